@@ -1,0 +1,60 @@
+// linecal: the command line of the calibration station. `linecal help` lists subcommands.
+#include <algorithm>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "tools/cli/command_line.h"
+#include "tools/linecal/commands.h"
+
+namespace {
+
+struct Subcommand {
+  std::vector<std::string> words;  // e.g. {"lidar", "decode"}
+  const char* summary;
+  int (*run)(const linecal::tools::Args&);
+};
+
+const std::vector<Subcommand>& Subcommands() {
+  using namespace linecal::tools;
+  static const std::vector<Subcommand> kTable = {
+  };
+  return kTable;
+}
+
+void PrintHelp(std::FILE* out) {
+  std::fprintf(out,
+               "usage: linecal SUBCOMMAND [options]   (linecal SUBCOMMAND --help for details)\n\n"
+               "subcommands:\n");
+  for (const Subcommand& s : Subcommands()) {
+    std::string name;
+    for (const std::string& w : s.words) name += (name.empty() ? "" : " ") + w;
+    std::fprintf(out, "  %-22s %s\n", name.c_str(), s.summary);
+  }
+  std::fprintf(out,
+               "\nexit codes: 0 success, 1 negative answer (no board, out of tolerance), "
+               "2 bad usage or input\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::vector<std::string> args(argv + 1, argv + argc);
+  if (args.empty() || args[0] == "help" || args[0] == "--help" || args[0] == "-h") {
+    PrintHelp(stdout);
+    return args.empty() ? linecal::cli::kExitBadInput : linecal::cli::kExitOk;
+  }
+  // The longest subcommand whose words open the argument list wins ("lidar decode").
+  const Subcommand* best = nullptr;
+  for (const Subcommand& s : Subcommands()) {
+    if (s.words.size() > args.size()) continue;
+    if (!std::equal(s.words.begin(), s.words.end(), args.begin())) continue;
+    if (best == nullptr || s.words.size() > best->words.size()) best = &s;
+  }
+  if (best == nullptr) {
+    std::fprintf(stderr, "linecal: unknown subcommand '%s' (linecal help lists them)\n",
+                 args[0].c_str());
+    return linecal::cli::kExitBadInput;
+  }
+  return best->run(linecal::tools::Args(args.begin() + best->words.size(), args.end()));
+}
