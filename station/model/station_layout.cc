@@ -1,0 +1,209 @@
+#include "station/model/station_layout.h"
+
+#include <algorithm>
+#include <set>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "station/io/json_reader.h"
+#include "station/model/pose_json.h"
+
+namespace linecal {
+namespace {
+
+constexpr const char* kFormat = "linecal.station";
+constexpr int kVersion = 1;
+
+absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
+  if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "border_bits", "pose"});
+      !s.ok()) {
+    return s;
+  }
+  absl::StatusOr<std::string> id = f.String("id");
+  if (!id.ok()) return id.status();
+  BoardParams params;
+  absl::StatusOr<std::string> type = f.String("type");
+  if (!type.ok()) return type.status();
+  const std::optional<BoardType> board_type = BoardTypeFromName(*type);
+  if (!board_type) {
+    std::vector<std::string> names;
+    for (BoardType t : kAllBoardTypes) names.push_back(BoardTypeName(t));
+    return f.Error("type", absl::StrCat("unknown board type '", *type, "'; known: ",
+                                        absl::StrJoin(names, ", ")));
+  }
+  params.type = *board_type;
+  absl::StatusOr<double> scale = f.NumberOr("scale", 1.0);
+  if (!scale.ok()) return scale.status();
+  params.scale = *scale;
+  absl::StatusOr<std::int64_t> cols = f.IntegerOr("cols", params.cols);
+  if (!cols.ok()) return cols.status();
+  absl::StatusOr<std::int64_t> rows = f.IntegerOr("rows", params.rows);
+  if (!rows.ok()) return rows.status();
+  absl::StatusOr<double> square = f.NumberOr("square_m", params.square_m);
+  if (!square.ok()) return square.status();
+  absl::StatusOr<std::int64_t> border = f.IntegerOr("border_bits", params.apriltag_border_bits);
+  if (!border.ok()) return border.status();
+  // Out-of-int values fall to the validation below as a clearly bad value.
+  constexpr std::int64_t kClamp = 1 << 20;
+  params.cols = static_cast<int>(std::clamp<std::int64_t>(*cols, -kClamp, kClamp));
+  params.rows = static_cast<int>(std::clamp<std::int64_t>(*rows, -kClamp, kClamp));
+  params.square_m = *square;
+  params.apriltag_border_bits = static_cast<int>(std::clamp<std::int64_t>(*border, -kClamp, kClamp));
+  BoardParamsError error = BoardParamsError::kOk;
+  std::optional<Board> board = Board::Create(params, &error);
+  if (!board) {
+    const char* field = error == BoardParamsError::kBadScale     ? "scale"
+                        : error == BoardParamsError::kBadCols    ? "cols"
+                        : error == BoardParamsError::kBadRows    ? "rows"
+                        : error == BoardParamsError::kBadSquare  ? "square_m"
+                                                                 : "border_bits";
+    return f.Error(field, BoardParamsErrorName(error));
+  }
+  absl::StatusOr<Rigid3d> pose = ReadPose(f, "pose", BoardBaseRotation());
+  if (!pose.ok()) return pose.status();
+  return StationBoard{*id, params, std::move(*board), *pose};
+}
+
+absl::StatusOr<CornerReflector> ReadReflector(const JsonField& f) {
+  if (auto s = f.AllowOnlyKeys({"id", "xyz_m", "rcs_dbsm"}); !s.ok()) return s;
+  CornerReflector r;
+  absl::StatusOr<std::string> id = f.String("id");
+  if (!id.ok()) return id.status();
+  r.id = *id;
+  absl::StatusOr<std::vector<double>> xyz = f.Numbers("xyz_m", 3);
+  if (!xyz.ok()) return xyz.status();
+  r.p_station = Eigen::Vector3d((*xyz)[0], (*xyz)[1], (*xyz)[2]);
+  absl::StatusOr<double> rcs = f.NumberOr("rcs_dbsm", r.rcs_dbsm);
+  if (!rcs.ok()) return rcs.status();
+  // Physical trihedral reflectors span roughly -10..50 dBm²; beyond that it is a typo.
+  if (*rcs < -20 || *rcs > 60) return f.Error("rcs_dbsm", absl::StrCat("must be within -20..60, got ", *rcs));
+  r.rcs_dbsm = *rcs;
+  return r;
+}
+
+absl::StatusOr<StationSurface> ReadSurface(const JsonField& f) {
+  if (auto s = f.AllowOnlyKeys({"id", "size_m", "reflectivity", "pose"}); !s.ok()) return s;
+  StationSurface w;
+  absl::StatusOr<std::string> id = f.String("id");
+  if (!id.ok()) return id.status();
+  w.id = *id;
+  absl::StatusOr<std::vector<double>> size = f.Numbers("size_m", 2);
+  if (!size.ok()) return size.status();
+  if ((*size)[0] <= 0 || (*size)[1] <= 0) return f.Error("size_m", "sizes must be > 0");
+  w.size_m = Eigen::Vector2d((*size)[0], (*size)[1]);
+  absl::StatusOr<double> refl = f.NumberOr("reflectivity", w.reflectivity);
+  if (!refl.ok()) return refl.status();
+  if (*refl < 0 || *refl > 1) return f.Error("reflectivity", absl::StrCat("must be within 0..1, got ", *refl));
+  w.reflectivity = *refl;
+  // A surface is placed like a board: at zero angles it faces the car (its z along -x).
+  absl::StatusOr<Rigid3d> pose = ReadPose(f, "pose", BoardBaseRotation());
+  if (!pose.ok()) return pose.status();
+  w.T_station_surface = *pose;
+  return w;
+}
+
+template <typename T, typename ReadFn>
+absl::Status ReadList(const JsonField& root, const char* key, ReadFn read, std::vector<T>* out,
+                      std::set<std::string>* ids) {
+  if (!root.Has(key)) return absl::OkStatus();
+  absl::StatusOr<std::vector<JsonField>> items = root.Array(key);
+  if (!items.ok()) return items.status();
+  for (const JsonField& item : *items) {
+    absl::StatusOr<T> v = read(item);
+    if (!v.ok()) return v.status();
+    if (!ids->insert(v->id).second) return item.Error("id", absl::StrCat("duplicate id '", v->id, "'"));
+    out->push_back(std::move(*v));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+const StationBoard* StationLayout::FindBoard(const std::string& id) const {
+  for (const StationBoard& b : boards) {
+    if (b.id == id) return &b;
+  }
+  return nullptr;
+}
+
+const CornerReflector* StationLayout::FindReflector(const std::string& id) const {
+  for (const CornerReflector& r : reflectors) {
+    if (r.id == id) return &r;
+  }
+  return nullptr;
+}
+
+absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text, const std::string& source) {
+  absl::StatusOr<JsonDocument> doc = JsonDocument::FromText(text, source);
+  if (!doc.ok()) return doc.status();
+  absl::StatusOr<JsonField> root = doc->Root();
+  if (!root.ok()) return root.status();
+  if (auto s = root->AllowOnlyKeys({"format", "version", "name", "boards", "reflectors",
+                                    "floor_reflectivity", "surfaces"});
+      !s.ok()) {
+    return s;
+  }
+  absl::StatusOr<std::string> format = root->String("format");
+  if (!format.ok()) return format.status();
+  if (*format != kFormat) return root->Error("format", absl::StrCat("expected '", kFormat, "', got '", *format, "'"));
+  absl::StatusOr<std::int64_t> version = root->Integer("version");
+  if (!version.ok()) return version.status();
+  if (*version != kVersion) {
+    return root->Error("version", absl::StrCat("unsupported version ", *version, " (this build reads ", kVersion, ")"));
+  }
+  StationLayout layout;
+  absl::StatusOr<std::string> name = root->String("name");
+  if (!name.ok()) return name.status();
+  layout.name = *name;
+  absl::StatusOr<double> floor = root->NumberOr("floor_reflectivity", layout.floor_reflectivity);
+  if (!floor.ok()) return floor.status();
+  if (*floor < 0 || *floor > 1) return root->Error("floor_reflectivity", "must be within 0..1");
+  layout.floor_reflectivity = *floor;
+  // Boards, reflectors and surfaces share one id space so that a sensor's targets are unambiguous.
+  std::set<std::string> ids;
+  if (auto s = ReadList(*root, "boards", ReadBoard, &layout.boards, &ids); !s.ok()) return s;
+  if (auto s = ReadList(*root, "reflectors", ReadReflector, &layout.reflectors, &ids); !s.ok()) return s;
+  if (auto s = ReadList(*root, "surfaces", ReadSurface, &layout.surfaces, &ids); !s.ok()) return s;
+  return layout;
+}
+
+absl::StatusOr<StationLayout> ReadStationLayout(const std::string& path) {
+  absl::StatusOr<std::string> text = ReadTextFile(path);
+  if (!text.ok()) return text.status();
+  return ParseStationLayout(*text, path);
+}
+
+nlohmann::json StationLayoutToJson(const StationLayout& layout) {
+  nlohmann::json boards = nlohmann::json::array();
+  for (const StationBoard& b : layout.boards) {
+    const BoardParams& p = b.params;
+    nlohmann::json j = {{"id", b.id}, {"type", BoardTypeName(p.type)}, {"scale", p.scale}};
+    if (p.type == BoardType::kChecker) {
+      j["cols"] = p.cols;
+      j["rows"] = p.rows;
+      j["square_m"] = p.square_m;
+    }
+    if (p.type == BoardType::kApriltag) j["border_bits"] = p.apriltag_border_bits;
+    j["pose"] = PoseToJson(b.T_station_board, BoardBaseRotation());
+    boards.push_back(std::move(j));
+  }
+  nlohmann::json reflectors = nlohmann::json::array();
+  for (const CornerReflector& r : layout.reflectors) {
+    reflectors.push_back({{"id", r.id},
+                          {"xyz_m", {r.p_station.x(), r.p_station.y(), r.p_station.z()}},
+                          {"rcs_dbsm", r.rcs_dbsm}});
+  }
+  nlohmann::json surfaces = nlohmann::json::array();
+  for (const StationSurface& w : layout.surfaces) {
+    surfaces.push_back({{"id", w.id},
+                        {"size_m", {w.size_m.x(), w.size_m.y()}},
+                        {"reflectivity", w.reflectivity},
+                        {"pose", PoseToJson(w.T_station_surface, BoardBaseRotation())}});
+  }
+  return {{"format", kFormat},     {"version", kVersion},
+          {"name", layout.name},   {"floor_reflectivity", layout.floor_reflectivity},
+          {"boards", boards},      {"reflectors", reflectors},
+          {"surfaces", surfaces}};
+}
+
+}  // namespace linecal

@@ -1,0 +1,59 @@
+#pragma once
+// The station layout: what stands around the car, surveyed in the station frame
+// (docs/station-and-car.md documents the file).
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "absl/status/statusor.h"
+#include "detectors/boards/board.h"
+#include "detectors/core/pose.h"
+
+namespace linecal {
+
+struct StationBoard {
+  std::string id;  // unique in the layout, e.g. "front_chessboard"
+  BoardParams params;
+  Board board;              // built from params
+  Rigid3d T_station_board;  // board frame (page centre) in the station frame
+};
+
+// A trihedral corner reflector for radars: a point target.
+struct CornerReflector {
+  std::string id;
+  Eigen::Vector3d p_station = Eigen::Vector3d::Zero();  // metres, the reflector's apex
+  double rcs_dbsm = 20.0;                               // radar cross-section, dBm²
+};
+
+// A flat rectangular surface (a wall, a screen) for backgrounds and LiDAR returns.
+struct StationSurface {
+  std::string id;
+  Rigid3d T_station_surface;  // surface frame: the rectangle lies in its x-y plane, centred
+  Eigen::Vector2d size_m = Eigen::Vector2d::Zero();  // extent along x and y of that frame
+  double reflectivity = 0.5;                         // 0..1: grey level and LiDAR intensity
+};
+
+struct StationLayout {
+  std::string name;
+  std::vector<StationBoard> boards;
+  std::vector<CornerReflector> reflectors;
+  // The floor is the plane z = 0 of the station frame, always present.
+  double floor_reflectivity = 0.3;
+  std::vector<StationSurface> surfaces;
+
+  const StationBoard* FindBoard(const std::string& id) const;
+  const CornerReflector* FindReflector(const std::string& id) const;
+};
+
+// Reads a station layout file. Errors name the file and the field ("boards[1].type: unknown
+// board type 'chess'; known: chessboard, ..."). Ids must be unique.
+absl::StatusOr<StationLayout> ReadStationLayout(const std::string& path);
+// The same from text already in memory; `source` names it in messages.
+absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text, const std::string& source);
+nlohmann::json StationLayoutToJson(const StationLayout& layout);
+
+}  // namespace linecal
