@@ -1,0 +1,598 @@
+#include "detectors/boards/board.h"
+
+#include <apriltag/tag36h11.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <string_view>
+
+#include "detectors/boards/aruco_dict_4x4_50.h"
+
+namespace linecal {
+namespace {
+
+// Collects a board's shapes and features. Layouts are written in the units of boards.md,
+// millimetres, either in PDF coordinates (origin at the page's top-left, y down) or in
+// board-frame millimetres (origin at the page centre, y up); both end up in metres, scaled.
+class Drawing {
+ public:
+  Drawing(double page_w_mm, double page_h_mm, double scale)
+      : page_w_mm_(page_w_mm), page_h_mm_(page_h_mm), m_per_mm_(scale * 1e-3) {
+    // The page itself: every board is printed on white.
+    BoardRect(Paint::kWhite, -0.5 * page_w_mm, -0.5 * page_h_mm, 0.5 * page_w_mm, 0.5 * page_h_mm);
+  }
+
+  Eigen::Vector2d page_size_m() const {
+    return m_per_mm_ * Eigen::Vector2d(page_w_mm_, page_h_mm_);
+  }
+
+  // Board-frame millimetres to board-frame metres.
+  Eigen::Vector2d Board(double x_mm, double y_mm) const {
+    return Eigen::Vector2d(x_mm * m_per_mm_, y_mm * m_per_mm_);
+  }
+  // PDF millimetres to board-frame metres: x_board = x_pdf - W/2, y_board = H/2 - y_pdf.
+  Eigen::Vector2d Pdf(double x_pdf, double y_pdf) const {
+    return Board(x_pdf - 0.5 * page_w_mm_, 0.5 * page_h_mm_ - y_pdf);
+  }
+
+  void BoardRect(Paint paint, double min_x_mm, double min_y_mm, double max_x_mm, double max_y_mm) {
+    shapes_.push_back(
+        BoardShape{ShapeGeometry::kRect, paint,
+                   Eigen::AlignedBox2d(Board(min_x_mm, min_y_mm), Board(max_x_mm, max_y_mm))});
+  }
+  // A rectangle given by its top-left corner in PDF coordinates and its size.
+  void PdfRect(Paint paint, double x_pdf, double y_pdf, double w_mm, double h_mm) {
+    shapes_.push_back(
+        BoardShape{ShapeGeometry::kRect, paint,
+                   Eigen::AlignedBox2d(Pdf(x_pdf, y_pdf + h_mm), Pdf(x_pdf + w_mm, y_pdf))});
+  }
+  void PdfCircle(Paint paint, double cx_pdf, double cy_pdf, double diameter_mm) {
+    const double r = 0.5 * diameter_mm;
+    shapes_.push_back(
+        BoardShape{ShapeGeometry::kCircle, paint,
+                   Eigen::AlignedBox2d(Pdf(cx_pdf - r, cy_pdf + r), Pdf(cx_pdf + r, cy_pdf - r))});
+  }
+
+  // Appends a feature; ids are given in the order of the calls.
+  void Feature(FeatureKind kind, const Eigen::Vector2d& p_board, int marker = -1) {
+    features_.push_back(BoardFeature{static_cast<int>(features_.size()), p_board, kind, marker});
+  }
+
+  std::vector<BoardShape>& shapes() { return shapes_; }
+  std::vector<BoardFeature>& features() { return features_; }
+
+ private:
+  double page_w_mm_;
+  double page_h_mm_;
+  double m_per_mm_;
+  std::vector<BoardShape> shapes_;
+  std::vector<BoardFeature> features_;
+};
+
+// ---- 1. Chessboard (chessboard.pdf, 2600 x 500) -------------------------------------------
+
+void DrawChessboard(Drawing& d) {
+  constexpr double kSquare = 150.0;
+  // Black squares, top-left corners in PDF coordinates (boards.md, checked against the PDF).
+  constexpr double kSquares[6][2] = {{100, 100},  {400, 100},  {250, 250},    // left "V"
+                                     {2200, 100}, {2050, 250}, {2350, 250}};  // right "Λ"
+  for (const auto& s : kSquares) d.PdfRect(Paint::kBlack, s[0], s[1], kSquare, kSquare);
+  // The 10 corners of each group, PDF rows top to bottom, left to right in a row; X marks
+  // the two vertices where squares touch diagonally.
+  struct Corner {
+    double x, y;
+    bool x_corner;
+  };
+  // clang-format off
+  constexpr Corner kCorners[20] = {
+      // left group: ids 0..9
+      {100, 100, false}, {250, 100, false}, {400, 100, false}, {550, 100, false},
+      {100, 250, false}, {250, 250, true},  {400, 250, true},  {550, 250, false},
+      {250, 400, false}, {400, 400, false},
+      // right group: ids 10..19
+      {2200, 100, false}, {2350, 100, false},
+      {2050, 250, false}, {2200, 250, true},  {2350, 250, true},  {2500, 250, false},
+      {2050, 400, false}, {2200, 400, false}, {2350, 400, false}, {2500, 400, false}};
+  // clang-format on
+  for (const Corner& c : kCorners) {
+    d.Feature(c.x_corner ? FeatureKind::kXCorner : FeatureKind::kLCorner, d.Pdf(c.x, c.y));
+  }
+}
+
+// ---- 2. Circle board (circle_board.pdf, 900 x 600) ----------------------------------------
+
+void DrawCircleBoard(Drawing& d) {
+  constexpr double kDiameter = 50.0;
+  constexpr double kColumns[6] = {100, 300, 400, 500, 600, 800};
+  constexpr double kRows[5] = {100, 170, 240, 310, 380};
+  // The two black circles on the white bar: row 2, columns 2 and 3 (x 400 and 500).
+  const auto is_black = [](int row, int col) { return row == 2 && (col == 2 || col == 3); };
+
+  d.PdfRect(Paint::kBlack, 50, 50, 100, 500);   // left strip
+  d.PdfRect(Paint::kBlack, 200, 50, 500, 500);  // centre square
+  d.PdfRect(Paint::kBlack, 750, 50, 100, 500);  // right strip
+  for (int r = 0; r < 5; ++r) {
+    for (int c = 0; c < 6; ++c) {
+      if (!is_black(r, c)) d.PdfCircle(Paint::kWhite, kColumns[c], kRows[r], kDiameter);
+    }
+  }
+  d.PdfRect(Paint::kWhite, 350, 205, 200, 70);  // the white bar under the black pair
+  d.PdfCircle(Paint::kBlack, 400, 240, kDiameter);
+  d.PdfCircle(Paint::kBlack, 500, 240, kDiameter);
+
+  // Features: the 30 centres, row-major from the top row, id = 6 * row + col.
+  for (int r = 0; r < 5; ++r) {
+    for (int c = 0; c < 6; ++c) d.Feature(FeatureKind::kCircleCentre, d.Pdf(kColumns[c], kRows[r]));
+  }
+}
+
+// ---- 3. Vertical board (vertical_board.pdf, 300 x 1000) -----------------------------------
+
+void DrawVerticalBoard(Drawing& d) {
+  constexpr int kCellRows = 18;
+  constexpr int kCellCols = 4;
+  constexpr double kCell = 50.0;
+  constexpr double kLeft = 50.0;  // PDF x of cell column 0
+  constexpr double kTop = 50.0;   // PDF y of cell row 0
+  // boards.md's cell table, '#' black, row 0 at the top (checked against the PDF).
+  constexpr std::string_view kCells[kCellRows] = {"#.##", "##.#", "#.##", "##.#", "#.##", "##..",
+                                                  "#.#.", "##..", "#.#.", "##..", "..#.", ".#..",
+                                                  "..#.", ".#..", "..#.", "##..", "#.#.", "##.."};
+  const auto black = [&](int row, int col) {
+    return row >= 0 && row < kCellRows && col >= 0 && col < kCellCols && kCells[row][col] == '#';
+  };
+  for (int r = 0; r < kCellRows; ++r) {
+    for (int c = 0; c < kCellCols; ++c) {
+      if (black(r, c)) d.PdfRect(Paint::kBlack, kLeft + kCell * c, kTop + kCell * r, kCell, kCell);
+    }
+  }
+  // Features: the vertices of the three inner lines x = 100, 150, 200 (vertex column
+  // v = 1..3, between cell columns v-1 and v) where the four cells around form a corner.
+  // Row-major: vertex rows k = 0..18 top to bottom, then x left to right (docs/boards.md).
+  for (int k = 0; k <= kCellRows; ++k) {
+    for (int v = 1; v < kCellCols; ++v) {
+      const bool tl = black(k - 1, v - 1), tr = black(k - 1, v);
+      const bool bl = black(k, v - 1), br = black(k, v);
+      const int n = tl + tr + bl + br;
+      const bool x_corner = n == 2 && tl == br;
+      if (n == 1 || n == 3 || x_corner) {
+        d.Feature(x_corner ? FeatureKind::kXCorner : FeatureKind::kLCorner,
+                  d.Pdf(kLeft + kCell * v, kTop + kCell * k));
+      }
+    }
+  }
+}
+
+// ---- 4. ArUco markers (aruco_marker_board.pdf and round_hole_board.pdf) --------------------
+
+// Draws DICT_4X4_50 marker `id` with its top-left corner at PDF (x, y) in its canonical
+// orientation (as the PDFs print all four), and adds its corners as features: top-left,
+// top-right, bottom-right, bottom-left as seen facing the print.
+void DrawArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf) {
+  constexpr double kCell = 40.0;
+  constexpr double kSide = kCell * kAruco4x4MarkerCells;
+  d.PdfRect(Paint::kBlack, x_pdf, y_pdf, kSide, kSide);
+  const std::uint16_t code = kAruco4x4_50Codes[id];
+  for (int r = 0; r < kAruco4x4DataBits; ++r) {
+    for (int c = 0; c < kAruco4x4DataBits; ++c) {
+      if (Aruco4x4CellIsWhite(code, r, c)) {
+        // +1: the one-cell black border.
+        d.PdfRect(Paint::kWhite, x_pdf + kCell * (c + 1), y_pdf + kCell * (r + 1), kCell, kCell);
+      }
+    }
+  }
+  d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf, y_pdf), id);
+  d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf + kSide, y_pdf), id);
+  d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf + kSide, y_pdf + kSide), id);
+  d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf, y_pdf + kSide), id);
+}
+
+// The four markers of the ArUco and round-hole boards, in id order (so feature id =
+// 4 * rank of the marker id + corner). Positions: boards.md's table, checked against both
+// PDFs; they are deliberately not symmetric.
+void DrawArucoMarkers(Drawing& d) {
+  DrawArucoMarker(d, 4, 434, 130);   // top
+  DrawArucoMarker(d, 11, 130, 426);  // left
+  DrawArucoMarker(d, 12, 730, 426);  // right
+  DrawArucoMarker(d, 19, 430, 730);  // bottom
+}
+
+// ---- 5. AprilTag grid (april_board.pdf, A0) ------------------------------------------------
+
+void DrawApriltagBoard(Drawing& d, int border_bits) {
+  constexpr int kTagsPerSide = 6;
+  constexpr double kTag = 88.0;               // black square side
+  constexpr double kSpacing = 0.3 * kTag;     // 26.4 mm between tags
+  constexpr double kPitch = kTag + kSpacing;  // 114.4 mm
+  // The grid is not centred on the A0 page: its centre, in board-frame millimetres, as
+  // measured from april_board.pdf (tag 0's black square starts at x = 280.517 pt,
+  // y = 1176.265 pt from the page's bottom-left; all 36 tags agree to 0.0002 mm).
+  constexpr double kGridCentreX = 8.46;
+  constexpr double kGridCentreY = 150.46;
+  // tag36h11 has width_at_border 8 (a 1-bit border around 6 x 6 data cells), so its
+  // bit_x, bit_y run 1..6; here the data cells sit inside `border_bits` black cells.
+  constexpr int kDataBits = 6;
+  const double bit = kTag / (kDataBits + 2 * border_bits);
+
+  const std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)> family(tag36h11_create(),
+                                                                                tag36h11_destroy);
+
+  // The small black squares at the tag corners: a 7 x 7 lattice of kSpacing squares centred
+  // between the tags (and around the outside).
+  for (int r = 0; r <= kTagsPerSide; ++r) {
+    for (int c = 0; c <= kTagsPerSide; ++c) {
+      const double cx = kGridCentreX + (c - 0.5 * kTagsPerSide) * kPitch;
+      const double cy = kGridCentreY + (r - 0.5 * kTagsPerSide) * kPitch;
+      d.BoardRect(Paint::kBlack, cx - 0.5 * kSpacing, cy - 0.5 * kSpacing, cx + 0.5 * kSpacing,
+                  cy + 0.5 * kSpacing);
+    }
+  }
+  // Tag id = 6 * row + col, row 0 at the bottom, col 0 at the left (boards.md).
+  for (int id = 0; id < kTagsPerSide * kTagsPerSide; ++id) {
+    const int row = id / kTagsPerSide, col = id % kTagsPerSide;
+    const double cx = kGridCentreX + (col - 0.5 * (kTagsPerSide - 1)) * kPitch;
+    const double cy = kGridCentreY + (row - 0.5 * (kTagsPerSide - 1)) * kPitch;
+    const double left = cx - 0.5 * kTag, right = cx + 0.5 * kTag;
+    const double bottom = cy - 0.5 * kTag, top = cy + 0.5 * kTag;
+    d.BoardRect(Paint::kBlack, left, bottom, right, top);
+    const std::uint64_t code = family->codes[id];
+    for (std::uint32_t i = 0; i < family->nbits; ++i) {
+      // libapriltag: bit i is code bit nbits-1-i, 1 = white, at data cell (bit_x, bit_y)
+      // counted from the tag's top-left with y down.
+      if (((code >> (family->nbits - 1 - i)) & 1u) == 0) continue;
+      const int cell_x = border_bits + static_cast<int>(family->bit_x[i]) - 1;
+      const int cell_y = border_bits + static_cast<int>(family->bit_y[i]) - 1;
+      d.BoardRect(Paint::kWhite, left + bit * cell_x, top - bit * (cell_y + 1),
+                  left + bit * (cell_x + 1), top - bit * cell_y);
+    }
+    // Corners: top-left, top-right, bottom-right, bottom-left of the tag's canonical
+    // orientation (the PDF prints every tag upright); feature id = 4 * tag id + corner.
+    d.Feature(FeatureKind::kMarkerCorner, d.Board(left, top), id);
+    d.Feature(FeatureKind::kMarkerCorner, d.Board(right, top), id);
+    d.Feature(FeatureKind::kMarkerCorner, d.Board(right, bottom), id);
+    d.Feature(FeatureKind::kMarkerCorner, d.Board(left, bottom), id);
+  }
+}
+
+// ---- 6. Round-hole board (round_hole_board.pdf, 1100 x 1100) -------------------------------
+
+void DrawRoundHoleBoard(Drawing& d) {
+  constexpr double kCell = 300.0;
+  constexpr double kHoleDiameter = 240.0;
+  // The four corner cells and the centre cell of the 3 x 3 checker from (100, 100) are black
+  // and holed; the PDF paints the holes white. Order: rows top to bottom, left to right.
+  constexpr double kHoledCells[5][2] = {{100, 100}, {700, 100}, {400, 400}, {100, 700}, {700, 700}};
+  for (const auto& c : kHoledCells) d.PdfRect(Paint::kBlack, c[0], c[1], kCell, kCell);
+  DrawArucoMarkers(d);  // feature ids 0..15, as on the ArUco board
+  for (const auto& c : kHoledCells) {
+    d.PdfCircle(Paint::kHole, c[0] + 0.5 * kCell, c[1] + 0.5 * kCell, kHoleDiameter);
+  }
+  // Feature ids 16..20: the hole centres, in kHoledCells order.
+  for (const auto& c : kHoledCells) {
+    d.Feature(FeatureKind::kHoleCentre, d.Pdf(c[0] + 0.5 * kCell, c[1] + 0.5 * kCell));
+  }
+}
+
+// ---- 7. Generic chessboard -----------------------------------------------------------------
+
+// cols x rows inner corners: (cols+1) x (rows+1) squares, the top-left one black, on a page
+// with a one-square white margin (the quiet zone a corner detector needs).
+void DrawChecker(Drawing& d, int cols, int rows, double square_mm) {
+  const double left = -0.5 * (cols + 1) * square_mm;
+  const double top = 0.5 * (rows + 1) * square_mm;
+  for (int r = 0; r <= rows; ++r) {
+    for (int c = 0; c <= cols; ++c) {
+      if ((r + c) % 2 != 0) continue;
+      d.BoardRect(Paint::kBlack, left + c * square_mm, top - (r + 1) * square_mm,
+                  left + (c + 1) * square_mm, top - r * square_mm);
+    }
+  }
+  // Inner corners row-major from the top-left: id = cols * row + col.
+  for (int r = 1; r <= rows; ++r) {
+    for (int c = 1; c <= cols; ++c) {
+      d.Feature(FeatureKind::kXCorner, d.Board(left + c * square_mm, top - r * square_mm));
+    }
+  }
+}
+
+// Page sizes in millimetres (the PDFs' MediaBoxes; april_board.pdf is A0, 2383.94 x 3370.39
+// pt = 841 x 1189 mm).
+Eigen::Vector2d PageSizeMm(const BoardParams& p) {
+  switch (p.type) {
+    case BoardType::kChessboard:
+      return {2600.0, 500.0};
+    case BoardType::kCircle:
+      return {900.0, 600.0};
+    case BoardType::kVertical:
+      return {300.0, 1000.0};
+    case BoardType::kAruco:
+      return {1100.0, 1100.0};
+    case BoardType::kApriltag:
+      return {841.0, 1189.0};
+    case BoardType::kRoundHole:
+      return {1100.0, 1100.0};
+    case BoardType::kChecker: {
+      const double square_mm = p.square_m * 1e3;
+      return {(p.cols + 3) * square_mm, (p.rows + 3) * square_mm};
+    }
+  }
+  return {0.0, 0.0};
+}
+
+bool IsFiniteIn(double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; }
+
+}  // namespace
+
+const char* BoardTypeName(BoardType type) {
+  switch (type) {
+    case BoardType::kChessboard:
+      return "chessboard";
+    case BoardType::kCircle:
+      return "circle";
+    case BoardType::kVertical:
+      return "vertical";
+    case BoardType::kAruco:
+      return "aruco";
+    case BoardType::kApriltag:
+      return "apriltag";
+    case BoardType::kRoundHole:
+      return "round_hole";
+    case BoardType::kChecker:
+      return "checker";
+  }
+  return "unknown";
+}
+
+std::optional<BoardType> BoardTypeFromName(std::string_view name) {
+  for (BoardType t : kAllBoardTypes) {
+    if (name == BoardTypeName(t)) return t;
+  }
+  return std::nullopt;
+}
+
+const char* BoardParamsErrorName(BoardParamsError e) {
+  switch (e) {
+    case BoardParamsError::kOk:
+      return "ok";
+    case BoardParamsError::kBadScale:
+      return "bad_scale";
+    case BoardParamsError::kBadCols:
+      return "bad_cols";
+    case BoardParamsError::kBadRows:
+      return "bad_rows";
+    case BoardParamsError::kBadSquare:
+      return "bad_square";
+    case BoardParamsError::kBadBorderBits:
+      return "bad_border_bits";
+  }
+  return "unknown";
+}
+
+BoardParamsError ValidateBoardParams(const BoardParams& p) {
+  if (!IsFiniteIn(p.scale, kMinBoardScale, kMaxBoardScale)) return BoardParamsError::kBadScale;
+  if (p.cols < kMinCheckerCorners || p.cols > kMaxCheckerCorners) {
+    return BoardParamsError::kBadCols;
+  }
+  if (p.rows < kMinCheckerCorners || p.rows > kMaxCheckerCorners) {
+    return BoardParamsError::kBadRows;
+  }
+  if (!IsFiniteIn(p.square_m, 0.0, kMaxCheckerSquareM) || p.square_m == 0.0) {
+    return BoardParamsError::kBadSquare;
+  }
+  if (p.apriltag_border_bits != 1 && p.apriltag_border_bits != 2) {
+    return BoardParamsError::kBadBorderBits;
+  }
+  return BoardParamsError::kOk;
+}
+
+const char* FeatureKindName(FeatureKind kind) {
+  switch (kind) {
+    case FeatureKind::kXCorner:
+      return "x_corner";
+    case FeatureKind::kLCorner:
+      return "l_corner";
+    case FeatureKind::kCircleCentre:
+      return "circle_centre";
+    case FeatureKind::kMarkerCorner:
+      return "marker_corner";
+    case FeatureKind::kHoleCentre:
+      return "hole_centre";
+  }
+  return "unknown";
+}
+
+const char* PaintName(Paint paint) {
+  switch (paint) {
+    case Paint::kWhite:
+      return "white";
+    case Paint::kBlack:
+      return "black";
+    case Paint::kHole:
+      return "hole";
+    case Paint::kOffBoard:
+      return "off_board";
+  }
+  return "unknown";
+}
+
+bool BoardShape::Contains(const Eigen::Vector2d& p) const {
+  if (geometry == ShapeGeometry::kCircle) {
+    const double r = radius_m();
+    return (p - centre_board()).squaredNorm() < r * r;
+  }
+  return p.x() >= box_board.min().x() && p.x() < box_board.max().x() &&
+         p.y() >= box_board.min().y() && p.y() < box_board.max().y();
+}
+
+std::optional<Board> Board::Create(const BoardParams& params, BoardParamsError* error) {
+  const BoardParamsError e = ValidateBoardParams(params);
+  if (error != nullptr) *error = e;
+  if (e != BoardParamsError::kOk) return std::nullopt;
+
+  const Eigen::Vector2d page_mm = PageSizeMm(params);
+  Drawing d(page_mm.x(), page_mm.y(), params.scale);
+  switch (params.type) {
+    case BoardType::kChessboard:
+      DrawChessboard(d);
+      break;
+    case BoardType::kCircle:
+      DrawCircleBoard(d);
+      break;
+    case BoardType::kVertical:
+      DrawVerticalBoard(d);
+      break;
+    case BoardType::kAruco:
+      DrawArucoMarkers(d);
+      break;
+    case BoardType::kApriltag:
+      DrawApriltagBoard(d, params.apriltag_border_bits);
+      break;
+    case BoardType::kRoundHole:
+      DrawRoundHoleBoard(d);
+      break;
+    case BoardType::kChecker:
+      DrawChecker(d, params.cols, params.rows, params.square_m * 1e3);
+      break;
+  }
+  Board board;
+  board.params_ = params;
+  board.page_size_m_ = d.page_size_m();
+  board.shapes_ = std::move(d.shapes());
+  board.features_ = std::move(d.features());
+  board.BuildIndex();
+  return board;
+}
+
+namespace {
+
+// Conservative geometric tests of a shape against a closed box.
+bool ShapeTouches(const BoardShape& s, const Eigen::AlignedBox2d& box) {
+  if (!s.box_board.intersects(box)) return false;
+  if (s.geometry == ShapeGeometry::kRect) return true;
+  const double r = s.radius_m();
+  return box.squaredExteriorDistance(s.centre_board()) <= r * r;
+}
+
+bool ShapeCovers(const BoardShape& s, const Eigen::AlignedBox2d& box) {
+  if (s.geometry == ShapeGeometry::kRect) return s.box_board.contains(box);
+  const double r2 = s.radius_m() * s.radius_m();
+  const Eigen::Vector2d c = s.centre_board();
+  for (int i = 0; i < 4; ++i) {
+    if ((box.corner(static_cast<Eigen::AlignedBox2d::CornerType>(i)) - c).squaredNorm() >= r2) {
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+void Board::BuildIndex() {
+  const double w = page_size_m_.x(), h = page_size_m_.y();
+  // Cells of half the smallest shape extent leave most cells inside a single shape, so most
+  // queries are one table look-up; grown when that would exceed kMaxIndexCells.
+  double smallest = std::min(w, h);
+  for (const BoardShape& s : shapes_) smallest = std::min(smallest, s.box_board.sizes().minCoeff());
+  index_cell_m_ = std::max(0.5 * smallest, std::sqrt(w * h / kMaxIndexCells));
+  for (;;) {
+    index_cols_ = std::max(1, static_cast<int>(std::ceil(w / index_cell_m_)));
+    index_rows_ = std::max(1, static_cast<int>(std::ceil(h / index_cell_m_)));
+    if (static_cast<long long>(index_cols_) * index_rows_ <= kMaxIndexCells) break;
+    index_cell_m_ *= 1.05;  // the ceil() overshoot is small; a few steps suffice
+  }
+  const int n_cells = index_cols_ * index_rows_;
+  // Cell boxes are grown by a nanometre-scale margin so that rounding in CellOf() can never
+  // put a point in a cell whose list misses a shape that contains it.
+  const double margin = 1e-9 * std::max(w, h);
+  const Eigen::Vector2d origin = -0.5 * page_size_m_;
+  const auto cell_box = [&](int cx, int cy) {
+    const Eigen::Vector2d lo = origin + index_cell_m_ * Eigen::Vector2d(cx, cy);
+    return Eigen::AlignedBox2d(lo - Eigen::Vector2d::Constant(margin),
+                               lo + Eigen::Vector2d::Constant(index_cell_m_ + margin));
+  };
+  const auto cell_range = [&](double lo, double hi, int n, int* first, int* last) {
+    *first = std::clamp(static_cast<int>(std::floor((lo - margin) / index_cell_m_)), 0, n - 1);
+    *last = std::clamp(static_cast<int>(std::floor((hi + margin) / index_cell_m_)), 0, n - 1);
+  };
+
+  // Bucket every shape into the cells its bounding box overlaps (counting pass, then fill),
+  // in painter's order.
+  std::vector<std::uint32_t> count(n_cells + 1, 0);
+  const auto for_each_cell = [&](const BoardShape& s, auto&& fn) {
+    int x0, x1, y0, y1;
+    cell_range(s.box_board.min().x() - origin.x(), s.box_board.max().x() - origin.x(), index_cols_,
+               &x0, &x1);
+    cell_range(s.box_board.min().y() - origin.y(), s.box_board.max().y() - origin.y(), index_rows_,
+               &y0, &y1);
+    for (int cy = y0; cy <= y1; ++cy) {
+      for (int cx = x0; cx <= x1; ++cx) fn(cy * index_cols_ + cx);
+    }
+  };
+  for (const BoardShape& s : shapes_) for_each_cell(s, [&](int c) { ++count[c + 1]; });
+  for (int c = 0; c < n_cells; ++c) count[c + 1] += count[c];
+  std::vector<std::uint32_t> bucket(count[n_cells]);
+  std::vector<std::uint32_t> fill(count.begin(), count.end() - 1);
+  for (std::uint32_t i = 0; i < shapes_.size(); ++i) {
+    for_each_cell(shapes_[i], [&](int c) { bucket[fill[c]++] = i; });
+  }
+
+  // Per cell keep the shapes that really touch it, topmost first, down to the first one
+  // that covers the whole cell (nothing under it can show).
+  index_cells_.assign(n_cells, IndexCell{});
+  index_shapes_.clear();
+  for (int cy = 0; cy < index_rows_; ++cy) {
+    for (int cx = 0; cx < index_cols_; ++cx) {
+      const int c = cy * index_cols_ + cx;
+      const Eigen::AlignedBox2d box = cell_box(cx, cy);
+      IndexCell& cell = index_cells_[c];
+      cell.begin = static_cast<std::uint32_t>(index_shapes_.size());
+      for (std::uint32_t k = count[c + 1]; k > count[c]; --k) {
+        const BoardShape& s = shapes_[bucket[k - 1]];
+        if (!ShapeTouches(s, box)) continue;
+        const bool covers = ShapeCovers(s, box);
+        if (covers && index_shapes_.size() == cell.begin) {
+          cell.uniform = true;
+          cell.paint = s.paint;
+        }
+        index_shapes_.push_back(bucket[k - 1]);
+        if (covers) break;
+      }
+      cell.end = static_cast<std::uint32_t>(index_shapes_.size());
+    }
+  }
+}
+
+bool Board::CellOf(const Eigen::Vector2d& p, int* cx, int* cy) const {
+  const double hw = 0.5 * page_size_m_.x(), hh = 0.5 * page_size_m_.y();
+  // Written so that NaN fails every comparison and lands off the board.
+  if (!(p.x() >= -hw && p.x() < hw && p.y() >= -hh && p.y() < hh)) return false;
+  *cx = std::min(static_cast<int>((p.x() + hw) / index_cell_m_), index_cols_ - 1);
+  *cy = std::min(static_cast<int>((p.y() + hh) / index_cell_m_), index_rows_ - 1);
+  return true;
+}
+
+Paint Board::PaintAt(const Eigen::Vector2d& p_board) const {
+  int cx, cy;
+  if (!CellOf(p_board, &cx, &cy)) return Paint::kOffBoard;
+  const IndexCell& cell = index_cells_[cy * index_cols_ + cx];
+  if (cell.uniform) return cell.paint;
+  for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
+    const BoardShape& s = shapes_[index_shapes_[k]];
+    if (s.Contains(p_board)) return s.paint;
+  }
+  // Unreachable on the page (the page rectangle is in every cell's list); kept total.
+  return Paint::kOffBoard;
+}
+
+std::optional<Paint> Board::UniformPaintIn(const Eigen::Vector2d& min_board,
+                                           const Eigen::Vector2d& max_board) const {
+  int x0, y0, x1, y1;
+  if (!CellOf(min_board, &x0, &y0) || !CellOf(max_board, &x1, &y1)) return std::nullopt;
+  if (x0 != x1 || y0 != y1) return std::nullopt;
+  const IndexCell& cell = index_cells_[y0 * index_cols_ + x0];
+  if (!cell.uniform) return std::nullopt;
+  return cell.paint;
+}
+
+}  // namespace linecal

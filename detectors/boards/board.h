@@ -1,0 +1,200 @@
+#pragma once
+// Parametric definitions of the calibration boards of boards.md: their features (with stable
+// ids and exact board-frame coordinates), the shapes they are printed with, and a fast point
+// query of what is printed where. docs/boards.md documents every board's ids and layout.
+//
+// Board frame (boards.md, conventions.md): origin at the centre of the printed page, x to
+// the right and y up as seen facing the print, z out of the print towards the viewer.
+// Everything here is in metres in that frame. The default layouts are 1 PDF unit = 1 mm
+// (april_board.pdf: an A0 page); `scale` multiplies every length about the page centre.
+//
+// A Board is an immutable value: build it once with Board::Create and share it freely (all
+// member functions are const and thread-safe).
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string_view>
+#include <vector>
+
+namespace linecal {
+
+enum class BoardType {
+  kChessboard,  // the wide two-group board, chessboard.pdf
+  kCircle,      // circle_board.pdf
+  kVertical,    // vertical_board.pdf
+  kAruco,       // aruco_marker_board.pdf, four DICT_4X4_50 markers
+  kApriltag,    // april_board.pdf, a 6 x 6 tag36h11 AprilGrid
+  kRoundHole,   // round_hole_board.pdf, five through holes and four ArUco markers
+  kChecker,     // generic chessboard: cols x rows inner corners, square_m squares
+};
+
+inline constexpr std::array<BoardType, 7> kAllBoardTypes = {
+    BoardType::kChessboard, BoardType::kCircle,    BoardType::kVertical, BoardType::kAruco,
+    BoardType::kApriltag,   BoardType::kRoundHole, BoardType::kChecker};
+
+// The board's command-line and config name: "chessboard", "circle", "vertical", "aruco",
+// "apriltag", "round_hole", "checker" (interfaces.md).
+const char* BoardTypeName(BoardType type);
+// The inverse of BoardTypeName; nullopt for any other text. Case-sensitive.
+std::optional<BoardType> BoardTypeFromName(std::string_view name);
+
+struct BoardParams {
+  BoardType type = BoardType::kChessboard;
+  // Multiplies every length of the layout (a board printed at another size is the same
+  // board with another scale, boards.md). For kChecker it multiplies square_m too.
+  double scale = 1.0;
+  // kChecker only: inner corners along x (cols) and y (rows), and the square side.
+  // Defaults: the classic 9 x 6, 25 mm board of boards.md.
+  int cols = 9;
+  int rows = 6;
+  double square_m = 0.025;
+  // kApriltag only: black border width in bits. 2 = Kalibr's AprilGrid (the PDF); 1 = the
+  // ordinary tag36h11 layout. The black square stays 88 mm either way, so the features do
+  // not change; only the bit size does (88 mm / 10 or / 8).
+  int apriltag_border_bits = 2;
+};
+
+enum class BoardParamsError {
+  kOk = 0,
+  kBadScale,       // not finite or outside [kMinBoardScale, kMaxBoardScale]
+  kBadCols,        // outside [kMinCheckerCorners, kMaxCheckerCorners]
+  kBadRows,        // outside [kMinCheckerCorners, kMaxCheckerCorners]
+  kBadSquare,      // not finite or outside (0, kMaxCheckerSquareM]
+  kBadBorderBits,  // neither 1 nor 2
+};
+
+// A board of 2.6 mm or of 260 m is a typo, not a board: scales outside this range are refused.
+inline constexpr double kMinBoardScale = 1e-3;
+inline constexpr double kMaxBoardScale = 1e2;
+// Two inner corners per side give the grid a direction; 100 is far beyond any printed target
+// and bounds the shape count (about 10^4 squares).
+inline constexpr int kMinCheckerCorners = 2;
+inline constexpr int kMaxCheckerCorners = 100;
+// No station uses chessboard squares over 1 m.
+inline constexpr double kMaxCheckerSquareM = 1.0;
+
+// A short, stable text per error ("bad_scale", ...), for reasons and messages.
+const char* BoardParamsErrorName(BoardParamsError e);
+// Checks every field (the checker and apriltag fields too, whatever the type). O(1).
+BoardParamsError ValidateBoardParams(const BoardParams& params);
+
+enum class FeatureKind {
+  kXCorner,       // two black squares touching diagonally
+  kLCorner,       // one (or three) black squares meeting white at a vertex
+  kCircleCentre,  // centre of a printed circle (not of its image ellipse)
+  kMarkerCorner,  // outer corner of an ArUco marker's or AprilTag's black square
+  kHoleCentre,    // centre of a through hole (seen by a LiDAR)
+};
+
+// "x_corner", "l_corner", "circle_centre", "marker_corner", "hole_centre".
+const char* FeatureKindName(FeatureKind kind);
+
+struct BoardFeature {
+  int id = 0;  // stable per board type, 0..features().size()-1 (docs/boards.md)
+  Eigen::Vector2d p_board = Eigen::Vector2d::Zero();  // metres, board frame, scaled
+  FeatureKind kind = FeatureKind::kXCorner;
+  int marker = -1;  // ArUco / AprilTag id for kMarkerCorner, -1 otherwise
+};
+
+// What a point of the board looks like.
+enum class Paint : std::uint8_t {
+  kWhite,     // printed white (the page)
+  kBlack,     // printed black
+  kHole,      // a through hole: whatever is behind the board shows
+  kOffBoard,  // outside the page
+};
+
+// "white", "black", "hole", "off_board".
+const char* PaintName(Paint paint);
+
+enum class ShapeGeometry : std::uint8_t {
+  kRect,    // an axis-aligned rectangle: box_board
+  kCircle,  // a disc inscribed in the square box_board
+};
+
+// One filled primitive of a board's drawing. A point is inside a rectangle when
+// min <= p < max on both axes (half-open, so tiles that share an edge never overlap), and
+// inside a circle when |p - centre| < radius.
+struct BoardShape {
+  ShapeGeometry geometry = ShapeGeometry::kRect;
+  Paint paint = Paint::kBlack;  // kWhite, kBlack or kHole
+  Eigen::AlignedBox2d box_board;
+
+  Eigen::Vector2d centre_board() const { return box_board.center(); }
+  double radius_m() const { return 0.5 * box_board.sizes().x(); }
+  bool Contains(const Eigen::Vector2d& p_board) const;
+};
+
+class Board {
+ public:
+  // An empty board, so that Board can be a plain member: no page, shapes or features, and
+  // PaintAt() is kOffBoard everywhere. Only Create() makes a real board.
+  Board() = default;
+
+  // Builds the board of `params`. Returns nullopt, with the reason in *error when error is
+  // not null, when ValidateBoardParams fails. Cost: proportional to the number of shapes
+  // (at most about 10^4) plus the point index (at most kMaxIndexCells cells); about a
+  // millisecond for the default boards.
+  static std::optional<Board> Create(const BoardParams& params, BoardParamsError* error = nullptr);
+
+  const BoardParams& params() const { return params_; }
+  BoardType type() const { return params_.type; }
+  const char* name() const { return BoardTypeName(params_.type); }
+
+  // Width (x) and height (y) of the printed page, metres, scaled. The page spans
+  // [-w/2, w/2) x [-h/2, h/2) in the board frame.
+  const Eigen::Vector2d& page_size_m() const { return page_size_m_; }
+
+  // Every feature, ordered by id (features()[i].id == i). Ids per board: docs/boards.md.
+  const std::vector<BoardFeature>& features() const { return features_; }
+
+  // The drawing, in painter's order: shapes()[0] is the white page, every later shape is
+  // painted over the earlier ones. The board "draws itself" from these (SVG, raster).
+  const std::vector<BoardShape>& shapes() const { return shapes_; }
+
+  // What is printed at p_board (metres, board frame): the paint of the last shape in
+  // shapes() that contains the point, kOffBoard outside the page (and for NaN).
+  // O(1) on average: a uniform grid index over the page holds, per cell, either the one
+  // paint that covers it or the few shapes that cross it. Meant to be called per
+  // sub-sample of every rendered pixel.
+  Paint PaintAt(const Eigen::Vector2d& p_board) const;
+
+  // The paint of the whole axis-aligned box [min_board, max_board] when the index knows it
+  // is uniform (the box lies in one index cell covered by a single shape); nullopt when
+  // the box may hold more than one paint, or is not entirely on the page. Conservative: a
+  // uniform box can still give nullopt. O(1). Lets a renderer skip supersampling.
+  std::optional<Paint> UniformPaintIn(const Eigen::Vector2d& min_board,
+                                      const Eigen::Vector2d& max_board) const;
+
+  // Bounds the point index: at most 2^18 cells (a few MB), whatever the board.
+  static constexpr int kMaxIndexCells = 1 << 18;
+
+ private:
+  struct IndexCell {
+    std::uint32_t begin = 0;  // range into index_shapes_, topmost shape first
+    std::uint32_t end = 0;
+    bool uniform = false;  // true: every point of the cell has `paint`
+    Paint paint = Paint::kWhite;
+  };
+
+  void BuildIndex();
+  bool CellOf(const Eigen::Vector2d& p_board, int* cx, int* cy) const;
+
+  BoardParams params_;
+  Eigen::Vector2d page_size_m_ = Eigen::Vector2d::Zero();
+  std::vector<BoardFeature> features_;
+  std::vector<BoardShape> shapes_;
+
+  // The point index: index_cols_ x index_rows_ square cells of index_cell_m_, row-major,
+  // from the page's lower-left corner.
+  double index_cell_m_ = 0.0;
+  int index_cols_ = 0;
+  int index_rows_ = 0;
+  std::vector<IndexCell> index_cells_;
+  std::vector<std::uint32_t> index_shapes_;
+};
+
+}  // namespace linecal
