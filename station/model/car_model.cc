@@ -123,7 +123,8 @@ absl::StatusOr<SensorModel> ReadSensor(const JsonField& f, const std::filesystem
       if (!std::filesystem::is_regular_file(p)) {
         return f.Error("angles_file", absl::StrCat("no such file: ", p.string()));
       }
-      m.angles_file = p.lexically_normal().string();
+      // Absolute, so that the model means the same file wherever it is written out again.
+      m.angles_file = std::filesystem::absolute(p).lexically_normal().string();
     }
   } else if (*kind == "radar") {
     m.kind = SensorKind::kRadar;
