@@ -474,6 +474,11 @@ bool ShapeTouches(const BoardShape& s, const Eigen::AlignedBox2d& box) {
   return box.squaredExteriorDistance(s.centre_board()) <= r * r;
 }
 
+// Points closer than this fraction of an index cell to the cell's edges are not trusted to
+// the cell's uniform paint: 1e-9 is far above the rounding of CellOf()'s arithmetic (~1e-13
+// of a cell) and far below anything a renderer samples.
+constexpr double kInteriorFraction = 1e-9;
+
 bool ShapeCovers(const BoardShape& s, const Eigen::AlignedBox2d& box) {
   if (s.geometry == ShapeGeometry::kRect) return s.box_board.contains(box);
   const double r2 = s.radius_m() * s.radius_m();
@@ -493,7 +498,9 @@ void Board::BuildIndex() {
   // Cells of half the smallest shape extent leave most cells inside a single shape, so most
   // queries are one table look-up; grown when that would exceed kMaxIndexCells.
   double smallest = std::min(w, h);
-  for (const BoardShape& s : shapes_) smallest = std::min(smallest, s.box_board.sizes().minCoeff());
+  for (const BoardShape& s : shapes_) {
+    smallest = std::min(smallest, s.box_board.sizes().minCoeff());
+  }
   index_cell_m_ = std::max(0.5 * smallest, std::sqrt(w * h / kMaxIndexCells));
   for (;;) {
     index_cols_ = std::max(1, static_cast<int>(std::ceil(w / index_cell_m_)));
@@ -502,14 +509,15 @@ void Board::BuildIndex() {
     index_cell_m_ *= 1.05;  // the ceil() overshoot is small; a few steps suffice
   }
   const int n_cells = index_cols_ * index_rows_;
-  // Cell boxes are grown by a nanometre-scale margin so that rounding in CellOf() can never
-  // put a point in a cell whose list misses a shape that contains it.
+  // Cell boxes are grown by a nanometre-scale margin (far above the rounding in CellOf(),
+  // ~1e-16 of the page) so that rounding can never put a point in a cell whose list misses
+  // a shape that contains it.
   const double margin = 1e-9 * std::max(w, h);
   const Eigen::Vector2d origin = -0.5 * page_size_m_;
-  const auto cell_box = [&](int cx, int cy) {
+  const auto cell_box = [&](int cx, int cy, double grow) {
     const Eigen::Vector2d lo = origin + index_cell_m_ * Eigen::Vector2d(cx, cy);
-    return Eigen::AlignedBox2d(lo - Eigen::Vector2d::Constant(margin),
-                               lo + Eigen::Vector2d::Constant(index_cell_m_ + margin));
+    return Eigen::AlignedBox2d(lo - Eigen::Vector2d::Constant(grow),
+                               lo + Eigen::Vector2d::Constant(index_cell_m_ + grow));
   };
   const auto cell_range = [&](double lo, double hi, int n, int* first, int* last) {
     *first = std::clamp(static_cast<int>(std::floor((lo - margin) / index_cell_m_)), 0, n - 1);
@@ -537,59 +545,74 @@ void Board::BuildIndex() {
     for_each_cell(shapes_[i], [&](int c) { bucket[fill[c]++] = i; });
   }
 
-  // Per cell keep the shapes that really touch it, topmost first, down to the first one
-  // that covers the whole cell (nothing under it can show).
+  // Per cell keep the shapes that touch it (grown by the margin), topmost first, down to
+  // the first one that covers the grown cell: nothing under it can show, even at a point
+  // that rounding assigns to this cell from just beyond its edge. The cell is uniform when
+  // the topmost shape reaching into its interior (the cell shrunk by half of
+  // kInteriorFraction) covers that interior; PaintAt trusts this only for points clear of
+  // the cell's edges by kInteriorFraction, so cells that coincide with squares, as on most
+  // boards, are uniform, and PaintAt stays exact.
   index_cells_.assign(n_cells, IndexCell{});
   index_shapes_.clear();
   for (int cy = 0; cy < index_rows_; ++cy) {
     for (int cx = 0; cx < index_cols_; ++cx) {
       const int c = cy * index_cols_ + cx;
-      const Eigen::AlignedBox2d box = cell_box(cx, cy);
+      const Eigen::AlignedBox2d grown = cell_box(cx, cy, margin);
+      const Eigen::AlignedBox2d inner = cell_box(cx, cy, -0.5 * kInteriorFraction * index_cell_m_);
       IndexCell& cell = index_cells_[c];
       cell.begin = static_cast<std::uint32_t>(index_shapes_.size());
+      bool decided = false;
       for (std::uint32_t k = count[c + 1]; k > count[c]; --k) {
         const BoardShape& s = shapes_[bucket[k - 1]];
-        if (!ShapeTouches(s, box)) continue;
-        const bool covers = ShapeCovers(s, box);
-        if (covers && index_shapes_.size() == cell.begin) {
-          cell.uniform = true;
+        if (!ShapeTouches(s, grown)) continue;
+        if (!decided && ShapeTouches(s, inner)) {  // the topmost shape inside the cell
+          decided = true;
+          cell.uniform = ShapeCovers(s, inner);
           cell.paint = s.paint;
         }
         index_shapes_.push_back(bucket[k - 1]);
-        if (covers) break;
+        if (ShapeCovers(s, grown)) break;
       }
       cell.end = static_cast<std::uint32_t>(index_shapes_.size());
     }
   }
 }
 
-bool Board::CellOf(const Eigen::Vector2d& p, int* cx, int* cy) const {
+bool Board::CellOf(const Eigen::Vector2d& p, int* cx, int* cy, bool* interior) const {
   const double hw = 0.5 * page_size_m_.x(), hh = 0.5 * page_size_m_.y();
   // Written so that NaN fails every comparison and lands off the board.
   if (!(p.x() >= -hw && p.x() < hw && p.y() >= -hh && p.y() < hh)) return false;
-  *cx = std::min(static_cast<int>((p.x() + hw) / index_cell_m_), index_cols_ - 1);
-  *cy = std::min(static_cast<int>((p.y() + hh) / index_cell_m_), index_rows_ - 1);
+  const double fx = (p.x() + hw) / index_cell_m_, fy = (p.y() + hh) / index_cell_m_;
+  *cx = std::min(static_cast<int>(fx), index_cols_ - 1);
+  *cy = std::min(static_cast<int>(fy), index_rows_ - 1);
+  const double ux = fx - *cx, uy = fy - *cy;
+  *interior = ux >= kInteriorFraction && ux <= 1 - kInteriorFraction && uy >= kInteriorFraction &&
+              uy <= 1 - kInteriorFraction;
   return true;
 }
 
 Paint Board::PaintAt(const Eigen::Vector2d& p_board) const {
   int cx, cy;
-  if (!CellOf(p_board, &cx, &cy)) return Paint::kOffBoard;
+  bool interior;
+  if (!CellOf(p_board, &cx, &cy, &interior)) return Paint::kOffBoard;
   const IndexCell& cell = index_cells_[cy * index_cols_ + cx];
-  if (cell.uniform) return cell.paint;
+  if (cell.uniform && interior) return cell.paint;
   for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
     const BoardShape& s = shapes_[index_shapes_[k]];
     if (s.Contains(p_board)) return s.paint;
   }
-  // Unreachable on the page (the page rectangle is in every cell's list); kept total.
+  // Unreachable on the page (the page rectangle ends every cell's list); kept total.
   return Paint::kOffBoard;
 }
 
 std::optional<Paint> Board::UniformPaintIn(const Eigen::Vector2d& min_board,
                                            const Eigen::Vector2d& max_board) const {
   int x0, y0, x1, y1;
-  if (!CellOf(min_board, &x0, &y0) || !CellOf(max_board, &x1, &y1)) return std::nullopt;
-  if (x0 != x1 || y0 != y1) return std::nullopt;
+  bool interior0, interior1;
+  if (!CellOf(min_board, &x0, &y0, &interior0) || !CellOf(max_board, &x1, &y1, &interior1)) {
+    return std::nullopt;
+  }
+  if (x0 != x1 || y0 != y1 || !interior0 || !interior1) return std::nullopt;
   const IndexCell& cell = index_cells_[y0 * index_cols_ + x0];
   if (!cell.uniform) return std::nullopt;
   return cell.paint;

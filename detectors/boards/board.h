@@ -176,12 +176,14 @@ class Board {
   struct IndexCell {
     std::uint32_t begin = 0;  // range into index_shapes_, topmost shape first
     std::uint32_t end = 0;
-    bool uniform = false;  // true: every point of the cell has `paint`
+    bool uniform = false;  // true: every point clear of the cell's edges has `paint`
     Paint paint = Paint::kWhite;
   };
 
   void BuildIndex();
-  bool CellOf(const Eigen::Vector2d& p_board, int* cx, int* cy) const;
+  // The index cell of a point on the page (false off the page); *interior: the point is
+  // clear of the cell's edges, where the cell's uniform paint can be trusted.
+  bool CellOf(const Eigen::Vector2d& p_board, int* cx, int* cy, bool* interior) const;
 
   BoardParams params_;
   Eigen::Vector2d page_size_m_ = Eigen::Vector2d::Zero();
