@@ -9,6 +9,7 @@
 #include "station/io/json_reader.h"
 #include "station/model/pose_json.h"
 #include "station/model/station_layout.h"
+#include "station/sensors/lidar_format.h"
 
 namespace linecal {
 namespace {
@@ -171,7 +172,12 @@ const char* SensorKindName(SensorKind kind) {
 }
 
 Eigen::Matrix3d SensorBaseRotation(SensorKind kind) {
-  return kind == SensorKind::kCamera ? CameraBaseRotation() : Eigen::Matrix3d::Identity();
+  switch (kind) {
+    case SensorKind::kCamera: return CameraBaseRotation();
+    case SensorKind::kLidar: return LidarBaseRotation();
+    case SensorKind::kRadar: return Eigen::Matrix3d::Identity();
+  }
+  return Eigen::Matrix3d::Identity();
 }
 
 const SensorModel* CarModel::FindSensor(const std::string& name) const {

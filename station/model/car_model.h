@@ -50,8 +50,8 @@ struct SensorModel {
 };
 
 // R_base of each sensor kind (conventions.md): the orientation at yaw = pitch = roll = 0.
-// Cameras: CameraBaseRotation(). LiDARs and radars: identity (their frames are x forward,
-// y left, z up once decoded).
+// Cameras: CameraBaseRotation(). LiDARs: LidarBaseRotation() (the vendor frame has y at
+// azimuth 0, which faces forward). Radars: identity (x along the boresight, y left, z up).
 Eigen::Matrix3d SensorBaseRotation(SensorKind kind);
 
 struct CarModel {

@@ -21,6 +21,11 @@ const OptionSpec* CommandLine::Find(const std::string& name) const {
 }
 
 absl::Status CommandLine::Parse(const std::vector<std::string>& args) {
+  std::vector<const OptionSpec*> positionals;
+  for (const OptionSpec& o : options_) {
+    if (o.positional) positionals.push_back(&o);
+  }
+  size_t next_positional = 0;
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& arg = args[i];
     if (arg == "--help" || arg == "-h") {
@@ -28,7 +33,11 @@ absl::Status CommandLine::Parse(const std::vector<std::string>& args) {
       return absl::OkStatus();
     }
     if (arg.rfind("--", 0) != 0) {
-      return absl::InvalidArgumentError(absl::StrCat("unexpected argument '", arg, "'"));
+      if (next_positional == positionals.size()) {
+        return absl::InvalidArgumentError(absl::StrCat("unexpected argument '", arg, "'"));
+      }
+      values_[positionals[next_positional++]->name].push_back(arg);
+      continue;
     }
     std::string name = arg.substr(2);
     std::optional<std::string> inline_value;
@@ -37,7 +46,7 @@ absl::Status CommandLine::Parse(const std::vector<std::string>& args) {
       name = name.substr(0, eq);
     }
     const OptionSpec* spec = Find(name);
-    if (spec == nullptr) {
+    if (spec == nullptr || spec->positional) {
       return absl::InvalidArgumentError(absl::StrCat("unknown option --", name));
     }
     std::string value;
@@ -61,7 +70,7 @@ absl::Status CommandLine::Parse(const std::vector<std::string>& args) {
   }
   for (const OptionSpec& o : options_) {
     if (o.required && !Has(o.name)) {
-      return absl::InvalidArgumentError(absl::StrCat("missing --", o.name));
+      return absl::InvalidArgumentError(absl::StrCat("missing ", o.positional ? "" : "--", o.name));
     }
   }
   return absl::OkStatus();
@@ -71,7 +80,8 @@ std::string CommandLine::Help() const {
   std::ostringstream out;
   out << "usage: " << usage_ << "\n\n" << summary_ << "\n\noptions:\n";
   for (const OptionSpec& o : options_) {
-    std::string left = "  --" + o.name + (o.metavar.empty() ? "" : " " + o.metavar);
+    std::string left = o.positional ? "  " + o.name
+                                    : "  --" + o.name + (o.metavar.empty() ? "" : " " + o.metavar);
     out << left;
     // Align help text in a column; 28 fits the longest option names in use.
     constexpr size_t kHelpColumn = 28;

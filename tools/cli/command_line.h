@@ -27,6 +27,9 @@ struct OptionSpec {
   std::string help;
   bool required = false;
   bool repeated = false;  // may be given several times; GetAll() returns every value
+  // A positional argument (given without "--name"); positionals are filled in the order
+  // they are declared. Get(name) reads them like options.
+  bool positional = false;
 };
 
 class CommandLine {

@@ -9,5 +9,10 @@ namespace linecal::tools {
 
 using Args = std::vector<std::string>;
 
+int RunBoards(const Args& args);   // cmd_boards.cc
+int RunPattern(const Args& args);  // cmd_pattern.cc
+int RunCaptureCheck(const Args& args);  // cmd_capture.cc
+int RunLidarDecode(const Args& args);  // cmd_lidar.cc
+int RunRadarDecode(const Args& args);  // cmd_radar.cc
 
 }  // namespace linecal::tools

@@ -18,6 +18,11 @@ struct Subcommand {
 const std::vector<Subcommand>& Subcommands() {
   using namespace linecal::tools;
   static const std::vector<Subcommand> kTable = {
+      {{"boards"}, "list the calibration boards (--json)", RunBoards},
+      {{"pattern"}, "write a printable board pattern (SVG/PNG)", RunPattern},
+      {{"capture", "check"}, "validate a capture directory", RunCaptureCheck},
+      {{"lidar", "decode"}, "decode LiDAR packets (pcap) into one PCD per rotation", RunLidarDecode},
+      {{"radar", "decode"}, "decode a radar CAN log (candump) into detections", RunRadarDecode},
   };
   return kTable;
 }
