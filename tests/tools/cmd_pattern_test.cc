@@ -1,0 +1,153 @@
+// `linecal boards` and `linecal pattern` run as programs: output, files and exit codes
+// (interfaces.md: 0 success, 2 bad usage or input with a one-line message).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "station/io/image_io.h"
+#include "tests/tools/run_linecal.h"
+
+namespace linecal {
+namespace {
+
+using testing_tools::RunLinecal;
+
+class PatternCliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("linecal_pattern_cli_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  std::filesystem::path dir_;
+};
+
+std::string ReadText(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
+  const auto run = RunLinecal("boards --json");
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  const std::map<std::string, int> expected = {
+      {"chessboard", 20}, {"circle", 30},     {"vertical", 51}, {"aruco", 16},
+      {"apriltag", 144},  {"round_hole", 21}, {"checker", 54}};
+  ASSERT_EQ(j.at("boards").size(), expected.size());
+  for (const nlohmann::json& b : j.at("boards")) {
+    const std::string name = b.at("name");
+    ASSERT_TRUE(expected.count(name)) << name;
+    EXPECT_EQ(b.at("feature_count").get<int>(), expected.at(name)) << name;
+    EXPECT_GT(b.at("page_width_m").get<double>(), 0) << name;
+    EXPECT_EQ(b.at("parameters").at("scale").get<double>(), 1.0) << name;
+  }
+  EXPECT_EQ(j.at("boards")[0].at("name"), "chessboard");
+  EXPECT_DOUBLE_EQ(j.at("boards")[0].at("page_width_m").get<double>(), 2.6);
+  EXPECT_EQ(j.at("boards")[0].at("feature_kinds").at("x_corner").get<int>(), 4);
+  EXPECT_EQ(j.at("boards")[6].at("parameters").at("cols").get<int>(), 9);
+  EXPECT_EQ(j.at("boards")[4].at("parameters").at("border_bits").get<int>(), 2);
+
+  const auto text = RunLinecal("boards");
+  EXPECT_EQ(text.exit_code, 0);
+  EXPECT_NE(text.out.find("round_hole"), std::string::npos);
+  EXPECT_EQ(RunLinecal("boards --bogus").exit_code, 2);
+}
+
+TEST_F(PatternCliTest, SvgHasTheBoardSizeInMillimetres) {
+  const auto run = RunLinecal("pattern --board vertical --out " + Path("v.svg"));
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const std::string svg = ReadText(Path("v.svg"));
+  EXPECT_NE(svg.find("width=\"300mm\" height=\"1000mm\" viewBox=\"0 0 300 1000\""),
+            std::string::npos);
+
+  const auto scaled = RunLinecal(
+      "pattern --board checker --cols 7 --rows 5 --square 0.03 "
+      "--scale 2 --json --out " +
+      Path("c.svg"));
+  ASSERT_EQ(scaled.exit_code, 0) << scaled.err;
+  // (7 + 3) x (5 + 3) squares of 2 x 30 mm.
+  EXPECT_NE(ReadText(Path("c.svg")).find("width=\"600mm\" height=\"480mm\""), std::string::npos);
+  const nlohmann::json j = nlohmann::json::parse(scaled.out);
+  EXPECT_EQ(j.at("format"), "svg");
+  EXPECT_DOUBLE_EQ(j.at("page_width_m").get<double>(), 0.6);
+}
+
+TEST_F(PatternCliTest, PngSizeIsDpiTimesBoardSize) {
+  const auto run = RunLinecal("pattern --board aruco --dpi 50 --json --out " + Path("a.png"));
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  // 1.1 m at 50 dpi: 1.1 / 0.0254 * 50 = 2165.35 -> 2165 pixels.
+  const absl::StatusOr<Image8> image = ReadImage8(Path("a.png"));
+  ASSERT_TRUE(image.ok()) << image.status();
+  EXPECT_EQ(image->width, 2165);
+  EXPECT_EQ(image->height, 2165);
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  EXPECT_EQ(j.at("width_px").get<int>(), 2165);
+  EXPECT_EQ(j.at("format"), "png");
+  // pHYs: 50 dpi = 1968.5 px/m, written rounded.
+  const std::string bytes = ReadText(Path("a.png"));
+  const std::size_t at = bytes.find("pHYs");
+  ASSERT_NE(at, std::string::npos);
+  const auto byte = [&](std::size_t i) {
+    return static_cast<std::uint32_t>(static_cast<std::uint8_t>(bytes[i]));
+  };
+  EXPECT_EQ((byte(at + 4) << 24) | (byte(at + 5) << 16) | (byte(at + 6) << 8) | byte(at + 7),
+            1969u);
+  // Black marker border and white page where expected: the top marker's top-left corner is
+  // at PDF (434, 130) mm, i.e. pixel (434, 130) * 50 / 25.4.
+  EXPECT_EQ(image->at(static_cast<int>(440 * 50 / 25.4), static_cast<int>(136 * 50 / 25.4)), 0);
+  EXPECT_EQ(image->at(static_cast<int>(420 * 50 / 25.4), static_cast<int>(120 * 50 / 25.4)), 255);
+
+  // The default resolution, 150 dpi, with the 1-bit border AprilGrid: 841 x 1189 mm.
+  const auto april = RunLinecal("pattern --board apriltag --border-bits 1 --out " + Path("t.png"));
+  ASSERT_EQ(april.exit_code, 0) << april.err;
+  const absl::StatusOr<Image8> tags = ReadImage8(Path("t.png"));
+  ASSERT_TRUE(tags.ok());
+  EXPECT_EQ(tags->width, static_cast<int>(std::lround(0.841 / 0.0254 * 150)));
+  EXPECT_EQ(tags->height, static_cast<int>(std::lround(1.189 / 0.0254 * 150)));
+}
+
+TEST_F(PatternCliTest, BadUsageExitsWithTwoAndOneLine) {
+  const struct {
+    std::string args;
+    std::string message;
+  } cases[] = {
+      {"pattern --out " + Path("x.svg"), "missing --board"},
+      {"pattern --board nope --out " + Path("x.svg"), "unknown board 'nope'"},
+      {"pattern --board aruco", "missing --out"},
+      {"pattern --board aruco --out " + Path("x.txt"), "must end in .svg or .png"},
+      {"pattern --board aruco --cols 5 --out " + Path("x.svg"),
+       "--cols applies to --board checker only"},
+      {"pattern --board aruco --border-bits 1 --out " + Path("x.svg"), "--border-bits applies"},
+      {"pattern --board apriltag --border-bits 3 --out " + Path("x.svg"), "--border-bits: 3"},
+      {"pattern --board checker --cols 1 --out " + Path("x.svg"), "--cols: 1 is outside"},
+      {"pattern --board checker --square -1 --out " + Path("x.svg"), "--square"},
+      {"pattern --board aruco --scale 0 --out " + Path("x.svg"), "--scale: 0"},
+      {"pattern --board aruco --dpi 100 --out " + Path("x.svg"), "--dpi applies to .png"},
+      {"pattern --board aruco --dpi abc --out " + Path("x.png"), "--dpi: 'abc'"},
+      {"pattern --board chessboard --dpi 600 --out " + Path("x.png"), "use --dpi 160 or less"},
+      {"pattern --board aruco --out " + Path("no/such/dir/x.svg"), "cannot create"},
+  };
+  for (const auto& c : cases) {
+    const auto run = RunLinecal(c.args);
+    EXPECT_EQ(run.exit_code, 2) << c.args;
+    EXPECT_NE(run.err.find(c.message), std::string::npos) << c.args << "\n" << run.err;
+    EXPECT_EQ(std::count(run.err.begin(), run.err.end(), '\n'), 1) << run.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(Path("x.png")));
+}
+
+}  // namespace
+}  // namespace linecal
