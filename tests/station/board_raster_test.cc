@@ -2,6 +2,8 @@
 // area-correct anti-aliasing, and the true-scale SVG.
 #include "station/board_raster.h"
 
+#include <apriltag/apriltag.h>
+#include <apriltag/tag36h11.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -9,7 +11,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <memory>
 #include <numbers>
+#include <set>
 #include <string>
 
 #include "station/io/image_io.h"
@@ -100,6 +104,53 @@ TEST_F(BoardRasterTest, DefaultBoardsMatchTheirPdfs) {
     std::printf("%-11s %5d x %-5d px: %.5f of %zu compared pixels agree with %s\n", board.name(), w,
                 h, agreement, compared, c.pdf);
     EXPECT_GE(agreement, kMinAgreement) << board.name();
+  }
+}
+
+// The 1-bit-border AprilGrid is the ordinary tag36h11 layout: stock libapriltag must decode
+// every tag of our rendering, with corners where the board says; the 2-bit (Kalibr) grid
+// must give it nothing (boards.md).
+TEST_F(BoardRasterTest, StockAprilTagDecodesOnlyTheOneBitGrid) {
+  using Family = std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)>;
+  using Detector = std::unique_ptr<apriltag_detector_t, void (*)(apriltag_detector_t*)>;
+  for (int border_bits : {1, 2}) {
+    BoardParams p;
+    p.type = BoardType::kApriltag;
+    p.apriltag_border_bits = border_bits;
+    const Board board = *Board::Create(p);
+    BoardRasterOptions options;
+    options.pixels_per_metre = 2000.0;  // 8.8 mm bits are 17.6 px
+    const absl::StatusOr<Image8> image = RasterizeBoard(board, options);
+    ASSERT_TRUE(image.ok());
+    image_u8_t view{image->width, image->height, image->width,
+                    const_cast<std::uint8_t*>(image->pixels.data())};
+    const Family family(tag36h11_create(), tag36h11_destroy);
+    const Detector detector(apriltag_detector_create(), apriltag_detector_destroy);
+    apriltag_detector_add_family(detector.get(), family.get());
+    zarray_t* detections = apriltag_detector_detect(detector.get(), &view);
+    const int n = zarray_size(detections);
+    std::set<int> ids;
+    for (int i = 0; i < n; ++i) {
+      apriltag_detection_t* d;
+      zarray_get(detections, i, &d);
+      ids.insert(d->id);
+      ASSERT_LT(d->id, 36);
+      for (int c = 0; c < 4; ++c) {
+        // Our corners run top-left, top-right, bottom-right, bottom-left; libapriltag's p[]
+        // bottom-left, bottom-right, top-right, top-left for an upright tag, in a pixel frame
+        // whose origin is the top-left pixel's corner (ours: its centre), hence +0.5.
+        const Eigen::Vector2d f = board.features()[4 * d->id + c].p_board;
+        const double u = (f.x() + 0.5 * board.page_size_m().x()) * options.pixels_per_metre;
+        const double v = (0.5 * board.page_size_m().y() - f.y()) * options.pixels_per_metre;
+        // libapriltag's corner fit on a clean render: a few tenths of a pixel.
+        constexpr double kCornerTolerancePx = 0.5;
+        EXPECT_NEAR(d->p[3 - c][0], u, kCornerTolerancePx) << "tag " << d->id << " corner " << c;
+        EXPECT_NEAR(d->p[3 - c][1], v, kCornerTolerancePx) << "tag " << d->id << " corner " << c;
+      }
+    }
+    apriltag_detections_destroy(detections);
+    EXPECT_EQ(n, border_bits == 1 ? 36 : 0) << "border bits " << border_bits;
+    EXPECT_EQ(ids.size(), border_bits == 1 ? 36u : 0u);
   }
 }
 
