@@ -21,6 +21,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"boards"}, "list the calibration boards (--json)", RunBoards},
       {{"pattern"}, "write a printable board pattern (SVG/PNG)", RunPattern},
       {{"capture", "check"}, "validate a capture directory", RunCaptureCheck},
+      {{"sim"}, "simulate a car in a station and write a capture", RunSim},
       {{"lidar", "decode"}, "decode LiDAR packets (pcap) into one PCD per rotation", RunLidarDecode},
       {{"radar", "decode"}, "decode a radar CAN log (candump) into detections", RunRadarDecode},
   };

@@ -1,0 +1,273 @@
+// The simulator's LiDAR and radar, checked against geometry and through the real decoders:
+// points lie on the board planes within the noise and never inside a hole, rays pass through
+// every hole, simulated packets decode to the simulated points, and simulated CAN frames decode
+// back to the reflectors' range and azimuth.
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <numbers>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "daemon/drivers/lidar_decoder.h"
+#include "daemon/drivers/lidar_pcap.h"
+#include "daemon/drivers/radar_decoder.h"
+#include "station/io/candump.h"
+#include "station/io/pcd.h"
+#include "station/model/car_model.h"
+#include "station/model/station_layout.h"
+#include "station/sim/lidar_sim.h"
+#include "station/sim/radar_sim.h"
+#include "station/sim/simulator.h"
+
+namespace linecal {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+class SimTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    station_ = new StationLayout(*ReadStationLayout(kDeploy + "/stations/reference.json"));
+    car_ = new CarModel(*ReadCarModel(kDeploy + "/cars/reference.json"));
+  }
+  static void TearDownTestSuite() {
+    delete station_;
+    delete car_;
+  }
+  // The nominal T_station_sensor of a car at the station origin.
+  static Rigid3d NominalPose(const std::string& sensor) { return car_->FindSensor(sensor)->T_car_sensor_nominal; }
+  static LidarBeamTable Beams(const std::string& sensor) {
+    const SensorModel* s = car_->FindSensor(sensor);
+    const LidarModel model = *LidarModelFromName(s->model);
+    return *(s->angles_file.empty() ? DefaultBeamTable(model) : ReadAngleCorrectionCsv(model, s->angles_file));
+  }
+
+  static StationLayout* station_;
+  static CarModel* car_;
+};
+StationLayout* SimTest::station_ = nullptr;
+CarModel* SimTest::car_ = nullptr;
+
+// For every point that lies near a target board's plane: its position on the board is printed
+// (never a hole), and the distances to the plane spread like the range noise.
+void CheckBoardPoints(const LidarSimResult& sim, const Rigid3d& T_station_lidar, const StationBoard& board,
+                      double sigma, int* on_board, double* rms) {
+  const Rigid3d T_board_lidar = board.T_station_board.Inverse() * T_station_lidar;
+  const Eigen::Vector2d half = 0.5 * board.board.page_size_m();
+  // Points within 5 sigma (or 1 cm without noise) of the plane and inside the page count.
+  const double band = std::max(5 * sigma, 0.01);
+  double sum2 = 0;
+  *on_board = 0;
+  for (const LidarPoint& p : sim.scans[0].points) {
+    const Eigen::Vector3d q = T_board_lidar * Eigen::Vector3d(p.x, p.y, p.z);
+    if (std::abs(q.z()) > band || std::abs(q.x()) > half.x() || std::abs(q.y()) > half.y()) continue;
+    // Noise moves a point along its ray, so it lands slightly beside where the ray hit: compare
+    // the paint where the ray crossed the plane.
+    const Eigen::Vector3d o = T_board_lidar.translation();
+    const Eigen::Vector3d d = (q - o).normalized();
+    const Eigen::Vector3d hit = o + (-o.z() / d.z()) * d;
+    const Paint paint = board.board.PaintAt(hit.head<2>());
+    EXPECT_NE(paint, Paint::kHole) << "point in a hole of " << board.id << " at " << hit.transpose();
+    ++*on_board;
+    sum2 += q.z() * q.z();
+  }
+  *rms = *on_board ? std::sqrt(sum2 / *on_board) : 0;
+}
+
+TEST_F(SimTest, LidarPointsLieOnBoardsAndNeverInHoles) {
+  for (const char* sensor : {"roof_lidar", "bumper_lidar"}) {
+    for (double sigma : {0.0, 0.02}) {
+      LidarSimOptions o;
+      o.range_sigma_m = sigma;
+      const Rigid3d pose = NominalPose(sensor);
+      absl::StatusOr<LidarSimResult> sim = SimulateLidar(Beams(sensor), pose, *station_, o, 0, 7);
+      ASSERT_TRUE(sim.ok()) << sim.status();
+      for (const char* id : {"lidar_left", "lidar_right"}) {
+        int n = 0;
+        double rms = 0;
+        CheckBoardPoints(*sim, pose, *station_->FindBoard(id), sigma, &n, &rms);
+        // Both LiDARs put dozens of returns on each board at 4-7 m.
+        EXPECT_GT(n, 30) << sensor << " " << id;
+        // Without noise only the distance unit's rounding (2-4 mm) remains; with noise the
+        // spread along the normal is about sigma times the cosine of the incidence angle
+        // (boards face the car within ~35 degrees), hence 0.6..1.1 sigma.
+        if (sigma == 0) {
+          EXPECT_LT(rms, 0.004) << sensor << " " << id;
+        } else {
+          EXPECT_GT(rms, 0.6 * sigma) << sensor << " " << id;
+          EXPECT_LT(rms, 1.1 * sigma) << sensor << " " << id;
+        }
+      }
+    }
+  }
+}
+
+TEST_F(SimTest, LidarRaysPassThroughEveryHole) {
+  // The Pandar64's dense central beams cross every hole of both boards: count, per hole, the
+  // rays that cross the board plane inside it and return from farther away.
+  const Rigid3d pose = NominalPose("roof_lidar");
+  LidarSimOptions o;
+  o.range_sigma_m = 0;
+  absl::StatusOr<LidarSimResult> sim = SimulateLidar(Beams("roof_lidar"), pose, *station_, o, 0, 1);
+  ASSERT_TRUE(sim.ok());
+  for (const char* id : {"lidar_left", "lidar_right"}) {
+    const StationBoard& b = *station_->FindBoard(id);
+    const Rigid3d T_board_lidar = b.T_station_board.Inverse() * pose;
+    std::map<int, int> through;
+    for (const LidarPoint& p : sim->scans[0].points) {
+      const Eigen::Vector3d q = T_board_lidar * Eigen::Vector3d(p.x, p.y, p.z);
+      if (q.z() > -0.05) continue;  // not behind the board
+      const Eigen::Vector3d o = T_board_lidar.translation();
+      const Eigen::Vector3d hit = o + (-o.z() / (q - o).z()) * (q - o);
+      for (const BoardFeature& f : b.board.features()) {
+        if (f.kind == FeatureKind::kHoleCentre && (hit.head<2>() - f.p_board).norm() < 0.12) ++through[f.id];
+      }
+    }
+    EXPECT_EQ(through.size(), 5u) << id;
+  }
+}
+
+TEST_F(SimTest, LidarIsDeterministic) {
+  const Rigid3d pose = NominalPose("bumper_lidar");
+  LidarSimOptions o;
+  o.dropout_probability = 0.1;
+  absl::StatusOr<LidarSimResult> a = SimulateLidar(Beams("bumper_lidar"), pose, *station_, o, 0, 5);
+  absl::StatusOr<LidarSimResult> b = SimulateLidar(Beams("bumper_lidar"), pose, *station_, o, 0, 5);
+  absl::StatusOr<LidarSimResult> c = SimulateLidar(Beams("bumper_lidar"), pose, *station_, o, 0, 6);
+  ASSERT_TRUE(a.ok() && b.ok() && c.ok());
+  EXPECT_EQ(a->scans[0].points, b->scans[0].points);
+  EXPECT_NE(a->scans[0].points, c->scans[0].points);
+}
+
+TEST_F(SimTest, LidarOptionsErrorsNameTheField) {
+  LidarSimOptions o;
+  o.range_sigma_m = -1;
+  EXPECT_EQ(o.Validate().message(), "range_sigma_m = -1: must be in [0, 1]");
+  o = {};
+  o.rotations = 0;
+  EXPECT_EQ(o.Validate().message(), "rotations = 0: must be in [1, 100]");
+}
+
+// The capture's pcap decodes, through the real decoder, to the capture's PCD points.
+TEST_F(SimTest, PacketsDecodeToTheSimulatedPoints) {
+  for (const char* sensor : {"roof_lidar", "bumper_lidar"}) {
+    SimulatorOptions o;
+    o.sensors = {sensor};
+    o.lidar.rotations = 2;
+    const fs::path dir = fs::path(testing::TempDir()) / (std::string("sim_pcap_") + sensor);
+    absl::StatusOr<SimulationSummary> sim = SimulateCapture(*station_, *car_, o, 11, dir.string());
+    ASSERT_TRUE(sim.ok()) << sim.status();
+    const CaptureSensor& entry = sim->manifest.sensors[0];
+    ASSERT_TRUE(entry.packets.has_value());
+    ASSERT_EQ(entry.frames.size(), 2u);
+    absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(Beams(sensor));
+    ASSERT_TRUE(decoder.ok());
+    std::vector<LidarScan> scans;
+    LidarPcapStats stats;
+    ASSERT_TRUE(DecodeLidarPcap(dir / entry.packets->path, {}, &*decoder,
+                                [&](LidarScan&& s) { scans.push_back(std::move(s)); return absl::OkStatus(); }, &stats)
+                    .ok());
+    EXPECT_EQ(decoder->stats().skipped_total(), 0);
+    ASSERT_EQ(scans.size(), 2u) << sensor;
+    for (int r = 0; r < 2; ++r) {
+      absl::StatusOr<PcdCloud> pcd = ReadPcd(dir / entry.frames[r].path);
+      ASSERT_TRUE(pcd.ok());
+      const std::vector<LidarPoint>& expected = pcd->points;
+      const std::vector<LidarPoint>& got = scans[r].points;
+      ASSERT_EQ(got.size(), expected.size()) << sensor << " rotation " << r;
+      for (size_t i = 0; i < got.size(); ++i) {
+        // float coordinates of the same metres: rounding of the two computations only.
+        ASSERT_NEAR(got[i].x, expected[i].x, 2e-5) << i;
+        ASSERT_NEAR(got[i].y, expected[i].y, 2e-5) << i;
+        ASSERT_NEAR(got[i].z, expected[i].z, 2e-5) << i;
+        ASSERT_EQ(got[i].ring, expected[i].ring) << i;
+        ASSERT_EQ(got[i].intensity, expected[i].intensity) << i;
+        // The packets' time fields have 1 us resolution.
+        // (Compared as integers: a double cannot hold ns since the epoch exactly.)
+        ASSERT_LE(std::llabs(got[i].time_ns - expected[i].time_ns), 1000) << i;
+      }
+    }
+  }
+}
+
+TEST_F(SimTest, RadarFramesDecodeToTheReflectors) {
+  for (const char* sensor : {"front_radar", "corner_radar_left"}) {
+    const SensorModel* s = car_->FindSensor(sensor);
+    const Rigid3d pose = s->T_car_sensor_nominal;
+    RadarSimOptions o;
+    o.cycles = 50;
+    absl::StatusOr<std::vector<CanFrame>> frames =
+        SimulateRadar(s->model, s->radar_sensor_id, *station_, pose, CanTime{}, "can0", o, 3);
+    ASSERT_TRUE(frames.ok()) << frames.status();
+    const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *ParseRadarModel(s->model), RadarConventions{});
+    EXPECT_EQ(decoded.cycles.size(), 50u);
+    for (const RadarCycle& c : decoded.cycles) EXPECT_TRUE(c.complete());
+    // Every target reflector: the detections nearest its true position average to the truth.
+    for (const RadarTruth& t : RadarReflectorTruth(*station_, pose, *RadarFieldOfViewOf(s->model))) {
+      if (std::find(s->targets.begin(), s->targets.end(), t.reflector_id) == s->targets.end()) continue;
+      ASSERT_TRUE(t.in_view) << t.reflector_id;
+      double sum_az = 0, sum_r = 0;
+      int n = 0;
+      for (const RadarCycle& c : decoded.cycles) {
+        for (const RadarDetection& d : c.detections) {
+          // Within 5 sigma of range and azimuth plus the encoding steps (0.2 m, 0.1 deg).
+          if (std::abs(d.range_m - t.range_m) < 0.5 && std::abs(d.azimuth_rad - t.azimuth_rad) < 1.0 * kDegToRad) {
+            sum_az += d.azimuth_rad;
+            sum_r += d.range_m;
+            ++n;
+          }
+        }
+      }
+      // 98% detection probability over 50 cycles.
+      EXPECT_GE(n, 45) << sensor << " " << t.reflector_id;
+      // Means of ~50 detections: sigma/sqrt(50) plus quantisation; 4 standard errors.
+      EXPECT_NEAR(sum_az / n, t.azimuth_rad, 0.06 * kDegToRad + 4 * 0.1 * kDegToRad / std::sqrt(n)) << t.reflector_id;
+      EXPECT_NEAR(sum_r / n, t.range_m, 0.06 + 4 * 0.05 / std::sqrt(n)) << t.reflector_id;
+    }
+  }
+}
+
+TEST_F(SimTest, WholeCaptureIsValidAndDeterministic) {
+  SimulatorOptions o;
+  o.sensors = {"front_camera", "bumper_lidar", "front_radar"};
+  const fs::path a = fs::path(testing::TempDir()) / "sim_whole_a";
+  const fs::path b = fs::path(testing::TempDir()) / "sim_whole_b";
+  absl::StatusOr<SimulationSummary> sa = SimulateCapture(*station_, *car_, o, 21, a.string());
+  absl::StatusOr<SimulationSummary> sb = SimulateCapture(*station_, *car_, o, 21, b.string());
+  ASSERT_TRUE(sa.ok() && sb.ok()) << sa.status();
+  absl::StatusOr<Capture> c = ReadCapture(a.string());
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->manifest.sensors.size(), 3u);
+  EXPECT_EQ(sa->ground_truth.dump(), sb->ground_truth.dump());
+  for (const char* f : {"front_camera/frame-000000.png", "bumper_lidar/packets.pcap", "front_radar/can.log"}) {
+    std::ifstream fa(a / f, std::ios::binary), fb(b / f, std::ios::binary);
+    const std::string da((std::istreambuf_iterator<char>(fa)), {}), db((std::istreambuf_iterator<char>(fb)), {});
+    EXPECT_FALSE(da.empty());
+    EXPECT_EQ(da, db) << f;
+  }
+  // The mounting error stays within its bounds, and the true pose is nominal + error.
+  for (const auto& s : sa->ground_truth["sensors"]) {
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_LE(std::abs(s["mounting_error"]["ypr_deg"][i].get<double>()), o.perturb_angle_deg);
+      EXPECT_LE(std::abs(s["mounting_error"]["xyz_m"][i].get<double>()), o.perturb_offset_m);
+    }
+  }
+}
+
+TEST_F(SimTest, UnknownSensorIsRefused) {
+  SimulatorOptions o;
+  o.sensors = {"periscope"};
+  absl::StatusOr<SimulationSummary> s =
+      SimulateCapture(*station_, *car_, o, 1, (fs::path(testing::TempDir()) / "sim_bad").string());
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.status().message(), "car model 'reference' has no sensor 'periscope'");
+}
+
+}  // namespace
+}  // namespace linecal
