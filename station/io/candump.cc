@@ -263,6 +263,9 @@ absl::StatusOr<CanFrame> ParseCandumpLine(std::string_view line) {
   }
   frame.interface = std::string(fields[1]);
   if (absl::Status s = ParseFrameToken(fields[2], &frame); !s.ok()) return s;
+  // What the line-level checks leave to the frame's own invariants (e.g. control characters
+  // in the interface name): a parsed frame is always one FormatCandumpLine accepts.
+  if (absl::Status s = ValidateCanFrame(frame); !s.ok()) return s;
   return frame;
 }
 

@@ -12,6 +12,7 @@
 // direction token (` R` / ` T`, written by `candump -x`) is accepted and ignored. The
 // classic-CAN "len8_dlc" suffix (`#..._D`) and CAN XL frames are not supported (rejected).
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdint>
@@ -60,9 +61,10 @@ struct CanFrame {
   uint8_t len = 0;       // payload bytes: 0..8 classic, CAN FD one of 0..8,12,16,20,24,32,48,64
   std::array<uint8_t, kCanFdMaxDataBytes> data{};  // bytes past `len` are zero
 
-  // The payload (empty for remote frames). Points into this frame.
+  // The payload (empty for remote frames; never past `data`, even for a `len` that
+  // ValidateCanFrame would refuse). Points into this frame.
   std::span<const uint8_t> payload() const {
-    return {data.data(), remote ? size_t{0} : size_t{len}};
+    return {data.data(), remote ? size_t{0} : std::min(size_t{len}, data.size())};
   }
   bool operator==(const CanFrame&) const = default;
 };

@@ -14,6 +14,7 @@ namespace {
 using std::chrono::microseconds;
 using std::chrono::nanoseconds;
 using std::chrono::seconds;
+using std::string_view_literals::operator""sv;
 
 constexpr int64_t kLogEpochS = 1600000000;  // the timestamp of sensors.md's example line
 
@@ -95,7 +96,7 @@ TEST(CandumpParseTest, AcceptsSeparatorsCaseDirectionAndFractions) {
 }
 
 struct BadLine {
-  const char* line;
+  std::string_view line;
   const char* message_part;
 };
 
@@ -124,6 +125,7 @@ TEST(CandumpParseTest, MalformedLinesAreErrorsNamingTheProblem) {
       {"(1600000000.000000) can0 123#00 X", "only R or T"},
       {"(1600000000.000000) can0 123#00 R extra", "unexpected text"},
       {"(1600000000.000000) averyveryverylongname0 123#00", "longer than 15"},
+      {"(1600000000.000000) c\0n0 123#00"sv, "control character"},
   };
   for (const BadLine& c : cases) {
     const absl::StatusOr<CanFrame> f = ParseCandumpLine(c.line);
