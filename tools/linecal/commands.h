@@ -13,6 +13,7 @@ int RunBoards(const Args& args);   // cmd_boards.cc
 int RunPattern(const Args& args);  // cmd_pattern.cc
 int RunCaptureCheck(const Args& args);  // cmd_capture.cc
 int RunSim(const Args& args);  // cmd_sim.cc
+int RunLidarTopview(const Args& args);  // cmd_topview.cc
 int RunLidarDecode(const Args& args);  // cmd_lidar.cc
 int RunRadarDecode(const Args& args);  // cmd_radar.cc
 

@@ -22,6 +22,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"pattern"}, "write a printable board pattern (SVG/PNG)", RunPattern},
       {{"capture", "check"}, "validate a capture directory", RunCaptureCheck},
       {{"sim"}, "simulate a car in a station and write a capture", RunSim},
+      {{"lidar", "topview"}, "draw LiDAR scans seen from above (PNG)", RunLidarTopview},
       {{"lidar", "decode"}, "decode LiDAR packets (pcap) into one PCD per rotation", RunLidarDecode},
       {{"radar", "decode"}, "decode a radar CAN log (candump) into detections", RunRadarDecode},
   };
