@@ -1,8 +1,6 @@
 // `linecal radar decode` run as a program: output, summary and exit codes (interfaces.md).
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -11,37 +9,13 @@
 
 #include "station/io/candump.h"
 #include "station/sensors/radar_format.h"
+#include "tests/tools/run_linecal.h"
 
 namespace linecal {
 namespace {
 
-const std::string kLinecal = std::string(LINECAL_BINARY_DIR) + "/bin/linecal";
-
-struct RunResult {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
-
-// Runs `linecal <args>` with stdout and stderr captured.
-RunResult Linecal(const std::string& args) {
-  const std::filesystem::path err_path =
-      std::filesystem::path(testing::TempDir()) / "cmd_radar_stderr.txt";
-  const std::string command = kLinecal + " " + args + " 2>" + err_path.string();
-  RunResult run;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return run;
-  char buffer[4096];
-  size_t n;
-  while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) run.out.append(buffer, n);
-  const int status = pclose(pipe);
-  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream err(err_path);
-  std::stringstream text;
-  text << err.rdbuf();
-  run.err = text.str();
-  return run;
-}
+using testing_tools::LinecalRun;
+using testing_tools::RunLinecal;
 
 std::string WriteLog(const std::string& name, const std::string& text) {
   const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / name;
@@ -66,8 +40,8 @@ constexpr char kArsLog[] =
     "(1600000000.000750) can0 201#0000000000000000\n";
 
 TEST(CmdRadarTest, Ars408JsonLinesCarryTheWorkedExample) {
-  const RunResult run =
-      Linecal("radar decode --model ars408 --json --log " + WriteLog("ars.log", kArsLog));
+  const LinecalRun run =
+      RunLinecal("radar decode --model ars408 --json --log " + WriteLog("ars.log", kArsLog));
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const std::vector<nlohmann::json> lines = JsonLines(run.out);
   ASSERT_EQ(lines.size(), 1u) << run.out;
@@ -89,8 +63,8 @@ TEST(CmdRadarTest, Ars408JsonLinesCarryTheWorkedExample) {
 }
 
 TEST(CmdRadarTest, TableWithoutJson) {
-  const RunResult run =
-      Linecal("radar decode --model ars408 --log " + WriteLog("ars_t.log", kArsLog));
+  const LinecalRun run =
+      RunLinecal("radar decode --model ars408 --log " + WriteLog("ars_t.log", kArsLog));
   ASSERT_EQ(run.exit_code, 0) << run.err;
   EXPECT_EQ(run.out.rfind("t_ns", 0), 0u) << run.out;
   EXPECT_NE(run.out.find("cluster"), std::string::npos) << run.out;
@@ -112,7 +86,7 @@ TEST(CmdRadarTest, EsrTracksHaveNoRcs) {
   scan.detections.push_back(d);
   const std::string path = (std::filesystem::path(testing::TempDir()) / "esr.log").string();
   ASSERT_TRUE(WriteCandumpLog(path, *EncodeEsrScan(scan, "can0", {})).ok());
-  const RunResult run = Linecal("radar decode --model esr --json --log " + path);
+  const LinecalRun run = RunLinecal("radar decode --model esr --json --log " + path);
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const std::vector<nlohmann::json> lines = JsonLines(run.out);
   ASSERT_EQ(lines.size(), 1u);
@@ -124,16 +98,17 @@ TEST(CmdRadarTest, EsrTracksHaveNoRcs) {
   EXPECT_NEAR(lines[0]["range_rate_mps"].get<double>(), -1.5, 0.005);
   EXPECT_FALSE(lines[0].contains("rcs_dbsm"));
   // The other angle convention mirrors the azimuth.
-  const RunResult ccw =
-      Linecal("radar decode --model esr --json --esr-angle counterclockwise --log " + path);
+  const LinecalRun ccw =
+      RunLinecal("radar decode --model esr --json --esr-angle counterclockwise --log " + path);
   ASSERT_EQ(ccw.exit_code, 0) << ccw.err;
   EXPECT_NEAR(JsonLines(ccw.out).at(0)["azimuth_deg"].get<double>(), 5.0, 0.05);
 }
 
 TEST(CmdRadarTest, NoDetectionsIsANegativeAnswer) {
   // An ESR log decoded as ARS408: every frame is an unknown id.
-  const RunResult run = Linecal("radar decode --model ars408 --log " +
-                                WriteLog("esr_as_ars.log", "(1.0) can0 4E0#0000000000000000\n"));
+  const LinecalRun run =
+      RunLinecal("radar decode --model ars408 --log " +
+                 WriteLog("esr_as_ars.log", "(1.0) can0 4E0#0000000000000000\n"));
   EXPECT_EQ(run.exit_code, 1) << run.err;
   EXPECT_NE(run.err.find("unknown_id 1"), std::string::npos) << run.err;
 }
@@ -154,7 +129,7 @@ TEST(CmdRadarTest, BadInputExitsTwoWithAOneLineMessage) {
        "bad.log:2: bad CAN id '7G1'"},
   };
   for (const Case& c : cases) {
-    const RunResult run = Linecal("radar decode " + c.args);
+    const LinecalRun run = RunLinecal("radar decode " + c.args);
     EXPECT_EQ(run.exit_code, 2) << c.args << "\n" << run.err;
     EXPECT_NE(run.err.find(c.message_part), std::string::npos) << c.args << "\n" << run.err;
     EXPECT_EQ(std::count(run.err.begin(), run.err.end(), '\n'), 1) << run.err;
@@ -162,7 +137,7 @@ TEST(CmdRadarTest, BadInputExitsTwoWithAOneLineMessage) {
 }
 
 TEST(CmdRadarTest, HelpExitsZero) {
-  const RunResult run = Linecal("radar decode --help");
+  const LinecalRun run = RunLinecal("radar decode --help");
   EXPECT_EQ(run.exit_code, 0);
   EXPECT_NE(run.out.find("--model ars408|esr"), std::string::npos) << run.out;
 }
