@@ -1,0 +1,46 @@
+#pragma once
+// What every board detector returns (interfaces.md, `linecal detect`), and the reasons it can
+// give when it finds no board. Detectors are pure functions over non-owning image views: no
+// I/O, no threads, no global state; a detector either finds the whole board (found = true),
+// or reports found = false with a reason and, only when they are certain, the features of a
+// partly seen board (occlusion, a vertical board cut by the image border).
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "detectors/boards/board.h"
+
+namespace linecal {
+
+enum class DetectReason : std::uint8_t {
+  kNone = 0,            // found
+  kBadImage,            // the view is invalid (ImageView::Validate), or too small to hold a board
+  kLowContrast,         // nothing in the image has the contrast of a printed board
+  kNoCandidates,        // no feature candidates of this board's kind
+  kTooFewFeatures,      // candidates, but too few to identify the board
+  kAmbiguous,           // more than one way to identify the board (e.g. two boards in view)
+  kVerificationFailed,  // a candidate board failed the geometric check of the whole board
+  kWrongBoard,          // the pattern found belongs to another board (e.g. other marker ids)
+  kPartial,             // only part of the board is visible; the certain features are reported
+};
+
+// "", "bad_image", "low_contrast", "no_candidates", "too_few_features", "ambiguous",
+// "verification_failed", "wrong_board", "partial".
+const char* DetectReasonName(DetectReason reason);
+
+struct DetectedFeature {
+  int id = 0;                                   // BoardFeature::id
+  Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();  // sub-pixel, pixel-centre convention
+  Eigen::Vector2d p_board = Eigen::Vector2d::Zero();  // BoardFeature::p_board, metres
+  int marker = -1;                              // BoardFeature::marker
+};
+
+struct Detection {
+  bool found = false;
+  DetectReason reason = DetectReason::kNoCandidates;
+  std::vector<DetectedFeature> features;  // ordered by id
+};
+
+}  // namespace linecal
