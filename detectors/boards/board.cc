@@ -612,10 +612,41 @@ std::optional<Paint> Board::UniformPaintIn(const Eigen::Vector2d& min_board,
   if (!CellOf(min_board, &x0, &y0, &interior0) || !CellOf(max_board, &x1, &y1, &interior1)) {
     return std::nullopt;
   }
-  if (x0 != x1 || y0 != y1 || !interior0 || !interior1) return std::nullopt;
-  const IndexCell& cell = index_cells_[y0 * index_cols_ + x0];
-  if (!cell.uniform) return std::nullopt;
-  return cell.paint;
+  if (x0 == x1 && y0 == y1) {
+    const IndexCell& cell = index_cells_[y0 * index_cols_ + x0];
+    if (cell.uniform && interior0 && interior1) return cell.paint;
+  }
+  // A pixel-sized box meets at most 2 x 2 cells; a larger one is left to the caller.
+  if (x1 - x0 > 1 || y1 - y0 > 1) return std::nullopt;
+  // Per cell, the topmost of its shapes reaching into the box's part in that cell decides
+  // that part. The box is shrunk by a hair so that a shape merely sharing its edge does not
+  // count.
+  const Eigen::Vector2d hair = Eigen::Vector2d::Constant(kInteriorFraction * index_cell_m_);
+  const Eigen::AlignedBox2d box(min_board + hair, max_board - hair);
+  if (box.isEmpty()) return std::nullopt;
+  const Eigen::Vector2d origin = -0.5 * page_size_m_;
+  std::optional<Paint> paint;
+  for (int cy = y0; cy <= y1; ++cy) {
+    for (int cx = x0; cx <= x1; ++cx) {
+      const Eigen::Vector2d lo = origin + index_cell_m_ * Eigen::Vector2d(cx, cy);
+      const Eigen::AlignedBox2d part =
+          box.intersection(Eigen::AlignedBox2d(lo, lo + Eigen::Vector2d::Constant(index_cell_m_)));
+      if (part.isEmpty()) continue;
+      const IndexCell& cell = index_cells_[cy * index_cols_ + cx];
+      std::optional<Paint> part_paint;
+      for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
+        const BoardShape& s = shapes_[index_shapes_[k]];
+        if (!ShapeTouches(s, part)) continue;
+        if (ShapeCovers(s, part)) part_paint = s.paint;
+        break;
+      }
+      if (!part_paint.has_value() || (paint.has_value() && *paint != *part_paint)) {
+        return std::nullopt;
+      }
+      paint = part_paint;
+    }
+  }
+  return paint;
 }
 
 }  // namespace linecal

@@ -162,10 +162,12 @@ class Board {
   // sub-sample of every rendered pixel.
   Paint PaintAt(const Eigen::Vector2d& p_board) const;
 
-  // The paint of the whole axis-aligned box [min_board, max_board] when the index knows it
-  // is uniform (the box lies in one index cell covered by a single shape); nullopt when
-  // the box may hold more than one paint, or is not entirely on the page. Conservative: a
-  // uniform box can still give nullopt. O(1). Lets a renderer skip supersampling.
+  // The paint of the axis-aligned box [min_board, max_board] (all of it but a
+  // nanometre-scale band along its edges) when it has one paint; nullopt when it may hold
+  // more than one, or is not entirely on the page. Meant for pixel-sized boxes: a box over
+  // more than 2 x 2 index cells (over half the smallest shape wide) gives nullopt. O(1) on
+  // average: a look-up, or a few shapes of at most four index cells. Lets a renderer
+  // supersample only the pixels that an edge crosses.
   std::optional<Paint> UniformPaintIn(const Eigen::Vector2d& min_board,
                                       const Eigen::Vector2d& max_board) const;
 
