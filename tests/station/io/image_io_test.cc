@@ -63,7 +63,9 @@ void WriteRawPng(const std::string& path, int w, int h, int bit_depth, int colou
   std::fclose(f);
 }
 
-void WriteGreyJpeg(const std::string& path, const Image8& image, int quality) {
+// Writes packed 8-bit rows as a JPEG: components 1 (grey) or 3 (RGB).
+void WriteJpeg(const std::string& path, int w, int h, int components, const std::uint8_t* pixels,
+               int quality) {
   jpeg_compress_struct cinfo{};
   jpeg_error_mgr err;
   cinfo.err = jpeg_std_error(&err);
@@ -71,15 +73,15 @@ void WriteGreyJpeg(const std::string& path, const Image8& image, int quality) {
   std::FILE* f = std::fopen(path.c_str(), "wb");
   ASSERT_NE(f, nullptr);
   jpeg_stdio_dest(&cinfo, f);
-  cinfo.image_width = image.width;
-  cinfo.image_height = image.height;
-  cinfo.input_components = 1;
-  cinfo.in_color_space = JCS_GRAYSCALE;
+  cinfo.image_width = w;
+  cinfo.image_height = h;
+  cinfo.input_components = components;
+  cinfo.in_color_space = components == 1 ? JCS_GRAYSCALE : JCS_RGB;
   jpeg_set_defaults(&cinfo);
   jpeg_set_quality(&cinfo, quality, TRUE);
   jpeg_start_compress(&cinfo, TRUE);
-  for (int y = 0; y < image.height; ++y) {
-    JSAMPROW row = const_cast<JSAMPROW>(&image.pixels[static_cast<std::size_t>(y) * image.width]);
+  for (int y = 0; y < h; ++y) {
+    JSAMPROW row = const_cast<JSAMPROW>(pixels + static_cast<std::size_t>(y) * w * components);
     jpeg_write_scanlines(&cinfo, &row, 1);
   }
   jpeg_finish_compress(&cinfo);
@@ -87,28 +89,8 @@ void WriteGreyJpeg(const std::string& path, const Image8& image, int quality) {
   std::fclose(f);
 }
 
-void WriteRgbJpeg(const std::string& path, const RgbImage& image, int quality) {
-  jpeg_compress_struct cinfo{};
-  jpeg_error_mgr err;
-  cinfo.err = jpeg_std_error(&err);
-  jpeg_create_compress(&cinfo);
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  ASSERT_NE(f, nullptr);
-  jpeg_stdio_dest(&cinfo, f);
-  cinfo.image_width = image.width;
-  cinfo.image_height = image.height;
-  cinfo.input_components = 3;
-  cinfo.in_color_space = JCS_RGB;
-  jpeg_set_defaults(&cinfo);
-  jpeg_set_quality(&cinfo, quality, TRUE);
-  jpeg_start_compress(&cinfo, TRUE);
-  for (int y = 0; y < image.height; ++y) {
-    JSAMPROW row = const_cast<JSAMPROW>(image.at(0, y));
-    jpeg_write_scanlines(&cinfo, &row, 1);
-  }
-  jpeg_finish_compress(&cinfo);
-  jpeg_destroy_compress(&cinfo);
-  std::fclose(f);
+void WriteGreyJpeg(const std::string& path, const Image8& image, int quality) {
+  WriteJpeg(path, image.width, image.height, 1, image.pixels.data(), quality);
 }
 
 std::string ReadBytes(const std::string& path) {
@@ -250,7 +232,7 @@ TEST_F(ImageIoTest, JpegGreyAndColour) {
   EXPECT_NEAR(g->at(13, 13), 210, kJpegTolerance);
 
   RgbImage rgb(16, 16, {200, 100, 50});
-  WriteRgbJpeg(Path("c.jpg"), rgb, 100);
+  WriteJpeg(Path("c.jpg"), rgb.width, rgb.height, 3, rgb.rgb.data(), 100);
   const absl::StatusOr<Image16> c = ReadImage16(Path("c.jpg"));
   ASSERT_TRUE(c.ok()) << c.status();
   // JPEG's Y is the BT.601 luma too; read as 16 bits it is scaled by 257.
