@@ -1,0 +1,419 @@
+#include "detectors/checker/checker_detector.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <deque>
+#include <map>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "detectors/common/homography.h"
+#include "detectors/common/image_filters.h"
+
+namespace linecal {
+namespace {
+
+// Below this side no board of boards.md (smallest squares 12 px) fits.
+constexpr int kMinImageSide = 16;
+// Links of the corner graph: the neighbour lies within 25 degrees of the edge direction
+// and one of its own edge lines is within 25 degrees of the link. Perspective bends a
+// board's lines between neighbouring vertices by far less; a wrong corner off the line
+// by a quarter square is already 14 degrees off.
+const double kCosLinkTolerance = std::cos(25.0 * 3.14159265358979 / 180.0);
+// The dark axes of edge neighbours are perpendicular (bisectors of the same two lines);
+// |cos| below 0.5 (60 degrees) allows for strong perspective.
+constexpr double kMaxDarkAxisCos = 0.5;
+
+// The four local directions of a corner, in cyclic order: +line_a, +line_b, -line_a,
+// -line_b (line_b is counter-clockwise from line_a, so the order is one rotation sense).
+Eigen::Vector2d LocalDirection(const XCorner& c, int k) {
+  switch (k & 3) {
+    case 0: return c.line_a;
+    case 1: return c.line_b;
+    case 2: return -c.line_a;
+    default: return -c.line_b;
+  }
+}
+
+// neighbours[i][k]: the corner linked to corner i along its local direction k, or -1.
+std::vector<std::array<int, 4>> LinkCorners(const std::vector<XCorner>& corners) {
+  const int n = static_cast<int>(corners.size());
+  std::vector<std::array<int, 4>> best(n, {-1, -1, -1, -1});
+  // Two corners nearer than this are not neighbouring vertices of a board (the smallest
+  // foreshortened square is about 8 px).
+  constexpr double kMinLinkPx = 4.0;
+  for (int i = 0; i < n; ++i) {
+    std::array<double, 4> best_dist = {1e300, 1e300, 1e300, 1e300};
+    for (int j = 0; j < n; ++j) {
+      if (j == i) continue;
+      const Eigen::Vector2d d = corners[j].uv_px - corners[i].uv_px;
+      const double dist = d.norm();
+      if (dist < kMinLinkPx) continue;
+      const Eigen::Vector2d dir = d / dist;
+      if (std::abs(corners[i].dark_axis.dot(corners[j].dark_axis)) > kMaxDarkAxisCos) continue;
+      if (std::max(std::abs(corners[j].line_a.dot(dir)), std::abs(corners[j].line_b.dot(dir))) <
+          kCosLinkTolerance) {
+        continue;
+      }
+      for (int k = 0; k < 4; ++k) {
+        if (LocalDirection(corners[i], k).dot(dir) >= kCosLinkTolerance && dist < best_dist[k]) {
+          best_dist[k] = dist;
+          best[i][k] = j;
+        }
+      }
+    }
+  }
+  // Keep mutual links only: j is i's nearest along k and i is j's nearest back.
+  std::vector<std::array<int, 4>> links(n, {-1, -1, -1, -1});
+  for (int i = 0; i < n; ++i) {
+    for (int k = 0; k < 4; ++k) {
+      const int j = best[i][k];
+      if (j < 0) continue;
+      const Eigen::Vector2d back = (corners[i].uv_px - corners[j].uv_px).normalized();
+      for (int m = 0; m < 4; ++m) {
+        if (best[j][m] == i && LocalDirection(corners[j], m).dot(back) >= kCosLinkTolerance) {
+          links[i][k] = j;
+        }
+      }
+    }
+  }
+  return links;
+}
+
+struct GridCorner {
+  int index = 0;  // into the corner list
+  int gi = 0;     // grid coordinates, axes right-handed in the image
+  int gj = 0;
+};
+
+struct Component {
+  std::vector<GridCorner> corners;
+  bool consistent = true;  // no two corners on one grid point, no contradicting links
+};
+
+// Connected components of the link graph with grid coordinates: global direction g
+// (0 = +i, 1 = +j, 2 = -i, 3 = -j) is local direction (rotation[c] + g) % 4 of corner c.
+std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
+                                      const std::vector<std::array<int, 4>>& links) {
+  const int n = static_cast<int>(corners.size());
+  constexpr std::array<int, 4> kDi = {1, 0, -1, 0};
+  constexpr std::array<int, 4> kDj = {0, 1, 0, -1};
+  std::vector<int> rotation(n, -1);
+  std::vector<std::pair<int, int>> coords(n);
+  std::vector<Component> components;
+  for (int seed = 0; seed < n; ++seed) {
+    if (rotation[seed] >= 0) continue;
+    bool linked = false;
+    for (int j : links[seed]) linked = linked || j >= 0;
+    if (!linked) continue;
+    Component comp;
+    rotation[seed] = 0;
+    coords[seed] = {0, 0};
+    std::deque<int> queue = {seed};
+    while (!queue.empty()) {
+      const int c = queue.front();
+      queue.pop_front();
+      comp.corners.push_back({c, coords[c].first, coords[c].second});
+      for (int g = 0; g < 4; ++g) {
+        const int j = links[c][(rotation[c] + g) % 4];
+        if (j < 0) continue;
+        const Eigen::Vector2d v = LocalDirection(corners[c], rotation[c] + g);
+        int m_best = 0;
+        for (int m = 1; m < 4; ++m) {
+          if (LocalDirection(corners[j], m).dot(v) > LocalDirection(corners[j], m_best).dot(v)) {
+            m_best = m;
+          }
+        }
+        const int rot_j = (m_best - g + 4) % 4;
+        const std::pair<int, int> cj = {coords[c].first + kDi[g], coords[c].second + kDj[g]};
+        if (rotation[j] < 0) {
+          rotation[j] = rot_j;
+          coords[j] = cj;
+          queue.push_back(j);
+        } else if (rotation[j] != rot_j || coords[j] != cj) {
+          comp.consistent = false;
+        }
+      }
+    }
+    std::map<std::pair<int, int>, int> seen;
+    for (const GridCorner& gc : comp.corners) {
+      if (!seen.emplace(std::make_pair(gc.gi, gc.gj), gc.index).second) comp.consistent = false;
+    }
+    components.push_back(std::move(comp));
+  }
+  return components;
+}
+
+// Mean of the blurred image over a small cross of points around the board point
+// (c, r) in corner-grid units (corner (0, 0) = id 0), mapped through H_image_grid; nullopt
+// when a point falls outside the image.
+std::optional<double> SquareValue(const ImageF& blurred, const Eigen::Matrix3d& H_image_grid,
+                                  double c, double r) {
+  // The centre and four points a quarter square away: averages noise, stays inside the
+  // square under any view the corner test accepts.
+  constexpr std::array<std::array<double, 2>, 5> kOffsets = {
+      {{0.0, 0.0}, {0.25, 0.0}, {-0.25, 0.0}, {0.0, 0.25}, {0.0, -0.25}}};
+  double sum = 0.0;
+  for (const auto& o : kOffsets) {
+    const Eigen::Vector2d uv = ApplyHomography(H_image_grid, Eigen::Vector2d(c + o[0], r + o[1]));
+    if (!uv.allFinite() || uv.x() < 0.0 || uv.y() < 0.0 || uv.x() > blurred.width - 1 ||
+        uv.y() > blurred.height - 1) {
+      return std::nullopt;
+    }
+    sum += SampleBilinear(blurred, uv.x(), uv.y());
+  }
+  return sum / kOffsets.size();
+}
+
+// The colours of the squares around a grid hypothesis: square (sc, sr), sc in -1..cols+1,
+// sr in -1..rows+1, has its centre at corner coordinates (sc - 0.5, sr - 0.5); the board's
+// squares (0..cols, 0..rows) are black when sc + sr is even, the margin around them white.
+struct ColourCheck {
+  double score = 0.0;  // mean white minus mean black over the board's squares
+  bool all_pairs_ok = false;
+};
+
+ColourCheck CheckColours(const ImageF& blurred, const Eigen::Matrix3d& H_image_grid, int cols,
+                         int rows) {
+  const int nc = cols + 3;
+  const int nr = rows + 3;
+  std::vector<std::optional<double>> value(nc * nr);
+  std::vector<int> black(nc * nr);
+  double sum_white = 0.0, sum_black = 0.0;
+  int n_white = 0, n_black = 0;
+  for (int sr = -1; sr <= rows + 1; ++sr) {
+    for (int sc = -1; sc <= cols + 1; ++sc) {
+      const int k = (sr + 1) * nc + (sc + 1);
+      const bool on_board = sc >= 0 && sc <= cols && sr >= 0 && sr <= rows;
+      black[k] = on_board && (sc + sr) % 2 == 0;
+      value[k] = SquareValue(blurred, H_image_grid, sc - 0.5, sr - 0.5);
+      if (on_board && value[k]) {
+        if (black[k]) {
+          sum_black += *value[k];
+          ++n_black;
+        } else {
+          sum_white += *value[k];
+          ++n_white;
+        }
+      }
+    }
+  }
+  ColourCheck check;
+  if (n_white == 0 || n_black == 0) return check;
+  check.score = sum_white / n_white - sum_black / n_black;
+  if (!(check.score > 0.0)) return check;
+  // Each white square is brighter than each black square next to it by a quarter of the
+  // board's mean contrast: robust to a 4:1 illumination gradient (neighbours are lit
+  // alike), and a grid shifted by a square or laid over another pattern fails it.
+  const double min_step = 0.25 * check.score;
+  for (int sr = 0; sr < nr; ++sr) {
+    for (int sc = 0; sc < nc; ++sc) {
+      const int k = sr * nc + sc;
+      if (!value[k]) continue;
+      const std::array<int, 2> others = {sc + 1 < nc ? k + 1 : -1, sr + 1 < nr ? k + nc : -1};
+      for (int o : others) {
+        if (o < 0 || !value[o] || black[o] == black[k]) continue;
+        const double white_v = black[k] ? *value[o] : *value[k];
+        const double black_v = black[k] ? *value[k] : *value[o];
+        if (white_v - black_v < min_step) return check;
+      }
+    }
+  }
+  check.all_pairs_ok = true;
+  return check;
+}
+
+// The side of a square of the grid at grid point g in the image: the square root of the
+// area of the parallelogram that H maps the unit grid steps at g to, pixels.
+double LocalSquarePx(const Eigen::Matrix3d& H_image_grid, const Eigen::Vector2d& g) {
+  const Eigen::Vector2d p = ApplyHomography(H_image_grid, g);
+  const Eigen::Vector2d dx = ApplyHomography(H_image_grid, g + Eigen::Vector2d(1.0, 0.0)) - p;
+  const Eigen::Vector2d dy = ApplyHomography(H_image_grid, g + Eigen::Vector2d(0.0, 1.0)) - p;
+  return std::sqrt(std::abs(dx.x() * dy.y() - dx.y() * dy.x()));
+}
+
+}  // namespace
+
+std::string_view CheckerOptions::Validate() const {
+  if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
+  if (!(corners.ring_radius_px >= 2.0 && corners.ring_radius_px <= 32.0)) {
+    return "corners.ring_radius_px";
+  }
+  if (!(corners.min_contrast > 0.0 && corners.min_contrast <= 255.0)) return "corners.min_contrast";
+  if (corners.max_candidates < 1 || corners.max_candidates > 1000000) {
+    return "corners.max_candidates";
+  }
+  if (corners.saddle.half_window < 1 || corners.saddle.half_window > 15) {
+    return "corners.saddle.half_window";
+  }
+  if (!(max_residual_square_fraction > 0.0 && max_residual_square_fraction <= 0.5)) {
+    return "max_residual_square_fraction";
+  }
+  return {};
+}
+
+Detection DetectChecker(const ImageView8& image, const Board& board,
+                        const CheckerOptions& options) {
+  Detection result;
+  if (board.type() != BoardType::kChecker) {
+    result.reason = DetectReason::kWrongBoard;
+    return result;
+  }
+  if (image.Validate() != ImageViewError::kOk || image.width < kMinImageSide ||
+      image.height < kMinImageSide || !options.Validate().empty()) {
+    result.reason = DetectReason::kBadImage;
+    return result;
+  }
+  const int cols = board.params().cols;
+  const int rows = board.params().rows;
+
+  const ImageF blurred = GaussianBlur(image, options.blur_sigma_px);
+  const auto [lo, hi] = std::minmax_element(blurred.pixels.begin(), blurred.pixels.end());
+  if (*hi - *lo < options.corners.min_contrast) {
+    result.reason = DetectReason::kLowContrast;
+    return result;
+  }
+  const std::vector<XCorner> corners = FindXCorners(blurred, options.corners);
+  if (corners.empty()) {
+    result.reason = DetectReason::kNoCandidates;
+    return result;
+  }
+  if (static_cast<int>(corners.size()) < cols * rows) {
+    result.reason = DetectReason::kTooFewFeatures;
+    return result;
+  }
+  const std::vector<Component> components = GridComponents(corners, LinkCorners(corners));
+
+  // A hypothesis: a complete grid and the map (gi, gj) -> (c, r) of one of its rotations.
+  struct Hypothesis {
+    std::vector<std::pair<int, Eigen::Vector2d>> id_uv;  // feature id, image position
+    Eigen::Matrix3d H_image_grid;
+    double score = 0.0;
+    double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
+  };
+  std::vector<Hypothesis> found_grids;
+  DetectReason best_failure = DetectReason::kTooFewFeatures;
+  for (const Component& comp : components) {
+    if (!comp.consistent || comp.corners.size() < 4) continue;
+    int i0 = 1 << 30, i1 = -(1 << 30), j0 = 1 << 30, j1 = -(1 << 30);
+    for (const GridCorner& gc : comp.corners) {
+      i0 = std::min(i0, gc.gi);
+      i1 = std::max(i1, gc.gi);
+      j0 = std::min(j0, gc.gj);
+      j1 = std::max(j1, gc.gj);
+    }
+    const int w = i1 - i0 + 1;
+    const int h = j1 - j0 + 1;
+    if (w * h > cols * rows || std::max(w, h) > std::max(cols, rows) ||
+        std::min(w, h) > std::min(cols, rows)) {
+      best_failure = DetectReason::kWrongBoard;
+      continue;
+    }
+    if (static_cast<int>(comp.corners.size()) != cols * rows) continue;
+    // Rotations k of the grid onto (c, r); both keep the axes right-handed in the image, as
+    // the board's x right and rows down are for a camera facing the print.
+    for (int k = 0; k < 4; ++k) {
+      const bool swapped = k % 2 == 1;
+      if ((swapped ? h : w) != cols || (swapped ? w : h) != rows) continue;
+      Hypothesis hyp;
+      std::vector<Eigen::Vector2d> grid_pts, image_pts;
+      for (const GridCorner& gc : comp.corners) {
+        const int di = gc.gi - i0, dj = gc.gj - j0;
+        int c = 0, r = 0;
+        switch (k) {
+          case 0: c = di; r = dj; break;
+          case 1: c = dj; r = w - 1 - di; break;
+          case 2: c = w - 1 - di; r = h - 1 - dj; break;
+          default: c = h - 1 - dj; r = di; break;
+        }
+        hyp.id_uv.emplace_back(cols * r + c, corners[gc.index].uv_px);
+        grid_pts.emplace_back(c, r);
+        image_pts.push_back(corners[gc.index].uv_px);
+      }
+      const std::optional<HomographyFit> fit = FitHomography(grid_pts, image_pts);
+      if (!fit) {
+        best_failure = DetectReason::kVerificationFailed;
+        continue;
+      }
+      const ColourCheck colours = CheckColours(blurred, fit->H, cols, rows);
+      if (!(colours.score > 0.0)) continue;  // the colour-flipped rotation of a valid grid
+      if (!colours.all_pairs_ok) {
+        best_failure = DetectReason::kVerificationFailed;
+        continue;
+      }
+      // Every corner fits the whole-board homography within a fraction of its square.
+      const Eigen::Vector2d centre(0.5 * (cols - 1), 0.5 * (rows - 1));
+      const Eigen::Vector2d uc = ApplyHomography(fit->H, centre);
+      const Eigen::Vector2d ux = ApplyHomography(fit->H, centre + Eigen::Vector2d(1.0, 0.0));
+      bool residuals_ok = true;
+      for (std::size_t m = 0; m < grid_pts.size() && residuals_ok; ++m) {
+        const Eigen::Vector2d p = ApplyHomography(fit->H, grid_pts[m]);
+        const double square_px = LocalSquarePx(fit->H, grid_pts[m]);
+        const double tol = std::max(1.0, options.max_residual_square_fraction * square_px);
+        residuals_ok = (p - image_pts[m]).norm() <= tol;
+      }
+      if (!residuals_ok) {
+        best_failure = DetectReason::kVerificationFailed;
+        continue;
+      }
+      hyp.H_image_grid = fit->H;
+      hyp.score = colours.score;
+      hyp.x_axis_u = (ux - uc).normalized().x();
+      found_grids.push_back(std::move(hyp));
+    }
+  }
+  if (found_grids.empty()) {
+    result.reason = best_failure;
+    return result;
+  }
+  // Several hypotheses: rotations of one symmetric grid (same corners) are resolved by the
+  // upright rule of the header; two different grids are ambiguous.
+  std::sort(found_grids.begin(), found_grids.end(),
+            [](const Hypothesis& a, const Hypothesis& b) { return a.x_axis_u > b.x_axis_u; });
+  const Hypothesis& chosen = found_grids.front();
+  for (const Hypothesis& other : found_grids) {
+    std::vector<Eigen::Vector2d> a, b;
+    for (const auto& [id, uv] : chosen.id_uv) a.push_back(uv);
+    for (const auto& [id, uv] : other.id_uv) b.push_back(uv);
+    std::sort(a.begin(), a.end(), [](const auto& p, const auto& q) {
+      return p.x() < q.x() || (p.x() == q.x() && p.y() < q.y());
+    });
+    std::sort(b.begin(), b.end(), [](const auto& p, const auto& q) {
+      return p.x() < q.x() || (p.x() == q.x() && p.y() < q.y());
+    });
+    if (a != b) {
+      result.reason = DetectReason::kAmbiguous;
+      return result;
+    }
+  }
+
+  // Final refinement with a window of a third of the local square side (at most 7 px: beyond
+  // that the saddle of a 1.5 px blur is flat and more pixels add nothing).
+  result.features.resize(cols * rows);
+  for (const auto& [id, uv] : chosen.id_uv) {
+    const int c = id % cols;
+    const int r = id / cols;
+    const Eigen::Vector2d p = ApplyHomography(chosen.H_image_grid, Eigen::Vector2d(c, r));
+    double side = 1e300;
+    for (const Eigen::Vector2d& d : {Eigen::Vector2d(1, 0), Eigen::Vector2d(-1, 0),
+                                     Eigen::Vector2d(0, 1), Eigen::Vector2d(0, -1)}) {
+      side = std::min(side, (ApplyHomography(chosen.H_image_grid, Eigen::Vector2d(c, r) + d) - p)
+                                .norm());
+    }
+    SaddleFitOptions saddle = options.corners.saddle;
+    saddle.half_window = std::clamp(static_cast<int>(side / 3.0), 2, 7);
+    const std::optional<Eigen::Vector2d> refined = RefineSaddle(blurred, uv, saddle);
+    DetectedFeature& f = result.features[id];
+    f.id = id;
+    f.uv_px = refined && (*refined - uv).norm() < 1.0 ? *refined : uv;
+    f.p_board = board.features()[id].p_board;
+    f.marker = board.features()[id].marker;
+  }
+  result.found = true;
+  result.reason = DetectReason::kNone;
+  return result;
+}
+
+}  // namespace linecal

@@ -1,0 +1,86 @@
+#include "detectors/common/image_filters.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace linecal {
+namespace {
+
+// Normalised Gaussian taps w[0..r] (w[k] for offsets +-k), r = ceil(3 sigma): beyond
+// 3 sigma the weights are below 1.1 % of the centre tap and hold 0.3 % of the total.
+std::vector<float> GaussianTaps(double sigma_px) {
+  const int radius = std::max(1, static_cast<int>(std::ceil(3.0 * sigma_px)));
+  std::vector<float> taps(radius + 1);
+  double sum = 0.0;
+  for (int k = 0; k <= radius; ++k) {
+    const double w = std::exp(-0.5 * k * k / (sigma_px * sigma_px));
+    taps[k] = static_cast<float>(w);
+    sum += (k == 0 ? 1.0 : 2.0) * w;
+  }
+  for (float& t : taps) t = static_cast<float>(t / sum);
+  return taps;
+}
+
+}  // namespace
+
+ImageF GaussianBlur(const ImageView8& image, double sigma_px) {
+  const int w = image.width;
+  const int h = image.height;
+  ImageF out(w, h);
+  if (!(sigma_px > 0.0)) {
+    for (int y = 0; y < h; ++y) {
+      const std::uint8_t* src = image.Row(y);
+      float* dst = out.Row(y);
+      for (int x = 0; x < w; ++x) dst[x] = src[x];
+    }
+    return out;
+  }
+  const std::vector<float> taps = GaussianTaps(sigma_px);
+  const int r = static_cast<int>(taps.size()) - 1;
+  // Horizontal pass into a row buffer padded by r on each side (edge replicated), then the
+  // vertical pass over a ring of 2r + 1 horizontally blurred rows.
+  std::vector<float> padded(w + 2 * r);
+  ImageF horizontal(w, h);
+  for (int y = 0; y < h; ++y) {
+    const std::uint8_t* src = image.Row(y);
+    for (int x = 0; x < w + 2 * r; ++x) padded[x] = src[std::clamp(x - r, 0, w - 1)];
+    float* dst = horizontal.Row(y);
+    const float* c = padded.data() + r;
+    // Tap-outer loops: the inner loop runs over contiguous pixels and vectorises.
+    for (int x = 0; x < w; ++x) dst[x] = taps[0] * c[x];
+    for (int k = 1; k <= r; ++k) {
+      const float t = taps[k];
+      const float* left = c - k;
+      const float* right = c + k;
+      for (int x = 0; x < w; ++x) dst[x] += t * (left[x] + right[x]);
+    }
+  }
+  for (int y = 0; y < h; ++y) {
+    float* dst = out.Row(y);
+    const float* centre = horizontal.Row(y);
+    for (int x = 0; x < w; ++x) dst[x] = taps[0] * centre[x];
+    for (int k = 1; k <= r; ++k) {
+      const float* up = horizontal.Row(std::max(y - k, 0));
+      const float* down = horizontal.Row(std::min(y + k, h - 1));
+      const float t = taps[k];
+      for (int x = 0; x < w; ++x) dst[x] += t * (up[x] + down[x]);
+    }
+  }
+  return out;
+}
+
+float SampleBilinear(const ImageF& image, double u, double v) {
+  u = std::clamp(u, 0.0, static_cast<double>(image.width - 1));
+  v = std::clamp(v, 0.0, static_cast<double>(image.height - 1));
+  const int x0 = std::min(static_cast<int>(u), image.width - 2 < 0 ? 0 : image.width - 2);
+  const int y0 = std::min(static_cast<int>(v), image.height - 2 < 0 ? 0 : image.height - 2);
+  const int x1 = std::min(x0 + 1, image.width - 1);
+  const int y1 = std::min(y0 + 1, image.height - 1);
+  const float fx = static_cast<float>(u - x0);
+  const float fy = static_cast<float>(v - y0);
+  const float top = image.at(x0, y0) + fx * (image.at(x1, y0) - image.at(x0, y0));
+  const float bottom = image.at(x0, y1) + fx * (image.at(x1, y1) - image.at(x0, y1));
+  return top + fy * (bottom - top);
+}
+
+}  // namespace linecal

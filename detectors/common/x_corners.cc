@@ -1,0 +1,198 @@
+#include "detectors/common/x_corners.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+
+namespace linecal {
+namespace {
+
+// Samples on the test ring: 32 gives 11.25 degree steps, fine enough to see sectors of
+// 35 degrees (a square foreshortened by 50 degrees and rolled) as at least 3 samples.
+constexpr int kRingSamples = 32;
+
+struct RingResult {
+  XCorner corner;
+  bool ok = false;
+};
+
+// The unit direction of the doubled-angle mean of two line angles (radians), i.e. the
+// average of two undirected directions.
+Eigen::Vector2d MeanLine(double angle1, double angle2) {
+  const double c = std::cos(2.0 * angle1) + std::cos(2.0 * angle2);
+  const double s = std::sin(2.0 * angle1) + std::sin(2.0 * angle2);
+  const double a = 0.5 * std::atan2(s, c);
+  return Eigen::Vector2d(std::cos(a), std::sin(a));
+}
+
+RingResult TestRing(const ImageF& blurred, const Eigen::Vector2d& centre,
+                    const XCornerOptions& options,
+                    const std::array<Eigen::Vector2d, kRingSamples>& ring) {
+  RingResult result;
+  std::array<float, kRingSamples> v;
+  float lo = 1e30f;
+  float hi = -1e30f;
+  for (int k = 0; k < kRingSamples; ++k) {
+    const Eigen::Vector2d p = centre + options.ring_radius_px * ring[k];
+    v[k] = SampleBilinear(blurred, p.x(), p.y());
+    lo = std::min(lo, v[k]);
+    hi = std::max(hi, v[k]);
+  }
+  const float contrast = hi - lo;
+  if (contrast < options.min_contrast) return result;
+  const float mid = 0.5f * (hi + lo);
+  // The vertex of an X-corner is mid-grey; an L-corner's is a quarter or three quarters.
+  // 0.2 of the contrast sits between the two with margin for blur asymmetry.
+  constexpr float kCentreTolerance = 0.2f;
+  if (std::abs(SampleBilinear(blurred, centre.x(), centre.y()) - mid) >
+      kCentreTolerance * contrast) {
+    return result;
+  }
+  std::array<double, 4> transitions;
+  std::array<bool, 4> dark_after;  // the sector after transition i is dark
+  int count = 0;
+  for (int k = 0; k < kRingSamples; ++k) {
+    const float a = v[k];
+    const float b = v[(k + 1) % kRingSamples];
+    if ((a > mid) != (b > mid)) {
+      if (count == 4) return result;
+      const double t = (mid - a) / (b - a);
+      transitions[count] = (k + t) * 2.0 * std::numbers::pi / kRingSamples;
+      dark_after[count] = b <= mid;
+      ++count;
+    }
+  }
+  if (count != 4) return result;
+  // Every sector spans at least two samples (22.5 degrees), and opposite samples agree
+  // for at least 3/4 of the ring (a point-symmetric pattern; the misses are the samples
+  // next to the four transitions).
+  constexpr double kMinSectorRad = 2.0 * 2.0 * std::numbers::pi / kRingSamples;
+  for (int i = 0; i < 4; ++i) {
+    double span = transitions[(i + 1) % 4] - transitions[i];
+    if (span < 0.0) span += 2.0 * std::numbers::pi;
+    if (span < kMinSectorRad) return result;
+  }
+  int agree = 0;
+  for (int k = 0; k < kRingSamples / 2; ++k) {
+    agree += (v[k] > mid) == (v[k + kRingSamples / 2] > mid) ? 2 : 0;
+  }
+  constexpr int kMinAgreement = kRingSamples * 3 / 4;
+  if (agree < kMinAgreement) return result;
+
+  XCorner& c = result.corner;
+  c.contrast = contrast;
+  const double pi = std::numbers::pi;
+  c.line_a = MeanLine(transitions[0], transitions[2] - pi);
+  c.line_b = MeanLine(transitions[1], transitions[3] - pi);
+  if (c.line_a.x() * c.line_b.y() - c.line_a.y() * c.line_b.x() < 0.0) c.line_b = -c.line_b;
+  // The dark sectors start at the transitions with dark_after; bisect the first of them
+  // and its opposite.
+  const int i = dark_after[0] ? 0 : 1;
+  double end = transitions[i + 1];
+  if (end < transitions[i]) end += 2.0 * pi;
+  const double mid_first = 0.5 * (transitions[i] + end);
+  double start2 = transitions[i + 2];
+  double end2 = transitions[(i + 3) % 4];
+  if (end2 < start2) end2 += 2.0 * pi;
+  c.dark_axis = MeanLine(mid_first, 0.5 * (start2 + end2) - pi);
+  result.ok = true;
+  return result;
+}
+
+}  // namespace
+
+std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& options) {
+  const int w = blurred.width;
+  const int h = blurred.height;
+  std::vector<XCorner> corners;
+  if (w < 5 || h < 5) return corners;
+
+  // R = Ixy^2 - Ixx Iyy from central differences. For an ideal X-corner of contrast C
+  // blurred to sigma, Ixy at the vertex is C / (pi sigma^2); the floor takes half of that
+  // for min_contrast at sigma 2.5 px (detector blur plus a camera blur of 1.5 px, the
+  // worst of acceptance.md), so any printed corner passes and flat noise does not.
+  constexpr double kWorstSigmaPx = 2.5;
+  const double ixy_floor =
+      0.5 * options.min_contrast / (std::numbers::pi * kWorstSigmaPx * kWorstSigmaPx);
+  const float floor = static_cast<float>(ixy_floor * ixy_floor);
+  ImageF response(w, h);
+  for (int y = 1; y < h - 1; ++y) {
+    const float* up = blurred.Row(y - 1);
+    const float* row = blurred.Row(y);
+    const float* down = blurred.Row(y + 1);
+    float* out = response.Row(y);
+    for (int x = 1; x < w - 1; ++x) {
+      const float ixx = row[x - 1] - 2.0f * row[x] + row[x + 1];
+      const float iyy = up[x] - 2.0f * row[x] + down[x];
+      const float ixy = 0.25f * (down[x + 1] - down[x - 1] - up[x + 1] + up[x - 1]);
+      out[x] = ixy * ixy - ixx * iyy;
+    }
+  }
+
+  // Local maxima in a 5 x 5 neighbourhood (vertices of the smallest squares are 8 px apart),
+  // far enough from the border for the ring.
+  struct Peak {
+    float r;
+    int x;
+    int y;
+  };
+  std::vector<Peak> peaks;
+  const int margin = std::max(2, static_cast<int>(std::ceil(options.ring_radius_px)) + 1);
+  for (int y = margin; y < h - margin; ++y) {
+    const float* row = response.Row(y);
+    for (int x = margin; x < w - margin; ++x) {
+      const float r = row[x];
+      if (r < floor) continue;
+      bool is_max = true;
+      for (int dy = -2; dy <= 2 && is_max; ++dy) {
+        const float* other = response.Row(y + dy);
+        for (int dx = -2; dx <= 2; ++dx) {
+          if ((dy != 0 || dx != 0) && (other[x + dx] > r || (other[x + dx] == r && (dy < 0 || (dy == 0 && dx < 0))))) {
+            is_max = false;
+            break;
+          }
+        }
+      }
+      if (is_max) peaks.push_back({r, x, y});
+    }
+  }
+  std::sort(peaks.begin(), peaks.end(), [](const Peak& a, const Peak& b) { return a.r > b.r; });
+  if (static_cast<int>(peaks.size()) > options.max_candidates) {
+    peaks.resize(options.max_candidates);
+  }
+
+  std::array<Eigen::Vector2d, kRingSamples> ring;
+  for (int k = 0; k < kRingSamples; ++k) {
+    const double a = (k + 0.5) * 2.0 * std::numbers::pi / kRingSamples;
+    ring[k] = Eigen::Vector2d(std::cos(a), std::sin(a));
+  }
+  for (const Peak& peak : peaks) {
+    const Eigen::Vector2d start(peak.x, peak.y);
+    RingResult ring_result = TestRing(blurred, start, options, ring);
+    if (!ring_result.ok) continue;
+    const std::optional<Eigen::Vector2d> refined = RefineSaddle(blurred, start, options.saddle);
+    if (!refined) continue;
+    ring_result.corner.uv_px = *refined;
+    corners.push_back(ring_result.corner);
+  }
+  std::sort(corners.begin(), corners.end(),
+            [](const XCorner& a, const XCorner& b) { return a.contrast > b.contrast; });
+  // Two maxima converging to one vertex: keep the first (highest contrast). 2 px is far
+  // below the smallest vertex spacing (8 px).
+  constexpr double kMergeDistancePx = 2.0;
+  std::vector<XCorner> merged;
+  for (const XCorner& c : corners) {
+    bool duplicate = false;
+    for (const XCorner& m : merged) {
+      if ((m.uv_px - c.uv_px).squaredNorm() < kMergeDistancePx * kMergeDistancePx) {
+        duplicate = true;
+        break;
+      }
+    }
+    if (!duplicate) merged.push_back(c);
+  }
+  return merged;
+}
+
+}  // namespace linecal

@@ -1,0 +1,97 @@
+#pragma once
+// Test scenes for the board detectors: one board in front of a 1280 x 720 pinhole camera,
+// rendered by the station simulator's camera renderer with exact ground truth.
+
+#include <cstdint>
+#include <numbers>
+#include <vector>
+
+#include <Eigen/Core>
+#include <gtest/gtest.h>
+
+#include "detectors/boards/board.h"
+#include "detectors/core/pose.h"
+#include "detectors/detection.h"
+#include "station/camera/camera_model.h"
+#include "station/model/station_layout.h"
+#include "station/sim/camera_render.h"
+
+namespace linecal::test_scene {
+
+struct BoardView {
+  BoardParams params;
+  double distance_m = 2.0;  // from the camera to the board centre, along the optical axis
+  double yaw_deg = 0.0;     // the board turned about its vertical axis
+  double pitch_deg = 0.0;   // about its horizontal axis
+  double roll_deg = 0.0;    // about its normal
+  Eigen::Vector2d offset_m = Eigen::Vector2d::Zero();  // board centre, right and up
+};
+
+// 1280 x 720, f = 1000 px (a 65 degree horizontal view), no distortion.
+inline CameraModel TestCamera() {
+  CameraIntrinsics c;
+  c.type = CameraModelType::kPinhole;
+  c.width = 1280;
+  c.height = 720;
+  c.fx = 1000.0;
+  c.fy = 1000.0;
+  c.cx = 639.5;
+  c.cy = 359.5;
+  return *CameraModel::Create(c);
+}
+
+// The camera 1.5 m above the floor looking along the station's +x.
+inline Rigid3d TestCameraPose() {
+  return Rigid3d(RotationFromYawPitchRoll({0.0, 0.0, 0.0}) * CameraBaseRotation(),
+                 Eigen::Vector3d(0.0, 0.0, 1.5));
+}
+
+inline StationLayout SceneOf(const BoardView& view) {
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  // A board's zero orientation: upright, its print facing -x (towards the camera).
+  Eigen::Matrix3d base;
+  base.col(0) = -Eigen::Vector3d::UnitY();
+  base.col(1) = Eigen::Vector3d::UnitZ();
+  base.col(2) = -Eigen::Vector3d::UnitX();
+  StationBoard b;
+  b.id = "board";
+  b.params = view.params;
+  b.board = *Board::Create(view.params);
+  b.T_station_board = Rigid3d(
+      MountingRotation({view.yaw_deg * kDeg, view.pitch_deg * kDeg, view.roll_deg * kDeg}, base),
+      Eigen::Vector3d(view.distance_m, -view.offset_m.x(), 1.5 + view.offset_m.y()));
+  StationLayout layout;
+  layout.name = "test";
+  layout.boards.push_back(b);
+  return layout;
+}
+
+inline CameraFrame RenderView(const BoardView& view, const CameraRenderOptions& options,
+                              std::uint64_t seed) {
+  absl::StatusOr<CameraFrame> frame =
+      RenderCameraFrame(TestCamera(), TestCameraPose(), SceneOf(view), options, seed);
+  EXPECT_TRUE(frame.ok()) << frame.status();
+  return frame.ok() ? *std::move(frame) : CameraFrame();
+}
+
+// RMS of detected minus true image positions over the features both have, and how many
+// detected ids have no true feature (must be none); *matched counts the pairs.
+inline double FeatureRmsPx(const Detection& detection, const CameraFrame& frame, int* matched,
+                           int* unknown_ids) {
+  double sum_sq = 0.0;
+  *matched = 0;
+  *unknown_ids = 0;
+  for (const DetectedFeature& f : detection.features) {
+    bool known = false;
+    for (const RenderedFeature& t : frame.features) {
+      if (t.feature_id != f.id) continue;
+      known = true;
+      sum_sq += (f.uv_px - t.uv_px).squaredNorm();
+      ++*matched;
+    }
+    if (!known) ++*unknown_ids;
+  }
+  return *matched > 0 ? std::sqrt(sum_sq / *matched) : 0.0;
+}
+
+}  // namespace linecal::test_scene
