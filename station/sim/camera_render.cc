@@ -126,23 +126,26 @@ struct ClutterObject {
 
 std::optional<ClutterObject> ClutterInCell(const ClutterGrid& grid, std::int64_t cx,
                                            std::int64_t cy) {
-  const std::uint64_t h =
-      Mix(grid.key, Mix(static_cast<std::uint64_t>(cx), static_cast<std::uint64_t>(cy)));
+  const std::uint64_t h = Mix(Mix(grid.key ^ static_cast<std::uint64_t>(cx)) ^
+                              static_cast<std::uint64_t>(cy));
   if (Unit(h) >= grid.density) return std::nullopt;
-  const auto u = [&](std::uint64_t i) { return Unit(Mix(h, i)); };
-  const auto fraction = [&](std::uint64_t i) {
+  // The object's six parameters from 10-bit fields of one more hash: sizes and greys in
+  // steps of 1/1024 of their range are as random as any.
+  const std::uint64_t fields = Mix(h);
+  const auto u = [&](int i) { return (static_cast<double>((fields >> (10 * i)) & 1023) + 0.5) / 1024; };
+  const auto fraction = [&](int i) {
     return kClutterMinFraction + (kClutterMaxFraction - kClutterMinFraction) * u(i);
   };
   ClutterObject o;
-  o.disc = u(1) < 0.5;
-  const double fx = fraction(2);
-  const double fy = o.disc ? fx : fraction(3);
+  o.disc = u(0) < 0.5;
+  const double fx = fraction(1);
+  const double fy = o.disc ? fx : fraction(2);
   o.half_size = 0.5 * kClutterCellM * Eigen::Vector2d(fx, fy);
   // Anywhere in the cell that keeps the object inside it.
   const Eigen::Vector2d slack = 0.5 * Eigen::Vector2d::Constant(kClutterCellM) - o.half_size;
   o.centre_grid = kClutterCellM * Eigen::Vector2d(cx + 0.5, cy + 0.5) +
-                  Eigen::Vector2d(slack.x() * (2 * u(4) - 1), slack.y() * (2 * u(5) - 1));
-  o.grey = kClutterMinGrey + (kClutterMaxGrey - kClutterMinGrey) * u(6);
+                  Eigen::Vector2d(slack.x() * (2 * u(3) - 1), slack.y() * (2 * u(4) - 1));
+  o.grey = kClutterMinGrey + (kClutterMaxGrey - kClutterMinGrey) * u(5);
   return o;
 }
 
@@ -304,22 +307,31 @@ class Scene {
       const std::optional<Paint> paint = s.board->UniformPaintIn(lo, hi);
       return paint.has_value() && (*paint == Paint::kWhite || *paint == Paint::kBlack);
     }
-    const auto cell = ClutterCell(lo);
-    if (cell != ClutterCell(hi)) return false;
-    const std::optional<ClutterObject> o = ClutterInCell(s.clutter_grid, cell[0], cell[1]);
-    if (!o.has_value()) return true;
+    // Uniform if the box lies inside one object, or meets none (it spans at most 2 x 2
+    // cells, as pixels are far smaller than cells; larger boxes are left to the caller).
+    const auto [x0, y0] = ClutterCell(lo);
+    const auto [x1, y1] = ClutterCell(hi);
+    if (x1 - x0 > 1 || y1 - y0 > 1) return false;
     const Eigen::AlignedBox2d box(lo, hi);
-    if (o->disc) {
-      const double r2 = o->half_size.x() * o->half_size.x();
-      if (box.squaredExteriorDistance(o->centre_grid) >= r2) return true;
-      for (int i = 0; i < 4; ++i) {
-        const auto corner = static_cast<Eigen::AlignedBox2d::CornerType>(i);
-        if ((box.corner(corner) - o->centre_grid).squaredNorm() >= r2) return false;
+    for (std::int64_t cy = y0; cy <= y1; ++cy) {
+      for (std::int64_t cx = x0; cx <= x1; ++cx) {
+        const std::optional<ClutterObject> o = ClutterInCell(s.clutter_grid, cx, cy);
+        if (!o.has_value()) continue;
+        if (o->disc) {
+          const double r2 = o->half_size.x() * o->half_size.x();
+          if (box.squaredExteriorDistance(o->centre_grid) >= r2) continue;
+          for (int i = 0; i < 4; ++i) {
+            const auto corner = static_cast<Eigen::AlignedBox2d::CornerType>(i);
+            if ((box.corner(corner) - o->centre_grid).squaredNorm() >= r2) return false;
+          }
+          return true;
+        }
+        const Eigen::AlignedBox2d rect(o->centre_grid - o->half_size, o->centre_grid + o->half_size);
+        if (!rect.intersects(box)) continue;
+        return rect.contains(box);
       }
-      return true;
     }
-    const Eigen::AlignedBox2d rect(o->centre_grid - o->half_size, o->centre_grid + o->half_size);
-    return rect.contains(box) || !rect.intersects(box);
+    return true;
   }
 
   // The nearest opaque hit of the ray t * d_camera among the candidate surfaces, skipping
@@ -1018,26 +1030,33 @@ void Blur(int width, int height, double sigma, int threads, std::vector<float>* 
   }
   for (double& w : kernel) w /= total;
   std::vector<float> tmp(image->size());
-  const auto pass = [&](const std::vector<float>& in, std::vector<float>* out, bool along_x) {
-    const int lines = along_x ? height : width, length = along_x ? width : height;
-    const std::size_t step = along_x ? 1 : width, line_step = along_x ? width : 1;
-    ParallelFor(lines, threads, [&](int l0, int l1) {
-      for (int l = l0; l < l1; ++l) {
-        const float* src = in.data() + l * line_step;
-        float* dst = out->data() + l * line_step;
-        for (int i = 0; i < length; ++i) {
-          double sum = 0.0;
-          for (int k = -radius; k <= radius; ++k) {
-            const int j = std::clamp(i + k, 0, length - 1);
-            sum += kernel[k + radius] * src[j * step];
-          }
-          dst[i * step] = static_cast<float>(sum);
+  // Along rows, then across them whole rows at a time (cache-friendly).
+  ParallelFor(height, threads, [&](int y0, int y1) {
+    for (int y = y0; y < y1; ++y) {
+      const float* src = image->data() + static_cast<std::size_t>(y) * width;
+      float* dst = tmp.data() + static_cast<std::size_t>(y) * width;
+      for (int x = 0; x < width; ++x) {
+        double sum = 0.0;
+        for (int k = -radius; k <= radius; ++k) {
+          sum += kernel[k + radius] * src[std::clamp(x + k, 0, width - 1)];
         }
+        dst[x] = static_cast<float>(sum);
       }
-    });
-  };
-  pass(*image, &tmp, true);
-  pass(tmp, image, false);
+    }
+  });
+  ParallelFor(height, threads, [&](int y0, int y1) {
+    std::vector<double> sum(width);
+    for (int y = y0; y < y1; ++y) {
+      std::fill(sum.begin(), sum.end(), 0.0);
+      for (int k = -radius; k <= radius; ++k) {
+        const float* src = tmp.data() + static_cast<std::size_t>(std::clamp(y + k, 0, height - 1)) * width;
+        const double w = kernel[k + radius];
+        for (int x = 0; x < width; ++x) sum[x] += w * src[x];
+      }
+      float* dst = image->data() + static_cast<std::size_t>(y) * width;
+      for (int x = 0; x < width; ++x) dst[x] = static_cast<float>(sum[x]);
+    }
+  });
 }
 
 // The JPEG luminance quantisation table (ITU-T T.81 Annex K, Table K.1), row-major.

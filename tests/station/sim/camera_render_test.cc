@@ -32,6 +32,8 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kEdgeBarPx = 0.01;
 constexpr double kCornerBarPx = 0.02;
 constexpr double kCentroidBarPx = 0.02;
+// The same projection through differently composed transforms: rounding, ~1e-12 px.
+constexpr double kRoundingPx = 1e-9;
 // 16-bit full scale.
 constexpr double kFull16 = 65535.0;
 
@@ -101,7 +103,7 @@ StationBoard MakeBoard(const std::string& id, BoardType type, double scale, cons
 }
 
 // A wall facing -x (towards the camera) at distance x, big enough to fill any view.
-[[maybe_unused]] StationSurface Wall(double x, double reflectivity) {
+StationSurface Wall(double x, double reflectivity) {
   StationSurface w;
   w.id = "wall";
   w.T_station_surface = BoardPose(Eigen::Vector3d(x, 0, 1.5), 0, 0, 0);
@@ -499,6 +501,464 @@ TEST(CameraRenderEdges, BlurKeepsStraightEdgesInPlace) {
   const EdgeResult r = MeasureMarkers(Pinhole(), CameraPose(), layout, o, 1);
   EXPECT_LE(r.worst_edge_px, kEdgeBarPx);
   EXPECT_LE(r.worst_corner_px, kCornerBarPx);
+}
+
+// ---- Ground truth ------------------------------------------------------------------------
+
+// Where the sight line from the camera centre to p_station meets surface `pose`'s plane
+// inside the rectangle of half sizes `half` (strictly between camera and point); an
+// independent ray test for the expectations below.
+bool SightLineHits(const Rigid3d& T_station_camera, const Eigen::Vector3d& p_station,
+                   const Rigid3d& pose, const Eigen::Vector2d& half, Eigen::Vector2d* p_surface) {
+  const Eigen::Vector3d o = pose.Inverse() * T_station_camera.translation();
+  const Eigen::Vector3d q = pose.Inverse() * p_station;
+  const double t = o.z() / (o.z() - q.z());
+  if (!(t > 0.0 && t < 1.0)) return false;
+  const Eigen::Vector3d x = o + t * (q - o);
+  *p_surface = x.head<2>();
+  return std::abs(x.x()) < half.x() && std::abs(x.y()) < half.y();
+}
+
+Eigen::Vector3d FeatureInStation(const StationBoard& b, int feature) {
+  const Eigen::Vector2d& p = b.board.features()[feature].p_board;
+  return b.T_station_board * Eigen::Vector3d(p.x(), p.y(), 0.0);
+}
+
+StationBoard Checker(const std::string& id, double square_m, const Rigid3d& pose) {
+  StationBoard b;
+  b.id = id;
+  b.params.type = BoardType::kChecker;
+  b.params.square_m = square_m;
+  b.board = *Board::Create(b.params);
+  b.T_station_board = pose;
+  return b;
+}
+
+TEST(CameraRenderGroundTruth, ListsExactlyTheUnoccludedFeaturesInView) {
+  const CameraModel camera = Pinhole();
+  const Rigid3d T_station_camera = CameraPose();
+  StationLayout layout;
+  // 0: a checkerboard 3 m ahead; 1: a small ArUco board in front of part of it; 2: a board
+  // behind the camera facing it; 3: a board in view whose print faces away.
+  layout.boards.push_back(Checker("far", 0.08, BoardPose(Eigen::Vector3d(3.0, 0.1, 1.5), 5, 0, 3)));
+  layout.boards.push_back(
+      MakeBoard("near", BoardType::kAruco, 0.25, BoardPose(Eigen::Vector3d(1.8, 0.2, 1.45), 0, 0, 0)));
+  layout.boards.push_back(Checker("behind", 0.08, BoardPose(Eigen::Vector3d(-3.0, 0, 1.5), 180, 0, 0)));
+  layout.boards.push_back(Checker("away", 0.05, BoardPose(Eigen::Vector3d(3.0, -1.2, 1.5), 180, 0, 0)));
+  CameraRenderOptions options;
+  options.feature_margin_px = 3.0;
+  const CameraFrame frame = Render(camera, T_station_camera, layout, options);
+
+  // The expectation, from independent ray tests: in front of the camera and projecting 3 px
+  // inside the image, printed face towards the camera, sight line clear of the near
+  // board's page (it has no holes, so its whole page is opaque).
+  const StationBoard& near = layout.boards[1];
+  const Eigen::Vector2d near_half = 0.5 * near.board.page_size_m();
+  std::set<std::pair<int, int>> expected;
+  int hidden = 0;
+  for (int b = 0; b < 4; ++b) {
+    const StationBoard& board = layout.boards[b];
+    const Eigen::Vector3d n_station = board.T_station_board.rotation() * Eigen::Vector3d::UnitZ();
+    for (const BoardFeature& f : board.board.features()) {
+      const Eigen::Vector3d p = FeatureInStation(board, f.id);
+      const Eigen::Vector3d p_camera = T_station_camera.Inverse() * p;
+      Eigen::Vector2d uv;
+      if (p_camera.z() <= 0 || !camera.Project(p_camera, &uv)) continue;
+      if (uv.x() < 2.5 || uv.x() > 636.5 || uv.y() < 2.5 || uv.y() > 476.5) continue;
+      if (n_station.dot(T_station_camera.translation() - p) <= 0) continue;
+      Eigen::Vector2d on_near;
+      if (b != 1 && SightLineHits(T_station_camera, p, near.T_station_board, near_half, &on_near)) {
+        ++hidden;
+        continue;
+      }
+      expected.insert({b, f.id});
+    }
+  }
+  std::set<std::pair<int, int>> listed;
+  for (const RenderedFeature& f : frame.features) {
+    listed.insert({f.board_index, f.feature_id});
+    EXPECT_EQ(f.board_id, layout.boards[f.board_index].id);
+    EXPECT_EQ(f.kind, layout.boards[f.board_index].board.features()[f.feature_id].kind);
+    // The exact projection, and inside the image by the margin.
+    Eigen::Vector2d uv;
+    ASSERT_TRUE(camera.Project(
+        T_station_camera.Inverse() * FeatureInStation(layout.boards[f.board_index], f.feature_id), &uv));
+    EXPECT_LE((f.uv_px - uv).norm(), kRoundingPx);
+    EXPECT_GE(f.uv_px.x(), -0.5 + options.feature_margin_px);
+    EXPECT_LE(f.uv_px.x(), 639.5 - options.feature_margin_px);
+    EXPECT_GE(f.uv_px.y(), -0.5 + options.feature_margin_px);
+    EXPECT_LE(f.uv_px.y(), 479.5 - options.feature_margin_px);
+    EXPECT_TRUE(f.board_index == 0 || f.board_index == 1) << f.board_id;
+  }
+  EXPECT_EQ(listed, expected);
+  // The scene exercises every rule: some far features hidden, some seen, all near ones.
+  EXPECT_GT(hidden, 5);
+  EXPECT_GT(std::count_if(listed.begin(), listed.end(), [](auto& f) { return f.first == 0; }), 5);
+  EXPECT_EQ(std::count_if(listed.begin(), listed.end(), [](auto& f) { return f.first == 1; }), 16);
+  // Sorted by board, then feature id.
+  EXPECT_TRUE(std::is_sorted(frame.features.begin(), frame.features.end(),
+                             [](const RenderedFeature& a, const RenderedFeature& b) {
+                               return std::pair(a.board_index, a.feature_id) <
+                                      std::pair(b.board_index, b.feature_id);
+                             }));
+}
+
+TEST(CameraRenderGroundTruth, FisheyeListsWhatItSeesBehindItsImagePlaneOnly) {
+  // The ~190 degree fisheye's image reaches ~103 degrees off axis (its valid region 143):
+  // it sees a board beside it partly behind its image plane (z < 0), and nothing of a
+  // board straight behind it.
+  const CameraModel camera = Fisheye();
+  const Rigid3d T_station_camera = CameraPose();
+  StationLayout layout;
+  layout.boards.push_back(Checker("behind", 0.08, BoardPose(Eigen::Vector3d(-2.0, 0, 1.5), 180, 0, 0)));
+  layout.boards.push_back(Checker("beside", 0.04, BoardPose(Eigen::Vector3d(-0.2, 1.0, 1.5), 90, 0, 0)));
+  const CameraRenderOptions options;
+  const CameraFrame frame = Render(camera, T_station_camera, layout, options);
+  std::set<int> expected;
+  const StationBoard& beside = layout.boards[1];
+  for (const BoardFeature& f : beside.board.features()) {
+    const Eigen::Vector3d p_camera = T_station_camera.Inverse() * FeatureInStation(beside, f.id);
+    Eigen::Vector2d uv;
+    if (!camera.Project(p_camera, &uv)) continue;
+    const double m = options.feature_margin_px;
+    if (uv.x() >= -0.5 + m && uv.x() <= 1279.5 - m && uv.y() >= -0.5 + m && uv.y() <= 959.5 - m) {
+      expected.insert(f.id);
+    }
+  }
+  std::set<int> listed;
+  int behind_image_plane = 0;
+  for (const RenderedFeature& f : frame.features) {
+    EXPECT_EQ(f.board_index, 1);
+    listed.insert(f.feature_id);
+    const Eigen::Vector3d p_camera = T_station_camera.Inverse() * FeatureInStation(beside, f.feature_id);
+    if (p_camera.z() < 0) ++behind_image_plane;
+  }
+  EXPECT_EQ(listed, expected);
+  EXPECT_GT(behind_image_plane, 0);
+  // Part of the board lies beyond the image's edge.
+  EXPECT_LT(listed.size(), beside.board.features().size());
+}
+
+TEST(CameraRenderGroundTruth, OccludersHideTheFeaturesBehindThem) {
+  const CameraModel camera = Pinhole();
+  const Rigid3d T_station_camera = CameraPose();
+  StationLayout layout;
+  layout.boards.push_back(Checker("board", 0.1, BoardPose(Eigen::Vector3d(2.5, 0, 1.5), 10, 0, 5)));
+  CameraRenderOptions options = GeometryOptions();
+  options.occluder_count = 4;
+  options.occluder_size_px = 60;
+  const CameraFrame frame = Render(camera, T_station_camera, layout, options, 3);
+  ASSERT_EQ(frame.occluders.size(), 4u);
+  const std::vector<RenderedFeature> all =
+      VisibleCameraFeatures(camera, T_station_camera, layout, {}, options.feature_margin_px);
+  std::vector<int> hides(frame.occluders.size(), 0);
+  std::set<int> expected;
+  int checked_pixels = 0;
+  for (const RenderedFeature& f : all) {
+    const Eigen::Vector3d p = FeatureInStation(layout.boards[0], f.feature_id);
+    // The nearest occluder on the sight line, if any.
+    int nearest = -1;
+    double nearest_distance = kInf;
+    Eigen::Vector2d nearest_hit;
+    for (std::size_t i = 0; i < frame.occluders.size(); ++i) {
+      const StationSurface& o = frame.occluders[i];
+      Eigen::Vector2d hit;
+      if (!SightLineHits(T_station_camera, p, o.T_station_surface, 0.5 * o.size_m, &hit)) continue;
+      ++hides[i];
+      const double distance = (o.T_station_surface * Eigen::Vector3d(hit.x(), hit.y(), 0) -
+                               T_station_camera.translation()).norm();
+      if (distance < nearest_distance) {
+        nearest = static_cast<int>(i);
+        nearest_distance = distance;
+        nearest_hit = hit;
+      }
+    }
+    if (nearest < 0) {
+      expected.insert(f.feature_id);
+      continue;
+    }
+    // Well inside the occluder (80% of its half sizes), the pixel shows its grey.
+    const StationSurface& o = frame.occluders[nearest];
+    if (std::abs(nearest_hit.x()) < 0.4 * o.size_m.x() && std::abs(nearest_hit.y()) < 0.4 * o.size_m.y()) {
+      const int x = static_cast<int>(std::lround(f.uv_px.x())), y = static_cast<int>(std::lround(f.uv_px.y()));
+      EXPECT_NEAR(frame.image16.at(x, y), o.reflectivity * kFull16, 0.5) << o.id;
+      ++checked_pixels;
+    }
+  }
+  std::set<int> listed;
+  for (const RenderedFeature& f : frame.features) listed.insert(f.feature_id);
+  EXPECT_EQ(listed, expected);
+  // Each occluder stands on the line of sight of a feature it was placed on.
+  for (std::size_t i = 0; i < hides.size(); ++i) EXPECT_GE(hides[i], 1) << frame.occluders[i].id;
+  EXPECT_GE(checked_pixels, 4);
+  for (const StationSurface& o : frame.occluders) {
+    EXPECT_GE(o.reflectivity, 0.0);
+    EXPECT_LE(o.reflectivity, 1.0);
+    EXPECT_GT(o.size_m.minCoeff(), 0.0);
+  }
+}
+
+// ---- The scene's looks ---------------------------------------------------------------------
+
+TEST(CameraRenderScene, HolesBacksWallsFloorAndBackground) {
+  const CameraModel camera = Pinhole();
+  const Rigid3d T_station_camera = CameraPose();
+  StationLayout layout;
+  layout.floor_reflectivity = 0.15;
+  layout.boards.push_back(
+      MakeBoard("holes", BoardType::kRoundHole, 0.5, BoardPose(Eigen::Vector3d(2.0, 0.25, 1.5), 0, 0, 0)));
+  // Seen from behind: its print faces +x, away from the camera.
+  layout.boards.push_back(Checker("back", 0.05, BoardPose(Eigen::Vector3d(2.5, -0.6, 1.5), 180, 0, 0)));
+  StationSurface wall;
+  wall.id = "wall";
+  wall.T_station_surface = BoardPose(Eigen::Vector3d(4.0, 0, 1.5), 0, 0, 0);
+  wall.size_m = Eigen::Vector2d(4.0, 2.0);
+  wall.reflectivity = 0.3;
+  layout.surfaces.push_back(wall);
+  CameraRenderOptions o = GeometryOptions();
+  o.board_back_reflectance = 0.4;
+  o.background_reflectance = 0.2;
+  const CameraFrame frame = Render(camera, T_station_camera, layout, o);
+  const auto level = [&](const Eigen::Vector2d& uv) {
+    return frame.image16.at(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
+  };
+  // Through the holes: the wall.
+  int holes = 0;
+  for (const RenderedFeature& f : frame.features) {
+    if (f.kind != FeatureKind::kHoleCentre) continue;
+    EXPECT_NEAR(level(f.uv_px), 0.3 * kFull16, 0.5);
+    ++holes;
+  }
+  EXPECT_EQ(holes, 5);
+  // The back of the second board, at its centre.
+  EXPECT_NEAR(level(ProjectBoardPoint(camera, T_station_camera, layout.boards[1], Eigen::Vector2d::Zero())),
+              0.4 * kFull16, 0.5);
+  // Straight up: nothing; straight down at the bottom row: the floor.
+  EXPECT_NEAR(frame.image16.at(320, 0), 0.2 * kFull16, 0.5);
+  EXPECT_NEAR(frame.image16.at(320, 479), 0.15 * kFull16, 0.5);
+}
+
+TEST(CameraRenderScene, ClutterBelongsToTheWallsNotToTheFrame) {
+  const CameraModel camera = Pinhole();
+  StationLayout layout;
+  layout.surfaces.push_back(Wall(3.0, 0.5));
+  CameraRenderOptions o;
+  const CameraFrame plain = Render(camera, CameraPose(), layout, o, 1);
+  o.clutter = true;
+  const CameraFrame a = Render(camera, CameraPose(), layout, o, 1);
+  const CameraFrame b = Render(camera, CameraPose(), layout, o, 2);
+  o.clutter_seed = 2;
+  const CameraFrame c = Render(camera, CameraPose(), layout, o, 1);
+  std::set<int> plain_levels(plain.image8.pixels.begin(), plain.image8.pixels.end());
+  std::set<int> clutter_levels(a.image8.pixels.begin(), a.image8.pixels.end());
+  EXPECT_EQ(plain_levels.size(), 1u);
+  // Objects of many greys, anti-aliased edges in between.
+  EXPECT_GT(clutter_levels.size(), 100u);
+  EXPECT_EQ(a.image8.pixels, b.image8.pixels);  // another frame seed: the same walls
+  EXPECT_NE(a.image8.pixels, c.image8.pixels);  // another clutter seed: other walls
+}
+
+// ---- Camera response ---------------------------------------------------------------------
+
+TEST(CameraRenderResponse, SameSeedSameBytesWhateverTheThreads) {
+  const CameraModel camera = Pinhole(-0.1, 0.02);
+  StationLayout layout;
+  layout.boards.push_back(Checker("board", 0.06, BoardPose(Eigen::Vector3d(2.0, 0, 1.4), 15, 5, 10)));
+  layout.surfaces.push_back(Wall(5.0, 0.5));
+  CameraRenderOptions o;
+  o.clutter = true;
+  o.occluder_count = 2;
+  o.illumination_gradient_ratio = 2.5;
+  o.vignetting = 0.3;
+  o.blur_sigma_px = 0.8;
+  o.gamma = 1.4;
+  o.noise_sigma = 3.0;
+  o.jpeg_quality = 85;
+  o.threads = 1;
+  const CameraFrame one = Render(camera, CameraPose(), layout, o, 11);
+  const CameraFrame again = Render(camera, CameraPose(), layout, o, 11);
+  o.threads = 2;
+  const CameraFrame two = Render(camera, CameraPose(), layout, o, 11);
+  const CameraFrame other = Render(camera, CameraPose(), layout, o, 12);
+  EXPECT_EQ(one.image8.pixels, again.image8.pixels);
+  EXPECT_EQ(one.image8.pixels, two.image8.pixels);
+  EXPECT_NE(one.image8.pixels, other.image8.pixels);
+  ASSERT_EQ(one.occluders.size(), 2u);
+  ASSERT_EQ(other.occluders.size(), 2u);
+  EXPECT_NE(one.occluders[0].T_station_surface.translation(),
+            other.occluders[0].T_station_surface.translation());
+}
+
+// A camera facing a uniform wall (which fills its view) of reflectance 0.5.
+CameraFrame WallFrame(const CameraRenderOptions& o, std::uint64_t seed = 1) {
+  StationLayout layout;
+  layout.surfaces.push_back(Wall(2.0, 0.5));
+  return Render(Pinhole(), CameraPose(), layout, o, seed);
+}
+
+template <typename T>
+std::pair<double, double> MeanAndSigma(const std::vector<T>& pixels, double scale) {
+  double sum = 0.0, sum_sq = 0.0;
+  for (T p : pixels) {
+    sum += p / scale;
+    sum_sq += (p / scale) * (p / scale);
+  }
+  const double mean = sum / pixels.size();
+  return {mean, std::sqrt(sum_sq / pixels.size() - mean * mean)};
+}
+
+TEST(CameraRenderResponse, NoiseHasTheRequestedSigma) {
+  // 307200 samples estimate sigma to 0.13% (1 / sqrt(2N)); 1% is 7 standard errors.
+  constexpr double kSigmaRelative = 0.01;
+  CameraRenderOptions o;
+  o.noise_sigma = 3.0;
+  o.bit_depth = 16;
+  const auto [mean16, sigma16] = MeanAndSigma(WallFrame(o).image16.pixels, 257.0);
+  EXPECT_NEAR(sigma16, 3.0, kSigmaRelative * 3.0);
+  EXPECT_NEAR(mean16, 0.5 * 255, 0.05);
+  // 8 bits add the rounding's 1/12 grey level^2.
+  o.noise_sigma = 2.0;
+  o.bit_depth = 8;
+  const auto [mean8, sigma8] = MeanAndSigma(WallFrame(o).image8.pixels, 1.0);
+  EXPECT_NEAR(sigma8, std::sqrt(4.0 + 1.0 / 12), kSigmaRelative * 2.0);
+  // Another seed, other noise.
+  EXPECT_NE(WallFrame(o, 1).image8.pixels, WallFrame(o, 2).image8.pixels);
+}
+
+TEST(CameraRenderResponse, GradientAndVignettingAsRequested) {
+  CameraRenderOptions o;
+  o.bit_depth = 16;
+  o.illumination_gradient_ratio = 3.0;
+  o.illumination_gradient_direction_deg = 30.0;
+  const CameraFrame f = WallFrame(o);
+  // log(grey) is linear in (u, v); fit it and read off the ratio between the extreme
+  // pixels along the fitted direction, and the direction.
+  Eigen::MatrixXd a(640 * 480, 3);
+  Eigen::VectorXd b(640 * 480);
+  for (int y = 0; y < 480; ++y) {
+    for (int x = 0; x < 640; ++x) {
+      a.row(y * 640 + x) << 1.0, x, y;
+      b(y * 640 + x) = std::log(f.image16.at(x, y));
+    }
+  }
+  const Eigen::Vector3d c = a.colPivHouseholderQr().solve(b);
+  const double lo = std::min({0.0, 639 * c(1), 479 * c(2), 639 * c(1) + 479 * c(2)});
+  const double hi = std::max({0.0, 639 * c(1), 479 * c(2), 639 * c(1) + 479 * c(2)});
+  // 16-bit rounding of greys >= 0.29 of full scale is < 3e-5 relative.
+  EXPECT_NEAR(std::exp(hi - lo), 3.0, 1e-3);
+  EXPECT_NEAR(std::atan2(c(2), c(1)) / kDeg, 30.0, 0.01);
+  // Vignetting: the corner pixels are darker than the principal point's by the requested
+  // fraction of (r / r_max)^2, r_max the distance to the farthest image corner.
+  o.illumination_gradient_ratio = 1.0;
+  o.vignetting = 0.4;
+  const CameraFrame v = WallFrame(o);
+  const Eigen::Vector2d pp(321.3, 238.6);
+  const double r2_max = (Eigen::Vector2d(-0.5, 479.5) - pp).squaredNorm();
+  const double centre = v.image16.at(321, 239);
+  for (const auto& [x, y] : {std::pair(0, 0), std::pair(639, 0), std::pair(0, 479), std::pair(639, 479)}) {
+    const double expected = (1 - 0.4 * (Eigen::Vector2d(x, y) - pp).squaredNorm() / r2_max) /
+                            (1 - 0.4 * (Eigen::Vector2d(321, 239) - pp).squaredNorm() / r2_max);
+    EXPECT_NEAR(v.image16.at(x, y) / centre, expected, 1e-4) << x << "," << y;
+  }
+}
+
+TEST(CameraRenderResponse, GammaEncodesLinearLight) {
+  CameraRenderOptions o;
+  o.bit_depth = 16;
+  o.gamma = 2.2;
+  const CameraFrame f = WallFrame(o);
+  EXPECT_NEAR(f.image16.at(100, 100), std::pow(0.5, 1 / 2.2) * kFull16, 0.5);
+}
+
+TEST(CameraRenderResponse, JpegQuantisationIsBoundedAndFaithfulAtHighQuality) {
+  StationLayout layout;
+  layout.boards.push_back(Checker("board", 0.04, BoardPose(Eigen::Vector3d(1.5, 0, 1.5), 20, 0, 10)));
+  layout.surfaces.push_back(Wall(4.0, 0.5));
+  CameraRenderOptions o;
+  o.clutter = true;
+  const CameraFrame plain = Render(Pinhole(), CameraPose(), layout, o);
+  const auto rms_difference = [&](int quality) {
+    o.jpeg_quality = quality;
+    const CameraFrame f = Render(Pinhole(), CameraPose(), layout, o);
+    double sum_sq = 0.0;
+    for (std::size_t i = 0; i < f.image8.pixels.size(); ++i) {
+      const double d = f.image8.pixels[i] - plain.image8.pixels[i];
+      sum_sq += d * d;
+    }
+    return std::sqrt(sum_sq / f.image8.pixels.size());
+  };
+  // At quality 100 every coefficient is rounded to an integer: an orthonormal DCT carries
+  // that uniform rounding (RMS sqrt(1/12) = 0.29 levels) to the pixels; with the final
+  // rounding to 8 bits the difference stays below half a level.
+  const double q100 = rms_difference(100);
+  EXPECT_GT(q100, 0.0);
+  EXPECT_LT(q100, 0.5);
+  // Quality 80 quantises high frequencies coarsely: visibly more, still a few levels.
+  const double q80 = rms_difference(80);
+  EXPECT_GT(q80, 2 * q100);
+  EXPECT_LT(q80, 8.0);
+}
+
+// ---- Validation ----------------------------------------------------------------------------
+
+TEST(CameraRenderOptionsTest, DefaultsAreValid) { EXPECT_TRUE(CameraRenderOptions().Validate().ok()); }
+
+TEST(CameraRenderOptionsTest, ErrorsNameTheField) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<std::pair<std::string, std::function<void(CameraRenderOptions&)>>> cases = {
+      {"edge_probes_per_side", [](auto& o) { o.edge_probes_per_side = 1; }},
+      {"edge_tolerance_px", [](auto& o) { o.edge_tolerance_px = 0.0; }},
+      {"max_subdivision_depth", [](auto& o) { o.max_subdivision_depth = 11; }},
+      {"white_reflectance", [](auto& o) { o.white_reflectance = 1.5; }},
+      {"black_reflectance", [](auto& o) { o.black_reflectance = 0.9; }},
+      {"board_back_reflectance", [](auto& o) { o.board_back_reflectance = -0.1; }},
+      {"background_reflectance", [&](auto& o) { o.background_reflectance = nan; }},
+      {"illumination", [](auto& o) { o.illumination = 0.0; }},
+      {"illumination_gradient_ratio", [](auto& o) { o.illumination_gradient_ratio = 5.0; }},
+      {"illumination_gradient_direction_deg", [](auto& o) { o.illumination_gradient_direction_deg = kInf; }},
+      {"vignetting", [](auto& o) { o.vignetting = 1.0; }},
+      {"blur_sigma_px", [](auto& o) { o.blur_sigma_px = -1.0; }},
+      {"gamma", [](auto& o) { o.gamma = 0.0; }},
+      {"noise_sigma", [](auto& o) { o.noise_sigma = 100.0; }},
+      {"jpeg_quality", [](auto& o) { o.jpeg_quality = 50; }},
+      {"bit_depth", [](auto& o) { o.bit_depth = 12; }},
+      {"clutter_density", [](auto& o) { o.clutter_density = 0.0; }},
+      {"occluder_count", [](auto& o) { o.occluder_count = 65; }},
+      {"occluder_size_px", [](auto& o) { o.occluder_size_px = 0.0; }},
+      {"feature_margin_px", [](auto& o) { o.feature_margin_px = -1.0; }},
+      {"threads", [](auto& o) { o.threads = 0; }},
+  };
+  StationLayout layout;
+  for (const auto& [field, set] : cases) {
+    CameraRenderOptions o;
+    set(o);
+    const absl::Status s = o.Validate();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << field;
+    EXPECT_EQ(std::string(s.message()).rfind(field + " = ", 0), 0u) << s.message();
+    const absl::StatusOr<CameraFrame> frame = RenderCameraFrame(Pinhole(), CameraPose(), layout, o, 1);
+    EXPECT_EQ(frame.status(), s);
+  }
+}
+
+TEST(CameraRenderOptionsTest, BadPoseAndLayoutAreRefused) {
+  StationLayout layout;
+  const absl::StatusOr<CameraFrame> pose = RenderCameraFrame(
+      Pinhole(), Rigid3d::Translation(Eigen::Vector3d(kInf, 0, 0)), layout, CameraRenderOptions(), 1);
+  EXPECT_EQ(pose.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(pose.status().message()).rfind("T_station_camera", 0), 0u);
+  layout.surfaces.push_back(Wall(2.0, 0.5));
+  layout.surfaces[0].size_m.x() = 0.0;
+  const absl::StatusOr<CameraFrame> size =
+      RenderCameraFrame(Pinhole(), CameraPose(), layout, CameraRenderOptions(), 1);
+  EXPECT_EQ(size.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(size.status().message()).rfind("surfaces[0] 'wall': size_m", 0), 0u)
+      << size.status();
+  layout.surfaces[0].size_m.x() = 1.0;
+  layout.surfaces[0].reflectivity = 2.0;
+  const absl::StatusOr<CameraFrame> reflectivity =
+      RenderCameraFrame(Pinhole(), CameraPose(), layout, CameraRenderOptions(), 1);
+  EXPECT_EQ(std::string(reflectivity.status().message()).rfind("surfaces[0] 'wall'.reflectivity", 0), 0u)
+      << reflectivity.status();
 }
 
 }  // namespace
