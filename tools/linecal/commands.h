@@ -16,5 +16,7 @@ int RunSim(const Args& args);  // cmd_sim.cc
 int RunLidarTopview(const Args& args);  // cmd_topview.cc
 int RunLidarDecode(const Args& args);  // cmd_lidar.cc
 int RunRadarDecode(const Args& args);  // cmd_radar.cc
+int RunRadarCalibrate(const Args& args);  // cmd_radar_cal.cc
+int RunEvalRadar(const Args& args);  // cmd_eval_radar.cc
 
 }  // namespace linecal::tools

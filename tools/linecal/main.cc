@@ -25,6 +25,8 @@ const std::vector<Subcommand>& Subcommands() {
       {{"lidar", "topview"}, "draw LiDAR scans seen from above (PNG)", RunLidarTopview},
       {{"lidar", "decode"}, "decode LiDAR packets (pcap) into one PCD per rotation", RunLidarDecode},
       {{"radar", "decode"}, "decode a radar CAN log (candump) into detections", RunRadarDecode},
+      {{"radar", "calibrate"}, "radar mounting yaw from a capture's corner reflectors", RunRadarCalibrate},
+      {{"eval", "radar"}, "Monte Carlo evaluation of radar yaw calibration", RunEvalRadar},
   };
   return kTable;
 }
