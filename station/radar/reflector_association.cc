@@ -114,14 +114,17 @@ absl::Status ReflectorAssociationOptions::Validate() const {
   }
   if (auto s = non_negative("ambiguity_range_m", ambiguity_range_m); !s.ok()) return s;
   if (auto s = positive("outlier_z", outlier_z); !s.ok()) return s;
-  if (auto s = positive("detection_azimuth_sigma_rad", detection_azimuth_sigma_rad); !s.ok())
+  if (auto s = positive("detection_azimuth_sigma_rad", detection_azimuth_sigma_rad); !s.ok()) {
     return s;
+  }
   if (auto s = positive("detection_range_sigma_m", detection_range_sigma_m); !s.ok()) return s;
-  if (auto s = non_negative("resolution.position_step_m", resolution.position_step_m); !s.ok())
+  if (auto s = non_negative("resolution.position_step_m", resolution.position_step_m); !s.ok()) {
     return s;
+  }
   if (auto s = non_negative("resolution.range_step_m", resolution.range_step_m); !s.ok()) return s;
-  if (auto s = non_negative("resolution.azimuth_step_rad", resolution.azimuth_step_rad); !s.ok())
+  if (auto s = non_negative("resolution.azimuth_step_rad", resolution.azimuth_step_rad); !s.ok()) {
     return s;
+  }
   return absl::OkStatus();
 }
 
