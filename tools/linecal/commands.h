@@ -18,5 +18,6 @@ int RunLidarDecode(const Args& args);  // cmd_lidar.cc
 int RunRadarDecode(const Args& args);  // cmd_radar.cc
 int RunRadarCalibrate(const Args& args);  // cmd_radar_cal.cc
 int RunEvalRadar(const Args& args);  // cmd_eval_radar.cc
+int RunDetect(const Args& args);  // cmd_detect.cc
 
 }  // namespace linecal::tools

@@ -1,0 +1,52 @@
+#include "detectors/detect.h"
+
+#include <algorithm>
+#include <cstdint>
+
+#include "detectors/checker/checker_detector.h"
+
+namespace linecal {
+
+std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board) {
+  switch (board.type()) {
+    case BoardType::kChecker: return DetectChecker(image, board);
+    case BoardType::kChessboard:
+    case BoardType::kCircle:
+    case BoardType::kVertical:
+    case BoardType::kAruco:
+    case BoardType::kApriltag:
+    case BoardType::kRoundHole: return std::nullopt;
+  }
+  return std::nullopt;
+}
+
+Image8 RangeTo8Bit(const ImageView16& image) {
+  if (image.Validate() != ImageViewError::kOk) return Image8();
+  std::uint16_t lo = 65535;
+  std::uint16_t hi = 0;
+  for (int y = 0; y < image.height; ++y) {
+    const std::uint16_t* row = image.Row(y);
+    const auto [mn, mx] = std::minmax_element(row, row + image.width);
+    lo = std::min(lo, *mn);
+    hi = std::max(hi, *mx);
+  }
+  Image8 image8(image.width, image.height, 0);
+  if (hi == lo) return image8;
+  // Fixed point: 255 * (v - lo) / (hi - lo), rounded; the product fits in 32 bits.
+  const std::uint32_t range = hi - lo;
+  for (int y = 0; y < image.height; ++y) {
+    const std::uint16_t* row = image.Row(y);
+    for (int x = 0; x < image.width; ++x) {
+      image8.at(x, y) = static_cast<std::uint8_t>((255u * (row[x] - lo) + range / 2) / range);
+    }
+  }
+  return image8;
+}
+
+std::optional<Detection> DetectBoard(const ImageView16& image, const Board& board) {
+  if (image.Validate() != ImageViewError::kOk) return DetectBoard(ImageView8{}, board);
+  const Image8 image8 = RangeTo8Bit(image);
+  return DetectBoard(image8.view(), board);
+}
+
+}  // namespace linecal

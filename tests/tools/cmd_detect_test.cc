@@ -1,0 +1,125 @@
+// `linecal detect` run as a program (interfaces.md): the JSON object, the exit codes
+// (0 found, 1 not found, 2 bad usage or input), 16-bit input and the overlay.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "station/io/image_io.h"
+#include "tests/detectors/board_scene.h"
+#include "tests/tools/run_linecal.h"
+
+namespace linecal {
+namespace {
+
+using testing_tools::RunLinecal;
+
+class DetectCliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("linecal_detect_cli_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+
+  // A 7 x 5 checker of 30 mm squares at 0.9 m (squares of about 33 px), and its truth.
+  CameraFrame RenderChecker(int bit_depth) {
+    test_scene::BoardView view;
+    view.params.type = BoardType::kChecker;
+    view.params.cols = 7;
+    view.params.rows = 5;
+    view.params.square_m = 0.03;
+    view.distance_m = 0.9;
+    view.yaw_deg = 20.0;
+    CameraRenderOptions options;
+    options.blur_sigma_px = 0.7;
+    options.noise_sigma = 2.0;
+    options.bit_depth = bit_depth;
+    return test_scene::RenderView(view, options, 7);
+  }
+
+  std::filesystem::path dir_;
+};
+
+constexpr char kChecker[] = "--board checker --cols 7 --rows 5 --square 0.03";
+
+TEST_F(DetectCliTest, JsonOfAFoundCheckerMatchesTheTruth) {
+  const CameraFrame frame = RenderChecker(8);
+  ASSERT_TRUE(WritePng8(Path("c.png"), frame.image8.view()).ok());
+  const auto run =
+      RunLinecal(std::string("detect ") + kChecker + " --image " + Path("c.png") + " --json");
+  ASSERT_EQ(run.exit_code, 0) << run.err << run.out;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  EXPECT_EQ(j.at("board"), "checker");
+  EXPECT_EQ(j.at("found"), true);
+  EXPECT_EQ(j.at("reason"), "");
+  EXPECT_GT(j.at("elapsed_ms").get<double>(), 0.0);
+  ASSERT_EQ(j.at("features").size(), 35u);
+  // Corner 0 (col 0, row 0) of a 7 x 5 board of 30 mm: x = (1 - 4) * 0.03, y = (3 - 1) * 0.03.
+  const nlohmann::json& f0 = j.at("features")[0];
+  EXPECT_EQ(f0.at("id"), 0);
+  EXPECT_NEAR(f0.at("x").get<double>(), -0.09, 1e-12);
+  EXPECT_NEAR(f0.at("y").get<double>(), 0.06, 1e-12);
+  EXPECT_EQ(f0.at("marker"), -1);
+  // Positions within the noisy bar of acceptance.md (sigma 2 here is gentler).
+  constexpr double kTolPx = 0.12;
+  for (const nlohmann::json& f : j.at("features")) {
+    for (const RenderedFeature& t : frame.features) {
+      if (t.feature_id != f.at("id").get<int>()) continue;
+      EXPECT_NEAR(f.at("u").get<double>(), t.uv_px.x(), kTolPx);
+      EXPECT_NEAR(f.at("v").get<double>(), t.uv_px.y(), kTolPx);
+    }
+  }
+}
+
+TEST_F(DetectCliTest, SixteenBitImageAndOverlay) {
+  const CameraFrame frame = RenderChecker(16);
+  ASSERT_TRUE(WritePng16(Path("c16.png"), frame.image16.view()).ok());
+  const auto run = RunLinecal(std::string("detect ") + kChecker + " --image " + Path("c16.png") +
+                              " --overlay " + Path("o.png"));
+  ASSERT_EQ(run.exit_code, 0) << run.err << run.out;
+  EXPECT_NE(run.out.find("checker: found, 35 features"), std::string::npos) << run.out;
+  const absl::StatusOr<Image8> overlay = ReadImage8(Path("o.png"));
+  ASSERT_TRUE(overlay.ok()) << overlay.status();
+  EXPECT_EQ(overlay->width, 1280);
+  EXPECT_EQ(overlay->height, 720);
+}
+
+TEST_F(DetectCliTest, NotFoundExitsOneWithAReason) {
+  const CameraFrame frame = RenderChecker(8);
+  ASSERT_TRUE(WritePng8(Path("c.png"), frame.image8.view()).ok());
+  // The same image searched for a 9 x 6 board.
+  const auto run = RunLinecal("detect --board checker --cols 9 --rows 6 --square 0.025 --image " +
+                              Path("c.png") + " --json");
+  ASSERT_EQ(run.exit_code, 1) << run.err;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  EXPECT_EQ(j.at("found"), false);
+  EXPECT_EQ(j.at("reason"), "too_few_features");
+  EXPECT_TRUE(j.at("features").empty());
+}
+
+TEST_F(DetectCliTest, BadInputExitsTwo) {
+  const auto missing = RunLinecal("detect --board checker --image " + Path("none.png"));
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_NE(missing.err.find("none.png"), std::string::npos) << missing.err;
+  std::ofstream(Path("bad.png")) << "not an image";
+  EXPECT_EQ(RunLinecal("detect --board checker --image " + Path("bad.png")).exit_code, 2);
+  const auto no_image = RunLinecal("detect --board checker");
+  EXPECT_EQ(no_image.exit_code, 2);
+  EXPECT_NE(no_image.err.find("image"), std::string::npos) << no_image.err;
+  const auto bad_board = RunLinecal("detect --board chess --image " + Path("bad.png"));
+  EXPECT_EQ(bad_board.exit_code, 2);
+  EXPECT_NE(bad_board.err.find("chess"), std::string::npos) << bad_board.err;
+  const auto bad_cols =
+      RunLinecal("detect --board checker --cols 1 --rows 5 --image " + Path("bad.png"));
+  EXPECT_EQ(bad_cols.exit_code, 2);
+}
+
+}  // namespace
+}  // namespace linecal

@@ -1,0 +1,120 @@
+// linecal detect: finds a calibration board in an image and prints its features
+// (interfaces.md, "linecal detect"; fixed, the acceptance tests call it).
+#include <chrono>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "detectors/boards/board.h"
+#include "detectors/core/image_view.h"
+#include "detectors/detect.h"
+#include "detectors/detection.h"
+#include "station/io/image_io.h"
+#include "tools/cli/command_line.h"
+#include "tools/linecal/board_options.h"
+#include "tools/linecal/commands.h"
+#include "tools/linecal/detection_overlay.h"
+
+namespace linecal::tools {
+namespace {
+
+constexpr char kCommand[] = "detect";
+
+// True when every sample is a multiple of 257: the file held 8-bit samples, which
+// ReadImage16 widened (v * 257). Those are detected as they are, without stretching.
+bool Holds8BitSamples(const Image16& image) {
+  for (std::uint16_t v : image.pixels) {
+    if (v % 257 != 0) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+int RunDetect(const Args& args) {
+  std::vector<cli::OptionSpec> options = BoardOptionSpecs(/*board_required=*/true);
+  options.push_back({"image", "FILE", "PNG or JPEG, 8- or 16-bit, grey or colour", true});
+  options.push_back({"json", "", "print the result as one JSON object"});
+  options.push_back({"overlay", "OUT.png", "write the image with the features drawn"});
+  cli::CommandLine cl(
+      "linecal detect --board NAME [--scale S] [--cols N --rows M --square METRES] "
+      "--image FILE [--json] [--overlay OUT.png]",
+      "Finds the board in the image and prints every feature found: its id, sub-pixel image "
+      "position (u, v; pixel centres at integers) and board position (x, y, metres, at the "
+      "default scale). 16-bit images are stretched from their darkest to their brightest "
+      "pixel. Exit 0 when the whole board was found, 1 when not (the reason is printed), "
+      "2 on bad usage or input.",
+      std::move(options));
+  if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
+
+  const absl::StatusOr<BoardParams> params = BoardParamsFromCommandLine(cl);
+  if (!params.ok()) return cli::BadInput(kCommand, std::string(params.status().message()));
+  const std::optional<Board> board = Board::Create(*params);
+  if (!board.has_value()) return cli::BadInput(kCommand, "invalid board parameters");
+
+  const std::string path = cl.Get("image");
+  absl::StatusOr<Image16> image16 = ReadImage16(path);
+  if (!image16.ok()) return cli::BadInput(kCommand, std::string(image16.status().message()));
+  // The 8-bit image the detector sees: the file's own samples, or the 16-bit range stretched.
+  Image8 image8;
+  if (Holds8BitSamples(*image16)) {
+    image8 = Image8(image16->width, image16->height);
+    for (std::size_t i = 0; i < image8.pixels.size(); ++i) {
+      image8.pixels[i] = static_cast<std::uint8_t>(image16->pixels[i] / 257);
+    }
+  } else {
+    image8 = RangeTo8Bit(image16->view());
+  }
+
+  const auto start = std::chrono::steady_clock::now();
+  const std::optional<Detection> detection = DetectBoard(image8.view(), *board);
+  const double elapsed_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  if (!detection.has_value()) {
+    return cli::BadInput(kCommand, absl::StrCat("--board ", board->name(),
+                                                ": no image detector for this board yet"));
+  }
+
+  if (cl.Has("overlay")) {
+    const std::string out = cl.Get("overlay");
+    const absl::Status written =
+        WritePngRgb(out, DrawDetectionOverlay(image8.view(), *detection));
+    if (!written.ok()) return cli::BadInput(kCommand, std::string(written.message()));
+  }
+
+  // x, y at the default scale (interfaces.md): the ids' positions on the PDF board.
+  const double scale = board->params().scale;
+  if (cl.Has("json")) {
+    nlohmann::json features = nlohmann::json::array();
+    for (const DetectedFeature& f : detection->features) {
+      features.push_back({{"id", f.id},
+                          {"u", f.uv_px.x()},
+                          {"v", f.uv_px.y()},
+                          {"x", f.p_board.x() / scale},
+                          {"y", f.p_board.y() / scale},
+                          {"marker", f.marker}});
+    }
+    const nlohmann::json report = {{"board", board->name()},
+                                   {"found", detection->found},
+                                   {"reason", DetectReasonName(detection->reason)},
+                                   {"features", features},
+                                   {"elapsed_ms", elapsed_ms}};
+    std::printf("%s\n", report.dump().c_str());
+  } else {
+    std::printf("%s: %s%s, %zu features, %.2f ms\n", board->name(),
+                detection->found ? "found" : "not found",
+                detection->found ? "" : absl::StrCat(" (", DetectReasonName(detection->reason), ")").c_str(),
+                detection->features.size(), elapsed_ms);
+    for (const DetectedFeature& f : detection->features) {
+      std::printf("%4d  u %9.3f  v %9.3f  x %8.4f  y %8.4f%s\n", f.id, f.uv_px.x(), f.uv_px.y(),
+                  f.p_board.x() / scale, f.p_board.y() / scale,
+                  f.marker >= 0 ? absl::StrFormat("  marker %d", f.marker).c_str() : "");
+    }
+  }
+  return detection->found ? cli::kExitOk : cli::kExitNegative;
+}
+
+}  // namespace linecal::tools

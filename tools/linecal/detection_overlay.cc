@@ -1,0 +1,84 @@
+#include "tools/linecal/detection_overlay.h"
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+namespace linecal::tools {
+namespace {
+
+// A 3 x 5 pixel font for the digits 0-9: five rows of three bits, top row first, the
+// leftmost pixel in the high bit.
+constexpr std::array<std::array<std::uint8_t, 5>, 10> kDigits = {{
+    {7, 5, 5, 5, 7},  // 0
+    {2, 6, 2, 2, 7},  // 1
+    {7, 1, 7, 4, 7},  // 2
+    {7, 1, 7, 1, 7},  // 3
+    {5, 5, 7, 1, 1},  // 4
+    {7, 4, 7, 1, 7},  // 5
+    {7, 4, 7, 5, 7},  // 6
+    {7, 1, 1, 1, 1},  // 7
+    {7, 5, 7, 5, 7},  // 8
+    {7, 5, 7, 1, 7},  // 9
+}};
+// Digits drawn at twice their size: readable on a 1280 x 720 overlay.
+constexpr int kFontScale = 2;
+constexpr int kCrossHalfPx = 5;
+
+void Put(RgbImage* img, int x, int y, const std::array<std::uint8_t, 3>& colour) {
+  if (x < 0 || y < 0 || x >= img->width || y >= img->height) return;
+  std::uint8_t* p = img->at(x, y);
+  p[0] = colour[0];
+  p[1] = colour[1];
+  p[2] = colour[2];
+}
+
+void DrawNumber(RgbImage* img, int x0, int y0, int number,
+                const std::array<std::uint8_t, 3>& colour) {
+  const std::string text = std::to_string(number);
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    if (text[i] < '0' || text[i] > '9') continue;
+    const auto& glyph = kDigits[text[i] - '0'];
+    const int gx = x0 + static_cast<int>(i) * 4 * kFontScale;
+    for (int row = 0; row < 5; ++row) {
+      for (int col = 0; col < 3; ++col) {
+        if ((glyph[row] >> (2 - col) & 1) == 0) continue;
+        for (int dy = 0; dy < kFontScale; ++dy) {
+          for (int dx = 0; dx < kFontScale; ++dx) {
+            Put(img, gx + col * kFontScale + dx, y0 + row * kFontScale + dy, colour);
+          }
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+
+RgbImage DrawDetectionOverlay(const ImageView8& image, const Detection& detection) {
+  RgbImage img(image.width, image.height);
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      const std::uint8_t g = image.At(x, y);
+      Put(&img, x, y, {g, g, g});
+    }
+  }
+  const std::array<std::uint8_t, 3> colour =
+      detection.found ? std::array<std::uint8_t, 3>{0, 230, 0}
+                      : std::array<std::uint8_t, 3>{255, 140, 0};
+  for (const DetectedFeature& f : detection.features) {
+    // Far outside the image (or not a number): nothing to draw, and no int overflow.
+    if (!(f.uv_px.cwiseAbs().maxCoeff() < 1e6)) continue;
+    const int u = static_cast<int>(std::lround(f.uv_px.x()));
+    const int v = static_cast<int>(std::lround(f.uv_px.y()));
+    for (int d = -kCrossHalfPx; d <= kCrossHalfPx; ++d) {
+      Put(&img, u + d, v, colour);
+      Put(&img, u, v + d, colour);
+    }
+    DrawNumber(&img, u + 3, v + 3, f.id, colour);
+  }
+  return img;
+}
+
+}  // namespace linecal::tools
