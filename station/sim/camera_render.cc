@@ -126,8 +126,10 @@ struct ClutterObject {
 
 std::optional<ClutterObject> ClutterInCell(const ClutterGrid& grid, std::int64_t cx,
                                            std::int64_t cy) {
-  const std::uint64_t h = Mix(Mix(grid.key ^ static_cast<std::uint64_t>(cx)) ^
-                              static_cast<std::uint64_t>(cy));
+  // One mix of the key and the cell indices scaled by large odd constants (the golden ratio
+  // and sqrt(3) in 64-bit fixed point) decorrelates neighbouring cells.
+  const std::uint64_t h = Mix(grid.key ^ (static_cast<std::uint64_t>(cx) * 0x9e3779b97f4a7c15ULL) ^
+                              (static_cast<std::uint64_t>(cy) * 0xbb67ae8584caa73bULL));
   if (Unit(h) >= grid.density) return std::nullopt;
   // The object's six parameters from 10-bit fields of one more hash: sizes and greys in
   // steps of 1/1024 of their range are as random as any.
@@ -609,6 +611,31 @@ struct CornerSample {
   Hit hit;
 };
 
+// True if all four corners of a pixel hit one surface and every other candidate's plane
+// lies behind it (or is never met) along all four corner rays: depths along blended rays
+// are harmonic blends of the corners' depths, so that order holds inside the pixel too.
+bool InFrontOverPixel(const Scene& scene, const std::array<CornerSample*, 4>& c,
+                      const std::uint32_t* candidates, int n) {
+  const int front = c[0]->hit.surface;
+  if (front < 0) return false;
+  for (int k = 1; k < 4; ++k) {
+    if (c[k]->hit.surface != front) return false;
+  }
+  for (int i = 0; i < n; ++i) {
+    const int other = static_cast<int>(candidates[i]);
+    if (other == front) continue;
+    const SceneSurface& o = scene.surfaces()[other];
+    bool behind = true, never = true;
+    for (int k = 0; k < 4; ++k) {
+      const double t = -o.eye_surface.z() / o.R_surface_camera.row(2).dot(c[k]->ray);
+      behind = behind && t > c[k]->hit.t;
+      never = never && t < 0.0;
+    }
+    if (!behind && !never) return false;
+  }
+  return true;
+}
+
 class PixelIntegrator {
  public:
   PixelIntegrator(const Scene& scene, const CameraRenderOptions& options)
@@ -638,29 +665,10 @@ class PixelIntegrator {
  private:
   static constexpr int kMaxLoop = 4 * kMaxEdgeProbes;
 
-  // The surface in front of everything else over the whole pixel, if all four corners hit
-  // it and every other candidate's plane lies behind it (or is never met) along all four
-  // corner rays: depths along blended rays are harmonic blends of the corners' depths, so
-  // that order holds inside the pixel too. Null otherwise.
+  // The surface the pixel's corners all hit, if it is in front over the whole pixel.
   const SceneSurface* FrontSurface(const std::array<CornerSample*, 4>& c) const {
-    const int front = c[0]->hit.surface;
-    if (front < 0) return nullptr;
-    for (int k = 1; k < 4; ++k) {
-      if (c[k]->hit.surface != front) return nullptr;
-    }
-    for (int i = 0; i < n_candidates_; ++i) {
-      const int other = static_cast<int>(candidates_[i]);
-      if (other == front) continue;
-      const SceneSurface& o = scene_.surfaces()[other];
-      bool behind = true, never = true;
-      for (int k = 0; k < 4; ++k) {
-        const double t = -o.eye_surface.z() / o.R_surface_camera.row(2).dot(c[k]->ray);
-        behind = behind && t > c[k]->hit.t;
-        never = never && t < 0.0;
-      }
-      if (!behind && !never) return nullptr;
-    }
-    return &scene_.surfaces()[front];
+    if (!InFrontOverPixel(scene_, c, candidates_, n_candidates_)) return nullptr;
+    return &scene_.surfaces()[c[0]->hit.surface];
   }
 
   Look Eval(const Eigen::Vector2d& st) const {
@@ -903,8 +911,9 @@ class LinearRenderer {
     }
   }
 
-  // The reflectance of the whole pixel if it is flat: its corners and centre see one look
-  // and the surface is uniform over the footprint, grown by the corners' ray errors.
+  // The reflectance of the whole pixel if it is flat: its corners see one look, the surface
+  // is uniform over the footprint (grown by the corners' ray errors), and nothing else
+  // shows in between: every other surface lies behind, or the centre sees the same look.
   std::optional<double> Flat(const std::array<CornerSample*, 4>& c, const std::uint32_t* candidates,
                              int n) const {
     const std::uint64_t label = c[0]->hit.look.label;
@@ -922,8 +931,10 @@ class LinearRenderer {
         return std::nullopt;
       }
     }
-    const Eigen::Vector3d centre = c[0]->ray + c[1]->ray + c[2]->ray + c[3]->ray;
-    if (scene_.Trace(centre, candidates, n).look.label != label) return std::nullopt;
+    if (!InFrontOverPixel(scene_, c, candidates, n)) {
+      const Eigen::Vector3d centre = c[0]->ray + c[1]->ray + c[2]->ray + c[3]->ray;
+      if (scene_.Trace(centre, candidates, n).look.label != label) return std::nullopt;
+    }
     return c[0]->hit.look.reflectance;
   }
 
@@ -993,23 +1004,29 @@ void Illuminate(const CameraModel& camera, const CameraRenderOptions& o, std::ve
     lo = std::min(lo, corner.dot(dir));
     hi = std::max(hi, corner.dot(dir));
   }
+  // exp(log_ratio (s - 0.5)) with s linear in (u, v) factors into a column and a row term.
   const double log_ratio = std::log(o.illumination_gradient_ratio);
+  const double scale = hi > lo ? log_ratio / (hi - lo) : 0.0;
+  std::vector<double> column_gain(width), row_gain(height);
+  for (int x = 0; x < width; ++x) column_gain[x] = std::exp(scale * x * dir.x());
+  for (int y = 0; y < height; ++y) {
+    row_gain[y] = o.illumination * std::exp(scale * (y * dir.y() - lo) - 0.5 * log_ratio);
+  }
   const Eigen::Vector2d principal(camera.intrinsics().cx, camera.intrinsics().cy);
   double r2_max = 0.0;
   for (const Eigen::Vector2d& corner : {Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(width - 0.5, -0.5),
-                                       Eigen::Vector2d(-0.5, height - 0.5),
-                                       Eigen::Vector2d(width - 0.5, height - 0.5)}) {
+                                        Eigen::Vector2d(-0.5, height - 0.5),
+                                        Eigen::Vector2d(width - 0.5, height - 0.5)}) {
     r2_max = std::max(r2_max, (corner - principal).squaredNorm());
   }
   ParallelFor(height, o.threads, [&](int y0, int y1) {
     for (int y = y0; y < y1; ++y) {
       float* row = image->data() + static_cast<std::size_t>(y) * width;
+      const double dy2 = (y - principal.y()) * (y - principal.y());
       for (int x = 0; x < width; ++x) {
-        const Eigen::Vector2d uv(x, y);
-        const double s = hi > lo ? (uv.dot(dir) - lo) / (hi - lo) : 0.5;
-        const double gradient = std::exp(log_ratio * (s - 0.5));
-        const double vignette = 1.0 - o.vignetting * (uv - principal).squaredNorm() / r2_max;
-        row[x] = static_cast<float>(row[x] * o.illumination * gradient * vignette);
+        const double r2 = (x - principal.x()) * (x - principal.x()) + dy2;
+        const double vignette = 1.0 - o.vignetting * r2 / r2_max;
+        row[x] = static_cast<float>(row[x] * row_gain[y] * column_gain[x] * vignette);
       }
     }
   });

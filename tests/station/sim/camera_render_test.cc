@@ -102,6 +102,16 @@ StationBoard MakeBoard(const std::string& id, BoardType type, double scale, cons
   return b;
 }
 
+StationBoard Checker(const std::string& id, double square_m, const Rigid3d& pose) {
+  StationBoard b;
+  b.id = id;
+  b.params.type = BoardType::kChecker;
+  b.params.square_m = square_m;
+  b.board = *Board::Create(b.params);
+  b.T_station_board = pose;
+  return b;
+}
+
 // A wall facing -x (towards the camera) at distance x, big enough to fill any view.
 StationSurface Wall(double x, double reflectivity) {
   StationSurface w;
@@ -503,6 +513,99 @@ TEST(CameraRenderEdges, BlurKeepsStraightEdgesInPlace) {
   EXPECT_LE(r.worst_corner_px, kCornerBarPx);
 }
 
+// ---- Dense patterns: every pixel against its exact coverage ------------------------------
+
+// Area of the convex polygon `poly` clipped to the axis-aligned box [lo, hi]
+// (Sutherland-Hodgman against the box's four sides, then the shoelace formula).
+double ClippedArea(std::vector<Eigen::Vector2d> poly, const Eigen::Vector2d& lo,
+                   const Eigen::Vector2d& hi) {
+  for (int side = 0; side < 4 && !poly.empty(); ++side) {
+    const int axis = side % 2;
+    const bool keep_above = side < 2;
+    const double bound = keep_above ? lo[axis] : hi[axis];
+    const auto inside = [&](const Eigen::Vector2d& p) {
+      return keep_above ? p[axis] >= bound : p[axis] <= bound;
+    };
+    std::vector<Eigen::Vector2d> out;
+    for (std::size_t i = 0; i < poly.size(); ++i) {
+      const Eigen::Vector2d& a = poly[i];
+      const Eigen::Vector2d& b = poly[(i + 1) % poly.size()];
+      if (inside(a)) out.push_back(a);
+      if (inside(a) != inside(b)) out.push_back(a + (bound - a[axis]) / (b[axis] - a[axis]) * (b - a));
+    }
+    poly = std::move(out);
+  }
+  double twice_area = 0.0;
+  for (std::size_t i = 0; i < poly.size(); ++i) {
+    const Eigen::Vector2d& a = poly[i];
+    const Eigen::Vector2d& b = poly[(i + 1) % poly.size()];
+    twice_area += a.x() * b.y() - b.x() * a.y();
+  }
+  return 0.5 * std::abs(twice_area);
+}
+
+// A checkerboard of sub-pixel to few-pixel squares, parallel to the image plane of an
+// undistorted pinhole and rolled: each pixel's preimage on the board is then exactly the
+// quadrilateral of its corners' preimages, and its white coverage is 1 minus the area of the
+// black squares inside that quadrilateral over its area.
+double WorstDenseCoverageError(double square_m) {
+  const CameraModel camera = Pinhole();
+  const Rigid3d T_station_camera = CameraPose();
+  StationLayout layout;
+  // 2 m ahead: 1 px is 3.33 mm on the board. The page centre projects at (321.3, 238.6),
+  // near the principal point.
+  layout.boards.push_back(Checker("dense", square_m, BoardPose(Eigen::Vector3d(2.0, 0.0, 1.5), 0, 0, 20)));
+  StationBoard& b = layout.boards[0];
+  b.params.cols = b.params.rows = 30;
+  b.board = *Board::Create(b.params);
+  const CameraFrame frame = Render(camera, T_station_camera, layout, GeometryOptions());
+  const Rigid3d T_board_camera = b.T_station_board.Inverse() * T_station_camera;
+  const auto preimage = [&](double u, double v) {
+    Eigen::Vector3d ray;
+    EXPECT_TRUE(camera.Unproject(Eigen::Vector2d(u, v), &ray));
+    const Eigen::Vector3d o = T_board_camera.translation(), d = T_board_camera.rotation() * ray;
+    return Eigen::Vector2d((o - o.z() / d.z() * d).head<2>());
+  };
+  // The pattern's extent (the black squares span (cols + 1) squares), inset by 2 px.
+  const double half_pattern = 0.5 * (b.params.cols + 1) * square_m - 0.0067;
+  double worst = 0.0;
+  int pixels = 0;
+  for (int y = 0; y < 480; ++y) {
+    for (int x = 0; x < 640; ++x) {
+      const std::vector<Eigen::Vector2d> quad = {preimage(x - 0.5, y - 0.5), preimage(x + 0.5, y - 0.5),
+                                                 preimage(x + 0.5, y + 0.5), preimage(x - 0.5, y + 0.5)};
+      if (std::any_of(quad.begin(), quad.end(), [&](const Eigen::Vector2d& q) {
+            return q.cwiseAbs().maxCoeff() > half_pattern;
+          })) {
+        continue;
+      }
+      double black = 0.0;
+      for (const BoardShape& shape : b.board.shapes()) {
+        if (shape.paint == Paint::kBlack) black += ClippedArea(quad, shape.box_board.min(), shape.box_board.max());
+      }
+      const double area = ClippedArea(quad, Eigen::Vector2d::Constant(-1), Eigen::Vector2d::Constant(1));
+      worst = std::max(worst, std::abs(Grey(frame, x, y) - (1.0 - black / area)));
+      ++pixels;
+    }
+  }
+  EXPECT_GT(pixels, 500);
+  return worst;
+}
+
+TEST(CameraRenderDense, EveryPixelHasItsExactCoverage) {
+  // Squares of 1.3 px: nearly every pixel holds a corner where four squares meet, many hold
+  // several edges. Corner pixels are split down to 1/32 px and the last cell point-sampled,
+  // so a pixel may be off by a fraction of (1/32)^2 ~ 1e-3 per corner it holds.
+  constexpr double kCornerPixelBar = 2e-3;
+  const double fine = WorstDenseCoverageError(0.0043);
+  EXPECT_LE(fine, kCornerPixelBar);
+  // Squares of 4 px: about one pixel in four holds a corner.
+  const double coarse = WorstDenseCoverageError(0.0133);
+  EXPECT_LE(coarse, kCornerPixelBar);
+  std::printf("dense checkerboards: worst pixel coverage error %.2e (1.3 px squares), %.2e (4 px)\n",
+              fine, coarse);
+}
+
 // ---- Ground truth ------------------------------------------------------------------------
 
 // Where the sight line from the camera centre to p_station meets surface `pose`'s plane
@@ -522,16 +625,6 @@ bool SightLineHits(const Rigid3d& T_station_camera, const Eigen::Vector3d& p_sta
 Eigen::Vector3d FeatureInStation(const StationBoard& b, int feature) {
   const Eigen::Vector2d& p = b.board.features()[feature].p_board;
   return b.T_station_board * Eigen::Vector3d(p.x(), p.y(), 0.0);
-}
-
-StationBoard Checker(const std::string& id, double square_m, const Rigid3d& pose) {
-  StationBoard b;
-  b.id = id;
-  b.params.type = BoardType::kChecker;
-  b.params.square_m = square_m;
-  b.board = *Board::Create(b.params);
-  b.T_station_board = pose;
-  return b;
 }
 
 TEST(CameraRenderGroundTruth, ListsExactlyTheUnoccludedFeaturesInView) {
