@@ -57,7 +57,7 @@ absl::StatusOr<std::vector<ExpectedReflector>> ExpectedReflectors(const SensorMo
 struct ReflectorAssociationOptions {
   // Half-widths of the gate around the expected azimuth and range. The azimuth gate must
   // cover the mounting yaw error to be measured (tolerance and beyond) plus 3σ of the noise.
-  double azimuth_gate_rad = 0.05;  // ~2.9°: 2 x a 1° tolerance + 3 x 0.1° (see ForSensor)
+  double azimuth_gate_rad = 0.05;  // ~2.9°: 2 x a 1° tolerance + 3σ + margins (see ForSensor)
   double range_gate_m = 0.6;       // ForSensor: position tolerance + noise + resolution
   // Station clutter (floor, stands, people) stays below ~5 dBm² while corner reflectors are
   // ≥ 10 dBm²; applied only to detections that carry RCS.
@@ -113,7 +113,8 @@ struct ReflectorObservation {
   int ambiguous_cycles = 0;
   int outliers = 0;  // rejected by the median/MAD test
   int n_used = 0;    // detections averaged
-  // Means of the used detections and their standard errors: the scatter over √n, plus (in
+  // Means of the used detections and their standard errors: the scatter (not below the
+  // sensor's nominal noise: quantised values may not vary at all) over √n, plus (in
   // quadrature) the bias of resolution steps that the noise does not dither. Valid when found.
   double range_m = 0;
   double range_se_m = 0;
