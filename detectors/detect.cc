@@ -4,14 +4,15 @@
 #include <cstdint>
 
 #include "detectors/checker/checker_detector.h"
+#include "detectors/circle/circle_detector.h"
 
 namespace linecal {
 
 std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board) {
   switch (board.type()) {
     case BoardType::kChecker: return DetectChecker(image, board);
+    case BoardType::kCircle: return DetectCircleBoard(image, board);
     case BoardType::kChessboard:
-    case BoardType::kCircle:
     case BoardType::kVertical:
     case BoardType::kAruco:
     case BoardType::kApriltag:
