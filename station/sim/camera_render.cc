@@ -72,7 +72,8 @@ constexpr std::uint64_t kOccluderStream = 2;
 
 // ------------------------------------------------------------------------------------------
 // Labels: what a ray sees, as an id (equal ids = one region of one paint) and a reflectance.
-// Surface s has ids (s + 1) << kSurfaceShift | code; 0 is the background.
+// Surface s has ids (s + 1) << kSurfaceShift | code; 0 is the background. 44 bits leave room
+// for the clutter codes below (16 + 40 bits of cell indices) and for 2^20 surfaces.
 
 constexpr int kSurfaceShift = 44;
 constexpr std::uint64_t kCodeWhite = 1;
@@ -126,8 +127,9 @@ struct ClutterObject {
 
 std::optional<ClutterObject> ClutterInCell(const ClutterGrid& grid, std::int64_t cx,
                                            std::int64_t cy) {
-  // One mix of the key and the cell indices scaled by large odd constants (the golden ratio
-  // and sqrt(3) in 64-bit fixed point) decorrelates neighbouring cells.
+  // One mix of the key and the cell indices scaled by large odd constants (2^64 / golden
+  // ratio, and the fraction of sqrt(3) in 64-bit fixed point) decorrelates neighbouring
+  // cells.
   const std::uint64_t h = Mix(grid.key ^ (static_cast<std::uint64_t>(cx) * 0x9e3779b97f4a7c15ULL) ^
                               (static_cast<std::uint64_t>(cy) * 0xbb67ae8584caa73bULL));
   if (Unit(h) >= grid.density) return std::nullopt;
@@ -242,7 +244,6 @@ class Scene {
 
   const std::vector<SceneSurface>& surfaces() const { return surfaces_; }
   int surface_count() const { return static_cast<int>(surfaces_.size()); }
-  double background() const { return looks_.background; }
 
   // Where the ray t * d_camera (0 < t < max_t) meets the plane of surface s inside its
   // extent.
@@ -419,7 +420,7 @@ class RayGrid {
     for (int j = 0; j <= rows_; ++j) {
       for (int i = 0; i <= cols_; ++i) {
         const std::size_t k = Node(i, j);
-        valid_[k] = camera.Unproject(Eigen::Vector2d(NodeX(i) - 0.5, NodeY(j) - 0.5), &rays_[k]);
+        valid_[k] = Ray(Eigen::Vector2d(NodeX(i) - 0.5, NodeY(j) - 0.5), &rays_[k]);
       }
     }
     error_px_.assign(static_cast<std::size_t>(cols_) * rows_, kInf);
@@ -489,10 +490,19 @@ class RayGrid {
   }
 
   bool ExactCornerRay(int x, int y, Eigen::Vector3d* ray) const {
-    return camera_.Unproject(Eigen::Vector2d(x - 0.5, y - 0.5), ray);
+    return Ray(Eigen::Vector2d(x - 0.5, y - 0.5), ray);
   }
 
  private:
+  // The ray of image point uv: for a pinhole scaled to z = 1, where the undistorted image
+  // is linear in the ray, so that blends of rays are exact rays of blended pixels; for a
+  // fisheye (rays may point backwards) of unit length.
+  bool Ray(const Eigen::Vector2d& uv, Eigen::Vector3d* ray) const {
+    if (!camera_.Unproject(uv, ray)) return false;
+    if (camera_.type() == CameraModelType::kPinhole) *ray /= ray->z();
+    return true;
+  }
+
   int NodeX(int i) const { return std::min(i * spacing_px_, width_); }
   int NodeY(int j) const { return std::min(j * spacing_px_, height_); }
   std::size_t Node(int i, int j) const { return static_cast<std::size_t>(j) * (cols_ + 1) + i; }

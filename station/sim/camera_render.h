@@ -14,13 +14,14 @@
 //   - else background_reflectance.
 // Boards, walls and occluders are seen from both sides; nothing casts shadows.
 //
-// Geometry is exact: the (W+1) x (H+1) pixel-corner rays come from CameraModel::Unproject,
-// rays inside a pixel are interpolated bilinearly from its corners (exact for an
-// undistorted pinhole, ~1e-6 px otherwise), and each pixel integrates the scene over its
-// area: pixels of one surface and one paint are flat; the others (edge pixels) locate
-// their edges by bisection and integrate them analytically as straight or parabolic arcs,
-// splitting pixels with corners into quarters. Edges come out within ~1e-4 px of their
-// projection (docs/simulator.md gives the measurements).
+// Geometry: the (W+1) x (H+1) pixel-corner rays come from CameraModel::Unproject (exact
+// ones wherever an edge crosses a pixel), rays inside a pixel are blended bilinearly from
+// its corners (exact for an undistorted pinhole, off by ~1/8 of the lens mapping's
+// curvature otherwise: 5e-5 px for the reference front camera), and each pixel integrates
+// the scene over its area: pixels of one surface and one paint are flat; the others (edge
+// pixels) locate their edges by bisection and integrate them analytically as straight or
+// parabolic arcs, splitting pixels with corners into quarters. Straight edges come out
+// within ~2e-4 px of their projection (docs/simulator.md gives the measurements).
 //
 // Radiometry, in linear light: coverage-weighted reflectance x illumination x gradient x
 // vignetting, then Gaussian blur, then gamma, Gaussian noise, JPEG-like block quantisation,
@@ -163,9 +164,10 @@ std::vector<RenderedFeature> VisibleCameraFeatures(const CameraModel& camera,
 // arguments give the same bytes (whatever options.threads); `seed` drives the noise and
 // the occluders. Errors (InvalidArgument): invalid options (the field is named), a
 // non-finite camera pose, a layout surface with a non-positive or non-finite size or a
-// reflectivity outside [0, 1]. Cost: about 150 ms for a 1920 x 1080 frame of the
-// reference station on two threads (docs/simulator.md); memory: a float per pixel plus
-// two rows of pixel-corner rays per thread.
+// reflectivity outside [0, 1]. Cost: about 150-180 ms for a 1920 x 1080 frame of the
+// reference station on two idle cores, ~270 ms on one (docs/simulator.md); memory: a
+// float per pixel, the rays of a coarse grid, and two rows of pixel-corner rays per
+// thread.
 absl::StatusOr<CameraFrame> RenderCameraFrame(const CameraModel& camera,
                                               const Rigid3d& T_station_camera,
                                               const StationLayout& layout,
