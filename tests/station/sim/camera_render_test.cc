@@ -463,44 +463,36 @@ StationLayout ArucoLayout(const Rigid3d& pose) {
   return layout;
 }
 
+// Every measured line, fitted curve and corner within the bars; the whole board measured.
+void ExpectWithinBars(const EdgeResult& r, int min_lines, const char* what) {
+  EXPECT_GT(r.lines, min_lines) << what;
+  EXPECT_EQ(r.corners, 16) << what;
+  EXPECT_LE(r.worst_edge_px, kEdgeBarPx) << what;
+  EXPECT_LE(r.worst_line_px, kEdgeBarPx) << what;
+  EXPECT_LE(r.worst_corner_px, kCornerBarPx) << what;
+  std::printf("%s edges: %d lines, worst %.2e px; fitted curves %.2e px; corners %.2e px\n", what,
+              r.lines, r.worst_edge_px, r.worst_line_px, r.worst_corner_px);
+}
+
 TEST(CameraRenderEdges, PinholeLinesAndCornersMatchTheProjection) {
   // Rolled and turned so that no edge is near an image axis; ~100 px markers.
   const StationLayout layout = ArucoLayout(BoardPose(Eigen::Vector3d(1.6, 0.05, 1.52), 25, -15, 17));
-  const EdgeResult r = MeasureMarkers(Pinhole(), CameraPose(), layout, GeometryOptions(), 1);
-  EXPECT_GT(r.lines, 1000);
-  EXPECT_EQ(r.corners, 16);
-  EXPECT_LE(r.worst_edge_px, kEdgeBarPx);
-  EXPECT_LE(r.worst_line_px, kEdgeBarPx);
-  EXPECT_LE(r.worst_corner_px, kCornerBarPx);
-  std::printf("pinhole edges: %d lines, worst %.2e px; fitted lines %.2e px; corners %.2e px\n",
-              r.lines, r.worst_edge_px, r.worst_line_px, r.worst_corner_px);
+  ExpectWithinBars(MeasureMarkers(Pinhole(), CameraPose(), layout, GeometryOptions(), 1), 1000,
+                   "pinhole");
 }
 
 TEST(CameraRenderEdges, DistortedPinholeEdgesMatchTheProjection) {
   // Barrel distortion of a wide-angle lens; the board off-centre, where it bends edges most.
   const StationLayout layout = ArucoLayout(BoardPose(Eigen::Vector3d(1.5, 0.3, 1.4), -20, 10, -8));
-  const EdgeResult r =
-      MeasureMarkers(Pinhole(-0.3, 0.12), CameraPose(), layout, GeometryOptions(), 3);
-  EXPECT_GT(r.lines, 1000);
-  EXPECT_EQ(r.corners, 16);
-  EXPECT_LE(r.worst_edge_px, kEdgeBarPx);
-  EXPECT_LE(r.worst_line_px, kEdgeBarPx);
-  EXPECT_LE(r.worst_corner_px, kCornerBarPx);
-  std::printf("distorted pinhole edges: %d lines, worst %.2e px; fits %.2e px; corners %.2e px\n",
-              r.lines, r.worst_edge_px, r.worst_line_px, r.worst_corner_px);
+  ExpectWithinBars(MeasureMarkers(Pinhole(-0.3, 0.12), CameraPose(), layout, GeometryOptions(), 3),
+                   1000, "distorted pinhole");
 }
 
 TEST(CameraRenderEdges, FisheyeEdgesMatchTheProjection) {
   // Off axis (about 40 degrees), where the fisheye bends edges visibly.
   const StationLayout layout = ArucoLayout(BoardPose(Eigen::Vector3d(0.9, -0.6, 1.1), -30, 15, 12));
-  const EdgeResult r = MeasureMarkers(Fisheye(), CameraPose(), layout, GeometryOptions(), 3);
-  EXPECT_GT(r.lines, 500);
-  EXPECT_EQ(r.corners, 16);
-  EXPECT_LE(r.worst_edge_px, kEdgeBarPx);
-  EXPECT_LE(r.worst_line_px, kEdgeBarPx);
-  EXPECT_LE(r.worst_corner_px, kCornerBarPx);
-  std::printf("fisheye edges: %d lines, worst %.2e px; fits %.2e px; corners %.2e px\n", r.lines,
-              r.worst_edge_px, r.worst_line_px, r.worst_corner_px);
+  ExpectWithinBars(MeasureMarkers(Fisheye(), CameraPose(), layout, GeometryOptions(), 3), 500,
+                   "fisheye");
 }
 
 TEST(CameraRenderEdges, BlurKeepsStraightEdgesInPlace) {
