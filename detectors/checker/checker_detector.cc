@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <deque>
 #include <map>
 #include <optional>
@@ -269,12 +270,21 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
   const int cols = board.params().cols;
   const int rows = board.params().rows;
 
-  const ImageF blurred = GaussianBlur(image, options.blur_sigma_px);
-  const auto [lo, hi] = std::minmax_element(blurred.pixels.begin(), blurred.pixels.end());
-  if (*hi - *lo < options.corners.min_contrast) {
+  // The raw range bounds the blurred one: an image without min_contrast anywhere has no
+  // corner. (Byte rows: the loop vectorises.)
+  std::uint8_t lo = 255, hi = 0;
+  for (int y = 0; y < image.height; ++y) {
+    const std::uint8_t* row = image.Row(y);
+    for (int x = 0; x < image.width; ++x) {
+      lo = std::min(lo, row[x]);
+      hi = std::max(hi, row[x]);
+    }
+  }
+  if (hi - lo < options.corners.min_contrast) {
     result.reason = DetectReason::kLowContrast;
     return result;
   }
+  const ImageF blurred = GaussianBlur(image, options.blur_sigma_px);
   const std::vector<XCorner> corners = FindXCorners(blurred, options.corners);
   if (corners.empty()) {
     result.reason = DetectReason::kNoCandidates;

@@ -1,7 +1,6 @@
 #include "detectors/common/corner_refine.h"
 
 #include <cmath>
-#include <vector>
 
 #include <Eigen/Dense>
 
@@ -11,34 +10,59 @@ std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::
                                             const SaddleFitOptions& options) {
   const int w = options.half_window;
   if (w < 1 || blurred.width < 2 * w + 3 || blurred.height < 2 * w + 3) return std::nullopt;
-  // The least-squares solution is a fixed linear map of the samples, because the sample
-  // offsets are the same at every iteration: coefficients = (A^T A)^-1 A^T * samples.
+  // Least squares on the symmetric grid of offsets -w..w decouples: d, e and b come from
+  // one moment each, and a, c, g from a 3 x 3 system of the even moments S2 = sum x^2,
+  // S4 = sum x^4, S22 = sum x^2 y^2 and N (sums over the whole window).
   const int side = 2 * w + 1;
-  const int n = side * side;
-  Eigen::MatrixXd A(n, 6);
-  for (int j = 0, k = 0; j < side; ++j) {
-    for (int i = 0; i < side; ++i, ++k) {
-      const double x = i - w;
-      const double y = j - w;
-      A.row(k) << x * x, x * y, y * y, x, y, 1.0;
-    }
+  double s2_1d = 0.0, s4_1d = 0.0;
+  for (int i = -w; i <= w; ++i) {
+    s2_1d += i * i;
+    s4_1d += static_cast<double>(i) * i * i * i;
   }
-  const Eigen::MatrixXd solver = (A.transpose() * A).ldlt().solve(A.transpose());
-  Eigen::VectorXd samples(n);
+  const double n = static_cast<double>(side) * side;
+  const double s2 = s2_1d * side;
+  const double s4 = s4_1d * side;
+  const double s22 = s2_1d * s2_1d;
+  Eigen::Matrix3d even;
+  even << s4, s22, s2, s22, s4, s2, s2, s2, n;
+  const Eigen::Matrix3d even_inverse = even.inverse();
+
   Eigen::Vector2d p = start_px;
   for (int it = 0; it < options.max_iterations; ++it) {
     // Keep the whole window on real pixels: clamped samples would break the symmetry.
-    if (p.x() < w || p.y() < w || p.x() > blurred.width - 1 - w ||
-        p.y() > blurred.height - 1 - w) {
+    if (!(p.x() >= w && p.y() >= w && p.x() <= blurred.width - 2 - w &&
+          p.y() <= blurred.height - 2 - w)) {
       return std::nullopt;
     }
-    for (int j = 0, k = 0; j < side; ++j) {
-      for (int i = 0; i < side; ++i, ++k) {
-        samples[k] = SampleBilinear(blurred, p.x() + (i - w), p.y() + (j - w));
+    // Every sample has the same fractional offset, so one set of bilinear weights serves
+    // the whole window.
+    const int x0 = static_cast<int>(std::floor(p.x()));
+    const int y0 = static_cast<int>(std::floor(p.y()));
+    const double fx = p.x() - x0;
+    const double fy = p.y() - y0;
+    const double w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy,
+                 w11 = fx * fy;
+    double m_x = 0, m_y = 0, m_xy = 0, m_xx = 0, m_yy = 0, m_1 = 0;
+    for (int j = -w; j <= w; ++j) {
+      const float* r0 = blurred.Row(y0 + j);
+      const float* r1 = blurred.Row(y0 + j + 1);
+      for (int i = -w; i <= w; ++i) {
+        const int x = x0 + i;
+        const double f = w00 * r0[x] + w10 * r0[x + 1] + w01 * r1[x] + w11 * r1[x + 1];
+        m_x += i * f;
+        m_y += j * f;
+        m_xy += i * j * f;
+        m_xx += i * i * f;
+        m_yy += j * j * f;
+        m_1 += f;
       }
     }
-    const Eigen::Matrix<double, 6, 1> c = solver * samples;
-    const double a = c[0], b = c[1], cc = c[2], d = c[3], e = c[4];
+    const double d = m_x / s2;
+    const double e = m_y / s2;
+    const double b = m_xy / s22;
+    const Eigen::Vector3d acg = even_inverse * Eigen::Vector3d(m_xx, m_yy, m_1);
+    const double a = acg[0];
+    const double cc = acg[1];
     // Hessian [2a b; b 2c]: a saddle has a negative determinant.
     const double det = 4.0 * a * cc - b * b;
     if (!(det < 0.0)) return std::nullopt;

@@ -37,14 +37,17 @@ ImageF GaussianBlur(const ImageView8& image, double sigma_px) {
   }
   const std::vector<float> taps = GaussianTaps(sigma_px);
   const int r = static_cast<int>(taps.size()) - 1;
-  // Horizontal pass into a row buffer padded by r on each side (edge replicated), then the
-  // vertical pass over a ring of 2r + 1 horizontally blurred rows.
+  // Horizontal pass into a ring of 2r + 1 rows (a row buffer padded by r on each side, edge
+  // replicated), then the vertical pass from the ring: no image-sized intermediate, whose
+  // fresh pages would cost more than the arithmetic.
+  const int ring_rows = 2 * r + 1;
   std::vector<float> padded(w + 2 * r);
-  ImageF horizontal(w, h);
-  for (int y = 0; y < h; ++y) {
+  std::vector<float> ring(static_cast<std::size_t>(ring_rows) * w);
+  auto ring_row = [&](int y) { return ring.data() + static_cast<std::size_t>(y % ring_rows) * w; };
+  auto filter_row = [&](int y) {
     const std::uint8_t* src = image.Row(y);
     for (int x = 0; x < w + 2 * r; ++x) padded[x] = src[std::clamp(x - r, 0, w - 1)];
-    float* dst = horizontal.Row(y);
+    float* __restrict dst = ring_row(y);
     const float* c = padded.data() + r;
     // Tap-outer loops: the inner loop runs over contiguous pixels and vectorises.
     for (int x = 0; x < w; ++x) dst[x] = taps[0] * c[x];
@@ -54,14 +57,16 @@ ImageF GaussianBlur(const ImageView8& image, double sigma_px) {
       const float* right = c + k;
       for (int x = 0; x < w; ++x) dst[x] += t * (left[x] + right[x]);
     }
-  }
+  };
+  int filtered = 0;  // rows [0, filtered) have been filtered
   for (int y = 0; y < h; ++y) {
-    float* dst = out.Row(y);
-    const float* centre = horizontal.Row(y);
+    while (filtered < h && filtered <= y + r) filter_row(filtered++);
+    float* __restrict dst = out.Row(y);
+    const float* centre = ring_row(y);
     for (int x = 0; x < w; ++x) dst[x] = taps[0] * centre[x];
     for (int k = 1; k <= r; ++k) {
-      const float* up = horizontal.Row(std::max(y - k, 0));
-      const float* down = horizontal.Row(std::min(y + k, h - 1));
+      const float* up = ring_row(std::max(y - k, 0));
+      const float* down = ring_row(std::min(y + k, h - 1));
       const float t = taps[k];
       for (int x = 0; x < w; ++x) dst[x] += t * (up[x] + down[x]);
     }

@@ -58,7 +58,8 @@ RingResult TestRing(const ImageF& blurred, const Eigen::Vector2d& centre,
     if ((a > mid) != (b > mid)) {
       if (count == 4) return result;
       const double t = (mid - a) / (b - a);
-      transitions[count] = (k + t) * 2.0 * std::numbers::pi / kRingSamples;
+      // Sample k sits at angle (k + 0.5) steps (see the ring below).
+      transitions[count] = (k + 0.5 + t) * 2.0 * std::numbers::pi / kRingSamples;
       dark_after[count] = b <= mid;
       ++count;
     }
@@ -116,22 +117,35 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
   const double ixy_floor =
       0.5 * options.min_contrast / (std::numbers::pi * kWorstSigmaPx * kWorstSigmaPx);
   const float floor = static_cast<float>(ixy_floor * ixy_floor);
-  ImageF response(w, h);
-  for (int y = 1; y < h - 1; ++y) {
+  // The response is computed row by row into a ring of five rows, enough for the 5 x 5
+  // non-maximum suppression below (an image-sized buffer would cost more in fresh pages
+  // than the arithmetic).
+  constexpr int kRingRows = 5;
+  std::vector<float> response_ring(static_cast<std::size_t>(kRingRows) * w, 0.0f);
+  auto response_row = [&](int y) {
+    return response_ring.data() + static_cast<std::size_t>(y % kRingRows) * w;
+  };
+  auto compute_row = [&](int y) {
+    float* __restrict out = response_row(y);
+    if (y < 1 || y > h - 2) {
+      std::fill(out, out + w, 0.0f);
+      return;
+    }
     const float* up = blurred.Row(y - 1);
     const float* row = blurred.Row(y);
     const float* down = blurred.Row(y + 1);
-    float* out = response.Row(y);
+    out[0] = 0.0f;
+    out[w - 1] = 0.0f;
     for (int x = 1; x < w - 1; ++x) {
       const float ixx = row[x - 1] - 2.0f * row[x] + row[x + 1];
       const float iyy = up[x] - 2.0f * row[x] + down[x];
       const float ixy = 0.25f * (down[x + 1] - down[x - 1] - up[x + 1] + up[x - 1]);
       out[x] = ixy * ixy - ixx * iyy;
     }
-  }
+  };
 
   // Local maxima in a 5 x 5 neighbourhood (vertices of the smallest squares are 8 px apart),
-  // far enough from the border for the ring.
+  // far enough from the border for the ring; ties go to the first in raster order.
   struct Peak {
     float r;
     int x;
@@ -139,16 +153,19 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
   };
   std::vector<Peak> peaks;
   const int margin = std::max(2, static_cast<int>(std::ceil(options.ring_radius_px)) + 1);
+  for (int y = margin - 2; y < std::min(h, margin + 2); ++y) compute_row(y);
   for (int y = margin; y < h - margin; ++y) {
-    const float* row = response.Row(y);
+    compute_row(y + 2);
+    const float* row = response_row(y);
     for (int x = margin; x < w - margin; ++x) {
       const float r = row[x];
       if (r < floor) continue;
       bool is_max = true;
       for (int dy = -2; dy <= 2 && is_max; ++dy) {
-        const float* other = response.Row(y + dy);
+        const float* other = response_row(y + dy);
         for (int dx = -2; dx <= 2; ++dx) {
-          if ((dy != 0 || dx != 0) && (other[x + dx] > r || (other[x + dx] == r && (dy < 0 || (dy == 0 && dx < 0))))) {
+          const float o = other[x + dx];
+          if ((dy != 0 || dx != 0) && (o > r || (o == r && (dy < 0 || (dy == 0 && dx < 0))))) {
             is_max = false;
             break;
           }
