@@ -16,6 +16,8 @@ namespace linecal {
 namespace {
 
 using test_scene::BoardView;
+using test_scene::CleanRender;
+using test_scene::NoisyRender;
 using test_scene::FeatureRmsPx;
 using test_scene::RenderView;
 
@@ -38,20 +40,6 @@ BoardParams Checker(int cols, int rows, double square_m) {
   return p;
 }
 
-CameraRenderOptions Clean() {
-  CameraRenderOptions o;
-  o.blur_sigma_px = 0.5;
-  o.threads = 2;
-  return o;
-}
-
-CameraRenderOptions Noisy() {
-  CameraRenderOptions o = Clean();
-  o.blur_sigma_px = 1.0;
-  o.noise_sigma = 4.0;
-  return o;
-}
-
 // Every one of the board's features found with its own id and board position.
 void ExpectComplete(const Detection& d, const Board& board) {
   ASSERT_TRUE(d.found) << DetectReasonName(d.reason);
@@ -66,7 +54,7 @@ TEST(CheckerDetectorTest, FrontalBoardHasExactIdsAndSubPixelCorners) {
   BoardView view;
   view.params = Checker(9, 6, 0.025);
   view.distance_m = 0.8;  // squares of about 31 px
-  const CameraFrame frame = RenderView(view, Clean(), 1);
+  const CameraFrame frame = RenderView(view, CleanRender(), 1);
   const Board board = *Board::Create(view.params);
   const Detection d = DetectChecker(frame.image8.view(), board);
   ExpectComplete(d, board);
@@ -101,7 +89,7 @@ TEST(CheckerDetectorTest, PoseGridWithNoiseBlurAndLighting) {
           view.roll_deg = roll;
           view.yaw_deg = yaw;
           view.pitch_deg = pitch;
-          CameraRenderOptions options = noisy ? Noisy() : Clean();
+          CameraRenderOptions options = noisy ? NoisyRender() : CleanRender();
           if (noisy) {
             options.illumination_gradient_ratio = 3.0;
             options.illumination_gradient_direction_deg = roll * 3.0;
@@ -141,7 +129,7 @@ TEST(CheckerDetectorTest, SmallestSquaresOfTwelvePixels) {
   view.params = Checker(9, 6, 0.025);
   view.distance_m = 1000.0 * 0.025 / 12.0;  // f = 1000 px: 12 px squares
   view.yaw_deg = 20.0;
-  const CameraFrame frame = RenderView(view, Noisy(), 3);
+  const CameraFrame frame = RenderView(view, NoisyRender(), 3);
   const Board board = *Board::Create(view.params);
   const Detection d = DetectChecker(frame.image8.view(), board);
   ExpectComplete(d, board);
@@ -157,7 +145,7 @@ TEST(CheckerDetectorTest, SymmetricBoardIsReportedUpright) {
   view.params = Checker(8, 6, 0.025);
   view.distance_m = 0.8;
   view.roll_deg = 170.0;
-  const CameraFrame frame = RenderView(view, Clean(), 4);
+  const CameraFrame frame = RenderView(view, CleanRender(), 4);
   const Board board = *Board::Create(view.params);
   const Detection d = DetectChecker(frame.image8.view(), board);
   ExpectComplete(d, board);
@@ -194,7 +182,7 @@ TEST(CheckerDetectorTest, NothingOnOtherBoardsOrEmptyScenes) {
   views.push_back(v);
   std::uint64_t seed = 100;
   for (const BoardView& view : views) {
-    CameraRenderOptions options = Noisy();
+    CameraRenderOptions options = NoisyRender();
     options.clutter = true;
     const CameraFrame frame = RenderView(view, options, ++seed);
     const Detection d = DetectChecker(frame.image8.view(), board);
@@ -242,7 +230,7 @@ TEST(CheckerDetectorTest, SpeedAt1280x720) {
   view.params = Checker(9, 6, 0.025);
   view.distance_m = 1.0;
   view.yaw_deg = 30.0;
-  CameraRenderOptions options = Noisy();
+  CameraRenderOptions options = NoisyRender();
   options.clutter = true;
   const CameraFrame frame = RenderView(view, options, 5);
   const Board board = *Board::Create(view.params);
