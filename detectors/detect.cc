@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstdint>
 
+#include "detectors/apriltag/apriltag_detector.h"
+#include "detectors/aruco/aruco_detector.h"
 #include "detectors/checker/checker_detector.h"
 #include "detectors/circle/circle_detector.h"
 
@@ -13,10 +15,10 @@ std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board
     case BoardType::kChecker: return DetectChecker(image, board);
     case BoardType::kCircle: return DetectCircleBoard(image, board);
     case BoardType::kChessboard:
-    case BoardType::kVertical:
+    case BoardType::kVertical: return std::nullopt;
     case BoardType::kAruco:
-    case BoardType::kApriltag:
-    case BoardType::kRoundHole: return std::nullopt;
+    case BoardType::kRoundHole: return DetectAruco(image, board);
+    case BoardType::kApriltag: return DetectApriltag(image, board);
   }
   return std::nullopt;
 }

@@ -1,0 +1,286 @@
+#include "detectors/common/contours.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace linecal {
+namespace {
+
+struct Run {
+  int x0 = 0;  // inclusive
+  int x1 = 0;  // exclusive
+  int y = 0;
+  int parent = 0;  // union-find over runs
+};
+
+int FindRoot(std::vector<Run>& runs, int i) {
+  while (runs[i].parent != i) {
+    runs[i].parent = runs[runs[i].parent].parent;  // path halving
+    i = runs[i].parent;
+  }
+  return i;
+}
+
+void Unite(std::vector<Run>& runs, int a, int b) {
+  a = FindRoot(runs, a);
+  b = FindRoot(runs, b);
+  if (a == b) return;
+  // The smaller index stays the root, so a component's root is its first run in raster
+  // order.
+  if (a < b) {
+    runs[b].parent = a;
+  } else {
+    runs[a].parent = b;
+  }
+}
+
+// Moore neighbourhood, clockwise in the image (y down), starting east.
+constexpr std::array<int, 8> kDx = {1, 1, 0, -1, -1, -1, 0, 1};
+constexpr std::array<int, 8> kDy = {0, 1, 1, 1, 0, -1, -1, -1};
+
+double PointLineDistance(const Eigen::Vector2d& p, const Eigen::Vector2d& a,
+                         const Eigen::Vector2d& b) {
+  const Eigen::Vector2d d = b - a;
+  const double len = d.norm();
+  if (len == 0.0) return (p - a).norm();
+  return std::abs(d.x() * (p.y() - a.y()) - d.y() * (p.x() - a.x())) / len;
+}
+
+// Douglas-Peucker on contour[first..last] (indices modulo n), appending kept interior
+// indices (not first or last) in order.
+void Simplify(const std::vector<Eigen::Vector2i>& contour, int first, int last, double epsilon,
+              std::vector<int>* kept) {
+  const int n = static_cast<int>(contour.size());
+  // An explicit stack keeps deep recursion on long contours off the call stack.
+  std::vector<std::pair<int, int>> stack = {{first, last}};
+  std::vector<int> found;
+  while (!stack.empty()) {
+    const auto [a, b] = stack.back();
+    stack.pop_back();
+    const int span = (b - a + n) % n;
+    if (span < 2) continue;
+    const Eigen::Vector2d pa = contour[a].cast<double>();
+    const Eigen::Vector2d pb = contour[b].cast<double>();
+    double best = -1.0;
+    int best_k = -1;
+    for (int s = 1; s < span; ++s) {
+      const int k = (a + s) % n;
+      const double d = PointLineDistance(contour[k].cast<double>(), pa, pb);
+      if (d > best) {
+        best = d;
+        best_k = k;
+      }
+    }
+    if (best > epsilon) {
+      found.push_back(best_k);
+      stack.push_back({a, best_k});
+      stack.push_back({best_k, b});
+    }
+  }
+  // Order by position along the path from `first`.
+  std::sort(found.begin(), found.end(),
+            [&](int i, int j) { return (i - first + n) % n < (j - first + n) % n; });
+  kept->insert(kept->end(), found.begin(), found.end());
+}
+
+double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return a.x() * b.y() - a.y() * b.x();
+}
+
+}  // namespace
+
+ComponentLabels LabelComponents(const ImageView8& binary) {
+  ComponentLabels out;
+  out.width = binary.width;
+  out.height = binary.height;
+  std::vector<Run> runs;
+  std::vector<int> row_start(static_cast<std::size_t>(binary.height) + 1, 0);
+  int prev_begin = 0;
+  int prev_end = 0;
+  for (int y = 0; y < binary.height; ++y) {
+    const std::uint8_t* row = binary.Row(y);
+    const int begin = static_cast<int>(runs.size());
+    int x = 0;
+    while (x < binary.width) {
+      if (row[x] == 0) {
+        ++x;
+        continue;
+      }
+      const int x0 = x;
+      while (x < binary.width && row[x] != 0) ++x;
+      const int index = static_cast<int>(runs.size());
+      runs.push_back(Run{x0, x, y, index});
+    }
+    const int end = static_cast<int>(runs.size());
+    // Runs of consecutive rows touch (4-connectivity) when their x ranges overlap; both
+    // lists are sorted by x, so one merge-like sweep finds every overlap.
+    int p = prev_begin;
+    for (int r = begin; r < end; ++r) {
+      while (p < prev_end && runs[p].x1 <= runs[r].x0) ++p;
+      for (int q = p; q < prev_end && runs[q].x0 < runs[r].x1; ++q) Unite(runs, q, r);
+    }
+    row_start[y] = begin;
+    prev_begin = begin;
+    prev_end = end;
+  }
+  row_start[binary.height] = static_cast<int>(runs.size());
+
+  out.labels.assign(static_cast<std::size_t>(binary.width) * binary.height, 0);
+  std::vector<int> component_of_root(runs.size(), -1);
+  for (int i = 0; i < static_cast<int>(runs.size()); ++i) {
+    const int root = FindRoot(runs, i);
+    int c = component_of_root[root];
+    const Run& run = runs[i];
+    if (c < 0) {
+      c = static_cast<int>(out.components.size());
+      component_of_root[root] = c;
+      Component comp;
+      comp.min_x = run.x0;
+      comp.max_x = run.x1 - 1;
+      comp.min_y = comp.max_y = run.y;
+      comp.first_x = run.x0;
+      comp.first_y = run.y;
+      out.components.push_back(comp);
+    }
+    Component& comp = out.components[c];
+    comp.area_px += run.x1 - run.x0;
+    comp.min_x = std::min(comp.min_x, run.x0);
+    comp.max_x = std::max(comp.max_x, run.x1 - 1);
+    comp.max_y = std::max(comp.max_y, run.y);
+    std::int32_t* label = &out.labels[static_cast<std::size_t>(run.y) * binary.width];
+    std::fill(label + run.x0, label + run.x1, c + 1);
+  }
+  return out;
+}
+
+std::vector<Eigen::Vector2i> TraceOuterContour(const ComponentLabels& labels, int index) {
+  const Component& comp = labels.components[index];
+  const std::int32_t label = index + 1;
+  auto inside = [&](int x, int y) {
+    return x >= 0 && y >= 0 && x < labels.width && y < labels.height &&
+           labels.LabelAt(x, y) == label;
+  };
+  std::vector<Eigen::Vector2i> contour;
+  const Eigen::Vector2i start(comp.first_x, comp.first_y);
+  contour.push_back(start);
+  // The first pixel in raster order has no component pixel to its west or in the row above:
+  // start as if we had arrived with the west neighbour as the last background pixel seen.
+  int backtrack = 4;
+  Eigen::Vector2i p = start;
+  int first_move = -1;
+  // A boundary pixel is visited at most 4 times (once per side it exposes), so this bounds
+  // the walk even for an inconsistent labelling.
+  const long max_steps = 4L * comp.area_px + 8;
+  for (long step = 0; step < max_steps; ++step) {
+    int move = -1;
+    for (int k = 1; k <= 8; ++k) {
+      const int d = (backtrack + k) % 8;
+      if (inside(p.x() + kDx[d], p.y() + kDy[d])) {
+        move = d;
+        break;
+      }
+    }
+    if (move < 0) break;  // an isolated pixel
+    // Jacob's stopping criterion: back at the start, leaving it the way we first did.
+    if (p == start) {
+      if (first_move < 0) {
+        first_move = move;
+      } else if (move == first_move) {
+        contour.pop_back();  // the start was appended again on arrival
+        break;
+      }
+    }
+    p += Eigen::Vector2i(kDx[move], kDy[move]);
+    contour.push_back(p);
+    // The last background pixel examined, seen from the new pixel: north of it for an axis
+    // move east, and so on; the table below is that rule for every direction.
+    backtrack = (move + 6 - (move & 1)) % 8;
+  }
+  return contour;
+}
+
+std::vector<int> ApproximateClosedPolygon(const std::vector<Eigen::Vector2i>& contour,
+                                          double epsilon_px) {
+  const int n = static_cast<int>(contour.size());
+  std::vector<int> out;
+  if (n < 3) {
+    out.resize(n);
+    std::iota(out.begin(), out.end(), 0);
+    return out;
+  }
+  // Anchors: the point farthest from the first, and the point farthest from that one: two
+  // points that are vertices of any good approximation.
+  auto farthest_from = [&](int i) {
+    int best = i;
+    long best_d2 = -1;
+    for (int k = 0; k < n; ++k) {
+      const long d2 = (contour[k] - contour[i]).cast<long>().squaredNorm();
+      if (d2 > best_d2) {
+        best_d2 = d2;
+        best = k;
+      }
+    }
+    return best;
+  };
+  const int a = farthest_from(0);
+  const int b = farthest_from(a);
+  if (a == b) return {a};
+  std::vector<int> kept = {a};
+  Simplify(contour, a, b, epsilon_px, &kept);
+  kept.push_back(b);
+  Simplify(contour, b, a, epsilon_px, &kept);
+  std::sort(kept.begin(), kept.end());
+  return kept;
+}
+
+std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& options) {
+  std::vector<Quad> quads;
+  const int max_side = static_cast<int>(options.max_side_fraction *
+                                        std::max(labels.width, labels.height));
+  for (int i = 0; i < static_cast<int>(labels.components.size()); ++i) {
+    const Component& c = labels.components[i];
+    const int w = c.max_x - c.min_x + 1;
+    const int h = c.max_y - c.min_y + 1;
+    if (std::max(w, h) < options.min_side_px || std::max(w, h) > max_side) continue;
+    // A square rotated 45 degrees fills half its bounding box, and a marker's dark border
+    // ring alone is over a third of its area: less than a tenth of the box inked is a thin
+    // line drawing or clutter, not a marker.
+    if (c.area_px < 0.1 * w * h) continue;
+    const std::vector<Eigen::Vector2i> contour = TraceOuterContour(labels, i);
+    if (contour.size() < 8) continue;
+    double length = 0.0;
+    for (std::size_t k = 0; k < contour.size(); ++k) {
+      length += (contour[(k + 1) % contour.size()] - contour[k]).cast<double>().norm();
+    }
+    const std::vector<int> vertices =
+        ApproximateClosedPolygon(contour, options.polygon_epsilon_fraction * length);
+    if (vertices.size() != 4) continue;
+    Quad quad;
+    quad.component = i;
+    for (int k = 0; k < 4; ++k) quad.corners_px[k] = contour[vertices[k]].cast<double>();
+    // Convex, and clockwise in the image (the trace direction): every turn has a positive
+    // cross product in y-down coordinates.
+    bool ok = true;
+    double min_len = 1e300;
+    double max_len = 0.0;
+    for (int k = 0; k < 4 && ok; ++k) {
+      const Eigen::Vector2d e0 = quad.corners_px[(k + 1) % 4] - quad.corners_px[k];
+      const Eigen::Vector2d e1 = quad.corners_px[(k + 2) % 4] - quad.corners_px[(k + 1) % 4];
+      if (Cross(e0, e1) <= 0.0) ok = false;
+      min_len = std::min(min_len, e0.norm());
+      max_len = std::max(max_len, e0.norm());
+      const Eigen::Vector2d& p = quad.corners_px[k];
+      if (p.x() < options.min_border_distance_px || p.y() < options.min_border_distance_px ||
+          p.x() > labels.width - 1 - options.min_border_distance_px ||
+          p.y() > labels.height - 1 - options.min_border_distance_px) {
+        ok = false;
+      }
+    }
+    if (!ok || min_len < options.min_side_ratio * max_len) continue;
+    quads.push_back(quad);
+  }
+  return quads;
+}
+
+}  // namespace linecal

@@ -1,0 +1,89 @@
+#pragma once
+// Connected components of a binary image, the outer contours of components, and quads
+// (convex four-sided polygons) approximated from those contours: the candidate stage of the
+// square-marker detectors (ArUco, AprilTag).
+//
+// A binary image here is an ImageView8 whose non-zero pixels are "set" (foreground, e.g. the
+// dark pixels of a thresholded image). Coordinates are pixel indices (x right, y down); a
+// contour point is the centre of a boundary pixel (conventions.md: pixel centres are
+// integers).
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "detectors/core/image_view.h"
+
+namespace linecal {
+
+// One connected component of set pixels.
+struct Component {
+  int area_px = 0;                    // number of pixels
+  int min_x = 0, min_y = 0;           // bounding box, inclusive
+  int max_x = 0, max_y = 0;
+  int first_x = 0, first_y = 0;       // its first pixel in raster order (topmost, then leftmost)
+};
+
+struct ComponentLabels {
+  int width = 0;
+  int height = 0;
+  // Per pixel, row-major: 0 for unset pixels, else 1 + the index of its component.
+  std::vector<std::int32_t> labels;
+  std::vector<Component> components;
+
+  std::int32_t LabelAt(int x, int y) const {
+    return labels[static_cast<std::size_t>(y) * width + x];
+  }
+};
+
+// Labels the 4-connected components of the set pixels of `binary` (valid view, checked by
+// the caller). 4-connectivity keeps two dark squares that touch only at a corner apart.
+// Cost: one pass over the pixels with union-find over runs, O(W * H); memory 4 bytes per
+// pixel for the labels.
+ComponentLabels LabelComponents(const ImageView8& binary);
+
+// The outer boundary of component `index` of `labels`, traced clockwise (as seen in the
+// image, y down) by Moore-neighbour tracing from the component's first pixel: each boundary
+// pixel's centre, in order, without repeating the start. A one-pixel component gives one
+// point. Cost: O(perimeter).
+std::vector<Eigen::Vector2i> TraceOuterContour(const ComponentLabels& labels, int index);
+
+// Douglas-Peucker approximation of a closed contour: the indices (increasing) of the
+// contour points kept as polygon vertices, so that every contour point lies within
+// epsilon_px of the polygon. Contours of fewer than 3 points give all their indices.
+// Cost: O(n log n) typical, O(n^2) worst case.
+std::vector<int> ApproximateClosedPolygon(const std::vector<Eigen::Vector2i>& contour,
+                                          double epsilon_px);
+
+struct QuadOptions {
+  // Components with a bounding box side below this many pixels are skipped (the smallest
+  // marker of acceptance.md is 6 cells of 4 px, 24 px; perspective shortens it).
+  int min_side_px = 10;
+  // Skipped above this fraction of the image's larger side (a marker never fills the
+  // image).
+  double max_side_fraction = 0.95;
+  // Douglas-Peucker tolerance relative to the contour's length (OpenCV's ArUco uses the same
+  // 3%: large enough to absorb pixel steps and blur, small enough to keep a corner).
+  double polygon_epsilon_fraction = 0.03;
+  // Smallest quad side relative to its longest: rejects slivers (a square seen 80 degrees
+  // off-axis is not readable anyway).
+  double min_side_ratio = 0.15;
+  // Quads with a corner closer than this to the image border are dropped: their outline may
+  // be cut by the border.
+  int min_border_distance_px = 2;
+};
+
+// A quad: corners as contour pixel centres, clockwise in the image (y down).
+struct Quad {
+  std::array<Eigen::Vector2d, 4> corners_px;
+  int component = 0;  // index into ComponentLabels::components
+};
+
+// The quads of the components of `labels`: components of a plausible size whose outer
+// contour approximates to a convex quadrilateral. Cost: O(total perimeter of the components
+// of plausible size) after labelling.
+std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& options = {});
+
+}  // namespace linecal

@@ -1,0 +1,121 @@
+#pragma once
+// Square fiducial markers (ArUco, AprilTag): finding and decoding them in an image, and
+// verifying a board of them. One implementation for every marker board of boards.md; the
+// families differ only through MarkerFamily and the board through Board::features().
+//
+// Pipeline: local-contrast binarisation (a threshold halfway between the local minimum and
+// maximum over tiles, as AprilTag 3 does; low-contrast areas inherit the threshold of their
+// neighbours), 4-connected dark components, outer contours approximated by quads
+// (detectors/common/contours.h), edge-line refinement of the quad corners, perspective-correct
+// sampling of the cell grid through the quad's homography, and decoding against the whole
+// family in all four rotations within a Hamming distance.
+//
+// Image coordinates: pixel-centre convention (conventions.md). Pure functions, no state.
+
+#include <array>
+#include <cstdint>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "detectors/boards/board.h"
+#include "detectors/core/image_view.h"
+#include "detectors/detection.h"
+
+namespace linecal {
+
+// A family of square markers: the cell grid, where each code bit is printed, and the codes.
+struct MarkerFamily {
+  int cells = 6;         // cells per side, black border included
+  int border_cells = 1;  // width of the black border in cells
+  // bit_cells[i] = {row, col} (0-based from the marker's top-left in its canonical
+  // orientation) of code bit (bits - 1 - i); 1 = white.
+  std::vector<std::array<int, 2>> bit_cells;
+  std::vector<std::uint64_t> codes;  // codes[id]
+  // A code read within this Hamming distance of exactly one (code, rotation) is accepted.
+  int max_correction_bits = 1;
+};
+
+// OpenCV's DICT_4X4_50 (detectors/boards/aruco_dict_4x4_50.h): 6 x 6 cells, 1-cell border,
+// at most 1 corrected bit (OpenCV's maxCorrectionBits). O(1).
+MarkerFamily Aruco4x4_50Family();
+// tag36h11 (libapriltag's codes) with a black border of border_bits (1 or 2) cells:
+// 8 x 8 or 10 x 10 cells. At most 2 corrected bits: tag36h11's minimum distance is 11,
+// so 2 leaves a margin of 7 bits against decoding a random pattern (AprilTag 3's default
+// for this family). Cost: copies 587 codes.
+MarkerFamily Tag36h11Family(int border_bits);
+
+struct MarkerDetectOptions {
+  // Smallest difference between the local dark and light levels (grey levels) for an area
+  // to count as printed contrast; the effective value also grows with the image's noise
+  // (noise_contrast_factor x the estimated noise sigma).
+  int min_contrast = 12;
+  // A noise sigma estimated from the image is multiplied by this. The local extremes are
+  // taken over 144 means of 2 x 2 pixels (noise sigma / 2), whose range exceeds 4 sigma with
+  // a probability of about 1e-4 (the range of 144 normal samples averages 5.4 of their
+  // sigma, with a spread of 0.6).
+  double noise_contrast_factor = 4.0;
+  // Smallest marker side in pixels (acceptance.md: data cells of 4 px, so an ArUco marker
+  // is 24 px; a 50-degree view shortens a side to about 15 px).
+  int min_marker_side_px = 12;
+  // Largest number of candidate quads decoded: bounds the cost of a pathological image
+  // (dense texture); a real scene has tens.
+  int max_candidates = 4096;
+  // Candidate quads are looked for in the dark pixels, then again after eroding them by
+  // 1 .. max_erosion_px pixels: erosion separates markers that touch other dark shapes at a
+  // corner (the AprilGrid's corner squares), where blur and gamma leave a bridge of a pixel
+  // or two. Each erosion costs about a third of the scan. [0, 4].
+  int max_erosion_px = 0;
+  // Whole-board check: largest homography residual relative to the mean marker side (a
+  // swapped or misread marker moves corners by whole marker pitches; lens distortion over a
+  // large board moves them by a few percent of a marker side at most).
+  double max_residual_fraction = 0.06;
+  // Whole-board check: at least this fraction of the board's sampled printed points
+  // (black and white separately) must show that paint.
+  double min_paint_agreement = 0.85;
+
+  // Empty when every field is usable, else the name of the first bad one. O(1).
+  std::string_view Validate() const;
+};
+
+// One decoded marker.
+struct DecodedMarker {
+  int id = 0;
+  // Corners 0 top-left, 1 top-right, 2 bottom-right, 3 bottom-left of the marker in its
+  // canonical orientation, sub-pixel (edge-line intersections), pixels.
+  std::array<Eigen::Vector2d, 4> corners_px;
+  int hamming = 0;           // corrected bits
+  double dark_level = 0.0;   // mean grey of its dark cells
+  double light_level = 0.0;  // mean grey of its light cells
+};
+
+// Everything found in one image: decoded markers and the binary image (1 = dark) they
+// were found in, for the whole-board paint check.
+struct MarkerScan {
+  DetectReason reason = DetectReason::kNone;  // kBadImage, kLowContrast, kNoCandidates, kNone
+  int quads = 0;                              // candidate quads examined
+  std::vector<DecodedMarker> markers;
+  Image8 dark;  // 1 where the pixel is darker than its local threshold
+};
+
+// Finds and decodes the markers of `family` in `image`. The view must be valid (the caller
+// checks ImageView::Validate). Cost: O(W * H) for binarisation and labelling (about 2 ms at
+// 1280 x 720) plus O(perimeter) per component and O(cells^2 + codes) per quad.
+MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
+                       const MarkerDetectOptions& options);
+
+// Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features) from the
+// markers of `scan`, and checks the whole board: every marker id at most once, one board
+// homography through all their corners within the residual bound, no marker of another id on
+// the board's page, and the board's printed paint where it is projected.
+// found = true when all of the board's markers pass; with 2 or more markers but not all:
+// found = false, kPartial, their corners. Otherwise no features and the reason: kWrongBoard
+// (markers of other ids only, another id on the page, or the paint disagrees),
+// kAmbiguous (an id seen twice), kVerificationFailed (residual), kTooFewFeatures (one
+// marker), scan.reason / kNoCandidates (no markers). Cost: O(markers) plus a fixed grid of
+// paint probes (about 0.2 ms).
+Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board,
+                            const MarkerDetectOptions& options);
+
+}  // namespace linecal

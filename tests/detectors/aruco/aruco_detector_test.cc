@@ -1,0 +1,302 @@
+// The ArUco board detector (and the camera side of the round-hole board) on golden renders
+// (station/sim/camera_render.h, exact ground truth): ids and sub-pixel errors over a grid of
+// poses with noise, blur and lighting, partial views, nothing on other boards, board-free
+// images or markers of other ids, and the bad-input reasons.
+#include "detectors/aruco/aruco_detector.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <random>
+#include <vector>
+
+#include "detectors/boards/aruco_dict_4x4_50.h"
+#include "tests/detectors/board_scene.h"
+
+namespace linecal {
+namespace {
+
+using test_scene::BoardView;
+using test_scene::CleanRender;
+using test_scene::NoisyRender;
+using test_scene::FeatureRmsPx;
+using test_scene::RenderView;
+
+// acceptance.md's sub-pixel bars.
+constexpr double kCleanRmsBarPx = 0.05;  // noise 0, blur 0.5
+constexpr double kNoisyRmsBarPx = 0.12;  // noise sigma 4, blur 1.0
+
+BoardParams Params(BoardType type) {
+  BoardParams p;
+  p.type = type;
+  return p;
+}
+
+Board MakeBoard(BoardType type) { return *Board::Create(Params(type)); }
+
+// All 16 marker corners with their own ids, board positions and marker ids.
+void ExpectAllMarkerCorners(const Detection& d, const Board& board) {
+  ASSERT_TRUE(d.found) << DetectReasonName(d.reason);
+  EXPECT_EQ(d.reason, DetectReason::kNone);
+  ASSERT_EQ(d.features.size(), 16u);
+  for (std::size_t i = 0; i < d.features.size(); ++i) {
+    EXPECT_EQ(d.features[i].id, static_cast<int>(i));
+    EXPECT_EQ(d.features[i].p_board, board.features()[i].p_board);
+    EXPECT_EQ(d.features[i].marker, board.features()[i].marker);
+  }
+}
+
+TEST(ArucoDetectorTest, FrontalCleanBoardHasExactIdsAndSubPixelCorners) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  BoardView view;
+  view.params = board.params();
+  view.distance_m = 1.8;
+  view.roll_deg = 7.0;  // off the pixel grid, so corners are not at pixel centres
+  const CameraFrame frame = RenderView(view, CleanRender(), 1);
+  const Detection d = DetectAruco(frame.image8.view(), board);
+  ExpectAllMarkerCorners(d, board);
+  int matched = 0;
+  int unknown = 0;
+  const double rms = FeatureRmsPx(d, frame, &matched, &unknown);
+  EXPECT_EQ(matched, 16);
+  EXPECT_EQ(unknown, 0);
+  EXPECT_LE(rms, kCleanRmsBarPx);
+  std::printf("clean RMS %.4f px\n", rms);
+}
+
+TEST(ArucoDetectorTest, NoisyBlurredBoardMeetsTheNoisyBar) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  BoardView view;
+  view.params = board.params();
+  view.distance_m = 2.5;
+  view.yaw_deg = 20.0;
+  view.roll_deg = -12.0;
+  const CameraFrame frame = RenderView(view, NoisyRender(), 2);
+  const Detection d = DetectAruco(frame.image8.view(), board);
+  ExpectAllMarkerCorners(d, board);
+  int matched = 0;
+  int unknown = 0;
+  const double rms = FeatureRmsPx(d, frame, &matched, &unknown);
+  EXPECT_EQ(unknown, 0);
+  EXPECT_LE(rms, kNoisyRmsBarPx);
+  std::printf("noisy RMS %.4f px\n", rms);
+}
+
+// Corners of markers seen at the extremes of the pose range, small and large, under noise,
+// blur, an illumination gradient and gamma: every board found, every id right. The error
+// bound is looser than the bar: at 50 degrees a 4 m view has data cells of about 4 px,
+// where a blurred cell's neighbours bias the edge fit.
+constexpr double kGridRmsBoundPx = 0.25;
+
+TEST(ArucoDetectorTest, FindsTheBoardOverAPoseGrid) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  struct Pose {
+    double distance_m, roll_deg, yaw_deg, pitch_deg;
+  };
+  const std::vector<Pose> poses = {
+      {1.5, 30, 50, 0},  {1.5, -30, 0, -50}, {2.5, 0, -50, 50}, {2.5, 30, 50, 50},
+      {4.0, -30, -50, 0}, {4.0, 0, 0, 50},   {4.0, 30, 50, -50}, {6.0, 15, 30, 30},
+  };
+  std::uint64_t seed = 10;
+  for (const Pose& pose : poses) {
+    BoardView view;
+    view.params = board.params();
+    view.distance_m = pose.distance_m;
+    view.roll_deg = pose.roll_deg;
+    view.yaw_deg = pose.yaw_deg;
+    view.pitch_deg = pose.pitch_deg;
+    CameraRenderOptions o = NoisyRender();
+    o.illumination_gradient_ratio = 4.0;
+    o.illumination_gradient_direction_deg = 30.0 * seed;
+    // Every other view under a strong gamma, which moves a blurred edge's apparent position
+    // (acceptance.md's error bars are for the linear response): detection and ids only.
+    const bool linear = seed % 2 == 0;
+    if (!linear) o.gamma = (seed % 4 == 1) ? 0.6 : 1.6;
+    const CameraFrame frame = RenderView(view, o, seed++);
+    ASSERT_EQ(frame.features.size(), 16u) << "the whole board must be in view";
+    const Detection d = DetectAruco(frame.image8.view(), board);
+    SCOPED_TRACE(::testing::Message() << "distance " << pose.distance_m << " roll "
+                                      << pose.roll_deg << " yaw " << pose.yaw_deg << " pitch "
+                                      << pose.pitch_deg << " gamma " << o.gamma << ": "
+                                      << DetectReasonName(d.reason));
+    ExpectAllMarkerCorners(d, board);
+    int matched = 0;
+    int unknown = 0;
+    const double rms = FeatureRmsPx(d, frame, &matched, &unknown);
+    if (linear) {
+      EXPECT_LE(rms, kGridRmsBoundPx);
+    }
+    EXPECT_EQ(unknown, 0);
+  }
+}
+
+TEST(ArucoDetectorTest, RoundHoleBoardIsFoundThroughItsMarkersAndTellsTheBoardsApart) {
+  const Board round_hole = MakeBoard(BoardType::kRoundHole);
+  const Board aruco = MakeBoard(BoardType::kAruco);
+  BoardView view;
+  view.params = round_hole.params();
+  view.distance_m = 2.2;
+  view.yaw_deg = -25.0;
+  const CameraFrame frame = RenderView(view, NoisyRender(), 3);
+  const Detection d = DetectAruco(frame.image8.view(), round_hole);
+  ASSERT_TRUE(d.found) << DetectReasonName(d.reason);
+  ASSERT_EQ(d.features.size(), 16u);  // the hole centres 16..20 are the LiDAR's
+  for (int i = 0; i < 16; ++i) EXPECT_EQ(d.features[i].id, i);
+  int matched = 0;
+  int unknown = 0;
+  EXPECT_LE(FeatureRmsPx(d, frame, &matched, &unknown), kNoisyRmsBarPx);
+  EXPECT_EQ(unknown, 0);
+
+  // The same markers on the other board's print: the paint check refuses both ways.
+  const Detection as_aruco = DetectAruco(frame.image8.view(), aruco);
+  EXPECT_FALSE(as_aruco.found);
+  EXPECT_EQ(as_aruco.reason, DetectReason::kWrongBoard);
+  EXPECT_TRUE(as_aruco.features.empty());
+  view.params = aruco.params();
+  const CameraFrame aruco_frame = RenderView(view, NoisyRender(), 4);
+  const Detection as_round_hole = DetectAruco(aruco_frame.image8.view(), round_hole);
+  EXPECT_FALSE(as_round_hole.found);
+  EXPECT_EQ(as_round_hole.reason, DetectReason::kWrongBoard);
+  EXPECT_TRUE(as_round_hole.features.empty());
+}
+
+TEST(ArucoDetectorTest, PartialViewReportsOnlyTheVisibleMarkers) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  BoardView view;
+  view.params = board.params();
+  view.distance_m = 1.6;
+  view.offset_m = Eigen::Vector2d(0.0, 0.3);  // the top marker (id 4) is cut by the border
+  const CameraFrame frame = RenderView(view, NoisyRender(), 5);
+  const Detection d = DetectAruco(frame.image8.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kPartial);
+  ASSERT_EQ(d.features.size(), 12u);
+  for (int i = 0; i < 12; ++i) EXPECT_EQ(d.features[i].id, 4 + i);  // markers 11, 12, 19
+  int matched = 0;
+  int unknown = 0;
+  EXPECT_LE(FeatureRmsPx(d, frame, &matched, &unknown), kNoisyRmsBarPx);
+  EXPECT_EQ(matched, 12);
+  EXPECT_EQ(unknown, 0);
+}
+
+TEST(ArucoDetectorTest, FindsNothingOnOtherBoards) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  for (BoardType other : {BoardType::kChessboard, BoardType::kCircle, BoardType::kVertical,
+                          BoardType::kApriltag, BoardType::kChecker}) {
+    BoardView view;
+    view.params = Params(other);
+    view.distance_m = other == BoardType::kChecker ? 0.5 : 2.5;
+    const CameraFrame frame = RenderView(view, NoisyRender(), 6);
+    const Detection d = DetectAruco(frame.image8.view(), board);
+    EXPECT_FALSE(d.found) << BoardTypeName(other);
+    EXPECT_TRUE(d.features.empty()) << BoardTypeName(other);
+  }
+}
+
+TEST(ArucoDetectorTest, FindsNothingOnABoardFreeClutteredScene) {
+  StationLayout layout;
+  layout.name = "walls";
+  StationSurface wall;
+  wall.id = "wall";
+  // A wall 6 m ahead, facing the camera (its z axis towards -x), 8 x 4 m.
+  Eigen::Matrix3d r;
+  r.col(0) = -Eigen::Vector3d::UnitY();
+  r.col(1) = Eigen::Vector3d::UnitZ();
+  r.col(2) = -Eigen::Vector3d::UnitX();
+  wall.T_station_surface = Rigid3d(Eigen::Quaterniond(r), Eigen::Vector3d(6.0, 0.0, 1.5));
+  wall.size_m = Eigen::Vector2d(8.0, 4.0);
+  wall.reflectivity = 0.6;
+  layout.surfaces.push_back(wall);
+  CameraRenderOptions o = NoisyRender();
+  o.clutter = true;
+  o.clutter_density = 1.0;
+  const absl::StatusOr<CameraFrame> frame = RenderCameraFrame(
+      test_scene::TestCamera(), test_scene::TestCameraPose(), layout, o, 7);
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  for (BoardType type : {BoardType::kAruco, BoardType::kRoundHole}) {
+    const Detection d = DetectAruco(frame->image8.view(), MakeBoard(type));
+    EXPECT_FALSE(d.found);
+    EXPECT_TRUE(d.features.empty());
+  }
+}
+
+// Draws DICT_4X4_50 marker `id` upright with its top-left at (x0, y0), cells of `cell` px.
+void DrawMarker(Image8* img, int id, int x0, int y0, int cell) {
+  for (int r = 0; r < kAruco4x4MarkerCells; ++r) {
+    for (int c = 0; c < kAruco4x4MarkerCells; ++c) {
+      const bool border = r == 0 || c == 0 || r == kAruco4x4MarkerCells - 1 ||
+                          c == kAruco4x4MarkerCells - 1;
+      const bool white = !border && Aruco4x4CellIsWhite(kAruco4x4_50Codes[id], r - 1, c - 1);
+      for (int y = 0; y < cell; ++y) {
+        for (int x = 0; x < cell; ++x) {
+          img->at(x0 + c * cell + x, y0 + r * cell + y) = white ? 220 : 20;
+        }
+      }
+    }
+  }
+}
+
+TEST(ArucoDetectorTest, MarkersOfOtherIdsAreTheWrongBoard) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  Image8 img(640, 480, 220);
+  DrawMarker(&img, 0, 60, 60, 12);
+  DrawMarker(&img, 1, 300, 60, 12);
+  DrawMarker(&img, 2, 60, 300, 12);
+  DrawMarker(&img, 3, 300, 300, 12);
+  Detection d = DetectAruco(img.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kWrongBoard);
+  EXPECT_TRUE(d.features.empty());
+
+  // One marker of the board among others: too few to identify, and still not this board.
+  DrawMarker(&img, 4, 60, 60, 12);
+  d = DetectAruco(img.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kWrongBoard);
+  EXPECT_TRUE(d.features.empty());
+
+  // A lone marker of the board: too few features, none reported.
+  Image8 lone(320, 240, 220);
+  DrawMarker(&lone, 11, 100, 60, 12);
+  d = DetectAruco(lone.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kTooFewFeatures);
+  EXPECT_TRUE(d.features.empty());
+}
+
+TEST(ArucoDetectorTest, BadInputGivesAReasonAndNoFeatures) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  const std::vector<std::uint8_t> pixels(64 * 64, 128);
+  auto expect_reason = [&](const ImageView8& view, DetectReason reason, const char* what) {
+    const Detection d = DetectAruco(view, board);
+    EXPECT_FALSE(d.found) << what;
+    EXPECT_EQ(d.reason, reason) << what << ": " << DetectReasonName(d.reason);
+    EXPECT_TRUE(d.features.empty()) << what;
+  };
+  expect_reason(ImageView8{}, DetectReason::kBadImage, "empty");
+  expect_reason(ImageView8{nullptr, 64, 64, 64}, DetectReason::kBadImage, "null data");
+  expect_reason(ImageView8{pixels.data(), 1, 1, 1}, DetectReason::kBadImage, "1x1");
+  expect_reason(ImageView8{pixels.data(), 64, 64, 32}, DetectReason::kBadImage, "short stride");
+  expect_reason(ImageView8{pixels.data(), kMaxImageSide + 1, 1, kMaxImageSide + 1},
+                DetectReason::kBadImage, "huge");
+  const Image8 black(320, 240, 0);
+  expect_reason(black.view(), DetectReason::kLowContrast, "all black");
+  const Image8 white(320, 240, 255);
+  expect_reason(white.view(), DetectReason::kLowContrast, "all white");
+  Image8 noise(320, 240);
+  std::mt19937 rng(42);
+  for (std::uint8_t& p : noise.pixels) p = static_cast<std::uint8_t>(rng() & 0xff);
+  const Detection d = DetectAruco(noise.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_TRUE(d.features.empty());
+
+  ArucoOptions bad;
+  bad.markers.max_residual_fraction = 0.0;
+  EXPECT_EQ(bad.Validate(), "max_residual_fraction");
+  EXPECT_EQ(DetectAruco(black.view(), board, bad).reason, DetectReason::kBadImage);
+  EXPECT_EQ(DetectAruco(black.view(), MakeBoard(BoardType::kChessboard)).reason,
+            DetectReason::kWrongBoard);
+}
+
+}  // namespace
+}  // namespace linecal

@@ -1,0 +1,145 @@
+// Connected components, contour tracing and quad extraction on small hand-made binary
+// images whose answers are known exactly.
+#include "detectors/common/contours.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+namespace linecal {
+namespace {
+
+Image8 Blank(int w, int h) { return Image8(w, h, 0); }
+
+void FillRect(Image8* img, int x0, int y0, int x1, int y1) {
+  for (int y = y0; y <= y1; ++y) {
+    for (int x = x0; x <= x1; ++x) img->at(x, y) = 1;
+  }
+}
+
+// A filled convex polygon: pixels whose centre lies inside every edge's half-plane.
+void FillConvex(Image8* img, const std::vector<Eigen::Vector2d>& poly) {
+  for (int y = 0; y < img->height; ++y) {
+    for (int x = 0; x < img->width; ++x) {
+      bool inside = true;
+      for (std::size_t k = 0; k < poly.size() && inside; ++k) {
+        const Eigen::Vector2d a = poly[k];
+        const Eigen::Vector2d b = poly[(k + 1) % poly.size()];
+        const double cross = (b.x() - a.x()) * (y - a.y()) - (b.y() - a.y()) * (x - a.x());
+        inside = cross >= 0.0;  // clockwise in y-down coordinates: the inside is on the right
+      }
+      if (inside) img->at(x, y) = 1;
+    }
+  }
+}
+
+TEST(ContoursTest, DiagonalNeighboursAreSeparateComponents) {
+  Image8 img = Blank(20, 20);
+  FillRect(&img, 2, 2, 5, 5);
+  FillRect(&img, 6, 6, 9, 9);  // touches the first square only at a corner
+  const ComponentLabels labels = LabelComponents(img.view());
+  ASSERT_EQ(labels.components.size(), 2u);
+  EXPECT_EQ(labels.components[0].area_px, 16);
+  EXPECT_EQ(labels.components[0].min_x, 2);
+  EXPECT_EQ(labels.components[0].max_y, 5);
+  EXPECT_EQ(labels.components[1].first_x, 6);
+  EXPECT_EQ(labels.components[1].first_y, 6);
+  EXPECT_EQ(labels.LabelAt(3, 3), 1);
+  EXPECT_EQ(labels.LabelAt(7, 7), 2);
+  EXPECT_EQ(labels.LabelAt(0, 0), 0);
+}
+
+TEST(ContoursTest, UShapeMergesIntoOneComponent) {
+  // Two columns joined only by their bottom row: the second column's runs start as a new
+  // component and must be united with the first at the bottom.
+  Image8 img = Blank(12, 12);
+  FillRect(&img, 1, 1, 2, 8);
+  FillRect(&img, 7, 1, 8, 8);
+  FillRect(&img, 1, 9, 8, 9);
+  const ComponentLabels labels = LabelComponents(img.view());
+  ASSERT_EQ(labels.components.size(), 1u);
+  EXPECT_EQ(labels.components[0].area_px, 2 * 8 * 2 + 8);
+  EXPECT_EQ(labels.LabelAt(8, 1), labels.LabelAt(1, 1));
+}
+
+TEST(ContoursTest, TracesASquareClockwiseFromItsFirstPixel) {
+  Image8 img = Blank(10, 10);
+  FillRect(&img, 3, 4, 5, 6);
+  const ComponentLabels labels = LabelComponents(img.view());
+  const std::vector<Eigen::Vector2i> contour = TraceOuterContour(labels, 0);
+  const std::vector<Eigen::Vector2i> expected = {{3, 4}, {4, 4}, {5, 4}, {5, 5},
+                                                 {5, 6}, {4, 6}, {3, 6}, {3, 5}};
+  EXPECT_EQ(contour, expected);
+}
+
+TEST(ContoursTest, TracesSinglePixelAndThinLine) {
+  Image8 img = Blank(10, 10);
+  img.at(2, 2) = 1;
+  FillRect(&img, 4, 7, 8, 7);
+  const ComponentLabels labels = LabelComponents(img.view());
+  ASSERT_EQ(labels.components.size(), 2u);
+  EXPECT_EQ(TraceOuterContour(labels, 0), std::vector<Eigen::Vector2i>{Eigen::Vector2i(2, 2)});
+  // A one-pixel-wide line is walked out and back: its end pixels once, the others twice.
+  EXPECT_EQ(TraceOuterContour(labels, 1).size(), 8u);
+}
+
+TEST(ContoursTest, PolygonOfARectangleContourIsItsCorners) {
+  Image8 img = Blank(40, 30);
+  FillRect(&img, 5, 6, 30, 20);
+  const ComponentLabels labels = LabelComponents(img.view());
+  const std::vector<Eigen::Vector2i> contour = TraceOuterContour(labels, 0);
+  const std::vector<int> vertices = ApproximateClosedPolygon(contour, 1.0);
+  ASSERT_EQ(vertices.size(), 4u);
+  std::vector<Eigen::Vector2i> corners;
+  for (int v : vertices) corners.push_back(contour[v]);
+  EXPECT_EQ(corners, (std::vector<Eigen::Vector2i>{{5, 6}, {30, 6}, {30, 20}, {5, 20}}));
+}
+
+TEST(ContoursTest, FindsARotatedSquareAndNotADiscOrATriangle) {
+  Image8 img = Blank(200, 120);
+  // A 40 px square turned by 25 degrees, centred at (50, 60), clockwise in the image.
+  const double a = 25.0 * std::numbers::pi / 180.0;
+  std::vector<Eigen::Vector2d> square;
+  for (int k = 0; k < 4; ++k) {
+    const double t = a + k * std::numbers::pi / 2.0 + std::numbers::pi / 4.0 * 5.0;
+    square.push_back(Eigen::Vector2d(50, 60) + 20.0 * std::sqrt(2.0) *
+                                                   Eigen::Vector2d(std::cos(t), std::sin(t)));
+  }
+  FillConvex(&img, square);
+  // A disc of radius 18 at (110, 60) and a triangle at the right.
+  for (int y = 0; y < img.height; ++y) {
+    for (int x = 0; x < img.width; ++x) {
+      if (std::hypot(x - 110.0, y - 60.0) < 18.0) img.at(x, y) = 1;
+    }
+  }
+  FillConvex(&img, {{150, 90}, {170, 30}, {190, 90}});
+  const ComponentLabels labels = LabelComponents(img.view());
+  ASSERT_EQ(labels.components.size(), 3u);
+  const std::vector<Quad> quads = FindQuads(labels);
+  ASSERT_EQ(quads.size(), 1u);
+  // Contour corners are boundary pixel centres: within 1.5 px of the true corners (half a
+  // pixel inside the edge, plus the pixel steps of a turned edge).
+  constexpr double kContourCornerTolPx = 1.5;
+  double turn = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    double best = 1e9;
+    for (const Eigen::Vector2d& c : square) best = std::min(best, (quads[0].corners_px[k] - c).norm());
+    EXPECT_LT(best, kContourCornerTolPx) << "corner " << k;
+    const Eigen::Vector2d e0 = quads[0].corners_px[(k + 1) % 4] - quads[0].corners_px[k];
+    const Eigen::Vector2d e1 = quads[0].corners_px[(k + 2) % 4] - quads[0].corners_px[(k + 1) % 4];
+    turn += e0.x() * e1.y() - e0.y() * e1.x();
+  }
+  EXPECT_GT(turn, 0.0);  // clockwise in the image
+}
+
+TEST(ContoursTest, QuadsTouchingTheBorderAreDropped) {
+  Image8 img = Blank(60, 60);
+  FillRect(&img, 0, 10, 30, 40);
+  const ComponentLabels labels = LabelComponents(img.view());
+  EXPECT_TRUE(FindQuads(labels).empty());
+}
+
+}  // namespace
+}  // namespace linecal
