@@ -311,8 +311,8 @@ struct Blob {
   Ellipse ellipse;  // full-resolution pixels, from the blob's moments
   bool light = true;
   double radius_px = 0.0;  // sqrt(semi_major * semi_minor)
-  // The ellipse's shape matrix S (x inside when (x - c)^T S^-1 (x - c) <= 1), inverted.
-  Eigen::Matrix2d s_inverse = Eigen::Matrix2d::Identity();
+  // The ellipse's shape matrix S: x is inside when (x - c)^T S^-1 (x - c) <= 1; px^2.
+  Eigen::Matrix2d shape = Eigen::Matrix2d::Identity();
 };
 
 // Appends the components of `mask` (half image) that look like filled ellipses.
@@ -380,14 +380,14 @@ void CollectBlobs(const std::vector<std::uint8_t>& mask, const Reduced& half, bo
     const double f = half.factor;
     const std::optional<Ellipse> e =
         EllipseFromMoments(f * centroid + Eigen::Vector2d::Constant(0.5 * (f - 1.0)), f * f * cov);
-    // Circles seen up to 50 degrees off-axis in both directions keep a third of their
-    // width; narrower blobs are lines or text.
+    // Circles seen 50 degrees off-axis in both directions keep about 0.4 of their width
+    // (cos 50 squared); narrower blobs are lines or text.
     if (!e || e->semi_minor < 0.25 * e->semi_major) continue;
     Blob b;
     b.ellipse = *e;
     b.light = light;
     b.radius_px = std::sqrt(e->semi_major * e->semi_minor);
-    b.s_inverse = (4.0 * f * f * cov).inverse();
+    b.shape = 4.0 * f * f * cov;
     blobs->push_back(b);
   }
 }
@@ -419,8 +419,7 @@ double BoxGrey(const ImageView8& image, const Eigen::Vector2d& uv) {
 Eigen::Matrix3d PairAffine(const CircleBoardModel& m, const Blob& left, const Blob& right) {
   const Eigen::Vector2d a_x = (right.ellipse.centre - left.ellipse.centre) /
                               (m.p_board[m.pair[1]] - m.p_board[m.pair[0]]).norm();
-  const Eigen::Matrix2d s =
-      0.5 * (left.s_inverse.inverse() + right.s_inverse.inverse()) / (m.radius_m * m.radius_m);
+  const Eigen::Matrix2d s = 0.5 * (left.shape + right.shape) / (m.radius_m * m.radius_m);
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(s);
   const Eigen::Matrix2d root = eig.operatorSqrt();
   const Eigen::Matrix2d root_inverse = eig.operatorInverseSqrt();
@@ -781,8 +780,7 @@ std::optional<Detection> SearchAtFactor(const ImageView8& image, const Board& bo
         continue;
       }
       const Eigen::Vector2d d = b.ellipse.centre - a.ellipse.centre;
-      const Eigen::Matrix2d s_inverse =
-          (0.5 * (a.s_inverse.inverse() + b.s_inverse.inverse())).inverse();
+      const Eigen::Matrix2d s_inverse = (0.5 * (a.shape + b.shape)).inverse();
       // The pair's distance in radii, measured in the ellipses' own metric (which removes
       // the local perspective): 4 on the printed board; the blob sizes' threshold bias
       // widens the band.

@@ -1,0 +1,116 @@
+#pragma once
+// Test scenes for the circle board detector: a pinhole camera 1.5 m above the station
+// origin looking along +x, boards placed in front of it by distance and angles, a grey wall
+// behind, rendered by station/sim/camera_render.h with exact ground truth. Shared by the
+// detector's test, benchmark and evaluation.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <numbers>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "detectors/boards/board.h"
+#include "detectors/core/pose.h"
+#include "station/camera/camera_model.h"
+#include "station/model/station_layout.h"
+#include "station/sim/camera_render.h"
+
+namespace linecal::circle_scene {
+
+inline constexpr double kDeg = std::numbers::pi / 180.0;
+
+// A 1280 x 720 pinhole (about 63 degrees across), or the same field of view at another size.
+inline CameraModel Camera(int width = 1280, int height = 720) {
+  const double scale = width / 1280.0;
+  CameraIntrinsics c;
+  c.type = CameraModelType::kPinhole;
+  c.width = width;
+  c.height = height;
+  c.fx = 1050.0 * scale;
+  c.fy = 1048.0 * scale;
+  c.cx = 642.6 * scale;
+  c.cy = 0.496 * height;
+  return *CameraModel::Create(c);
+}
+
+// The camera 1.5 m above the station origin, looking along +x.
+inline Rigid3d CameraPose() { return Rigid3d(CameraBaseRotation(), Eigen::Vector3d(0, 0, 1.5)); }
+
+// A board's zero orientation: upright, its print facing the camera (-x).
+inline Eigen::Matrix3d BoardBase() {
+  Eigen::Matrix3d r;
+  r.col(0) = -Eigen::Vector3d::UnitY();
+  r.col(1) = Eigen::Vector3d::UnitZ();
+  r.col(2) = -Eigen::Vector3d::UnitX();
+  return r;
+}
+
+struct Pose {
+  double distance_m = 2.0;
+  double yaw_deg = 0.0;
+  double pitch_deg = 0.0;
+  double roll_deg = 0.0;
+  double right_m = 0.0;  // board centre offset to the camera's right
+  double up_m = 0.0;     // and up
+};
+
+inline StationBoard MakeBoard(BoardType type, const Pose& pose, const std::string& id = "board") {
+  StationBoard b;
+  b.id = id;
+  b.params.type = type;
+  b.board = *Board::Create(b.params);
+  b.T_station_board =
+      Rigid3d(MountingRotation({pose.yaw_deg * kDeg, pose.pitch_deg * kDeg, pose.roll_deg * kDeg},
+                               BoardBase()),
+              Eigen::Vector3d(pose.distance_m, -pose.right_m, 1.5 + pose.up_m));
+  return b;
+}
+
+// The wall's distance: boards must stand closer to be seen.
+inline constexpr double kWallDistanceM = 6.0;
+
+// A grey wall kWallDistanceM away, behind everything (cluttered when the render asks).
+inline StationSurface Wall() {
+  StationSurface w;
+  w.id = "wall";
+  w.T_station_surface = Rigid3d(BoardBase(), Eigen::Vector3d(kWallDistanceM, 0.0, 1.5));
+  w.size_m = Eigen::Vector2d(30.0, 30.0);
+  w.reflectivity = 0.35;
+  return w;
+}
+
+inline CameraRenderOptions Effects(double noise, double blur) {
+  CameraRenderOptions o;
+  o.noise_sigma = noise;
+  o.blur_sigma_px = blur;
+  o.threads = 2;
+  return o;
+}
+
+// One board at `pose`, with the wall behind unless the board stands beyond it.
+inline StationLayout OneBoard(BoardType type, const Pose& pose) {
+  StationLayout layout;
+  layout.boards.push_back(MakeBoard(type, pose));
+  if (pose.distance_m < kWallDistanceM) layout.surfaces.push_back(Wall());
+  return layout;
+}
+
+inline absl::StatusOr<CameraFrame> RenderScene(const StationLayout& layout,
+                                               const CameraRenderOptions& options,
+                                               std::uint64_t seed,
+                                               const CameraModel& camera = Camera()) {
+  return RenderCameraFrame(camera, CameraPose(), layout, options, seed);
+}
+
+// The default circle board, built once.
+inline const Board& CircleBoard() {
+  static const Board* board = [] {
+    BoardParams p;
+    p.type = BoardType::kCircle;
+    return new Board(*Board::Create(p));
+  }();
+  return *board;
+}
+
+}  // namespace linecal::circle_scene
