@@ -246,58 +246,39 @@ bool LidarDecoder::DecodeHesai(std::span<const std::uint8_t> p, std::int64_t hos
     Skip(LidarSkipReason::kBadMagic);
     return false;
   }
-  std::size_t header_bytes, block_bytes, unit_bytes, unit_offset, mode_offset, date_offset,
-      timestamp_offset;
-  bool model_ok;
+  const HesaiLayout& layout = GetHesaiLayout(table_.model);
+  bool model_ok =
+      d[layout.laser_count_offset] == info.channels && d[layout.block_count_offset] == info.blocks;
   if (xt32) {
-    model_ok = d[pandarxt32::kProtocolMajorOffset] == pandarxt32::kProtocolMajor &&
-               d[pandarxt32::kProtocolMinorOffset] == pandarxt32::kProtocolMinor &&
-               d[pandarxt32::kLaserCountOffset] == pandarxt32::kChannels &&
-               d[pandarxt32::kBlockCountOffset] == pandarxt32::kBlocks;
-    header_bytes = pandarxt32::kHeaderBytes;
-    block_bytes = pandarxt32::kBlockBytes;
-    unit_bytes = pandarxt32::kUnitBytes;
-    unit_offset = pandarxt32::kDistanceUnitOffset;
-    mode_offset = pandarxt32::kReturnModeOffset;
-    date_offset = pandarxt32::kDateTimeOffset;
-    timestamp_offset = pandarxt32::kTimestampOffset;
-  } else {
-    model_ok = d[pandar64::kLaserCountOffset] == pandar64::kChannels &&
-               d[pandar64::kBlockCountOffset] == pandar64::kBlocks;
-    header_bytes = pandar64::kHeaderBytes;
-    block_bytes = pandar64::kBlockBytes;
-    unit_bytes = pandar64::kUnitBytes;
-    unit_offset = pandar64::kDistanceUnitOffset;
-    mode_offset = pandar64::kReturnModeOffset;
-    date_offset = pandar64::kDateTimeOffset;
-    timestamp_offset = pandar64::kTimestampOffset;
+    model_ok = model_ok && d[pandarxt32::kProtocolMajorOffset] == pandarxt32::kProtocolMajor &&
+               d[pandarxt32::kProtocolMinorOffset] == pandarxt32::kProtocolMinor;
   }
   if (!model_ok) {
     Skip(LidarSkipReason::kWrongModel);
     return false;
   }
-  const int returns = ReturnsForModeByte(table_.model, d[mode_offset]);
+  const int returns = ReturnsForModeByte(table_.model, d[layout.return_mode_offset]);
   if (returns == 0) {
     Skip(LidarSkipReason::kBadReturnMode);
     return false;
   }
-  const int unit_mm = d[unit_offset];
+  const int unit_mm = d[layout.distance_unit_offset];
   if (unit_mm == 0) {
     Skip(LidarSkipReason::kBadField);
     return false;
   }
   const int groups = info.blocks / returns;
   for (int g = 0; g < groups; ++g) {
-    if (LoadLe16(d + header_bytes + g * returns * block_bytes) >= kCentidegPerTurn) {
+    if (LoadLe16(d + layout.header_bytes + g * returns * layout.block_bytes) >= kCentidegPerTurn) {
       Skip(LidarSkipReason::kBadField);
       return false;
     }
   }
 
   const std::int64_t in_second_ns =
-      static_cast<std::int64_t>(LoadLe32(d + timestamp_offset)) * kNsPerUs;
+      static_cast<std::int64_t>(LoadLe32(d + layout.timestamp_offset)) * kNsPerUs;
   const std::optional<std::int64_t> utc_s =
-      HesaiUtcSeconds(std::span<const std::uint8_t, 6>(d + date_offset, 6));
+      HesaiUtcSeconds(std::span<const std::uint8_t, 6>(d + layout.date_time_offset, 6));
   std::int64_t packet_time_ns;
   if (utc_s) {
     packet_time_ns = *utc_s * kNsPerSecond + in_second_ns;
@@ -310,7 +291,7 @@ bool LidarDecoder::DecodeHesai(std::span<const std::uint8_t> p, std::int64_t hos
   const std::vector<SinCos>& table = AzimuthTable();
   const int channel_count = info.channels;
   for (int g = 0; g < groups; ++g) {
-    const std::uint8_t* first_block = d + header_bytes + g * returns * block_bytes;
+    const std::uint8_t* first_block = d + layout.header_bytes + g * returns * layout.block_bytes;
     const int az = LoadLe16(first_block);
     BeginColumnGroup(az, completed);
     const SinCos a = table[az];
@@ -318,13 +299,13 @@ bool LidarDecoder::DecodeHesai(std::span<const std::uint8_t> p, std::int64_t hos
         packet_time_ns + ColumnTimeOffsetNs(table_.model, g, groups);
     for (int c = 0; c < channel_count; ++c) {
       const Channel& ch = channels_[c];
-      const std::size_t at = 2 + c * unit_bytes;
+      const std::size_t at = 2 + c * layout.unit_bytes;
       const double corrected = az + ch.offset_centideg;
       const int delta = corrected >= kCentidegPerTurn ? 1 : (corrected < 0.0 ? -1 : 0);
       const double s = a.sin * ch.cos_offset + a.cos * ch.sin_offset;
       const double co = a.cos * ch.cos_offset - a.sin * ch.sin_offset;
       for (int r = 0; r < returns; ++r) {
-        const std::uint8_t* unit = first_block + r * block_bytes + at;
+        const std::uint8_t* unit = first_block + r * layout.block_bytes + at;
         const std::uint16_t raw = LoadLe16(unit);
         if (raw == 0) continue;
         if (r == 1 && raw == LoadLe16(first_block + at)) continue;

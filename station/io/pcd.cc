@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <optional>
 #include <string>
@@ -45,7 +46,10 @@ struct PcdHeader {
     std::uint64_t size = 4;
   };
   std::vector<Field> fields;
+  std::uint64_t width = 0;
+  std::uint64_t height = 1;
   std::uint64_t points = 0;
+  std::uint64_t point_bytes = 0;
   std::string data;             // "ascii", "binary" or "binary_compressed"
   std::size_t data_offset = 0;  // where the body starts in the file
   std::uint64_t values_per_point = 0;
@@ -64,9 +68,11 @@ std::uint8_t PclType(char type, std::uint64_t size) {
   return 0;
 }
 
-// Parses and checks a header before PCL sees the file: PCL sizes its buffers from the header
-// (POINTS × point size) before it looks at the data, so a forged header would make it
-// allocate without bound. The body must be able to hold what the header announces.
+// Parses and checks a header. PCL's own header parser is not used: it sizes its buffers from
+// POINTS × point size before it looks at the data, and it stops at the first line it does
+// not know and then reads the file from a wrong offset (a crash the fuzzer found). Here the
+// entries must come in the order the PCD format prescribes, unknown ones are refused, and the
+// body must be able to hold what the header announces.
 absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
   std::error_code ec;
   const std::uint64_t file_size = std::filesystem::file_size(path, ec);
@@ -84,8 +90,14 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
   PcdHeader h;
   std::vector<absl::string_view> names, types;
   std::vector<std::uint64_t> sizes, counts;
-  std::uint64_t width = 0, height = 1;
+  std::uint64_t& width = h.width;
+  std::uint64_t& height = h.height;
   bool have_points = false;
+  // The entries in their prescribed order (COLUMNS is FIELDS in PCD v0.6).
+  static constexpr absl::string_view kOrder[] = {"VERSION", "FIELDS", "SIZE",   "TYPE",
+                                                 "COUNT",   "WIDTH",  "HEIGHT", "VIEWPOINT",
+                                                 "POINTS",  "DATA"};
+  int last_entry = -1;
   std::size_t pos = 0;
   while (pos < text.size() && h.data.empty()) {
     const std::size_t eol = text.find('\n', pos);
@@ -95,8 +107,15 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
     std::vector<absl::string_view> tok =
         absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
     if (tok.empty() || tok[0][0] == '#') continue;
-    const absl::string_view key = tok[0];
+    const absl::string_view key = tok[0] == "COLUMNS" ? "FIELDS" : tok[0];
     tok.erase(tok.begin());
+    int entry = 0;
+    while (entry < static_cast<int>(std::size(kOrder)) && kOrder[entry] != key) ++entry;
+    if (entry == static_cast<int>(std::size(kOrder))) {
+      return bad(absl::StrCat("unknown header entry '", key, "'"));
+    }
+    if (entry <= last_entry) return bad(absl::StrCat("header entry ", key, " out of order"));
+    last_entry = entry;
     auto numbers = [&](std::vector<std::uint64_t>* out) {
       out->clear();
       for (absl::string_view t : tok) {
@@ -112,7 +131,7 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
       *out = one[0];
       return true;
     };
-    if (key == "FIELDS" || key == "COLUMNS") {
+    if (key == "FIELDS") {
       names = tok;
     } else if (key == "SIZE") {
       if (!numbers(&sizes)) return bad("SIZE");
@@ -127,6 +146,8 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
     } else if (key == "POINTS") {
       if (!single(&h.points)) return bad("POINTS");
       have_points = true;
+    } else if (key == "VIEWPOINT") {
+      if (tok.size() != 7) return bad("VIEWPOINT needs 7 values");
     } else if (key == "DATA") {
       if (tok.size() != 1) return bad("DATA");
       h.data = std::string(tok[0]);
@@ -144,7 +165,7 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
   if (counts.size() != names.size()) return bad("FIELDS and COUNT differ in length");
   // The limits keep every product below 2^64: a point of at most 2^20 values of 8 bytes.
   constexpr std::uint64_t kMaxValuesPerPoint = 1 << 20;
-  std::uint64_t point_bytes = 0;
+  std::uint64_t& point_bytes = h.point_bytes;
   for (std::size_t i = 0; i < names.size(); ++i) {
     PcdHeader::Field f;
     f.name = std::string(names[i]);
@@ -390,33 +411,66 @@ absl::StatusOr<PcdCloud> ReadAscii(const std::filesystem::path& path, const PcdH
   return out;
 }
 
-absl::StatusOr<PcdCloud> ReadBinary(const std::filesystem::path& path) {
-  SilencePcl();
+// The body through PCL's decoder (a copy for binary, LZF and de-interleaving for
+// binary_compressed), on a cloud laid out from the checked header. PCL trusts the sizes in a
+// compressed body, so they are checked against the file first.
+absl::StatusOr<PcdCloud> ReadBinary(const std::filesystem::path& path, const PcdHeader& h) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<std::uint8_t> file((std::istreambuf_iterator<char>(in)),
+                                 std::istreambuf_iterator<char>());
+  auto bad = [&](const std::string& what) {
+    return absl::InvalidArgumentError(absl::StrCat(path.string(), ": ", what));
+  };
   pcl::PCLPointCloud2 cloud;
-  Eigen::Vector4f origin;
-  Eigen::Quaternionf orientation;
-  int version = 0;
-  int result = -1;
-  try {
-    result = pcl::PCDReader().read(path.string(), cloud, origin, orientation, version);
-  } catch (const std::exception& e) {
-    return absl::InvalidArgumentError(absl::StrCat(path.string(), ": ", e.what()));
+  std::uint32_t offset = 0;
+  for (const PcdHeader::Field& f : h.fields) {
+    pcl::PCLPointField pf;
+    pf.name = f.name;
+    pf.offset = offset;
+    pf.datatype = f.datatype;
+    pf.count = static_cast<std::uint32_t>(f.count);
+    cloud.fields.push_back(pf);
+    offset += static_cast<std::uint32_t>(f.count * f.size);
   }
-  if (result < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(path.string(), ": not a readable PCD file"));
+  // ParseHeader bounded all of these by kMaxDataBytes.
+  cloud.point_step = offset;
+  cloud.width = static_cast<std::uint32_t>(h.width);
+  cloud.height = static_cast<std::uint32_t>(h.height);
+  cloud.row_step = cloud.point_step * cloud.width;
+  const std::uint64_t data_bytes = h.points * h.point_bytes;
+  cloud.data.resize(data_bytes);
+  const bool compressed = h.data == "binary_compressed";
+  const std::uint64_t body = file.size() - std::min<std::uint64_t>(file.size(), h.data_offset);
+  if (compressed) {
+    // A u32 compressed size, a u32 uncompressed size, then the LZF stream.
+    constexpr std::uint64_t kSizesBytes = 8;
+    if (body < kSizesBytes) return bad("binary_compressed body shorter than its sizes");
+    std::uint32_t sizes[2];
+    std::memcpy(sizes, file.data() + h.data_offset, sizeof(sizes));
+    if (sizes[0] > body - kSizesBytes) {
+      return bad(absl::StrCat("compressed size ", sizes[0], " exceeds the file"));
+    }
+    if (sizes[1] != data_bytes) {
+      return bad(absl::StrCat("uncompressed size ", sizes[1], " is not ", data_bytes));
+    }
+  } else if (body < data_bytes) {
+    return bad("data shorter than the header says");
   }
-  const std::uint64_t n = static_cast<std::uint64_t>(cloud.width) * cloud.height;
-  if (cloud.point_step == 0 || cloud.data.size() < n * cloud.point_step) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path.string(), ": data shorter than ", n, " points"));
+  if (h.points > 0) {
+    SilencePcl();
+    int result = -1;
+    try {
+      result =
+          pcl::PCDReader().readBodyBinary(file.data(), cloud, pcl::PCDReader::PCD_V7, compressed,
+                                          static_cast<unsigned int>(h.data_offset));
+    } catch (const std::exception& e) {
+      return bad(e.what());
+    }
+    if (result < 0 || cloud.data.size() != data_bytes) return bad("corrupt point data");
   }
+  const std::uint64_t n = h.points;
   std::vector<std::tuple<std::string, std::uint8_t, std::uint64_t, std::uint64_t>> fields;
   for (const pcl::PCLPointField& f : cloud.fields) {
-    const std::size_t size = pcl::getFieldSize(f.datatype);
-    if (size == 0 || f.offset + size > cloud.point_step) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(path.string(), ": field ", f.name, " lies outside its point"));
-    }
     fields.emplace_back(f.name, f.datatype, f.count, f.offset);
   }
   absl::StatusOr<FieldMap> m = MapFields(path, fields);
@@ -443,7 +497,7 @@ absl::StatusOr<PcdCloud> ReadPcd(const std::filesystem::path& path) {
   }
   const absl::StatusOr<PcdHeader> header = ParseHeader(path);
   if (!header.ok()) return header.status();
-  return header->data == "ascii" ? ReadAscii(path, *header) : ReadBinary(path);
+  return header->data == "ascii" ? ReadAscii(path, *header) : ReadBinary(path, *header);
 }
 
 absl::Status WritePcd(const std::filesystem::path& path, std::span<const LidarPoint> points,

@@ -133,6 +133,20 @@ const LidarModelInfo& GetLidarModelInfo(LidarModel model) {
   return kModels[0];  // unreachable for valid enumerators
 }
 
+const HesaiLayout& GetHesaiLayout(LidarModel model) {
+  static constexpr HesaiLayout kPandar64 = {
+      pandar64::kHeaderBytes,      pandar64::kBlockBytes,       pandar64::kUnitBytes,
+      pandar64::kLaserCountOffset, pandar64::kBlockCountOffset, pandar64::kDistanceUnitOffset,
+      pandar64::kReturnModeOffset, pandar64::kMotorSpeedOffset, pandar64::kDateTimeOffset,
+      pandar64::kTimestampOffset,  pandar64::kDistanceUnitMm};
+  static constexpr HesaiLayout kXt32 = {
+      pandarxt32::kHeaderBytes,      pandarxt32::kBlockBytes,       pandarxt32::kUnitBytes,
+      pandarxt32::kLaserCountOffset, pandarxt32::kBlockCountOffset, pandarxt32::kDistanceUnitOffset,
+      pandarxt32::kReturnModeOffset, pandarxt32::kMotorSpeedOffset, pandarxt32::kDateTimeOffset,
+      pandarxt32::kTimestampOffset,  pandarxt32::kDistanceUnitMm};
+  return model == LidarModel::kPandarXt32 ? kXt32 : kPandar64;
+}
+
 std::optional<LidarModel> LidarModelFromName(std::string_view name) {
   for (const LidarModelInfo& info : kModels) {
     if (name == info.name) return info.model;
@@ -474,55 +488,42 @@ absl::StatusOr<std::vector<std::vector<std::uint8_t>>> EncodeLidarPackets(
       out[vlp16::kProductIdOffset] = vlp16::kProductId;
     } else {
       const bool xt32 = settings.model == LidarModel::kPandarXt32;
-      const std::size_t header = xt32 ? pandarxt32::kHeaderBytes : pandar64::kHeaderBytes;
-      const std::size_t block_bytes = xt32 ? pandarxt32::kBlockBytes : pandar64::kBlockBytes;
-      const std::size_t unit_bytes = xt32 ? pandarxt32::kUnitBytes : pandar64::kUnitBytes;
-      const std::uint8_t unit_mm = xt32 ? pandarxt32::kDistanceUnitMm : pandar64::kDistanceUnitMm;
+      const HesaiLayout& layout = GetHesaiLayout(settings.model);
       out.assign(xt32 ? pandarxt32::kPacketBytes
                       : (settings.pandar64_udp_sequence ? pandar64::kPacketBytesWithSequence
                                                         : pandar64::kPacketBytes),
                  0);
       out[0] = kHesaiMagic0;
       out[1] = kHesaiMagic1;
+      out[layout.laser_count_offset] = static_cast<std::uint8_t>(info.channels);
+      out[layout.block_count_offset] = static_cast<std::uint8_t>(info.blocks);
+      out[layout.distance_unit_offset] = layout.distance_unit_mm;
+      out[layout.return_mode_offset] = mode;
+      StoreLe16(out.data() + layout.motor_speed_offset, settings.motor_rpm);
+      WriteHesaiTime(packet_time_ns, out.data() + layout.date_time_offset,
+                     out.data() + layout.timestamp_offset);
       if (xt32) {
         out[pandarxt32::kProtocolMajorOffset] = pandarxt32::kProtocolMajor;
         out[pandarxt32::kProtocolMinorOffset] = pandarxt32::kProtocolMinor;
-        out[pandarxt32::kLaserCountOffset] = pandarxt32::kChannels;
-        out[pandarxt32::kBlockCountOffset] = pandarxt32::kBlocks;
-        out[pandarxt32::kDistanceUnitOffset] = unit_mm;
         out[pandarxt32::kReturnCountOffset] = static_cast<std::uint8_t>(returns);
+        StoreLe32(out.data() + pandarxt32::kUdpSequenceOffset, sequence);
       } else {
-        out[pandar64::kLaserCountOffset] = pandar64::kChannels;
-        out[pandar64::kBlockCountOffset] = pandar64::kBlocks;
-        out[pandar64::kDistanceUnitOffset] = unit_mm;
+        // The factory byte of the recorded Pandar64 (shared/data/lidar/pandar64).
+        out[pandar64::kFactoryOffset] = 0x42;
+        if (settings.pandar64_udp_sequence) {
+          StoreLe32(out.data() + pandar64::kUdpSequenceOffset, sequence);
+        }
       }
       for (int b = 0; b < info.blocks; ++b) {
-        std::uint8_t* block = out.data() + header + b * block_bytes;
+        std::uint8_t* block = out.data() + layout.header_bytes + b * layout.block_bytes;
         const LidarColumn& col = cols[b / returns];
         const int r = b % returns;
         StoreLe16(block, col.azimuth_centideg);
         for (int c = 0; c < info.channels; ++c) {
           const LidarEcho& e = col.echoes[r * info.channels + c];
-          std::uint8_t* u = block + 2 + c * unit_bytes;
-          StoreLe16(u, EncodeRange(e.range_m, unit_mm * 1e-3));
+          std::uint8_t* u = block + 2 + c * layout.unit_bytes;
+          StoreLe16(u, EncodeRange(e.range_m, layout.distance_unit_mm * 1e-3));
           u[2] = e.intensity;
-        }
-      }
-      if (xt32) {
-        out[pandarxt32::kReturnModeOffset] = mode;
-        StoreLe16(out.data() + pandarxt32::kMotorSpeedOffset, settings.motor_rpm);
-        WriteHesaiTime(packet_time_ns, out.data() + pandarxt32::kDateTimeOffset,
-                       out.data() + pandarxt32::kTimestampOffset);
-        StoreLe32(out.data() + pandarxt32::kUdpSequenceOffset, sequence);
-      } else {
-        StoreLe16(out.data() + pandar64::kMotorSpeedOffset, settings.motor_rpm);
-        out[pandar64::kReturnModeOffset] = mode;
-        // The factory byte of the recorded Pandar64 (shared/data/lidar/pandar64).
-        out[pandar64::kFactoryOffset] = 0x42;
-        WriteHesaiTime(packet_time_ns, out.data() + pandar64::kDateTimeOffset,
-                       out.data() + pandar64::kTimestampOffset);
-        if (settings.pandar64_udp_sequence) {
-          StoreLe32(out.data() + pandar64::kUdpSequenceOffset, sequence);
         }
       }
     }

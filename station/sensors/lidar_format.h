@@ -16,10 +16,10 @@
 //
 // LiDAR frame (conventions.md: "as the vendor defines it"), the same for all three models,
 // as both vendors' manuals define it:
-//   origin  the sensor's own origin (on the rotation axis, at the optical centre)
+//   origin  the sensor's origin on the rotation axis (VLP-16: 37.7 mm above its base, per
+//           its manual; Hesai: as their manuals draw it)
 //   +z      up along the rotation axis (towards the top cap)
-//   +y      azimuth 0: VLP-16 away from the cable exit; Pandar64/XT-32 the front marked on
-//           the housing
+//   +y      azimuth 0, the direction the manuals' top views mark as 0°
 //   +x      azimuth 90°, i.e. to the right when looking along +y (x × y = z)
 // Azimuth α grows clockwise seen from above; elevation ω grows upwards. A return at range R:
 //   x = R cos ω sin α,   y = R cos ω cos α,   z = R sin ω          (LidarPointFromPolar)
@@ -159,6 +159,26 @@ inline constexpr std::int64_t kChannelPeriodNs = 1512;
 // Both Hesai headers open with the bytes EE FF.
 inline constexpr std::uint8_t kHesaiMagic0 = 0xEE;
 inline constexpr std::uint8_t kHesaiMagic1 = 0xFF;
+
+// Where a Hesai model keeps the fields both Hesai formats share (the constants above, in one
+// place for the encoder and the decoder).
+struct HesaiLayout {
+  std::size_t header_bytes;
+  std::size_t block_bytes;
+  std::size_t unit_bytes;
+  std::size_t laser_count_offset;
+  std::size_t block_count_offset;
+  std::size_t distance_unit_offset;
+  std::size_t return_mode_offset;
+  std::size_t motor_speed_offset;
+  std::size_t date_time_offset;
+  std::size_t timestamp_offset;
+  std::uint8_t distance_unit_mm;  // what the sensors send
+};
+
+// The layout of kPandar64 or kPandarXt32 (the Pandar64's for the VLP-16, which has none).
+// O(1); the reference stays valid for the program's lifetime.
+const HesaiLayout& GetHesaiLayout(LidarModel model);
 
 // Return modes as the packets write them (the same byte values on all three models).
 enum class LidarReturnMode : std::uint8_t {

@@ -1,11 +1,13 @@
 #include "station/io/pcd.h"
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <random>
 #include <string>
+#include <tuple>
 
 #include "gtest/gtest.h"
 
@@ -138,6 +140,33 @@ TEST(Pcd, ReadsOtherFieldTypesOrganizedCloudsAndSecondsAsTime) {
   std::filesystem::remove(path);
 }
 
+TEST(Pcd, RejectsCompressedBodiesWhoseSizesLie) {
+  const std::filesystem::path path = TempPath("lzf.pcd");
+  ASSERT_TRUE(WritePcd(path, RandomPoints(50), PcdEncoding::kBinaryCompressed).ok());
+  std::ifstream in(path, std::ios::binary);
+  const std::string good((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  in.close();
+  const std::size_t body = good.find("DATA binary_compressed\n") + 23;
+  // Bytes 0-3 of the body: compressed size; 4-7: uncompressed size (50 × 26 bytes).
+  for (const auto& [at, value, message] :
+       std::vector<std::tuple<std::size_t, std::uint32_t, std::string>>{
+           {0, 0x7FFFFFFF, "compressed size 2147483647 exceeds the file"},
+           {4, 1299, "uncompressed size 1299 is not 1300"}}) {
+    std::string bad = good;
+    std::memcpy(&bad[body + at], &value, 4);
+    WriteText(path, bad);
+    const absl::StatusOr<PcdCloud> cloud = ReadPcd(path);
+    ASSERT_FALSE(cloud.ok()) << message;
+    EXPECT_NE(cloud.status().message().find(message), std::string::npos) << cloud.status();
+  }
+  // A stream that decompresses to the wrong size.
+  std::string bad = good;
+  for (std::size_t i = body + 8; i < bad.size(); ++i) bad[i] = 0;
+  WriteText(path, bad);
+  EXPECT_EQ(ReadPcd(path).status().code(), absl::StatusCode::kInvalidArgument);
+  std::filesystem::remove(path);
+}
+
 TEST(Pcd, RejectsBrokenFilesWithoutTrustingTheirHeader) {
   const std::filesystem::path path = TempPath("bad.pcd");
   const std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n";
@@ -146,7 +175,13 @@ TEST(Pcd, RejectsBrokenFilesWithoutTrustingTheirHeader) {
     std::string message;
   };
   const std::vector<Case> cases = {
-      {"hello\n", "no DATA line"},
+      {"hello\n", "unknown header entry 'hello'"},
+      // The fuzzer's find: a first line PCL does not know made its reader crash.
+      {"c .PCD v0.7\n" + head + "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA binary\n123456789012",
+       "unknown header entry 'c'"},
+      {"VERSION 0.7\nSIZE 4 4 4\nFIELDS x y z\nTYPE F F F\nWIDTH 1\nHEIGHT 1\nPOINTS 1\n"
+       "DATA ascii\n1 2 3\n",
+       "header entry FIELDS out of order"},
       {"", "no DATA line"},
       // Four billion points in a file of a few bytes: refused before anything is allocated.
       {head + "WIDTH 1000000000\nHEIGHT 1\nPOINTS 1000000000\nDATA binary\nabc", "do not fit"},
