@@ -13,8 +13,10 @@ Detection DetectApriltag(const ImageView8& image, const Board& board,
     detection.reason = DetectReason::kBadImage;
     return detection;
   }
-  const MarkerScan scan =
-      ScanMarkers(image, Tag36h11Family(board.params().apriltag_border_bits), options.markers);
+  // Four corner features per tag: once every tag of the board is read, stop eroding.
+  const int board_tags = static_cast<int>(board.features().size()) / 4;
+  const MarkerScan scan = ScanMarkers(
+      image, Tag36h11Family(board.params().apriltag_border_bits), options.markers, board_tags);
   return VerifyMarkerBoard(scan, board, options.markers);
 }
 

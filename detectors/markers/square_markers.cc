@@ -582,7 +582,7 @@ MarkerFamily Tag36h11Family(int border_bits) {
 }
 
 MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
-                       const MarkerDetectOptions& options) {
+                       const MarkerDetectOptions& options, int enough_markers) {
   MarkerScan scan;
   if (image.width < options.min_marker_side_px || image.height < options.min_marker_side_px) {
     scan.reason = DetectReason::kBadImage;
@@ -602,6 +602,10 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
   quad_options.min_side_px = options.min_marker_side_px;
   Image8 eroded;
   for (int erosion = 0; erosion <= options.max_erosion_px; ++erosion) {
+    if (erosion > 0 && enough_markers > 0 &&
+        static_cast<int>(scan.markers.size()) >= enough_markers) {
+      break;
+    }
     if (erosion > 0) eroded = Erode(erosion == 1 ? scan.dark : eroded);
     const ComponentLabels labels = LabelComponents((erosion == 0 ? scan.dark : eroded).view());
     for (const Quad& quad : FindQuads(labels, quad_options)) {
