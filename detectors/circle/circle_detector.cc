@@ -676,36 +676,63 @@ Outcome MeasureBoard(const ImageView8& image, const CircleBoardModel& m, const G
   const RayDirections rays(options.edge_rays);
   std::vector<Eigen::Vector2d> centres(n);
   std::vector<double> radii(n);
-  for (std::size_t id = 0; id < n; ++id) {
+  // Measures circle `id` seeded by the ellipse that H predicts.
+  auto measure = [&](const Eigen::Matrix3d& H, std::size_t id) {
     const std::optional<Ellipse> predicted =
-        EllipseFromConic(ImageOfCircle(grid.H, m.p_board[id], m.radius_m));
-    if (!predicted) return Outcome::kFailed;
+        EllipseFromConic(ImageOfCircle(H, m.p_board[id], m.radius_m));
+    if (!predicted) return false;
     const std::optional<Ellipse> e = MeasureCircle(MakePatch(image, *predicted), *predicted,
                                                    m.light[id], rays, options.min_contrast);
-    if (!e) return Outcome::kFailed;
+    if (!e) return false;
     centres[id] = e->centre;
     radii[id] = std::sqrt(e->semi_major * e->semi_minor);
+    return true;
+  };
+  for (std::size_t id = 0; id < n; ++id) {
+    if (!measure(grid.H, id)) return Outcome::kFailed;
   }
-  std::optional<HomographyFit> fit = FitHomography(m.p_board, centres);
-  if (!fit) return Outcome::kFailed;
   std::vector<Eigen::Vector2d> corrected = centres;
-  if (options.correct_perspective) {
-    // The offset changes by (change of H) x (offset / radius), tiny after the first round;
-    // three rounds leave it below 1e-4 px.
-    for (int round = 0; round < 3; ++round) {
+  std::optional<HomographyFit> fit;
+  // Fits H to the centres, corrected for perspective when asked. The offset changes by
+  // (change of H) x (offset / radius), tiny after the first round; three rounds leave it
+  // below 1e-4 px.
+  auto correct = [&]() {
+    corrected = centres;
+    fit = FitHomography(m.p_board, corrected);
+    if (!options.correct_perspective) return fit.has_value();
+    for (int round = 0; round < 3 && fit; ++round) {
       for (std::size_t id = 0; id < n; ++id) {
         const std::optional<Ellipse> image_ellipse =
             EllipseFromConic(ImageOfCircle(fit->H, m.p_board[id], m.radius_m));
-        if (!image_ellipse) return Outcome::kFailed;
+        if (!image_ellipse) return false;
         corrected[id] =
             centres[id] - (image_ellipse->centre - ApplyHomography(fit->H, m.p_board[id]));
       }
       fit = FitHomography(m.p_board, corrected);
-      if (!fit) return Outcome::kFailed;
     }
-  }
+    return fit.has_value();
+  };
+  if (!correct()) return Outcome::kFailed;
   std::vector<double> residuals;
   HomographyResiduals(fit->H, m.p_board, corrected, &residuals);
+  // A circle far off the board's homography was measured from a poor seed (the blob grid's
+  // H): measure it again from the far better seed of the measured board, and refit. Far
+  // off: 4 times the median residual and over half a pixel (noise of sigma 6 moves a
+  // centre by about 0.2 px).
+  std::vector<double> sorted = residuals;
+  std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+  const double outlier_px = std::max(0.5, 4.0 * sorted[n / 2]);
+  const Eigen::Matrix3d seed_H = fit->H;
+  bool remeasured = false;
+  for (std::size_t id = 0; id < n; ++id) {
+    if (residuals[id] <= outlier_px) continue;
+    if (!measure(seed_H, id)) return Outcome::kFailed;
+    remeasured = true;
+  }
+  if (remeasured) {
+    if (!correct()) return Outcome::kFailed;
+    HomographyResiduals(fit->H, m.p_board, corrected, &residuals);
+  }
   for (std::size_t id = 0; id < n; ++id) {
     if (!(residuals[id] <= options.max_residual_radius_fraction * radii[id])) {
       return Outcome::kFailed;

@@ -85,6 +85,13 @@ int Run() {
           // Neighbouring circles are at least 2.8 radii (12 px at the smallest) apart.
           if (worst > 5.0) ++t.wrong;
           t.rms_px.push_back(std::sqrt(sum2 / 30.0));
+          // Frames far over the noisy bar (0.12 px) are worth a look.
+          if (t.rms_px.back() > 0.25) {
+            std::printf(
+                "outlier: %s, distance %.1f roll %.0f yaw %.0f pitch %.0f: RMS %.3f px, "
+                "worst %.3f px\n",
+                sets[s].name, distance, roll, yaw, pitch, t.rms_px.back(), worst);
+          }
         }
       }
     }
