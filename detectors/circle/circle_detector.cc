@@ -396,8 +396,9 @@ void CollectBlobs(const std::vector<std::uint8_t>& mask, const Reduced& half, bo
 
 double GreyAt(const ImageView8& image, const Eigen::Vector2d& uv) {
   if (!uv.allFinite()) return std::numeric_limits<double>::quiet_NaN();
-  const int x = std::clamp(static_cast<int>(std::lround(uv.x())), 0, image.width - 1);
-  const int y = std::clamp(static_cast<int>(std::lround(uv.y())), 0, image.height - 1);
+  // Clamped before the conversion, which far-off points would overflow.
+  const int x = static_cast<int>(std::lround(std::clamp(uv.x(), 0.0, image.width - 1.0)));
+  const int y = static_cast<int>(std::lround(std::clamp(uv.y(), 0.0, image.height - 1.0)));
   return image.At(x, y);
 }
 
@@ -529,14 +530,15 @@ struct Patch {
 // and the profile's end samples (a few pixels).
 Patch MakePatch(const ImageView8& image, const Ellipse& ellipse) {
   const double reach = 1.5 * ellipse.semi_major + 4.0;
-  const int x0 =
-      std::clamp(static_cast<int>(std::floor(ellipse.centre.x() - reach)), 0, image.width - 1);
-  const int y0 =
-      std::clamp(static_cast<int>(std::floor(ellipse.centre.y() - reach)), 0, image.height - 1);
-  const int x1 =
-      std::clamp(static_cast<int>(std::ceil(ellipse.centre.x() + reach)), x0, image.width - 1);
-  const int y1 =
-      std::clamp(static_cast<int>(std::ceil(ellipse.centre.y() + reach)), y0, image.height - 1);
+  // Clamped in floating point before the conversion, which a degenerate ellipse (one near
+  // the board's vanishing line) would overflow.
+  auto clamp_to = [](double v, int lo, int hi) {
+    return static_cast<int>(std::clamp(v, static_cast<double>(lo), static_cast<double>(hi)));
+  };
+  const int x0 = clamp_to(std::floor(ellipse.centre.x() - reach), 0, image.width - 1);
+  const int y0 = clamp_to(std::floor(ellipse.centre.y() - reach), 0, image.height - 1);
+  const int x1 = clamp_to(std::ceil(ellipse.centre.x() + reach), x0, image.width - 1);
+  const int y1 = clamp_to(std::ceil(ellipse.centre.y() + reach), y0, image.height - 1);
   const ImageView8 crop{image.Row(y0) + x0, x1 - x0 + 1, y1 - y0 + 1, image.stride_bytes};
   return Patch{GaussianBlur(crop, 0.0), Eigen::Vector2d(x0, y0)};
 }
