@@ -1,0 +1,160 @@
+#pragma once
+// The station's record of every car: cycles (every attempt), their per-sensor results and
+// their progress events, in one SQLite file.
+//
+// Durability: WAL journal with synchronous=FULL, so a call that returned OK is on disk and
+// survives a crash or power loss of the daemon; nothing committed is ever lost. A cycle found
+// still `running` when the store opens was interrupted (crash, kill -9, power) and becomes
+// `aborted` (reason "daemon_restarted"). The schema is versioned (PRAGMA user_version) and
+// migrated forward on open; a file from a newer linecald is refused, never rewritten.
+//
+// Errors (absl::Status, messages name the database file):
+//   Unavailable         the database stayed locked by another process past the busy timeout
+//   FailedPrecondition  a newer schema; ending a cycle that already ended
+//   NotFound            unknown cycle id
+//   InvalidArgument     a malformed page token or filter
+//   Internal / DataLoss any other SQLite failure / a failed integrity check
+// Thread safety: every method may be called from any thread (one connection, one mutex).
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+struct sqlite3;
+
+namespace linecal {
+
+enum class CycleState { kRunning, kDone, kCancelled, kAborted };
+enum class Verdict { kNone, kPass, kFail, kError };
+
+// "running", "done", "cancelled", "aborted" — the words stored in the database.
+const char* CycleStateName(CycleState state);
+// "", "pass", "fail", "error" — the words of interfaces.md's results.
+const char* VerdictName(Verdict verdict);
+
+// Yaw/pitch/roll (degrees, conventions.md) and position (metres) of a sensor in the car.
+struct MountingValues {
+  double yaw_deg = 0, pitch_deg = 0, roll_deg = 0;
+  double x_m = 0, y_m = 0, z_m = 0;
+  bool operator==(const MountingValues&) const = default;
+};
+
+struct StoredSensorResult {
+  std::string sensor;  // the car model's sensor name
+  std::string kind;    // "camera", "lidar", "radar"
+  Verdict verdict = Verdict::kNone;
+  std::string reason;   // a code ("yaw_out_of_tolerance"); empty on pass
+  std::string message;  // the same for a person
+  std::vector<double> T_car_sensor;  // 16 values, row-major; empty when not solved
+  MountingValues measured, deviation, sigma;
+  double residual_rms = 0;  // pixels (cameras), metres (LiDARs), degrees (radars)
+  int features_used = 0;
+  std::optional<double> vanishing_point_u_px, vanishing_point_v_px;  // cameras
+  std::vector<double> ground_homography;  // cameras: 9 values, row-major; else empty
+  std::string ranging_json;  // cameras: the ranging check as JSON; else empty
+  int64_t elapsed_ns = 0;    // acquire to verdict
+  bool operator==(const StoredSensorResult&) const = default;
+};
+
+struct StoredCycle {
+  int64_t id = 0;  // assigned by BeginCycle: increasing, never reused
+  std::string vin;
+  std::string car_model_id;
+  CycleState state = CycleState::kRunning;
+  Verdict verdict = Verdict::kNone;
+  std::string reason;
+  int64_t started_ns = 0;  // Unix epoch
+  int64_t ended_ns = 0;    // 0 while running
+  std::string request_json;  // the request as received (VIN, aligner, options)
+  std::string capture_path;  // relative to the data root, when recorded
+  std::vector<StoredSensorResult> sensors;  // by sensor name; filled by GetCycle only
+};
+
+struct StoredEvent {
+  int64_t cycle_id = 0;
+  int64_t sequence = 0;  // 0, 1, 2, ... per cycle, assigned by AppendEvent
+  int64_t time_ns = 0;
+  std::string type;    // "started", "sensor_acquired", ..., "cycle_ended"
+  std::string sensor;  // empty for cycle-wide events
+  std::string detail;
+  Verdict verdict = Verdict::kNone;
+};
+
+struct CycleFilter {
+  std::string vin;                 // empty: every VIN
+  int64_t since_ns = 0;            // started at or after; 0: no bound
+  int64_t until_ns = 0;            // started before; 0: no bound
+  std::optional<Verdict> verdict;  // nullopt: every verdict
+  int page_size = 50;              // 1..1000
+  std::string page_token;          // empty: the first page
+};
+
+struct CyclePage {
+  std::vector<StoredCycle> cycles;  // newest first, without sensors
+  std::string next_page_token;      // empty on the last page
+};
+
+struct StoreOptions {
+  // How long a call waits for another process's lock before giving up with Unavailable.
+  // 5 s: longer than any write of ours takes, short enough for a cycle to end in error
+  // rather than hang the line.
+  std::chrono::milliseconds busy_timeout{5000};
+};
+
+class Store {
+ public:
+  // The current schema version (PRAGMA user_version after Open).
+  static constexpr int kSchemaVersion = 1;
+
+  // Opens or creates the database at `path` (its directory must exist), migrates it to
+  // kSchemaVersion and turns running cycles into aborted ones. Cost: a few fsyncs.
+  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& path,
+                                                     const StoreOptions& options = {});
+  ~Store();
+  Store(const Store&) = delete;
+  Store& operator=(const Store&) = delete;
+
+  const std::string& path() const { return path_; }
+  // Cycles that Open found running and stored as aborted.
+  int aborted_at_open() const { return aborted_at_open_; }
+
+  // Stores a new running cycle (`cycle.id`, state, verdict and sensors are ignored) and
+  // its car; returns the cycle's id.
+  absl::StatusOr<int64_t> BeginCycle(const StoredCycle& cycle);
+  // Appends an event to a cycle; returns its sequence number. NotFound for an unknown cycle.
+  absl::StatusOr<int64_t> AppendEvent(const StoredEvent& event);
+  // Stores (or replaces) the result of one sensor of a running cycle.
+  absl::Status PutSensorResult(int64_t cycle_id, const StoredSensorResult& result);
+  // Ends a running cycle: state (not kRunning), overall verdict and reason, end time.
+  // FailedPrecondition when it already ended.
+  absl::Status EndCycle(int64_t cycle_id, CycleState state, Verdict verdict,
+                        const std::string& reason, int64_t ended_ns);
+
+  absl::StatusOr<StoredCycle> GetCycle(int64_t cycle_id);
+  absl::StatusOr<std::vector<StoredEvent>> Events(int64_t cycle_id);
+  absl::StatusOr<CyclePage> ListCycles(const CycleFilter& filter);
+  // The newest running cycle's id, if any.
+  absl::StatusOr<std::optional<int64_t>> RunningCycle();
+
+  // PRAGMA integrity_check: OK, or DataLoss with SQLite's first complaint.
+  absl::Status IntegrityCheck();
+
+ private:
+  Store(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
+  absl::Status Migrate();
+  absl::Status AbortRunning();
+
+  std::mutex mutex_;
+  sqlite3* db_;
+  std::string path_;
+  int aborted_at_open_ = 0;
+};
+
+}  // namespace linecal

@@ -1,0 +1,315 @@
+// The station store on real SQLite files in a scratch directory: schema and durability
+// settings, round trips, error codes, paging, a locked database, and crashes of a writer
+// process (kill -9) that must lose nothing it committed.
+#include "daemon/store/store.h"
+
+#include <signal.h>
+#include <sqlite3.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace linecal {
+namespace {
+
+namespace fs = std::filesystem;
+
+class StoreTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("linecal_store_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    path_ = (dir_ / "station.db").string();
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::unique_ptr<Store> OpenOk(const StoreOptions& options = {}) {
+    absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(path_, options);
+    EXPECT_TRUE(store.ok()) << store.status();
+    return store.ok() ? std::move(*store) : nullptr;
+  }
+
+  // A second, raw connection, as another process would have.
+  std::string RawQuery(const std::string& sql) {
+    sqlite3* db = nullptr;
+    EXPECT_EQ(sqlite3_open(path_.c_str(), &db), SQLITE_OK);
+    std::string value;
+    sqlite3_exec(
+        db, sql.c_str(),
+        [](void* out, int, char** values, char**) {
+          *static_cast<std::string*>(out) = values[0] ? values[0] : "";
+          return 0;
+        },
+        &value, nullptr);
+    sqlite3_close(db);
+    return value;
+  }
+
+  fs::path dir_;
+  std::string path_;
+};
+
+StoredCycle Request(const std::string& vin, int64_t started_ns) {
+  StoredCycle c;
+  c.vin = vin;
+  c.car_model_id = "reference";
+  c.started_ns = started_ns;
+  c.request_json = R"({"vin":")" + vin + R"("})";
+  return c;
+}
+
+StoredSensorResult CameraResult() {
+  StoredSensorResult r;
+  r.sensor = "front_camera";
+  r.kind = "camera";
+  r.verdict = Verdict::kFail;
+  r.reason = "yaw_out_of_tolerance";
+  r.message = "yaw 0.61 deg off nominal, tolerance 0.5 deg";
+  r.T_car_sensor = {0, 0, 1, 1.9, -1, 0, 0, 0.01, 0, -1, 0, 1.32, 0, 0, 0, 1};
+  r.measured = {0.61, -1.02, 0.03, 1.9, 0.01, 1.32};
+  r.deviation = {0.61, -0.02, 0.03, 0.001, 0.01, -0.002};
+  r.sigma = {0.004, 0.003, 0.006, 0.0007, 0.0009, 0.0011};
+  r.residual_rms = 0.187;
+  r.features_used = 90;
+  r.vanishing_point_u_px = 961.25;
+  r.vanishing_point_v_px = 512.0625;
+  r.ground_homography = {1.5, 0.25, -3, 0.0625, 7, 11, 1e-3, 2e-5, 1};
+  r.ranging_json = R"([{"true_m":5,"measured_m":5.01}])";
+  r.elapsed_ns = 412000000;
+  return r;
+}
+
+TEST_F(StoreTest, NewDatabaseIsWalWithTheCurrentSchemaVersion) {
+  std::unique_ptr<Store> store = OpenOk();
+  ASSERT_NE(store, nullptr);
+  EXPECT_EQ(RawQuery("PRAGMA journal_mode"), "wal");
+  EXPECT_EQ(RawQuery("PRAGMA user_version"), std::to_string(Store::kSchemaVersion));
+  EXPECT_EQ(RawQuery("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name IN "
+                     "('cars', 'cycles', 'sensor_results', 'events')"),
+            "4");
+  EXPECT_EQ(store->aborted_at_open(), 0);
+  EXPECT_TRUE(store->IntegrityCheck().ok());
+}
+
+TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
+  std::unique_ptr<Store> store = OpenOk();
+  absl::StatusOr<int64_t> id = store->BeginCycle(Request("WVWZZZ1JZXW000001", 1000));
+  ASSERT_TRUE(id.ok()) << id.status();
+  EXPECT_EQ(*store->RunningCycle(), std::optional<int64_t>(*id));
+  for (int i = 0; i < 3; ++i) {
+    absl::StatusOr<int64_t> seq = store->AppendEvent({*id, 0, 1000 + i, "sensor_acquired", "front_camera", "", Verdict::kNone});
+    ASSERT_TRUE(seq.ok()) << seq.status();
+    EXPECT_EQ(*seq, i);
+  }
+  StoredSensorResult camera = CameraResult();
+  StoredSensorResult radar;
+  radar.sensor = "front_radar";
+  radar.kind = "radar";
+  radar.verdict = Verdict::kPass;
+  radar.T_car_sensor = {1, 0, 0, 3.7, 0, 1, 0, 0, 0, 0, 1, 0.5, 0, 0, 0, 1};
+  ASSERT_TRUE(store->PutSensorResult(*id, camera).ok());
+  ASSERT_TRUE(store->PutSensorResult(*id, radar).ok());
+  ASSERT_TRUE(store->EndCycle(*id, CycleState::kDone, Verdict::kFail, "front_camera", 5000).ok());
+
+  absl::StatusOr<StoredCycle> back = store->GetCycle(*id);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->vin, "WVWZZZ1JZXW000001");
+  EXPECT_EQ(back->state, CycleState::kDone);
+  EXPECT_EQ(back->verdict, Verdict::kFail);
+  EXPECT_EQ(back->reason, "front_camera");
+  EXPECT_EQ(back->started_ns, 1000);
+  EXPECT_EQ(back->ended_ns, 5000);
+  EXPECT_EQ(back->request_json, R"({"vin":"WVWZZZ1JZXW000001"})");
+  ASSERT_EQ(back->sensors.size(), 2u);
+  EXPECT_EQ(back->sensors[0], camera);  // every double bit-exact (%.17g and REAL columns)
+  EXPECT_EQ(back->sensors[1], radar);
+  EXPECT_FALSE(back->sensors[1].vanishing_point_u_px.has_value());
+
+  absl::StatusOr<std::vector<StoredEvent>> events = store->Events(*id);
+  ASSERT_TRUE(events.ok());
+  ASSERT_EQ(events->size(), 3u);
+  EXPECT_EQ((*events)[2].sequence, 2);
+  EXPECT_EQ((*events)[2].time_ns, 1002);
+  EXPECT_EQ(*store->RunningCycle(), std::nullopt);
+}
+
+TEST_F(StoreTest, ErrorCodesOfUnknownAndEndedCycles) {
+  std::unique_ptr<Store> store = OpenOk();
+  EXPECT_EQ(store->GetCycle(42).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store->AppendEvent({42, 0, 1, "started", "", "", Verdict::kNone}).status().code(),
+            absl::StatusCode::kNotFound);
+  EXPECT_EQ(store->PutSensorResult(42, CameraResult()).code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store->EndCycle(42, CycleState::kDone, Verdict::kPass, "", 1).code(), absl::StatusCode::kNotFound);
+
+  const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
+  EXPECT_EQ(store->EndCycle(id, CycleState::kRunning, Verdict::kPass, "", 2).code(),
+            absl::StatusCode::kInvalidArgument);
+  ASSERT_TRUE(store->EndCycle(id, CycleState::kCancelled, Verdict::kError, "cancelled", 2).ok());
+  const absl::Status again = store->EndCycle(id, CycleState::kDone, Verdict::kPass, "", 3);
+  EXPECT_EQ(again.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(again.message().find("cancelled"), std::string::npos) << again;
+  EXPECT_EQ(store->PutSensorResult(id, CameraResult()).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store->GetCycle(id)->state, CycleState::kCancelled);
+}
+
+TEST_F(StoreTest, IdsIncreaseAndAreNeverReused) {
+  std::unique_ptr<Store> store = OpenOk();
+  const int64_t a = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
+  const int64_t b = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 2));
+  EXPECT_EQ(b, a + 1);
+  // Even when the newest row goes away, AUTOINCREMENT keeps its id retired.
+  RawQuery("DELETE FROM cycles WHERE id = " + std::to_string(b));
+  store = OpenOk();
+  EXPECT_EQ(*store->BeginCycle(Request("WVWZZZ1JZXW000001", 3)), b + 1);
+  EXPECT_EQ(RawQuery("SELECT last_cycle_id FROM cars WHERE vin = 'WVWZZZ1JZXW000001'"), std::to_string(b + 1));
+}
+
+TEST_F(StoreTest, ListFiltersAndPagesNewestFirstWithoutRepeats) {
+  std::unique_ptr<Store> store = OpenOk();
+  // 7 cycles: 3 VINs, started at t = 10, 20, ..., 70; verdicts pass, fail, error in turn.
+  const Verdict verdicts[] = {Verdict::kPass, Verdict::kFail, Verdict::kError};
+  const char* vins[] = {"WVWZZZ1JZXW000001", "WVWZZZ1JZXW000002", "WVWZZZ1JZXW000003"};
+  for (int i = 0; i < 7; ++i) {
+    const int64_t id = *store->BeginCycle(Request(vins[i % 3], 10 * (i + 1)));
+    ASSERT_TRUE(store->EndCycle(id, CycleState::kDone, verdicts[i % 3], "", 10 * (i + 1) + 5).ok());
+  }
+  CycleFilter filter;
+  filter.page_size = 3;
+  std::vector<int64_t> started;
+  std::set<int64_t> ids;
+  int pages = 0;
+  do {
+    absl::StatusOr<CyclePage> page = store->ListCycles(filter);
+    ASSERT_TRUE(page.ok()) << page.status();
+    ++pages;
+    for (const StoredCycle& c : page->cycles) {
+      started.push_back(c.started_ns);
+      ids.insert(c.id);
+      EXPECT_TRUE(c.sensors.empty());
+    }
+    filter.page_token = page->next_page_token;
+  } while (!filter.page_token.empty());
+  EXPECT_EQ(pages, 3);
+  EXPECT_EQ(started, (std::vector<int64_t>{70, 60, 50, 40, 30, 20, 10}));
+  EXPECT_EQ(ids.size(), 7u);
+
+  CycleFilter by_vin;
+  by_vin.vin = vins[0];  // cycles 0, 3, 6
+  EXPECT_EQ(store->ListCycles(by_vin)->cycles.size(), 3u);
+  CycleFilter by_verdict;
+  by_verdict.verdict = Verdict::kFail;  // cycles 1, 4
+  absl::StatusOr<CyclePage> fails = store->ListCycles(by_verdict);
+  ASSERT_EQ(fails->cycles.size(), 2u);
+  EXPECT_EQ(fails->cycles[0].started_ns, 50);
+  CycleFilter window;
+  window.since_ns = 20;
+  window.until_ns = 50;  // started 20, 30, 40
+  EXPECT_EQ(store->ListCycles(window)->cycles.size(), 3u);
+
+  CycleFilter bad;
+  bad.page_token = "not-a-token";
+  EXPECT_EQ(store->ListCycles(bad).status().code(), absl::StatusCode::kInvalidArgument);
+  bad.page_token.clear();
+  bad.page_size = 0;
+  const absl::Status size = store->ListCycles(bad).status();
+  EXPECT_EQ(size.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(size.message().find("page_size"), std::string::npos);
+}
+
+TEST_F(StoreTest, LockedDatabaseIsUnavailableAndNamesTheFile) {
+  StoreOptions options;
+  options.busy_timeout = std::chrono::milliseconds(100);
+  std::unique_ptr<Store> store = OpenOk(options);
+  sqlite3* other = nullptr;
+  ASSERT_EQ(sqlite3_open(path_.c_str(), &other), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(other, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK);
+  const absl::StatusOr<int64_t> blocked = store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
+  EXPECT_EQ(blocked.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(blocked.status().message().find(path_), std::string::npos) << blocked.status();
+  ASSERT_EQ(sqlite3_exec(other, "COMMIT", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_close(other);
+  // Nothing half-written stayed behind, and the store works again.
+  EXPECT_TRUE(store->BeginCycle(Request("WVWZZZ1JZXW000001", 1)).ok());
+  EXPECT_EQ(RawQuery("SELECT count(*) FROM cycles"), "1");
+}
+
+TEST_F(StoreTest, NewerSchemaAndForeignFilesAreRefused) {
+  OpenOk();
+  RawQuery("PRAGMA user_version = 99");
+  const absl::Status newer = Store::Open(path_).status();
+  EXPECT_EQ(newer.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(newer.message().find("99"), std::string::npos) << newer;
+  EXPECT_EQ(RawQuery("PRAGMA user_version"), "99");  // left as it was
+
+  const std::string junk = (dir_ / "junk.db").string();
+  std::ofstream(junk) << std::string(4096, 'x');
+  const absl::Status foreign = Store::Open(junk).status();
+  EXPECT_EQ(foreign.code(), absl::StatusCode::kDataLoss) << foreign;
+  EXPECT_NE(foreign.message().find(junk), std::string::npos);
+
+  EXPECT_FALSE(Store::Open((dir_ / "no" / "such" / "dir.db").string()).ok());
+}
+
+// A writer process commits cycles as fast as it can and reports each committed id on a pipe;
+// it is killed with SIGKILL mid-stream. Every id it reported must be there after reopening,
+// the cycle it was in the middle of must come back aborted, and the file must be intact.
+TEST_F(StoreTest, KillNineLosesNothingCommittedAndAbortsTheInterruptedCycle) {
+  OpenOk();  // create the schema before forking
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::close(fds[0]);
+    absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(path_);
+    if (!store.ok()) ::_exit(3);
+    for (int64_t i = 0;; ++i) {
+      absl::StatusOr<int64_t> id = (*store)->BeginCycle(Request("WVWZZZ1JZXW000001", i));
+      if (!id.ok()) ::_exit(4);
+      (*store)->AppendEvent({*id, 0, i, "started", "", "", Verdict::kNone}).IgnoreError();
+      // Every second cycle ends: the other half are left running, as a crash leaves them.
+      if (i % 2 == 0 && !(*store)->EndCycle(*id, CycleState::kDone, Verdict::kPass, "", i + 1).ok()) ::_exit(5);
+      if (::write(fds[1], &*id, sizeof(*id)) != sizeof(*id)) ::_exit(6);
+    }
+  }
+  ::close(fds[1]);
+  std::vector<int64_t> committed;
+  int64_t id = 0;
+  // 40 commits: enough to be mid-stream, few enough to stay quick with fsync on every commit.
+  while (committed.size() < 40 && ::read(fds[0], &id, sizeof(id)) == sizeof(id)) committed.push_back(id);
+  ::kill(child, SIGKILL);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ::close(fds[0]);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "writer exited early with " << WEXITSTATUS(status);
+  ASSERT_EQ(committed.size(), 40u);
+
+  std::unique_ptr<Store> store = OpenOk();
+  EXPECT_TRUE(store->IntegrityCheck().ok());
+  EXPECT_GE(store->aborted_at_open(), 20);  // the odd cycles among the 40, at least
+  for (int64_t c : committed) {
+    absl::StatusOr<StoredCycle> cycle = store->GetCycle(c);
+    ASSERT_TRUE(cycle.ok()) << "committed cycle " << c << " lost: " << cycle.status();
+    if (cycle->started_ns % 2 == 0) {
+      EXPECT_EQ(cycle->state, CycleState::kDone) << c;
+    } else {
+      EXPECT_EQ(cycle->state, CycleState::kAborted) << c;
+      EXPECT_EQ(cycle->reason, "daemon_restarted");
+      EXPECT_EQ(cycle->verdict, Verdict::kError);
+    }
+  }
+  EXPECT_EQ(*store->RunningCycle(), std::nullopt);
+}
+
+}  // namespace
+}  // namespace linecal
