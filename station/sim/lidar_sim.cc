@@ -188,7 +188,9 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
 
   const Scene scene(layout, options);
   std::mt19937_64 rng(seed);
-  std::normal_distribution<double> noise(0.0, options.range_sigma_m);
+  // Unit normal scaled by sigma: the standard library requires sigma > 0, and 0 is a valid
+  // option (noise-free scans).
+  std::normal_distribution<double> normal(0.0, 1.0);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   const Eigen::Vector3d o = T_station_lidar.translation();
   const Eigen::Matrix3d R = T_station_lidar.RotationMatrix();
@@ -215,7 +217,7 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
       const Hit hit = scene.Cast(o, R * dir_lidar);
       if (!std::isfinite(hit.range)) continue;
       if (options.dropout_probability > 0 && uniform(rng) < options.dropout_probability) continue;
-      double range = hit.range + noise(rng);
+      double range = hit.range + options.range_sigma_m * normal(rng);
       if (range < options.min_range_m || range > options.max_range_m) continue;
       // The packet carries whole distance units; the point must be what the decoder sees.
       range = std::round(range / info.distance_unit_m) * info.distance_unit_m;

@@ -1,6 +1,6 @@
 #pragma once
 // The station simulator's LiDAR: ray casting of a spinning LiDAR's real beam pattern against
-// a station (docs/simulator.md, "LiDAR").
+// a station (docs/simulator.md, "LiDAR simulator").
 //
 // Every column (one firing of all channels) casts one ray per beam, in the direction the
 // decoders will assign to that return (BeamAzimuthRad, the model's column step and timing), so
@@ -55,7 +55,7 @@ struct LidarSimResult {
 };
 
 // The lead-in and lead-out around the simulated rotations, degrees: more than the largest
-// Hesai azimuth offset (about 3 degrees), so that every beam of the first and last rotation is
+// Hesai azimuth offset (5.2 degrees in the reference Pandar64 file), so that every beam of the first and last rotation is
 // fired, and whole packets.
 inline constexpr double kLidarLeadDeg = 10.0;
 

@@ -115,15 +115,20 @@ absl::StatusOr<std::vector<CanFrame>> SimulateRadar(const std::string& model, in
     for (size_t i = 0; i < truth.size(); ++i) {
       const RadarTruth& t = truth[i];
       if (!t.in_view || uniform(rng) > options.detection_probability) continue;
-      add(t.range_m + options.range_sigma_m * normal(rng),
-          t.azimuth_rad + options.azimuth_sigma_deg * kDegToRad * normal(rng),
-          options.range_rate_sigma_mps * normal(rng), rcs[i] + options.rcs_sigma_db * normal(rng));
+      // Draws in named steps: the order of a call's arguments is unspecified, and the same
+      // seed must give the same log whatever the compiler.
+      const double range_noise = options.range_sigma_m * normal(rng);
+      const double azimuth_noise = options.azimuth_sigma_deg * kDegToRad * normal(rng);
+      const double rate_noise = options.range_rate_sigma_mps * normal(rng);
+      const double rcs_noise = options.rcs_sigma_db * normal(rng);
+      add(t.range_m + range_noise, t.azimuth_rad + azimuth_noise, rate_noise, rcs[i] + rcs_noise);
       if (options.multipath) {
         const double ghost_range = t.range_m * (1.3 + 0.5 * uniform(rng));
         if (ghost_range <= fov->max_range_m) {
-          add(ghost_range, t.azimuth_rad + options.azimuth_sigma_deg * kDegToRad * normal(rng),
-              options.range_rate_sigma_mps * normal(rng),
-              rcs[i] - (kGhostLossMinDb + (kGhostLossMaxDb - kGhostLossMinDb) * uniform(rng)));
+          const double ghost_azimuth_noise = options.azimuth_sigma_deg * kDegToRad * normal(rng);
+          const double ghost_rate_noise = options.range_rate_sigma_mps * normal(rng);
+          const double ghost_loss_db = kGhostLossMinDb + (kGhostLossMaxDb - kGhostLossMinDb) * uniform(rng);
+          add(ghost_range, t.azimuth_rad + ghost_azimuth_noise, ghost_rate_noise, rcs[i] - ghost_loss_db);
         }
       }
     }

@@ -1,7 +1,7 @@
 #pragma once
 // The station simulator's radar: what an ARS408 or Delphi ESR reports of a station's corner
 // reflectors and clutter over a number of measurement cycles, as the CAN frames the sensor
-// sends (docs/simulator.md, "Radar").
+// sends (docs/simulator.md, "Radar simulator").
 //
 // Every reflector of the layout inside the radar's field of view and range gives one
 // detection per cycle with Gaussian range, azimuth and RCS noise and zero range rate (the

@@ -223,8 +223,10 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, 
     const YawPitchRoll nominal = MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
     const double a = options.perturb_angle_deg * kDegToRad;
     const YawPitchRoll error{a * u(srng), a * u(srng), a * u(srng)};
-    const Eigen::Vector3d offset(options.perturb_offset_m * u(srng), options.perturb_offset_m * u(srng),
-                                 options.perturb_offset_m * u(srng));
+    // Braced lists evaluate in order (a constructor's parenthesised arguments do not), so the
+    // same seed gives the same pose whatever the compiler.
+    const Eigen::Vector3d offset{options.perturb_offset_m * u(srng), options.perturb_offset_m * u(srng),
+                                 options.perturb_offset_m * u(srng)};
     const YawPitchRoll truth_angles{nominal.yaw + error.yaw, nominal.pitch + error.pitch, nominal.roll + error.roll};
     const Rigid3d T_car_sensor(MountingRotation(truth_angles, r_base), sensor->T_car_sensor_nominal.translation() + offset);
     const Rigid3d T_station_sensor = T_station_car * T_car_sensor;
