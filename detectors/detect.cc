@@ -6,6 +6,7 @@
 #include "detectors/apriltag/apriltag_detector.h"
 #include "detectors/aruco/aruco_detector.h"
 #include "detectors/checker/checker_detector.h"
+#include "detectors/chessboard/chessboard_detector.h"
 #include "detectors/circle/circle_detector.h"
 
 namespace linecal {
@@ -14,7 +15,7 @@ std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board
   switch (board.type()) {
     case BoardType::kChecker: return DetectChecker(image, board);
     case BoardType::kCircle: return DetectCircleBoard(image, board);
-    case BoardType::kChessboard:
+    case BoardType::kChessboard: return DetectChessboard(image, board);
     case BoardType::kVertical: return std::nullopt;
     case BoardType::kAruco:
     case BoardType::kRoundHole: return DetectAruco(image, board);

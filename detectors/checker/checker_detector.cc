@@ -226,15 +226,6 @@ ColourCheck CheckColours(const ImageF& blurred, const Eigen::Matrix3d& H_image_g
   return check;
 }
 
-// The side of a square of the grid at grid point g in the image: the square root of the
-// area of the parallelogram that H maps the unit grid steps at g to, pixels.
-double LocalSquarePx(const Eigen::Matrix3d& H_image_grid, const Eigen::Vector2d& g) {
-  const Eigen::Vector2d p = ApplyHomography(H_image_grid, g);
-  const Eigen::Vector2d dx = ApplyHomography(H_image_grid, g + Eigen::Vector2d(1.0, 0.0)) - p;
-  const Eigen::Vector2d dy = ApplyHomography(H_image_grid, g + Eigen::Vector2d(0.0, 1.0)) - p;
-  return std::sqrt(std::abs(dx.x() * dy.y() - dx.y() * dy.x()));
-}
-
 }  // namespace
 
 std::string_view CheckerOptions::Validate() const {
@@ -360,7 +351,7 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
       bool residuals_ok = true;
       for (std::size_t m = 0; m < grid_pts.size() && residuals_ok; ++m) {
         const Eigen::Vector2d p = ApplyHomography(fit->H, grid_pts[m]);
-        const double square_px = LocalSquarePx(fit->H, grid_pts[m]);
+        const double square_px = LocalSquareSide(fit->H, grid_pts[m], 1.0);
         const double tol = std::max(1.0, options.max_residual_square_fraction * square_px);
         residuals_ok = (p - image_pts[m]).norm() <= tol;
       }

@@ -195,4 +195,11 @@ double HomographyResiduals(const Eigen::Matrix3d& H, std::span<const Eigen::Vect
   return std::sqrt(sum_sq / static_cast<double>(src.size()));
 }
 
+double LocalSquareSide(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_src, double side_src) {
+  const Eigen::Vector2d p = ApplyHomography(H, p_src);
+  const Eigen::Vector2d dx = ApplyHomography(H, p_src + Eigen::Vector2d(side_src, 0.0)) - p;
+  const Eigen::Vector2d dy = ApplyHomography(H, p_src + Eigen::Vector2d(0.0, side_src)) - p;
+  return std::sqrt(std::abs(dx.x() * dy.y() - dx.y() * dy.x()));
+}
+
 }  // namespace linecal

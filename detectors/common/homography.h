@@ -56,4 +56,9 @@ Eigen::Vector2d ApplyHomography(const Eigen::Matrix3d& H, const Eigen::Vector2d&
 double HomographyResiduals(const Eigen::Matrix3d& H, std::span<const Eigen::Vector2d> src,
                            std::span<const Eigen::Vector2d> dst, std::vector<double>* residuals);
 
+// The side, in dst units, of the image of a square of side side_src at p_src: the square
+// root of the area of the parallelogram that H maps the two steps of side_src from p_src to
+// (a local scale under perspective). NaN when a step maps to infinity. O(1).
+double LocalSquareSide(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_src, double side_src);
+
 }  // namespace linecal

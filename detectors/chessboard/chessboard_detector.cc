@@ -1,0 +1,564 @@
+#include "detectors/chessboard/chessboard_detector.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "detectors/common/binarise.h"
+#include "detectors/common/contours.h"
+#include "detectors/common/corner_refine.h"
+#include "detectors/common/edge_lines.h"
+#include "detectors/common/homography.h"
+#include "detectors/common/image_filters.h"
+#include "detectors/common/paint_check.h"
+
+namespace linecal {
+namespace {
+
+// Below this side no board of boards.md (smallest squares 12 px) fits.
+constexpr int kMinImageSide = 16;
+
+// ---- The board model, derived from Board (so a scaled board works unchanged) -------------
+
+// One side of a black square on a board edge line.
+struct Segment {
+  Eigen::Vector2d a_board = Eigen::Vector2d::Zero();
+  Eigen::Vector2d b_board = Eigen::Vector2d::Zero();
+  Eigen::Vector2d light_normal_board = Eigen::Vector2d::Zero();  // unit, towards the white
+};
+
+// A straight edge of one group: the sides of its squares on one board line.
+struct EdgeLine {
+  int group = 0;
+  bool horizontal = true;  // y = coord, else x = coord (board frame)
+  double coord = 0.0;
+  std::vector<Segment> segments;
+};
+
+// A group in its local grid: the middle square is [0, 1]^2 with the corners it shares
+// with its two neighbours at (0, 0) and (1, 0) (the first neighbour's square is
+// [-1, 0] x [-1, 0], the second's [1, 2] x [-1, 0]); axes handed like the image's (u right,
+// v down) for a camera facing the print. Board point = origin + gx step + gy R(step), R
+// the clockwise quarter turn as seen facing the print.
+struct GroupModel {
+  Eigen::Vector2d origin_board = Eigen::Vector2d::Zero();
+  Eigen::Vector2d step_board = Eigen::Vector2d::Zero();
+
+  Eigen::Vector2d ToBoard(const Eigen::Vector2d& g) const {
+    const Eigen::Vector2d turned(step_board.y(), -step_board.x());
+    return origin_board + g.x() * step_board + g.y() * turned;
+  }
+};
+
+struct FeatureModel {
+  int h_line = -1;  // the EdgeLine indices through the feature
+  int v_line = -1;
+  bool x_corner = false;
+};
+
+struct ChessModel {
+  std::array<GroupModel, 2> groups;  // left (smaller board x) first
+  std::vector<EdgeLine> lines;
+  std::vector<FeatureModel> features;  // by feature id
+  double square_m = 0.0;
+};
+
+// Corners of a black square, clockwise as seen facing the print (y up): TL, TR, BR, BL.
+std::array<Eigen::Vector2d, 4> BoxCorners(const Eigen::AlignedBox2d& b) {
+  return {Eigen::Vector2d(b.min().x(), b.max().y()), b.max(),
+          Eigen::Vector2d(b.max().x(), b.min().y()), b.min()};
+}
+
+// The model of a board made of groups of three squares (boards.md §1); nullopt when the
+// board is not such a board (two groups, every feature on one vertical and one horizontal
+// edge line of its group) or is not symmetric under 180 degrees (see the header).
+std::optional<ChessModel> MakeModel(const Board& board) {
+  std::vector<Eigen::AlignedBox2d> squares;
+  for (const BoardShape& s : board.shapes()) {
+    if (s.geometry == ShapeGeometry::kRect && s.paint == Paint::kBlack) {
+      squares.push_back(s.box_board);
+    }
+  }
+  if (squares.empty()) return std::nullopt;
+  ChessModel m;
+  m.square_m = squares[0].sizes().x();
+  // Coordinates are exact multiples of the PDF unit; a micrometre (times the scale) is far
+  // below any printed detail and far above rounding.
+  const double eps = 1e-6 * board.params().scale;
+  const auto same = [eps](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return (a - b).norm() < eps;
+  };
+  // 180-degree symmetry: every square's image under p -> -p is a square.
+  for (const Eigen::AlignedBox2d& s : squares) {
+    if (std::none_of(squares.begin(), squares.end(), [&](const Eigen::AlignedBox2d& o) {
+          return same(o.min(), -s.max()) && same(o.max(), -s.min());
+        })) {
+      return std::nullopt;
+    }
+  }
+  std::vector<int> group_of(squares.size(), -1);
+  std::vector<std::pair<double, GroupModel>> groups;  // centre x, model
+  std::vector<std::array<int, 3>> members;
+  for (std::size_t i = 0; i < squares.size(); ++i) {
+    const std::array<Eigen::Vector2d, 4> ci = BoxCorners(squares[i]);
+    std::array<int, 4> touching = {-1, -1, -1, -1};  // per corner of i, the square there
+    int count = 0;
+    for (std::size_t j = 0; j < squares.size(); ++j) {
+      if (j == i) continue;
+      for (int k = 0; k < 4; ++k) {
+        for (const Eigen::Vector2d& cj : BoxCorners(squares[j])) {
+          if (same(ci[k], cj)) {
+            touching[k] = static_cast<int>(j);
+            ++count;
+          }
+        }
+      }
+    }
+    if (count != 2) continue;
+    for (int k = 0; k < 4; ++k) {
+      const int next = (k + 1) % 4;
+      if (touching[k] < 0 || touching[next] < 0) continue;
+      GroupModel g;
+      g.origin_board = ci[k];
+      g.step_board = ci[next] - ci[k];
+      groups.emplace_back(squares[i].center().x(), g);
+      members.push_back({static_cast<int>(i), touching[k], touching[next]});
+    }
+  }
+  if (groups.size() != 2) return std::nullopt;
+  const int left = groups[0].first < groups[1].first ? 0 : 1;
+  m.groups = {groups[left].second, groups[1 - left].second};
+  for (int g = 0; g < 2; ++g) {
+    for (int s : members[g == 0 ? left : 1 - left]) group_of[s] = g;
+  }
+  // Edge lines: the four sides of each square, grouped by (group, orientation, coordinate).
+  for (std::size_t i = 0; i < squares.size(); ++i) {
+    if (group_of[i] < 0) return std::nullopt;
+    const std::array<Eigen::Vector2d, 4> c = BoxCorners(squares[i]);
+    // Side k runs from corner k to k + 1: top, right, bottom, left.
+    const std::array<Eigen::Vector2d, 4> normals = {Eigen::Vector2d(0, 1), Eigen::Vector2d(1, 0),
+                                                    Eigen::Vector2d(0, -1), Eigen::Vector2d(-1, 0)};
+    for (int k = 0; k < 4; ++k) {
+      const bool horizontal = k % 2 == 0;
+      const double coord = horizontal ? c[k].y() : c[k].x();
+      auto it = std::find_if(m.lines.begin(), m.lines.end(), [&](const EdgeLine& l) {
+        return l.group == group_of[i] && l.horizontal == horizontal &&
+               std::abs(l.coord - coord) < eps;
+      });
+      if (it == m.lines.end()) {
+        m.lines.push_back({group_of[i], horizontal, coord, {}});
+        it = m.lines.end() - 1;
+      }
+      it->segments.push_back({c[k], c[(k + 1) % 4], normals[k]});
+    }
+  }
+  for (const BoardFeature& f : board.features()) {
+    FeatureModel fm;
+    fm.x_corner = f.kind == FeatureKind::kXCorner;
+    for (std::size_t l = 0; l < m.lines.size(); ++l) {
+      const EdgeLine& line = m.lines[l];
+      const double v = line.horizontal ? f.p_board.y() : f.p_board.x();
+      if (std::abs(v - line.coord) >= eps) continue;
+      for (const Segment& s : line.segments) {
+        if (same(s.a_board, f.p_board) || same(s.b_board, f.p_board)) {
+          (line.horizontal ? fm.h_line : fm.v_line) = static_cast<int>(l);
+        }
+      }
+    }
+    if (fm.h_line < 0 || fm.v_line < 0) return std::nullopt;
+    m.features.push_back(fm);
+  }
+  return m;
+}
+
+// ---- Candidates: square quads, touching pairs, groups of three ---------------------------
+
+struct SquareQuad {
+  std::array<Eigen::Vector2d, 4> corners_px;  // clockwise in the image
+  Eigen::Vector2d centre_px = Eigen::Vector2d::Zero();
+  double side_px = 0.0;  // mean side length
+};
+
+struct Touch {
+  int other = 0;         // the other quad
+  int corner = 0;        // this quad's corner at the shared vertex
+  int other_corner = 0;  // the other quad's corner there
+};
+
+// A group seen in the image: quads (middle, first neighbour, second neighbour) and, for
+// each, its corner at local grid corner 0 of its square (see kLocal).
+struct Triple {
+  std::array<int, 3> quads = {0, 0, 0};
+  std::array<int, 3> first_corner = {0, 0, 0};
+  double side_px = 0.0;
+};
+
+// Local grid positions (GroupModel) of the quads' corners, in their clockwise order from
+// first_corner: the middle square from its corner shared with the first neighbour, the
+// neighbours from their shared corners.
+constexpr double kLocal[3][4][2] = {{{0, 0}, {1, 0}, {1, 1}, {0, 1}},
+                                    {{0, 0}, {-1, 0}, {-1, -1}, {0, -1}},
+                                    {{1, 0}, {1, -1}, {2, -1}, {2, 0}}};
+
+// The 12 image corners of a triple and their local grid positions.
+void TriplePoints(const Triple& t, const std::vector<SquareQuad>& quads,
+                  std::vector<Eigen::Vector2d>* local, std::vector<Eigen::Vector2d>* image) {
+  for (int m = 0; m < 3; ++m) {
+    for (int r = 0; r < 4; ++r) {
+      local->emplace_back(kLocal[m][r][0], kLocal[m][r][1]);
+      image->push_back(quads[t.quads[m]].corners_px[(t.first_corner[m] + r) % 4]);
+    }
+  }
+}
+
+std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
+                                const ChessboardOptions& options, int erosion) {
+  const int n = static_cast<int>(quads.size());
+  std::vector<std::vector<Touch>> touches(n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const SquareQuad& a = quads[i];
+      const SquareQuad& b = quads[j];
+      // Squares of one group differ in size only by perspective over two squares: a factor
+      // of 2 is far beyond any view of acceptance.md.
+      const double small = std::min(a.side_px, b.side_px);
+      const double large = std::max(a.side_px, b.side_px);
+      if (large > 2.0 * small) continue;
+      // Centres of touching squares are sqrt(2) sides apart (more under perspective).
+      if ((a.centre_px - b.centre_px).squaredNorm() > 6.25 * large * large) continue;
+      int best_a = 0, best_b = 0;
+      double best = 1e300;
+      for (int ka = 0; ka < 4; ++ka) {
+        for (int kb = 0; kb < 4; ++kb) {
+          const double d = (a.corners_px[ka] - b.corners_px[kb]).norm();
+          if (d < best) {
+            best = d;
+            best_a = ka;
+            best_b = kb;
+          }
+        }
+      }
+      // The contour of each square retreats from the shared vertex by about the blur over
+      // the sine of half the corner's angle (acute under perspective): the corners may lie
+      // well apart, and the reflection test below is the sharp one.
+      if (best > 2.0 * options.touch_fraction * small + 2.0 + erosion) continue;
+      const Eigen::Vector2d vertex = 0.5 * (a.corners_px[best_a] + b.corners_px[best_b]);
+      const Eigen::Vector2d mirrored = 2.0 * vertex - a.centre_px;
+      if ((mirrored - b.centre_px).norm() > options.touch_fraction * 0.5 * (small + large)) {
+        continue;
+      }
+      touches[i].push_back({j, best_a, best_b});
+      touches[j].push_back({i, best_b, best_a});
+    }
+  }
+  std::vector<Triple> triples;
+  std::vector<Eigen::Vector2d> local, image;
+  HomographyFitOptions dlt;
+  dlt.refine = false;  // a coarse check: contour corners are off by a pixel anyway
+  for (int m = 0; m < n; ++m) {
+    for (const Touch& t1 : touches[m]) {
+      for (const Touch& t2 : touches[m]) {
+        if (t2.corner != (t1.corner + 1) % 4 || t1.other == t2.other) continue;
+        Triple t;
+        t.quads = {m, t1.other, t2.other};
+        t.first_corner = {t1.corner, t1.other_corner, t2.other_corner};
+        t.side_px = (quads[m].side_px + quads[t1.other].side_px + quads[t2.other].side_px) / 3.0;
+        local.clear();
+        image.clear();
+        TriplePoints(t, quads, &local, &image);
+        const std::optional<HomographyFit> fit = FitHomography(local, image, dlt);
+        if (!fit || fit->max_residual > options.coarse_residual_fraction * t.side_px) continue;
+        triples.push_back(t);
+      }
+    }
+  }
+  return triples;
+}
+
+// ---- Sub-pixel refinement ---------------------------------------------------------------
+
+// Saddle fit of an X-corner: blur sigma and window as the checker detector's (sigma 1.5
+// px keeps the saddle stable under noise of sigma 6 and is small enough for 12 px
+// squares; the window is a third of the local square side, 2..7 px).
+constexpr double kSaddleBlurSigmaPx = 1.5;
+
+// The X-corner near start_px refined by the saddle fit on a blurred patch of the image
+// (blurring the patch alone costs far less than the whole image); nullopt when the patch
+// leaves the image or the fit fails or wanders more than a pixel from the start.
+std::optional<Eigen::Vector2d> RefineXCorner(const ImageView8& image,
+                                             const Eigen::Vector2d& start_px, double side_px) {
+  SaddleFitOptions saddle;
+  saddle.half_window = std::clamp(static_cast<int>(side_px / 3.0), 2, 7);
+  // The patch holds the window, a pixel of movement and the blur kernel (3 sigma) clear of
+  // its clamped border, plus two pixels for the saddle fit's own border rule.
+  const int radius =
+      saddle.half_window + 1 + static_cast<int>(std::ceil(3.0 * kSaddleBlurSigmaPx)) + 2;
+  const int x0 = static_cast<int>(std::floor(start_px.x())) - radius;
+  const int y0 = static_cast<int>(std::floor(start_px.y())) - radius;
+  const int size = 2 * radius + 2;
+  if (x0 < 0 || y0 < 0 || x0 + size > image.width || y0 + size > image.height) {
+    return std::nullopt;
+  }
+  ImageView8 patch;
+  patch.data = image.Row(y0) + x0;
+  patch.width = size;
+  patch.height = size;
+  patch.stride_bytes = image.stride_bytes;
+  const ImageF blurred = GaussianBlur(patch, kSaddleBlurSigmaPx);
+  const Eigen::Vector2d offset(x0, y0);
+  const std::optional<Eigen::Vector2d> refined = RefineSaddle(blurred, start_px - offset, saddle);
+  if (!refined || (*refined + offset - start_px).norm() > 1.0) return std::nullopt;
+  return *refined + offset;
+}
+
+// The image line of each edge line, measured around its prediction by H_image_board.
+std::optional<std::vector<Line2d>> MeasureLines(const ImageView8& image, const ChessModel& model,
+                                                const Eigen::Matrix3d& H) {
+  std::vector<Line2d> lines;
+  std::vector<EdgePoint> points;
+  for (const EdgeLine& line : model.lines) {
+    points.clear();
+    Eigen::Vector2d hint = Eigen::Vector2d::Zero();
+    for (const Segment& s : line.segments) {
+      const Eigen::Vector2d a = ApplyHomography(H, s.a_board);
+      const Eigen::Vector2d b = ApplyHomography(H, s.b_board);
+      const double len = (b - a).norm();
+      if (!(len > 1.0)) return std::nullopt;
+      const Eigen::Vector2d tangent = (b - a) / len;
+      if (hint.dot(tangent) < 0.0) {
+        hint -= tangent;
+      } else {
+        hint += tangent;
+      }
+      const Eigen::Vector2d mid_board = 0.5 * (s.a_board + s.b_board);
+      const Eigen::Vector2d mid = ApplyHomography(H, mid_board);
+      Eigen::Vector2d normal(-tangent.y(), tangent.x());
+      const Eigen::Vector2d light =
+          ApplyHomography(H, mid_board + 0.25 * model.square_m * s.light_normal_board);
+      if (normal.dot(light - mid) < 0.0) normal = -normal;
+      // The window stays within 0.3 of the square across the edge: the nearest edge of the
+      // same polarity is beyond the white margin (two thirds of a square) or the square's
+      // far side; at most 4 px, beyond which only the blur's tail is seen.
+      const double across_px =
+          (ApplyHomography(H, mid_board - model.square_m * s.light_normal_board) - mid).norm();
+      const double half_window_px = std::clamp(0.3 * across_px, 1.0, 4.0);
+      // About one edge point per pixel of side, at least 8 (a line from few points is
+      // noisy), at most 80 (more points add little).
+      const int samples = std::clamp(static_cast<int>(len), 8, 80);
+      for (int i = 0; i < samples; ++i) {
+        // The middle 80 % of the side: the ends are blurred together with the square's
+        // other sides and the neighbour's corner.
+        const double t = 0.1 + 0.8 * (i + 0.5) / samples;
+        const Eigen::Vector2d q = ApplyHomography(H, s.a_board + t * (s.b_board - s.a_board));
+        if (!q.allFinite()) return std::nullopt;
+        const std::optional<EdgePoint> e = MeasureEdgePoint(image, q, normal, half_window_px);
+        if (e) points.push_back(*e);
+      }
+    }
+    // A line from fewer points than a side's minimum of 8 is not trusted.
+    if (points.size() < 8) return std::nullopt;
+    const std::optional<Line2d> fit = FitWeightedLine(points, hint);
+    if (!fit) return std::nullopt;
+    lines.push_back(*fit);
+  }
+  return lines;
+}
+
+struct Refined {
+  std::vector<Eigen::Vector2d> uv_px;  // by feature id
+  Eigen::Matrix3d H = Eigen::Matrix3d::Identity();
+};
+
+// Refines every feature from the coarse H_image_board (two passes, see the header) and
+// checks the whole board. *reason on failure.
+std::optional<Refined> RefineBoard(const ImageView8& image, const Board& board,
+                                   const ChessModel& model, const Eigen::Matrix3d& H_coarse,
+                                   const Image8& dark, const ChessboardOptions& options,
+                                   DetectReason* reason) {
+  *reason = DetectReason::kVerificationFailed;
+  const std::vector<BoardFeature>& features = board.features();
+  std::vector<Eigen::Vector2d> p_board;
+  for (const BoardFeature& f : features) p_board.push_back(f.p_board);
+  Refined r;
+  r.H = H_coarse;
+  constexpr int kPasses = 2;
+  for (int pass = 0; pass < kPasses; ++pass) {
+    const std::optional<std::vector<Line2d>> lines = MeasureLines(image, model, r.H);
+    if (!lines) return std::nullopt;
+    r.uv_px.clear();
+    for (std::size_t id = 0; id < features.size(); ++id) {
+      const FeatureModel& fm = model.features[id];
+      std::optional<Eigen::Vector2d> uv = IntersectLines((*lines)[fm.h_line], (*lines)[fm.v_line]);
+      if (!uv) return std::nullopt;
+      if (fm.x_corner && pass == kPasses - 1) {
+        const double side_px = LocalSquareSide(r.H, p_board[id], model.square_m);
+        uv = RefineXCorner(image, *uv, side_px);
+        if (!uv) return std::nullopt;
+      }
+      r.uv_px.push_back(*uv);
+    }
+    const std::optional<HomographyFit> fit = FitHomography(p_board, r.uv_px);
+    if (!fit) return std::nullopt;
+    r.H = fit->H;
+  }
+  for (std::size_t id = 0; id < features.size(); ++id) {
+    const double side_px = LocalSquareSide(r.H, p_board[id], model.square_m);
+    const double tol = std::max(0.5, options.max_residual_square_fraction * side_px);
+    if (!((ApplyHomography(r.H, p_board[id]) - r.uv_px[id]).norm() <= tol)) return std::nullopt;
+  }
+  const double px_per_m =
+      LocalSquareSide(r.H, Eigen::Vector2d::Zero(), model.square_m) / model.square_m;
+  if (!PaintAgrees(board, r.H, dark, px_per_m, options.min_paint_agreement)) {
+    *reason = DetectReason::kWrongBoard;
+    return std::nullopt;
+  }
+  *reason = DetectReason::kNone;
+  return r;
+}
+
+Detection Fail(DetectReason reason) {
+  Detection d;
+  d.found = false;
+  d.reason = reason;
+  return d;
+}
+
+}  // namespace
+
+std::string_view ChessboardOptions::Validate() const {
+  if (min_contrast < 1 || min_contrast > 255) return "min_contrast";
+  if (!(noise_contrast_factor >= 0.0 && noise_contrast_factor <= 100.0)) {
+    return "noise_contrast_factor";
+  }
+  if (min_square_side_px < 4 || min_square_side_px > 64) return "min_square_side_px";
+  if (max_erosion_px < 0 || max_erosion_px > 3) return "max_erosion_px";
+  if (!(touch_fraction > 0.0 && touch_fraction <= 0.5)) return "touch_fraction";
+  if (!(coarse_residual_fraction > 0.0 && coarse_residual_fraction <= 0.5)) {
+    return "coarse_residual_fraction";
+  }
+  if (!(max_residual_square_fraction > 0.0 && max_residual_square_fraction <= 0.5)) {
+    return "max_residual_square_fraction";
+  }
+  if (!(min_paint_agreement >= 0.0 && min_paint_agreement <= 1.0)) return "min_paint_agreement";
+  return {};
+}
+
+Detection DetectChessboard(const ImageView8& image, const Board& board,
+                           const ChessboardOptions& options) {
+  if (board.type() != BoardType::kChessboard) return Fail(DetectReason::kWrongBoard);
+  if (image.Validate() != ImageViewError::kOk || image.width < kMinImageSide ||
+      image.height < kMinImageSide || !options.Validate().empty()) {
+    return Fail(DetectReason::kBadImage);
+  }
+  const std::optional<ChessModel> model = MakeModel(board);
+  if (!model) return Fail(DetectReason::kWrongBoard);
+
+  const double noise_sigma = EstimateNoiseSigma(image);
+  const int min_contrast =
+      std::max(options.min_contrast,
+               static_cast<int>(std::ceil(options.noise_contrast_factor * noise_sigma)));
+  int max_contrast = 0;
+  const Image8 dark = BinariseDark(image, min_contrast, &max_contrast);
+  if (max_contrast < min_contrast) return Fail(DetectReason::kLowContrast);
+
+  QuadOptions quad_options;
+  quad_options.min_side_px = options.min_square_side_px;
+  // The reason reported when nothing is found: the furthest stage reached, which is the
+  // largest in DetectReason's order (no candidates, too few, verification, wrong board).
+  DetectReason failure = DetectReason::kNoCandidates;
+  Image8 eroded;
+  for (int erosion = 0; erosion <= options.max_erosion_px; ++erosion) {
+    if (erosion > 0) eroded = Erode(erosion == 1 ? dark : eroded);
+    const ComponentLabels labels = LabelComponents((erosion == 0 ? dark : eroded).view());
+    std::vector<SquareQuad> quads;
+    for (const Quad& q : FindQuads(labels, quad_options)) {
+      SquareQuad s;
+      s.corners_px = q.corners_px;
+      for (int k = 0; k < 4; ++k) {
+        s.centre_px += 0.25 * q.corners_px[k];
+        s.side_px += 0.25 * (q.corners_px[(k + 1) % 4] - q.corners_px[k]).norm();
+      }
+      quads.push_back(s);
+    }
+    if (quads.empty()) continue;
+    const std::vector<Triple> triples = FindTriples(quads, options, erosion);
+    if (triples.size() < 2) {
+      failure = std::max(failure, DetectReason::kTooFewFeatures);
+      continue;
+    }
+    failure = std::max(failure, DetectReason::kVerificationFailed);
+    // Every pair of groups with distinct quads: the coarse board homography from their 24
+    // corners, then refinement and the whole-board checks.
+    std::vector<Refined> found;
+    std::vector<Eigen::Vector2d> local, image_pts, board_pts;
+    std::vector<double> tolerance;
+    HomographyFitOptions dlt;
+    dlt.refine = false;  // coarse: contour corners are off by a pixel anyway
+    for (std::size_t a = 0; a < triples.size(); ++a) {
+      for (std::size_t b = a + 1; b < triples.size(); ++b) {
+        const Triple& ta = triples[a];
+        const Triple& tb = triples[b];
+        if (std::any_of(ta.quads.begin(), ta.quads.end(), [&](int q) {
+              return std::find(tb.quads.begin(), tb.quads.end(), q) != tb.quads.end();
+            })) {
+          continue;
+        }
+        board_pts.clear();
+        image_pts.clear();
+        tolerance.clear();
+        for (int g = 0; g < 2; ++g) {
+          const Triple& t = g == 0 ? ta : tb;
+          local.clear();
+          TriplePoints(t, quads, &local, &image_pts);
+          for (const Eigen::Vector2d& l : local) board_pts.push_back(model->groups[g].ToBoard(l));
+          tolerance.resize(image_pts.size(), options.coarse_residual_fraction * t.side_px);
+        }
+        const std::optional<HomographyFit> fit = FitHomography(board_pts, image_pts, dlt);
+        if (!fit) continue;
+        std::vector<double> residuals;
+        HomographyResiduals(fit->H, board_pts, image_pts, &residuals);
+        bool ok = true;
+        for (std::size_t i = 0; i < residuals.size() && ok; ++i) ok = residuals[i] <= tolerance[i];
+        if (!ok) continue;
+        // The upright one of the two orientations (header): board +x along image +u.
+        Eigen::Matrix3d H = fit->H;
+        const Eigen::Vector2d centre = ApplyHomography(H, Eigen::Vector2d::Zero());
+        const Eigen::Vector2d x_axis =
+            ApplyHomography(H, Eigen::Vector2d(model->square_m, 0.0)) - centre;
+        if (x_axis.x() < 0.0) H = H * Eigen::Vector3d(-1.0, -1.0, 1.0).asDiagonal();
+        DetectReason reason = DetectReason::kNone;
+        std::optional<Refined> refined =
+            RefineBoard(image, board, *model, H, dark, options, &reason);
+        if (!refined) {
+          failure = std::max(failure, reason);
+          continue;
+        }
+        found.push_back(*std::move(refined));
+      }
+    }
+    if (found.empty()) continue;
+    // Two verified boards: the same board from duplicate groups, or two boards in view.
+    for (const Refined& other : found) {
+      for (std::size_t id = 0; id < other.uv_px.size(); ++id) {
+        if ((other.uv_px[id] - found[0].uv_px[id]).norm() > 1.0) {
+          return Fail(DetectReason::kAmbiguous);
+        }
+      }
+    }
+    Detection d;
+    d.found = true;
+    d.reason = DetectReason::kNone;
+    for (std::size_t id = 0; id < found[0].uv_px.size(); ++id) {
+      const BoardFeature& f = board.features()[id];
+      d.features.push_back({f.id, found[0].uv_px[id], f.p_board, f.marker});
+    }
+    return d;
+  }
+  return Fail(failure);
+}
+
+}  // namespace linecal

@@ -1,0 +1,185 @@
+#include "detectors/common/binarise.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+namespace linecal {
+namespace {
+
+// Binarisation tiles: 4 x 4 pixels, the smallest marker cell of acceptance.md, so that a
+// 3 x 3 tile window (12 px) always spans a dark and a light cell of the smallest markers.
+constexpr int kTile = 4;
+// Low-contrast tiles take the mean threshold of their known neighbours, repeatedly: this
+// many passes reach 64 px into a flat area, the half-width of the largest black cell of a
+// board filling 80% of a 2448 px image (ArUco border cell: 71 px wide).
+constexpr int kThresholdPropagationPasses = 16;
+
+}  // namespace
+
+// Immerkaer's noise estimate made robust to edges: the median absolute response of the
+// Laplacian-difference kernel [1 -2 1; -2 4 -2; 1 -2 1] (std 6 sigma on white noise) over a
+// sparse grid of pixels, divided by 0.6745 (the median of |N(0, 1)|) and 6. O(W * H / 8).
+double EstimateNoiseSigma(const ImageView8& image) {
+  if (image.width < 3 || image.height < 3) return 0.0;
+  std::vector<int> histogram(4 * 255 * 4 + 1, 0);
+  long count = 0;
+  // Every 4th row and 2nd column: ample samples for a median, an eighth of the cost.
+  for (int y = 1; y + 1 < image.height; y += 4) {
+    const std::uint8_t* a = image.Row(y - 1);
+    const std::uint8_t* b = image.Row(y);
+    const std::uint8_t* c = image.Row(y + 1);
+    for (int x = 1; x + 1 < image.width; x += 2) {
+      const int r = a[x - 1] - 2 * a[x] + a[x + 1] - 2 * (b[x - 1] - 2 * b[x] + b[x + 1]) +
+                    c[x - 1] - 2 * c[x] + c[x + 1];
+      ++histogram[std::abs(r)];
+      ++count;
+    }
+  }
+  long seen = 0;
+  for (int v = 0; v < static_cast<int>(histogram.size()); ++v) {
+    seen += histogram[v];
+    if (2 * seen >= count) return v / (0.6745 * 6.0);
+  }
+  return 0.0;
+}
+
+// 1 where a pixel is darker than halfway between the local minimum and maximum (over the
+// 3 x 3 tiles around its tile); 0 elsewhere, including areas without printed contrast that
+// no threshold reaches. *max_contrast: the largest local max - min seen.
+Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast) {
+  const int tw = (image.width + kTile - 1) / kTile;
+  const int th = (image.height + kTile - 1) / kTile;
+  std::vector<std::uint8_t> tmin(static_cast<std::size_t>(tw) * th, 255);
+  std::vector<std::uint8_t> tmax(static_cast<std::size_t>(tw) * th, 0);
+  // The extremes are taken over 2 x 2 pixel means, which halve the noise (a 4 px cell still
+  // holds nine such means entirely inside it). Plain loops over rows, which vectorise.
+  const int w = image.width;
+  std::vector<std::uint16_t> pairs_a(static_cast<std::size_t>(w));
+  std::vector<std::uint16_t> pairs_b(static_cast<std::size_t>(w));
+  std::vector<std::uint8_t> means(static_cast<std::size_t>(tw) * kTile, 0);
+  auto horizontal_pairs = [w](const std::uint8_t* row, std::uint16_t* out) {
+    for (int x = 0; x + 1 < w; ++x) out[x] = static_cast<std::uint16_t>(row[x] + row[x + 1]);
+    out[w - 1] = static_cast<std::uint16_t>(2 * row[w - 1]);
+  };
+  horizontal_pairs(image.Row(0), pairs_a.data());
+  for (int y = 0; y < image.height; ++y) {
+    horizontal_pairs(image.Row(std::min(y + 1, image.height - 1)), pairs_b.data());
+    for (int x = 0; x < w; ++x) {
+      means[x] = static_cast<std::uint8_t>((pairs_a[x] + pairs_b[x] + 2) >> 2);
+    }
+    // The padding of the last tile repeats its last mean, which changes no extreme.
+    for (int x = w; x < tw * kTile; ++x) means[x] = means[w - 1];
+    std::uint8_t* mn = &tmin[static_cast<std::size_t>(y / kTile) * tw];
+    std::uint8_t* mx = &tmax[static_cast<std::size_t>(y / kTile) * tw];
+    for (int tx = 0; tx < tw; ++tx) {
+      const std::uint8_t* m = &means[static_cast<std::size_t>(tx) * kTile];
+      const std::uint8_t lo = std::min(std::min(m[0], m[1]), std::min(m[2], m[3]));
+      const std::uint8_t hi = std::max(std::max(m[0], m[1]), std::max(m[2], m[3]));
+      mn[tx] = std::min(mn[tx], lo);
+      mx[tx] = std::max(mx[tx], hi);
+    }
+    pairs_a.swap(pairs_b);
+  }
+  // Twice the threshold per tile, or -1 where the tile has no contrast of its own.
+  std::vector<int> thr2(static_cast<std::size_t>(tw) * th, -1);
+  *max_contrast = 0;
+  for (int ty = 0; ty < th; ++ty) {
+    for (int tx = 0; tx < tw; ++tx) {
+      int lo = 255;
+      int hi = 0;
+      for (int dy = -1; dy <= 1; ++dy) {
+        const int yy = ty + dy;
+        if (yy < 0 || yy >= th) continue;
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = tx + dx;
+          if (xx < 0 || xx >= tw) continue;
+          lo = std::min<int>(lo, tmin[static_cast<std::size_t>(yy) * tw + xx]);
+          hi = std::max<int>(hi, tmax[static_cast<std::size_t>(yy) * tw + xx]);
+        }
+      }
+      *max_contrast = std::max(*max_contrast, hi - lo);
+      if (hi - lo >= min_contrast) thr2[static_cast<std::size_t>(ty) * tw + tx] = lo + hi;
+    }
+  }
+  // Breadth-first, one ring of tiles per pass: each unknown tile next to known ones takes
+  // their mean, so the cost is the number of tiles reached, not passes x tiles.
+  std::vector<std::uint8_t> queued(thr2.size(), 0);
+  std::vector<int> frontier;
+  auto push_unknown_neighbours = [&](int i, std::vector<int>* out) {
+    const int tx = i % tw;
+    const int ty = i / tw;
+    const std::array<int, 4> nb = {tx > 0 ? i - 1 : -1, tx + 1 < tw ? i + 1 : -1,
+                                   ty > 0 ? i - tw : -1, ty + 1 < th ? i + tw : -1};
+    for (int j : nb) {
+      if (j >= 0 && thr2[j] < 0 && queued[j] == 0) {
+        queued[j] = 1;
+        out->push_back(j);
+      }
+    }
+  };
+  for (int i = 0; i < tw * th; ++i) {
+    if (thr2[i] >= 0) push_unknown_neighbours(i, &frontier);
+  }
+  std::vector<int> values;
+  std::vector<int> next;
+  for (int pass = 0; pass < kThresholdPropagationPasses && !frontier.empty(); ++pass) {
+    values.assign(frontier.size(), -1);
+    for (std::size_t f = 0; f < frontier.size(); ++f) {
+      const int i = frontier[f];
+      const int tx = i % tw;
+      const int ty = i / tw;
+      int sum = 0;
+      int n = 0;
+      const std::array<int, 4> nb = {tx > 0 ? i - 1 : -1, tx + 1 < tw ? i + 1 : -1,
+                                     ty > 0 ? i - tw : -1, ty + 1 < th ? i + tw : -1};
+      for (int j : nb) {
+        if (j >= 0 && thr2[j] >= 0) {
+          sum += thr2[j];
+          ++n;
+        }
+      }
+      values[f] = sum / n;  // n >= 1: the tile was queued next to a known one
+    }
+    for (std::size_t f = 0; f < frontier.size(); ++f) thr2[frontier[f]] = values[f];
+    next.clear();
+    for (int i : frontier) push_unknown_neighbours(i, &next);
+    frontier.swap(next);
+  }
+  Image8 dark(image.width, image.height, 0);
+  // Per tile row, the doubled threshold of every pixel column (0 where unknown: 2 v < 0
+  // never holds), so that the per-pixel loop is a plain comparison.
+  std::vector<std::int16_t> column_thr2(static_cast<std::size_t>(tw) * kTile);
+  for (int y = 0; y < image.height; ++y) {
+    if (y % kTile == 0) {
+      const int* t = &thr2[static_cast<std::size_t>(y / kTile) * tw];
+      for (int x = 0; x < tw * kTile; ++x) {
+        column_thr2[x] = static_cast<std::int16_t>(std::max(t[x / kTile], 0));
+      }
+    }
+    const std::uint8_t* row = image.Row(y);
+    std::uint8_t* out = &dark.pixels[static_cast<std::size_t>(y) * image.width];
+    for (int x = 0; x < w; ++x) {
+      out[x] = static_cast<std::uint8_t>(2 * static_cast<std::int16_t>(row[x]) < column_thr2[x]);
+    }
+  }
+  return dark;
+}
+
+Image8 Erode(const Image8& in) {
+  Image8 out(in.width, in.height, 0);
+  for (int y = 1; y + 1 < in.height; ++y) {
+    const std::uint8_t* up = &in.pixels[static_cast<std::size_t>(y - 1) * in.width];
+    const std::uint8_t* mid = up + in.width;
+    const std::uint8_t* down = mid + in.width;
+    std::uint8_t* o = &out.pixels[static_cast<std::size_t>(y) * in.width];
+    for (int x = 1; x + 1 < in.width; ++x) {
+      o[x] = static_cast<std::uint8_t>(mid[x] & mid[x - 1] & mid[x + 1] & up[x] & down[x]);
+    }
+  }
+  return out;
+}
+
+}  // namespace linecal
