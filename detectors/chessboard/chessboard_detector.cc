@@ -215,6 +215,13 @@ void TriplePoints(const Triple& t, const std::vector<SquareQuad>& quads,
   }
 }
 
+// The coarse homography tolerance for contour corners of squares of side_px: a fraction of
+// the side, plus a pixel for the contour's pixel steps and a pixel per erosion (eroded
+// quads are smaller than the squares they stand for).
+double CoarseTolerancePx(const ChessboardOptions& options, double side_px, int erosion) {
+  return options.coarse_residual_fraction * side_px + 1.0 + erosion;
+}
+
 std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
                                 const ChessboardOptions& options, int erosion) {
   const int n = static_cast<int>(quads.size());
@@ -271,7 +278,7 @@ std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
         image.clear();
         TriplePoints(t, quads, &local, &image);
         const std::optional<HomographyFit> fit = FitHomography(local, image, dlt);
-        if (!fit || fit->max_residual > options.coarse_residual_fraction * t.side_px) continue;
+        if (!fit || fit->max_residual > CoarseTolerancePx(options, t.side_px, erosion)) continue;
         triples.push_back(t);
       }
     }
@@ -515,7 +522,7 @@ Detection DetectChessboard(const ImageView8& image, const Board& board,
           local.clear();
           TriplePoints(t, quads, &local, &image_pts);
           for (const Eigen::Vector2d& l : local) board_pts.push_back(model->groups[g].ToBoard(l));
-          tolerance.resize(image_pts.size(), options.coarse_residual_fraction * t.side_px);
+          tolerance.resize(image_pts.size(), CoarseTolerancePx(options, t.side_px, erosion));
         }
         const std::optional<HomographyFit> fit = FitHomography(board_pts, image_pts, dlt);
         if (!fit) continue;
