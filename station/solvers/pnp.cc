@@ -1,0 +1,301 @@
+#include "station/solvers/pnp.h"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+
+#include "absl/strings/str_cat.h"
+#include "detectors/common/homography.h"
+
+namespace linecal {
+namespace {
+
+// Relative singular values below this make the object points collinear (second) or planar
+// (third): board coordinates are exact to ~1e-12 m, while the smallest real spread of a set
+// of boards is millimetres over metres (1e-3).
+constexpr double kDegenerateRatio = 1e-6;
+// The virtual camera keeps rays within 85 degrees of its axis: beyond that normalised
+// coordinates exceed tan(85°) ≈ 11 and the start loses its conditioning; such a view (a board
+// spanning more than 170° of a fisheye) has no closed-form start.
+const double kMinVirtualZ = std::cos(85.0 * M_PI / 180.0);
+
+Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m) {
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  return svd.matrixU() * d * svd.matrixV().transpose();
+}
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d s;
+  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return s;
+}
+
+// The closed-form start in the virtual camera `v` (normalised coordinates m_v of the rays):
+// T_v_object, or nullopt when degenerate.
+std::optional<Rigid3d> PlanarStart(std::span<const Eigen::Vector3d> p_object, std::span<const Eigen::Vector2d> m_v,
+                                   const Eigen::Vector3d& centroid, Eigen::Matrix3d basis) {
+  // basis: columns e1, e2 in the plane and the normal; a proper rotation (det +1).
+  if (basis.determinant() < 0) basis.col(2) = -basis.col(2);
+  std::vector<Eigen::Vector2d> a(p_object.size());
+  for (size_t i = 0; i < p_object.size(); ++i) {
+    const Eigen::Vector3d q = basis.transpose() * (p_object[i] - centroid);
+    a[i] = q.head<2>();
+  }
+  const std::optional<HomographyFit> fit = FitHomography(a, m_v);
+  if (!fit) return std::nullopt;
+  const Eigen::Matrix3d& H = fit->H;
+  // H = λ [r1 r2 t]: the scale from the two rotation columns, the sign that puts the
+  // centroid (the plane origin, at t) in front of the camera.
+  double lambda = 2.0 / (H.col(0).norm() + H.col(1).norm());
+  if (H(2, 2) * lambda < 0) lambda = -lambda;
+  Eigen::Matrix3d r;
+  r.col(0) = lambda * H.col(0);
+  r.col(1) = lambda * H.col(1);
+  r.col(2) = r.col(0).cross(r.col(1));
+  const Rigid3d T_v_plane(NearestRotation(r), lambda * H.col(2));
+  const Rigid3d T_plane_object(Eigen::Matrix3d(basis.transpose()), -(basis.transpose() * centroid));
+  return T_v_plane * T_plane_object;
+}
+
+std::optional<Rigid3d> GeneralStart(std::span<const Eigen::Vector3d> p_object, std::span<const Eigen::Vector2d> m_v,
+                                    const Eigen::Vector3d& centroid) {
+  // Normalised DLT: object points centred and scaled to unit mean distance; the normalised
+  // image coordinates are already of order one.
+  double scale = 0;
+  for (const Eigen::Vector3d& p : p_object) scale += (p - centroid).norm();
+  scale /= static_cast<double>(p_object.size());
+  Eigen::MatrixXd A(2 * p_object.size(), 12);
+  for (size_t i = 0; i < p_object.size(); ++i) {
+    const Eigen::Vector4d X((p_object[i] - centroid).x() / scale, (p_object[i] - centroid).y() / scale,
+                            (p_object[i] - centroid).z() / scale, 1.0);
+    const double u = m_v[i].x(), v = m_v[i].y();
+    A.row(2 * i) << X.transpose(), Eigen::RowVector4d::Zero(), -u * X.transpose();
+    A.row(2 * i + 1) << Eigen::RowVector4d::Zero(), X.transpose(), -v * X.transpose();
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeFullV);
+  const Eigen::VectorXd p = svd.matrixV().col(11);
+  Eigen::Matrix<double, 3, 4> P;
+  P << p.segment<4>(0).transpose(), p.segment<4>(4).transpose(), p.segment<4>(8).transpose();
+  // P ~ [R | t] up to a scale; the scale with det > 0 is the one that puts the points in
+  // front of the camera (a negative scale flips the determinant of the 3x3 block).
+  if (P.leftCols<3>().determinant() < 0) P = -P;
+  Eigen::JacobiSVD<Eigen::Matrix3d> m(P.leftCols<3>());
+  const double s = m.singularValues().mean();
+  if (!(s > 0)) return std::nullopt;
+  const Eigen::Matrix3d R = NearestRotation(P.leftCols<3>() / s);
+  const Eigen::Vector3d t = P.col(3) / s;
+  // In object units: p_v = R (p - c) / scale + t, times scale.
+  return Rigid3d(R, scale * t - R * centroid);
+}
+
+// Reprojection residual of one point, with the rotation as a rotation vector applied on top
+// of the start: p_camera = exp(omega) (R0 p_object) + t.
+struct ReprojectionCost {
+  ReprojectionCost(const CameraModel* camera, const Eigen::Vector3d& r0_p, const Eigen::Vector2d& uv)
+      : camera(camera), r0_p(r0_p), uv(uv) {}
+
+  template <typename T>
+  bool operator()(const T* omega, const T* t, T* residual) const {
+    const T p[3] = {T(r0_p.x()), T(r0_p.y()), T(r0_p.z())};
+    T p_camera[3];
+    ceres::AngleAxisRotatePoint(omega, p, p_camera);
+    for (int k = 0; k < 3; ++k) p_camera[k] += t[k];
+    const CameraParameters& cp = camera->parameters();
+    T params[kMaxCameraParameterCount];
+    for (int k = 0; k < cp.size(); ++k) params[k] = T(cp[k]);
+    T projected[2];
+    if (camera->type() == CameraModelType::kPinhole) {
+      if (!(p_camera[2] > T(0))) return false;  // behind the camera: reject the step
+      ProjectPinhole(params, p_camera, projected);
+    } else {
+      // The fisheye folds on the negative optical axis; reject steps that reach it.
+      if (!(p_camera[2] > T(0)) && p_camera[0] * p_camera[0] + p_camera[1] * p_camera[1] == T(0)) return false;
+      ProjectFisheye(params, p_camera, projected);
+    }
+    residual[0] = projected[0] - T(uv.x());
+    residual[1] = projected[1] - T(uv.y());
+    return true;
+  }
+
+  const CameraModel* camera;
+  Eigen::Vector3d r0_p;
+  Eigen::Vector2d uv;
+};
+
+}  // namespace
+
+const char* PnpOutcomeName(PnpOutcome outcome) {
+  switch (outcome) {
+    case PnpOutcome::kOk: return "";
+    case PnpOutcome::kTooFewPoints: return "too_few_features";
+    case PnpOutcome::kCollinear: return "collinear_features";
+    case PnpOutcome::kNoStart: return "no_initial_pose";
+    case PnpOutcome::kNotConverged: return "did_not_converge";
+  }
+  return "no_initial_pose";
+}
+
+std::string_view PnpOptions::Validate() const {
+  if (!(huber_px > 0 && huber_px <= 100)) return "huber_px";
+  if (!(feature_sigma_px >= 0 && feature_sigma_px <= 100)) return "feature_sigma_px";
+  if (max_iterations < 1 || max_iterations > 1000) return "max_iterations";
+  return {};
+}
+
+bool BoardFacesCamera(const Rigid3d& T_camera_board) {
+  // The camera sits at -R^T t in the board frame: on the print's side when its z is positive,
+  // i.e. when the board normal R e_z points back along the line of sight t.
+  const Eigen::Vector3d normal_camera = T_camera_board.RotationMatrix().col(2);
+  return normal_camera.dot(T_camera_board.translation()) < 0;
+}
+
+std::vector<double> ReprojectionErrors(const CameraModel& camera, const Rigid3d& T_camera_object,
+                                       std::span<const PnpCorrespondence> points) {
+  std::vector<double> errors(points.size(), std::numeric_limits<double>::infinity());
+  for (size_t i = 0; i < points.size(); ++i) {
+    Eigen::Vector2d uv;
+    if (camera.Project(T_camera_object * points[i].p_object, &uv)) errors[i] = (uv - points[i].uv_px).norm();
+  }
+  return errors;
+}
+
+absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const PnpCorrespondence> points,
+                                   const PnpOptions& options) {
+  if (const std::string_view bad = options.Validate(); !bad.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("PnpOptions.", std::string(bad), " is out of range"));
+  }
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (!points[i].p_object.allFinite()) return absl::InvalidArgumentError(absl::StrCat("points[", i, "].p_object is not finite"));
+    if (!points[i].uv_px.allFinite()) return absl::InvalidArgumentError(absl::StrCat("points[", i, "].uv_px is not finite"));
+  }
+  PnpResult result;
+  result.points = static_cast<int>(points.size());
+  if (points.size() < 4) {
+    result.outcome = PnpOutcome::kTooFewPoints;
+    return result;
+  }
+
+  // The object's shape: collinear, planar or general.
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const PnpCorrespondence& c : points) centroid += c.p_object;
+  centroid /= static_cast<double>(points.size());
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const PnpCorrespondence& c : points) scatter += (c.p_object - centroid) * (c.p_object - centroid).transpose();
+  Eigen::JacobiSVD<Eigen::Matrix3d> shape(scatter, Eigen::ComputeFullU);
+  const Eigen::Vector3d spread = shape.singularValues().cwiseSqrt();
+  if (!(spread(1) > kDegenerateRatio * spread(0))) {
+    result.outcome = PnpOutcome::kCollinear;
+    return result;
+  }
+  result.planar = spread(2) <= kDegenerateRatio * spread(0);
+  if (!result.planar && points.size() < 6) {
+    result.outcome = PnpOutcome::kTooFewPoints;
+    return result;
+  }
+
+  // Rays, turned into the virtual camera that looks along their mean.
+  std::vector<Eigen::Vector3d> rays;
+  std::vector<Eigen::Vector3d> p_start;
+  rays.reserve(points.size());
+  Eigen::Vector3d mean_ray = Eigen::Vector3d::Zero();
+  for (const PnpCorrespondence& c : points) {
+    Eigen::Vector3d ray;
+    if (!camera.Unproject(c.uv_px, &ray)) continue;
+    rays.push_back(ray);
+    p_start.push_back(c.p_object);
+    mean_ray += ray;
+  }
+  const Eigen::Matrix3d R_v_camera =
+      Eigen::Quaterniond::FromTwoVectors(mean_ray, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  std::vector<Eigen::Vector2d> m_v;
+  std::vector<Eigen::Vector3d> p_used;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Eigen::Vector3d r = R_v_camera * rays[i];
+    if (r.z() < kMinVirtualZ) continue;
+    m_v.push_back(r.head<2>() / r.z());
+    p_used.push_back(p_start[i]);
+  }
+  std::optional<Rigid3d> T_v_object;
+  if (p_used.size() >= (result.planar ? 4u : 6u)) {
+    T_v_object = result.planar ? PlanarStart(p_used, m_v, centroid, shape.matrixU())
+                               : GeneralStart(p_used, m_v, centroid);
+  }
+  if (!T_v_object) {
+    result.outcome = PnpOutcome::kNoStart;
+    return result;
+  }
+  const Rigid3d T_start = Rigid3d(Eigen::Matrix3d(R_v_camera.transpose()), Eigen::Vector3d::Zero()) * *T_v_object;
+
+  // Refinement: rotation vector on top of the start rotation, and the translation.
+  const Eigen::Matrix3d R0 = T_start.RotationMatrix();
+  double omega[3] = {0, 0, 0};
+  double t[3] = {T_start.translation().x(), T_start.translation().y(), T_start.translation().z()};
+  ceres::Problem problem;
+  ceres::LossFunction* loss = new ceres::HuberLoss(options.huber_px);  // owned by the problem
+  for (const PnpCorrespondence& c : points) {
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<ReprojectionCost, 2, 3, 3>(
+                                 new ReprojectionCost(&camera, R0 * c.p_object, c.uv_px)),
+                             loss, omega, t);
+  }
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = options.max_iterations;
+  // Converge to well below the noise: 1e-12 relative cost change is ~1e-6 of a pixel.
+  solver.function_tolerance = 1e-12;
+  solver.gradient_tolerance = 1e-14;
+  solver.parameter_tolerance = 1e-12;
+  solver.logging_type = ceres::SILENT;
+  solver.num_threads = 1;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+
+  Eigen::Matrix3d d_rotation;
+  ceres::AngleAxisToRotationMatrix(omega, ceres::ColumnMajorAdapter3x3(d_rotation.data()));
+  result.T_camera_object = Rigid3d(NearestRotation(d_rotation * R0), Eigen::Vector3d(t[0], t[1], t[2]));
+  result.outcome = summary.termination_type == ceres::CONVERGENCE ? PnpOutcome::kOk : PnpOutcome::kNotConverged;
+
+  // Residuals and the Jacobian of every reprojection at the solution, for the covariance:
+  // d uv / d(δθ, δt) = d uv / d p_camera * [-[R p]x, I].
+  Eigen::Matrix<double, 6, 6> JtJ = Eigen::Matrix<double, 6, 6>::Zero();
+  double sum_sq = 0;
+  bool all_projected = true;
+  const Eigen::Matrix3d R = result.T_camera_object.RotationMatrix();
+  for (const PnpCorrespondence& c : points) {
+    const Eigen::Vector3d rp = R * c.p_object;
+    Eigen::Vector2d uv;
+    ProjectionPointJacobian d_uv_d_p;
+    if (!camera.Project(rp + result.T_camera_object.translation(), &uv, &d_uv_d_p)) {
+      all_projected = false;  // the pose puts a point outside the lens: no fit
+      continue;
+    }
+    const double e = (uv - c.uv_px).norm();
+    sum_sq += e * e;
+    result.max_residual_px = std::max(result.max_residual_px, e);
+    Eigen::Matrix<double, 3, 6> d_p;
+    d_p << -Skew(rp), Eigen::Matrix3d::Identity();
+    const Eigen::Matrix<double, 2, 6> J = d_uv_d_p * d_p;
+    JtJ += J.transpose() * J;
+  }
+  const double n = static_cast<double>(points.size());
+  if (!all_projected) {
+    result.outcome = PnpOutcome::kNotConverged;
+    result.residual_rms_px = result.max_residual_px = std::numeric_limits<double>::infinity();
+    return result;
+  }
+  result.residual_rms_px = std::sqrt(sum_sq / n);
+  result.sigma_px = options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
+  result.covariance = result.sigma_px * result.sigma_px * JtJ.inverse();
+  if (!result.covariance.allFinite()) result.outcome = PnpOutcome::kNotConverged;
+  return result;
+}
+
+}  // namespace linecal
