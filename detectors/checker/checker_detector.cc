@@ -18,71 +18,6 @@ namespace {
 
 // Below this side no board of boards.md (smallest squares 12 px) fits.
 constexpr int kMinImageSide = 16;
-// Links of the corner graph: the neighbour lies within 25 degrees of the edge direction
-// and one of its own edge lines is within 25 degrees of the link. Perspective bends a
-// board's lines between neighbouring vertices by far less; a wrong corner off the line
-// by a quarter square is already 14 degrees off.
-const double kCosLinkTolerance = std::cos(25.0 * 3.14159265358979 / 180.0);
-// The dark axes of edge neighbours are perpendicular (bisectors of the same two lines);
-// |cos| below 0.5 (60 degrees) allows for strong perspective.
-constexpr double kMaxDarkAxisCos = 0.5;
-
-// The four local directions of a corner, in cyclic order: +line_a, +line_b, -line_a,
-// -line_b (line_b is counter-clockwise from line_a, so the order is one rotation sense).
-Eigen::Vector2d LocalDirection(const XCorner& c, int k) {
-  switch (k & 3) {
-    case 0: return c.line_a;
-    case 1: return c.line_b;
-    case 2: return -c.line_a;
-    default: return -c.line_b;
-  }
-}
-
-// neighbours[i][k]: the corner linked to corner i along its local direction k, or -1.
-std::vector<std::array<int, 4>> LinkCorners(const std::vector<XCorner>& corners) {
-  const int n = static_cast<int>(corners.size());
-  std::vector<std::array<int, 4>> best(n, {-1, -1, -1, -1});
-  // Two corners nearer than this are not neighbouring vertices of a board (the smallest
-  // foreshortened square is about 8 px).
-  constexpr double kMinLinkPx = 4.0;
-  for (int i = 0; i < n; ++i) {
-    std::array<double, 4> best_dist = {1e300, 1e300, 1e300, 1e300};
-    for (int j = 0; j < n; ++j) {
-      if (j == i) continue;
-      const Eigen::Vector2d d = corners[j].uv_px - corners[i].uv_px;
-      const double dist = d.norm();
-      if (dist < kMinLinkPx) continue;
-      const Eigen::Vector2d dir = d / dist;
-      if (std::abs(corners[i].dark_axis.dot(corners[j].dark_axis)) > kMaxDarkAxisCos) continue;
-      if (std::max(std::abs(corners[j].line_a.dot(dir)), std::abs(corners[j].line_b.dot(dir))) <
-          kCosLinkTolerance) {
-        continue;
-      }
-      for (int k = 0; k < 4; ++k) {
-        if (LocalDirection(corners[i], k).dot(dir) >= kCosLinkTolerance && dist < best_dist[k]) {
-          best_dist[k] = dist;
-          best[i][k] = j;
-        }
-      }
-    }
-  }
-  // Keep mutual links only: j is i's nearest along k and i is j's nearest back.
-  std::vector<std::array<int, 4>> links(n, {-1, -1, -1, -1});
-  for (int i = 0; i < n; ++i) {
-    for (int k = 0; k < 4; ++k) {
-      const int j = best[i][k];
-      if (j < 0) continue;
-      const Eigen::Vector2d back = (corners[i].uv_px - corners[j].uv_px).normalized();
-      for (int m = 0; m < 4; ++m) {
-        if (best[j][m] == i && LocalDirection(corners[j], m).dot(back) >= kCosLinkTolerance) {
-          links[i][k] = j;
-        }
-      }
-    }
-  }
-  return links;
-}
-
 struct GridCorner {
   int index = 0;  // into the corner list
   int gi = 0;     // grid coordinates, axes right-handed in the image
@@ -120,10 +55,10 @@ std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
       for (int g = 0; g < 4; ++g) {
         const int j = links[c][(rotation[c] + g) % 4];
         if (j < 0) continue;
-        const Eigen::Vector2d v = LocalDirection(corners[c], rotation[c] + g);
+        const Eigen::Vector2d v = XCornerDirection(corners[c], rotation[c] + g);
         int m_best = 0;
         for (int m = 1; m < 4; ++m) {
-          if (LocalDirection(corners[j], m).dot(v) > LocalDirection(corners[j], m_best).dot(v)) {
+          if (XCornerDirection(corners[j], m).dot(v) > XCornerDirection(corners[j], m_best).dot(v)) {
             m_best = m;
           }
         }
@@ -285,7 +220,7 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
     result.reason = DetectReason::kTooFewFeatures;
     return result;
   }
-  const std::vector<Component> components = GridComponents(corners, LinkCorners(corners));
+  const std::vector<Component> components = GridComponents(corners, LinkXCorners(corners));
 
   // A hypothesis: a complete grid and the map (gi, gj) -> (c, r) of one of its rotations.
   struct Hypothesis {

@@ -12,6 +12,15 @@ namespace {
 // 35 degrees (a square foreshortened by 50 degrees and rolled) as at least 3 samples.
 constexpr int kRingSamples = 32;
 
+// Links of the corner graph: the neighbour lies within 25 degrees of the edge direction
+// and one of its own edge lines is within 25 degrees of the link. Perspective bends a
+// board's lines between neighbouring vertices by far less; a wrong corner off the line
+// by a quarter square is already 14 degrees off.
+const double kCosLinkTolerance = std::cos(25.0 * 3.14159265358979 / 180.0);
+// The dark axes of edge neighbours are perpendicular (bisectors of the same two lines);
+// |cos| below 0.5 (60 degrees) allows for strong perspective.
+constexpr double kMaxDarkAxisCos = 0.5;
+
 struct RingResult {
   XCorner corner;
   bool ok = false;
@@ -210,6 +219,59 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
     if (!duplicate) merged.push_back(c);
   }
   return merged;
+}
+
+Eigen::Vector2d XCornerDirection(const XCorner& c, int k) {
+  switch (k & 3) {
+    case 0: return c.line_a;
+    case 1: return c.line_b;
+    case 2: return -c.line_a;
+    default: return -c.line_b;
+  }
+}
+
+std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners) {
+  const int n = static_cast<int>(corners.size());
+  std::vector<std::array<int, 4>> best(n, {-1, -1, -1, -1});
+  // Two corners nearer than this are not neighbouring vertices of a board (the smallest
+  // foreshortened square is about 8 px).
+  constexpr double kMinLinkPx = 4.0;
+  for (int i = 0; i < n; ++i) {
+    std::array<double, 4> best_dist = {1e300, 1e300, 1e300, 1e300};
+    for (int j = 0; j < n; ++j) {
+      if (j == i) continue;
+      const Eigen::Vector2d d = corners[j].uv_px - corners[i].uv_px;
+      const double dist = d.norm();
+      if (dist < kMinLinkPx) continue;
+      const Eigen::Vector2d dir = d / dist;
+      if (std::abs(corners[i].dark_axis.dot(corners[j].dark_axis)) > kMaxDarkAxisCos) continue;
+      if (std::max(std::abs(corners[j].line_a.dot(dir)), std::abs(corners[j].line_b.dot(dir))) <
+          kCosLinkTolerance) {
+        continue;
+      }
+      for (int k = 0; k < 4; ++k) {
+        if (XCornerDirection(corners[i], k).dot(dir) >= kCosLinkTolerance && dist < best_dist[k]) {
+          best_dist[k] = dist;
+          best[i][k] = j;
+        }
+      }
+    }
+  }
+  // Keep mutual links only: j is i's nearest along k and i is j's nearest back.
+  std::vector<std::array<int, 4>> links(n, {-1, -1, -1, -1});
+  for (int i = 0; i < n; ++i) {
+    for (int k = 0; k < 4; ++k) {
+      const int j = best[i][k];
+      if (j < 0) continue;
+      const Eigen::Vector2d back = (corners[i].uv_px - corners[j].uv_px).normalized();
+      for (int m = 0; m < 4; ++m) {
+        if (best[j][m] == i && XCornerDirection(corners[j], m).dot(back) >= kCosLinkTolerance) {
+          links[i][k] = j;
+        }
+      }
+    }
+  }
+  return links;
 }
 
 }  // namespace linecal

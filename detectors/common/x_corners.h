@@ -10,6 +10,7 @@
 // refined by the saddle fit of corner_refine.h. The ring also gives the directions of the
 // two edge lines through the vertex and the axis of the dark sectors.
 
+#include <array>
 #include <vector>
 
 #include <Eigen/Core>
@@ -52,5 +53,18 @@ struct XCorner {
 // is ordered by decreasing contrast; vertices closer than 2 px are merged. Cost: two passes
 // over the image plus O(ring) per local maximum; a few ms at 1280 x 720.
 std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& options = {});
+
+// The four local directions of a corner, in cyclic order k = 0..3: +line_a, +line_b,
+// -line_a, -line_b (line_b is counter-clockwise from line_a, so the order is one rotation
+// sense); k is taken modulo 4. O(1).
+Eigen::Vector2d XCornerDirection(const XCorner& corner, int k);
+
+// The graph of neighbouring vertices of a printed grid of X-corners: links[i][k] is the
+// corner linked to corner i along its local direction k (XCornerDirection), or -1. A link
+// joins a corner to its nearest corner within 25 degrees of that direction, which must lie
+// on one of its own edge lines and have its dark axis turned by about 90 degrees (the
+// vertices of one square edge); only mutual links are kept. Image pixels; no failure (a
+// lone corner has no links). Cost: O(n^2) for n corners (about 1 ms for 1000).
+std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners);
 
 }  // namespace linecal
