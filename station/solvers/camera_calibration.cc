@@ -1,0 +1,245 @@
+#include "station/solvers/camera_calibration.h"
+
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include <Eigen/Geometry>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace linecal {
+namespace {
+
+constexpr double kDegPerRad = 180.0 / std::numbers::pi;
+
+double WrapAngle(double a) { return std::remainder(a, 2 * std::numbers::pi); }
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d s;
+  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return s;
+}
+
+Eigen::Vector3d AnglesVector(const YawPitchRoll& a) { return {a.yaw, a.pitch, a.roll}; }
+
+Eigen::Matrix3d K(const CameraIntrinsics& k) {
+  Eigen::Matrix3d m;
+  m << k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1;
+  return m;
+}
+
+}  // namespace
+
+const char* SensorVerdictName(SensorVerdict verdict) {
+  switch (verdict) {
+    case SensorVerdict::kPass: return "pass";
+    case SensorVerdict::kFail: return "fail";
+    case SensorVerdict::kError: return "error";
+  }
+  return "error";
+}
+
+absl::Status CameraCalibrationOptions::Validate() const {
+  if (const std::string_view bad = pnp.Validate(); !bad.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("pnp.", std::string(bad), " is out of range"));
+  }
+  if (min_features < 4 || min_features > 10000) return absl::InvalidArgumentError("min_features is outside [4, 10000]");
+  if (!(max_residual_rms_px > 0 && max_residual_rms_px <= 100)) {
+    return absl::InvalidArgumentError("max_residual_rms_px is outside (0, 100]");
+  }
+  if (!(max_sigma_fraction_of_tolerance > 0 && max_sigma_fraction_of_tolerance <= 10)) {
+    return absl::InvalidArgumentError("max_sigma_fraction_of_tolerance is outside (0, 10]");
+  }
+  for (double d : ranging_distances_m) {
+    if (!(d > 0 && d < 1e4)) return absl::InvalidArgumentError("ranging_distances_m: every distance must be in (0, 10000)");
+  }
+  return absl::OkStatus();
+}
+
+MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen::Matrix<double, 6, 6>& covariance,
+                                        const SensorModel& sensor) {
+  const Eigen::Matrix3d r_base = SensorBaseRotation(sensor.kind);
+  MountingEstimate m;
+  m.T_car_sensor = T_sensor_car.Inverse();
+  const Eigen::Matrix3d R = m.T_car_sensor.RotationMatrix();
+  m.angles = MountingAngles(R, r_base);
+  m.position_m = m.T_car_sensor.translation();
+  const YawPitchRoll nominal = MountingAngles(sensor.T_car_sensor_nominal.RotationMatrix(), r_base);
+  m.angles_deviation = {WrapAngle(m.angles.yaw - nominal.yaw), WrapAngle(m.angles.pitch - nominal.pitch),
+                        WrapAngle(m.angles.roll - nominal.roll)};
+  m.position_deviation_m = m.position_m - sensor.T_car_sensor_nominal.translation();
+
+  // Covariance of T_car_sensor = T_sensor_car^-1 with R_sc = exp(δθ) R̂_sc, t_sc = t̂ + δt:
+  //   R_cs = R̂_scᵀ exp(-δθ) = exp(-R̂_cs δθ) R̂_cs             =>  δθ_car = -R̂_cs δθ
+  //   t_cs = -R_cs t_sc ≈ t̂_cs - R̂_cs δt - R̂_cs [t̂_sc]x δθ
+  const Eigen::Matrix3d R_cs = R;
+  const Eigen::Vector3d t_sc = T_sensor_car.translation();
+  Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Zero();
+  J.topLeftCorner<3, 3>() = -R_cs;
+  J.bottomLeftCorner<3, 3>() = -R_cs * Skew(t_sc);
+  J.bottomRightCorner<3, 3>() = -R_cs;
+  // Yaw/pitch/roll as functions of the car-frame rotation vector, by central differences:
+  // the angles are smooth away from pitch = ±90°, and 1e-6 rad keeps the truncation error
+  // (~1e-12) and the rounding error (~1e-10 relative) far below any reported sigma.
+  constexpr double kStep = 1e-6;
+  Eigen::Matrix3d d_angles;
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Matrix3d plus = Eigen::AngleAxisd(kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
+    const Eigen::Matrix3d minus = Eigen::AngleAxisd(-kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
+    const Eigen::Vector3d a = AnglesVector(MountingAngles(plus, r_base));
+    const Eigen::Vector3d b = AnglesVector(MountingAngles(minus, r_base));
+    for (int i = 0; i < 3; ++i) d_angles(i, k) = WrapAngle(a[i] - b[i]) / (2 * kStep);
+  }
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Identity();
+  A.topLeftCorner<3, 3>() = d_angles;
+  const Eigen::Matrix<double, 6, 6> cov_mounting = A * J * covariance * J.transpose() * A.transpose();
+  m.sigma = cov_mounting.diagonal().cwiseMax(0.0).cwiseSqrt();
+  return m;
+}
+
+std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3d& T_camera_car,
+                                         const Eigen::Vector2d& vanishing_point_px,
+                                         std::span<const double> distances_m) {
+  const Rigid3d T_car_camera = T_camera_car.Inverse();
+  const Eigen::Vector3d c = T_car_camera.translation();
+  const CameraIntrinsics& k = camera.intrinsics();
+  std::vector<RangingCheck> out;
+  for (double d : distances_m) {
+    RangingCheck r{d, std::numeric_limits<double>::quiet_NaN()};
+    const Eigen::Vector3d p_camera = T_camera_car * Eigen::Vector3d(c.x() + d, c.y(), 0.0);
+    Eigen::Vector2d uv;
+    // The point must really be in the image; its undistorted row is what the formula reads.
+    if (p_camera.z() > 0 && camera.Project(p_camera, &uv) && camera.IsInImage(uv)) {
+      const double v_u = k.fy * p_camera.y() / p_camera.z() + k.cy;
+      r.measured_distance_m = c.z() * k.fy / (v_u - vanishing_point_px.y());
+    }
+    out.push_back(r);
+  }
+  return out;
+}
+
+absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& sensor, const StationLayout& station,
+                                                        const Rigid3d& T_station_car,
+                                                        std::span<const BoardObservation> observations,
+                                                        const CameraCalibrationOptions& options) {
+  if (sensor.kind != SensorKind::kCamera || !sensor.intrinsics) {
+    return absl::InvalidArgumentError(absl::StrCat("sensor ", sensor.name, " is not a camera with intrinsics"));
+  }
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  absl::StatusOr<CameraModel> camera = CameraModel::Create(*sensor.intrinsics);
+  if (!camera.ok()) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ".intrinsics: ", camera.status().message()));
+
+  CameraCalibrationResult result;
+  const Rigid3d T_car_station = T_station_car.Inverse();
+  std::vector<PnpCorrespondence> points;
+  std::vector<std::pair<std::string, Rigid3d>> boards_seen;  // id, T_car_board
+  for (const BoardObservation& o : observations) {
+    const StationBoard* board = station.FindBoard(o.board_id);
+    if (board == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": observed board '", o.board_id,
+                                                     "' is not in station '", station.name, "'"));
+    }
+    if (o.features.empty()) continue;
+    const Rigid3d T_car_board = T_car_station * board->T_station_board;
+    bool listed = false;
+    for (const auto& b : boards_seen) listed |= b.first == o.board_id;
+    if (!listed) boards_seen.emplace_back(o.board_id, T_car_board);
+    for (const DetectedFeature& f : o.features) {
+      points.push_back({T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
+    }
+  }
+  result.features_used = static_cast<int>(points.size());
+  result.boards_used = static_cast<int>(boards_seen.size());
+  if (points.empty()) {
+    result.reason = "board_not_found";
+    result.message = absl::StrCat(sensor.name, ": none of its boards was found in any frame");
+    return result;
+  }
+  if (result.features_used < options.min_features) {
+    result.reason = "too_few_features";
+    result.message = absl::StrCat(sensor.name, ": ", result.features_used, " features, at least ",
+                                  options.min_features, " needed");
+    return result;
+  }
+  absl::StatusOr<PnpResult> pnp = SolvePnp(*camera, points, options.pnp);
+  if (!pnp.ok()) return pnp.status();
+  result.residual_rms_px = pnp->residual_rms_px;
+  if (pnp->outcome != PnpOutcome::kOk) {
+    result.reason = PnpOutcomeName(pnp->outcome);
+    result.message = absl::StrCat(sensor.name, ": no pose (", result.reason, ")");
+    return result;
+  }
+  const Rigid3d& T_camera_car = pnp->T_camera_object;
+  result.solved = true;
+  result.mounting = MountingFromSensorPose(T_camera_car, pnp->covariance, sensor);
+
+  // What the car's software derives from the extrinsic (valid whatever the verdict).
+  const Eigen::Matrix3d R_camera_car = T_camera_car.RotationMatrix();
+  const Eigen::Matrix3d k = K(*sensor.intrinsics);
+  const Eigen::Vector3d forward = R_camera_car.col(0);
+  if (forward.z() > 0) {
+    result.vanishing_point_px = (k * forward).hnormalized();
+    result.vanishing_point_valid = true;
+  }
+  Eigen::Matrix3d rt;
+  rt << R_camera_car.col(0), R_camera_car.col(1), T_camera_car.translation();
+  result.ground_homography = k * rt;
+  result.ground_homography /= result.ground_homography(2, 2);
+  if (result.vanishing_point_valid) {
+    result.ranging = RangingCheckOf(*camera, T_camera_car, result.vanishing_point_px, options.ranging_distances_m);
+  }
+
+  // Trust checks, then the tolerance.
+  for (const auto& [id, T_car_board] : boards_seen) {
+    if (!BoardFacesCamera(T_camera_car * T_car_board)) {
+      result.reason = "board_seen_from_behind";
+      result.message = absl::StrCat(sensor.name, ": the pose puts the print of board ", id,
+                                    " facing away from the camera (mirrored or mis-identified board)");
+      return result;
+    }
+  }
+  if (result.residual_rms_px > options.max_residual_rms_px) {
+    result.reason = "residual_too_high";
+    result.message = absl::StrFormat("%s: residual RMS %.3f px above %.3f px (moved board or wrong correspondence)",
+                                     sensor.name, result.residual_rms_px, options.max_residual_rms_px);
+    return result;
+  }
+  const MountingTolerance& tol = sensor.tolerance;
+  const double tolerances[6] = {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
+  const double deviations[6] = {result.mounting.angles_deviation.yaw,   result.mounting.angles_deviation.pitch,
+                                result.mounting.angles_deviation.roll,  result.mounting.position_deviation_m.x(),
+                                result.mounting.position_deviation_m.y(), result.mounting.position_deviation_m.z()};
+  const char* names[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
+  // Angles are shown in degrees, positions in millimetres.
+  auto shown = [](int i, double v) { return i < 3 ? v * kDegPerRad : v * 1e3; };
+  const char* units[6] = {"deg", "deg", "deg", "mm", "mm", "mm"};
+  for (int i = 0; i < 6; ++i) {
+    // A zero tolerance means "not checked" (e.g. a position the station cannot observe).
+    if (tolerances[i] > 0 && result.mounting.sigma[i] > options.max_sigma_fraction_of_tolerance * tolerances[i]) {
+      result.reason = "uncertainty_too_high";
+      result.message = absl::StrFormat("%s: %s 1-sigma %.4f %s is above %.2f of its tolerance %.4f %s",
+                                       sensor.name, names[i], shown(i, result.mounting.sigma[i]), units[i],
+                                       options.max_sigma_fraction_of_tolerance, shown(i, tolerances[i]), units[i]);
+      return result;
+    }
+  }
+  std::string out_of_tolerance;
+  for (int i = 0; i < 6; ++i) {
+    if (tolerances[i] > 0 && std::abs(deviations[i]) > tolerances[i]) {
+      if (result.reason.empty()) result.reason = absl::StrCat(names[i], "_out_of_tolerance");
+      absl::StrAppendFormat(&out_of_tolerance, "%s%s %+.3f %s (tolerance %.3f)", out_of_tolerance.empty() ? "" : ", ",
+                            names[i], shown(i, deviations[i]), units[i], shown(i, tolerances[i]));
+    }
+  }
+  if (!result.reason.empty()) {
+    result.verdict = SensorVerdict::kFail;
+    result.message = absl::StrCat(sensor.name, ": out of tolerance: ", out_of_tolerance);
+    return result;
+  }
+  result.verdict = SensorVerdict::kPass;
+  return result;
+}
+
+}  // namespace linecal

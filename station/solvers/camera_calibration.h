@@ -1,0 +1,128 @@
+#pragma once
+// Camera-to-car calibration: every board feature a camera saw, in every frame, placed in the
+// car frame through the station layout and the aligner (p_car = T_car_station *
+// T_station_board * p_board) and solved jointly as one PnP problem (not per board and
+// averaged); then the mounting angles and position with their 1-sigma, the deviation from
+// nominal, the verdict against the car model's tolerances, and what the car's own software
+// derives from the extrinsic: the vanishing point of the car's forward direction, the
+// camera-to-ground homography and a ranging check.
+//
+// Frames: T_car_camera maps camera coordinates to the car frame (ISO 8855, origin on the
+// ground under the rear axle). Angles per conventions.md: R_car_camera = Rz(yaw) Ry(pitch)
+// Rx(roll) R_base.
+//
+// Verdicts: pass; fail with "<yaw|pitch|roll|x|y|z>_out_of_tolerance" (the first of them in
+// that order; the message lists all); error with "board_not_found", "too_few_features",
+// "board_seen_from_behind", "residual_too_high", "uncertainty_too_high" or a PnP outcome
+// ("collinear_features", "no_initial_pose", "did_not_converge").
+
+#include <span>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/statusor.h"
+#include "detectors/core/pose.h"
+#include "detectors/detection.h"
+#include "station/camera/camera_model.h"
+#include "station/model/car_model.h"
+#include "station/model/station_layout.h"
+#include "station/solvers/pnp.h"
+
+namespace linecal {
+
+enum class SensorVerdict { kPass, kFail, kError };
+
+// "pass", "fail", "error" (interfaces.md).
+const char* SensorVerdictName(SensorVerdict verdict);
+
+// One board as the camera saw it in one frame: the detector's features (image position and
+// board-frame position, metres).
+struct BoardObservation {
+  std::string board_id;  // a board of the station layout
+  std::vector<DetectedFeature> features;
+};
+
+// A sensor's mounting in the car: angles (radians) and position (metres) with their 1-sigma,
+// and the deviation from the nominal mounting.
+struct MountingEstimate {
+  Rigid3d T_car_sensor;
+  YawPitchRoll angles;
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();
+  YawPitchRoll angles_deviation;  // measured - nominal, wrapped to (-pi, pi]
+  Eigen::Vector3d position_deviation_m = Eigen::Vector3d::Zero();
+  // 1-sigma of yaw, pitch, roll (radians), x, y, z (metres).
+  Eigen::Matrix<double, 6, 1> sigma = Eigen::Matrix<double, 6, 1>::Zero();
+};
+
+// The mounting of a sensor whose pose is T_sensor_object with covariance `covariance`
+// (PnpResult's convention: left rotation vector and translation in the sensor frame), for an
+// object frame that is the car frame. Propagates the covariance to yaw/pitch/roll and the
+// position in the car frame. O(1).
+MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen::Matrix<double, 6, 6>& covariance,
+                                        const SensorModel& sensor);
+
+struct RangingCheck {
+  double true_distance_m = 0;      // a ground point this far ahead of the camera
+  double measured_distance_m = 0;  // what the flat-ground formula D = h fy / (v - vp_v) gives
+};
+
+struct CameraCalibrationOptions {
+  PnpOptions pnp;
+  // Fewer features give error too_few_features: 8 over-determine the 6 pose unknowns enough
+  // for the residual test to catch a wrong correspondence. [4, 10000].
+  int min_features = 8;
+  // A residual RMS above this gives error residual_too_high: detectors reach ~0.1 px, so 1 px
+  // means a wrong board model, a moved board or a bad correspondence. (0, 100].
+  double max_residual_rms_px = 1.0;
+  // A 1-sigma above this fraction of a component's tolerance gives error
+  // uncertainty_too_high: at 1/3 the 3-sigma band fits inside the tolerance. (0, 10].
+  double max_sigma_fraction_of_tolerance = 1.0 / 3.0;
+  // Ground distances ahead of the camera for the ranging check, metres.
+  std::vector<double> ranging_distances_m = {5, 10, 20, 50};
+
+  // OK or InvalidArgument naming the first bad field. O(1).
+  absl::Status Validate() const;
+};
+
+struct CameraCalibrationResult {
+  SensorVerdict verdict = SensorVerdict::kError;
+  std::string reason;   // a code, empty on pass
+  std::string message;  // for a person
+  bool solved = false;  // the pose below is meaningful
+  MountingEstimate mounting;
+  double residual_rms_px = 0;
+  int features_used = 0;
+  int boards_used = 0;
+  // The image of the car's forward direction (+x_car), pixels; valid when solved and the
+  // direction is inside the lens's valid region (vanishing_point_valid).
+  Eigen::Vector2d vanishing_point_px = Eigen::Vector2d::Zero();
+  bool vanishing_point_valid = false;
+  // H_image_ground = K [r1 r2 t] of T_camera_car: the ground plane z_car = 0 ((x, y) in
+  // metres) to the undistorted image (the pinhole K = fx, fy, cx, cy of the intrinsics; lens
+  // distortion removed). Scaled to H(2, 2) = 1.
+  Eigen::Matrix3d ground_homography = Eigen::Matrix3d::Identity();
+  std::vector<RangingCheck> ranging;
+};
+
+// Calibrates `sensor` (a camera of the car model, with intrinsics) from its observations.
+// Errors (InvalidArgument): not a camera, invalid intrinsics or options, an observation of a
+// board that is not in `station`. Everything else is an outcome in the result. Cost: one PnP
+// solve over all features (about 1 ms for 150).
+absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& sensor, const StationLayout& station,
+                                                        const Rigid3d& T_station_car,
+                                                        std::span<const BoardObservation> observations,
+                                                        const CameraCalibrationOptions& options = {});
+
+// The ground points at `distances_m` straight ahead of the camera (along +x_car from the
+// camera's footprint) imaged through T_camera_car and the full lens model, and the distance
+// the flat-ground formula of the reference toolbox recovers from each pixel: D_lon = h fy /
+// (v_u - vp_v), with h the camera height, v_u the undistorted row and vp the vanishing point.
+// Its error measures how well (h, vp) stand in for the full extrinsic. A distance whose
+// point the camera cannot see gives measured_distance_m = NaN. O(n).
+std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3d& T_camera_car,
+                                         const Eigen::Vector2d& vanishing_point_px,
+                                         std::span<const double> distances_m);
+
+}  // namespace linecal
