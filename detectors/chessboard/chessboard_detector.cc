@@ -15,6 +15,7 @@
 #include "detectors/common/homography.h"
 #include "detectors/common/image_filters.h"
 #include "detectors/common/paint_check.h"
+#include "detectors/common/x_corners.h"
 
 namespace linecal {
 namespace {
@@ -181,6 +182,7 @@ struct SquareQuad {
   std::array<Eigen::Vector2d, 4> corners_px;  // clockwise in the image
   Eigen::Vector2d centre_px = Eigen::Vector2d::Zero();
   double side_px = 0.0;  // mean side length
+  int component = 0;     // index into the labelling's components
 };
 
 struct Touch {
@@ -216,14 +218,13 @@ void TriplePoints(const Triple& t, const std::vector<SquareQuad>& quads,
 }
 
 // The coarse homography tolerance for contour corners of squares of side_px: a fraction of
-// the side, plus a pixel for the contour's pixel steps and a pixel per erosion (eroded
-// quads are smaller than the squares they stand for).
-double CoarseTolerancePx(const ChessboardOptions& options, double side_px, int erosion) {
-  return options.coarse_residual_fraction * side_px + 1.0 + erosion;
+// the side, plus a pixel for the contour's pixel steps.
+double CoarseTolerancePx(const ChessboardOptions& options, double side_px) {
+  return options.coarse_residual_fraction * side_px + 1.0;
 }
 
 std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
-                                const ChessboardOptions& options, int erosion) {
+                                const ChessboardOptions& options) {
   const int n = static_cast<int>(quads.size());
   std::vector<std::vector<Touch>> touches(n);
   for (int i = 0; i < n; ++i) {
@@ -252,7 +253,7 @@ std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
       // The contour of each square retreats from the shared vertex by about the blur over
       // the sine of half the corner's angle (acute under perspective): the corners may lie
       // well apart, and the reflection test below is the sharp one.
-      if (best > 2.0 * options.touch_fraction * small + 2.0 + erosion) continue;
+      if (best > 2.0 * options.touch_fraction * small + 2.0) continue;
       const Eigen::Vector2d vertex = 0.5 * (a.corners_px[best_a] + b.corners_px[best_b]);
       const Eigen::Vector2d mirrored = 2.0 * vertex - a.centre_px;
       if ((mirrored - b.centre_px).norm() > options.touch_fraction * 0.5 * (small + large)) {
@@ -278,7 +279,7 @@ std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
         image.clear();
         TriplePoints(t, quads, &local, &image);
         const std::optional<HomographyFit> fit = FitHomography(local, image, dlt);
-        if (!fit || fit->max_residual > CoarseTolerancePx(options, t.side_px, erosion)) continue;
+        if (!fit || fit->max_residual > CoarseTolerancePx(options, t.side_px)) continue;
         triples.push_back(t);
       }
     }
@@ -322,6 +323,13 @@ std::optional<Eigen::Vector2d> RefineXCorner(const ImageView8& image,
   return *refined + offset;
 }
 
+// Edge points keep this far from the ends of a side (at least a tenth of it, at most 0.35):
+// near a vertex the window across the edge also sees the blurred perpendicular side or
+// the neighbour's corner, which pulls the point towards it. 3 px is the window of half
+// the edge (up to 4 px across) seen from the perpendicular side at the blur of
+// acceptance.md (1.5 px at most).
+constexpr double kEdgeEndMarginPx = 3.0;
+
 // The image line of each edge line, measured around its prediction by H_image_board.
 std::optional<std::vector<Line2d>> MeasureLines(const ImageView8& image, const ChessModel& model,
                                                 const Eigen::Matrix3d& H) {
@@ -356,10 +364,9 @@ std::optional<std::vector<Line2d>> MeasureLines(const ImageView8& image, const C
       // About one edge point per pixel of side, at least 8 (a line from few points is
       // noisy), at most 80 (more points add little).
       const int samples = std::clamp(static_cast<int>(len), 8, 80);
+      const double end = std::clamp(kEdgeEndMarginPx / len, 0.1, 0.35);
       for (int i = 0; i < samples; ++i) {
-        // The middle 80 % of the side: the ends are blurred together with the square's
-        // other sides and the neighbour's corner.
-        const double t = 0.1 + 0.8 * (i + 0.5) / samples;
+        const double t = end + (1.0 - 2.0 * end) * (i + 0.5) / samples;
         const Eigen::Vector2d q = ApplyHomography(H, s.a_board + t * (s.b_board - s.a_board));
         if (!q.allFinite()) return std::nullopt;
         const std::optional<EdgePoint> e = MeasureEdgePoint(image, q, normal, half_window_px);
@@ -434,6 +441,182 @@ Detection Fail(DetectReason reason) {
   return d;
 }
 
+// ---- Splitting squares merged at X-corners ----------------------------------------------
+
+// Components up to this fraction of the image's larger side are searched for X-corners: a
+// group spans 550 / 2600 of the board's width, and the board at most the image's width
+// (acceptance.md: 80 %), so a third holds a group with clutter attached and skips walls.
+constexpr double kMaxSplitComponentFraction = 1.0 / 3.0;
+// Dark pixels closer than this to either edge line of a split X-corner turn light: two
+// pixels in opposite dark sectors that are 4-neighbours would have to change their distance
+// to both lines by more than a pixel in one step, which a unit step cannot.
+constexpr double kSplitBandHalfWidthPx = 0.5;
+
+// Splits dark components that are not quads at the X-corners inside them: squares of a
+// group touching at an X-corner merge into one 4-connected component where blur and noise
+// bridge the vertex. Each component of plausible size that gave no quad is blurred on a
+// patch around its bounding box and searched for X-corners (x_corners.h); around each, a
+// disc of `dark` (half the side of the component's mean square) is repainted from the
+// corner's model: dark in the two dark sectors, light in the bright ones and on a band
+// along both edge lines. Returns the number of
+// X-corners split. Cost: the blur and the corner response over the patches only.
+int SplitAtXCorners(const ImageView8& image, const ComponentLabels& labels,
+                    const std::vector<bool>& has_quad, int min_side_px, Image8* dark) {
+  const XCornerOptions corner_options;
+  // The patch holds the ring, one more pixel for the response's non-maximum window and the
+  // blur kernel (3 sigma) clear of the patch border, where the blur is clamped.
+  const int pad = static_cast<int>(std::ceil(corner_options.ring_radius_px)) + 1 +
+                  static_cast<int>(std::ceil(3.0 * kSaddleBlurSigmaPx));
+  const int max_side =
+      static_cast<int>(kMaxSplitComponentFraction * std::max(image.width, image.height));
+  int splits = 0;
+  for (std::size_t c = 0; c < labels.components.size(); ++c) {
+    if (has_quad[c]) continue;
+    const Component& comp = labels.components[c];
+    const int w = comp.max_x - comp.min_x + 1;
+    const int h = comp.max_y - comp.min_y + 1;
+    if (std::max(w, h) < min_side_px || std::max(w, h) > max_side) continue;
+    const int x0 = std::max(0, comp.min_x - pad);
+    const int y0 = std::max(0, comp.min_y - pad);
+    const int x1 = std::min(image.width, comp.max_x + 1 + pad);
+    const int y1 = std::min(image.height, comp.max_y + 1 + pad);
+    ImageView8 patch;
+    patch.data = image.Row(y0) + x0;
+    patch.width = x1 - x0;
+    patch.height = y1 - y0;
+    patch.stride_bytes = image.stride_bytes;
+    const ImageF blurred = GaussianBlur(patch, kSaddleBlurSigmaPx);
+    std::vector<XCorner> inside;
+    for (XCorner& corner : FindXCorners(blurred, corner_options)) {
+      corner.uv_px += Eigen::Vector2d(x0, y0);
+      const Eigen::Vector2d& v = corner.uv_px;
+      // Corners in the padding belong to other components.
+      if (v.x() >= comp.min_x && v.x() <= comp.max_x && v.y() >= comp.min_y &&
+          v.y() <= comp.max_y) {
+        inside.push_back(corner);
+      }
+    }
+    if (inside.empty()) continue;
+    // The component holds one square more than X-corners; half the side of their mean
+    // area stays inside the squares at each vertex (the shortest side under 50 degrees of
+    // perspective is about two thirds of the mean), and reaches along a thin bright sector
+    // as far as the bridge that blur and noise left.
+    const double side_px = std::sqrt(comp.area_px / (inside.size() + 1.0));
+    const double radius = std::max(corner_options.ring_radius_px, 0.5 * side_px);
+    const int reach = static_cast<int>(std::ceil(radius));
+    for (const XCorner& corner : inside) {
+      const Eigen::Vector2d& v = corner.uv_px;
+      const Eigen::Vector2d n_a(-corner.line_a.y(), corner.line_a.x());
+      const Eigen::Vector2d n_b(-corner.line_b.y(), corner.line_b.x());
+      // Sectors are the sign pairs of the distances to the two lines; opposite sectors have
+      // the same product of signs, so the dark ones are those of the dark axis's product.
+      const bool dark_product_positive =
+          (n_a.dot(corner.dark_axis) > 0.0) == (n_b.dot(corner.dark_axis) > 0.0);
+      const int cx = static_cast<int>(std::lround(v.x()));
+      const int cy = static_cast<int>(std::lround(v.y()));
+      for (int y = std::max(0, cy - reach); y <= std::min(image.height - 1, cy + reach); ++y) {
+        for (int x = std::max(0, cx - reach); x <= std::min(image.width - 1, cx + reach); ++x) {
+          const Eigen::Vector2d d = Eigen::Vector2d(x, y) - v;
+          if (d.squaredNorm() > radius * radius) continue;
+          const double da = n_a.dot(d);
+          const double db = n_b.dot(d);
+          const bool in_dark_sector = ((da > 0.0) == (db > 0.0)) == dark_product_positive;
+          const bool clear_of_lines =
+              std::abs(da) > kSplitBandHalfWidthPx && std::abs(db) > kSplitBandHalfWidthPx;
+          dark->at(x, y) = in_dark_sector && clear_of_lines ? 1 : 0;
+        }
+      }
+      ++splits;
+    }
+  }
+  return splits;
+}
+
+// ---- The search over one binarisation --------------------------------------------------
+
+// The quads of `dark`'s components (*labels: their labelling, kept for splitting).
+std::vector<SquareQuad> SquareQuads(const Image8& dark, const ChessboardOptions& options,
+                                    ComponentLabels* labels) {
+  *labels = LabelComponents(dark.view());
+  QuadOptions quad_options;
+  quad_options.min_side_px = options.min_square_side_px;
+  std::vector<SquareQuad> quads;
+  for (const Quad& q : FindQuads(*labels, quad_options)) {
+    SquareQuad s;
+    s.corners_px = q.corners_px;
+    s.component = q.component;
+    for (int k = 0; k < 4; ++k) {
+      s.centre_px += 0.25 * q.corners_px[k];
+      s.side_px += 0.25 * (q.corners_px[(k + 1) % 4] - q.corners_px[k]).norm();
+    }
+    quads.push_back(s);
+  }
+  return quads;
+}
+
+// Every pair of groups with distinct quads: the coarse board homography from their 24
+// corners, then refinement and the whole-board checks. The verified boards; *failure is
+// raised to the furthest stage reached (DetectReason's order).
+std::vector<Refined> SearchBoards(const ImageView8& image, const Board& board,
+                                  const ChessModel& model, const std::vector<SquareQuad>& quads,
+                                  const Image8& dark, const ChessboardOptions& options,
+                                  DetectReason* failure) {
+  std::vector<Refined> found;
+  if (quads.empty()) return found;
+  const std::vector<Triple> triples = FindTriples(quads, options);
+  if (triples.size() < 2) {
+    *failure = std::max(*failure, DetectReason::kTooFewFeatures);
+    return found;
+  }
+  *failure = std::max(*failure, DetectReason::kVerificationFailed);
+  std::vector<Eigen::Vector2d> local, image_pts, board_pts;
+  std::vector<double> tolerance;
+  HomographyFitOptions dlt;
+  dlt.refine = false;  // coarse: contour corners are off by a pixel anyway
+  for (std::size_t a = 0; a < triples.size(); ++a) {
+    for (std::size_t b = a + 1; b < triples.size(); ++b) {
+      const Triple& ta = triples[a];
+      const Triple& tb = triples[b];
+      if (std::any_of(ta.quads.begin(), ta.quads.end(), [&](int q) {
+            return std::find(tb.quads.begin(), tb.quads.end(), q) != tb.quads.end();
+          })) {
+        continue;
+      }
+      board_pts.clear();
+      image_pts.clear();
+      tolerance.clear();
+      for (int g = 0; g < 2; ++g) {
+        const Triple& t = g == 0 ? ta : tb;
+        local.clear();
+        TriplePoints(t, quads, &local, &image_pts);
+        for (const Eigen::Vector2d& l : local) board_pts.push_back(model.groups[g].ToBoard(l));
+        tolerance.resize(image_pts.size(), CoarseTolerancePx(options, t.side_px));
+      }
+      const std::optional<HomographyFit> fit = FitHomography(board_pts, image_pts, dlt);
+      if (!fit) continue;
+      std::vector<double> residuals;
+      HomographyResiduals(fit->H, board_pts, image_pts, &residuals);
+      bool ok = true;
+      for (std::size_t i = 0; i < residuals.size() && ok; ++i) ok = residuals[i] <= tolerance[i];
+      if (!ok) continue;
+      // The upright one of the two orientations (header): board +x along image +u.
+      Eigen::Matrix3d H = fit->H;
+      const Eigen::Vector2d centre = ApplyHomography(H, Eigen::Vector2d::Zero());
+      const Eigen::Vector2d x_axis =
+          ApplyHomography(H, Eigen::Vector2d(model.square_m, 0.0)) - centre;
+      if (x_axis.x() < 0.0) H = H * Eigen::Vector3d(-1.0, -1.0, 1.0).asDiagonal();
+      DetectReason reason = DetectReason::kNone;
+      std::optional<Refined> refined = RefineBoard(image, board, model, H, dark, options, &reason);
+      if (!refined) {
+        *failure = std::max(*failure, reason);
+        continue;
+      }
+      found.push_back(*std::move(refined));
+    }
+  }
+  return found;
+}
+
 }  // namespace
 
 std::string_view ChessboardOptions::Validate() const {
@@ -442,7 +625,6 @@ std::string_view ChessboardOptions::Validate() const {
     return "noise_contrast_factor";
   }
   if (min_square_side_px < 4 || min_square_side_px > 64) return "min_square_side_px";
-  if (max_erosion_px < 0 || max_erosion_px > 3) return "max_erosion_px";
   if (!(touch_fraction > 0.0 && touch_fraction <= 0.5)) return "touch_fraction";
   if (!(coarse_residual_fraction > 0.0 && coarse_residual_fraction <= 0.5)) {
     return "coarse_residual_fraction";
@@ -469,103 +651,41 @@ Detection DetectChessboard(const ImageView8& image, const Board& board,
       std::max(options.min_contrast,
                static_cast<int>(std::ceil(options.noise_contrast_factor * noise_sigma)));
   int max_contrast = 0;
-  const Image8 dark = BinariseDark(image, min_contrast, &max_contrast);
+  Image8 dark = BinariseDark(image, min_contrast, &max_contrast);
   if (max_contrast < min_contrast) return Fail(DetectReason::kLowContrast);
 
-  QuadOptions quad_options;
-  quad_options.min_side_px = options.min_square_side_px;
   // The reason reported when nothing is found: the furthest stage reached, which is the
   // largest in DetectReason's order (no candidates, too few, verification, wrong board).
   DetectReason failure = DetectReason::kNoCandidates;
-  Image8 eroded;
-  for (int erosion = 0; erosion <= options.max_erosion_px; ++erosion) {
-    if (erosion > 0) eroded = Erode(erosion == 1 ? dark : eroded);
-    const ComponentLabels labels = LabelComponents((erosion == 0 ? dark : eroded).view());
-    std::vector<SquareQuad> quads;
-    for (const Quad& q : FindQuads(labels, quad_options)) {
-      SquareQuad s;
-      s.corners_px = q.corners_px;
-      for (int k = 0; k < 4; ++k) {
-        s.centre_px += 0.25 * q.corners_px[k];
-        s.side_px += 0.25 * (q.corners_px[(k + 1) % 4] - q.corners_px[k]).norm();
-      }
-      quads.push_back(s);
+  ComponentLabels labels;
+  std::vector<SquareQuad> quads = SquareQuads(dark, options, &labels);
+  std::vector<Refined> found = SearchBoards(image, board, *model, quads, dark, options, &failure);
+  if (found.empty()) {
+    // Second chance: squares merged at X-corners, split and searched again.
+    std::vector<bool> has_quad(labels.components.size(), false);
+    for (const SquareQuad& q : quads) has_quad[q.component] = true;
+    if (SplitAtXCorners(image, labels, has_quad, options.min_square_side_px, &dark) > 0) {
+      quads = SquareQuads(dark, options, &labels);
+      found = SearchBoards(image, board, *model, quads, dark, options, &failure);
     }
-    if (quads.empty()) continue;
-    const std::vector<Triple> triples = FindTriples(quads, options, erosion);
-    if (triples.size() < 2) {
-      failure = std::max(failure, DetectReason::kTooFewFeatures);
-      continue;
-    }
-    failure = std::max(failure, DetectReason::kVerificationFailed);
-    // Every pair of groups with distinct quads: the coarse board homography from their 24
-    // corners, then refinement and the whole-board checks.
-    std::vector<Refined> found;
-    std::vector<Eigen::Vector2d> local, image_pts, board_pts;
-    std::vector<double> tolerance;
-    HomographyFitOptions dlt;
-    dlt.refine = false;  // coarse: contour corners are off by a pixel anyway
-    for (std::size_t a = 0; a < triples.size(); ++a) {
-      for (std::size_t b = a + 1; b < triples.size(); ++b) {
-        const Triple& ta = triples[a];
-        const Triple& tb = triples[b];
-        if (std::any_of(ta.quads.begin(), ta.quads.end(), [&](int q) {
-              return std::find(tb.quads.begin(), tb.quads.end(), q) != tb.quads.end();
-            })) {
-          continue;
-        }
-        board_pts.clear();
-        image_pts.clear();
-        tolerance.clear();
-        for (int g = 0; g < 2; ++g) {
-          const Triple& t = g == 0 ? ta : tb;
-          local.clear();
-          TriplePoints(t, quads, &local, &image_pts);
-          for (const Eigen::Vector2d& l : local) board_pts.push_back(model->groups[g].ToBoard(l));
-          tolerance.resize(image_pts.size(), CoarseTolerancePx(options, t.side_px, erosion));
-        }
-        const std::optional<HomographyFit> fit = FitHomography(board_pts, image_pts, dlt);
-        if (!fit) continue;
-        std::vector<double> residuals;
-        HomographyResiduals(fit->H, board_pts, image_pts, &residuals);
-        bool ok = true;
-        for (std::size_t i = 0; i < residuals.size() && ok; ++i) ok = residuals[i] <= tolerance[i];
-        if (!ok) continue;
-        // The upright one of the two orientations (header): board +x along image +u.
-        Eigen::Matrix3d H = fit->H;
-        const Eigen::Vector2d centre = ApplyHomography(H, Eigen::Vector2d::Zero());
-        const Eigen::Vector2d x_axis =
-            ApplyHomography(H, Eigen::Vector2d(model->square_m, 0.0)) - centre;
-        if (x_axis.x() < 0.0) H = H * Eigen::Vector3d(-1.0, -1.0, 1.0).asDiagonal();
-        DetectReason reason = DetectReason::kNone;
-        std::optional<Refined> refined =
-            RefineBoard(image, board, *model, H, dark, options, &reason);
-        if (!refined) {
-          failure = std::max(failure, reason);
-          continue;
-        }
-        found.push_back(*std::move(refined));
-      }
-    }
-    if (found.empty()) continue;
-    // Two verified boards: the same board from duplicate groups, or two boards in view.
-    for (const Refined& other : found) {
-      for (std::size_t id = 0; id < other.uv_px.size(); ++id) {
-        if ((other.uv_px[id] - found[0].uv_px[id]).norm() > 1.0) {
-          return Fail(DetectReason::kAmbiguous);
-        }
-      }
-    }
-    Detection d;
-    d.found = true;
-    d.reason = DetectReason::kNone;
-    for (std::size_t id = 0; id < found[0].uv_px.size(); ++id) {
-      const BoardFeature& f = board.features()[id];
-      d.features.push_back({f.id, found[0].uv_px[id], f.p_board, f.marker});
-    }
-    return d;
   }
-  return Fail(failure);
+  if (found.empty()) return Fail(failure);
+  // Two verified boards: the same board from duplicate groups, or two boards in view.
+  for (const Refined& other : found) {
+    for (std::size_t id = 0; id < other.uv_px.size(); ++id) {
+      if ((other.uv_px[id] - found[0].uv_px[id]).norm() > 1.0) {
+        return Fail(DetectReason::kAmbiguous);
+      }
+    }
+  }
+  Detection d;
+  d.found = true;
+  d.reason = DetectReason::kNone;
+  for (std::size_t id = 0; id < found[0].uv_px.size(); ++id) {
+    const BoardFeature& f = board.features()[id];
+    d.features.push_back({f.id, found[0].uv_px[id], f.p_board, f.marker});
+  }
+  return d;
 }
 
 }  // namespace linecal

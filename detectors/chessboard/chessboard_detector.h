@@ -7,8 +7,11 @@
 //  1. Candidates: local-contrast binarisation (binarise.h; the contrast floor grows with
 //     the image's own noise), 4-connected dark components, convex quads from their
 //     contours (contours.h). Squares touching at an X-corner are separate 4-connected
-//     components; where blur and noise bridge them, the search is repeated on the dark
-//     pixels eroded by one and then two pixels.
+//     components unless blur and noise bridge the vertex. When the first search finds no
+//     board, every component of plausible size that gave no quad is searched for X-corners
+//     (x_corners.h, on a blurred patch around it); the binary image is repainted around
+//     each from the corner's two edge lines (dark sectors dark, a light band along both
+//     lines), which cuts the bridge, and the search is repeated.
 //  2. Groups: two quads touch when a corner of each lies within a fraction of the square
 //     side of the other's and each centre is the other's reflection through that vertex. A
 //     quad touching two others at two neighbouring corners is the middle square of a group
@@ -59,15 +62,11 @@ struct ChessboardOptions {
   // Smallest bounding-box side of a square's component, pixels: the smallest squares of
   // acceptance.md are 12 px, about 7.7 px foreshortened by 50 degrees. [4, 64].
   int min_square_side_px = 6;
-  // Erosion passes after a failed search (0 = none): blur and noise of sigma 4 bridge the
-  // two squares of an X-corner by a pixel or two now and then. [0, 3].
-  int max_erosion_px = 2;
   // Two quads touch when the centre of each is the other's reflection through their nearest
   // corners' midpoint within this fraction of the mean side (a quad of another square is at
   // least a side away), and those corners are closer than twice this fraction of the smaller
   // side plus 2 px (contours retreat from a shared vertex by the blur, more at the acute
-  // corners of a strong perspective; pixel centres lie inside the square; a pixel more per
-  // erosion). (0, 0.5].
+  // corners of a strong perspective; pixel centres lie inside the square). (0, 0.5].
   double touch_fraction = 0.35;
   // Coarse board homography from contour corners: every corner within this fraction of
   // its local square side. Contour corners are off by a pixel or two; a wrong pair of
@@ -94,8 +93,9 @@ struct ChessboardOptions {
 // one board, or its refinement failed, e.g. a board cut by the image border), kWrongBoard
 // (a board-shaped pattern whose paint is not this board's), kAmbiguous (two boards).
 // Pure function. Cost on one core: about 3 ms at 1280 x 720 (binarisation and contours,
-// about 0.3 ms of refinement); each erosion pass, run only when nothing was found, adds
-// about 1 ms.
+// about 0.3 ms of refinement); the split pass, run only when nothing was found, adds the
+// blur and corner response over the unmatched components' patches and a second labelling
+// (its time is not yet measured separately).
 Detection DetectChessboard(const ImageView8& image, const Board& board,
                            const ChessboardOptions& options = {});
 
