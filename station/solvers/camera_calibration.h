@@ -16,6 +16,7 @@
 // "board_seen_from_behind", "residual_too_high", "uncertainty_too_high" or a PnP outcome
 // ("collinear_features", "no_initial_pose", "did_not_converge").
 
+#include <array>
 #include <span>
 #include <string>
 #include <vector>
@@ -54,6 +55,9 @@ struct MountingEstimate {
   Eigen::Vector3d position_deviation_m = Eigen::Vector3d::Zero();
   // 1-sigma of yaw, pitch, roll (radians), x, y, z (metres).
   Eigen::Matrix<double, 6, 1> sigma = Eigen::Matrix<double, 6, 1>::Zero();
+  // Which of yaw, pitch, roll, x, y, z were measured; the others are the nominal values,
+  // with no deviation and no sigma to report (e.g. a radar without elevation: yaw only).
+  std::array<bool, 6> observed = {true, true, true, true, true, true};
 };
 
 // The mounting of a sensor whose pose is T_sensor_object with covariance `covariance`

@@ -19,5 +19,6 @@ int RunRadarDecode(const Args& args);  // cmd_radar.cc
 int RunRadarCalibrate(const Args& args);  // cmd_radar_cal.cc
 int RunEvalRadar(const Args& args);  // cmd_eval_radar.cc
 int RunDetect(const Args& args);  // cmd_detect.cc
+int RunCalibrate(const Args& args);  // cmd_calibrate.cc
 
 }  // namespace linecal::tools

@@ -28,6 +28,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"radar", "calibrate"}, "radar mounting yaw from a capture's corner reflectors", RunRadarCalibrate},
       {{"eval", "radar"}, "Monte Carlo evaluation of radar yaw calibration", RunEvalRadar},
       {{"detect"}, "find a calibration board in an image (--json, --overlay)", RunDetect},
+      {{"calibrate"}, "compute a calibration cycle from a capture (--json)", RunCalibrate},
   };
   return kTable;
 }

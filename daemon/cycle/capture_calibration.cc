@@ -1,0 +1,254 @@
+#include "daemon/cycle/capture_calibration.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <numbers>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "daemon/drivers/radar_decoder.h"
+#include "detectors/detect.h"
+#include "station/io/candump.h"
+#include "station/io/image_io.h"
+#include "station/model/pose_json.h"
+#include "station/radar/radar_calibration.h"
+
+namespace linecal {
+namespace {
+
+constexpr double kDegPerRad = 180.0 / std::numbers::pi;
+
+std::int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorModel& sensor,
+                                        const CaptureSensor& recorded, const CameraCalibrationOptions& options) {
+  SensorCalibration out;
+  std::vector<const StationBoard*> boards;
+  for (const std::string& id : sensor.targets) {
+    if (const StationBoard* b = capture.station.FindBoard(id)) boards.push_back(b);
+    out.boards.push_back({id, 0, 0, ""});
+  }
+  std::vector<BoardObservation> observations;
+  for (const CaptureFile& frame : recorded.frames) {
+    const absl::StatusOr<Image8> image = ReadImage8(capture.PathOf(frame));
+    if (!image.ok()) {
+      out.reason = "data_unreadable";
+      out.message = std::string(image.status().message());
+      return out;
+    }
+    for (size_t i = 0; i < boards.size(); ++i) {
+      const std::optional<Detection> d = DetectBoard(image->view(), boards[i]->board);
+      if (!d) {
+        out.boards[i].last_reason = "no_detector";
+        continue;
+      }
+      // Whole boards, and partial views whose reported features the detector is certain of.
+      if (d->found) {
+        ++out.boards[i].frames_found;
+      } else if (d->reason == DetectReason::kPartial && !d->features.empty()) {
+        ++out.boards[i].frames_partial;
+      } else {
+        out.boards[i].last_reason = DetectReasonName(d->reason);
+        continue;
+      }
+      observations.push_back({boards[i]->id, d->features});
+    }
+  }
+  absl::StatusOr<CameraCalibrationResult> r =
+      CalibrateCamera(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations, options);
+  if (!r.ok()) {
+    out.reason = "invalid_input";
+    out.message = std::string(r.status().message());
+    return out;
+  }
+  out.verdict = r->verdict;
+  out.reason = r->reason;
+  out.message = r->message;
+  out.solved = r->solved;
+  out.mounting = r->mounting;
+  out.residual_rms = r->residual_rms_px;
+  out.features_used = r->features_used;
+  if (r->solved) {
+    if (r->vanishing_point_valid) out.vanishing_point_px = r->vanishing_point_px;
+    out.ground_homography = r->ground_homography;
+    out.ranging = r->ranging;
+  }
+  return out;
+}
+
+SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel& sensor,
+                                       const CaptureSensor& recorded) {
+  SensorCalibration out;
+  const std::optional<RadarModel> model = ParseRadarModel(sensor.model);
+  if (!model || !recorded.can_log) {
+    out.reason = "data_unreadable";
+    out.message = absl::StrCat(sensor.name, ": no CAN log or unknown radar model '", sensor.model, "'");
+    return out;
+  }
+  const absl::StatusOr<std::vector<CanFrame>> frames = ReadCandumpLog(capture.PathOf(*recorded.can_log));
+  if (!frames.ok()) {
+    out.reason = "data_unreadable";
+    out.message = std::string(frames.status().message());
+    return out;
+  }
+  const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *model, RadarConventions{});
+  const absl::StatusOr<RadarCalibrationRun> run = CalibrateRadar(
+      sensor, capture.station, capture.manifest.aligner.T_station_car(), decoded.cycles, RadarCalibrationOptions{});
+  if (!run.ok()) {
+    out.reason = "invalid_input";
+    out.message = std::string(run.status().message());
+    return out;
+  }
+  const RadarCalibrationResult& r = run->result;
+  out.verdict = r.verdict == RadarVerdict::kPass   ? SensorVerdict::kPass
+                : r.verdict == RadarVerdict::kFail ? SensorVerdict::kFail
+                                                   : SensorVerdict::kError;
+  out.reason = r.reason;
+  out.features_used = r.reflectors_used;
+  out.solved = r.reflectors_used > 0;
+  if (out.solved) {
+    // Yaw measured; pitch, roll and position nominal (unobservable without elevation), so
+    // their deviations are 0 with no uncertainty to report beyond the yaw's.
+    out.mounting.T_car_sensor = r.T_car_radar;
+    out.mounting.angles = {r.yaw_rad, r.pitch_rad, r.roll_rad};
+    out.mounting.position_m = r.T_car_radar.translation();
+    out.mounting.angles_deviation = {r.yaw_deviation_rad, 0, 0};
+    out.mounting.sigma[0] = r.yaw_sigma_rad;
+    out.mounting.observed = {true, false, false, false, false, false};
+    double sum_sq = 0;
+    for (const RadarReflectorResidual& res : r.residuals) sum_sq += res.residual_rad * res.residual_rad;
+    out.residual_rms = r.residuals.empty() ? 0 : std::sqrt(sum_sq / r.residuals.size()) * kDegPerRad;
+  }
+  out.message = out.verdict == SensorVerdict::kPass
+                    ? ""
+                    : absl::StrCat(sensor.name, ": ", r.reason, " (yaw deviation ", r.yaw_deviation_rad * kDegPerRad,
+                                   " deg, tolerance ", r.yaw_tolerance_rad * kDegPerRad, " deg)");
+  return out;
+}
+
+// Measured values, deviations from nominal and 1-sigma; components the sensor cannot
+// observe keep their nominal value, and their deviation and sigma are null.
+nlohmann::json MountingJson(const MountingEstimate& m) {
+  const double values[6] = {m.angles.yaw * kDegPerRad, m.angles.pitch * kDegPerRad, m.angles.roll * kDegPerRad,
+                            m.position_m.x(), m.position_m.y(), m.position_m.z()};
+  const double deviations[6] = {m.angles_deviation.yaw * kDegPerRad, m.angles_deviation.pitch * kDegPerRad,
+                                m.angles_deviation.roll * kDegPerRad, m.position_deviation_m.x(),
+                                m.position_deviation_m.y(), m.position_deviation_m.z()};
+  const char* names[6] = {"yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m"};
+  nlohmann::json measured, deviation, sigma;
+  for (int i = 0; i < 6; ++i) {
+    measured[names[i]] = values[i];
+    deviation[names[i]] = m.observed[i] ? nlohmann::json(deviations[i]) : nlohmann::json(nullptr);
+    sigma[names[i]] = m.observed[i] ? nlohmann::json(i < 3 ? m.sigma[i] * kDegPerRad : m.sigma[i])
+                                    : nlohmann::json(nullptr);
+  }
+  return {{"T_car_sensor", MatrixToJson(m.T_car_sensor.Matrix())},
+          {"mounting", measured},
+          {"deviation", deviation},
+          {"sigma", sigma}};
+}
+
+}  // namespace
+
+absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const CaptureCalibrationOptions& options) {
+  if (options.threads < 1 || options.threads > 64) {
+    return absl::InvalidArgumentError(absl::StrCat("threads = ", options.threads, ": must be in [1, 64]"));
+  }
+  if (absl::Status s = options.camera.Validate(); !s.ok()) return s;
+  const std::int64_t start = NowNs();
+  CycleCalibration cycle;
+  std::vector<const SensorModel*> sensors;
+  for (const SensorModel& s : capture.car.sensors) {
+    if (capture.manifest.FindSensor(s.name) != nullptr) sensors.push_back(&s);
+  }
+  cycle.sensors.resize(sensors.size());
+  // Each worker takes the next sensor; every result goes to its own slot.
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i = next++; i < sensors.size(); i = next++) {
+      const SensorModel& s = *sensors[i];
+      const CaptureSensor& recorded = *capture.manifest.FindSensor(s.name);
+      const std::int64_t t0 = NowNs();
+      SensorCalibration r;
+      switch (s.kind) {
+        case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options.camera); break;
+        case SensorKind::kRadar: r = CalibrateRadarSensor(capture, s, recorded); break;
+        case SensorKind::kLidar:
+          r.reason = "lidar_solver_unavailable";
+          r.message = absl::StrCat(s.name, ": LiDAR-to-car calibration is not part of this build");
+          break;
+      }
+      r.name = s.name;
+      r.kind = s.kind;
+      r.elapsed_ns = NowNs() - t0;
+      cycle.sensors[i] = std::move(r);
+    }
+  };
+  const int threads = std::min<int>(options.threads, static_cast<int>(sensors.size()));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+
+  bool any_error = cycle.sensors.empty(), all_pass = !cycle.sensors.empty();
+  for (const SensorCalibration& s : cycle.sensors) {
+    any_error |= s.verdict == SensorVerdict::kError;
+    all_pass &= s.verdict == SensorVerdict::kPass;
+  }
+  cycle.verdict = all_pass ? SensorVerdict::kPass : any_error ? SensorVerdict::kError : SensorVerdict::kFail;
+  cycle.elapsed_ns = NowNs() - start;
+  return cycle;
+}
+
+nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibration& cycle) {
+  nlohmann::json sensors = nlohmann::json::array();
+  for (const SensorCalibration& s : cycle.sensors) {
+    nlohmann::json j = {{"name", s.name},
+                        {"kind", SensorKindName(s.kind)},
+                        {"verdict", SensorVerdictName(s.verdict)},
+                        {"reason", s.reason},
+                        {"message", s.message},
+                        {"features_used", s.features_used},
+                        {"residual_rms", s.residual_rms},
+                        {"elapsed_ms", s.elapsed_ns * 1e-6}};
+    if (s.solved) j.update(MountingJson(s.mounting));
+    if (s.kind == SensorKind::kCamera) {
+      nlohmann::json boards = nlohmann::json::array();
+      for (const BoardDetectionSummary& b : s.boards) {
+        boards.push_back({{"board", b.board_id},
+                          {"frames_found", b.frames_found},
+                          {"frames_partial", b.frames_partial},
+                          {"reason", b.last_reason}});
+      }
+      j["boards"] = boards;
+      if (s.vanishing_point_px) j["vanishing_point_px"] = {s.vanishing_point_px->x(), s.vanishing_point_px->y()};
+      if (s.ground_homography) {
+        nlohmann::json h = nlohmann::json::array();
+        for (int r = 0; r < 3; ++r) {
+          for (int c = 0; c < 3; ++c) h.push_back((*s.ground_homography)(r, c));
+        }
+        j["ground_homography"] = h;
+      }
+      nlohmann::json ranging = nlohmann::json::array();
+      for (const RangingCheck& c : s.ranging) {
+        ranging.push_back({{"true_distance_m", c.true_distance_m},
+                           {"measured_distance_m", std::isfinite(c.measured_distance_m)
+                                                       ? nlohmann::json(c.measured_distance_m)
+                                                       : nlohmann::json(nullptr)}});
+      }
+      if (!s.ranging.empty()) j["ranging"] = ranging;
+    }
+    sensors.push_back(std::move(j));
+  }
+  return {{"vin", capture.manifest.vin},
+          {"car_model", capture.manifest.car_model},
+          {"verdict", SensorVerdictName(cycle.verdict)},
+          {"elapsed_ms", cycle.elapsed_ns * 1e-6},
+          {"sensors", sensors}};
+}
+
+}  // namespace linecal

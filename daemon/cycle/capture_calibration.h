@@ -1,0 +1,79 @@
+#pragma once
+// One calibration cycle computed from a capture: what `linecal calibrate --capture DIR` prints
+// and what the daemon stores for a cycle replayed from, or recorded into, that capture. One
+// function for both, so that they give identical results (interfaces.md, "Captures").
+//
+// Per sensor of the capture (in parallel, one thread per sensor; results do not depend on
+// the scheduling):
+//   camera  every frame's PNG -> DetectBoard for each of the sensor's target boards (whole
+//           boards, and the certain features of partial views) -> CalibrateCamera
+//   radar   the CAN log -> DecodeRadarFrames -> CalibrateRadar (yaw only; pitch, roll and
+//           position nominal, docs/lidar-radar.md)
+//   LiDAR   error "lidar_solver_unavailable": LiDAR-to-car is not part of this build yet
+// The overall verdict is pass when every sensor passes, else fail when none is in error,
+// else error.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/status/statusor.h"
+#include "station/capture/capture.h"
+#include "station/solvers/camera_calibration.h"
+
+namespace linecal {
+
+struct BoardDetectionSummary {
+  std::string board_id;
+  int frames_found = 0;  // frames in which the whole board was identified
+  int frames_partial = 0;  // frames with certain features of a partly seen board
+  std::string last_reason;  // the detector's reason in the last frame without the board
+};
+
+struct SensorCalibration {
+  std::string name;
+  SensorKind kind = SensorKind::kCamera;
+  SensorVerdict verdict = SensorVerdict::kError;
+  std::string reason;
+  std::string message;
+  bool solved = false;
+  MountingEstimate mounting;  // when solved
+  double residual_rms = 0;    // pixels (cameras), degrees (radars)
+  int features_used = 0;      // board features (cameras), reflectors (radars)
+  std::vector<BoardDetectionSummary> boards;  // cameras
+  // Cameras, when solved: see CameraCalibrationResult.
+  std::optional<Eigen::Vector2d> vanishing_point_px;
+  std::optional<Eigen::Matrix3d> ground_homography;
+  std::vector<RangingCheck> ranging;
+  std::int64_t elapsed_ns = 0;  // wall time of this sensor's detection and solve
+};
+
+struct CycleCalibration {
+  SensorVerdict verdict = SensorVerdict::kError;
+  std::vector<SensorCalibration> sensors;  // in the car model's order
+  std::int64_t elapsed_ns = 0;
+};
+
+struct CaptureCalibrationOptions {
+  CameraCalibrationOptions camera;
+  // Sensors computed at once (threads); 1 computes them one after the other. [1, 64].
+  int threads = 8;
+};
+
+// Computes the cycle of `capture` (already read and validated by ReadCapture). Errors:
+// InvalidArgument for invalid options. A sensor whose data cannot be read or decoded gets
+// verdict error with reason "data_unreadable" and the file in the message; it never stops
+// the other sensors. Cost: the detectors' and solvers' (about 0.1-1 s for the reference car).
+absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture,
+                                                  const CaptureCalibrationOptions& options = {});
+
+// The results document of interfaces.md ("Results"): per sensor name, kind, verdict, reason,
+// message, T_car_sensor (4x4 row-major), yaw/pitch/roll (deg) and x/y/z (m), their deviation
+// and 1-sigma, residual RMS, features used; cameras also the vanishing point, the ground
+// homography and the ranging check; overall verdict, VIN, car model and timings.
+nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibration& cycle);
+
+}  // namespace linecal

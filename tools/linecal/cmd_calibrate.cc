@@ -1,0 +1,71 @@
+// linecal calibrate: one cycle's results from a capture, without the daemon
+// (daemon/cycle/capture_calibration.h does the work; the daemon replays through the same code).
+#include <cstdio>
+#include <numbers>
+#include <string>
+
+#include "absl/strings/str_format.h"
+#include "daemon/cycle/capture_calibration.h"
+#include "tools/cli/command_line.h"
+#include "tools/linecal/commands.h"
+
+namespace linecal::tools {
+namespace {
+
+constexpr char kCommand[] = "calibrate";
+constexpr double kDegPerRad = 180.0 / std::numbers::pi;
+
+void PrintTable(const Capture& capture, const CycleCalibration& cycle) {
+  std::printf("VIN %s, car model %s: %s (%.0f ms)\n", capture.manifest.vin.c_str(),
+              capture.manifest.car_model.c_str(), SensorVerdictName(cycle.verdict), cycle.elapsed_ns * 1e-6);
+  std::printf("  %-20s %-7s %-7s %-26s %9s %9s %9s %8s %8s %8s %6s %9s\n", "sensor", "kind", "verdict", "reason",
+              "dyaw_deg", "dpitch_deg", "droll_deg", "dx_mm", "dy_mm", "dz_mm", "feat", "rms");
+  for (const SensorCalibration& s : cycle.sensors) {
+    std::string numbers;
+    const MountingEstimate& m = s.mounting;
+    const double shown[6] = {m.angles_deviation.yaw * kDegPerRad, m.angles_deviation.pitch * kDegPerRad,
+                             m.angles_deviation.roll * kDegPerRad, m.position_deviation_m.x() * 1e3,
+                             m.position_deviation_m.y() * 1e3, m.position_deviation_m.z() * 1e3};
+    for (int i = 0; i < 6; ++i) {
+      const int width = i < 3 ? 9 : 8;
+      // "-": not solved, or a component this sensor cannot observe (kept nominal).
+      numbers += s.solved && m.observed[i] ? absl::StrFormat(i < 3 ? " %+*.3f" : " %+*.1f", width, shown[i])
+                                           : absl::StrFormat(" %*s", width, "-");
+    }
+    std::printf("  %-20s %-7s %-7s %-26s%s %6d %9.3f\n", s.name.c_str(), SensorKindName(s.kind),
+                SensorVerdictName(s.verdict), s.reason.empty() ? "-" : s.reason.c_str(), numbers.c_str(),
+                s.features_used, s.residual_rms);
+  }
+  for (const SensorCalibration& s : cycle.sensors) {
+    if (!s.message.empty()) std::printf("  %s\n", s.message.c_str());
+  }
+}
+
+}  // namespace
+
+int RunCalibrate(const Args& args) {
+  cli::CommandLine cl(
+      "linecal calibrate --capture DIR [--json]",
+      "Computes a calibration cycle from a capture, as the daemon would: detects every camera's "
+      "boards in its frames and solves its mounting in the car frame, calibrates the radars from "
+      "their corner reflectors, and judges each sensor against the car model's tolerances. "
+      "Prints a table (deviations from nominal; residual RMS in pixels for cameras, degrees for "
+      "radars), or with --json the results document of interfaces.md. Exit 0 when every sensor "
+      "passes, 1 when any fails or could not be calibrated, 2 on bad usage or input.",
+      {{"capture", "DIR", "capture directory (docs/capture-format.md)", true},
+       {"json", "", "print one JSON object"}});
+  if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
+  const absl::StatusOr<Capture> capture = ReadCapture(cl.Get("capture"));
+  if (!capture.ok()) return cli::BadInput(kCommand, std::string(capture.status().message()));
+  std::fprintf(stderr, "calibrate: %zu sensors of %s\n", capture->manifest.sensors.size(), capture->dir.c_str());
+  const absl::StatusOr<CycleCalibration> cycle = CalibrateCapture(*capture);
+  if (!cycle.ok()) return cli::BadInput(kCommand, std::string(cycle.status().message()));
+  if (cl.Has("json")) {
+    std::printf("%s\n", CycleCalibrationToJson(*capture, *cycle).dump(2).c_str());
+  } else {
+    PrintTable(*capture, *cycle);
+  }
+  return cycle->verdict == SensorVerdict::kPass ? cli::kExitOk : cli::kExitNegative;
+}
+
+}  // namespace linecal::tools
