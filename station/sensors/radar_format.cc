@@ -143,7 +143,9 @@ std::optional<int64_t> ExtractRaw(std::span<const uint8_t> payload, const CanSig
     }
   }
   if (s.is_signed && ((bits >> (s.length - 1)) & 1) != 0) {
-    return static_cast<int64_t>(bits) - (int64_t{1} << s.length);
+    // Sign extension in unsigned arithmetic (bits - 2^length overflows int64 for 63-bit
+    // signals); the conversion to int64 is two's complement (C++20).
+    return static_cast<int64_t>(bits | ~LowMask(s.length));
   }
   return static_cast<int64_t>(bits);
 }
