@@ -99,19 +99,28 @@ MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen
   return m;
 }
 
+int CarAxisAlong(const Rigid3d& T_camera_car) {
+  // The optical axis in the car frame; within 45 degrees of ±x_car the camera looks along
+  // the car (front and rear cameras), beyond it sideways.
+  const double axis_x = T_camera_car.RotationMatrix().row(2).x();
+  constexpr double kCos45 = 0.70710678118654752;
+  return axis_x >= kCos45 ? 1 : axis_x <= -kCos45 ? -1 : 0;
+}
+
 std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3d& T_camera_car,
                                          const Eigen::Vector2d& vanishing_point_px,
                                          std::span<const double> distances_m) {
   const Rigid3d T_car_camera = T_camera_car.Inverse();
   const Eigen::Vector3d c = T_car_camera.translation();
   const CameraIntrinsics& k = camera.intrinsics();
+  const int along = CarAxisAlong(T_camera_car);
   std::vector<RangingCheck> out;
   for (double d : distances_m) {
     RangingCheck r{d, std::numeric_limits<double>::quiet_NaN()};
-    const Eigen::Vector3d p_camera = T_camera_car * Eigen::Vector3d(c.x() + d, c.y(), 0.0);
+    const Eigen::Vector3d p_camera = T_camera_car * Eigen::Vector3d(c.x() + along * d, c.y(), 0.0);
     Eigen::Vector2d uv;
     // The point must really be in the image; its undistorted row is what the formula reads.
-    if (p_camera.z() > 0 && camera.Project(p_camera, &uv) && camera.IsInImage(uv)) {
+    if (along != 0 && p_camera.z() > 0 && camera.Project(p_camera, &uv) && camera.IsInImage(uv)) {
       const double v_u = k.fy * p_camera.y() / p_camera.z() + k.cy;
       r.measured_distance_m = c.z() * k.fy / (v_u - vanishing_point_px.y());
     }
@@ -178,9 +187,9 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
   // What the car's software derives from the extrinsic (valid whatever the verdict).
   const Eigen::Matrix3d R_camera_car = T_camera_car.RotationMatrix();
   const Eigen::Matrix3d k = K(*sensor.intrinsics);
-  const Eigen::Vector3d forward = R_camera_car.col(0);
-  if (forward.z() > 0) {
-    result.vanishing_point_px = (k * forward).hnormalized();
+  const int along = CarAxisAlong(T_camera_car);
+  if (along != 0) {
+    result.vanishing_point_px = (k * (along * R_camera_car.col(0))).hnormalized();
     result.vanishing_point_valid = true;
   }
   Eigen::Matrix3d rt;

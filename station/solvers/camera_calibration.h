@@ -99,8 +99,9 @@ struct CameraCalibrationResult {
   double residual_rms_px = 0;
   int features_used = 0;
   int boards_used = 0;
-  // The image of the car's forward direction (+x_car), pixels; valid when solved and the
-  // direction is inside the lens's valid region (vanishing_point_valid).
+  // The vanishing point of the car's longitudinal axis in the undistorted image (K of the
+  // intrinsics), pixels: of +x_car for a camera looking forward, of -x_car for one looking
+  // backward (CarAxisAlong); side cameras have none (vanishing_point_valid = false).
   Eigen::Vector2d vanishing_point_px = Eigen::Vector2d::Zero();
   bool vanishing_point_valid = false;
   // H_image_ground = K [r1 r2 t] of T_camera_car: the ground plane z_car = 0 ((x, y) in
@@ -119,12 +120,17 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
                                                         std::span<const BoardObservation> observations,
                                                         const CameraCalibrationOptions& options = {});
 
-// The ground points at `distances_m` straight ahead of the camera (along +x_car from the
-// camera's footprint) imaged through T_camera_car and the full lens model, and the distance
+// +1 when the camera's optical axis is within 45 degrees of +x_car (it looks forward), -1
+// within 45 degrees of -x_car (backward), 0 otherwise (sideways). O(1).
+int CarAxisAlong(const Rigid3d& T_camera_car);
+
+// The ground points at `distances_m` straight ahead of the camera (along ±x_car, the way it
+// looks (CarAxisAlong), from the camera's footprint) imaged through T_camera_car and the full lens model, and the distance
 // the flat-ground formula of the reference toolbox recovers from each pixel: D_lon = h fy /
 // (v_u - vp_v), with h the camera height, v_u the undistorted row and vp the vanishing point.
 // Its error measures how well (h, vp) stand in for the full extrinsic. A distance whose
-// point the camera cannot see gives measured_distance_m = NaN. O(n).
+// point the camera cannot see, or any distance for a side camera, gives
+// measured_distance_m = NaN. O(n).
 std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3d& T_camera_car,
                                          const Eigen::Vector2d& vanishing_point_px,
                                          std::span<const double> distances_m);

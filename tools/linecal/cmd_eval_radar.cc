@@ -25,6 +25,7 @@
 #include "station/sim/radar_sim.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
+#include "tools/linecal/eval_stats.h"
 
 namespace linecal::tools {
 namespace {
@@ -38,8 +39,6 @@ constexpr double kSigmaRatioLow = 0.8;
 constexpr double kSigmaRatioHigh = 1.2;
 constexpr double kCoverageLow = 0.93;
 constexpr double kCoverageHigh = 0.97;
-// The two-sided 95% quantile of the standard normal distribution.
-constexpr double kZ95 = 1.959964;
 // Yaw errors are drawn within ±this x the tolerance: half the cars in, half out.
 constexpr double kYawErrorRangeOfTolerance = 2.0;
 // The simulator's default aligner bounds (simulator.h): the car stands within ±2 cm, ±0.2°.
@@ -61,15 +60,6 @@ struct Group {
   std::map<std::string, int> reasons;
   std::vector<Sample> samples;
 };
-
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const double pos = q * static_cast<double>(v.size() - 1);
-  const size_t lo = static_cast<size_t>(std::floor(pos));
-  const size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
-}
 
 struct Summary {
   int cars = 0;

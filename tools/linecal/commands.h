@@ -20,5 +20,6 @@ int RunRadarCalibrate(const Args& args);  // cmd_radar_cal.cc
 int RunEvalRadar(const Args& args);  // cmd_eval_radar.cc
 int RunDetect(const Args& args);  // cmd_detect.cc
 int RunCalibrate(const Args& args);  // cmd_calibrate.cc
+int RunEvalCalibrate(const Args& args);  // cmd_eval_calibrate.cc
 
 }  // namespace linecal::tools

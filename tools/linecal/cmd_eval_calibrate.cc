@@ -1,0 +1,269 @@
+// linecal eval calibrate: Monte Carlo evaluation of camera-to-car calibration over random
+// cars on a station (acceptance.md, "Solvers"; the table is in docs/solvers.md).
+//
+// Per car and camera: mounting angle and position errors uniform within ±1.5x the
+// tolerance (so some cars are out of tolerance), a random aligner pose, the simulator's exact
+// projections of every visible target feature (VisibleCameraFeatures) plus Gaussian corner
+// noise; CalibrateCamera; the estimate against the truth. The detectors are not in this loop
+// (their accuracy is measured by their own evaluations); the solver is.
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "station/model/aligner.h"
+#include "station/sim/camera_render.h"
+#include "station/solvers/camera_calibration.h"
+#include "tools/cli/command_line.h"
+#include "tools/linecal/commands.h"
+#include "tools/linecal/eval_stats.h"
+
+namespace linecal::tools {
+namespace {
+
+constexpr char kCommand[] = "eval calibrate";
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+// Acceptance bars (acceptance.md, "Solvers").
+constexpr double kAngleP95BarDeg = 0.02;
+constexpr double kPositionP95BarM = 0.010;
+constexpr double kVanishingPointBarPx = 0.3;
+constexpr double kRangingBarFraction = 0.005;
+constexpr double kSigmaRatioLow = 0.8, kSigmaRatioHigh = 1.2;
+constexpr double kCoverageLow = 0.93, kCoverageHigh = 0.97;
+// Mounting errors within ±this x the tolerance: about a third of the cars out of tolerance.
+constexpr double kErrorRangeOfTolerance = 1.5;
+// The simulator's default aligner bounds (simulator.h): within ±2 cm, ±0.2°.
+constexpr double kAlignerOffsetM = 0.02;
+constexpr double kAlignerThrustDeg = 0.2;
+// Features closer than this to the image border are not used (a detector's window needs it).
+constexpr double kFeatureMarginPx = 8.0;
+// Ground distances of the ranging bar.
+const double kRangingDistancesM[] = {5, 10, 20, 50};
+const char* kComponents[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
+
+struct CameraSamples {
+  int cars = 0;
+  std::map<std::string, int> reasons;  // verdict error reasons
+  std::vector<double> errors[6], sigmas[6];
+  std::vector<double> vp_errors_px, ranging_errors;
+  int verdicts_judged = 0, verdicts_agree = 0;
+};
+
+Eigen::Matrix3d GroundHomography(const CameraIntrinsics& k, const Rigid3d& T_camera_car) {
+  Eigen::Matrix3d K;
+  K << k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1;
+  const Eigen::Matrix3d R = T_camera_car.RotationMatrix();
+  Eigen::Matrix3d rt;
+  rt << R.col(0), R.col(1), T_camera_car.translation();
+  return K * rt;
+}
+
+void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937_64& rng, double noise_px, int frames,
+                 std::map<std::string, CameraSamples>* out) {
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  AlignerMeasurement aligner;
+  aligner.longitudinal_offset_m = kAlignerOffsetM * unit(rng);
+  aligner.lateral_offset_m = kAlignerOffsetM * unit(rng);
+  aligner.thrust_angle_rad = kAlignerThrustDeg * kDegToRad * unit(rng);
+  for (const SensorModel& s : car.sensors) {
+    if (s.kind != SensorKind::kCamera || !s.intrinsics) continue;
+    CameraSamples& samples = (*out)[s.name];
+    ++samples.cars;
+    const MountingTolerance& tol = s.tolerance;
+    const double tolerances[6] = {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
+    double truth[6];
+    for (int i = 0; i < 6; ++i) truth[i] = kErrorRangeOfTolerance * tolerances[i] * unit(rng);
+    const Eigen::Matrix3d r_base = SensorBaseRotation(s.kind);
+    const YawPitchRoll n = MountingAngles(s.T_car_sensor_nominal.RotationMatrix(), r_base);
+    const Rigid3d T_car_camera(MountingRotation({n.yaw + truth[0], n.pitch + truth[1], n.roll + truth[2]}, r_base),
+                               s.T_car_sensor_nominal.translation() + Eigen::Vector3d(truth[3], truth[4], truth[5]));
+    const CameraModel camera = *CameraModel::Create(*s.intrinsics);
+    const std::vector<RenderedFeature> visible =
+        VisibleCameraFeatures(camera, aligner.T_station_car() * T_car_camera, station, {}, kFeatureMarginPx);
+    std::vector<BoardObservation> observations;
+    for (int frame = 0; frame < frames; ++frame) {
+      const size_t first = observations.size();
+      for (const RenderedFeature& f : visible) {
+        if (std::find(s.targets.begin(), s.targets.end(), f.board_id) == s.targets.end()) continue;
+        if (observations.size() == first || observations.back().board_id != f.board_id) {
+          observations.push_back({f.board_id, {}});
+        }
+        DetectedFeature d;
+        d.id = f.feature_id;
+        d.p_board = station.FindBoard(f.board_id)->board.features()[f.feature_id].p_board;
+        const double du = noise_px * normal(rng);
+        const double dv = noise_px * normal(rng);
+        d.uv_px = f.uv_px + Eigen::Vector2d(du, dv);
+        observations.back().features.push_back(d);
+      }
+    }
+    const absl::StatusOr<CameraCalibrationResult> r =
+        CalibrateCamera(s, station, aligner.T_station_car(), observations);
+    if (!r.ok() || !r->solved) {
+      ++samples.reasons[r.ok() ? r->reason : "invalid_input"];
+      continue;
+    }
+    if (r->verdict == SensorVerdict::kError) ++samples.reasons[r->reason];
+    const MountingEstimate& m = r->mounting;
+    const double estimate[6] = {m.angles_deviation.yaw,      m.angles_deviation.pitch,    m.angles_deviation.roll,
+                                m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+    bool judgeable = true, truly_in = true;
+    for (int i = 0; i < 6; ++i) {
+      samples.errors[i].push_back(estimate[i] - truth[i]);
+      samples.sigmas[i].push_back(m.sigma[i]);
+      // acceptance.md: verdicts must agree for true errors more than 2 sigma from the edge.
+      judgeable &= std::abs(std::abs(truth[i]) - tolerances[i]) > 2 * m.sigma[i];
+      truly_in &= std::abs(truth[i]) <= tolerances[i];
+    }
+    if (judgeable && r->verdict != SensorVerdict::kError) {
+      ++samples.verdicts_judged;
+      samples.verdicts_agree += (r->verdict == SensorVerdict::kPass) == truly_in;
+    }
+    // The vanishing point and the ground homography against the true extrinsic's.
+    const Rigid3d T_camera_car = T_car_camera.Inverse();
+    const Eigen::Matrix3d H_true = GroundHomography(*s.intrinsics, T_camera_car);
+    // The vanishing point and ranging apply to cameras looking along the car.
+    const int along = CarAxisAlong(T_camera_car);
+    if (along == 0 || !r->vanishing_point_valid) continue;
+    const Eigen::Vector3d axis_image = along * H_true.col(0);  // K (±r1): the image of ±x_car
+    samples.vp_errors_px.push_back((r->vanishing_point_px - axis_image.hnormalized()).norm());
+    // Ranging: a ground point D ahead of the camera, imaged by the true homography, mapped
+    // back to the ground by the calibrated one.
+    const Eigen::Matrix3d H_est_inv = r->ground_homography.inverse();
+    const Eigen::Vector3d c = T_car_camera.translation();
+    for (double d : kRangingDistancesM) {
+      const Eigen::Vector3d ground(c.x() + along * d, c.y(), 1.0);
+      if ((T_camera_car * Eigen::Vector3d(ground.x(), ground.y(), 0)).z() <= 0) continue;  // behind the camera
+      const Eigen::Vector3d pixel = H_true * ground;
+      const Eigen::Vector2d back = (H_est_inv * pixel).hnormalized();
+      samples.ranging_errors.push_back((back - ground.head<2>()).norm() / d);
+    }
+  }
+}
+
+}  // namespace
+
+int RunEvalCalibrate(const Args& args) {
+  cli::CommandLine cl(
+      "linecal eval calibrate --station FILE --car FILE [--cars N] [--seed S] [--noise-px P] [--frames F] [--json]",
+      "Monte Carlo evaluation of camera-to-car calibration: N cars with random mounting errors "
+      "(uniform within 1.5x each tolerance) and aligner poses; every camera's visible target "
+      "features (exact projections) plus Gaussian corner noise are solved, and the estimates "
+      "compared with the truth. Prints per camera the 95th-percentile angle and position "
+      "errors, vanishing point and ground ranging errors, the reported sigma against the spread "
+      "(RMS error / RMS sigma) and the 95% coverage, and the verdict agreement, each against "
+      "acceptance.md's bar. Exit 0 when every camera meets every bar, 1 otherwise.",
+      {{"station", "FILE", "station layout", true},
+       {"car", "FILE", "car model", true},
+       {"cars", "N", "number of random cars (default 200)"},
+       {"seed", "S", "random seed (default 1)"},
+       {"noise-px", "P", "corner noise sigma, pixels (default 0.2)"},
+       {"frames", "F", "frames per camera, each with fresh noise (default 3)"},
+       {"json", "", "print one JSON object"}});
+  if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
+  const absl::StatusOr<StationLayout> station = ReadStationLayout(cl.Get("station"));
+  if (!station.ok()) return cli::BadInput(kCommand, std::string(station.status().message()));
+  const absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
+  if (!car.ok()) return cli::BadInput(kCommand, std::string(car.status().message()));
+  // 200 cars put the 95th percentiles and the coverage within about +-1.5 percentage points.
+  const absl::StatusOr<int> cars = cl.GetInt("cars", 200);
+  if (!cars.ok()) return cli::BadInput(kCommand, std::string(cars.status().message()));
+  if (*cars < 1 || *cars > 100000) return cli::BadInput(kCommand, absl::StrCat("--cars: ", *cars, ": must be in [1, 100000]"));
+  const absl::StatusOr<int> seed = cl.GetInt("seed", 1);
+  if (!seed.ok()) return cli::BadInput(kCommand, std::string(seed.status().message()));
+  // A station grabs several frames per camera (the daemon's frames_per_sensor); each frame's
+  // corners carry fresh noise here, which real detectors' small fixed biases do not.
+  const absl::StatusOr<int> frames = cl.GetInt("frames", 3);
+  if (!frames.ok()) return cli::BadInput(kCommand, std::string(frames.status().message()));
+  if (*frames < 1 || *frames > 100) return cli::BadInput(kCommand, absl::StrCat("--frames: ", *frames, ": must be in [1, 100]"));
+  const absl::StatusOr<double> noise = cl.GetDouble("noise-px", 0.2);
+  if (!noise.ok()) return cli::BadInput(kCommand, std::string(noise.status().message()));
+  if (!(*noise >= 0 && *noise <= 10)) return cli::BadInput(kCommand, absl::StrCat("--noise-px: ", *noise, ": must be in [0, 10]"));
+  if (absl::Status s = CheckTargetsExist(*car, *station); !s.ok()) return cli::BadInput(kCommand, std::string(s.message()));
+
+  std::mt19937_64 rng(static_cast<std::uint64_t>(*seed));
+  std::map<std::string, CameraSamples> samples;
+  for (int i = 0; i < *cars; ++i) {
+    EvaluateCar(*station, *car, rng, *noise, *frames, &samples);
+    if ((i + 1) % 50 == 0) std::fprintf(stderr, "eval calibrate: %d / %d cars\n", i + 1, *cars);
+  }
+
+  bool all_meet = true;
+  nlohmann::json rows = nlohmann::json::array();
+  if (!cl.Has("json")) {
+    std::printf("%-16s %5s %6s | %-27s | %-24s | %7s %8s | %11s %9s | %7s | %s\n", "camera", "cars", "solved",
+                "p95 |err| yaw/pitch/roll deg", "p95 |err| x/y/z mm", "vp px", "range %", "err/sigma", "cover95",
+                "verdict", "errors");
+  }
+  for (const SensorModel& s : car->sensors) {
+    if (!samples.count(s.name)) continue;
+    const CameraSamples& c = samples[s.name];
+    ErrorSigmaStats stats[6];
+    double ratio_lo = 1e9, ratio_hi = 0, cover_lo = 1, cover_hi = 0;
+    for (int i = 0; i < 6; ++i) {
+      stats[i] = SummariseErrors(c.errors[i], c.sigmas[i]);
+      ratio_lo = std::min(ratio_lo, stats[i].error_over_sigma);
+      ratio_hi = std::max(ratio_hi, stats[i].error_over_sigma);
+      cover_lo = std::min(cover_lo, stats[i].coverage95);
+      cover_hi = std::max(cover_hi, stats[i].coverage95);
+    }
+    const double vp95 = Percentile(c.vp_errors_px, 0.95);
+    const double range95 = Percentile(c.ranging_errors, 0.95);
+    const double agreement = c.verdicts_judged ? static_cast<double>(c.verdicts_agree) / c.verdicts_judged : 1.0;
+    const int solved = static_cast<int>(c.errors[0].size());
+    const bool meets = solved == c.cars &&
+                       std::max({stats[0].p95_abs_error, stats[1].p95_abs_error, stats[2].p95_abs_error}) <=
+                           kAngleP95BarDeg * kDegToRad &&
+                       std::max({stats[3].p95_abs_error, stats[4].p95_abs_error, stats[5].p95_abs_error}) <=
+                           kPositionP95BarM &&
+                       vp95 <= kVanishingPointBarPx && range95 <= kRangingBarFraction && ratio_lo >= kSigmaRatioLow &&
+                       ratio_hi <= kSigmaRatioHigh && cover_lo >= kCoverageLow && cover_hi <= kCoverageHigh &&
+                       agreement == 1.0;
+    all_meet &= meets;
+    std::string errors;
+    for (const auto& [reason, count] : c.reasons) absl::StrAppend(&errors, errors.empty() ? "" : ", ", reason, " ", count);
+    nlohmann::json row = {{"camera", s.name},           {"cars", c.cars},
+                          {"solved", solved},           {"vanishing_point_p95_px", vp95},
+                          {"ranging_p95_fraction", range95}, {"verdict_agreement", agreement},
+                          {"verdicts_judged", c.verdicts_judged}, {"errors", c.reasons},
+                          {"meets_bars", meets}};
+    for (int i = 0; i < 6; ++i) {
+      const double scale = i < 3 ? kRadToDeg : 1e3;
+      const std::string unit = i < 3 ? "_deg" : "_mm";
+      row[absl::StrCat(kComponents[i], "_p95_abs_error", unit)] = stats[i].p95_abs_error * scale;
+      row[absl::StrCat(kComponents[i], "_error_over_sigma")] = stats[i].error_over_sigma;
+      row[absl::StrCat(kComponents[i], "_coverage95")] = stats[i].coverage95;
+    }
+    rows.push_back(row);
+    if (!cl.Has("json")) {
+      std::printf("%-16s %5d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %7.3f %8.3f | %5.2f..%-5.2f %4.2f..%-4.2f | %6.1f%% | %s%s\n",
+                  s.name.c_str(), c.cars, solved, stats[0].p95_abs_error * kRadToDeg,
+                  stats[1].p95_abs_error * kRadToDeg, stats[2].p95_abs_error * kRadToDeg,
+                  stats[3].p95_abs_error * 1e3, stats[4].p95_abs_error * 1e3, stats[5].p95_abs_error * 1e3, vp95,
+                  range95 * 100, ratio_lo, ratio_hi, cover_lo, cover_hi, agreement * 100,
+                  errors.empty() ? "-" : errors.c_str(), meets ? "" : "  (misses a bar)");
+    }
+  }
+  if (cl.Has("json")) {
+    std::printf("%s\n", nlohmann::json({{"cars", *cars}, {"seed", *seed}, {"noise_px", *noise}, {"frames", *frames}, {"cameras", rows},
+                                        {"meets_bars", all_meet}})
+                            .dump(2)
+                            .c_str());
+  } else {
+    std::printf("bars: p95 angles <= %.2f deg, positions <= %.0f mm, vanishing point <= %.1f px, ranging <= %.1f%%, "
+                "error/sigma %.1f..%.1f, coverage %.2f..%.2f, verdict agreement 100%%: %s\n",
+                kAngleP95BarDeg, kPositionP95BarM * 1e3, kVanishingPointBarPx, kRangingBarFraction * 100,
+                kSigmaRatioLow, kSigmaRatioHigh, kCoverageLow, kCoverageHigh, all_meet ? "all met" : "NOT all met");
+  }
+  return all_meet ? cli::kExitOk : cli::kExitNegative;
+}
+
+}  // namespace linecal::tools
