@@ -244,11 +244,14 @@ int RunEvalCalibrate(const Args& args) {
     }
     rows.push_back(row);
     if (!cl.Has("json")) {
-      std::printf("%-16s %5d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %7.3f %8.3f | %5.2f..%-5.2f %4.2f..%-4.2f | %6.1f%% | %s%s\n",
+      // Side cameras have no vanishing point or ranging along the car: "-".
+      const std::string vp = c.vp_errors_px.empty() ? "-" : absl::StrFormat("%.3f", vp95);
+      const std::string range = c.ranging_errors.empty() ? "-" : absl::StrFormat("%.3f", range95 * 100);
+      std::printf("%-16s %5d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %7s %8s | %5.2f..%-5.2f %4.2f..%-4.2f | %6.1f%% | %s%s\n",
                   s.name.c_str(), c.cars, solved, stats[0].p95_abs_error * kRadToDeg,
                   stats[1].p95_abs_error * kRadToDeg, stats[2].p95_abs_error * kRadToDeg,
-                  stats[3].p95_abs_error * 1e3, stats[4].p95_abs_error * 1e3, stats[5].p95_abs_error * 1e3, vp95,
-                  range95 * 100, ratio_lo, ratio_hi, cover_lo, cover_hi, agreement * 100,
+                  stats[3].p95_abs_error * 1e3, stats[4].p95_abs_error * 1e3, stats[5].p95_abs_error * 1e3, vp.c_str(),
+                  range.c_str(), ratio_lo, ratio_hi, cover_lo, cover_hi, agreement * 100,
                   errors.empty() ? "-" : errors.c_str(), meets ? "" : "  (misses a bar)");
     }
   }
