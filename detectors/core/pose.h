@@ -69,6 +69,14 @@ class Rigid3d {
   Eigen::Vector3d translation_;
 };
 
+// [v]x, the matrix of the cross product: Skew(v) * w == v.cross(w). The derivative of a
+// rotated point under a small rotation: d(exp(δθ) p)/dδθ = -Skew(p) at δθ = 0. O(1).
+inline Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d s;
+  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return s;
+}
+
 // Mounting angles in radians: R_car_sensor = Rz(yaw) * Ry(pitch) * Rx(roll) * R_base.
 struct YawPitchRoll {
   double yaw = 0.0;

@@ -12,18 +12,6 @@
 namespace linecal {
 namespace {
 
-constexpr double kDegPerRad = 180.0 / std::numbers::pi;
-
-double WrapAngle(double a) { return std::remainder(a, 2 * std::numbers::pi); }
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d s;
-  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return s;
-}
-
-Eigen::Vector3d AnglesVector(const YawPitchRoll& a) { return {a.yaw, a.pitch, a.roll}; }
-
 Eigen::Matrix3d K(const CameraIntrinsics& k) {
   Eigen::Matrix3d m;
   m << k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1;
@@ -31,15 +19,6 @@ Eigen::Matrix3d K(const CameraIntrinsics& k) {
 }
 
 }  // namespace
-
-const char* SensorVerdictName(SensorVerdict verdict) {
-  switch (verdict) {
-    case SensorVerdict::kPass: return "pass";
-    case SensorVerdict::kFail: return "fail";
-    case SensorVerdict::kError: return "error";
-  }
-  return "error";
-}
 
 absl::Status CameraCalibrationOptions::Validate() const {
   if (const std::string_view bad = pnp.Validate(); !bad.empty()) {
@@ -56,47 +35,6 @@ absl::Status CameraCalibrationOptions::Validate() const {
     if (!(d > 0 && d < 1e4)) return absl::InvalidArgumentError("ranging_distances_m: every distance must be in (0, 10000)");
   }
   return absl::OkStatus();
-}
-
-MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen::Matrix<double, 6, 6>& covariance,
-                                        const SensorModel& sensor) {
-  const Eigen::Matrix3d r_base = SensorBaseRotation(sensor.kind);
-  MountingEstimate m;
-  m.T_car_sensor = T_sensor_car.Inverse();
-  const Eigen::Matrix3d R = m.T_car_sensor.RotationMatrix();
-  m.angles = MountingAngles(R, r_base);
-  m.position_m = m.T_car_sensor.translation();
-  const YawPitchRoll nominal = MountingAngles(sensor.T_car_sensor_nominal.RotationMatrix(), r_base);
-  m.angles_deviation = {WrapAngle(m.angles.yaw - nominal.yaw), WrapAngle(m.angles.pitch - nominal.pitch),
-                        WrapAngle(m.angles.roll - nominal.roll)};
-  m.position_deviation_m = m.position_m - sensor.T_car_sensor_nominal.translation();
-
-  // Covariance of T_car_sensor = T_sensor_car^-1 with R_sc = exp(δθ) R̂_sc, t_sc = t̂ + δt:
-  //   R_cs = R̂_scᵀ exp(-δθ) = exp(-R̂_cs δθ) R̂_cs             =>  δθ_car = -R̂_cs δθ
-  //   t_cs = -R_cs t_sc ≈ t̂_cs - R̂_cs δt - R̂_cs [t̂_sc]x δθ
-  const Eigen::Matrix3d R_cs = R;
-  const Eigen::Vector3d t_sc = T_sensor_car.translation();
-  Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Zero();
-  J.topLeftCorner<3, 3>() = -R_cs;
-  J.bottomLeftCorner<3, 3>() = -R_cs * Skew(t_sc);
-  J.bottomRightCorner<3, 3>() = -R_cs;
-  // Yaw/pitch/roll as functions of the car-frame rotation vector, by central differences:
-  // the angles are smooth away from pitch = ±90°, and 1e-6 rad keeps the truncation error
-  // (~1e-12) and the rounding error (~1e-10 relative) far below any reported sigma.
-  constexpr double kStep = 1e-6;
-  Eigen::Matrix3d d_angles;
-  for (int k = 0; k < 3; ++k) {
-    const Eigen::Matrix3d plus = Eigen::AngleAxisd(kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
-    const Eigen::Matrix3d minus = Eigen::AngleAxisd(-kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
-    const Eigen::Vector3d a = AnglesVector(MountingAngles(plus, r_base));
-    const Eigen::Vector3d b = AnglesVector(MountingAngles(minus, r_base));
-    for (int i = 0; i < 3; ++i) d_angles(i, k) = WrapAngle(a[i] - b[i]) / (2 * kStep);
-  }
-  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Identity();
-  A.topLeftCorner<3, 3>() = d_angles;
-  const Eigen::Matrix<double, 6, 6> cov_mounting = A * J * covariance * J.transpose() * A.transpose();
-  m.sigma = cov_mounting.diagonal().cwiseMax(0.0).cwiseSqrt();
-  return m;
 }
 
 int CarAxisAlong(const Rigid3d& T_camera_car) {
@@ -215,39 +153,11 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
                                      sensor.name, result.residual_rms_px, options.max_residual_rms_px);
     return result;
   }
-  const MountingTolerance& tol = sensor.tolerance;
-  const double tolerances[6] = {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
-  const double deviations[6] = {result.mounting.angles_deviation.yaw,   result.mounting.angles_deviation.pitch,
-                                result.mounting.angles_deviation.roll,  result.mounting.position_deviation_m.x(),
-                                result.mounting.position_deviation_m.y(), result.mounting.position_deviation_m.z()};
-  const char* names[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
-  // Angles are shown in degrees, positions in millimetres.
-  auto shown = [](int i, double v) { return i < 3 ? v * kDegPerRad : v * 1e3; };
-  const char* units[6] = {"deg", "deg", "deg", "mm", "mm", "mm"};
-  for (int i = 0; i < 6; ++i) {
-    // A zero tolerance means "not checked" (e.g. a position the station cannot observe).
-    if (tolerances[i] > 0 && result.mounting.sigma[i] > options.max_sigma_fraction_of_tolerance * tolerances[i]) {
-      result.reason = "uncertainty_too_high";
-      result.message = absl::StrFormat("%s: %s 1-sigma %.4f %s is above %.2f of its tolerance %.4f %s",
-                                       sensor.name, names[i], shown(i, result.mounting.sigma[i]), units[i],
-                                       options.max_sigma_fraction_of_tolerance, shown(i, tolerances[i]), units[i]);
-      return result;
-    }
-  }
-  std::string out_of_tolerance;
-  for (int i = 0; i < 6; ++i) {
-    if (tolerances[i] > 0 && std::abs(deviations[i]) > tolerances[i]) {
-      if (result.reason.empty()) result.reason = absl::StrCat(names[i], "_out_of_tolerance");
-      absl::StrAppendFormat(&out_of_tolerance, "%s%s %+.3f %s (tolerance %.3f)", out_of_tolerance.empty() ? "" : ", ",
-                            names[i], shown(i, deviations[i]), units[i], shown(i, tolerances[i]));
-    }
-  }
-  if (!result.reason.empty()) {
-    result.verdict = SensorVerdict::kFail;
-    result.message = absl::StrCat(sensor.name, ": out of tolerance: ", out_of_tolerance);
-    return result;
-  }
-  result.verdict = SensorVerdict::kPass;
+  const MountingJudgement judgement =
+      JudgeMounting(sensor, result.mounting, options.max_sigma_fraction_of_tolerance);
+  result.verdict = judgement.verdict;
+  result.reason = judgement.reason;
+  result.message = judgement.message;
   return result;
 }
 

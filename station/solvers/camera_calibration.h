@@ -29,14 +29,10 @@
 #include "station/camera/camera_model.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
+#include "station/solvers/mounting.h"
 #include "station/solvers/pnp.h"
 
 namespace linecal {
-
-enum class SensorVerdict { kPass, kFail, kError };
-
-// "pass", "fail", "error" (interfaces.md).
-const char* SensorVerdictName(SensorVerdict verdict);
 
 // One board as the camera saw it in one frame: the detector's features (image position and
 // board-frame position, metres).
@@ -44,28 +40,6 @@ struct BoardObservation {
   std::string board_id;  // a board of the station layout
   std::vector<DetectedFeature> features;
 };
-
-// A sensor's mounting in the car: angles (radians) and position (metres) with their 1-sigma,
-// and the deviation from the nominal mounting.
-struct MountingEstimate {
-  Rigid3d T_car_sensor;
-  YawPitchRoll angles;
-  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();
-  YawPitchRoll angles_deviation;  // measured - nominal, wrapped to (-pi, pi]
-  Eigen::Vector3d position_deviation_m = Eigen::Vector3d::Zero();
-  // 1-sigma of yaw, pitch, roll (radians), x, y, z (metres).
-  Eigen::Matrix<double, 6, 1> sigma = Eigen::Matrix<double, 6, 1>::Zero();
-  // Which of yaw, pitch, roll, x, y, z were measured; the others are the nominal values,
-  // with no deviation and no sigma to report (e.g. a radar without elevation: yaw only).
-  std::array<bool, 6> observed = {true, true, true, true, true, true};
-};
-
-// The mounting of a sensor whose pose is T_sensor_object with covariance `covariance`
-// (PnpResult's convention: left rotation vector and translation in the sensor frame), for an
-// object frame that is the car frame. Propagates the covariance to yaw/pitch/roll and the
-// position in the car frame. O(1).
-MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen::Matrix<double, 6, 6>& covariance,
-                                        const SensorModel& sensor);
 
 struct RangingCheck {
   double true_distance_m = 0;      // a ground point this far ahead of the camera

@@ -33,12 +33,6 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m) {
   return svd.matrixU() * d * svd.matrixV().transpose();
 }
 
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d s;
-  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return s;
-}
-
 // The closed-form start in the virtual camera `v` (normalised coordinates m_v of the rays):
 // T_v_object, or nullopt when degenerate.
 std::optional<Rigid3d> PlanarStart(std::span<const Eigen::Vector3d> p_object, std::span<const Eigen::Vector2d> m_v,

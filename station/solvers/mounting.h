@@ -1,0 +1,66 @@
+#pragma once
+// A sensor's mounting on the car as the solvers estimate it, and the verdict against the car
+// model's tolerances: one implementation for cameras and LiDARs (and the vocabulary radars
+// report in).
+//
+// Angles per conventions.md: R_car_sensor = Rz(yaw) Ry(pitch) Rx(roll) R_base, R_base by the
+// sensor kind (SensorBaseRotation).
+
+#include <array>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "detectors/core/pose.h"
+#include "station/model/car_model.h"
+
+namespace linecal {
+
+enum class SensorVerdict { kPass, kFail, kError };
+
+// "pass", "fail", "error" (interfaces.md).
+const char* SensorVerdictName(SensorVerdict verdict);
+
+// A sensor's mounting in the car: angles (radians) and position (metres) with their 1-sigma,
+// and the deviation from the nominal mounting.
+struct MountingEstimate {
+  Rigid3d T_car_sensor;
+  YawPitchRoll angles;
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();
+  YawPitchRoll angles_deviation;  // measured - nominal, wrapped to (-pi, pi]
+  Eigen::Vector3d position_deviation_m = Eigen::Vector3d::Zero();
+  // 1-sigma of yaw, pitch, roll (radians), x, y, z (metres).
+  Eigen::Matrix<double, 6, 1> sigma = Eigen::Matrix<double, 6, 1>::Zero();
+  // Which of yaw, pitch, roll, x, y, z were measured; the others are the nominal values,
+  // with no deviation and no sigma to report (e.g. a radar without elevation: yaw only).
+  std::array<bool, 6> observed = {true, true, true, true, true, true};
+};
+
+// The mounting of a sensor whose pose is T_sensor_car, with the covariance of that pose as
+// PnpResult gives it: (δθ, δt), the left rotation vector and the translation, both in the
+// sensor frame. Propagates the covariance to yaw/pitch/roll and the position in the car
+// frame. O(1).
+MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen::Matrix<double, 6, 6>& covariance,
+                                        const SensorModel& sensor);
+
+// The same from T_car_sensor and the covariance of (δθ, δt) in the car frame (R_car_sensor =
+// exp(δθ) R̂, t = t̂ + δt), as a solver in the car frame gives it. O(1).
+MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::Matrix<double, 6, 6>& covariance,
+                                     const SensorModel& sensor);
+
+struct MountingJudgement {
+  SensorVerdict verdict = SensorVerdict::kError;
+  std::string reason;   // "", "uncertainty_too_high", "<yaw|pitch|roll|x|y|z>_out_of_tolerance"
+  std::string message;  // for a person; empty on pass
+};
+
+// The verdict of a trustworthy estimate against sensor.tolerance: error
+// "uncertainty_too_high" when an observed component's 1-sigma exceeds
+// max_sigma_fraction_of_tolerance of its tolerance (the verdict could not be trusted); else
+// fail with the first out-of-tolerance component in the order yaw, pitch, roll, x, y, z (the
+// message lists all, in degrees and millimetres); else pass. A zero tolerance and an
+// unobserved component are not judged. O(1).
+MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimate& mounting,
+                                double max_sigma_fraction_of_tolerance);
+
+}  // namespace linecal
