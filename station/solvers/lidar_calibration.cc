@@ -1,0 +1,229 @@
+#include "station/solvers/lidar_calibration.h"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <cmath>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace linecal {
+namespace {
+
+// Relative spread below which the hole centres lie on a line (no rotation about it).
+constexpr double kCollinearRatio = 1e-3;
+
+// A whitened residual of a LiDAR point (or direction) against its car-frame position:
+// (exp(omega) R0 p + t - q) / sigma; directions ignore t.
+struct AlignmentCost {
+  AlignmentCost(const Eigen::Vector3d& r0_p, const Eigen::Vector3d& q, double sigma, bool direction)
+      : r0_p(r0_p), q(q), inv_sigma(1.0 / sigma), direction(direction) {}
+
+  template <typename T>
+  bool operator()(const T* omega, const T* t, T* residual) const {
+    const T p[3] = {T(r0_p.x()), T(r0_p.y()), T(r0_p.z())};
+    T rotated[3];
+    ceres::AngleAxisRotatePoint(omega, p, rotated);
+    for (int k = 0; k < 3; ++k) {
+      const T moved = direction ? rotated[k] : rotated[k] + t[k];
+      residual[k] = (moved - T(q[k])) * T(inv_sigma);
+    }
+    return true;
+  }
+
+  Eigen::Vector3d r0_p, q;
+  double inv_sigma;
+  bool direction;
+};
+
+struct Pair {
+  Eigen::Vector3d p_lidar, q_car;
+  double sigma;
+  bool direction;
+};
+
+// Weighted Kabsch: the rotation and translation minimising Σ w |R p + t - q|² over the
+// points (not the directions).
+Rigid3d KabschStart(const std::vector<Pair>& pairs) {
+  double w_sum = 0;
+  Eigen::Vector3d p_mean = Eigen::Vector3d::Zero(), q_mean = Eigen::Vector3d::Zero();
+  for (const Pair& x : pairs) {
+    if (x.direction) continue;
+    const double w = 1.0 / (x.sigma * x.sigma);
+    w_sum += w;
+    p_mean += w * x.p_lidar;
+    q_mean += w * x.q_car;
+  }
+  p_mean /= w_sum;
+  q_mean /= w_sum;
+  Eigen::Matrix3d cross = Eigen::Matrix3d::Zero();
+  for (const Pair& x : pairs) {
+    if (x.direction) continue;
+    cross += (x.q_car - q_mean) * (x.p_lidar - p_mean).transpose() / (x.sigma * x.sigma);
+  }
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(cross, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  const Eigen::Matrix3d R = svd.matrixU() * d * svd.matrixV().transpose();
+  return Rigid3d(R, q_mean - R * p_mean);
+}
+
+}  // namespace
+
+std::string_view LidarCalibrationOptions::Validate() const {
+  if (!(centre_sigma_m > 0 && centre_sigma_m <= 1)) return "centre_sigma_m";
+  if (!(normal_sigma_rad > 0 && normal_sigma_rad <= 1)) return "normal_sigma_rad";
+  if (!(translation_bound_m >= 0 && translation_bound_m <= 10)) return "translation_bound_m";
+  if (!(max_residual_rms_m > 0 && max_residual_rms_m <= 1)) return "max_residual_rms_m";
+  if (!(max_sigma_fraction_of_tolerance > 0 && max_sigma_fraction_of_tolerance <= 10)) {
+    return "max_sigma_fraction_of_tolerance";
+  }
+  return {};
+}
+
+absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor, const StationLayout& station,
+                                                      const Rigid3d& T_station_car,
+                                                      std::span<const LidarBoardObservation> observations,
+                                                      const LidarCalibrationOptions& options) {
+  if (sensor.kind != SensorKind::kLidar) {
+    return absl::InvalidArgumentError(absl::StrCat("sensor ", sensor.name, " is not a LiDAR"));
+  }
+  if (const std::string_view bad = options.Validate(); !bad.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("LidarCalibrationOptions.", std::string(bad), " is out of range"));
+  }
+  const Rigid3d T_car_station = T_station_car.Inverse();
+  LidarCalibrationResult result;
+  std::vector<Pair> pairs;
+  for (const LidarBoardObservation& o : observations) {
+    const StationBoard* board = station.FindBoard(o.board_id);
+    if (board == nullptr) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(sensor.name, ": observed board '", o.board_id, "' is not in station '", station.name, "'"));
+    }
+    if (o.holes.empty()) continue;
+    const Rigid3d T_car_board = T_car_station * board->T_station_board;
+    const double sigma = o.centre_sigma_m > 0 ? o.centre_sigma_m : options.centre_sigma_m;
+    for (const LidarHoleCentre& h : o.holes) {
+      const std::vector<BoardFeature>& features = board->board.features();
+      if (h.feature_id < 0 || h.feature_id >= static_cast<int>(features.size()) ||
+          features[h.feature_id].kind != FeatureKind::kHoleCentre) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(sensor.name, ": board '", o.board_id, "' has no hole centre with id ", h.feature_id));
+      }
+      if (!h.p_lidar.allFinite()) {
+        return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": board '", o.board_id, "' hole ", h.feature_id,
+                                                       ": position is not finite"));
+      }
+      const Eigen::Vector2d& p = features[h.feature_id].p_board;
+      pairs.push_back({h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false});
+      ++result.features_used;
+    }
+    if (o.normal_lidar) {
+      if (!o.normal_lidar->allFinite() || std::abs(o.normal_lidar->norm() - 1) > 1e-6) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(sensor.name, ": board '", o.board_id, "': normal_lidar must be a finite unit vector"));
+      }
+      const double nsigma = o.normal_sigma_rad > 0 ? o.normal_sigma_rad : options.normal_sigma_rad;
+      pairs.push_back({*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true});
+    }
+    ++result.boards_used;
+  }
+  if (result.features_used == 0) {
+    result.reason = "board_not_found";
+    result.message = absl::StrCat(sensor.name, ": none of its boards was found");
+    return result;
+  }
+  // Three hole centres not on one line fix a rigid pose.
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const Pair& x : pairs) mean += x.direction ? Eigen::Vector3d::Zero() : x.q_car;
+  mean /= result.features_used;
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const Pair& x : pairs) {
+    if (!x.direction) scatter += (x.q_car - mean) * (x.q_car - mean).transpose();
+  }
+  const Eigen::Vector3d spread = Eigen::JacobiSVD<Eigen::Matrix3d>(scatter).singularValues().cwiseSqrt();
+  if (result.features_used < 3 || !(spread(1) > kCollinearRatio * spread(0))) {
+    result.reason = "too_few_features";
+    result.message = absl::StrCat(sensor.name, ": ", result.features_used,
+                                  " hole centres, not enough off one line to fix a pose");
+    return result;
+  }
+
+  const Rigid3d start = KabschStart(pairs);
+  const Eigen::Matrix3d R0 = start.RotationMatrix();
+  double omega[3] = {0, 0, 0};
+  double t[3] = {start.translation().x(), start.translation().y(), start.translation().z()};
+  ceres::Problem problem;
+  for (const Pair& x : pairs) {
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<AlignmentCost, 3, 3, 3>(
+                                 new AlignmentCost(R0 * x.p_lidar, x.q_car, x.sigma, x.direction)),
+                             nullptr, omega, t);
+  }
+  const Eigen::Vector3d nominal = sensor.T_car_sensor_nominal.translation();
+  if (options.translation_bound_m > 0) {
+    for (int k = 0; k < 3; ++k) {
+      // Start inside the box, so the bounded solver begins from a feasible point.
+      t[k] = std::clamp(t[k], nominal[k] - options.translation_bound_m, nominal[k] + options.translation_bound_m);
+      problem.SetParameterLowerBound(t, k, nominal[k] - options.translation_bound_m);
+      problem.SetParameterUpperBound(t, k, nominal[k] + options.translation_bound_m);
+    }
+  }
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = 100;
+  // Converge to far below the millimetre: 1e-12 relative cost change.
+  solver.function_tolerance = 1e-12;
+  solver.gradient_tolerance = 1e-14;
+  solver.parameter_tolerance = 1e-12;
+  solver.logging_type = ceres::SILENT;
+  solver.num_threads = 1;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  if (summary.termination_type != ceres::CONVERGENCE) {
+    result.reason = "did_not_converge";
+    result.message = absl::StrCat(sensor.name, ": the LiDAR solve did not converge");
+    return result;
+  }
+  Eigen::Matrix3d d_rotation;
+  ceres::AngleAxisToRotationMatrix(omega, ceres::ColumnMajorAdapter3x3(d_rotation.data()));
+  const Rigid3d T_car_lidar(Eigen::Quaterniond(d_rotation * R0).normalized(), Eigen::Vector3d(t[0], t[1], t[2]));
+  for (int k = 0; k < 3 && options.translation_bound_m > 0; ++k) {
+    // Within a micrometre of the bound counts as on it.
+    result.translation_at_bound |= std::abs(std::abs(t[k] - nominal[k]) - options.translation_bound_m) < 1e-6;
+  }
+
+  // Covariance of (δθ, δt) in the car frame: whitened residual Jacobians [-[R p]x, I] / σ for
+  // points and [-[R n]x, 0] / σ for normals.
+  const Eigen::Matrix3d R = T_car_lidar.RotationMatrix();
+  Eigen::Matrix<double, 6, 6> JtJ = Eigen::Matrix<double, 6, 6>::Zero();
+  double sum_sq = 0;
+  for (const Pair& x : pairs) {
+    Eigen::Matrix<double, 3, 6> J = Eigen::Matrix<double, 3, 6>::Zero();
+    J.leftCols<3>() = -Skew(R * x.p_lidar) / x.sigma;
+    if (!x.direction) {
+      J.rightCols<3>() = Eigen::Matrix3d::Identity() / x.sigma;
+      sum_sq += (T_car_lidar * x.p_lidar - x.q_car).squaredNorm();
+    }
+    JtJ += J.transpose() * J;
+  }
+  result.residual_rms_m = std::sqrt(sum_sq / result.features_used);
+  result.solved = true;
+  result.mounting = MountingFromCarPose(T_car_lidar, JtJ.inverse(), sensor);
+  if (result.residual_rms_m > options.max_residual_rms_m) {
+    result.reason = "residual_too_high";
+    result.message = absl::StrFormat("%s: hole centres %.1f mm RMS off the layout (limit %.1f mm): moved board or wrong match",
+                                     sensor.name, result.residual_rms_m * 1e3, options.max_residual_rms_m * 1e3);
+    return result;
+  }
+  const MountingJudgement judgement = JudgeMounting(sensor, result.mounting, options.max_sigma_fraction_of_tolerance);
+  result.verdict = judgement.verdict;
+  result.reason = judgement.reason;
+  result.message = judgement.message;
+  return result;
+}
+
+}  // namespace linecal
