@@ -1,5 +1,6 @@
 #include "station/sim/simulator.h"
 
+#include <cmath>
 #include <filesystem>
 #include <numbers>
 #include <random>
@@ -169,6 +170,13 @@ absl::Status SimulatorOptions::Validate() const {
   // The aligner's own plausibility bounds (aligner.h).
   if (auto s = CheckBound("aligner_offset_m", aligner_offset_m, 1.0); !s.ok()) return s;
   if (auto s = CheckBound("aligner_thrust_deg", aligner_thrust_deg, 10); !s.ok()) return s;
+  if (aligner) {
+    if (auto s = CheckBound("aligner.longitudinal_offset_m", std::abs(aligner->longitudinal_offset_m), 1.0); !s.ok()) return s;
+    if (auto s = CheckBound("aligner.lateral_offset_m", std::abs(aligner->lateral_offset_m), 1.0); !s.ok()) return s;
+    if (auto s = CheckBound("aligner.thrust_angle_deg", std::abs(aligner->thrust_angle_rad) / kDegToRad, 10); !s.ok()) {
+      return s;
+    }
+  }
   if (camera_frames < 1 || camera_frames > 100) {
     return absl::InvalidArgumentError(absl::StrCat("camera_frames = ", camera_frames, ": must be in [1, 100]"));
   }
@@ -208,9 +216,13 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, 
   m.car_model = car.id;
   m.time_ns = options.time_ns;
   m.origin = "simulator";
-  m.aligner.longitudinal_offset_m = options.aligner_offset_m * u(rng);
-  m.aligner.lateral_offset_m = options.aligner_offset_m * u(rng);
-  m.aligner.thrust_angle_rad = options.aligner_thrust_deg * kDegToRad * u(rng);
+  if (options.aligner) {
+    m.aligner = *options.aligner;
+  } else {
+    m.aligner.longitudinal_offset_m = options.aligner_offset_m * u(rng);
+    m.aligner.lateral_offset_m = options.aligner_offset_m * u(rng);
+    m.aligner.thrust_angle_rad = options.aligner_thrust_deg * kDegToRad * u(rng);
+  }
   const Rigid3d T_station_car = m.aligner.T_station_car();
 
   nlohmann::json truth_sensors = nlohmann::json::array();

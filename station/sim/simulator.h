@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,9 @@ struct SimulatorOptions {
   // Aligner bounds: longitudinal and lateral offsets and thrust angle, uniform in ±these.
   double aligner_offset_m = 0.02;
   double aligner_thrust_deg = 0.2;
+  // The aligner's measurement to use instead of a random one (a daemon cycle simulating the
+  // car the station controller described).
+  std::optional<AlignerMeasurement> aligner;
   int camera_frames = 1;  // frames per camera, 1..100
   CameraRenderOptions camera;
   LidarSimOptions lidar;

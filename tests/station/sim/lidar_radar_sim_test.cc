@@ -265,6 +265,26 @@ TEST_F(SimTest, WholeCaptureIsValidAndDeterministic) {
   }
 }
 
+// A given aligner measurement is the one the capture records (and the one the truth uses),
+// and an implausible one is refused naming the field.
+TEST_F(SimTest, GivenAlignerIsUsed) {
+  SimulatorOptions o;
+  o.sensors = {"front_radar"};
+  o.aligner = AlignerMeasurement{0.031, -0.012, 0.1 * kDegToRad};
+  const fs::path dir = fs::path(testing::TempDir()) / "sim_given_aligner";
+  absl::StatusOr<SimulationSummary> s = SimulateCapture(*station_, *car_, o, 5, dir.string());
+  ASSERT_TRUE(s.ok()) << s.status();
+  absl::StatusOr<Capture> c = ReadCapture(dir.string());
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_NEAR(c->manifest.aligner.longitudinal_offset_m, 0.031, 1e-12);
+  EXPECT_NEAR(c->manifest.aligner.lateral_offset_m, -0.012, 1e-12);
+  EXPECT_NEAR(c->manifest.aligner.thrust_angle_rad, 0.1 * kDegToRad, 1e-12);
+  o.aligner->lateral_offset_m = 3.0;
+  const absl::Status bad = SimulateCapture(*station_, *car_, o, 5, dir.string()).status();
+  EXPECT_EQ(bad.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.message().find("aligner.lateral_offset_m"), std::string::npos) << bad;
+}
+
 TEST_F(SimTest, UnknownSensorIsRefused) {
   SimulatorOptions o;
   o.sensors = {"periscope"};
