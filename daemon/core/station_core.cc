@@ -1,0 +1,331 @@
+#include "daemon/core/station_core.h"
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <numbers>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "daemon/cycle/capture_calibration.h"
+#include "station/capture/capture.h"
+#include "station/model/vin.h"
+#include "station/sim/simulator.h"
+
+namespace linecal {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+// The aligner centres a car to centimetres; beyond these it is a wrong unit or a bad reading
+// (the bounds of station/model/aligner.h).
+constexpr double kMaxAlignerOffsetM = 1.0;
+constexpr double kMaxThrustDeg = 10.0;
+constexpr int kMaxFramesPerSensor = 100;
+
+std::int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+Verdict ToStored(SensorVerdict v) {
+  switch (v) {
+    case SensorVerdict::kPass: return Verdict::kPass;
+    case SensorVerdict::kFail: return Verdict::kFail;
+    case SensorVerdict::kError: return Verdict::kError;
+  }
+  return Verdict::kError;
+}
+
+StoredSensorResult ToStored(const SensorCalibration& s) {
+  constexpr double kDeg = kRadToDeg;
+  StoredSensorResult r;
+  r.sensor = s.name;
+  r.kind = SensorKindName(s.kind);
+  r.verdict = ToStored(s.verdict);
+  r.reason = s.reason;
+  r.message = s.message;
+  if (s.solved) {
+    const MountingEstimate& m = s.mounting;
+    const Eigen::Matrix4d T = m.T_car_sensor.Matrix();
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 4; ++j) r.T_car_sensor.push_back(T(i, j));
+    }
+    r.measured = {m.angles.yaw * kDeg, m.angles.pitch * kDeg, m.angles.roll * kDeg,
+                  m.position_m.x(),    m.position_m.y(),      m.position_m.z()};
+    r.deviation = {m.angles_deviation.yaw * kDeg, m.angles_deviation.pitch * kDeg, m.angles_deviation.roll * kDeg,
+                   m.position_deviation_m.x(),    m.position_deviation_m.y(),      m.position_deviation_m.z()};
+    r.sigma = {m.sigma[0] * kDeg, m.sigma[1] * kDeg, m.sigma[2] * kDeg, m.sigma[3], m.sigma[4], m.sigma[5]};
+  }
+  r.residual_rms = s.residual_rms;
+  r.features_used = s.features_used;
+  if (s.vanishing_point_px) {
+    r.vanishing_point_u_px = s.vanishing_point_px->x();
+    r.vanishing_point_v_px = s.vanishing_point_px->y();
+  }
+  if (s.ground_homography) {
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) r.ground_homography.push_back((*s.ground_homography)(i, j));
+    }
+  }
+  if (!s.ranging.empty()) {
+    nlohmann::json ranging = nlohmann::json::array();
+    for (const RangingCheck& c : s.ranging) {
+      ranging.push_back({{"true_distance_m", c.true_distance_m},
+                         {"measured_distance_m", std::isfinite(c.measured_distance_m)
+                                                     ? nlohmann::json(c.measured_distance_m)
+                                                     : nlohmann::json(nullptr)}});
+    }
+    r.ranging_json = ranging.dump();
+  }
+  r.elapsed_ns = s.elapsed_ns;
+  return r;
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCoreConfig& config) {
+  absl::StatusOr<StationLayout> station = ReadStationLayout(config.station_path);
+  if (!station.ok()) return station.status();
+  std::vector<CarModel> cars;
+  for (const std::string& path : config.car_model_paths) {
+    absl::StatusOr<CarModel> car = ReadCarModel(path);
+    if (!car.ok()) return car.status();
+    for (const CarModel& c : cars) {
+      if (c.id == car->id) return absl::InvalidArgumentError(absl::StrCat(path, ": car model id '", car->id, "' twice"));
+    }
+    if (absl::Status s = CheckTargetsExist(*car, *station); !s.ok()) return s;
+    cars.push_back(std::move(*car));
+  }
+  if (cars.empty()) return absl::InvalidArgumentError("car_models: at least one car model is needed");
+  std::error_code ec;
+  fs::create_directories(config.data_root, ec);
+  if (ec) return absl::InvalidArgumentError(absl::StrCat("data_root: cannot create '", config.data_root, "': ", ec.message()));
+  if (config.source == CycleSource::kReplay) {
+    const fs::path rel(config.replay_capture);
+    if (rel.empty() || rel.is_absolute() || rel.lexically_normal().string().rfind("..", 0) == 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("replay_capture: '", config.replay_capture, "' must be a path inside data_root"));
+    }
+    absl::StatusOr<Capture> capture = ReadCapture((fs::path(config.data_root) / rel).string());
+    if (!capture.ok()) return capture.status();
+  }
+  if (config.default_frames_per_sensor < 1 || config.default_frames_per_sensor > kMaxFramesPerSensor) {
+    return absl::InvalidArgumentError("default_frames_per_sensor: must be in [1, 100]");
+  }
+  StoreOptions store_options;
+  store_options.busy_timeout = config.busy_timeout;
+  absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(config.db_path, store_options);
+  if (!store.ok()) return store.status();
+  return std::unique_ptr<StationCore>(new StationCore(config, std::move(*station), std::move(cars), std::move(*store)));
+}
+
+StationCore::StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
+                         std::unique_ptr<Store> store)
+    : config_(std::move(config)), station_(std::move(station)), cars_(std::move(cars)), store_(std::move(store)) {}
+
+StationCore::~StationCore() {
+  cancel_ = true;
+  if (worker_.joinable()) worker_.join();
+}
+
+const CarModel* StationCore::FindCar(const std::string& id) const {
+  for (const CarModel& c : cars_) {
+    if (c.id == id) return &c;
+  }
+  return nullptr;
+}
+
+absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
+  if (absl::Status s = ValidateVin(request.vin, config_.vin_check_digit); !s.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("vin: ", s.message()));
+  }
+  if (FindCar(request.car_model_id) == nullptr) {
+    std::vector<std::string> known;
+    for (const CarModel& c : cars_) known.push_back(c.id);
+    return absl::InvalidArgumentError(absl::StrCat("car_model_id: unknown car model '", request.car_model_id,
+                                                   "'; known: ", absl::StrJoin(known, ", ")));
+  }
+  const AlignerMeasurement& a = request.aligner;
+  const std::pair<const char*, double> offsets[] = {{"aligner.longitudinal_offset_m", a.longitudinal_offset_m},
+                                                    {"aligner.lateral_offset_m", a.lateral_offset_m}};
+  for (const auto& [field, v] : offsets) {
+    if (!(std::abs(v) <= kMaxAlignerOffsetM)) {
+      return absl::InvalidArgumentError(absl::StrCat(field, " = ", v, ": must be within +-", kMaxAlignerOffsetM, " m"));
+    }
+  }
+  if (!(std::abs(a.thrust_angle_rad * kRadToDeg) <= kMaxThrustDeg)) {
+    return absl::InvalidArgumentError(absl::StrCat("aligner.thrust_angle_deg = ", a.thrust_angle_rad * kRadToDeg,
+                                                   ": must be within +-", kMaxThrustDeg, " deg"));
+  }
+  if (request.frames_per_sensor < 0 || request.frames_per_sensor > kMaxFramesPerSensor) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.frames_per_sensor = ", request.frames_per_sensor, ": must be in [0, 100]"));
+  }
+
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (running_) return absl::FailedPreconditionError(absl::StrCat("cycle ", *running_, " is running"));
+  if (worker_.joinable()) worker_.join();  // the previous cycle's thread has finished its work
+  StoredCycle cycle;
+  cycle.vin = request.vin;
+  cycle.car_model_id = request.car_model_id;
+  cycle.started_ns = NowNs();
+  cycle.request_json = nlohmann::json{{"vin", request.vin},
+                                      {"car_model_id", request.car_model_id},
+                                      {"aligner", AlignerToJson(request.aligner)},
+                                      {"record_capture", request.record_capture},
+                                      {"frames_per_sensor", request.frames_per_sensor}}
+                           .dump();
+  cycle.capture_path = config_.source == CycleSource::kReplay
+                           ? config_.replay_capture
+                           : absl::StrCat("captures/", request.vin, "-", cycle.started_ns);
+  absl::StatusOr<int64_t> id = store_->BeginCycle(cycle);
+  if (!id.ok()) return id.status();
+  running_ = *id;
+  cancel_ = false;
+  worker_ = std::thread(&StationCore::RunCycle, this, *id, request);
+  return *id;
+}
+
+absl::Status StationCore::Event(int64_t id, const std::string& type, const std::string& sensor,
+                                const std::string& detail, Verdict verdict) {
+  absl::StatusOr<int64_t> seq = store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
+  changed_.notify_all();
+  return seq.status();
+}
+
+void StationCore::RunCycle(int64_t id, CycleRequest request) {
+  const CarModel& car = *FindCar(request.car_model_id);
+  std::string capture_rel;
+  std::string end_reason;
+  CycleState end_state = CycleState::kDone;
+  Verdict end_verdict = Verdict::kError;
+  // Every step that fails ends the cycle with error and a reason; nothing here stops the
+  // cycle from being stored as ended.
+  [&] {
+    Event(id, "started", "", car.id).IgnoreError();
+    absl::StatusOr<StoredCycle> stored = store_->GetCycle(id);
+    if (!stored.ok()) {
+      end_reason = "store_unavailable";
+      return;
+    }
+    capture_rel = stored->capture_path;
+    const fs::path dir = fs::path(config_.data_root) / capture_rel;
+    if (config_.source == CycleSource::kSimulator) {
+      SimulatorOptions o;
+      o.vin = request.vin;
+      o.aligner = request.aligner;
+      o.time_ns = stored->started_ns;
+      o.camera_frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
+      absl::StatusOr<SimulationSummary> sim = SimulateCapture(
+          station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
+          [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });
+      if (!sim.ok()) {
+        end_reason = absl::StrCat("acquisition_failed: ", sim.status().message());
+        return;
+      }
+    }
+    if (cancel_) {
+      end_state = CycleState::kCancelled;
+      end_reason = "cancelled";
+      return;
+    }
+    absl::StatusOr<Capture> capture = ReadCapture(dir.string());
+    if (!capture.ok()) {
+      end_reason = absl::StrCat("capture_unreadable: ", capture.status().message());
+      return;
+    }
+    absl::StatusOr<CycleCalibration> result = CalibrateCapture(*capture);
+    if (!result.ok()) {
+      end_reason = absl::StrCat("calibration_failed: ", result.status().message());
+      return;
+    }
+    std::vector<std::string> not_passed;
+    for (const SensorCalibration& s : result->sensors) {
+      if (absl::Status st = store_->PutSensorResult(id, ToStored(s)); !st.ok()) {
+        end_reason = absl::StrCat("store_unavailable: ", st.message());
+        return;
+      }
+      Event(id, "sensor_verdict", s.name, s.reason, ToStored(s.verdict)).IgnoreError();
+      if (s.verdict != SensorVerdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
+    }
+    end_verdict = ToStored(result->verdict);
+    end_reason = absl::StrJoin(not_passed, ",");
+    if (!request.record_capture && config_.source == CycleSource::kSimulator) {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  }();
+  store_->EndCycle(id, end_state, end_state == CycleState::kCancelled ? Verdict::kError : end_verdict, end_reason,
+                   NowNs())
+      .IgnoreError();
+  Event(id, "cycle_ended", "", end_reason,
+        end_state == CycleState::kCancelled ? Verdict::kError : end_verdict)
+      .IgnoreError();
+  std::lock_guard<std::mutex> lock(mutex_);
+  running_.reset();
+  changed_.notify_all();
+}
+
+absl::Status StationCore::CancelCycle(int64_t cycle_id) {
+  absl::StatusOr<StoredCycle> cycle = store_->GetCycle(cycle_id);
+  if (!cycle.ok()) return cycle.status();
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (running_ != cycle_id) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("cycle ", cycle_id, " is not running (", CycleStateName(cycle->state), ")"));
+  }
+  cancel_ = true;
+  return absl::OkStatus();
+}
+
+absl::StatusOr<StoredCycle> StationCore::GetCycle(int64_t cycle_id) { return store_->GetCycle(cycle_id); }
+
+absl::StatusOr<CyclePage> StationCore::ListCycles(const CycleFilter& filter) { return store_->ListCycles(filter); }
+
+absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event) {
+  if (absl::StatusOr<StoredCycle> c = store_->GetCycle(cycle_id); !c.ok()) return c.status();
+  int64_t next = 0;
+  while (true) {
+    // Whether the cycle had ended is read before the events, so the last read delivers all.
+    absl::StatusOr<StoredCycle> cycle = store_->GetCycle(cycle_id);
+    if (!cycle.ok()) return cycle.status();
+    absl::StatusOr<std::vector<StoredEvent>> events = store_->Events(cycle_id);
+    if (!events.ok()) return events.status();
+    for (const StoredEvent& e : *events) {
+      if (e.sequence < next) continue;
+      if (!on_event(e)) return absl::CancelledError("the watcher went away");
+      next = e.sequence + 1;
+    }
+    if (cycle->state != CycleState::kRunning) return absl::OkStatus();
+    std::unique_lock<std::mutex> lock(mutex_);
+    // 200 ms: a missed notification (between the reads and the wait) costs at most this.
+    changed_.wait_for(lock, std::chrono::milliseconds(200));
+  }
+}
+
+StationStatusInfo StationCore::Status() {
+  StationStatusInfo s;
+  s.station_id = config_.station_id;
+  for (const CarModel& c : cars_) s.car_models.push_back(c.id);
+  s.source = config_.source == CycleSource::kSimulator ? "simulator" : "replay";
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    s.running_cycle = running_;
+  }
+  s.database_path = store_->path();
+  std::error_code ec;
+  const fs::space_info space = fs::space(config_.data_root, ec);
+  if (!ec) s.disk_free_bytes = space.available;
+  return s;
+}
+
+void StationCore::WaitIdle() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  changed_.wait(lock, [&] { return !running_.has_value(); });
+}
+
+}  // namespace linecal

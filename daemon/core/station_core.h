@@ -1,0 +1,116 @@
+#pragma once
+// The station's core, without gRPC: validates cycle requests, runs one cycle at a time on a
+// worker thread (acquire -> detect -> solve -> verdict through daemon/cycle), stores every
+// attempt and its events in the SQLite store, and serves reads and event streams. The gRPC
+// handlers (daemon/service) only translate to and from this.
+//
+// Sources: which data a cycle calibrates from is station configuration —
+//   simulator  the car is simulated in the station (the request's aligner measurement, the
+//              cycle id as seed) into the cycle's capture directory, then calibrated;
+//   replay     a recorded capture under the data root is calibrated as it is.
+// Live drivers (Aravis, V4L2, UDP LiDAR, SocketCAN) are not wired to cycles yet.
+//
+// Errors (absl::Status): InvalidArgument naming the request field; FailedPrecondition for a
+// second cycle while one runs, or cancelling an ended cycle; NotFound for unknown cycle ids;
+// Unavailable when the store is locked. Thread safety: every method may be called from any
+// thread.
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "daemon/store/store.h"
+#include "station/model/aligner.h"
+#include "station/model/car_model.h"
+#include "station/model/station_layout.h"
+
+namespace linecal {
+
+enum class CycleSource { kSimulator, kReplay };
+
+struct StationCoreConfig {
+  std::string station_id = "demo";
+  std::string station_path;                // linecal.station file
+  std::vector<std::string> car_model_paths;  // linecal.car files; ids must be unique
+  std::string db_path;                     // SQLite file (its directory must exist)
+  std::string data_root;                   // captures are written and read below it
+  CycleSource source = CycleSource::kSimulator;
+  std::string replay_capture;              // replay: a capture directory relative to data_root
+  bool vin_check_digit = true;             // ISO 3779 check digit (markets that use it)
+  int default_frames_per_sensor = 1;       // frames per camera when the request gives 0
+  std::chrono::milliseconds busy_timeout{5000};
+};
+
+struct CycleRequest {
+  std::string vin;
+  std::string car_model_id;
+  AlignerMeasurement aligner;
+  bool record_capture = false;  // keep the cycle's capture (simulator source) after the cycle
+  int frames_per_sensor = 0;    // 0: the configured default; at most 100
+};
+
+struct StationStatusInfo {
+  std::string station_id;
+  std::vector<std::string> car_models;
+  std::string source;  // "simulator" or "replay"
+  std::optional<int64_t> running_cycle;
+  std::string database_path;
+  std::uint64_t disk_free_bytes = 0;
+};
+
+class StationCore {
+ public:
+  // Loads the station and car models, opens the store (cycles left running by a previous
+  // process become aborted). Errors name the file and field.
+  static absl::StatusOr<std::unique_ptr<StationCore>> Create(const StationCoreConfig& config);
+  // Cancels a running cycle and waits for its thread.
+  ~StationCore();
+  StationCore(const StationCore&) = delete;
+  StationCore& operator=(const StationCore&) = delete;
+
+  // Validates and starts a cycle; returns its id once it is stored as running.
+  absl::StatusOr<int64_t> StartCycle(const CycleRequest& request);
+  // Asks the running cycle to stop at its next step; it ends as cancelled.
+  absl::Status CancelCycle(int64_t cycle_id);
+  absl::StatusOr<StoredCycle> GetCycle(int64_t cycle_id);
+  absl::StatusOr<CyclePage> ListCycles(const CycleFilter& filter);
+  // Calls on_event for every event of the cycle in order, those already stored first, then
+  // as they come, until the cycle has ended and all its events were delivered (OK), or
+  // on_event returns false (Cancelled: the watcher went away). NotFound for unknown ids.
+  absl::Status WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event);
+  StationStatusInfo Status();
+  // Blocks until no cycle runs (tests, shutdown).
+  void WaitIdle();
+
+  Store& store() { return *store_; }
+
+ private:
+  StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
+              std::unique_ptr<Store> store);
+  void RunCycle(int64_t id, CycleRequest request);
+  absl::Status Event(int64_t id, const std::string& type, const std::string& sensor, const std::string& detail,
+                     Verdict verdict = Verdict::kNone);
+  const CarModel* FindCar(const std::string& id) const;
+
+  const StationCoreConfig config_;
+  const StationLayout station_;
+  const std::vector<CarModel> cars_;
+  std::unique_ptr<Store> store_;
+
+  std::mutex mutex_;
+  std::condition_variable changed_;  // an event was stored or a cycle ended
+  std::optional<int64_t> running_;
+  std::atomic<bool> cancel_{false};
+  std::thread worker_;
+};
+
+}  // namespace linecal

@@ -1,0 +1,222 @@
+// The station core with real parts: the reference station, a car model with the reference
+// front camera and front radar (a short cycle), the simulator and replay sources, a real
+// SQLite file. Cycles run to a stored verdict; events stream in order; requests are
+// validated naming the field; one cycle at a time; the daemon's results equal the offline
+// calibration of the same capture.
+#include "daemon/core/station_core.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "daemon/cycle/capture_calibration.h"
+#include "station/capture/capture.h"
+#include "station/sim/simulator.h"
+
+namespace linecal {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
+// A valid VIN with its ISO 3779 check digit (position 9).
+constexpr char kVin[] = "1M8GDM9AXKP042788";
+
+class StationCoreTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::path(testing::TempDir()) /
+           ("core_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    // The reference car with two sensors only: a cycle of well under a second.
+    std::ifstream in(kDeploy + "/cars/reference.json");
+    nlohmann::json car = nlohmann::json::parse(in);
+    nlohmann::json kept = nlohmann::json::array();
+    for (const nlohmann::json& s : car["sensors"]) {
+      if (s["name"] == "front_camera" || s["name"] == "front_radar") kept.push_back(s);
+    }
+    car["sensors"] = kept;
+    car["id"] = "two_sensor";
+    std::ofstream(dir_ / "car.json") << car.dump(2);
+    config_.station_path = kDeploy + "/stations/reference.json";
+    config_.car_model_paths = {(dir_ / "car.json").string()};
+    config_.db_path = (dir_ / "station.db").string();
+    config_.data_root = (dir_ / "data").string();
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::unique_ptr<StationCore> Core() {
+    absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config_);
+    EXPECT_TRUE(core.ok()) << core.status();
+    return core.ok() ? std::move(*core) : nullptr;
+  }
+
+  static CycleRequest Request() {
+    CycleRequest r;
+    r.vin = kVin;
+    r.car_model_id = "two_sensor";
+    r.aligner = {0.012, -0.008, 0.05 * std::numbers::pi / 180};
+    return r;
+  }
+
+  fs::path dir_;
+  StationCoreConfig config_;
+};
+
+// The stored per-sensor results equal CalibrateCapture's on the same capture.
+void ExpectSameResults(const StoredCycle& stored, const CycleCalibration& offline) {
+  ASSERT_EQ(stored.sensors.size(), offline.sensors.size());
+  for (const SensorCalibration& s : offline.sensors) {
+    SCOPED_TRACE(s.name);
+    const StoredSensorResult* r = nullptr;
+    for (const StoredSensorResult& x : stored.sensors) {
+      if (x.sensor == s.name) r = &x;
+    }
+    ASSERT_NE(r, nullptr);
+    EXPECT_EQ(r->verdict == Verdict::kPass, s.verdict == SensorVerdict::kPass);
+    EXPECT_EQ(r->reason, s.reason);
+    EXPECT_EQ(r->features_used, s.features_used);
+    EXPECT_EQ(r->residual_rms, s.residual_rms);  // bit for bit: the same code on the same bytes
+    ASSERT_EQ(r->T_car_sensor.size(), 16u);
+    const Eigen::Matrix4d T = s.mounting.T_car_sensor.Matrix();
+    for (int i = 0; i < 16; ++i) EXPECT_EQ(r->T_car_sensor[i], T(i / 4, i % 4)) << i;
+  }
+}
+
+TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineResult) {
+  std::unique_ptr<StationCore> core = Core();
+  CycleRequest request = Request();
+  request.record_capture = true;
+  absl::StatusOr<int64_t> id = core->StartCycle(request);
+  ASSERT_TRUE(id.ok()) << id.status();
+  std::vector<std::string> types;
+  std::vector<int64_t> sequences;
+  ASSERT_TRUE(core->WatchCycle(*id, [&](const StoredEvent& e) {
+                    types.push_back(e.type + (e.sensor.empty() ? "" : ":" + e.sensor));
+                    sequences.push_back(e.sequence);
+                    return true;
+                  }).ok());
+  EXPECT_EQ(types.front(), "started");
+  EXPECT_EQ(types.back(), "cycle_ended");
+  EXPECT_NE(std::find(types.begin(), types.end(), "sensor_acquired:front_camera"), types.end());
+  EXPECT_NE(std::find(types.begin(), types.end(), "sensor_verdict:front_radar"), types.end());
+  for (size_t i = 0; i < sequences.size(); ++i) EXPECT_EQ(sequences[i], static_cast<int64_t>(i));
+
+  absl::StatusOr<StoredCycle> cycle = core->GetCycle(*id);
+  ASSERT_TRUE(cycle.ok());
+  EXPECT_EQ(cycle->state, CycleState::kDone);
+  EXPECT_EQ(cycle->vin, kVin);
+  EXPECT_GT(cycle->ended_ns, cycle->started_ns);
+  ASSERT_EQ(cycle->sensors.size(), 2u);
+  EXPECT_NE(cycle->request_json.find("\"lateral_offset_m\":-0.008"), std::string::npos) << cycle->request_json;
+
+  // The recorded capture holds the request's aligner, and calibrating it offline gives the
+  // stored results exactly.
+  absl::StatusOr<Capture> capture = ReadCapture((fs::path(config_.data_root) / cycle->capture_path).string());
+  ASSERT_TRUE(capture.ok()) << capture.status();
+  EXPECT_DOUBLE_EQ(capture->manifest.aligner.lateral_offset_m, -0.008);
+  absl::StatusOr<CycleCalibration> offline = CalibrateCapture(*capture);
+  ASSERT_TRUE(offline.ok());
+  ExpectSameResults(*cycle, *offline);
+  EXPECT_EQ(cycle->verdict == Verdict::kPass, offline->verdict == SensorVerdict::kPass);
+}
+
+TEST_F(StationCoreTest, ReplaySourceGivesTheOfflineResult) {
+  SimulatorOptions o;
+  o.sensors = {"front_camera", "front_radar"};
+  const fs::path rec = fs::path(config_.data_root) / "recorded";
+  fs::create_directories(config_.data_root);
+  ASSERT_TRUE(SimulateCapture(*ReadStationLayout(config_.station_path), *ReadCarModel(kDeploy + "/cars/reference.json"),
+                              o, 9, rec.string())
+                  .ok());
+  config_.source = CycleSource::kReplay;
+  config_.replay_capture = "recorded";
+  config_.car_model_paths = {kDeploy + "/cars/reference.json"};
+  std::unique_ptr<StationCore> core = Core();
+  CycleRequest request = Request();
+  request.car_model_id = "reference";
+  const int64_t id = *core->StartCycle(request);
+  core->WaitIdle();
+  absl::StatusOr<StoredCycle> cycle = core->GetCycle(id);
+  ASSERT_TRUE(cycle.ok());
+  EXPECT_EQ(cycle->state, CycleState::kDone);
+  EXPECT_EQ(cycle->capture_path, "recorded");
+  ExpectSameResults(*cycle, *CalibrateCapture(*ReadCapture(rec.string())));
+
+  // A replay capture outside the data root is refused at start-up.
+  config_.replay_capture = "../elsewhere";
+  const absl::Status escape = StationCore::Create(config_).status();
+  EXPECT_EQ(escape.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(escape.message().find("replay_capture"), std::string::npos);
+}
+
+TEST_F(StationCoreTest, RequestsAreValidatedNamingTheField) {
+  std::unique_ptr<StationCore> core = Core();
+  auto expect_field = [&](CycleRequest r, const std::string& field) {
+    const absl::Status s = core->StartCycle(r).status();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << field;
+    EXPECT_EQ(s.message().rfind(field, 0), 0u) << s.message();
+  };
+  CycleRequest r = Request();
+  r.vin = "1M8GDM9AXKP04278O";  // the letter O is not allowed
+  expect_field(r, "vin");
+  r = Request();
+  r.vin = "1M8GDM9AXKP042789";  // wrong check digit
+  expect_field(r, "vin");
+  r = Request();
+  r.car_model_id = "sedan";
+  expect_field(r, "car_model_id");
+  r = Request();
+  r.aligner.lateral_offset_m = 2.5;
+  expect_field(r, "aligner.lateral_offset_m");
+  r = Request();
+  r.aligner.thrust_angle_rad = std::nan("");
+  expect_field(r, "aligner.thrust_angle_deg");
+  r = Request();
+  r.frames_per_sensor = 101;
+  expect_field(r, "options.frames_per_sensor");
+  // Nothing was stored for refused requests.
+  EXPECT_TRUE(core->ListCycles({})->cycles.empty());
+}
+
+TEST_F(StationCoreTest, OneCycleAtATimeCancelAndUnknownIds) {
+  std::unique_ptr<StationCore> core = Core();
+  const int64_t first = *core->StartCycle(Request());
+  const absl::Status second = core->StartCycle(Request()).status();
+  EXPECT_EQ(second.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(second.message().find(std::to_string(first)), std::string::npos);
+  EXPECT_EQ(core->Status().running_cycle, std::optional<int64_t>(first));
+  ASSERT_TRUE(core->CancelCycle(first).ok());
+  core->WaitIdle();
+  absl::StatusOr<StoredCycle> cancelled = core->GetCycle(first);
+  EXPECT_EQ(cancelled->state, CycleState::kCancelled);
+  EXPECT_EQ(cancelled->reason, "cancelled");
+  EXPECT_EQ(core->CancelCycle(first).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(core->GetCycle(999).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(core->CancelCycle(999).code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(core->WatchCycle(999, [](const StoredEvent&) { return true; }).code(), absl::StatusCode::kNotFound);
+  // The station takes the next car.
+  const int64_t next = *core->StartCycle(Request());
+  EXPECT_GT(next, first);
+  core->WaitIdle();
+  const StationStatusInfo status = core->Status();
+  EXPECT_EQ(status.car_models, std::vector<std::string>{"two_sensor"});
+  EXPECT_EQ(status.running_cycle, std::nullopt);
+  EXPECT_GT(status.disk_free_bytes, 0u);
+}
+
+TEST_F(StationCoreTest, BadConfigurationNamesTheFile) {
+  config_.station_path = (dir_ / "missing.json").string();
+  const absl::Status s = StationCore::Create(config_).status();
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("missing.json"), std::string::npos) << s;
+}
+
+}  // namespace
+}  // namespace linecal
