@@ -312,6 +312,13 @@ StationStatusInfo StationCore::Status() {
   s.station_id = config_.station_id;
   for (const CarModel& c : cars_) s.car_models.push_back(c.id);
   s.source = config_.source == CycleSource::kSimulator ? "simulator" : "replay";
+  for (const CarModel& c : cars_) {
+    for (const SensorModel& sensor : c.sensors) {
+      bool listed = false;
+      for (const auto& [name, kind] : s.sensors) listed |= name == sensor.name;
+      if (!listed) s.sensors.emplace_back(sensor.name, sensor.kind);
+    }
+  }
   {
     std::lock_guard<std::mutex> lock(mutex_);
     s.running_cycle = running_;

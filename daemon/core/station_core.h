@@ -61,7 +61,9 @@ struct CycleRequest {
 struct StationStatusInfo {
   std::string station_id;
   std::vector<std::string> car_models;
-  std::string source;  // "simulator" or "replay"
+  std::string source;  // "simulator" or "replay": it serves every sensor
+  // Every sensor of the car models, by name (first car model first), with its kind.
+  std::vector<std::pair<std::string, SensorKind>> sensors;
   std::optional<int64_t> running_cycle;
   std::string database_path;
   std::uint64_t disk_free_bytes = 0;

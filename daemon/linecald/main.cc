@@ -1,0 +1,102 @@
+// linecald: the station daemon (interfaces.md). `linecald --config FILE` with --listen,
+// --db and --log-level overriding the file; without --config it starts on the bundled demo
+// station (simulated sensors) with its data under --data-dir (default ./linecald-data).
+// SIGTERM or SIGINT: stop taking calls, let a running cycle end as cancelled, exit 0.
+#include <pthread.h>
+#include <signal.h>
+
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "daemon/core/daemon_config.h"
+#include "daemon/service/station_service.h"
+
+namespace {
+
+constexpr char kUsage[] =
+    "usage: linecald [--config FILE] [--listen HOST:PORT] [--db PATH] [--log-level LEVEL] [--data-dir DIR]\n"
+    "  Serves the linecal.v1.Station gRPC API (proto/linecal/v1/station.proto), the gRPC health\n"
+    "  service and server reflection. Without --config: the demo station of deploy/ with\n"
+    "  simulated sensors, data and database in --data-dir (default ./linecald-data).\n";
+
+// One log line to stderr: "level=info msg=... key=value ...", for journald and people.
+void Log(const char* level, const std::string& message) {
+  std::fprintf(stderr, "level=%s msg=\"%s\"\n", level, message.c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string config_path, listen, db, log_level, data_dir = "linecald-data";
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&](std::string* out) {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "linecald: %s needs a value\n%s", arg.c_str(), kUsage);
+        std::exit(2);
+      }
+      *out = argv[++i];
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (arg == "--config") {
+      value(&config_path);
+    } else if (arg == "--listen") {
+      value(&listen);
+    } else if (arg == "--db") {
+      value(&db);
+    } else if (arg == "--log-level") {
+      value(&log_level);
+    } else if (arg == "--data-dir") {
+      value(&data_dir);
+    } else {
+      std::fprintf(stderr, "linecald: unknown option '%s'\n%s", arg.c_str(), kUsage);
+      return 2;
+    }
+  }
+  absl::StatusOr<linecal::DaemonConfig> config =
+      config_path.empty() ? absl::StatusOr<linecal::DaemonConfig>(linecal::DefaultDaemonConfig(LINECAL_DEPLOY_DIR, data_dir))
+                          : linecal::ReadDaemonConfig(config_path);
+  if (!config.ok()) {
+    std::fprintf(stderr, "linecald: %s\n", std::string(config.status().message()).c_str());
+    return 2;
+  }
+  if (!listen.empty()) config->listen = listen;
+  if (!db.empty()) config->core.db_path = db;
+  if (!log_level.empty()) config->log_level = log_level;
+
+  // Signals are taken by a waiting thread, not by handlers: the shutdown runs in normal code.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  absl::StatusOr<std::unique_ptr<linecal::StationCore>> core = linecal::StationCore::Create(config->core);
+  if (!core.ok()) {
+    std::fprintf(stderr, "linecald: %s\n", std::string(core.status().message()).c_str());
+    return 2;
+  }
+  if ((*core)->store().aborted_at_open() > 0) {
+    Log("warning", std::to_string((*core)->store().aborted_at_open()) + " cycles interrupted by the last stop are stored as aborted");
+  }
+  absl::StatusOr<linecal::RunningServer> server =
+      linecal::StartServer(core->get(), config->listen, config->auth_token, LINECAL_VERSION);
+  if (!server.ok()) {
+    std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
+    return 1;
+  }
+  Log("info", "listening on " + config->listen + " (port " + std::to_string(server->port) + "), database " +
+                  config->core.db_path + (config->auth_token.empty() ? ", no authentication" : ", token authentication"));
+  int signal = 0;
+  sigwait(&signals, &signal);
+  Log("info", std::string("stopping on ") + (signal == SIGTERM ? "SIGTERM" : "SIGINT"));
+  (*core)->Status().running_cycle.has_value() ? (void)(*core)->CancelCycle(*(*core)->Status().running_cycle) : void();
+  server->server->Shutdown();
+  (*core)->WaitIdle();
+  Log("info", "stopped");
+  return 0;
+}

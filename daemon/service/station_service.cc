@@ -1,0 +1,251 @@
+#include "daemon/service/station_service.h"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+
+#include <numbers>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+
+namespace linecal {
+namespace {
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+grpc::Status ToGrpc(const absl::Status& s) {
+  if (s.ok()) return grpc::Status::OK;
+  grpc::StatusCode code = grpc::StatusCode::INTERNAL;
+  switch (s.code()) {
+    case absl::StatusCode::kInvalidArgument: code = grpc::StatusCode::INVALID_ARGUMENT; break;
+    case absl::StatusCode::kNotFound: code = grpc::StatusCode::NOT_FOUND; break;
+    case absl::StatusCode::kFailedPrecondition: code = grpc::StatusCode::FAILED_PRECONDITION; break;
+    case absl::StatusCode::kUnavailable: code = grpc::StatusCode::UNAVAILABLE; break;
+    case absl::StatusCode::kCancelled: code = grpc::StatusCode::CANCELLED; break;
+    case absl::StatusCode::kDataLoss: code = grpc::StatusCode::DATA_LOSS; break;
+    default: break;
+  }
+  return grpc::Status(code, std::string(s.message()));
+}
+
+absl::StatusOr<int64_t> ParseCycleId(const std::string& id) {
+  int64_t v = 0;
+  if (!absl::SimpleAtoi(id, &v) || v <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("cycle_id: '", id, "' is not a cycle id"));
+  }
+  return v;
+}
+
+v1::Verdict ToProto(Verdict v) {
+  switch (v) {
+    case Verdict::kNone: return v1::VERDICT_UNSPECIFIED;
+    case Verdict::kPass: return v1::VERDICT_PASS;
+    case Verdict::kFail: return v1::VERDICT_FAIL;
+    case Verdict::kError: return v1::VERDICT_ERROR;
+  }
+  return v1::VERDICT_UNSPECIFIED;
+}
+
+v1::CycleState ToProto(CycleState s) {
+  switch (s) {
+    case CycleState::kRunning: return v1::CYCLE_STATE_RUNNING;
+    case CycleState::kDone: return v1::CYCLE_STATE_DONE;
+    case CycleState::kCancelled: return v1::CYCLE_STATE_CANCELLED;
+    case CycleState::kAborted: return v1::CYCLE_STATE_ABORTED;
+  }
+  return v1::CYCLE_STATE_UNSPECIFIED;
+}
+
+v1::SensorKind KindToProto(const std::string& kind) {
+  if (kind == "camera") return v1::SENSOR_KIND_CAMERA;
+  if (kind == "lidar") return v1::SENSOR_KIND_LIDAR;
+  if (kind == "radar") return v1::SENSOR_KIND_RADAR;
+  return v1::SENSOR_KIND_UNSPECIFIED;
+}
+
+v1::CycleEvent::Type EventToProto(const std::string& type) {
+  if (type == "started") return v1::CycleEvent::TYPE_STARTED;
+  if (type == "sensor_acquired") return v1::CycleEvent::TYPE_SENSOR_ACQUIRED;
+  if (type == "board_found") return v1::CycleEvent::TYPE_BOARD_FOUND;
+  if (type == "sensor_solved") return v1::CycleEvent::TYPE_SENSOR_SOLVED;
+  if (type == "sensor_verdict") return v1::CycleEvent::TYPE_SENSOR_VERDICT;
+  if (type == "cycle_ended") return v1::CycleEvent::TYPE_CYCLE_ENDED;
+  return v1::CycleEvent::TYPE_UNSPECIFIED;
+}
+
+void Fill(const MountingValues& m, v1::MountingAngles* out) {
+  out->set_yaw_deg(m.yaw_deg);
+  out->set_pitch_deg(m.pitch_deg);
+  out->set_roll_deg(m.roll_deg);
+  out->set_x_m(m.x_m);
+  out->set_y_m(m.y_m);
+  out->set_z_m(m.z_m);
+}
+
+void Fill(const StoredCycle& c, bool with_sensors, v1::Cycle* out) {
+  out->set_cycle_id(std::to_string(c.id));
+  out->set_vin(c.vin);
+  out->set_car_model_id(c.car_model_id);
+  out->set_state(ToProto(c.state));
+  out->set_verdict(ToProto(c.verdict));
+  out->set_reason(c.reason);
+  out->set_started_ns(c.started_ns);
+  out->set_ended_ns(c.ended_ns);
+  out->set_capture_path(c.capture_path);
+  if (!with_sensors) return;
+  for (const StoredSensorResult& s : c.sensors) {
+    v1::SensorResult* r = out->add_sensors();
+    r->set_name(s.sensor);
+    r->set_kind(KindToProto(s.kind));
+    r->set_verdict(ToProto(s.verdict));
+    r->set_reason(s.reason);
+    r->set_message(s.message);
+    for (double v : s.T_car_sensor) r->mutable_t_car_sensor()->add_m(v);
+    Fill(s.measured, r->mutable_mounting());
+    Fill(s.deviation, r->mutable_deviation());
+    Fill(s.sigma, r->mutable_uncertainty());
+    r->set_residual_rms(s.residual_rms);
+    r->set_features_used(static_cast<uint32_t>(s.features_used));
+    if (s.vanishing_point_u_px && s.vanishing_point_v_px) {
+      r->set_vanishing_point_u_px(*s.vanishing_point_u_px);
+      r->set_vanishing_point_v_px(*s.vanishing_point_v_px);
+    }
+    for (double v : s.ground_homography) r->add_ground_homography(v);
+  }
+}
+
+}  // namespace
+
+StationService::StationService(StationCore* core, std::string auth_token, std::string version)
+    : core_(core), auth_token_(std::move(auth_token)), version_(std::move(version)) {}
+
+grpc::Status StationService::Authorize(const grpc::ServerContext& context) const {
+  if (auth_token_.empty()) return grpc::Status::OK;
+  const auto& metadata = context.client_metadata();
+  const auto it = metadata.find("authorization");
+  if (it == metadata.end() || std::string(it->second.data(), it->second.size()) != "Bearer " + auth_token_) {
+    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "authorization: a valid bearer token is required");
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status StationService::StartCycle(grpc::ServerContext* context, const v1::StartCycleRequest* request,
+                                        v1::StartCycleResponse* response) {
+  if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
+  CycleRequest r;
+  r.vin = request->vin();
+  r.car_model_id = request->car_model_id();
+  r.aligner.longitudinal_offset_m = request->aligner().longitudinal_offset_m();
+  r.aligner.lateral_offset_m = request->aligner().lateral_offset_m();
+  r.aligner.thrust_angle_rad = request->aligner().thrust_angle_deg() * kDegToRad;
+  r.record_capture = request->options().record_capture();
+  if (request->options().frames_per_sensor() > 1000) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "options.frames_per_sensor: must be in [0, 100]");
+  }
+  r.frames_per_sensor = static_cast<int>(request->options().frames_per_sensor());
+  absl::StatusOr<int64_t> id = core_->StartCycle(r);
+  if (!id.ok()) return ToGrpc(id.status());
+  response->set_cycle_id(std::to_string(*id));
+  return grpc::Status::OK;
+}
+
+grpc::Status StationService::WatchCycle(grpc::ServerContext* context, const v1::WatchCycleRequest* request,
+                                        grpc::ServerWriter<v1::CycleEvent>* writer) {
+  if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
+  absl::StatusOr<int64_t> id = ParseCycleId(request->cycle_id());
+  if (!id.ok()) return ToGrpc(id.status());
+  return ToGrpc(core_->WatchCycle(*id, [&](const StoredEvent& e) {
+    if (context->IsCancelled()) return false;
+    v1::CycleEvent event;
+    event.set_cycle_id(request->cycle_id());
+    event.set_sequence(static_cast<uint64_t>(e.sequence));
+    event.set_time_ns(e.time_ns);
+    event.set_type(EventToProto(e.type));
+    event.set_sensor(e.sensor);
+    event.set_detail(e.detail);
+    event.set_verdict(ToProto(e.verdict));
+    return writer->Write(event);
+  }));
+}
+
+grpc::Status StationService::GetCycle(grpc::ServerContext* context, const v1::GetCycleRequest* request,
+                                      v1::Cycle* response) {
+  if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
+  absl::StatusOr<int64_t> id = ParseCycleId(request->cycle_id());
+  if (!id.ok()) return ToGrpc(id.status());
+  absl::StatusOr<StoredCycle> cycle = core_->GetCycle(*id);
+  if (!cycle.ok()) return ToGrpc(cycle.status());
+  Fill(*cycle, true, response);
+  return grpc::Status::OK;
+}
+
+grpc::Status StationService::ListCycles(grpc::ServerContext* context, const v1::ListCyclesRequest* request,
+                                        v1::ListCyclesResponse* response) {
+  if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
+  CycleFilter f;
+  f.vin = request->vin();
+  f.since_ns = request->since_ns();
+  f.until_ns = request->until_ns();
+  switch (request->verdict()) {
+    case v1::VERDICT_PASS: f.verdict = Verdict::kPass; break;
+    case v1::VERDICT_FAIL: f.verdict = Verdict::kFail; break;
+    case v1::VERDICT_ERROR: f.verdict = Verdict::kError; break;
+    default: break;
+  }
+  // 0 means the default page; the store refuses sizes beyond 1000 naming page_size.
+  f.page_size = request->page_size() == 0 ? 50 : static_cast<int>(std::min<uint32_t>(request->page_size(), 1001));
+  f.page_token = request->page_token();
+  absl::StatusOr<CyclePage> page = core_->ListCycles(f);
+  if (!page.ok()) return ToGrpc(page.status());
+  for (const StoredCycle& c : page->cycles) Fill(c, false, response->add_cycles());
+  response->set_next_page_token(page->next_page_token);
+  return grpc::Status::OK;
+}
+
+grpc::Status StationService::CancelCycle(grpc::ServerContext* context, const v1::CancelCycleRequest* request,
+                                         v1::CancelCycleResponse* response) {
+  if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
+  absl::StatusOr<int64_t> id = ParseCycleId(request->cycle_id());
+  if (!id.ok()) return ToGrpc(id.status());
+  if (absl::Status s = core_->CancelCycle(*id); !s.ok()) return ToGrpc(s);
+  response->set_state(v1::CYCLE_STATE_RUNNING);  // it stops at its next step
+  return grpc::Status::OK;
+}
+
+grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, const v1::GetStationStatusRequest*,
+                                              v1::StationStatus* response) {
+  if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
+  const StationStatusInfo s = core_->Status();
+  response->set_version(version_);
+  response->set_station_id(s.station_id);
+  for (const std::string& c : s.car_models) response->add_car_models(c);
+  if (s.running_cycle) response->set_running_cycle_id(std::to_string(*s.running_cycle));
+  response->set_database_path(s.database_path);
+  response->set_disk_free_bytes(s.disk_free_bytes);
+  for (const auto& [name, kind] : s.sensors) {
+    v1::SensorStatus* sensor = response->add_sensors();
+    sensor->set_name(name);
+    sensor->set_kind(KindToProto(SensorKindName(kind)));
+    sensor->set_source(s.source);
+    sensor->set_connected(true);  // the simulator and a recorded capture are always there
+  }
+  return grpc::Status::OK;
+}
+
+absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,
+                                          const std::string& version) {
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  RunningServer running;
+  running.service = std::make_unique<StationService>(core, auth_token, version);
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &running.port);
+  builder.RegisterService(running.service.get());
+  running.server = builder.BuildAndStart();
+  if (!running.server || running.port == 0) {
+    return absl::UnavailableError(absl::StrCat("listen: cannot listen on '", address, "'"));
+  }
+  return running;
+}
+
+}  // namespace linecal

@@ -1,0 +1,57 @@
+#pragma once
+// The gRPC face of the station core (proto/linecal/v1/station.proto): thin handlers that
+// check credentials, translate messages and map absl::Status codes to gRPC's; the work is in
+// StationCore.
+//
+// Authentication: with a non-empty token, every call must carry the metadata
+// "authorization: Bearer <token>", else UNAUTHENTICATED. Cycle ids are the store's integer
+// ids in decimal; a malformed one is INVALID_ARGUMENT naming cycle_id, an unknown one
+// NOT_FOUND.
+
+#include <memory>
+#include <string>
+
+#include <grpcpp/grpcpp.h>
+
+#include "daemon/core/station_core.h"
+#include "linecal/v1/station.grpc.pb.h"
+
+namespace linecal {
+
+class StationService final : public v1::Station::Service {
+ public:
+  // `core` must outlive the service.
+  StationService(StationCore* core, std::string auth_token, std::string version);
+
+  grpc::Status StartCycle(grpc::ServerContext* context, const v1::StartCycleRequest* request,
+                          v1::StartCycleResponse* response) override;
+  grpc::Status WatchCycle(grpc::ServerContext* context, const v1::WatchCycleRequest* request,
+                          grpc::ServerWriter<v1::CycleEvent>* writer) override;
+  grpc::Status GetCycle(grpc::ServerContext* context, const v1::GetCycleRequest* request,
+                        v1::Cycle* response) override;
+  grpc::Status ListCycles(grpc::ServerContext* context, const v1::ListCyclesRequest* request,
+                          v1::ListCyclesResponse* response) override;
+  grpc::Status CancelCycle(grpc::ServerContext* context, const v1::CancelCycleRequest* request,
+                           v1::CancelCycleResponse* response) override;
+  grpc::Status GetStationStatus(grpc::ServerContext* context, const v1::GetStationStatusRequest* request,
+                                v1::StationStatus* response) override;
+
+ private:
+  grpc::Status Authorize(const grpc::ServerContext& context) const;
+
+  StationCore* core_;
+  std::string auth_token_;
+  std::string version_;
+};
+
+// A started server: listening on `address` ("127.0.0.1:0" picks a free port), with the
+// standard health service and server reflection.
+struct RunningServer {
+  std::unique_ptr<StationService> service;
+  std::unique_ptr<grpc::Server> server;
+  int port = 0;
+};
+absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,
+                                          const std::string& version);
+
+}  // namespace linecal

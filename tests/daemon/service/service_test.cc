@@ -1,0 +1,223 @@
+// The gRPC service on a real server on 127.0.0.1 (a free port) over the real core, store and
+// simulator: a cycle started, watched to its end and read back; every RPC's error codes;
+// authentication on and off; two clients watching one cycle.
+#include "daemon/service/station_service.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+namespace linecal {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
+constexpr char kVin[] = "1M8GDM9AXKP042788";
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  void Start(const std::string& token) {
+    dir_ = fs::path(testing::TempDir()) /
+           ("service_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    // The reference car with two sensors: a short cycle.
+    std::ifstream in(kDeploy + "/cars/reference.json");
+    nlohmann::json car = nlohmann::json::parse(in);
+    nlohmann::json kept = nlohmann::json::array();
+    for (const nlohmann::json& s : car["sensors"]) {
+      if (s["name"] == "front_camera" || s["name"] == "front_radar") kept.push_back(s);
+    }
+    car["sensors"] = kept;
+    std::ofstream(dir_ / "car.json") << car.dump(2);
+    StationCoreConfig config;
+    config.station_path = kDeploy + "/stations/reference.json";
+    config.car_model_paths = {(dir_ / "car.json").string()};
+    config.db_path = (dir_ / "station.db").string();
+    config.data_root = (dir_ / "data").string();
+    core_ = std::move(*StationCore::Create(config));
+    absl::StatusOr<RunningServer> server = StartServer(core_.get(), "127.0.0.1:0", token, "test");
+    ASSERT_TRUE(server.ok()) << server.status();
+    server_ = std::move(*server);
+    channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port), grpc::InsecureChannelCredentials());
+    stub_ = v1::Station::NewStub(channel_);
+  }
+  void TearDown() override {
+    if (server_.server) server_.server->Shutdown();
+    if (core_) core_->WaitIdle();
+    server_ = {};
+    core_.reset();
+    fs::remove_all(dir_);
+  }
+
+  static v1::StartCycleRequest Request() {
+    v1::StartCycleRequest r;
+    r.set_vin(kVin);
+    r.set_car_model_id("reference");
+    r.mutable_aligner()->set_lateral_offset_m(0.01);
+    r.mutable_aligner()->set_thrust_angle_deg(0.05);
+    return r;
+  }
+
+  std::vector<v1::CycleEvent> Watch(const std::string& id, const std::string& token = "") {
+    grpc::ClientContext context;
+    if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
+    v1::WatchCycleRequest w;
+    w.set_cycle_id(id);
+    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = stub_->WatchCycle(&context, w);
+    std::vector<v1::CycleEvent> events;
+    v1::CycleEvent e;
+    while (reader->Read(&e)) events.push_back(e);
+    EXPECT_TRUE(reader->Finish().ok());
+    return events;
+  }
+
+  fs::path dir_;
+  std::unique_ptr<StationCore> core_;
+  RunningServer server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::Station::Stub> stub_;
+};
+
+TEST_F(ServiceTest, CycleStartedWatchedAndReadBack) {
+  Start("");
+  grpc::ClientContext start_context;
+  v1::StartCycleResponse started;
+  ASSERT_TRUE(stub_->StartCycle(&start_context, Request(), &started).ok());
+  ASSERT_FALSE(started.cycle_id().empty());
+
+  // Two clients watch the same cycle and see the same events, ending with cycle_ended.
+  std::vector<v1::CycleEvent> other;
+  std::thread second([&] { other = Watch(started.cycle_id()); });
+  const std::vector<v1::CycleEvent> events = Watch(started.cycle_id());
+  second.join();
+  ASSERT_GE(events.size(), 4u);
+  EXPECT_EQ(events.front().type(), v1::CycleEvent::TYPE_STARTED);
+  EXPECT_EQ(events.back().type(), v1::CycleEvent::TYPE_CYCLE_ENDED);
+  ASSERT_EQ(other.size(), events.size());
+  for (size_t i = 0; i < events.size(); ++i) {
+    EXPECT_EQ(events[i].sequence(), i);
+    EXPECT_EQ(other[i].type(), events[i].type());
+  }
+
+  grpc::ClientContext get_context;
+  v1::GetCycleRequest get;
+  get.set_cycle_id(started.cycle_id());
+  v1::Cycle cycle;
+  ASSERT_TRUE(stub_->GetCycle(&get_context, get, &cycle).ok());
+  EXPECT_EQ(cycle.vin(), kVin);
+  EXPECT_EQ(cycle.state(), v1::CYCLE_STATE_DONE);
+  EXPECT_NE(cycle.verdict(), v1::VERDICT_UNSPECIFIED);
+  ASSERT_EQ(cycle.sensors_size(), 2);
+  for (const v1::SensorResult& s : cycle.sensors()) {
+    if (s.verdict() == v1::VERDICT_ERROR) continue;
+    EXPECT_EQ(s.t_car_sensor().m_size(), 16) << s.name();
+  }
+
+  grpc::ClientContext list_context;
+  v1::ListCyclesRequest list;
+  list.set_vin(kVin);
+  v1::ListCyclesResponse listed;
+  ASSERT_TRUE(stub_->ListCycles(&list_context, list, &listed).ok());
+  ASSERT_EQ(listed.cycles_size(), 1);
+  EXPECT_EQ(listed.cycles(0).cycle_id(), started.cycle_id());
+
+  grpc::ClientContext status_context;
+  v1::StationStatus status;
+  ASSERT_TRUE(stub_->GetStationStatus(&status_context, {}, &status).ok());
+  EXPECT_EQ(status.version(), "test");
+  EXPECT_EQ(status.sensors_size(), 2);
+  EXPECT_TRUE(status.running_cycle_id().empty());
+}
+
+TEST_F(ServiceTest, ErrorCodesOfEveryRpc) {
+  Start("");
+  auto start = [&](const v1::StartCycleRequest& r) {
+    grpc::ClientContext c;
+    v1::StartCycleResponse out;
+    return stub_->StartCycle(&c, r, &out);
+  };
+  v1::StartCycleRequest bad = Request();
+  bad.set_vin("SHORT");
+  grpc::Status s = start(bad);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(s.error_message().rfind("vin", 0), 0u) << s.error_message();
+  bad = Request();
+  bad.mutable_aligner()->set_thrust_angle_deg(45);
+  s = start(bad);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(s.error_message().find("thrust"), std::string::npos);
+  bad = Request();
+  bad.set_car_model_id("truck");
+  EXPECT_EQ(start(bad).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  ASSERT_TRUE(start(Request()).ok());
+  EXPECT_EQ(start(Request()).error_code(), grpc::StatusCode::FAILED_PRECONDITION);  // one at a time
+  core_->WaitIdle();
+
+  grpc::ClientContext get_context;
+  v1::GetCycleRequest get;
+  get.set_cycle_id("12345");
+  v1::Cycle cycle;
+  EXPECT_EQ(stub_->GetCycle(&get_context, get, &cycle).error_code(), grpc::StatusCode::NOT_FOUND);
+  grpc::ClientContext malformed_context;
+  get.set_cycle_id("abc");
+  const grpc::Status malformed = stub_->GetCycle(&malformed_context, get, &cycle);
+  EXPECT_EQ(malformed.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(malformed.error_message().find("cycle_id"), std::string::npos);
+  grpc::ClientContext cancel_context;
+  v1::CancelCycleRequest cancel;
+  cancel.set_cycle_id("1");  // ended
+  v1::CancelCycleResponse cancelled;
+  EXPECT_EQ(stub_->CancelCycle(&cancel_context, cancel, &cancelled).error_code(),
+            grpc::StatusCode::FAILED_PRECONDITION);
+  grpc::ClientContext watch_context;
+  v1::WatchCycleRequest watch;
+  watch.set_cycle_id("777");
+  std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = stub_->WatchCycle(&watch_context, watch);
+  v1::CycleEvent e;
+  EXPECT_FALSE(reader->Read(&e));
+  EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
+  grpc::ClientContext list_context;
+  v1::ListCyclesRequest list;
+  list.set_page_token("garbage");
+  v1::ListCyclesResponse listed;
+  EXPECT_EQ(stub_->ListCycles(&list_context, list, &listed).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(ServiceTest, TokenAuthentication) {
+  Start("s3cret");
+  {
+    grpc::ClientContext c;
+    v1::StationStatus status;
+    EXPECT_EQ(stub_->GetStationStatus(&c, {}, &status).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  }
+  {
+    grpc::ClientContext c;
+    c.AddMetadata("authorization", "Bearer wrong");
+    v1::StartCycleResponse out;
+    EXPECT_EQ(stub_->StartCycle(&c, Request(), &out).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  }
+  {
+    grpc::ClientContext c;
+    c.AddMetadata("authorization", "Bearer s3cret");
+    v1::StationStatus status;
+    EXPECT_TRUE(stub_->GetStationStatus(&c, {}, &status).ok());
+  }
+  EXPECT_TRUE(core_->ListCycles({})->cycles.empty());  // the refused start stored nothing
+}
+
+TEST_F(ServiceTest, HealthServiceIsOn) {
+  Start("");
+  ASSERT_NE(server_.server->GetHealthCheckService(), nullptr);
+}
+
+}  // namespace
+}  // namespace linecal
