@@ -1,0 +1,568 @@
+#include "detectors/round_hole/round_hole_cloud.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <map>
+#include <numbers>
+#include <set>
+
+namespace linecal {
+namespace {
+
+// Tukey biweight cut-off in robust sigmas: 95% efficiency under Gaussian noise.
+constexpr double kTukeyC = 4.685;
+// Median absolute deviation to sigma for Gaussian noise.
+constexpr double kMadToSigma = 1.4826;
+// The plane fit's robust sigma never goes below 2 mm: the sensors' distance unit (2-4 mm)
+// rounds ranges that coarsely even without noise.
+constexpr double kMinPlaneSigmaM = 0.002;
+// A plane whose robust sigma exceeds 6 cm (twice the largest range noise of acceptance.md)
+// is clutter, not a board.
+constexpr double kMaxPlaneSigmaM = 0.06;
+// Fewer points than this on the plane cannot hold a board (a 16-ring LiDAR at 8 m puts about
+// 150 points per rotation on it).
+constexpr int kMinPlanePoints = 20;
+// Iteration caps: the plane fit and the edge fit converge in well under ten iterations from
+// the prior; these only bound the cost on bad data.
+constexpr int kPlaneIterations = 30;
+constexpr int kEdgeIterations = 30;
+// Two consecutive returns of a ring farther apart than this many azimuth steps have a gap
+// between them (a hole, or the page's end): between one step (paper) and two (one ray lost).
+constexpr double kGapSteps = 1.5;
+// Virtual rays beyond each end of a ring's points, for the coarse search: three steps tell
+// "the page ends here" without reaching into the next board.
+constexpr int kEndSamples = 3;
+// Virtual rays per gap: the region is under 2 m wide and a ring's step over 5 mm for the
+// supported models at 3 m, so more than 400 means a bad azimuth, not a longer gap.
+constexpr int kMaxGapSamples = 400;
+// The coarse search uses at most this many samples (points and virtual rays): enough to
+// cover every ring of a Pandar64 at 3 m, and it bounds the search to about 2 * 10^6 look-ups.
+constexpr std::size_t kMaxSamples = 2000;
+// Coarse search grid: 2 cm shifts (a tenth of a hole, within the edge fit's reach) and
+// 0.5 degree rotations (at the page's corner, 0.78 m away, 7 mm).
+constexpr double kShiftStepM = 0.02;
+constexpr double kRotationStepRad = 0.5 * std::numbers::pi / 180.0;
+// The edge fit's first gate: residuals beyond 6 cm (the coarse grid's error plus a 8 m ring's
+// azimuth step) are wrong associations; later gates follow the edges' robust sigma, never
+// below 1 cm (so quantisation never shrinks it below the azimuth step of a ring at 3 m).
+constexpr double kInitialEdgeGateM = 0.06;
+constexpr double kMinEdgeGateM = 0.01;
+// Fewer edges than this cannot fix three in-plane parameters robustly.
+constexpr int kMinEdges = 6;
+// Edges of a fitted board scatter by the azimuth step (at most about 3 cm at 8 m for 0.2
+// degrees); an RMS beyond 5 cm means the model does not fit.
+constexpr double kMaxEdgeRmsM = 0.05;
+// Convergence of both fits: updates below 1e-7 (relative, m or rad) change nothing measurable.
+constexpr double kConvergence = 1e-7;
+
+struct RoiPoint {
+  Eigen::Vector3d p_lidar;
+  int ring = 0;
+  int frame = 0;
+};
+
+// A ring edge: where the ring leaves or enters paper, in plane coordinates. Edges of one gap
+// share `gap` (-1 for the two ends of a ring's points).
+struct Edge {
+  Eigen::Vector2d p_plane;
+  int group = 0;
+  int gap = -1;
+};
+
+// A sample of the coarse search: a return on the plane (paper = true) or a virtual ray that
+// passed through it (paper = false).
+struct Sample {
+  Eigen::Vector2d p_plane;
+  bool paper = true;
+};
+
+struct Circle {
+  Eigen::Vector2d centre_board;
+  double radius_m = 0.0;
+  int id = 0;
+};
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+Eigen::Matrix2d Rotation2(double theta) { return Eigen::Rotation2Dd(theta).toRotationMatrix(); }
+
+// The signed distance of m_board to the nearest boundary of the model (a hole circle or a
+// side of the page, each taken as a whole line), its outward unit gradient, and which it is
+// (a hole index, or -1 for the page).
+double NearestBoundary(const std::vector<Circle>& holes, const Eigen::Vector2d& half_page,
+                       const Eigen::Vector2d& m_board, Eigen::Vector2d* gradient, int* which) {
+  const std::array<double, 4> sides = {m_board.x() - half_page.x(), -half_page.x() - m_board.x(),
+                                       m_board.y() - half_page.y(), -half_page.y() - m_board.y()};
+  const std::array<Eigen::Vector2d, 4> normals = {Eigen::Vector2d(1, 0), Eigen::Vector2d(-1, 0),
+                                                  Eigen::Vector2d(0, 1), Eigen::Vector2d(0, -1)};
+  double best = std::numeric_limits<double>::infinity();
+  for (int s = 0; s < 4; ++s) {
+    if (std::abs(sides[s]) < std::abs(best)) {
+      best = sides[s];
+      *gradient = normals[s];
+      *which = -1;
+    }
+  }
+  for (std::size_t i = 0; i < holes.size(); ++i) {
+    const Eigen::Vector2d v = m_board - holes[i].centre_board;
+    const double len = v.norm();
+    const double d = len - holes[i].radius_m;
+    if (std::abs(d) < std::abs(best) && len > 0.0) {
+      best = d;
+      *gradient = v / len;
+      *which = static_cast<int>(i);
+    }
+  }
+  return best;
+}
+
+struct PlaneFit {
+  Eigen::Vector3d n_lidar;
+  double d_m = 0.0;       // n . p = d on the plane
+  double cutoff_m = 0.0;  // the final Tukey cut-off, on range residuals
+  // 1-sigma of the normal's tilt along its worse axis, radians, from the fit's covariance.
+  double normal_sigma_rad = 0.0;
+  bool ok = false;
+};
+
+// The range residual of p_lidar against the plane w . p = 1 (w = n / d): measured range minus
+// the range at which its ray meets the plane. Infinite for a ray parallel to the plane.
+double RangeResidual(const Eigen::Vector3d& w, const Eigen::Vector3d& p_lidar) {
+  const double range = p_lidar.norm();
+  const double wu = w.dot(p_lidar) / range;
+  return wu > 0.0 ? range - 1.0 / wu : std::numeric_limits<double>::infinity();
+}
+
+// Tukey IRLS plane fit from the expected plane (normal n0, offset from the points' median),
+// on range residuals: LiDAR noise is along the rays (whose directions are exact), and an
+// orthogonal (PCA) fit of such points, like any fit with the noisy points as regressors,
+// tilts the normal towards the rays by about sigma^2 sin(2 incidence) / (2 spread^2): 0.3
+// degree for a 35 degree incidence at 3 cm. Gauss-Newton in w = n / d, one step per
+// reweighting; the predicted range of a ray u is 1 / (w . u).
+PlaneFit FitPlane(const std::vector<RoiPoint>& points, const Eigen::Vector3d& n0, double depth_m) {
+  PlaneFit fit;
+  std::vector<double> offsets;
+  offsets.reserve(points.size());
+  for (const RoiPoint& p : points) offsets.push_back(n0.dot(p.p_lidar));
+  const double d0 = Median(offsets);
+  // A plane through the sensor's origin is not a board in view (and has no w).
+  if (!(std::abs(d0) > 0.0)) return fit;
+  Eigen::Vector3d w = n0 / d0;
+  double cutoff = depth_m;
+  double sigma = 0.0;
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  std::vector<double> abs_r;
+  for (int it = 0; it < kPlaneIterations; ++it) {
+    abs_r.clear();
+    for (const RoiPoint& p : points) {
+      const double r = std::abs(RangeResidual(w, p.p_lidar));
+      if (r < cutoff) abs_r.push_back(r);
+    }
+    if (static_cast<int>(abs_r.size()) < kMinPlanePoints) return fit;
+    sigma = std::max(kMadToSigma * Median(abs_r), kMinPlaneSigmaM);
+    const double next_cutoff = std::min(kTukeyC * sigma, depth_m);
+    H.setZero();
+    Eigen::Vector3d g = Eigen::Vector3d::Zero();
+    for (const RoiPoint& p : points) {
+      const double r = RangeResidual(w, p.p_lidar);
+      const double u = r / next_cutoff;
+      if (!(std::abs(u) < 1.0)) continue;
+      // d r / d w for r = range - 1 / (w . ray), with the exact ray direction of the return.
+      const Eigen::Vector3d ray = p.p_lidar.normalized();
+      const double wu = w.dot(ray);
+      const Eigen::Vector3d J = ray / (wu * wu);
+      const double weight = (1.0 - u * u) * (1.0 - u * u);
+      H += weight * J * J.transpose();
+      g += weight * J * r;
+    }
+    const Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return fit;
+    const Eigen::Vector3d next_w = w - ldlt.solve(g);
+    if (!next_w.allFinite() || next_w.norm() == 0.0) return fit;
+    const double change = (next_w - w).norm() / w.norm() + std::abs(next_cutoff - cutoff);
+    w = next_w;
+    cutoff = next_cutoff;
+    if (change < kConvergence) break;
+  }
+  // w = n / d for either orientation of n: report n on the side of n0.
+  const double side = w.dot(n0) > 0.0 ? 1.0 : -1.0;
+  fit.n_lidar = side * w.normalized();
+  fit.d_m = side / w.norm();
+  fit.cutoff_m = cutoff;
+  // Cov(w) = sigma^2 H^-1; n = w / |w| moves by (I - n n^T) dw / |w|.
+  const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - fit.n_lidar * fit.n_lidar.transpose();
+  const Eigen::Matrix3d cov_n = P * H.inverse() * P * (sigma * sigma * fit.d_m * fit.d_m);
+  fit.normal_sigma_rad = std::sqrt(
+      std::max(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov_n).eigenvalues()(2), 0.0));
+  fit.ok = true;
+  return fit;
+}
+
+}  // namespace
+
+bool RoundHoleCloudOptions::Valid() const {
+  const auto finite = [](double v) { return std::isfinite(v); };
+  return finite(roi_margin_m) && roi_margin_m > 0.0 && finite(roi_depth_m) && roi_depth_m > 0.0 &&
+         finite(max_tilt_rad) && max_tilt_rad > 0.0 && max_tilt_rad < 0.5 * std::numbers::pi &&
+         finite(max_in_plane_shift_m) && max_in_plane_shift_m >= 0.0 &&
+         finite(max_in_plane_rotation_rad) && max_in_plane_rotation_rad >= 0.0 &&
+         min_rings_through_holes >= 1;
+}
+
+const char* RoundHoleCloudReasonName(RoundHoleCloudReason reason) {
+  switch (reason) {
+    case RoundHoleCloudReason::kNone:
+      return "";
+    case RoundHoleCloudReason::kBadInput:
+      return "bad_input";
+    case RoundHoleCloudReason::kBoardNotInRoi:
+      return "board_not_in_roi";
+    case RoundHoleCloudReason::kNoPlane:
+      return "no_plane";
+    case RoundHoleCloudReason::kTooFewRingsThroughHoles:
+      return "too_few_rings_through_holes";
+    case RoundHoleCloudReason::kFitFailed:
+      return "fit_failed";
+  }
+  return "unknown";
+}
+
+RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
+    const Board& board, std::span<const std::span<const RoundHoleCloudPoint>> frames,
+    const Rigid3d& T_lidar_board_prior, const RoundHoleCloudOptions& options) {
+  RoundHoleCloudDetection out;
+  const Eigen::Matrix4d prior_matrix = T_lidar_board_prior.Matrix();
+  if (board.type() != BoardType::kRoundHole || !options.Valid() || !prior_matrix.allFinite())
+    return out;
+
+  // The model: hole circles (from the drawing) with their feature ids, and the page.
+  std::vector<Circle> holes;
+  for (const BoardFeature& f : board.features()) {
+    if (f.kind != FeatureKind::kHoleCentre) continue;
+    for (const BoardShape& s : board.shapes()) {
+      if (s.paint == Paint::kHole && (s.centre_board() - f.p_board).norm() < 0.5 * s.radius_m()) {
+        holes.push_back({f.p_board, s.radius_m(), f.id});
+      }
+    }
+  }
+  const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
+
+  // 1. Region of interest, in the expected board frame.
+  const Rigid3d T_board_lidar_prior = T_lidar_board_prior.Inverse();
+  std::vector<RoiPoint> roi;
+  for (std::size_t f = 0; f < frames.size(); ++f) {
+    for (const RoundHoleCloudPoint& p : frames[f]) {
+      const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
+      if (!p_lidar.allFinite()) continue;
+      const Eigen::Vector3d q = T_board_lidar_prior * p_lidar;
+      if (std::abs(q.x()) < half_page.x() + options.roi_margin_m &&
+          std::abs(q.y()) < half_page.y() + options.roi_margin_m &&
+          std::abs(q.z()) < options.roi_depth_m) {
+        roi.push_back({p_lidar, p.ring, static_cast<int>(f)});
+      }
+    }
+  }
+  out.roi_points = static_cast<int>(roi.size());
+  if (out.roi_points < kMinPlanePoints) {
+    out.reason = RoundHoleCloudReason::kBoardNotInRoi;
+    return out;
+  }
+  // One ring across the page is a line: it determines no plane, let alone the holes (a board
+  // far or small for the ring spacing). A ring crosses the page when its points span half the
+  // page's width, which a board's stand (a 6 cm post) never does.
+  std::map<int, std::pair<double, double>> ring_span_m;
+  for (const RoiPoint& p : roi) {
+    const double x = (T_board_lidar_prior * p.p_lidar).x();
+    std::pair<double, double>& span = ring_span_m.try_emplace(p.ring, x, x).first->second;
+    span = {std::min(span.first, x), std::max(span.second, x)};
+  }
+  const auto crossing = std::count_if(
+      ring_span_m.begin(), ring_span_m.end(),
+      [&](const auto& span) { return span.second.second - span.second.first > half_page.x(); });
+  if (crossing < 2) {
+    out.reason = RoundHoleCloudReason::kTooFewRingsThroughHoles;
+    return out;
+  }
+
+  const Eigen::Matrix3d R_prior = T_lidar_board_prior.RotationMatrix();
+  const Eigen::Vector3d n0 = R_prior.col(2);
+  // Two passes: the second fits the plane to the points the first pass's board pose puts on
+  // paper, clear of the edges: the region also holds the board's stand, a post touching its
+  // back below the page, whose points tilt the plane by a few tenths of a degree.
+  constexpr int kPasses = 2;
+  // Points closer than 2 cm (a ring's azimuth step at 6 m) to an edge of the page or a hole
+  // may be off the paper; the second pass's plane leaves them out.
+  constexpr double kPaperInsetM = 0.02;
+  std::vector<RoiPoint> plane_points = roi;
+  PlaneFit plane;
+  Eigen::Vector3d o, ex, ey;
+  Eigen::Vector3d pose = Eigen::Vector3d::Zero();  // (x, y, theta): p_plane = R(theta) m + (x, y)
+  std::vector<Edge> edges;
+  std::vector<int> group_ring;
+  std::vector<int> which;
+  std::vector<double> weight;
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  double rms = 0.0;
+  int kept = 0;
+  bool degenerate = false;
+  for (int pass = 0; pass < kPasses; ++pass) {
+    // 2. Plane.
+    plane = FitPlane(plane_points, n0, options.roi_depth_m);
+    out.reason = RoundHoleCloudReason::kNoPlane;
+    if (!plane.ok || plane.cutoff_m > kTukeyC * kMaxPlaneSigmaM ||
+        std::acos(std::clamp(plane.n_lidar.dot(n0), -1.0, 1.0)) > options.max_tilt_rad) {
+      return out;
+    }
+    const Eigen::Vector3d n = plane.n_lidar;
+
+    // 3. Inliers moved along their rays onto the plane, in plane coordinates: origin at the
+    // expected page centre's foot on the plane, x along the expected x projected on it.
+    o = T_lidar_board_prior.translation() -
+        (n.dot(T_lidar_board_prior.translation()) - plane.d_m) * n;
+    ex = (R_prior.col(0) - R_prior.col(0).dot(n) * n).normalized();
+    ey = n.cross(ex);
+    // Azimuth about the spin axis (LiDAR z), relative to the expected board centre's, so that a
+    // ring's points sort in firing order whatever azimuth the rotation starts at.
+    const double azimuth0 = std::atan2(o.y(), o.x());
+    struct InPlane {
+      Eigen::Vector2d p_plane;
+      double azimuth_rad = 0.0;
+      int group = 0;
+    };
+    std::vector<InPlane> in_plane;
+    double sum_r2 = 0.0;
+    std::set<int> plane_rings;
+    for (const RoiPoint& p : roi) {
+      const double r = RangeResidual(n / plane.d_m, p.p_lidar);
+      const double along = n.dot(p.p_lidar);
+      if (!(std::abs(r) < plane.cutoff_m)) continue;
+      sum_r2 += r * r;
+      const Eigen::Vector3d q = (plane.d_m / along) * p.p_lidar - o;
+      const double azimuth = std::remainder(std::atan2(p.p_lidar.y(), p.p_lidar.x()) - azimuth0,
+                                            2.0 * std::numbers::pi);
+      // Rings are < 2^16, so frame * 2^16 + ring names one ring of one frame.
+      in_plane.push_back(
+          {Eigen::Vector2d(q.dot(ex), q.dot(ey)), azimuth, p.frame * 65536 + p.ring});
+      plane_rings.insert(p.ring);
+    }
+    out.plane_inliers = static_cast<int>(in_plane.size());
+    if (out.plane_inliers < kMinPlanePoints) return out;
+    out.plane_rms_m = std::sqrt(sum_r2 / out.plane_inliers);
+    out.normal_sigma_rad = plane.normal_sigma_rad;
+    // Fewer than two rings on the board: not even the plane is determined by them.
+    if (plane_rings.size() < 2) {
+      out.reason = RoundHoleCloudReason::kTooFewRingsThroughHoles;
+      return out;
+    }
+
+    // 4. Edges and coarse-search samples, ring by ring.
+    std::sort(in_plane.begin(), in_plane.end(), [](const InPlane& a, const InPlane& b) {
+      return a.group != b.group ? a.group < b.group : a.azimuth_rad < b.azimuth_rad;
+    });
+    edges.clear();
+    std::vector<Sample> samples;
+    group_ring.clear();
+    int gaps = 0;
+    std::vector<double> steps;
+    for (std::size_t begin = 0; begin < in_plane.size();) {
+      std::size_t end = begin;
+      while (end < in_plane.size() && in_plane[end].group == in_plane[begin].group) ++end;
+      if (end - begin >= 2) {
+        const int group = static_cast<int>(group_ring.size());
+        group_ring.push_back(in_plane[begin].group % 65536);
+        steps.clear();
+        for (std::size_t i = begin + 1; i < end; ++i)
+          steps.push_back(in_plane[i].azimuth_rad - in_plane[i - 1].azimuth_rad);
+        const double step = Median(steps);
+        if (step > 0.0) {
+          // One azimuth step of the ring at point a, towards b, in the plane.
+          const auto step_vector = [&](std::size_t a, std::size_t b) {
+            const double da = in_plane[b].azimuth_rad - in_plane[a].azimuth_rad;
+            return Eigen::Vector2d((in_plane[b].p_plane - in_plane[a].p_plane) * (step / da));
+          };
+          const Eigen::Vector2d first_step = step_vector(begin, begin + 1);
+          const Eigen::Vector2d last_step = step_vector(end - 2, end - 1);
+          edges.push_back({in_plane[begin].p_plane - 0.5 * first_step, group, -1});
+          edges.push_back({in_plane[end - 1].p_plane + 0.5 * last_step, group, -1});
+          for (int k = 1; k <= kEndSamples; ++k) {
+            samples.push_back({in_plane[begin].p_plane - k * first_step, false});
+            samples.push_back({in_plane[end - 1].p_plane + k * last_step, false});
+          }
+          for (std::size_t i = begin; i < end; ++i) {
+            samples.push_back({in_plane[i].p_plane, true});
+            if (i + 1 == end) break;
+            const double da = in_plane[i + 1].azimuth_rad - in_plane[i].azimuth_rad;
+            if (da <= kGapSteps * step) continue;
+            const Eigen::Vector2d s = step_vector(i, i + 1);
+            edges.push_back({in_plane[i].p_plane + 0.5 * s, group, gaps});
+            edges.push_back({in_plane[i + 1].p_plane - 0.5 * s, group, gaps});
+            ++gaps;
+            const int missing =
+                static_cast<int>(std::min<double>(std::lround(da / step) - 1, kMaxGapSamples));
+            for (int k = 1; k <= missing; ++k)
+              samples.push_back({in_plane[i].p_plane + k * s, false});
+          }
+        }
+      }
+      begin = end;
+    }
+
+    // 5a. Coarse search of the in-plane pose: the most samples where the drawing agrees. The
+    // second pass starts from the first pass's pose (its plane differs by a fraction of a
+    // degree, which moves the page by a fraction of a millimetre).
+    if (pass == 0) {
+      const std::size_t stride = samples.size() / kMaxSamples + 1;
+      const int shifts = static_cast<int>(options.max_in_plane_shift_m / kShiftStepM);
+      const int rotations = static_cast<int>(options.max_in_plane_rotation_rad / kRotationStepRad);
+      int best_score = -1;
+      double best_distance = 0.0;
+      for (int ir = -rotations; ir <= rotations; ++ir) {
+        const Eigen::Matrix2d Rt = Rotation2(ir * kRotationStepRad).transpose();
+        for (int ix = -shifts; ix <= shifts; ++ix) {
+          for (int iy = -shifts; iy <= shifts; ++iy) {
+            const Eigen::Vector2d t(ix * kShiftStepM, iy * kShiftStepM);
+            int score = 0;
+            for (std::size_t i = 0; i < samples.size(); i += stride) {
+              const Paint paint = board.PaintAt(Rt * (samples[i].p_plane - t));
+              const bool paper = paint == Paint::kWhite || paint == Paint::kBlack;
+              score += paper == samples[i].paper ? 1 : 0;
+            }
+            // Ties go to the pose nearest the prior (1 radian weighs as 1 m).
+            const double distance = t.squaredNorm() + std::pow(ir * kRotationStepRad, 2);
+            if (score > best_score || (score == best_score && distance < best_distance)) {
+              best_score = score;
+              best_distance = distance;
+              pose = Eigen::Vector3d(t.x(), t.y(), ir * kRotationStepRad);
+            }
+          }
+        }
+      }
+    }
+
+    // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles.
+    which.assign(edges.size(), -1);
+    weight.assign(edges.size(), 0.0);
+    double gate = kInitialEdgeGateM;
+    H.setZero();
+    rms = 0.0;
+    kept = 0;
+    degenerate = false;
+    std::vector<double> abs_r;
+    for (int it = 0; it < kEdgeIterations; ++it) {
+      const Eigen::Matrix2d R = Rotation2(pose.z());
+      // d(R^T)/d(theta).
+      Eigen::Matrix2d dRt;
+      dRt << -std::sin(pose.z()), std::cos(pose.z()), -std::cos(pose.z()), -std::sin(pose.z());
+      H.setZero();
+      Eigen::Vector3d g = Eigen::Vector3d::Zero();
+      abs_r.clear();
+      double sum_r2_edges = 0.0;
+      kept = 0;
+      for (std::size_t k = 0; k < edges.size(); ++k) {
+        const Eigen::Vector2d e = edges[k].p_plane - pose.head<2>();
+        Eigen::Vector2d grad;
+        const double r = NearestBoundary(holes, half_page, R.transpose() * e, &grad, &which[k]);
+        weight[k] = 0.0;
+        if (std::abs(r) >= gate) continue;
+        abs_r.push_back(std::abs(r));
+        const double u = r / gate;
+        weight[k] = (1.0 - u * u) * (1.0 - u * u);
+        Eigen::Vector3d J;
+        J.head<2>() = -(R * grad);
+        J.z() = grad.dot(dRt * e);
+        H += weight[k] * J * J.transpose();
+        g += weight[k] * J * r;
+        sum_r2_edges += r * r;
+        ++kept;
+      }
+      if (kept < kMinEdges) break;
+      rms = std::sqrt(sum_r2_edges / kept);
+      // Singular: the edges do not fix the board along y (no ring through a hole) or at all.
+      const Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
+      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
+        degenerate = true;
+        break;
+      }
+      const Eigen::Vector3d dx = ldlt.solve(-g);
+      if (!dx.allFinite()) {
+        degenerate = true;
+        break;
+      }
+      pose += dx;
+      gate = std::max(kTukeyC * kMadToSigma * Median(abs_r), kMinEdgeGateM);
+      if (dx.norm() < kConvergence) break;
+    }
+    if (degenerate || pass + 1 == kPasses) break;
+    // The points on paper, by the board pose of this pass, for the next pass's plane.
+    const Eigen::Matrix2d Rt = Rotation2(pose.z()).transpose();
+    plane_points.clear();
+    for (const RoiPoint& p : roi) {
+      const double along = n.dot(p.p_lidar);
+      if (along == 0.0) continue;
+      const Eigen::Vector3d q = (plane.d_m / along) * p.p_lidar - o;
+      const Eigen::Vector2d m = Rt * (Eigen::Vector2d(q.dot(ex), q.dot(ey)) - pose.head<2>());
+      Eigen::Vector2d grad;
+      int boundary = -1;
+      const Paint paint = board.PaintAt(m);
+      if ((paint == Paint::kWhite || paint == Paint::kBlack) &&
+          std::abs(NearestBoundary(holes, half_page, m, &grad, &boundary)) > kPaperInsetM) {
+        plane_points.push_back(p);
+      }
+    }
+  }
+  out.edges = kept;
+  out.edge_rms_m = rms;
+
+  // Rings through holes: gaps whose two edges both fit the same hole.
+  std::vector<std::set<int>> hole_rings(holes.size());
+  std::set<int> rings_through;
+  for (std::size_t k = 0; k + 1 < edges.size(); ++k) {
+    if (edges[k].gap < 0 || edges[k + 1].gap != edges[k].gap) continue;
+    if (weight[k] > 0.0 && weight[k + 1] > 0.0 && which[k] >= 0 && which[k] == which[k + 1]) {
+      hole_rings[which[k]].insert(group_ring[edges[k].group]);
+      rings_through.insert(group_ring[edges[k].group]);
+    }
+  }
+  out.rings_through_holes = static_cast<int>(rings_through.size());
+  if (out.rings_through_holes < options.min_rings_through_holes) {
+    out.reason = RoundHoleCloudReason::kTooFewRingsThroughHoles;
+    return out;
+  }
+  out.reason = RoundHoleCloudReason::kFitFailed;
+  // An edge fit that left the coarse search's range by as much again has slid onto wrong
+  // associations (edges of one hole on another).
+  if (degenerate || kept < kMinEdges || rms > kMaxEdgeRmsM ||
+      pose.head<2>().norm() > 2.0 * options.max_in_plane_shift_m) {
+    return out;
+  }
+  const Eigen::Matrix3d cov = H.inverse() * rms * rms;
+  out.in_plane_sigma_m = Eigen::Vector2d(std::sqrt(cov(0, 0)), std::sqrt(cov(1, 1)));
+
+  Eigen::Matrix3d R_lidar_plane;
+  R_lidar_plane << ex, ey, plane.n_lidar;
+  const Rigid3d T_lidar_plane(R_lidar_plane, o);
+  const Rigid3d T_plane_board(
+      Eigen::Quaterniond(Eigen::AngleAxisd(pose.z(), Eigen::Vector3d::UnitZ())),
+      Eigen::Vector3d(pose.x(), pose.y(), 0.0));
+  out.T_lidar_board = T_lidar_plane * T_plane_board;
+  for (std::size_t i = 0; i < holes.size(); ++i) {
+    out.holes.push_back({holes[i].id,
+                         out.T_lidar_board * Eigen::Vector3d(holes[i].centre_board.x(),
+                                                             holes[i].centre_board.y(), 0.0),
+                         static_cast<int>(hole_rings[i].size())});
+  }
+  out.found = true;
+  out.reason = RoundHoleCloudReason::kNone;
+  return out;
+}
+
+}  // namespace linecal
