@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <numbers>
 #include <optional>
 #include <span>
 #include <vector>
@@ -330,14 +331,22 @@ std::optional<Eigen::Vector2d> RefineXCorner(const ImageView8& image,
 // acceptance.md (1.5 px at most).
 constexpr double kEdgeEndMarginPx = 3.0;
 
-// The image line of each edge line, measured around its prediction by H_image_board.
-std::optional<std::vector<Line2d>> MeasureLines(const ImageView8& image, const ChessModel& model,
-                                                const Eigen::Matrix3d& H) {
-  std::vector<Line2d> lines;
+// The edge points of one edge line, each with the unit image normal of its segment towards
+// the white, and the line's direction hint (FitWeightedLine's `towards`).
+struct MeasuredLine {
   std::vector<EdgePoint> points;
+  std::vector<Eigen::Vector2d> light_normals;
+  Eigen::Vector2d hint = Eigen::Vector2d::Zero();
+};
+
+// The edge points of each edge line, measured around its prediction by H_image_board.
+std::optional<std::vector<MeasuredLine>> MeasureEdges(const ImageView8& image,
+                                                      const ChessModel& model,
+                                                      const Eigen::Matrix3d& H) {
+  std::vector<MeasuredLine> lines;
   for (const EdgeLine& line : model.lines) {
-    points.clear();
-    Eigen::Vector2d hint = Eigen::Vector2d::Zero();
+    MeasuredLine m;
+    Eigen::Vector2d& hint = m.hint;
     for (const Segment& s : line.segments) {
       const Eigen::Vector2d a = ApplyHomography(H, s.a_board);
       const Eigen::Vector2d b = ApplyHomography(H, s.b_board);
@@ -370,16 +379,92 @@ std::optional<std::vector<Line2d>> MeasureLines(const ImageView8& image, const C
         const Eigen::Vector2d q = ApplyHomography(H, s.a_board + t * (s.b_board - s.a_board));
         if (!q.allFinite()) return std::nullopt;
         const std::optional<EdgePoint> e = MeasureEdgePoint(image, q, normal, half_window_px);
-        if (e) points.push_back(*e);
+        if (e) {
+          m.points.push_back(*e);
+          m.light_normals.push_back(normal);
+        }
       }
     }
     // A line from fewer points than a side's minimum of 8 is not trusted.
-    if (points.size() < 8) return std::nullopt;
-    const std::optional<Line2d> fit = FitWeightedLine(points, hint);
-    if (!fit) return std::nullopt;
-    lines.push_back(*fit);
+    if (m.points.size() < 8) return std::nullopt;
+    lines.push_back(std::move(m));
   }
   return lines;
+}
+
+// The line fitted to a measured edge line's points, each first moved by bias_px along its
+// light normal (EdgeBiasPx: the edge locator's shift, undone): the total-least-squares line,
+// or, when `direction` is given, the line of that direction through the points' weighted
+// centroid. nullopt as FitWeightedLine.
+std::optional<Line2d> FitEdgeLine(const MeasuredLine& line, double bias_px,
+                                  const std::optional<Eigen::Vector2d>& direction) {
+  std::vector<EdgePoint> points = line.points;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    points[i].uv_px -= bias_px * line.light_normals[i];
+  }
+  if (!direction) return FitWeightedLine(points, line.hint);
+  Line2d fit;
+  double weight = 0.0;
+  for (const EdgePoint& e : points) {
+    fit.point += e.weight * e.uv_px;
+    weight += e.weight;
+  }
+  if (!(weight > 0.0)) return std::nullopt;
+  fit.point /= weight;
+  fit.dir = direction->dot(line.hint) < 0.0 ? Eigen::Vector2d(-*direction) : *direction;
+  return fit;
+}
+
+// The shift of the edge locator along the light normal, pixels (positive: edges seen
+// towards the white), common to the edges of one group (one print, one blur, one gamma):
+// any asymmetry of the edge profile (gamma, the blur's tail) moves every edge point of the
+// group that way. A line whose segments have both polarities (those through the
+// X-corners: their segments alternate at the vertex) shows the shift as an offset between
+// its two polarities; left uncorrected it turns the line about the vertex and moves the
+// L-corners at its ends by more than the shift. Linear least squares over the group's
+// lines of the points' distances from their fitted lines (`fitted`, by line) in an offset
+// and a turn per line plus the common shift times the light normal's sign; 0 when no line
+// has both polarities. O(points).
+double EdgeBiasPx(const ChessModel& model, int group, const std::vector<MeasuredLine>& measured,
+                  const std::vector<Line2d>& fitted) {
+  double num = 0.0, den = 0.0, total = 0.0;
+  for (std::size_t l = 0; l < measured.size(); ++l) {
+    if (model.lines[l].group != group) continue;
+    const MeasuredLine& m = measured[l];
+    const Line2d& line = fitted[l];
+    const Eigen::Vector2d n(-line.dir.y(), line.dir.x());
+    // Per point: along-line position t, distance r, polarity s; weighted normal equations
+    // of [1 t] to eliminate the line's own offset and turn from s and r.
+    Eigen::Matrix2d xtx = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d xts = Eigen::Vector2d::Zero(), xtr = Eigen::Vector2d::Zero();
+    double sts = 0.0, str = 0.0;
+    for (std::size_t i = 0; i < m.points.size(); ++i) {
+      const Eigen::Vector2d d = m.points[i].uv_px - line.point;
+      const Eigen::Vector2d x(1.0, line.dir.dot(d));
+      const double r = n.dot(d);
+      const double sgn = n.dot(m.light_normals[i]);
+      const double w = m.points[i].weight;
+      xtx += w * x * x.transpose();
+      xts += w * sgn * x;
+      xtr += w * r * x;
+      sts += w * sgn * sgn;
+      str += w * sgn * r;
+    }
+    // Fewer than two distinct positions along the line: nothing to eliminate against (the
+    // determinant is a weighted variance of t times the weight sum; 1e-9 of its scale is
+    // rounding).
+    const double det = xtx(0, 0) * xtx(1, 1) - xtx(0, 1) * xtx(1, 0);
+    if (!(det > 1e-9 * xtx(0, 0) * xtx(1, 1))) continue;
+    const Eigen::Vector2d ks = Eigen::Vector2d(xtx(1, 1) * xts(0) - xtx(0, 1) * xts(1),
+                                               xtx(0, 0) * xts(1) - xtx(1, 0) * xts(0)) /
+                               det;
+    num += str - xtr.dot(ks);
+    den += sts - xts.dot(ks);
+    total += sts;
+  }
+  // A line of one polarity leaves nothing once its offset is eliminated (its share of den is
+  // 0 up to rounding); 1e-6 of the weights is far below any real second polarity.
+  return den > 1e-6 * total ? num / den : 0.0;
 }
 
 struct Refined {
@@ -387,7 +472,7 @@ struct Refined {
   Eigen::Matrix3d H = Eigen::Matrix3d::Identity();
 };
 
-// Refines every feature from the coarse H_image_board (two passes, see the header) and
+// Refines every feature from the coarse H_image_board (three passes, see the header) and
 // checks the whole board. *reason on failure.
 std::optional<Refined> RefineBoard(const ImageView8& image, const Board& board,
                                    const ChessModel& model, const Eigen::Matrix3d& H_coarse,
@@ -399,21 +484,60 @@ std::optional<Refined> RefineBoard(const ImageView8& image, const Board& board,
   for (const BoardFeature& f : features) p_board.push_back(f.p_board);
   Refined r;
   r.H = H_coarse;
-  constexpr int kPasses = 2;
+  // Three: the coarse points (contour corners, edge ends) are off by up to two pixels, so
+  // the first pass's windows may clip an edge; the second starts within a fraction of a
+  // pixel, the third from there is converged and corrects the edge bias (EdgeBiasPx).
+  constexpr int kPasses = 3;
   for (int pass = 0; pass < kPasses; ++pass) {
-    const std::optional<std::vector<Line2d>> lines = MeasureLines(image, model, r.H);
-    if (!lines) return std::nullopt;
-    r.uv_px.clear();
+    const std::optional<std::vector<MeasuredLine>> measured = MeasureEdges(image, model, r.H);
+    if (!measured) return std::nullopt;
+    std::vector<Line2d> lines;
+    for (const MeasuredLine& m : *measured) {
+      const std::optional<Line2d> line = FitEdgeLine(m, 0.0, std::nullopt);
+      if (!line) return std::nullopt;
+      lines.push_back(*line);
+    }
+    r.uv_px.assign(features.size(), Eigen::Vector2d::Zero());
+    // The X-corners first (the last pass refines them by the saddle fit, started at their
+    // line intersection, which the edge bias turns the lines about but does not move).
     for (std::size_t id = 0; id < features.size(); ++id) {
       const FeatureModel& fm = model.features[id];
-      std::optional<Eigen::Vector2d> uv = IntersectLines((*lines)[fm.h_line], (*lines)[fm.v_line]);
+      if (!fm.x_corner) continue;
+      std::optional<Eigen::Vector2d> uv = IntersectLines(lines[fm.h_line], lines[fm.v_line]);
       if (!uv) return std::nullopt;
-      if (fm.x_corner && pass == kPasses - 1) {
+      if (pass == kPasses - 1) {
         const double side_px = LocalSquareSide(r.H, p_board[id], model.square_m);
         uv = RefineXCorner(image, *uv, side_px);
         if (!uv) return std::nullopt;
       }
-      r.uv_px.push_back(*uv);
+      r.uv_px[id] = *uv;
+    }
+    if (pass == kPasses - 1) {
+      // The lines refitted with their group's edge bias undone (EdgeBiasPx). A line of one
+      // side (8 px of a foreshortened 12 px square, a third of it measured) has a direction
+      // good to a few degrees under noise; the homography of the previous pass's 20
+      // corners gives it far better, so such a line keeps only its measured offset.
+      const std::array<double, 2> bias = {EdgeBiasPx(model, 0, *measured, lines),
+                                          EdgeBiasPx(model, 1, *measured, lines)};
+      for (std::size_t l = 0; l < lines.size(); ++l) {
+        const EdgeLine& edge = model.lines[l];
+        std::optional<Eigen::Vector2d> direction;
+        if (edge.segments.size() == 1) {
+          direction = (ApplyHomography(r.H, edge.segments[0].b_board) -
+                       ApplyHomography(r.H, edge.segments[0].a_board))
+                          .normalized();
+        }
+        const std::optional<Line2d> line = FitEdgeLine((*measured)[l], bias[edge.group], direction);
+        if (!line) return std::nullopt;
+        lines[l] = *line;
+      }
+    }
+    for (std::size_t id = 0; id < features.size(); ++id) {
+      const FeatureModel& fm = model.features[id];
+      if (fm.x_corner) continue;
+      const std::optional<Eigen::Vector2d> uv = IntersectLines(lines[fm.h_line], lines[fm.v_line]);
+      if (!uv) return std::nullopt;
+      r.uv_px[id] = *uv;
     }
     const std::optional<HomographyFit> fit = FitHomography(p_board, r.uv_px);
     if (!fit) return std::nullopt;
@@ -554,6 +678,37 @@ std::vector<SquareQuad> SquareQuads(const Image8& dark, const ChessboardOptions&
   return quads;
 }
 
+// The board from image points of known board positions, each with its coarse tolerance,
+// pixels: the coarse homography must fit every point within its tolerance; then the upright
+// orientation (header), refinement and the whole-board checks (RefineBoard). nullopt when
+// any step fails; *failure is raised to the furthest stage reached.
+std::optional<Refined> FitAndRefineBoard(const ImageView8& image, const Board& board,
+                                         const ChessModel& model,
+                                         std::span<const Eigen::Vector2d> board_pts,
+                                         std::span<const Eigen::Vector2d> image_pts,
+                                         std::span<const double> tolerance, const Image8& dark,
+                                         const ChessboardOptions& options, DetectReason* failure) {
+  *failure = std::max(*failure, DetectReason::kVerificationFailed);
+  HomographyFitOptions dlt;
+  dlt.refine = false;  // coarse: the points are off by a pixel anyway
+  const std::optional<HomographyFit> fit = FitHomography(board_pts, image_pts, dlt);
+  if (!fit) return std::nullopt;
+  std::vector<double> residuals;
+  HomographyResiduals(fit->H, board_pts, image_pts, &residuals);
+  for (std::size_t i = 0; i < residuals.size(); ++i) {
+    if (!(residuals[i] <= tolerance[i])) return std::nullopt;
+  }
+  // The upright one of the two orientations (header): board +x along image +u.
+  Eigen::Matrix3d H = fit->H;
+  const Eigen::Vector2d centre = ApplyHomography(H, Eigen::Vector2d::Zero());
+  const Eigen::Vector2d x_axis = ApplyHomography(H, Eigen::Vector2d(model.square_m, 0.0)) - centre;
+  if (x_axis.x() < 0.0) H = H * Eigen::Vector3d(-1.0, -1.0, 1.0).asDiagonal();
+  DetectReason reason = DetectReason::kNone;
+  std::optional<Refined> refined = RefineBoard(image, board, model, H, dark, options, &reason);
+  if (!refined) *failure = std::max(*failure, reason);
+  return refined;
+}
+
 // Every pair of groups with distinct quads: the coarse board homography from their 24
 // corners, then refinement and the whole-board checks. The verified boards; *failure is
 // raised to the furthest stage reached (DetectReason's order).
@@ -568,11 +723,8 @@ std::vector<Refined> SearchBoards(const ImageView8& image, const Board& board,
     *failure = std::max(*failure, DetectReason::kTooFewFeatures);
     return found;
   }
-  *failure = std::max(*failure, DetectReason::kVerificationFailed);
   std::vector<Eigen::Vector2d> local, image_pts, board_pts;
   std::vector<double> tolerance;
-  HomographyFitOptions dlt;
-  dlt.refine = false;  // coarse: contour corners are off by a pixel anyway
   for (std::size_t a = 0; a < triples.size(); ++a) {
     for (std::size_t b = a + 1; b < triples.size(); ++b) {
       const Triple& ta = triples[a];
@@ -592,26 +744,246 @@ std::vector<Refined> SearchBoards(const ImageView8& image, const Board& board,
         for (const Eigen::Vector2d& l : local) board_pts.push_back(model.groups[g].ToBoard(l));
         tolerance.resize(image_pts.size(), CoarseTolerancePx(options, t.side_px));
       }
-      const std::optional<HomographyFit> fit = FitHomography(board_pts, image_pts, dlt);
-      if (!fit) continue;
-      std::vector<double> residuals;
-      HomographyResiduals(fit->H, board_pts, image_pts, &residuals);
-      bool ok = true;
-      for (std::size_t i = 0; i < residuals.size() && ok; ++i) ok = residuals[i] <= tolerance[i];
-      if (!ok) continue;
-      // The upright one of the two orientations (header): board +x along image +u.
-      Eigen::Matrix3d H = fit->H;
-      const Eigen::Vector2d centre = ApplyHomography(H, Eigen::Vector2d::Zero());
-      const Eigen::Vector2d x_axis =
-          ApplyHomography(H, Eigen::Vector2d(model.square_m, 0.0)) - centre;
-      if (x_axis.x() < 0.0) H = H * Eigen::Vector3d(-1.0, -1.0, 1.0).asDiagonal();
-      DetectReason reason = DetectReason::kNone;
-      std::optional<Refined> refined = RefineBoard(image, board, model, H, dark, options, &reason);
-      if (!refined) {
-        *failure = std::max(*failure, reason);
+      std::optional<Refined> refined = FitAndRefineBoard(image, board, model, board_pts, image_pts,
+                                                         tolerance, dark, options, failure);
+      if (refined) found.push_back(*std::move(refined));
+    }
+  }
+  return found;
+}
+
+// ---- Second path: groups seeded from their pairs of X-corners ----------------------------
+
+// A group's two X-corners lie one square side apart on one edge line, with the middle
+// square between them on one side of that line (GroupModel: local (0, 0) and (1, 0)).
+// Each of the pair's corners has one edge line within this angle of the line joining them
+// (LinkXCorners' 25 degrees: the ring's directions are good to a few degrees, perspective
+// does not bend lines).
+const double kPairLineCos = std::cos(25.0 * std::numbers::pi / 180.0);
+// Their dark axes bisect the same two lines' sectors turned by a quarter turn: |cos| below
+// 0.5 (60 degrees) allows for strong perspective (as LinkXCorners).
+constexpr double kPairMaxDarkAxisCos = 0.5;
+// The pair is at least this far apart (LinkXCorners' minimum): 12 px squares at 50 degrees
+// of both yaw and pitch and rolled are about 5 px along one side.
+constexpr double kMinPairPx = 4.0;
+
+// Edge-end scan (EdgeEndPx): samples every half pixel (the end is interpolated between
+// them); the grey-level difference across the edge is taken at this fraction of the square
+// side on either side of it (beyond the blur of the edge, 2 px at most in acceptance.md,
+// well inside the square), at least 1 px (where an edge blurred by 2 px still shows 40 % of
+// its contrast, and the scan can start within 3 px of the vertex: 5 px squares).
+constexpr double kEndScanStepPx = 0.5;
+constexpr double kEndOffsetSideFraction = 0.2;
+constexpr double kMinEndOffsetPx = 1.0;
+// The edge's difference near its start must reach this fraction of the X-corner's ring
+// contrast (the same print's edge; the ring sees it at 4 px, an edge sample at 1.5 px sees
+// about half of it): contrast-adaptive, so a dim or low-gamma print works.
+constexpr double kMinEndContrastFraction = 0.3;
+// A square's side along one edge line is at most this many times its side along the
+// other: 50 degrees of foreshortening (1 / cos 50 = 1.6) with the rest of the
+// perspective of acceptance.md's views; plus 2 px for the smallest squares.
+constexpr double kMaxSideRatio = 3.0;
+constexpr double kMaxEndExtraPx = 2.0;
+
+// Where the straight edge leaving start_px along the unit `dir` ends at a black square's
+// corner against white: the distance, pixels, at which the grey-level difference across the
+// edge (blurred image, samples at +-offset_px along the normal) has fallen to half its
+// largest value so far — at a blurred right-angled corner the sample on the dark side sees
+// half of the square there (short, blurred edges end up to a pixel or two early). Scanned from 1.5
+// offset_px + 1 px (clear of the other sectors at an X-corner, whose sectors span at least 35
+// degrees: cot 35 = 1.43) to max_px. nullopt when the edge is weaker than min_contrast, when the
+// scan leaves the image or when the edge does not end. Cost: O(max_px) bilinear samples.
+std::optional<double> EdgeEndPx(const ImageF& blurred, const Eigen::Vector2d& start_px,
+                                const Eigen::Vector2d& dir, double offset_px, double max_px,
+                                double min_contrast) {
+  const Eigen::Vector2d n(-dir.y(), dir.x());
+  const auto difference = [&](double t) -> std::optional<double> {
+    const Eigen::Vector2d p = start_px + t * dir;
+    const Eigen::Vector2d a = p + offset_px * n;
+    const Eigen::Vector2d b = p - offset_px * n;
+    for (const Eigen::Vector2d& q : {a, b}) {
+      if (!(q.x() >= 0.0 && q.y() >= 0.0 && q.x() <= blurred.width - 1.0 &&
+            q.y() <= blurred.height - 1.0)) {
+        return std::nullopt;
+      }
+    }
+    return SampleBilinear(blurred, a.x(), a.y()) - SampleBilinear(blurred, b.x(), b.y());
+  };
+  const double t0 = 1.5 * offset_px + 1.0;
+  const std::optional<double> first = difference(t0);
+  if (!first) return std::nullopt;
+  // The edge's side: the sign of the difference at the start; its contrast: the largest
+  // difference seen so far (perspective and blur make short edges a ramp, not a plateau).
+  const double sign = *first > 0.0 ? 1.0 : -1.0;
+  double peak = 0.0;
+  double previous = 0.0;
+  for (double t = t0; t <= max_px; t += kEndScanStepPx) {
+    const std::optional<double> c = difference(t);
+    if (!c) return std::nullopt;
+    const double value = sign * *c;
+    if (value < 0.5 * peak) {
+      if (peak < min_contrast) return std::nullopt;
+      return t - kEndScanStepPx * (0.5 * peak - value) / (previous - value);
+    }
+    peak = std::max(peak, value);
+    previous = value;
+  }
+  return std::nullopt;
+}
+
+// A group seen from its pair of X-corners: image points at local grid positions
+// (GroupModel) and the side of its middle square, pixels.
+struct PairGroup {
+  std::array<int, 2> corners = {0, 0};  // the X-corners at local (0, 0) and (1, 0)
+  std::vector<Eigen::Vector2d> local;
+  std::vector<Eigen::Vector2d> image_px;
+  double side_px = 0.0;
+};
+
+// The group seeded by X-corners p (local (0, 0)) and q (local (1, 0)), the middle square on
+// the image side of +90 degrees from p -> q (GroupModel's handedness): the six edge ends
+// on the pair's three edge lines (local (0, +-1), (1, +-1), (-1, 0), (2, 0)) found by
+// EdgeEndPx, then a homography of the eight points within the coarse tolerance.
+std::optional<PairGroup> GroupFromPair(const ImageF& blurred, const std::vector<XCorner>& corners,
+                                       int p, int q, const ChessboardOptions& options) {
+  const XCorner& cp = corners[p];
+  const XCorner& cq = corners[q];
+  const Eigen::Vector2d pq = cq.uv_px - cp.uv_px;
+  const double side_px = pq.norm();
+  const Eigen::Vector2d e = pq / side_px;
+  const Eigen::Vector2d gy(-e.y(), e.x());
+  // The other edge line at each corner (the one less aligned with p -> q), towards +gy.
+  const auto other_line = [&](const XCorner& c) {
+    Eigen::Vector2d l = std::abs(c.line_a.dot(e)) < std::abs(c.line_b.dot(e)) ? c.line_a : c.line_b;
+    return l.dot(gy) < 0.0 ? Eigen::Vector2d(-l) : l;
+  };
+  const Eigen::Vector2d lp = other_line(cp);
+  const Eigen::Vector2d lq = other_line(cq);
+  const double offset = std::max(kMinEndOffsetPx, kEndOffsetSideFraction * side_px);
+  const double max_px = kMaxSideRatio * side_px + kMaxEndExtraPx;
+  struct Scan {
+    const XCorner* from;
+    Eigen::Vector2d dir;
+    Eigen::Vector2d local;
+  };
+  const std::array<Scan, 6> scans = {{{&cp, lp, {0, 1}},
+                                      {&cp, -lp, {0, -1}},
+                                      {&cq, lq, {1, 1}},
+                                      {&cq, -lq, {1, -1}},
+                                      {&cp, -e, {-1, 0}},
+                                      {&cq, e, {2, 0}}}};
+  PairGroup g;
+  g.corners = {p, q};
+  g.local = {Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 0)};
+  g.image_px = {cp.uv_px, cq.uv_px};
+  for (const Scan& s : scans) {
+    const std::optional<double> t = EdgeEndPx(blurred, s.from->uv_px, s.dir, offset, max_px,
+                                              kMinEndContrastFraction * s.from->contrast);
+    if (!t) return std::nullopt;
+    g.local.push_back(s.local);
+    g.image_px.push_back(s.from->uv_px + *t * s.dir);
+  }
+  HomographyFitOptions dlt;
+  dlt.refine = false;  // coarse: edge ends are off by about a pixel
+  const std::optional<HomographyFit> fit = FitHomography(g.local, g.image_px, dlt);
+  if (!fit) return std::nullopt;
+  g.side_px = LocalSquareSide(fit->H, Eigen::Vector2d(0.0, 0.0), 1.0);
+  if (!(fit->max_residual <= CoarseTolerancePx(options, g.side_px))) return std::nullopt;
+  return g;
+}
+
+// The groups seeded from every pair of X-corners that could be a group's (see kPairLineCos
+// and kPairMaxDarkAxisCos; the dark sector of each facing the other on the same side of
+// their line: the middle square). Pairs longer than max_pair_px are skipped.
+std::vector<PairGroup> PairGroups(const ImageF& blurred, const std::vector<XCorner>& corners,
+                                  double max_pair_px, const ChessboardOptions& options) {
+  std::vector<PairGroup> groups;
+  const int n = static_cast<int>(corners.size());
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const XCorner& a = corners[i];
+      const XCorner& b = corners[j];
+      const Eigen::Vector2d d = b.uv_px - a.uv_px;
+      const double dist = d.norm();
+      if (dist < kMinPairPx || dist > max_pair_px) continue;
+      const Eigen::Vector2d e = d / dist;
+      const auto on_line = [&](const XCorner& c) {
+        return std::max(std::abs(c.line_a.dot(e)), std::abs(c.line_b.dot(e))) >= kPairLineCos;
+      };
+      if (!on_line(a) || !on_line(b)) continue;
+      if (std::abs(a.dark_axis.dot(b.dark_axis)) > kPairMaxDarkAxisCos) continue;
+      // The side of the line a -> b holding each corner's dark sector that faces the other.
+      const Eigen::Vector2d normal(-e.y(), e.x());
+      const Eigen::Vector2d da = a.dark_axis.dot(e) > 0.0 ? a.dark_axis : -a.dark_axis;
+      const Eigen::Vector2d db = b.dark_axis.dot(e) < 0.0 ? b.dark_axis : -b.dark_axis;
+      const double side_a = normal.dot(da);
+      const double side_b = normal.dot(db);
+      if ((side_a > 0.0) != (side_b > 0.0)) continue;
+      std::optional<PairGroup> g = side_a > 0.0 ? GroupFromPair(blurred, corners, i, j, options)
+                                                : GroupFromPair(blurred, corners, j, i, options);
+      if (g) groups.push_back(*std::move(g));
+    }
+  }
+  return groups;
+}
+
+// The second path (header, step 6): X-corners over the whole image, groups from their
+// pairs, and every two groups with distinct corners as the board's left and right group
+// (either way round) through FitAndRefineBoard.
+std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& board,
+                                      const ChessModel& model, int min_contrast, const Image8& dark,
+                                      const ChessboardOptions& options, DetectReason* failure) {
+  std::vector<Refined> found;
+  XCornerOptions corner_options;
+  // The ring's contrast floor rises with the image's noise like the binarisation's.
+  corner_options.min_contrast =
+      std::max(corner_options.min_contrast, static_cast<double>(min_contrast));
+  // A 3 px ring (default 4): 12 px squares at 50 degrees of yaw and pitch are 5-8 px along
+  // a side, where a 4 px ring reaches the neighbouring L-corners and noise breaks its
+  // sector test; 3 px stays outside the 1.5 px blur.
+  constexpr double kPairRingRadiusPx = 3.0;
+  corner_options.ring_radius_px = kPairRingRadiusPx;
+  const ImageF blurred = GaussianBlur(image, kSaddleBlurSigmaPx);
+  const std::vector<XCorner> corners = FindXCorners(blurred, corner_options);
+  // A group's pair is one square apart: a square is 150 / 2600 of a board at most the
+  // image's width (acceptance.md: 80 %); a tenth of the larger side allows perspective.
+  constexpr double kMaxPairImageFraction = 0.1;
+  const double max_pair_px = kMaxPairImageFraction * std::max(image.width, image.height);
+  const std::vector<PairGroup> groups = PairGroups(blurred, corners, max_pair_px, options);
+  if (groups.size() < 2) {
+    *failure = std::max(*failure, DetectReason::kTooFewFeatures);
+    return found;
+  }
+  std::vector<Eigen::Vector2d> image_pts, board_pts;
+  std::vector<double> tolerance;
+  for (std::size_t a = 0; a < groups.size(); ++a) {
+    for (std::size_t b = a + 1; b < groups.size(); ++b) {
+      const PairGroup& ga = groups[a];
+      const PairGroup& gb = groups[b];
+      if (std::any_of(ga.corners.begin(), ga.corners.end(), [&](int c) {
+            return std::find(gb.corners.begin(), gb.corners.end(), c) != gb.corners.end();
+          })) {
         continue;
       }
-      found.push_back(*std::move(refined));
+      for (int left_first = 0; left_first < 2; ++left_first) {
+        board_pts.clear();
+        image_pts.clear();
+        tolerance.clear();
+        for (int g = 0; g < 2; ++g) {
+          const PairGroup& pg = (g == 0) == (left_first == 1) ? ga : gb;
+          for (std::size_t k = 0; k < pg.local.size(); ++k) {
+            board_pts.push_back(model.groups[g].ToBoard(pg.local[k]));
+            image_pts.push_back(pg.image_px[k]);
+            tolerance.push_back(CoarseTolerancePx(options, pg.side_px));
+          }
+        }
+        std::optional<Refined> refined = FitAndRefineBoard(
+            image, board, model, board_pts, image_pts, tolerance, dark, options, failure);
+        if (refined) {
+          found.push_back(*std::move(refined));
+          break;
+        }
+      }
     }
   }
   return found;
@@ -668,6 +1040,9 @@ Detection DetectChessboard(const ImageView8& image, const Board& board,
       quads = SquareQuads(dark, options, &labels);
       found = SearchBoards(image, board, *model, quads, dark, options, &failure);
     }
+  }
+  if (found.empty()) {
+    found = SearchPairBoards(image, board, *model, min_contrast, dark, options, &failure);
   }
   if (found.empty()) return Fail(failure);
   // Two verified boards: the same board from duplicate groups, or two boards in view.

@@ -24,12 +24,26 @@
 //     one line, e.g. the five sides on the line through both X-corners) is measured along
 //     its whole length (edge points across the edge, edge_lines.h) and fitted by one line;
 //     L-corners are intersections of two fitted lines. X-corners are refined by the saddle
-//     fit (corner_refine.h) on a blurred patch, started at their line intersection. Twice:
-//     the second pass samples along the homography refitted to the first pass's corners.
+//     fit (corner_refine.h) on a blurred patch, started at their line intersection. Three
+//     passes, each sampling along the homography refitted to the previous pass's corners;
+//     the last undoes the edge locator's bias (gamma and blur asymmetry shift every edge
+//     of a group alike; the lines whose segments alternate polarity at an X-corner measure
+//     it) and takes the direction of a line of one side only (a single short square side)
+//     from the previous homography.
 //  5. Verification of the whole board: the homography of the 20 refined corners fits each
 //     within a fraction of its local square side, and the image binarised in step 1 shows
 //     the board's black and white where that homography puts them (paint_check.h), which
 //     rejects checkers and other patterns that happen to hold two such groups.
+//  6. Second path, when steps 1-5 (with the split) find no board, e.g. squares of 8-14 px
+//     whose binarised blobs are rounded and give no quads: X-corners over the whole image
+//     (x_corners.h, blur 1.5 px, ring 3 px). Each group has exactly two X-corners one square
+//     side apart on a shared edge line; pairs whose edge lines agree, whose dark axes are
+//     about perpendicular and whose dark sectors facing each other lie on the same side of
+//     their line (the middle square) seed a group: from each corner the ends of the edge
+//     lines through it (where the grey-level difference across the edge falls to half, on
+//     the blurred image) give six L-corners, the pair's local homography of the eight points
+//     must fit within the coarse tolerance, and every two groups (either as the left one)
+//     give the coarse board homography of steps 3-5.
 //
 // Orientation: the board is symmetric under a rotation by 180 degrees about its centre
 // (the left "V" turned by 180 degrees is exactly the right "Λ", and the page is centred),
@@ -92,10 +106,10 @@ struct ChessboardOptions {
 // (fewer than two groups of three squares), kVerificationFailed (no pair of groups fits
 // one board, or its refinement failed, e.g. a board cut by the image border), kWrongBoard
 // (a board-shaped pattern whose paint is not this board's), kAmbiguous (two boards).
-// Pure function. Cost on one core: about 3 ms at 1280 x 720 (binarisation and contours,
-// about 0.3 ms of refinement); the split pass, run only when nothing was found, adds the
-// blur and corner response over the unmatched components' patches and a second labelling
-// (its time is not yet measured separately).
+// Pure function. Cost on one core: about 3.3 ms at 1280 x 720 when steps 1-5 find the board
+// (binarisation and contours, about 0.4 ms of refinement); when they do not, the split pass
+// and the second path (step 6: a whole-image blur and corner response, pairs O(n^2) in the
+// n X-corners) bring it to about 12 ms (docs/corner-detectors.md).
 Detection DetectChessboard(const ImageView8& image, const Board& board,
                            const ChessboardOptions& options = {});
 
