@@ -21,5 +21,9 @@ int RunEvalRadar(const Args& args);  // cmd_eval_radar.cc
 int RunDetect(const Args& args);  // cmd_detect.cc
 int RunCalibrate(const Args& args);  // cmd_calibrate.cc
 int RunEvalCalibrate(const Args& args);  // cmd_eval_calibrate.cc
+int RunCycleStart(const Args& args);  // cmd_cycle.cc
+int RunCycleShow(const Args& args);  // cmd_cycle.cc
+int RunCyclesList(const Args& args);  // cmd_cycle.cc
+int RunStatus(const Args& args);  // cmd_cycle.cc
 
 }  // namespace linecal::tools

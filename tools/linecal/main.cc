@@ -30,6 +30,10 @@ const std::vector<Subcommand>& Subcommands() {
       {{"eval", "calibrate"}, "Monte Carlo evaluation of camera-to-car calibration", RunEvalCalibrate},
       {{"detect"}, "find a calibration board in an image (--json, --overlay)", RunDetect},
       {{"calibrate"}, "compute a calibration cycle from a capture (--json)", RunCalibrate},
+      {{"cycle", "start"}, "start a cycle on the daemon (--wait: follow it and print the results)", RunCycleStart},
+      {{"cycle", "show"}, "show a stored cycle", RunCycleShow},
+      {{"cycles", "list"}, "list stored cycles (--vin, --verdict)", RunCyclesList},
+      {{"status"}, "the daemon's station status", RunStatus},
   };
   return kTable;
 }
