@@ -16,6 +16,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/test_car.h"
+
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -32,14 +34,7 @@ class CycleCliTest : public ::testing::Test {
     dir_ = fs::path(testing::TempDir()) / ("cycle_cli_" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
-    std::ifstream in(kDeploy + "/cars/reference.json");
-    nlohmann::json car = nlohmann::json::parse(in);
-    nlohmann::json kept = nlohmann::json::array();
-    for (const nlohmann::json& s : car["sensors"]) {
-      if (s["name"] == "front_camera" || s["name"] == "front_radar") kept.push_back(s);
-    }
-    car["sensors"] = kept;
-    std::ofstream(dir_ / "car.json") << car.dump(2);
+    testing_daemon::WriteTwoSensorCar((dir_ / "car.json").string());
     std::ofstream(dir_ / "linecald.json") << nlohmann::json{{"listen", "127.0.0.1:0"},
                                                             {"station_id", "test-line"},
                                                             {"station", kDeploy + "/stations/reference.json"},

@@ -15,6 +15,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/test_car.h"
+
 #include "daemon/cycle/capture_calibration.h"
 #include "station/capture/capture.h"
 #include "station/sim/simulator.h"
@@ -35,15 +37,7 @@ class StationCoreTest : public ::testing::Test {
     fs::remove_all(dir_);
     fs::create_directories(dir_);
     // The reference car with two sensors only: a cycle of well under a second.
-    std::ifstream in(kDeploy + "/cars/reference.json");
-    nlohmann::json car = nlohmann::json::parse(in);
-    nlohmann::json kept = nlohmann::json::array();
-    for (const nlohmann::json& s : car["sensors"]) {
-      if (s["name"] == "front_camera" || s["name"] == "front_radar") kept.push_back(s);
-    }
-    car["sensors"] = kept;
-    car["id"] = "two_sensor";
-    std::ofstream(dir_ / "car.json") << car.dump(2);
+    testing_daemon::WriteTwoSensorCar((dir_ / "car.json").string(), "two_sensor");
     config_.station_path = kDeploy + "/stations/reference.json";
     config_.car_model_paths = {(dir_ / "car.json").string()};
     config_.db_path = (dir_ / "station.db").string();

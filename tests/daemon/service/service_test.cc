@@ -14,6 +14,8 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "tests/daemon/test_car.h"
+
 namespace linecal {
 namespace {
 
@@ -29,14 +31,7 @@ class ServiceTest : public ::testing::Test {
     fs::remove_all(dir_);
     fs::create_directories(dir_);
     // The reference car with two sensors: a short cycle.
-    std::ifstream in(kDeploy + "/cars/reference.json");
-    nlohmann::json car = nlohmann::json::parse(in);
-    nlohmann::json kept = nlohmann::json::array();
-    for (const nlohmann::json& s : car["sensors"]) {
-      if (s["name"] == "front_camera" || s["name"] == "front_radar") kept.push_back(s);
-    }
-    car["sensors"] = kept;
-    std::ofstream(dir_ / "car.json") << car.dump(2);
+    testing_daemon::WriteTwoSensorCar((dir_ / "car.json").string());
     StationCoreConfig config;
     config.station_path = kDeploy + "/stations/reference.json";
     config.car_model_paths = {(dir_ / "car.json").string()};
