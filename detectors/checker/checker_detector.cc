@@ -165,16 +165,7 @@ ColourCheck CheckColours(const ImageF& blurred, const Eigen::Matrix3d& H_image_g
 
 std::string_view CheckerOptions::Validate() const {
   if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
-  if (!(corners.ring_radius_px >= 2.0 && corners.ring_radius_px <= 32.0)) {
-    return "corners.ring_radius_px";
-  }
-  if (!(corners.min_contrast > 0.0 && corners.min_contrast <= 255.0)) return "corners.min_contrast";
-  if (corners.max_candidates < 1 || corners.max_candidates > 1000000) {
-    return "corners.max_candidates";
-  }
-  if (corners.saddle.half_window < 1 || corners.saddle.half_window > 15) {
-    return "corners.saddle.half_window";
-  }
+  if (const std::string_view bad = corners.Validate(); !bad.empty()) return bad;
   if (!(max_residual_square_fraction > 0.0 && max_residual_square_fraction <= 0.5)) {
     return "max_residual_square_fraction";
   }

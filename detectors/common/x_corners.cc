@@ -274,4 +274,12 @@ std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners
   return links;
 }
 
+std::string_view XCornerOptions::Validate() const {
+  if (!(ring_radius_px >= 2.0 && ring_radius_px <= 32.0)) return "corners.ring_radius_px";
+  if (!(min_contrast > 0.0 && min_contrast <= 255.0)) return "corners.min_contrast";
+  if (max_candidates < 1 || max_candidates > 1000000) return "corners.max_candidates";
+  if (saddle.half_window < 1 || saddle.half_window > 15) return "corners.saddle.half_window";
+  return {};
+}
+
 }  // namespace linecal

@@ -11,6 +11,7 @@
 // two edge lines through the vertex and the axis of the dark sectors.
 
 #include <array>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -33,6 +34,10 @@ struct XCornerOptions {
   // cost on textured images. 1..1e6.
   int max_candidates = 20000;
   SaddleFitOptions saddle;
+
+  // Empty when valid, else the first field out of range, named as a member `corners` of a
+  // detector's options ("corners.ring_radius_px"), for the detectors' own Validate. O(1).
+  std::string_view Validate() const;
 };
 
 struct XCorner {

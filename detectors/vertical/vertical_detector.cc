@@ -703,16 +703,7 @@ BoardFit FitBoard(const Frame& frame, const Placement& seed, const VerticalOptio
 
 std::string_view VerticalOptions::Validate() const {
   if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
-  if (!(corners.ring_radius_px >= 2.0 && corners.ring_radius_px <= 32.0)) {
-    return "corners.ring_radius_px";
-  }
-  if (!(corners.min_contrast > 0.0 && corners.min_contrast <= 255.0)) return "corners.min_contrast";
-  if (corners.max_candidates < 1 || corners.max_candidates > 1000000) {
-    return "corners.max_candidates";
-  }
-  if (corners.saddle.half_window < 1 || corners.saddle.half_window > 15) {
-    return "corners.saddle.half_window";
-  }
+  if (const std::string_view bad = corners.Validate(); !bad.empty()) return bad;
   if (min_chain_corners < 3 || min_chain_corners > 17) return "min_chain_corners";
   if (!(max_residual_cell_fraction > 0.0 && max_residual_cell_fraction <= 0.5)) {
     return "max_residual_cell_fraction";
