@@ -174,6 +174,14 @@ std::optional<ChessModel> MakeModel(const Board& board) {
     if (fm.h_line < 0 || fm.v_line < 0) return std::nullopt;
     m.features.push_back(fm);
   }
+  // The second path's gate (OnOneLine): every X-corner on one horizontal board line.
+  std::optional<double> x_line_y;
+  for (const FeatureModel& fm : m.features) {
+    if (!fm.x_corner) continue;
+    const double y = m.lines[fm.h_line].coord;
+    if (x_line_y && std::abs(*x_line_y - y) >= eps) return std::nullopt;
+    x_line_y = y;
+  }
   return m;
 }
 
@@ -927,6 +935,20 @@ std::vector<PairGroup> PairGroups(const ImageF& blurred, const std::vector<XCorn
   return groups;
 }
 
+// Both groups' X-corners lie on one board line (MakeModel checks it), so b's are on the
+// image line through a's: within half of the larger side plus a pixel (the line's
+// direction from two saddle points a side apart, extrapolated over the 13 sides between
+// the groups, is good to a quarter of a side). A cheap gate before the board homography:
+// clutter and checkers give many pairs of groups, few of them on one line. O(1).
+bool OnOneLine(const std::vector<XCorner>& corners, const PairGroup& a, const PairGroup& b) {
+  const Eigen::Vector2d& p = corners[a.corners[0]].uv_px;
+  const Eigen::Vector2d d = (corners[a.corners[1]].uv_px - p).normalized();
+  const Eigen::Vector2d n(-d.y(), d.x());
+  const double tol = 0.5 * std::max(a.side_px, b.side_px) + 1.0;
+  return std::abs(n.dot(corners[b.corners[0]].uv_px - p)) <= tol &&
+         std::abs(n.dot(corners[b.corners[1]].uv_px - p)) <= tol;
+}
+
 // The second path (header, step 6): X-corners over the whole image, groups from their
 // pairs, and every two groups with distinct corners as the board's left and right group
 // (either way round) through FitAndRefineBoard.
@@ -965,6 +987,7 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& boar
           })) {
         continue;
       }
+      if (!OnOneLine(corners, ga, gb) || !OnOneLine(corners, gb, ga)) continue;
       for (int left_first = 0; left_first < 2; ++left_first) {
         board_pts.clear();
         image_pts.clear();
