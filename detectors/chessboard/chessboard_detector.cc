@@ -77,7 +77,8 @@ std::array<Eigen::Vector2d, 4> BoxCorners(const Eigen::AlignedBox2d& b) {
 
 // The model of a board made of groups of three squares (boards.md §1); nullopt when the
 // board is not such a board (two groups, every feature on one vertical and one horizontal
-// edge line of its group) or is not symmetric under 180 degrees (see the header).
+// edge line of its group, every X-corner on one horizontal board line) or is not symmetric
+// under 180 degrees (see the header).
 std::optional<ChessModel> MakeModel(const Board& board) {
   std::vector<Eigen::AlignedBox2d> squares;
   for (const BoardShape& s : board.shapes()) {

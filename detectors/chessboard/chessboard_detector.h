@@ -42,8 +42,9 @@
 //     their line (the middle square) seed a group: from each corner the ends of the edge
 //     lines through it (where the grey-level difference across the edge falls to half, on
 //     the blurred image) give six L-corners, the pair's local homography of the eight points
-//     must fit within the coarse tolerance, and every two groups (either as the left one)
-//     give the coarse board homography of steps 3-5.
+//     must fit within the coarse tolerance, and every two groups whose four X-corners lie on
+//     one image line (they share one board line) give, either as the left one, the coarse
+//     board homography of steps 3-5.
 //
 // Orientation: the board is symmetric under a rotation by 180 degrees about its centre
 // (the left "V" turned by 180 degrees is exactly the right "Λ", and the page is centred),
