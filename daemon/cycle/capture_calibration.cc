@@ -9,10 +9,13 @@
 #include "absl/strings/str_cat.h"
 #include "daemon/drivers/radar_decoder.h"
 #include "detectors/detect.h"
+#include "detectors/round_hole/round_hole_cloud.h"
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
+#include "station/io/pcd.h"
 #include "station/model/pose_json.h"
 #include "station/radar/radar_calibration.h"
+#include "station/solvers/lidar_calibration.h"
 
 namespace linecal {
 namespace {
@@ -77,6 +80,72 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
     out.ground_homography = r->ground_homography;
     out.ranging = r->ranging;
   }
+  return out;
+}
+
+SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel& sensor,
+                                       const CaptureSensor& recorded) {
+  SensorCalibration out;
+  // Every recorded rotation, accumulated: the boards stand still during a cycle.
+  std::vector<std::vector<RoundHoleCloudPoint>> frames;
+  for (const CaptureFile& f : recorded.frames) {
+    absl::StatusOr<PcdCloud> cloud = ReadPcd(capture.PathOf(f));
+    if (!cloud.ok()) {
+      out.reason = "data_unreadable";
+      out.message = std::string(cloud.status().message());
+      return out;
+    }
+    std::vector<RoundHoleCloudPoint>& points = frames.emplace_back();
+    points.reserve(cloud->points.size());
+    for (const LidarPoint& p : cloud->points) points.push_back({p.x, p.y, p.z, p.ring});
+  }
+  if (frames.empty()) {
+    out.reason = "data_unreadable";
+    out.message = absl::StrCat(sensor.name, ": the capture has no PCD scans of this LiDAR");
+    return out;
+  }
+  const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
+  // Where the boards should be if the LiDAR sits at its nominal mounting.
+  const Rigid3d T_lidar_station =
+      (capture.manifest.aligner.T_station_car() * sensor.T_car_sensor_nominal).Inverse();
+  std::vector<LidarBoardObservation> observations;
+  for (const std::string& id : sensor.targets) {
+    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
+    const StationBoard* board = capture.station.FindBoard(id);
+    if (board == nullptr) continue;  // ReadCapture checked the targets; kept for safety of the data
+    const RoundHoleCloudDetection d =
+        DetectRoundHoleBoardInCloud(board->board, views, T_lidar_station * board->T_station_board);
+    if (!d.found) {
+      summary.last_reason = RoundHoleCloudReasonName(d.reason);
+      continue;
+    }
+    summary.frames_found = static_cast<int>(frames.size());
+    LidarBoardObservation o;
+    o.board_id = id;
+    for (const RoundHoleHole& h : d.holes) o.holes.push_back({h.id, h.p_lidar});
+    o.normal_lidar = d.T_lidar_board.RotationMatrix().col(2);
+    // The five centres share the board's in-plane error; as independent points each carries
+    // sqrt(5) times it, so that their mean is as uncertain as the board's position. 1 mm is
+    // the floor below which the fit's own sigma is not trusted.
+    constexpr double kMinCentreSigmaM = 0.001;
+    o.centre_sigma_m = std::max(kMinCentreSigmaM, std::sqrt(5.0) * d.in_plane_sigma_m.maxCoeff());
+    o.normal_sigma_rad = d.normal_sigma_rad;
+    observations.push_back(std::move(o));
+  }
+  absl::StatusOr<LidarCalibrationResult> r =
+      CalibrateLidar(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations);
+  if (!r.ok()) {
+    out.reason = "invalid_input";
+    out.message = std::string(r.status().message());
+    return out;
+  }
+  out.verdict = r->verdict;
+  out.reason = r->reason;
+  out.message = r->message;
+  out.solved = r->solved;
+  out.mounting = r->mounting;
+  out.residual_rms = r->residual_rms_m;
+  out.features_used = r->features_used;
   return out;
 }
 
@@ -177,10 +246,7 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
       switch (s.kind) {
         case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options.camera); break;
         case SensorKind::kRadar: r = CalibrateRadarSensor(capture, s, recorded); break;
-        case SensorKind::kLidar:
-          r.reason = "lidar_solver_unavailable";
-          r.message = absl::StrCat(s.name, ": LiDAR-to-car calibration is not part of this build");
-          break;
+        case SensorKind::kLidar: r = CalibrateLidarSensor(capture, s, recorded); break;
       }
       r.name = s.name;
       r.kind = s.kind;
@@ -216,7 +282,7 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
                         {"residual_rms", s.residual_rms},
                         {"elapsed_ms", s.elapsed_ns * 1e-6}};
     if (s.solved) j.update(MountingJson(s.mounting));
-    if (s.kind == SensorKind::kCamera) {
+    if (s.kind != SensorKind::kRadar) {
       nlohmann::json boards = nlohmann::json::array();
       for (const BoardDetectionSummary& b : s.boards) {
         boards.push_back({{"board", b.board_id},
@@ -225,6 +291,8 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
                           {"reason", b.last_reason}});
       }
       j["boards"] = boards;
+    }
+    if (s.kind == SensorKind::kCamera) {
       if (s.vanishing_point_px) j["vanishing_point_px"] = {s.vanishing_point_px->x(), s.vanishing_point_px->y()};
       if (s.ground_homography) {
         nlohmann::json h = nlohmann::json::array();

@@ -9,7 +9,8 @@
 //           boards, and the certain features of partial views) -> CalibrateCamera
 //   radar   the CAN log -> DecodeRadarFrames -> CalibrateRadar (yaw only; pitch, roll and
 //           position nominal, docs/lidar-radar.md)
-//   LiDAR   error "lidar_solver_unavailable": LiDAR-to-car is not part of this build yet
+//   LiDAR   every PCD scan accumulated -> DetectRoundHoleBoardInCloud for each target board
+//           (expected where the nominal mounting puts it) -> CalibrateLidar
 // The overall verdict is pass when every sensor passes, else fail when none is in error,
 // else error.
 
@@ -41,9 +42,9 @@ struct SensorCalibration {
   std::string message;
   bool solved = false;
   MountingEstimate mounting;  // when solved
-  double residual_rms = 0;    // pixels (cameras), degrees (radars)
-  int features_used = 0;      // board features (cameras), reflectors (radars)
-  std::vector<BoardDetectionSummary> boards;  // cameras
+  double residual_rms = 0;    // pixels (cameras), metres (LiDARs), degrees (radars)
+  int features_used = 0;      // board features (cameras), hole centres (LiDARs), reflectors (radars)
+  std::vector<BoardDetectionSummary> boards;  // cameras and LiDARs
   // Cameras, when solved: see CameraCalibrationResult.
   std::optional<Eigen::Vector2d> vanishing_point_px;
   std::optional<Eigen::Matrix3d> ground_homography;
