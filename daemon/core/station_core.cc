@@ -219,7 +219,9 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       o.vin = request.vin;
       o.aligner = request.aligner;
       o.time_ns = stored->started_ns;
+      // Frames per sensor: camera frames and LiDAR rotations alike.
       o.camera_frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
+      o.lidar.rotations = o.camera_frames;
       absl::StatusOr<SimulationSummary> sim = SimulateCapture(
           station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
           [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });

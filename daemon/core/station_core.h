@@ -46,7 +46,7 @@ struct StationCoreConfig {
   CycleSource source = CycleSource::kSimulator;
   std::string replay_capture;              // replay: a capture directory relative to data_root
   bool vin_check_digit = true;             // ISO 3779 check digit (markets that use it)
-  int default_frames_per_sensor = 1;       // frames per camera when the request gives 0
+  int default_frames_per_sensor = 1;       // camera frames and LiDAR rotations when the request gives 0
   std::chrono::milliseconds busy_timeout{5000};
 };
 
@@ -55,7 +55,7 @@ struct CycleRequest {
   std::string car_model_id;
   AlignerMeasurement aligner;
   bool record_capture = false;  // keep the cycle's capture (simulator source) after the cycle
-  int frames_per_sensor = 0;    // 0: the configured default; at most 100
+  int frames_per_sensor = 0;    // camera frames and LiDAR rotations; 0: the configured default; at most 100
 };
 
 struct StationStatusInfo {
