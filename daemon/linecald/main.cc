@@ -7,6 +7,7 @@
 
 #include <cstdio>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -94,7 +95,10 @@ int main(int argc, char** argv) {
   int signal = 0;
   sigwait(&signals, &signal);
   Log("info", std::string("stopping on ") + (signal == SIGTERM ? "SIGTERM" : "SIGINT"));
-  (*core)->Status().running_cycle.has_value() ? (void)(*core)->CancelCycle(*(*core)->Status().running_cycle) : void();
+  if (const std::optional<int64_t> running = (*core)->Status().running_cycle) {
+    // Ends as cancelled at its next step; a cycle that ended meanwhile needs nothing.
+    (*core)->CancelCycle(*running).IgnoreError();
+  }
   server->server->Shutdown();
   (*core)->WaitIdle();
   Log("info", "stopped");
