@@ -261,12 +261,12 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       fs::remove_all(dir, ec);
     }
   }();
-  store_->EndCycle(id, end_state, end_state == CycleState::kCancelled ? Verdict::kError : end_verdict, end_reason,
-                   NowNs())
-      .IgnoreError();
-  Event(id, "cycle_ended", "", end_reason,
-        end_state == CycleState::kCancelled ? Verdict::kError : end_verdict)
-      .IgnoreError();
+  const Verdict verdict = end_state == CycleState::kCancelled ? Verdict::kError : end_verdict;
+  // The last event, then the end in the store, then the station idle: a watcher returns only
+  // once the station no longer runs this cycle (WatchCycle), and WaitIdle once it is stored
+  // as ended, so whoever sees the end sees all of it.
+  Event(id, "cycle_ended", "", end_reason, verdict).IgnoreError();
+  store_->EndCycle(id, end_state, verdict, end_reason, NowNs()).IgnoreError();
   std::lock_guard<std::mutex> lock(mutex_);
   running_.reset();
   changed_.notify_all();
@@ -302,8 +302,9 @@ absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(
       if (!on_event(e)) return absl::CancelledError("the watcher went away");
       next = e.sequence + 1;
     }
-    if (cycle->state != CycleState::kRunning) return absl::OkStatus();
     std::unique_lock<std::mutex> lock(mutex_);
+    // Ended in the store and no longer run by the station: every event was stored before.
+    if (cycle->state != CycleState::kRunning && running_ != cycle_id) return absl::OkStatus();
     // 200 ms: a missed notification (between the reads and the wait) costs at most this.
     changed_.wait_for(lock, std::chrono::milliseconds(200));
   }

@@ -2,6 +2,7 @@
 // front camera and front radar is calibrated; the JSON results document has the fields of
 // interfaces.md, and the estimates agree with ground_truth.json within their reported sigma.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -31,7 +32,8 @@ nlohmann::json ReadJson(const fs::path& path) {
 class CalibrateCliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = fs::path(testing::TempDir()) / "calibrate_cli_capture";
+    // Per process: ctest runs each test of the suite in its own process, in parallel.
+    dir_ = fs::path(testing::TempDir()) / ("calibrate_cli_capture_" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     const LinecalRun sim = RunLinecal("sim" + kRef + " --seed 3 --sensors front_camera,front_radar --noise 2 --blur 0.5" +
                                       " --out " + dir_.string());
@@ -105,7 +107,7 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
 // clouds, the mounting within 4 reported sigma of the truth. (The 16-ring bumper LiDAR is
 // not asserted: its hole centres' in-plane sigma is underestimated, docs/lidar-radar.md.)
 TEST(CalibrateLidarCliTest, RoofLidarAgreesWithTheGroundTruth) {
-  const fs::path dir = fs::path(testing::TempDir()) / "calibrate_cli_lidar";
+  const fs::path dir = fs::path(testing::TempDir()) / ("calibrate_cli_lidar_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   const LinecalRun sim =
       RunLinecal("sim" + kRef + " --seed 5 --sensors roof_lidar --lidar-rotations 10 --out " + dir.string());
@@ -153,7 +155,7 @@ TEST_F(CalibrateCliTest, BadInputExitsTwoNamingTheProblem) {
 // A camera whose frames were lost gives that sensor an error with the file named, and the
 // radar is still calibrated.
 TEST_F(CalibrateCliTest, UnreadableFrameIsThatSensorsError) {
-  const fs::path copy = fs::path(testing::TempDir()) / "calibrate_cli_corrupt";
+  const fs::path copy = fs::path(testing::TempDir()) / ("calibrate_cli_corrupt_" + std::to_string(::getpid()));
   fs::remove_all(copy);
   fs::copy(dir_, copy, fs::copy_options::recursive);
   const fs::path frame = copy / "front_camera" / "frame-000000.png";

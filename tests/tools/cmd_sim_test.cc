@@ -7,6 +7,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <nlohmann/json.hpp>
 
 #include "tests/tools/run_linecal.h"
@@ -24,7 +25,7 @@ class SimCliTest : public ::testing::Test {
  protected:
   // One simulated capture shared by the tests (radars and one LiDAR: fast to make).
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::path(testing::TempDir()) / "cli_sim_capture");
+    dir_ = new fs::path(fs::path(testing::TempDir()) / ("cli_sim_capture_" + std::to_string(::getpid())));
     fs::remove_all(*dir_);
     const auto run = RunLinecal("sim" + kRef + " --seed 4 --sensors front_camera,bumper_lidar,front_radar --json --out " +
                                 dir_->string());

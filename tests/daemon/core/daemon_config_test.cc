@@ -7,6 +7,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 namespace linecal {
 namespace {
@@ -16,7 +17,9 @@ namespace fs = std::filesystem;
 class DaemonConfigTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::path(testing::TempDir()) / "daemon_config";
+    // Per test and process: ctest runs the tests in parallel, each in its own process.
+    dir_ = fs::path(testing::TempDir()) / ("daemon_config_" + std::to_string(::getpid()) + "_" +
+                                           testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::create_directories(dir_);
   }
   absl::StatusOr<DaemonConfig> Read(const std::string& text) {

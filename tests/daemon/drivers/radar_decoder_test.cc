@@ -1,6 +1,7 @@
 #include "daemon/drivers/radar_decoder.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -176,7 +177,7 @@ TEST(RadarDecoderTest, Ars408EncodeWriteReadDecodeRoundTrip) {
   }
   std::stable_sort(frames.begin(), frames.end(),
                    [](const CanFrame& a, const CanFrame& b) { return a.time < b.time; });
-  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / "ars408.log";
+  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / ("ars408_" + std::to_string(::getpid()) + ".log");
   ASSERT_TRUE(WriteCandumpLog(path, frames).ok());
   const absl::StatusOr<std::vector<CanFrame>> read = ReadCandumpLog(path);
   ASSERT_TRUE(read.ok()) << read.status();
@@ -250,7 +251,7 @@ TEST(RadarDecoderTest, EsrEncodeWriteReadDecodeRoundTrip) {
     frames.insert(frames.end(), encoded->begin(), encoded->end());
     sent.push_back(c);
   }
-  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / "esr.log";
+  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / ("esr_" + std::to_string(::getpid()) + ".log");
   ASSERT_TRUE(WriteCandumpLog(path, frames).ok());
   const absl::StatusOr<std::vector<CanFrame>> read = ReadCandumpLog(path);
   ASSERT_TRUE(read.ok()) << read.status();
