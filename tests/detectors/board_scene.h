@@ -3,6 +3,7 @@
 // rendered by the station simulator's camera renderer with exact ground truth.
 
 #include <cstdint>
+#include <ctime>
 #include <numbers>
 #include <vector>
 
@@ -10,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "detectors/boards/board.h"
+#include "detectors/core/image_view.h"
 #include "detectors/core/pose.h"
 #include "detectors/detection.h"
 #include "station/camera/camera_model.h"
@@ -108,6 +110,39 @@ inline double FeatureRmsPx(const Detection& detection, const CameraFrame& frame,
     if (!known) ++*unknown_ids;
   }
   return *matched > 0 ? std::sqrt(sum_sq / *matched) : 0.0;
+}
+
+// acceptance.md's sub-pixel bars for the two conditions above.
+inline constexpr double kCleanRmsBarPx = 0.05;  // noise 0, blur 0.5
+inline constexpr double kNoisyRmsBarPx = 0.12;  // noise sigma 4, blur 1.0
+
+// CPU time of the calling thread, milliseconds: the speed tests' clock (the machine is
+// shared, so wall time says little).
+inline double ThreadCpuMs() {
+  timespec t;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+
+// Every one of the board's features found, in id order, with its own board position.
+inline void ExpectComplete(const Detection& d, const Board& board) {
+  ASSERT_TRUE(d.found) << DetectReasonName(d.reason) << " " << d.features.size();
+  ASSERT_EQ(d.features.size(), board.features().size());
+  for (std::size_t i = 0; i < d.features.size(); ++i) {
+    EXPECT_EQ(d.features[i].id, static_cast<int>(i));
+    EXPECT_EQ(d.features[i].p_board, board.features()[i].p_board);
+  }
+}
+
+// Uniform noise 0..255 from a fixed LCG: the same image on every machine.
+inline Image8 UniformNoiseImage(int width, int height) {
+  Image8 noise(width, height);
+  std::uint32_t state = 12345;
+  for (std::uint8_t& p : noise.pixels) {
+    state = state * 1664525u + 1013904223u;
+    p = static_cast<std::uint8_t>(state >> 24);
+  }
+  return noise;
 }
 
 }  // namespace linecal::test_scene

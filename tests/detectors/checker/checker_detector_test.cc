@@ -16,20 +16,14 @@ namespace linecal {
 namespace {
 
 using test_scene::BoardView;
+using test_scene::ExpectComplete;
+using test_scene::kCleanRmsBarPx;
+using test_scene::kNoisyRmsBarPx;
+using test_scene::ThreadCpuMs;
 using test_scene::CleanRender;
 using test_scene::NoisyRender;
 using test_scene::FeatureRmsPx;
 using test_scene::RenderView;
-
-// acceptance.md's sub-pixel bars.
-constexpr double kCleanRmsBarPx = 0.05;  // noise 0, blur 0.5
-constexpr double kNoisyRmsBarPx = 0.12;  // noise sigma 4, blur 1.0
-
-double ThreadCpuMs() {
-  timespec t;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-}
 
 BoardParams Checker(int cols, int rows, double square_m) {
   BoardParams p;
@@ -38,16 +32,6 @@ BoardParams Checker(int cols, int rows, double square_m) {
   p.rows = rows;
   p.square_m = square_m;
   return p;
-}
-
-// Every one of the board's features found with its own id and board position.
-void ExpectComplete(const Detection& d, const Board& board) {
-  ASSERT_TRUE(d.found) << DetectReasonName(d.reason);
-  ASSERT_EQ(d.features.size(), board.features().size());
-  for (std::size_t i = 0; i < d.features.size(); ++i) {
-    EXPECT_EQ(d.features[i].id, static_cast<int>(i));
-    EXPECT_EQ(d.features[i].p_board, board.features()[i].p_board);
-  }
 }
 
 TEST(CheckerDetectorTest, FrontalBoardHasExactIdsAndSubPixelCorners) {
@@ -207,12 +191,7 @@ TEST(CheckerDetectorTest, BadInputGivesAReason) {
   EXPECT_EQ(DetectChecker(Image8(320, 240, 0).view(), board).reason, DetectReason::kLowContrast);
   EXPECT_EQ(DetectChecker(Image8(320, 240, 255).view(), board).reason,
             DetectReason::kLowContrast);
-  Image8 noise(320, 240);
-  std::uint32_t state = 12345;
-  for (std::uint8_t& p : noise.pixels) {
-    state = state * 1664525u + 1013904223u;  // a fixed LCG: uniform noise 0..255
-    p = static_cast<std::uint8_t>(state >> 24);
-  }
+  const Image8 noise = test_scene::UniformNoiseImage(320, 240);
   const Detection d = DetectChecker(noise.view(), board);
   EXPECT_FALSE(d.found);
   EXPECT_TRUE(d.features.empty());
