@@ -19,7 +19,6 @@ using test_scene::BoardView;
 using test_scene::ExpectComplete;
 using test_scene::kCleanRmsBarPx;
 using test_scene::kNoisyRmsBarPx;
-using test_scene::ThreadCpuMs;
 using test_scene::CleanRender;
 using test_scene::NoisyRender;
 using test_scene::FeatureRmsPx;
@@ -214,14 +213,10 @@ TEST(CheckerDetectorTest, SpeedAt1280x720) {
   const CameraFrame frame = RenderView(view, options, 5);
   const Board board = *Board::Create(view.params);
   constexpr int kRuns = 5;
-  double best_ms = 1e9;
-  for (int i = 0; i < kRuns; ++i) {
-    const double t0 = ThreadCpuMs();
+  const double best_ms = test_scene::BestThreadCpuMs(kRuns, [&] {
     const Detection d = DetectChecker(frame.image8.view(), board);
-    const double t1 = ThreadCpuMs();
     EXPECT_TRUE(d.found);
-    best_ms = std::min(best_ms, t1 - t0);
-  }
+  });
   // Reported, not asserted: timing depends on the machine and the build type (the suite
   // also runs under ASan). Thread CPU time, so that other processes do not count.
   std::printf("checker 1280x720: %.2f ms CPU (best of %d)\n", best_ms, kRuns);
