@@ -27,6 +27,24 @@ std::int64_t NowNs() {
       .count();
 }
 
+// The fields the camera and LiDAR solvers' results share. False, with the sensor in error,
+// when the solver refused its input.
+template <typename Result>
+bool TakeResult(const absl::StatusOr<Result>& r, SensorCalibration* out) {
+  if (!r.ok()) {
+    out->reason = "invalid_input";
+    out->message = std::string(r.status().message());
+    return false;
+  }
+  out->verdict = r->verdict;
+  out->reason = r->reason;
+  out->message = r->message;
+  out->solved = r->solved;
+  out->mounting = r->mounting;
+  out->features_used = r->features_used;
+  return true;
+}
+
 SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorModel& sensor,
                                         const CaptureSensor& recorded, const CameraCalibrationOptions& options) {
   SensorCalibration out;
@@ -63,18 +81,8 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
   }
   absl::StatusOr<CameraCalibrationResult> r =
       CalibrateCamera(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations, options);
-  if (!r.ok()) {
-    out.reason = "invalid_input";
-    out.message = std::string(r.status().message());
-    return out;
-  }
-  out.verdict = r->verdict;
-  out.reason = r->reason;
-  out.message = r->message;
-  out.solved = r->solved;
-  out.mounting = r->mounting;
+  if (!TakeResult(r, &out)) return out;
   out.residual_rms = r->residual_rms_px;
-  out.features_used = r->features_used;
   if (r->solved) {
     if (r->vanishing_point_valid) out.vanishing_point_px = r->vanishing_point_px;
     out.ground_homography = r->ground_homography;
@@ -134,18 +142,7 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
   }
   absl::StatusOr<LidarCalibrationResult> r =
       CalibrateLidar(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations);
-  if (!r.ok()) {
-    out.reason = "invalid_input";
-    out.message = std::string(r.status().message());
-    return out;
-  }
-  out.verdict = r->verdict;
-  out.reason = r->reason;
-  out.message = r->message;
-  out.solved = r->solved;
-  out.mounting = r->mounting;
-  out.residual_rms = r->residual_rms_m;
-  out.features_used = r->features_used;
+  if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
   return out;
 }
 
