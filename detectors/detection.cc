@@ -17,4 +17,13 @@ const char* DetectReasonName(DetectReason reason) {
   return "unknown";
 }
 
+DetectReason CheckDetectorInput(const ImageView8& image, const Board& board, BoardType type, bool options_valid) {
+  if (board.type() != type) return DetectReason::kWrongBoard;
+  if (image.Validate() != ImageViewError::kOk || image.width < kMinDetectImageSide ||
+      image.height < kMinDetectImageSide || !options_valid) {
+    return DetectReason::kBadImage;
+  }
+  return DetectReason::kNone;
+}
+
 }  // namespace linecal

@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "detectors/boards/board.h"
+#include "detectors/core/image_view.h"
 
 namespace linecal {
 
@@ -42,5 +43,14 @@ struct Detection {
   DetectReason reason = DetectReason::kNoCandidates;
   std::vector<DetectedFeature> features;  // ordered by id
 };
+
+// Below this side no board of boards.md (smallest squares and cells 12 px, circles a few
+// pixels wide) fits in an image.
+inline constexpr int kMinDetectImageSide = 16;
+
+// The checks every image detector opens with: kWrongBoard when `board` is not of `type`;
+// kBadImage for an invalid view, one under kMinDetectImageSide a side, or invalid options
+// (`options_valid` false); kNone to go on. O(1).
+DetectReason CheckDetectorInput(const ImageView8& image, const Board& board, BoardType type, bool options_valid);
 
 }  // namespace linecal

@@ -16,8 +16,6 @@
 namespace linecal {
 namespace {
 
-// Below this side no board of boards.md (smallest squares 12 px) fits.
-constexpr int kMinImageSide = 16;
 struct GridCorner {
   int index = 0;  // into the corner list
   int gi = 0;     // grid coordinates, axes right-handed in the image
@@ -175,15 +173,8 @@ std::string_view CheckerOptions::Validate() const {
 Detection DetectChecker(const ImageView8& image, const Board& board,
                         const CheckerOptions& options) {
   Detection result;
-  if (board.type() != BoardType::kChecker) {
-    result.reason = DetectReason::kWrongBoard;
-    return result;
-  }
-  if (image.Validate() != ImageViewError::kOk || image.width < kMinImageSide ||
-      image.height < kMinImageSide || !options.Validate().empty()) {
-    result.reason = DetectReason::kBadImage;
-    return result;
-  }
+  result.reason = CheckDetectorInput(image, board, BoardType::kChecker, options.Validate().empty());
+  if (result.reason != DetectReason::kNone) return result;
   const int cols = board.params().cols;
   const int rows = board.params().rows;
 

@@ -21,8 +21,6 @@
 namespace linecal {
 namespace {
 
-// Below this side no board of boards.md (smallest squares 12 px) fits.
-constexpr int kMinImageSide = 16;
 
 // ---- The board model, derived from Board (so a scaled board works unchanged) -------------
 
@@ -1034,10 +1032,9 @@ std::string_view ChessboardOptions::Validate() const {
 
 Detection DetectChessboard(const ImageView8& image, const Board& board,
                            const ChessboardOptions& options) {
-  if (board.type() != BoardType::kChessboard) return Fail(DetectReason::kWrongBoard);
-  if (image.Validate() != ImageViewError::kOk || image.width < kMinImageSide ||
-      image.height < kMinImageSide || !options.Validate().empty()) {
-    return Fail(DetectReason::kBadImage);
+  if (const DetectReason r = CheckDetectorInput(image, board, BoardType::kChessboard, options.Validate().empty());
+      r != DetectReason::kNone) {
+    return Fail(r);
   }
   const std::optional<ChessModel> model = MakeModel(board);
   if (!model) return Fail(DetectReason::kWrongBoard);

@@ -22,8 +22,6 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-// Below this an image cannot hold a board of circles that are themselves a few pixels wide.
-constexpr int kMinImageSide = 16;
 
 // The candidate stage's image is reduced while it keeps at least this many pixels (a
 // 1280 x 720 image stays at factor 2, 640 x 360; 2448 x 2048 starts at factor 4): about
@@ -863,11 +861,10 @@ std::string_view CircleOptions::Validate() const {
 
 Detection DetectCircleBoard(const ImageView8& image, const Board& board,
                             const CircleOptions& options) {
-  if (image.Validate() != ImageViewError::kOk || image.width < kMinImageSide ||
-      image.height < kMinImageSide || !options.Validate().empty()) {
-    return NotFound(DetectReason::kBadImage);
+  if (const DetectReason r = CheckDetectorInput(image, board, BoardType::kCircle, options.Validate().empty());
+      r != DetectReason::kNone) {
+    return NotFound(r);
   }
-  if (board.type() != BoardType::kCircle) return NotFound(DetectReason::kWrongBoard);
   const std::optional<CircleBoardModel> model = MakeModel(board);
   if (!model) return NotFound(DetectReason::kWrongBoard);
   // Coarse to fine: the candidate stage starts at the coarsest factor (a power of 2) whose

@@ -18,8 +18,6 @@
 namespace linecal {
 namespace {
 
-// Below this side no board of boards.md (smallest cells 12 px) fits.
-constexpr int kMinImageSide = 16;
 // The page in cells (boards.md §3: 300 x 1000 mm of 50 mm cells, the 4 x 18 pattern inside
 // a one-cell white margin).
 constexpr int kPageCols = 6;
@@ -717,15 +715,8 @@ std::string_view VerticalOptions::Validate() const {
 Detection DetectVertical(const ImageView8& image, const Board& board,
                          const VerticalOptions& options) {
   Detection result;
-  if (board.type() != BoardType::kVertical) {
-    result.reason = DetectReason::kWrongBoard;
-    return result;
-  }
-  if (image.Validate() != ImageViewError::kOk || image.width < kMinImageSide ||
-      image.height < kMinImageSide || !options.Validate().empty()) {
-    result.reason = DetectReason::kBadImage;
-    return result;
-  }
+  result.reason = CheckDetectorInput(image, board, BoardType::kVertical, options.Validate().empty());
+  if (result.reason != DetectReason::kNone) return result;
   std::uint8_t lo = 255, hi = 0;
   for (int y = 0; y < image.height; ++y) {
     const std::uint8_t* row = image.Row(y);
