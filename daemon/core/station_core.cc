@@ -1,5 +1,6 @@
 #include "daemon/core/station_core.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -139,13 +140,15 @@ const CarModel* StationCore::FindCar(const std::string& id) const {
   return nullptr;
 }
 
-absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
-  if (absl::Status s = ValidateVin(request.vin, config_.vin_check_digit); !s.ok()) {
+absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector<CarModel>& cars,
+                                  bool vin_check_digit) {
+  if (absl::Status s = ValidateVin(request.vin, vin_check_digit); !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("vin: ", s.message()));
   }
-  if (FindCar(request.car_model_id) == nullptr) {
+  const auto has_id = [&](const CarModel& c) { return c.id == request.car_model_id; };
+  if (std::none_of(cars.begin(), cars.end(), has_id)) {
     std::vector<std::string> known;
-    for (const CarModel& c : cars_) known.push_back(c.id);
+    for (const CarModel& c : cars) known.push_back(c.id);
     return absl::InvalidArgumentError(absl::StrCat("car_model_id: unknown car model '", request.car_model_id,
                                                    "'; known: ", absl::StrJoin(known, ", ")));
   }
@@ -165,6 +168,11 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
     return absl::InvalidArgumentError(
         absl::StrCat("options.frames_per_sensor = ", request.frames_per_sensor, ": must be in [0, 100]"));
   }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
+  if (absl::Status s = ValidateCycleRequest(request, cars_, config_.vin_check_digit); !s.ok()) return s;
 
   std::lock_guard<std::mutex> lock(mutex_);
   if (running_) return absl::FailedPreconditionError(absl::StrCat("cycle ", *running_, " is running"));

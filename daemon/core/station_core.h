@@ -58,6 +58,13 @@ struct CycleRequest {
   int frames_per_sensor = 0;    // camera frames and LiDAR rotations; 0: the configured default; at most 100
 };
 
+// The checks StartCycle makes before it touches the store: the VIN (ISO 3779, the check digit
+// when `vin_check_digit`), a car model among `cars`, finite aligner values in range, frames
+// per sensor in [0, 100]. InvalidArgument naming the field ("aligner.lateral_offset_m = 3: must
+// be within +-1 m"). Pure; O(cars).
+absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector<CarModel>& cars,
+                                  bool vin_check_digit);
+
 struct StationStatusInfo {
   std::string station_id;
   std::vector<std::string> car_models;

@@ -28,14 +28,6 @@ grpc::Status ToGrpc(const absl::Status& s) {
   return grpc::Status(code, std::string(s.message()));
 }
 
-absl::StatusOr<int64_t> ParseCycleId(const std::string& id) {
-  int64_t v = 0;
-  if (!absl::SimpleAtoi(id, &v) || v <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat("cycle_id: '", id, "' is not a cycle id"));
-  }
-  return v;
-}
-
 v1::Verdict ToProto(Verdict v) {
   switch (v) {
     case Verdict::kNone: return v1::VERDICT_UNSPECIFIED;
@@ -116,6 +108,49 @@ void Fill(const StoredCycle& c, bool with_sensors, v1::Cycle* out) {
 
 }  // namespace
 
+absl::StatusOr<int64_t> ParseCycleId(const std::string& id) {
+  int64_t v = 0;
+  if (!absl::SimpleAtoi(id, &v) || v <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("cycle_id: '", id, "' is not a cycle id"));
+  }
+  return v;
+}
+
+absl::StatusOr<CycleRequest> CycleRequestFromProto(const v1::StartCycleRequest& request) {
+  CycleRequest r;
+  r.vin = request.vin();
+  r.car_model_id = request.car_model_id();
+  r.aligner.longitudinal_offset_m = request.aligner().longitudinal_offset_m();
+  r.aligner.lateral_offset_m = request.aligner().lateral_offset_m();
+  r.aligner.thrust_angle_rad = request.aligner().thrust_angle_deg() * kDegToRad;
+  r.record_capture = request.options().record_capture();
+  // The core checks the range; a uint32 beyond it must not wrap into one that passes.
+  if (request.options().frames_per_sensor() > 1000) {
+    return absl::InvalidArgumentError(absl::StrCat("options.frames_per_sensor = ",
+                                                   request.options().frames_per_sensor(),
+                                                   ": must be in [0, 100]"));
+  }
+  r.frames_per_sensor = static_cast<int>(request.options().frames_per_sensor());
+  return r;
+}
+
+CycleFilter CycleFilterFromProto(const v1::ListCyclesRequest& request) {
+  CycleFilter f;
+  f.vin = request.vin();
+  f.since_ns = request.since_ns();
+  f.until_ns = request.until_ns();
+  switch (request.verdict()) {
+    case v1::VERDICT_PASS: f.verdict = Verdict::kPass; break;
+    case v1::VERDICT_FAIL: f.verdict = Verdict::kFail; break;
+    case v1::VERDICT_ERROR: f.verdict = Verdict::kError; break;
+    default: break;
+  }
+  // 0 means the default page; the store refuses sizes beyond 1000 naming page_size.
+  f.page_size = request.page_size() == 0 ? 50 : static_cast<int>(std::min<uint32_t>(request.page_size(), 1001));
+  f.page_token = request.page_token();
+  return f;
+}
+
 StationService::StationService(StationCore* core, std::string auth_token, std::string version)
     : core_(core), auth_token_(std::move(auth_token)), version_(std::move(version)) {}
 
@@ -132,18 +167,9 @@ grpc::Status StationService::Authorize(const grpc::ServerContext& context) const
 grpc::Status StationService::StartCycle(grpc::ServerContext* context, const v1::StartCycleRequest* request,
                                         v1::StartCycleResponse* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
-  CycleRequest r;
-  r.vin = request->vin();
-  r.car_model_id = request->car_model_id();
-  r.aligner.longitudinal_offset_m = request->aligner().longitudinal_offset_m();
-  r.aligner.lateral_offset_m = request->aligner().lateral_offset_m();
-  r.aligner.thrust_angle_rad = request->aligner().thrust_angle_deg() * kDegToRad;
-  r.record_capture = request->options().record_capture();
-  if (request->options().frames_per_sensor() > 1000) {
-    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "options.frames_per_sensor: must be in [0, 100]");
-  }
-  r.frames_per_sensor = static_cast<int>(request->options().frames_per_sensor());
-  absl::StatusOr<int64_t> id = core_->StartCycle(r);
+  absl::StatusOr<CycleRequest> r = CycleRequestFromProto(*request);
+  if (!r.ok()) return ToGrpc(r.status());
+  absl::StatusOr<int64_t> id = core_->StartCycle(*r);
   if (!id.ok()) return ToGrpc(id.status());
   response->set_cycle_id(std::to_string(*id));
   return grpc::Status::OK;
@@ -182,20 +208,7 @@ grpc::Status StationService::GetCycle(grpc::ServerContext* context, const v1::Ge
 grpc::Status StationService::ListCycles(grpc::ServerContext* context, const v1::ListCyclesRequest* request,
                                         v1::ListCyclesResponse* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
-  CycleFilter f;
-  f.vin = request->vin();
-  f.since_ns = request->since_ns();
-  f.until_ns = request->until_ns();
-  switch (request->verdict()) {
-    case v1::VERDICT_PASS: f.verdict = Verdict::kPass; break;
-    case v1::VERDICT_FAIL: f.verdict = Verdict::kFail; break;
-    case v1::VERDICT_ERROR: f.verdict = Verdict::kError; break;
-    default: break;
-  }
-  // 0 means the default page; the store refuses sizes beyond 1000 naming page_size.
-  f.page_size = request->page_size() == 0 ? 50 : static_cast<int>(std::min<uint32_t>(request->page_size(), 1001));
-  f.page_token = request->page_token();
-  absl::StatusOr<CyclePage> page = core_->ListCycles(f);
+  absl::StatusOr<CyclePage> page = core_->ListCycles(CycleFilterFromProto(*request));
   if (!page.ok()) return ToGrpc(page.status());
   for (const StoredCycle& c : page->cycles) Fill(c, false, response->add_cycles());
   response->set_next_page_token(page->next_page_token);

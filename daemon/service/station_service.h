@@ -18,6 +18,18 @@
 
 namespace linecal {
 
+// The handlers' translations, pure functions (the request fuzzer drives them with the core's
+// ValidateCycleRequest and the store's filter checks).
+// A cycle id as the API spells it: a positive decimal integer, else InvalidArgument naming
+// cycle_id.
+absl::StatusOr<int64_t> ParseCycleId(const std::string& id);
+// StartCycleRequest to the core's request (degrees to radians); InvalidArgument only for a
+// frames_per_sensor too large for an int; the core validates the rest.
+absl::StatusOr<CycleRequest> CycleRequestFromProto(const v1::StartCycleRequest& request);
+// ListCyclesRequest to the store's filter: verdict UNSPECIFIED means any, page size 0 the
+// default 50; sizes beyond 1000 stay invalid for the store to refuse.
+CycleFilter CycleFilterFromProto(const v1::ListCyclesRequest& request);
+
 class StationService final : public v1::Station::Service {
  public:
   // `core` must outlive the service.

@@ -214,5 +214,40 @@ TEST_F(ServiceTest, HealthServiceIsOn) {
   ASSERT_NE(server_.server->GetHealthCheckService(), nullptr);
 }
 
+// The handlers' translations, without a server (the request fuzzer drives them too).
+TEST(RequestTranslation, StartCycleInCoreUnits) {
+  v1::StartCycleRequest request;
+  request.set_vin(kVin);
+  request.set_car_model_id("reference");
+  request.mutable_aligner()->set_lateral_offset_m(-0.25);
+  request.mutable_aligner()->set_thrust_angle_deg(0.5);
+  request.mutable_options()->set_frames_per_sensor(7);
+  absl::StatusOr<CycleRequest> r = CycleRequestFromProto(request);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_EQ(r->vin, kVin);
+  EXPECT_DOUBLE_EQ(r->aligner.lateral_offset_m, -0.25);
+  EXPECT_NEAR(r->aligner.thrust_angle_rad, 0.5 * 3.14159265358979 / 180.0, 1e-12);
+  EXPECT_EQ(r->frames_per_sensor, 7);
+  // A uint32 that would wrap to a negative int is refused here, naming the field.
+  request.mutable_options()->set_frames_per_sensor(4'000'000'000u);
+  r = CycleRequestFromProto(request);
+  ASSERT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find("options.frames_per_sensor"), std::string::npos);
+}
+
+TEST(RequestTranslation, ListFilterAndCycleIds) {
+  v1::ListCyclesRequest request;
+  EXPECT_EQ(CycleFilterFromProto(request).page_size, 50);
+  EXPECT_FALSE(CycleFilterFromProto(request).verdict.has_value());
+  request.set_page_size(4'000'000'000u);
+  request.set_verdict(v1::VERDICT_FAIL);
+  EXPECT_EQ(CycleFilterFromProto(request).page_size, 1001);  // the store refuses it
+  EXPECT_EQ(CycleFilterFromProto(request).verdict, Verdict::kFail);
+  EXPECT_EQ(*ParseCycleId("42"), 42);
+  for (const char* bad : {"", "0", "-3", "x1", "99999999999999999999"}) {
+    EXPECT_EQ(ParseCycleId(bad).status().code(), absl::StatusCode::kInvalidArgument) << bad;
+  }
+}
+
 }  // namespace
 }  // namespace linecal
