@@ -91,7 +91,7 @@ Errors Compare(const CameraFrame& frame, const CircleOptions& options = {}) {
 
 // The pose grid: roll -30..30, yaw and pitch -50..50, from near (board 75% of the image
 // width) to far (circles 13 px across), with the board off-centre. Seven poses keep the
-// test fast; circle_detector_eval sweeps a larger grid.
+// test fast; detectors_eval sweeps a larger grid.
 std::vector<Pose> PoseGrid() {
   return {
       {1.25, 0, 0, 0, 0.0, 0.0},     {1.6, -45, 10, -30, -0.1, 0.0}, {2.2, 20, -40, 30, 0.2, -0.1},
