@@ -52,5 +52,48 @@ TEST(DetectBoardTest, CheckerIn8And16BitsGivesTheCheckerDetectorsResult) {
   EXPECT_EQ(bad->reason, DetectReason::kBadImage);
 }
 
+// acceptance.md's bad input, for every board: a reason, never a crash or a board. Views that
+// no detector may read (empty, over kMaxImageSide, short or misaligned stride) are refused
+// before a pixel is touched: the 20000 x 20000 view points at one byte.
+TEST(DetectBoardTest, BadInputGivesAReasonForEveryBoard) {
+  const std::uint8_t one_byte = 0;
+  const std::uint16_t one_word = 0;
+  const Image8 black(640, 480, 0);
+  const Image8 white(640, 480, 255);
+  const Image8 noise = test_scene::UniformNoiseImage(640, 480);
+  const Image16 noise16 = [&] {
+    Image16 n(640, 480);
+    for (std::size_t i = 0; i < n.pixels.size(); ++i) n.pixels[i] = static_cast<std::uint16_t>(noise.pixels[i] * 257);
+    return n;
+  }();
+  for (BoardType type : kAllBoardTypes) {
+    BoardParams params;
+    params.type = type;
+    const Board board = *Board::Create(params);
+    SCOPED_TRACE(board.name());
+    const auto reason = [&](const auto& view) {
+      const std::optional<Detection> d = DetectBoard(view, board);
+      EXPECT_TRUE(d.has_value());
+      if (!d) return DetectReason::kNone;
+      EXPECT_FALSE(d->found);
+      EXPECT_TRUE(d->features.empty());
+      return d->reason;
+    };
+    EXPECT_EQ(reason(ImageView8{}), DetectReason::kBadImage) << "empty";
+    EXPECT_EQ(reason(ImageView8{&one_byte, 1, 1, 1}), DetectReason::kBadImage) << "1x1";
+    EXPECT_EQ(reason(ImageView8{&one_byte, 20000, 20000, 20000}), DetectReason::kBadImage) << "20000x20000";
+    EXPECT_EQ(reason(ImageView8{black.pixels.data(), 640, 480, 320}), DetectReason::kBadImage) << "short stride";
+    EXPECT_EQ(reason(ImageView16{&one_word, 20000, 20000, 40000}), DetectReason::kBadImage) << "16-bit 20000x20000";
+    EXPECT_EQ(reason(ImageView16{&one_word, 2, 2, 3}), DetectReason::kBadImage) << "16-bit odd stride";
+    // Nothing printed: no contrast, or no candidates of the board's kind.
+    for (const Image8* flat : {&black, &white}) {
+      const DetectReason r = reason(flat->view());
+      EXPECT_TRUE(r == DetectReason::kLowContrast || r == DetectReason::kNoCandidates) << DetectReasonName(r);
+    }
+    EXPECT_NE(reason(noise.view()), DetectReason::kNone) << "noise";
+    EXPECT_NE(reason(noise16.view()), DetectReason::kNone) << "16-bit noise";
+  }
+}
+
 }  // namespace
 }  // namespace linecal
