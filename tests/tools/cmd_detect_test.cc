@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -119,6 +120,32 @@ TEST_F(DetectCliTest, BadInputExitsTwo) {
   const auto bad_cols =
       RunLinecal("detect --board checker --cols 1 --rows 5 --image " + Path("bad.png"));
   EXPECT_EQ(bad_cols.exit_code, 2);
+}
+
+// A PNG whose header claims 20000 x 20000 (and holds no pixels): refused from the header,
+// before 400 MB are allocated.
+TEST_F(DetectCliTest, HugeImageIsRefusedFromItsHeader) {
+  const auto be32 = [](std::uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16), static_cast<char>(v >> 8),
+                       static_cast<char>(v)};
+  };
+  const auto crc32 = [](const std::string& bytes) {
+    std::uint32_t c = 0xffffffffu;
+    for (unsigned char b : bytes) {
+      c ^= b;
+      for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+    }
+    return c ^ 0xffffffffu;
+  };
+  // IHDR: width, height, 8-bit grey, deflate, no filter, no interlace.
+  const std::string ihdr = "IHDR" + be32(20000) + be32(20000) + std::string{8, 0, 0, 0, 0};
+  std::ofstream(Path("huge.png"), std::ios::binary)
+      << "\x89PNG\r\n\x1a\n" << be32(13) << ihdr << be32(crc32(ihdr))
+      // An empty IDAT: libpng reads the chunks up to the first IDAT before it reports the size.
+      << be32(0) << "IDAT" << be32(crc32("IDAT"));
+  const auto huge = RunLinecal("detect --board checker --image " + Path("huge.png"));
+  EXPECT_EQ(huge.exit_code, 2);
+  EXPECT_NE(huge.err.find("huge.png: too large: 20000 x 20000"), std::string::npos) << huge.err;
 }
 
 }  // namespace
