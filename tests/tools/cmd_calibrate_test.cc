@@ -94,6 +94,19 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
         const double d = c["true_distance_m"];
         EXPECT_NEAR(c["measured_distance_m"].get<double>(), d, (d < 10 ? 0.01 : 0.005) * d) << d;
       }
+      // The seed formulas with the real detectors: method (b) from the rendered chessboard
+      // within the acceptance bars of method (a), and the vertical board's roll beside the
+      // pose's.
+      const nlohmann::json& b = s["board_method"];
+      ASSERT_TRUE(b["valid"].get<bool>()) << b.dump();
+      EXPECT_LT(b["vanishing_point_disagreement_px"].get<double>(), 0.5);
+      ASSERT_EQ(b["ranging_disagreement"].size(), 4u);
+      for (const nlohmann::json& c : b["ranging_disagreement"]) EXPECT_LT(c["fraction"].get<double>(), 0.005);
+      ASSERT_EQ(b["ground_points_px"].size(), 4u);
+      const nlohmann::json& roll = s["roll_from_vertical_board"];
+      ASSERT_TRUE(roll["valid"].get<bool>()) << roll.dump();
+      EXPECT_EQ(roll["pose_roll_deg"].get<double>(), s["mounting"]["roll_deg"].get<double>());
+      EXPECT_LT(std::abs(roll["difference_deg"].get<double>()), 0.1);
     } else {
       // A radar measures yaw only: pitch, roll and the position stay nominal (null).
       EXPECT_TRUE(s["deviation"]["pitch_deg"].is_null());

@@ -1,9 +1,11 @@
 // linecal calibrate: one cycle's results from a capture, without the daemon
 // (daemon/cycle/capture_calibration.h does the work; the daemon replays through the same code).
+#include <algorithm>
 #include <cstdio>
 #include <numbers>
 #include <string>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "daemon/cycle/capture_calibration.h"
 #include "tools/cli/command_line.h"
@@ -38,6 +40,27 @@ void PrintTable(const Capture& capture, const CycleCalibration& cycle) {
   }
   for (const SensorCalibration& s : cycle.sensors) {
     if (!s.message.empty()) std::printf("  %s\n", s.message.c_str());
+  }
+  // The seed formulas beside the extrinsic (docs/solvers.md).
+  for (const SensorCalibration& s : cycle.sensors) {
+    if (s.kind != SensorKind::kCamera || !s.solved) continue;
+    std::string line = absl::StrFormat("  %s: board method ", s.name);
+    if (s.board_method.valid && s.vanishing_point_px) {
+      double worst = 0;
+      for (double d : s.ground_disagreement) worst = std::max(worst, d);
+      absl::StrAppendFormat(&line, "vanishing point %.3f px from the extrinsic's, ground %.3f%% at 5-50 m",
+                            s.vanishing_point_disagreement_px, worst * 100);
+    } else {
+      absl::StrAppend(&line, s.board_method.valid ? "valid" : s.board_method.reason);
+    }
+    absl::StrAppend(&line, "; roll from the vertical board ");
+    if (s.vertical_roll.valid) {
+      absl::StrAppendFormat(&line, "%+.3f deg (pose %+.3f deg)", s.vertical_roll.roll_rad * kDegPerRad,
+                            s.mounting.angles.roll * kDegPerRad);
+    } else {
+      absl::StrAppend(&line, s.vertical_roll.reason);
+    }
+    std::printf("%s\n", line.c_str());
   }
 }
 
