@@ -46,7 +46,8 @@ bool TakeResult(const absl::StatusOr<Result>& r, SensorCalibration* out) {
 }
 
 SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorModel& sensor,
-                                        const CaptureSensor& recorded, const CameraCalibrationOptions& options) {
+                                        const CaptureSensor& recorded, const CaptureCalibrationOptions& capture_options) {
+  const CameraCalibrationOptions& options = capture_options.camera;
   SensorCalibration out;
   std::vector<const StationBoard*> boards;
   for (const std::string& id : sensor.targets) {
@@ -54,7 +55,8 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
     out.boards.push_back({id, 0, 0, ""});
   }
   std::vector<BoardObservation> observations;
-  for (const CaptureFile& frame : recorded.frames) {
+  for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
+    const CaptureFile& frame = recorded.frames[frame_index];
     const absl::StatusOr<Image8> image = ReadImage8(capture.PathOf(frame));
     if (!image.ok()) {
       out.reason = "data_unreadable";
@@ -77,6 +79,9 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
         continue;
       }
       observations.push_back({boards[i]->id, d->features});
+      if (frame_index == 0 && capture_options.keep_first_frame_features) {
+        out.first_frame_observations.push_back(observations.back());
+      }
     }
   }
   absl::StatusOr<CameraCalibrationResult> r =
@@ -295,7 +300,7 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
       const std::int64_t t0 = NowNs();
       SensorCalibration r;
       switch (s.kind) {
-        case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options.camera); break;
+        case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options); break;
         case SensorKind::kRadar: r = CalibrateRadarSensor(capture, s, recorded); break;
         case SensorKind::kLidar: r = CalibrateLidarSensor(capture, s, recorded); break;
       }

@@ -56,6 +56,9 @@ struct SensorCalibration {
   std::vector<double> ground_disagreement;          // per ranging[i].true_distance_m
   std::vector<double> toolbox_ground_disagreement;  // the same for the toolbox's formula
   VerticalBoardRoll vertical_roll;
+  // Cameras, with CaptureCalibrationOptions::keep_first_frame_features: the boards found in
+  // the sensor's first frame, for drawing reports.
+  std::vector<BoardObservation> first_frame_observations;
   std::int64_t elapsed_ns = 0;  // wall time of this sensor's detection and solve
 };
 
@@ -69,6 +72,8 @@ struct CaptureCalibrationOptions {
   CameraCalibrationOptions camera;
   // Sensors computed at once (threads); 1 computes them one after the other. [1, 64].
   int threads = 8;
+  // Keep each camera's first-frame detections in SensorCalibration (for `calibrate --report`).
+  bool keep_first_frame_features = false;
 };
 
 // Computes the cycle of `capture` (already read and validated by ReadCapture). Errors:
