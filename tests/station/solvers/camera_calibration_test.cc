@@ -175,6 +175,45 @@ TEST_F(CameraCalibrationTest, FisheyeSurroundCameraOnTheFloorGrid) {
   EXPECT_NEAR(r->mounting.angles_deviation.roll, error.roll, 4 * r->mounting.sigma[2]);
 }
 
+// A mirrored chessboard (its corners numbered the wrong way round: x -> -x) or a
+// mis-identified one (its two pattern groups swapped) among the front camera's boards: the
+// other boards fix the pose, the chessboard does not fit it, and the result is refused
+// (residual_too_high, or no pose at all) instead of a pose.
+TEST_F(CameraCalibrationTest, MirroredOrMisidentifiedBoardFailsTheResidualTest) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const Rigid3d truth = TrueMounting(s, {0.2 * kDeg, 0.1 * kDeg, 0}, Eigen::Vector3d::Zero());
+  std::mt19937_64 rng(17);
+  const std::vector<BoardObservation> obs = Observe(s, truth, 0.2, rng);
+  for (const bool mirror : {true, false}) {
+    SCOPED_TRACE(mirror ? "mirrored" : "groups swapped");
+    std::vector<BoardObservation> bad = obs;
+    bool changed = false;
+    for (BoardObservation& o : bad) {
+      if (o.board_id != "front_chessboard") continue;
+      for (DetectedFeature& f : o.features) {
+        if (mirror) {
+          f.p_board.x() = -f.p_board.x();
+        } else {
+          f.p_board.x() += f.p_board.x() < 0 ? 1.95 : -1.95;  // the groups' centres are 1.95 m apart
+        }
+      }
+      changed = true;
+    }
+    ASSERT_TRUE(changed);
+    absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), bad);
+    ASSERT_TRUE(r.ok());
+    EXPECT_EQ(r->verdict, SensorVerdict::kError);
+    if (mirror) {
+      EXPECT_EQ(r->reason, "residual_too_high") << r->message;
+      EXPECT_GT(r->residual_rms_px, 5.0);
+    } else {
+      // Swapped groups pull the pose so far that it leaves points outside the lens: no pose.
+      EXPECT_EQ(r->reason, "did_not_converge") << r->message;
+      EXPECT_FALSE(r->solved);
+    }
+  }
+}
+
 TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
   const SensorModel& s = *car_.FindSensor("front_camera");
   const Rigid3d truth = TrueMounting(s, {}, Eigen::Vector3d::Zero());
