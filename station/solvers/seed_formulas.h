@@ -40,7 +40,7 @@
 // along the car axis: it takes the angle below the horizon as tan(a) - tan(-pitch) instead of
 // tan(a + pitch), so for a camera pitched down by p a point at depression angle d reads
 // 1 / (1 - tan(d - p) tan(p)) long (0.7% at 5 m for the reference front camera, 1.5 deg down
-// at 1.35 m; 1.3% at 3.75 deg, the pitch tolerance's edge x 1.5), and D_lat does the same with
+// at 1.35 m; 1.1% at 3 deg, the pitch tolerance x 1.5), and D_lat does the same with
 // the yaw. Its four points and homography (toolbox_*) inherit that. The levelled frame
 // removes it with what the board already gives: the horizon is the line through vp and
 // H (1, 0, 0) (the image of the board's x axis, horizontal on an upright board), the ground
