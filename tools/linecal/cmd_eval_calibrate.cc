@@ -4,8 +4,10 @@
 // Per car and camera: mounting angle and position errors uniform within ±1.5x the
 // tolerance (so some cars are out of tolerance), a random aligner pose, the simulator's exact
 // projections of every visible target feature (VisibleCameraFeatures) plus Gaussian corner
-// noise; CalibrateCamera; the estimate against the truth. The detectors are not in this loop
-// (their accuracy is measured by their own evaluations); the solver is.
+// noise; CalibrateCamera; the estimate against the truth, and the seed formulas (method (b)
+// against method (a), the vertical board's roll against the truth and the pose). The
+// detectors are not in this loop (their accuracy is measured by their own evaluations); the
+// solver is.
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -176,8 +178,11 @@ int RunEvalCalibrate(const Args& args) {
       "features (exact projections) plus Gaussian corner noise are solved, and the estimates "
       "compared with the truth. Prints per camera the 95th-percentile angle and position "
       "errors, vanishing point and ground ranging errors, the reported sigma against the spread "
-      "(RMS error / RMS sigma) and the 95% coverage, and the verdict agreement, each against "
-      "acceptance.md's bar. Exit 0 when every camera meets every bar, 1 otherwise.",
+      "(RMS error / RMS sigma) and the 95% coverage, the verdict agreement, and for cameras that "
+      "see the wide chessboard method (b)'s vanishing point and ground disagreement from the "
+      "extrinsic's (levelled, and the toolbox formula's, reported only), each against "
+      "acceptance.md's bar; and the roll from the vertical board against the truth and the pose. "
+      "Exit 0 when every camera meets every bar, 1 otherwise.",
       {{"station", "FILE", "station layout", true},
        {"car", "FILE", "car model", true},
        {"cars", "N", "number of random cars (default 200)"},
