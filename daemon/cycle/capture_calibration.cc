@@ -46,7 +46,8 @@ bool TakeResult(const absl::StatusOr<Result>& r, SensorCalibration* out) {
 }
 
 SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorModel& sensor,
-                                        const CaptureSensor& recorded, const CameraCalibrationOptions& options) {
+                                        const CaptureSensor& recorded, const CaptureCalibrationOptions& capture_options) {
+  const CameraCalibrationOptions& options = capture_options.camera;
   SensorCalibration out;
   std::vector<const StationBoard*> boards;
   for (const std::string& id : sensor.targets) {
@@ -54,7 +55,8 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
     out.boards.push_back({id, 0, 0, ""});
   }
   std::vector<BoardObservation> observations;
-  for (const CaptureFile& frame : recorded.frames) {
+  for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
+    const CaptureFile& frame = recorded.frames[frame_index];
     const absl::StatusOr<Image8> image = ReadImage8(capture.PathOf(frame));
     if (!image.ok()) {
       out.reason = "data_unreadable";
@@ -77,6 +79,9 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
         continue;
       }
       observations.push_back({boards[i]->id, d->features});
+      if (frame_index == 0 && capture_options.keep_first_frame_features) {
+        out.first_frame_observations.push_back(observations.back());
+      }
     }
   }
   absl::StatusOr<CameraCalibrationResult> r =
@@ -87,6 +92,11 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
     if (r->vanishing_point_valid) out.vanishing_point_px = r->vanishing_point_px;
     out.ground_homography = r->ground_homography;
     out.ranging = r->ranging;
+    out.board_method = r->board_method;
+    out.vanishing_point_disagreement_px = r->vanishing_point_disagreement_px;
+    out.ground_disagreement = r->ground_disagreement;
+    out.toolbox_ground_disagreement = r->toolbox_ground_disagreement;
+    out.vertical_roll = r->vertical_roll;
   }
   return out;
 }
@@ -218,6 +228,55 @@ nlohmann::json MountingJson(const MountingEstimate& m) {
           {"sigma", sigma}};
 }
 
+nlohmann::json Matrix3Json(const Eigen::Matrix3d& m) {
+  nlohmann::json h = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) h.push_back(m(r, c));
+  }
+  return h;
+}
+
+nlohmann::json FiniteOrNull(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+
+// "board_method" and "roll_from_vertical_board" of a solved camera (docs/solvers.md).
+nlohmann::json SeedFormulasJson(const SensorCalibration& s) {
+  const BoardMethodResult& b = s.board_method;
+  nlohmann::json board = {{"valid", b.valid}, {"reason", b.reason}, {"message", b.message}};
+  if (b.valid) {
+    nlohmann::json points_px = nlohmann::json::array(), points_car = nlohmann::json::array(),
+                   points_toolbox = nlohmann::json::array();
+    for (size_t i = 0; i < b.ground_points_px.size(); ++i) {
+      points_px.push_back({b.ground_points_px[i].x(), b.ground_points_px[i].y()});
+      points_car.push_back({b.ground_points_car_m[i].x(), b.ground_points_car_m[i].y()});
+      points_toolbox.push_back({b.toolbox_ground_points_car_m[i].x(), b.toolbox_ground_points_car_m[i].y()});
+    }
+    board["vanishing_point_px"] = {b.vanishing_point_px.x(), b.vanishing_point_px.y()};
+    board["homography_rms_px"] = b.homography_rms_px;
+    board["ground_points_px"] = points_px;
+    board["ground_points_car_m"] = points_car;
+    board["ground_homography"] = Matrix3Json(b.ground_homography);
+    board["toolbox_ground_points_car_m"] = points_toolbox;
+    board["toolbox_ground_homography"] = Matrix3Json(b.toolbox_ground_homography);
+    if (s.vanishing_point_px) board["vanishing_point_disagreement_px"] = s.vanishing_point_disagreement_px;
+    nlohmann::json ranging = nlohmann::json::array();
+    for (size_t i = 0; i < s.ground_disagreement.size() && i < s.ranging.size(); ++i) {
+      ranging.push_back({{"distance_m", s.ranging[i].true_distance_m},
+                         {"fraction", FiniteOrNull(s.ground_disagreement[i])},
+                         {"toolbox_fraction", FiniteOrNull(s.toolbox_ground_disagreement[i])}});
+    }
+    board["ranging_disagreement"] = ranging;
+  }
+  const VerticalBoardRoll& v = s.vertical_roll;
+  nlohmann::json roll = {{"valid", v.valid}, {"reason", v.reason}, {"message", v.message}};
+  if (v.valid) {
+    roll["roll_deg"] = v.roll_rad * kDegPerRad;
+    roll["pose_roll_deg"] = s.mounting.angles.roll * kDegPerRad;
+    roll["difference_deg"] = (v.roll_rad - s.mounting.angles.roll) * kDegPerRad;
+    roll["lines_used"] = v.lines_used;
+  }
+  return {{"board_method", board}, {"roll_from_vertical_board", roll}};
+}
+
 }  // namespace
 
 absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const CaptureCalibrationOptions& options) {
@@ -241,7 +300,7 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
       const std::int64_t t0 = NowNs();
       SensorCalibration r;
       switch (s.kind) {
-        case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options.camera); break;
+        case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options); break;
         case SensorKind::kRadar: r = CalibrateRadarSensor(capture, s, recorded); break;
         case SensorKind::kLidar: r = CalibrateLidarSensor(capture, s, recorded); break;
       }
@@ -291,21 +350,14 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
     }
     if (s.kind == SensorKind::kCamera) {
       if (s.vanishing_point_px) j["vanishing_point_px"] = {s.vanishing_point_px->x(), s.vanishing_point_px->y()};
-      if (s.ground_homography) {
-        nlohmann::json h = nlohmann::json::array();
-        for (int r = 0; r < 3; ++r) {
-          for (int c = 0; c < 3; ++c) h.push_back((*s.ground_homography)(r, c));
-        }
-        j["ground_homography"] = h;
-      }
+      if (s.ground_homography) j["ground_homography"] = Matrix3Json(*s.ground_homography);
       nlohmann::json ranging = nlohmann::json::array();
       for (const RangingCheck& c : s.ranging) {
         ranging.push_back({{"true_distance_m", c.true_distance_m},
-                           {"measured_distance_m", std::isfinite(c.measured_distance_m)
-                                                       ? nlohmann::json(c.measured_distance_m)
-                                                       : nlohmann::json(nullptr)}});
+                           {"measured_distance_m", FiniteOrNull(c.measured_distance_m)}});
       }
       if (!s.ranging.empty()) j["ranging"] = ranging;
+      if (s.solved) j.update(SeedFormulasJson(s));
     }
     sensors.push_back(std::move(j));
   }

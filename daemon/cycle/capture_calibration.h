@@ -49,6 +49,16 @@ struct SensorCalibration {
   std::optional<Eigen::Vector2d> vanishing_point_px;
   std::optional<Eigen::Matrix3d> ground_homography;
   std::vector<RangingCheck> ranging;
+  // Cameras, when solved: the seed formulas (CameraCalibrationResult): method (b) with its
+  // disagreement from the extrinsic's, and the roll from the vertical board.
+  BoardMethodResult board_method;
+  double vanishing_point_disagreement_px = 0;
+  std::vector<double> ground_disagreement;          // per ranging[i].true_distance_m
+  std::vector<double> toolbox_ground_disagreement;  // the same for the toolbox's formula
+  VerticalBoardRoll vertical_roll;
+  // Cameras, with CaptureCalibrationOptions::keep_first_frame_features: the boards found in
+  // the sensor's first frame, for drawing reports.
+  std::vector<BoardObservation> first_frame_observations;
   std::int64_t elapsed_ns = 0;  // wall time of this sensor's detection and solve
 };
 
@@ -62,6 +72,8 @@ struct CaptureCalibrationOptions {
   CameraCalibrationOptions camera;
   // Sensors computed at once (threads); 1 computes them one after the other. [1, 64].
   int threads = 8;
+  // Keep each camera's first-frame detections in SensorCalibration (for `calibrate --report`).
+  bool keep_first_frame_features = false;
 };
 
 // Computes the cycle of `capture` (already read and validated by ReadCapture). Errors:
@@ -74,7 +86,8 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture,
 // The results document of interfaces.md ("Results"): per sensor name, kind, verdict, reason,
 // message, T_car_sensor (4x4 row-major), yaw/pitch/roll (deg) and x/y/z (m), their deviation
 // and 1-sigma, residual RMS, features used; cameras also the vanishing point, the ground
-// homography and the ranging check; overall verdict, VIN, car model and timings.
+// homography and the ranging check, and (docs/solvers.md) "board_method" (method (b) and its
+// disagreement) and "roll_from_vertical_board"; overall verdict, VIN, car model and timings.
 nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibration& cycle);
 
 }  // namespace linecal

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
 
 #include <Eigen/Geometry>
@@ -12,10 +13,23 @@
 namespace linecal {
 namespace {
 
-Eigen::Matrix3d K(const CameraIntrinsics& k) {
-  Eigen::Matrix3d m;
-  m << k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1;
-  return m;
+// All features of the observed board of `type` with the most of them, frames pooled, and
+// that board's id; empty when none was seen.
+std::pair<std::string, std::vector<DetectedFeature>> MostSeenBoard(const StationLayout& station,
+                                                                  std::span<const BoardObservation> observations,
+                                                                  BoardType type) {
+  std::map<std::string, std::vector<DetectedFeature>> pooled;
+  for (const BoardObservation& o : observations) {
+    const StationBoard* board = station.FindBoard(o.board_id);
+    if (board == nullptr || board->board.type() != type) continue;
+    std::vector<DetectedFeature>& all = pooled[o.board_id];
+    all.insert(all.end(), o.features.begin(), o.features.end());
+  }
+  std::pair<std::string, std::vector<DetectedFeature>> best;
+  for (auto& [id, features] : pooled) {
+    if (features.size() > best.second.size()) best = {id, std::move(features)};
+  }
+  return best;
 }
 
 }  // namespace
@@ -59,8 +73,8 @@ std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3
     Eigen::Vector2d uv;
     // The point must really be in the image; its undistorted row is what the formula reads.
     if (along != 0 && p_camera.z() > 0 && camera.Project(p_camera, &uv) && camera.IsInImage(uv)) {
-      const double v_u = k.fy * p_camera.y() / p_camera.z() + k.cy;
-      r.measured_distance_m = c.z() * k.fy / (v_u - vanishing_point_px.y());
+      const Eigen::Vector2d undistorted = (PinholeMatrix(k) * p_camera).hnormalized();
+      r.measured_distance_m = FlatGroundRange(k, vanishing_point_px, c.z(), undistorted).x();
     }
     out.push_back(r);
   }
@@ -124,7 +138,7 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
 
   // What the car's software derives from the extrinsic (valid whatever the verdict).
   const Eigen::Matrix3d R_camera_car = T_camera_car.RotationMatrix();
-  const Eigen::Matrix3d k = K(*sensor.intrinsics);
+  const Eigen::Matrix3d k = PinholeMatrix(*sensor.intrinsics);
   const int along = CarAxisAlong(T_camera_car);
   if (along != 0) {
     result.vanishing_point_px = (k * (along * R_camera_car.col(0))).hnormalized();
@@ -136,6 +150,37 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
   result.ground_homography /= result.ground_homography(2, 2);
   if (result.vanishing_point_valid) {
     result.ranging = RangingCheckOf(*camera, T_camera_car, result.vanishing_point_px, options.ranging_distances_m);
+  }
+
+  // The seed formulas, cross-checking the extrinsic.
+  const Rigid3d T_car_camera = T_camera_car.Inverse();
+  const auto [chessboard_id, chessboard] = MostSeenBoard(station, observations, BoardType::kChessboard);
+  if (chessboard.empty()) {
+    result.board_method.reason = "chessboard_not_seen";
+    result.board_method.message = absl::StrCat(sensor.name, ": no wide chessboard among its observed boards");
+  } else {
+    const StationBoard& board = *station.FindBoard(chessboard_id);
+    result.board_method = SolveBoardMethod(*camera, board.board, T_car_station * board.T_station_board,
+                                           T_car_camera.translation(), along, chessboard);
+    if (result.board_method.valid && result.vanishing_point_valid) {
+      result.vanishing_point_disagreement_px =
+          (result.board_method.vanishing_point_px - result.vanishing_point_px).norm();
+      result.ground_disagreement =
+          GroundDisagreement(result.ground_homography, result.board_method.ground_homography,
+                             T_car_camera.translation(), along, options.ranging_distances_m);
+      result.toolbox_ground_disagreement =
+          GroundDisagreement(result.ground_homography, result.board_method.toolbox_ground_homography,
+                             T_car_camera.translation(), along, options.ranging_distances_m);
+    }
+  }
+  const auto [vertical_id, vertical] = MostSeenBoard(station, observations, BoardType::kVertical);
+  if (vertical.empty()) {
+    result.vertical_roll.reason = "vertical_board_not_seen";
+    result.vertical_roll.message = absl::StrCat(sensor.name, ": no vertical board among its observed boards");
+  } else {
+    const StationBoard& board = *station.FindBoard(vertical_id);
+    result.vertical_roll = RollFromVerticalBoard(*camera, board.board, T_car_station * board.T_station_board,
+                                                 R_camera_car.col(0), vertical);
   }
 
   // Trust checks, then the tolerance.

@@ -31,6 +31,7 @@
 #include "station/model/station_layout.h"
 #include "station/solvers/mounting.h"
 #include "station/solvers/pnp.h"
+#include "station/solvers/seed_formulas.h"
 
 namespace linecal {
 
@@ -83,6 +84,22 @@ struct CameraCalibrationResult {
   // distortion removed). Scaled to H(2, 2) = 1.
   Eigen::Matrix3d ground_homography = Eigen::Matrix3d::Identity();
   std::vector<RangingCheck> ranging;
+  // Method (b), the board method of seed_formulas.h, from the wide chessboard with the most
+  // features (all frames pooled) and the solved camera position, for a camera looking along
+  // the car; board_method.valid = false with a reason otherwise ("chessboard_not_seen" or a
+  // reason of SolveBoardMethod).
+  BoardMethodResult board_method;
+  // When board_method is valid: |vp_b - vp_a| and, per ranging distance, how far the two
+  // ground homographies disagree on the ground (GroundDisagreement with (a) as reference),
+  // for (b)'s levelled homography and for the toolbox formula's.
+  double vanishing_point_disagreement_px = 0;
+  std::vector<double> ground_disagreement;
+  std::vector<double> toolbox_ground_disagreement;
+  // Roll from the corner lines of the vertical board with the most features, the car axis
+  // taken from the pose; valid = false with a reason ("vertical_board_not_seen" or one of
+  // RollFromVerticalBoard) otherwise. Its difference from the pose's roll is
+  // vertical_roll.roll_rad - mounting.angles.roll.
+  VerticalBoardRoll vertical_roll;
 };
 
 // Calibrates `sensor` (a camera of the car model, with intrinsics) from its observations.

@@ -4,12 +4,17 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include <opencv2/imgcodecs.hpp>
+
+#include "station/camera/camera_model.h"
+#include "station/capture/capture.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -94,6 +99,19 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
         const double d = c["true_distance_m"];
         EXPECT_NEAR(c["measured_distance_m"].get<double>(), d, (d < 10 ? 0.01 : 0.005) * d) << d;
       }
+      // The seed formulas with the real detectors: method (b) from the rendered chessboard
+      // within the acceptance bars of method (a), and the vertical board's roll beside the
+      // pose's.
+      const nlohmann::json& b = s["board_method"];
+      ASSERT_TRUE(b["valid"].get<bool>()) << b.dump();
+      EXPECT_LT(b["vanishing_point_disagreement_px"].get<double>(), 0.5);
+      ASSERT_EQ(b["ranging_disagreement"].size(), 4u);
+      for (const nlohmann::json& c : b["ranging_disagreement"]) EXPECT_LT(c["fraction"].get<double>(), 0.005);
+      ASSERT_EQ(b["ground_points_px"].size(), 4u);
+      const nlohmann::json& roll = s["roll_from_vertical_board"];
+      ASSERT_TRUE(roll["valid"].get<bool>()) << roll.dump();
+      EXPECT_EQ(roll["pose_roll_deg"].get<double>(), s["mounting"]["roll_deg"].get<double>());
+      EXPECT_LT(std::abs(roll["difference_deg"].get<double>()), 0.1);
     } else {
       // A radar measures yaw only: pitch, roll and the position stay nominal (null).
       EXPECT_TRUE(s["deviation"]["pitch_deg"].is_null());
@@ -150,6 +168,63 @@ TEST_F(CalibrateCliTest, BadInputExitsTwoNamingTheProblem) {
   const LinecalRun usage = RunLinecal("calibrate --json");
   EXPECT_EQ(usage.exit_code, 2);
   EXPECT_NE(usage.err.find("--capture"), std::string::npos) << usage.err;
+}
+
+// --report: a PNG per camera, of the image's size, with the drawing where the results put it:
+// a ring around a reprojected chessboard corner (magenta) and around the vanishing point on
+// the horizon (cyan), both computed here from the JSON pose, the layout and the aligner.
+TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
+  const fs::path report = fs::path(testing::TempDir()) / ("calibrate_cli_report_" + std::to_string(::getpid()));
+  fs::remove_all(report);
+  const LinecalRun run = RunLinecal("calibrate --json --capture " + dir_.string() + " --report " + report.string());
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const nlohmann::json r = nlohmann::json::parse(run.out);
+  const absl::StatusOr<Capture> capture = ReadCapture(dir_.string());
+  ASSERT_TRUE(capture.ok()) << capture.status();
+  int cameras = 0;
+  for (const nlohmann::json& s : r["sensors"]) {
+    if (s["kind"] != "camera") {
+      EXPECT_FALSE(fs::exists(report / (s["name"].get<std::string>() + ".png")));
+      continue;
+    }
+    ++cameras;
+    const SensorModel& sensor = *capture->car.FindSensor(s["name"]);
+    const cv::Mat png = cv::imread((report / (sensor.name + ".png")).string(), cv::IMREAD_COLOR);  // BGR
+    ASSERT_FALSE(png.empty()) << sensor.name;
+    EXPECT_EQ(png.cols, sensor.intrinsics->width);
+    EXPECT_EQ(png.rows, sensor.intrinsics->height);
+    Eigen::Matrix4d T;
+    for (int i = 0; i < 16; ++i) T(i / 4, i % 4) = s["T_car_sensor"][i];
+    const Rigid3d T_car_camera(Eigen::Matrix3d(T.topLeftCorner<3, 3>()), Eigen::Vector3d(T.topRightCorner<3, 1>()));
+    const CameraModel camera = *CameraModel::Create(*sensor.intrinsics);
+    auto rgb_at = [&](const Eigen::Vector2d& uv, int du) {
+      const cv::Vec3b bgr = png.at<cv::Vec3b>(static_cast<int>(std::lround(uv.y())),
+                                              static_cast<int>(std::lround(uv.x())) + du);
+      return std::array<int, 3>{bgr[2], bgr[1], bgr[0]};
+    };
+    const StationBoard& board = *capture->station.FindBoard("front_chessboard");
+    const Rigid3d T_camera_board =
+        (capture->manifest.aligner.T_station_car() * T_car_camera).Inverse() * board.T_station_board;
+    Eigen::Vector2d corner;
+    ASSERT_TRUE(camera.Project(T_camera_board * Eigen::Vector3d(board.board.features()[0].p_board.x(),
+                                                               board.board.features()[0].p_board.y(), 0),
+                               &corner));
+    EXPECT_EQ(rgb_at(corner, 6), (std::array<int, 3>{255, 0, 255})) << corner.transpose();
+    Eigen::Vector2d vp;
+    ASSERT_TRUE(camera.Project(T_car_camera.Inverse().RotationMatrix().col(0), &vp));
+    EXPECT_EQ(rgb_at(vp, 8), (std::array<int, 3>{0, 255, 255})) << vp.transpose();
+    // The image itself is grey: a pixel off every drawing keeps r = g = b.
+    const std::array<int, 3> plain = rgb_at(Eigen::Vector2d(sensor.intrinsics->width - 3, 3), 0);
+    EXPECT_EQ(plain[0], plain[1]);
+    EXPECT_EQ(plain[1], plain[2]);
+  }
+  EXPECT_EQ(cameras, 1);
+
+  // A report path that is a file: exit 2 naming it, before any work.
+  const fs::path file = report / "front_camera.png";
+  const LinecalRun bad = RunLinecal("calibrate --capture " + dir_.string() + " --report " + file.string());
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("--report " + file.string()), std::string::npos) << bad.err;
 }
 
 // A camera whose frames were lost gives that sensor an error with the file named, and the

@@ -36,9 +36,24 @@ TEST(EvalCalibrateCliTest, ReferenceCarOnTheReferenceStation) {
   const nlohmann::json& front = r["cameras"][0];
   ASSERT_EQ(front["camera"], "front_camera");
   EXPECT_TRUE(front["meets_bars"].get<bool>()) << front.dump(2);
-  EXPECT_LE(front["yaw_p95_abs_error_deg"].get<double>(), 0.02);
   EXPECT_LE(front["vanishing_point_p95_px"].get<double>(), 0.3);
   EXPECT_LE(front["ranging_p95_fraction"].get<double>(), 0.005);
+  for (const char* k : {"yaw", "pitch", "roll"}) EXPECT_LE(front[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.02) << k;
+  for (const char* k : {"x", "y", "z"}) EXPECT_LE(front[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
+  for (const char* k : {"yaw", "pitch", "roll", "x", "y", "z"}) {
+    const double coverage = front[std::string(k) + "_coverage95"];
+    EXPECT_GE(coverage, 0.93) << k;
+    EXPECT_LE(coverage, 0.97) << k;
+  }
+  // The seed formulas (method (b), the board method) against the extrinsic: 0.5 px, 0.5%
+  // (acceptance.md), on every car; the toolbox's small-angle ranging formula misses the
+  // 0.5% on pitched cameras (docs/solvers.md), so it is reported, not judged.
+  EXPECT_EQ(front["board_method_cars"], 200);
+  EXPECT_TRUE(front["board_method_meets_bars"].get<bool>());
+  EXPECT_LE(front["board_method_vanishing_point_p95_px"].get<double>(), 0.5);
+  EXPECT_LE(front["board_method_ranging_p95_fraction"].get<double>(), 0.005);
+  EXPECT_GT(front["board_method_toolbox_ranging_p95_fraction"].get<double>(), 0.005);
+  EXPECT_EQ(front["vertical_roll_cars"], 200);
 }
 
 TEST(EvalCalibrateCliTest, BadInputExitsTwo) {

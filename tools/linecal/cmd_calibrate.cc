@@ -1,12 +1,17 @@
 // linecal calibrate: one cycle's results from a capture, without the daemon
 // (daemon/cycle/capture_calibration.h does the work; the daemon replays through the same code).
+#include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <numbers>
 #include <string>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "daemon/cycle/capture_calibration.h"
+#include "station/io/image_io.h"
 #include "tools/cli/command_line.h"
+#include "tools/linecal/calibration_report.h"
 #include "tools/linecal/commands.h"
 
 namespace linecal::tools {
@@ -39,13 +44,34 @@ void PrintTable(const Capture& capture, const CycleCalibration& cycle) {
   for (const SensorCalibration& s : cycle.sensors) {
     if (!s.message.empty()) std::printf("  %s\n", s.message.c_str());
   }
+  // The seed formulas beside the extrinsic (docs/solvers.md).
+  for (const SensorCalibration& s : cycle.sensors) {
+    if (s.kind != SensorKind::kCamera || !s.solved) continue;
+    std::string line = absl::StrFormat("  %s: board method ", s.name);
+    if (s.board_method.valid && s.vanishing_point_px) {
+      double worst = 0;
+      for (double d : s.ground_disagreement) worst = std::max(worst, d);
+      absl::StrAppendFormat(&line, "vanishing point %.3f px from the extrinsic's, ground %.3f%% at 5-50 m",
+                            s.vanishing_point_disagreement_px, worst * 100);
+    } else {
+      absl::StrAppend(&line, s.board_method.valid ? "valid" : s.board_method.reason);
+    }
+    absl::StrAppend(&line, "; roll from the vertical board ");
+    if (s.vertical_roll.valid) {
+      absl::StrAppendFormat(&line, "%+.3f deg (pose %+.3f deg)", s.vertical_roll.roll_rad * kDegPerRad,
+                            s.mounting.angles.roll * kDegPerRad);
+    } else {
+      absl::StrAppend(&line, s.vertical_roll.reason);
+    }
+    std::printf("%s\n", line.c_str());
+  }
 }
 
 }  // namespace
 
 int RunCalibrate(const Args& args) {
   cli::CommandLine cl(
-      "linecal calibrate --capture DIR [--json]",
+      "linecal calibrate --capture DIR [--json] [--report DIR]",
       "Computes a calibration cycle from a capture, as the daemon would: detects every camera's "
       "boards in its frames and solves its mounting in the car frame, calibrates the radars from "
       "their corner reflectors, and judges each sensor against the car model's tolerances. "
@@ -53,13 +79,46 @@ int RunCalibrate(const Args& args) {
       "radars), or with --json the results document of interfaces.md. Exit 0 when every sensor "
       "passes, 1 when any fails or could not be calibrated, 2 on bad usage or input.",
       {{"capture", "DIR", "capture directory (docs/capture-format.md)", true},
-       {"json", "", "print one JSON object"}});
+       {"json", "", "print one JSON object"},
+       {"report", "DIR", "write DIR/<camera>.png per camera: its first frame with the detected features, the "
+                         "reprojected boards, the horizon, a ground grid and a legend (created if missing)"}});
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
+  std::string report_dir;
+  if (cl.Has("report")) {
+    report_dir = cl.Get("report");
+    std::error_code ec;
+    std::filesystem::create_directories(report_dir, ec);
+    if (ec || !std::filesystem::is_directory(report_dir)) {
+      return cli::BadInput(kCommand, absl::StrCat("--report ", report_dir, ": not a directory that can be created (",
+                                                  ec ? ec.message() : "a file is in the way", ")"));
+    }
+  }
   const absl::StatusOr<Capture> capture = ReadCapture(cl.Get("capture"));
   if (!capture.ok()) return cli::BadInput(kCommand, std::string(capture.status().message()));
   std::fprintf(stderr, "calibrate: %zu sensors of %s\n", capture->manifest.sensors.size(), capture->dir.c_str());
-  const absl::StatusOr<CycleCalibration> cycle = CalibrateCapture(*capture);
+  CaptureCalibrationOptions options;
+  options.keep_first_frame_features = !report_dir.empty();
+  const absl::StatusOr<CycleCalibration> cycle = CalibrateCapture(*capture, options);
   if (!cycle.ok()) return cli::BadInput(kCommand, std::string(cycle.status().message()));
+  if (!report_dir.empty()) {
+    for (const SensorCalibration& s : cycle->sensors) {
+      const SensorModel* sensor = capture->car.FindSensor(s.name);
+      const CaptureSensor* recorded = capture->manifest.FindSensor(s.name);
+      if (s.kind != SensorKind::kCamera || recorded == nullptr || recorded->frames.empty()) continue;
+      const std::string frame = capture->PathOf(recorded->frames.front());
+      const absl::StatusOr<Image8> image = ReadImage8(frame);
+      if (!image.ok()) {
+        std::fprintf(stderr, "calibrate: no report for %s: %s\n", s.name.c_str(),
+                     std::string(image.status().message()).c_str());
+        continue;
+      }
+      const std::string out = (std::filesystem::path(report_dir) / (s.name + ".png")).string();
+      if (absl::Status w = WritePngRgb(out, DrawCalibrationReport(image->view(), *capture, *sensor, s)); !w.ok()) {
+        return cli::BadInput(kCommand, absl::StrCat("--report ", report_dir, ": ", w.message()));
+      }
+      std::fprintf(stderr, "calibrate: wrote %s\n", out.c_str());
+    }
+  }
   if (cl.Has("json")) {
     std::printf("%s\n", CycleCalibrationToJson(*capture, *cycle).dump(2).c_str());
   } else {

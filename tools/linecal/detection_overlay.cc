@@ -26,7 +26,7 @@ constexpr std::array<std::array<std::uint8_t, 5>, 10> kDigits = {{
 constexpr int kFontScale = 2;
 constexpr int kCrossHalfPx = 5;
 
-void Put(RgbImage* img, int x, int y, const std::array<std::uint8_t, 3>& colour) {
+void Put(RgbImage* img, int x, int y, const RgbColour& colour) {
   if (x < 0 || y < 0 || x >= img->width || y >= img->height) return;
   std::uint8_t* p = img->at(x, y);
   p[0] = colour[0];
@@ -34,8 +34,7 @@ void Put(RgbImage* img, int x, int y, const std::array<std::uint8_t, 3>& colour)
   p[2] = colour[2];
 }
 
-void DrawNumber(RgbImage* img, int x0, int y0, int number,
-                const std::array<std::uint8_t, 3>& colour) {
+void DrawNumber(RgbImage* img, int x0, int y0, int number, const RgbColour& colour) {
   const std::string text = std::to_string(number);
   for (std::size_t i = 0; i < text.size(); ++i) {
     if (text[i] < '0' || text[i] > '9') continue;
@@ -56,7 +55,7 @@ void DrawNumber(RgbImage* img, int x0, int y0, int number,
 
 }  // namespace
 
-RgbImage DrawDetectionOverlay(const ImageView8& image, const Detection& detection) {
+RgbImage GreyToRgb(const ImageView8& image) {
   RgbImage img(image.width, image.height);
   for (int y = 0; y < image.height; ++y) {
     for (int x = 0; x < image.width; ++x) {
@@ -64,20 +63,26 @@ RgbImage DrawDetectionOverlay(const ImageView8& image, const Detection& detectio
       Put(&img, x, y, {g, g, g});
     }
   }
-  const std::array<std::uint8_t, 3> colour =
-      detection.found ? std::array<std::uint8_t, 3>{0, 230, 0}
-                      : std::array<std::uint8_t, 3>{255, 140, 0};
-  for (const DetectedFeature& f : detection.features) {
+  return img;
+}
+
+void DrawFeatures(RgbImage* img, std::span<const DetectedFeature> features, const RgbColour& colour) {
+  for (const DetectedFeature& f : features) {
     // Far outside the image (or not a number): nothing to draw, and no int overflow.
     if (!(f.uv_px.cwiseAbs().maxCoeff() < 1e6)) continue;
     const int u = static_cast<int>(std::lround(f.uv_px.x()));
     const int v = static_cast<int>(std::lround(f.uv_px.y()));
     for (int d = -kCrossHalfPx; d <= kCrossHalfPx; ++d) {
-      Put(&img, u + d, v, colour);
-      Put(&img, u, v + d, colour);
+      Put(img, u + d, v, colour);
+      Put(img, u, v + d, colour);
     }
-    DrawNumber(&img, u + 3, v + 3, f.id, colour);
+    DrawNumber(img, u + 3, v + 3, f.id, colour);
   }
+}
+
+RgbImage DrawDetectionOverlay(const ImageView8& image, const Detection& detection) {
+  RgbImage img = GreyToRgb(image);
+  DrawFeatures(&img, detection.features, detection.found ? kFoundColour : kPartialColour);
   return img;
 }
 

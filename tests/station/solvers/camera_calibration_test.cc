@@ -60,6 +60,16 @@ class CameraCalibrationTest : public ::testing::Test {
     return out;
   }
 
+  // `frames` frames of Observe, each with fresh noise (frames are combined in one problem).
+  std::vector<BoardObservation> ObserveFrames(const SensorModel& s, const Rigid3d& T_car_camera, double sigma_px,
+                                              int frames, std::mt19937_64& rng) const {
+    std::vector<BoardObservation> out;
+    for (int frame = 0; frame < frames; ++frame) {
+      for (BoardObservation& o : Observe(s, T_car_camera, sigma_px, rng)) out.push_back(std::move(o));
+    }
+    return out;
+  }
+
   StationLayout station_;
   CarModel car_;
   AlignerMeasurement aligner_;
@@ -175,6 +185,45 @@ TEST_F(CameraCalibrationTest, FisheyeSurroundCameraOnTheFloorGrid) {
   EXPECT_NEAR(r->mounting.angles_deviation.roll, error.roll, 4 * r->mounting.sigma[2]);
 }
 
+// A mirrored chessboard (its corners numbered the wrong way round: x -> -x) or a
+// mis-identified one (its two pattern groups swapped) among the front camera's boards: the
+// other boards fix the pose, the chessboard does not fit it, and the result is refused
+// (residual_too_high, or no pose at all) instead of a pose.
+TEST_F(CameraCalibrationTest, MirroredOrMisidentifiedBoardFailsTheResidualTest) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const Rigid3d truth = TrueMounting(s, {0.2 * kDeg, 0.1 * kDeg, 0}, Eigen::Vector3d::Zero());
+  std::mt19937_64 rng(17);
+  const std::vector<BoardObservation> obs = Observe(s, truth, 0.2, rng);
+  for (const bool mirror : {true, false}) {
+    SCOPED_TRACE(mirror ? "mirrored" : "groups swapped");
+    std::vector<BoardObservation> bad = obs;
+    bool changed = false;
+    for (BoardObservation& o : bad) {
+      if (o.board_id != "front_chessboard") continue;
+      for (DetectedFeature& f : o.features) {
+        if (mirror) {
+          f.p_board.x() = -f.p_board.x();
+        } else {
+          f.p_board.x() += f.p_board.x() < 0 ? 1.95 : -1.95;  // the groups' centres are 1.95 m apart
+        }
+      }
+      changed = true;
+    }
+    ASSERT_TRUE(changed);
+    absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), bad);
+    ASSERT_TRUE(r.ok());
+    EXPECT_EQ(r->verdict, SensorVerdict::kError);
+    // Either the fit is refused by its residual, or the bad board pulls the solve to a pose
+    // that leaves points outside the lens and there is no pose at all (what happens here).
+    EXPECT_TRUE(r->reason == "residual_too_high" || r->reason == "did_not_converge") << r->reason;
+    if (r->reason == "residual_too_high") {
+      EXPECT_GT(r->residual_rms_px, 5.0);
+    } else {
+      EXPECT_FALSE(r->solved);
+    }
+  }
+}
+
 TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
   const SensorModel& s = *car_.FindSensor("front_camera");
   const Rigid3d truth = TrueMounting(s, {}, Eigen::Vector3d::Zero());
@@ -225,6 +274,203 @@ TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
             std::string::npos);
   EXPECT_EQ(CalibrateCamera(*car_.FindSensor("front_radar"), station_, aligner_.T_station_car(), obs).status().code(),
             absl::StatusCode::kInvalidArgument);
+}
+
+// The true vanishing point of the car axis for a camera at T_car_camera (looking forward).
+Eigen::Vector2d TrueVanishingPoint(const CameraIntrinsics& k, const Rigid3d& T_car_camera) {
+  return (PinholeMatrix(k) * T_car_camera.Inverse().RotationMatrix().col(0)).hnormalized();
+}
+
+// Method (b) on exact features: the vanishing point is the extrinsic's to numerical
+// precision (the board point ahead is computed with the aligner's thrust angle), and so is
+// the levelled ground homography; the toolbox formula's only for a level camera looking
+// straight along the car (pitch and yaw 0), and within its documented bias otherwise.
+TEST_F(CameraCalibrationTest, BoardMethodOnExactFeaturesAgreesWithTheTruth) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const CameraModel camera = *CameraModel::Create(*s.intrinsics);
+  const StationBoard& board = *station_.FindBoard("front_chessboard");
+  const Rigid3d T_car_board = aligner_.T_station_car().Inverse() * board.T_station_board;
+  std::mt19937_64 rng(1);
+  // Nominal pitch 1.5 deg: -1.5 makes the camera level; with yaw 0 the formula is then exact.
+  for (const double pitch_error_deg : {0.3, -1.5}) {
+    SCOPED_TRACE(pitch_error_deg);
+    const double yaw_error_deg = pitch_error_deg == -1.5 ? 0.0 : 0.4;
+    const Rigid3d truth =
+        TrueMounting(s, {yaw_error_deg * kDeg, pitch_error_deg * kDeg, 0}, Eigen::Vector3d(0.01, -0.02, 0.005));
+    std::vector<DetectedFeature> corners;
+    for (const BoardObservation& o : Observe(s, truth, 0.0, rng)) {
+      if (o.board_id == "front_chessboard") corners = o.features;
+    }
+    ASSERT_EQ(corners.size(), 20u);
+    const BoardMethodResult b =
+        SolveBoardMethod(camera, board.board, T_car_board, truth.translation(), 1, corners);
+    ASSERT_TRUE(b.valid) << b.reason << ": " << b.message;
+    EXPECT_LT(b.homography_rms_px, 1e-6);
+    EXPECT_LT((b.vanishing_point_px - TrueVanishingPoint(*s.intrinsics, truth)).norm(), 1e-6);
+    ASSERT_EQ(b.ground_points_car_m.size(), 4u);
+    // A and B stand on the ground line of the board, at its foot.
+    for (int g = 0; g < 2; ++g) {
+      const Eigen::Vector3d on_board = T_car_board.Inverse() *
+                                       Eigen::Vector3d(b.ground_points_car_m[g].x(), b.ground_points_car_m[g].y(), 0);
+      if (pitch_error_deg == -1.5) {
+        EXPECT_NEAR(on_board.z(), 0, 1e-6) << g;
+      }
+    }
+    Eigen::Matrix3d H_true;
+    const Rigid3d T_camera_car = truth.Inverse();
+    H_true << T_camera_car.RotationMatrix().col(0), T_camera_car.RotationMatrix().col(1), T_camera_car.translation();
+    H_true = PinholeMatrix(*s.intrinsics) * H_true;
+    const std::vector<double> distances = {5, 10, 20, 50};
+    // The levelled ground homography is exact, pitched and yawed or not.
+    const std::vector<double> off = GroundDisagreement(H_true, b.ground_homography, truth.translation(), 1, distances);
+    ASSERT_EQ(off.size(), 4u);
+    for (size_t i = 0; i < off.size(); ++i) EXPECT_LT(off[i], 1e-9) << distances[i];
+    const std::vector<double> toolbox =
+        GroundDisagreement(H_true, b.toolbox_ground_homography, truth.translation(), 1, distances);
+    ASSERT_EQ(toolbox.size(), 4u);
+    for (size_t i = 0; i < toolbox.size(); ++i) {
+      if (pitch_error_deg == -1.5) {
+        EXPECT_LT(toolbox[i], 1e-9) << distances[i];
+      } else {
+        // Pitched down 1.8 deg: the toolbox formula's documented bias, 1 / (1 - tan(d - p)
+        // tan(p)) - 1 at the board's foot (5.1 m, d = 14.6 deg): 0.8%; under 1% everywhere.
+        EXPECT_GT(toolbox[i], 1e-4) << distances[i];
+        EXPECT_LT(toolbox[i], 0.01) << distances[i];
+      }
+    }
+  }
+}
+
+// Straight on (no aligner offsets or thrust): the board point ahead is the toolbox's
+// (-lateral_offset, camera_height - board_height).
+TEST_F(CameraCalibrationTest, BoardMethodPointAheadIsTheToolboxFormulaWhenTheBoardIsAcrossTheAxis) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const CameraModel camera = *CameraModel::Create(*s.intrinsics);
+  aligner_ = AlignerMeasurement{};
+  const StationBoard& board = *station_.FindBoard("front_chessboard");
+  const Rigid3d T_car_board = board.T_station_board;
+  const Rigid3d truth = TrueMounting(s, {0.2 * kDeg, 0.1 * kDeg, -0.3 * kDeg}, Eigen::Vector3d(0.0, 0.025, -0.01));
+  std::mt19937_64 rng(2);
+  const std::vector<BoardObservation> obs = Observe(s, truth, 0.0, rng);
+  const BoardMethodResult b =
+      SolveBoardMethod(camera, board.board, T_car_board, truth.translation(), 1, obs[0].features);
+  ASSERT_TRUE(b.valid) << b.reason;
+  const double lateral_offset = truth.translation().y() - T_car_board.translation().y();
+  const double height_difference = truth.translation().z() - T_car_board.translation().z();
+  EXPECT_NEAR(b.board_point_ahead_m.x(), -lateral_offset, 1e-12);
+  EXPECT_NEAR(b.board_point_ahead_m.y(), height_difference, 1e-12);
+}
+
+// Through CalibrateCamera with 0.2 px noise and three frames: method (b) within the
+// acceptance bar of method (a) (0.5 px) and of the truth.
+TEST_F(CameraCalibrationTest, BoardMethodWithNoiseAgreesWithMethodA) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const Rigid3d truth = TrueMounting(s, {-0.5 * kDeg, 0.6 * kDeg, 0.3 * kDeg}, Eigen::Vector3d(-0.01, 0.01, 0.02));
+  std::mt19937_64 rng(31);
+  absl::StatusOr<CameraCalibrationResult> r =
+      CalibrateCamera(s, station_, aligner_.T_station_car(), ObserveFrames(s, truth, 0.2, 3, rng));
+  ASSERT_TRUE(r.ok() && r->solved);
+  ASSERT_TRUE(r->board_method.valid) << r->board_method.reason;
+  const Eigen::Vector2d vp_true = TrueVanishingPoint(*s.intrinsics, truth);
+  EXPECT_LT((r->board_method.vanishing_point_px - vp_true).norm(), 0.5);
+  EXPECT_LT(r->vanishing_point_disagreement_px, 0.5);
+  EXPECT_NEAR(r->vanishing_point_disagreement_px, (r->board_method.vanishing_point_px - r->vanishing_point_px).norm(),
+              1e-12);
+  ASSERT_EQ(r->ground_disagreement.size(), 4u);
+  for (double d : r->ground_disagreement) EXPECT_LT(d, 0.005);  // acceptance: 0.5%
+  ASSERT_EQ(r->toolbox_ground_disagreement.size(), 4u);
+  // A side camera has neither.
+  const SensorModel& side = *car_.FindSensor("surround_left");
+  absl::StatusOr<CameraCalibrationResult> l = CalibrateCamera(
+      side, station_, aligner_.T_station_car(), Observe(side, TrueMounting(side, {}, Eigen::Vector3d::Zero()), 0.2, rng));
+  ASSERT_TRUE(l.ok() && l->solved);
+  EXPECT_FALSE(l->board_method.valid);
+  EXPECT_EQ(l->board_method.reason, "chessboard_not_seen");
+  EXPECT_EQ(l->vertical_roll.reason, "vertical_board_not_seen");
+}
+
+TEST_F(CameraCalibrationTest, BoardMethodRefusesBadGeometryWithAReason) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const CameraModel camera = *CameraModel::Create(*s.intrinsics);
+  const StationBoard& board = *station_.FindBoard("front_chessboard");
+  const Rigid3d T_car_board = aligner_.T_station_car().Inverse() * board.T_station_board;
+  const Rigid3d truth = TrueMounting(s, {}, Eigen::Vector3d::Zero());
+  std::mt19937_64 rng(4);
+  const std::vector<DetectedFeature> corners = Observe(s, truth, 0.0, rng)[0].features;
+  ASSERT_EQ(corners.size(), 20u);
+  const Eigen::Vector3d c = truth.translation();
+  EXPECT_EQ(SolveBoardMethod(camera, station_.FindBoard("front_circle")->board, T_car_board, c, 1, corners).reason,
+            "not_a_chessboard");
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, c, 0, corners).reason, "not_looking_along_car");
+  const std::vector<DetectedFeature> left_only(corners.begin(), corners.begin() + 10);
+  const BoardMethodResult few = SolveBoardMethod(camera, board.board, T_car_board, c, 1, left_only);
+  EXPECT_EQ(few.reason, "too_few_features");
+  EXPECT_NE(few.message.find("0 of the right"), std::string::npos) << few.message;
+  // The board turned edge-on to the car axis, the camera looking backward, the board lying flat.
+  const Rigid3d edge_on = T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(1.55, Eigen::Vector3d::UnitY())),
+                                                Eigen::Vector3d::Zero());
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, edge_on, c, 1, corners).reason, "axis_parallel_to_board");
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, c, -1, corners).reason, "board_behind_camera");
+  const Rigid3d flat = T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(-1.3, Eigen::Vector3d::UnitX())),
+                                             Eigen::Vector3d::Zero());
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, flat, c, 1, corners).reason, "board_not_upright");
+  // A camera below the ground sees the ground points above its horizon.
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, Eigen::Vector3d(c.x(), c.y(), -0.5), 1, corners).reason,
+            "ground_point_above_horizon");
+}
+
+// Roll from the vertical board's corner columns: exact on exact features whatever the yaw and
+// pitch (the board stands 28 deg off the axis, where the plain slope reads 0.8 deg wrong),
+// within 0.05 deg of the truth with 0.2 px noise, and refused for a tilted board.
+TEST_F(CameraCalibrationTest, RollFromTheVerticalBoard) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const CameraModel camera = *CameraModel::Create(*s.intrinsics);
+  const StationBoard& board = *station_.FindBoard("front_vertical");
+  const Rigid3d T_car_board = aligner_.T_station_car().Inverse() * board.T_station_board;
+  std::mt19937_64 rng(6);
+  for (const double roll_deg : {0.0, 0.7, -1.2}) {
+    SCOPED_TRACE(roll_deg);
+    const YawPitchRoll error{0.6 * kDeg, -0.8 * kDeg, roll_deg * kDeg};
+    const Rigid3d truth = TrueMounting(s, error, Eigen::Vector3d::Zero());
+    const double roll_true = MountingAngles(truth.RotationMatrix(), SensorBaseRotation(s.kind)).roll;
+    const Eigen::Vector3d car_x = truth.Inverse().RotationMatrix().col(0);
+    std::vector<DetectedFeature> exact;
+    for (const BoardObservation& o : Observe(s, truth, 0.0, rng)) {
+      if (o.board_id == "front_vertical") exact = o.features;
+    }
+    ASSERT_GE(exact.size(), 40u);
+    const VerticalBoardRoll r = RollFromVerticalBoard(camera, board.board, T_car_board, car_x, exact);
+    ASSERT_TRUE(r.valid) << r.reason;
+    EXPECT_EQ(r.lines_used, 3);
+    EXPECT_NEAR(r.roll_rad, roll_true, 1e-9);
+
+    absl::StatusOr<CameraCalibrationResult> c =
+        CalibrateCamera(s, station_, aligner_.T_station_car(), ObserveFrames(s, truth, 0.2, 3, rng));
+    ASSERT_TRUE(c.ok() && c->solved);
+    ASSERT_TRUE(c->vertical_roll.valid) << c->vertical_roll.reason;
+    EXPECT_NEAR(c->vertical_roll.roll_rad, roll_true, 0.05 * kDeg);
+    EXPECT_NEAR(c->vertical_roll.roll_rad - c->mounting.angles.roll, 0, 0.05 * kDeg);
+  }
+  const Rigid3d truth = TrueMounting(s, {}, Eigen::Vector3d::Zero());
+  std::vector<DetectedFeature> exact;
+  for (const BoardObservation& o : Observe(s, truth, 0.0, rng)) {
+    if (o.board_id == "front_vertical") exact = o.features;
+  }
+  const Eigen::Vector3d car_x = truth.Inverse().RotationMatrix().col(0);
+  const Rigid3d tilted = T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(0.01, Eigen::Vector3d::UnitZ())),
+                                               Eigen::Vector3d::Zero());
+  EXPECT_EQ(RollFromVerticalBoard(camera, board.board, tilted, car_x, exact).reason, "board_not_upright");
+  const std::vector<DetectedFeature> one_column = [&] {
+    std::vector<DetectedFeature> v;
+    for (const DetectedFeature& f : exact) {
+      if (std::abs(f.p_board.x()) < 1e-6) v.push_back(f);
+    }
+    return v;
+  }();
+  EXPECT_EQ(RollFromVerticalBoard(camera, board.board, T_car_board, car_x, one_column).reason, "too_few_lines");
+  EXPECT_EQ(RollFromVerticalBoard(camera, station_.FindBoard("front_chessboard")->board, T_car_board, car_x, exact)
+                .reason,
+            "not_a_vertical_board");
 }
 
 }  // namespace
