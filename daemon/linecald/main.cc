@@ -2,17 +2,23 @@
 // --db and --log-level overriding the file; without --config it starts on the bundled demo
 // station (simulated sensors) with its data under --data-dir (default ./linecald-data).
 // SIGTERM or SIGINT: stop taking calls, let a running cycle end as cancelled, exit 0.
+// Under systemd (Type=notify): READY=1 once calls are served, WATCHDOG=1 while the core
+// answers, STOPPING=1 on the signal (daemon/systemd/sd_notify.h).
 #include <pthread.h>
 #include <signal.h>
 
+#include <condition_variable>
 #include <cstdio>
 #include <cstring>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "daemon/core/daemon_config.h"
 #include "daemon/service/station_service.h"
+#include "daemon/systemd/sd_notify.h"
 
 namespace {
 
@@ -26,6 +32,40 @@ constexpr char kUsage[] =
 void Log(const char* level, const std::string& message) {
   std::fprintf(stderr, "level=%s msg=\"%s\"\n", level, message.c_str());
 }
+
+// Sends WATCHDOG=1 at half systemd's interval for as long as the core answers a status
+// query: a core wedged on its lock stops the pings and systemd restarts the daemon.
+class Watchdog {
+ public:
+  Watchdog(const linecal::SystemdNotifier& notifier, linecal::StationCore* core) {
+    const std::optional<std::chrono::microseconds> interval = notifier.watchdog_interval();
+    if (!interval) return;
+    thread_ = std::thread([this, &notifier, core, period = *interval / 2] {
+      std::unique_lock<std::mutex> lock(mutex_);
+      while (!stop_) {
+        lock.unlock();
+        (void)core->Status();
+        if (absl::Status s = notifier.Notify("WATCHDOG=1"); !s.ok()) Log("warning", std::string(s.message()));
+        lock.lock();
+        stopped_.wait_for(lock, period, [this] { return stop_; });
+      }
+    });
+  }
+  ~Watchdog() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    stopped_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable stopped_;
+  bool stop_ = false;
+  std::thread thread_;
+};
 
 }  // namespace
 
@@ -90,11 +130,18 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
-  Log("info", "listening on " + config->listen + " (port " + std::to_string(server->port) + "), database " +
-                  config->core.db_path + (config->auth_token.empty() ? ", no authentication" : ", token authentication"));
+  const std::string listening = "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
+  Log("info", listening + ", database " + config->core.db_path +
+                  (config->auth_token.empty() ? ", no authentication" : ", token authentication"));
+  const linecal::SystemdNotifier notifier = linecal::SystemdNotifier::FromEnvironment();
+  if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok()) Log("warning", std::string(s.message()));
   int signal = 0;
-  sigwait(&signals, &signal);
+  {
+    const Watchdog watchdog(notifier, core->get());
+    sigwait(&signals, &signal);
+  }
   Log("info", std::string("stopping on ") + (signal == SIGTERM ? "SIGTERM" : "SIGINT"));
+  notifier.Notify("STOPPING=1").IgnoreError();
   if (const std::optional<int64_t> running = (*core)->Status().running_cycle) {
     // Ends as cancelled at its next step; a cycle that ended meanwhile needs nothing.
     (*core)->CancelCycle(*running).IgnoreError();
