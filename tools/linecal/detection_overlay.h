@@ -1,11 +1,32 @@
 #pragma once
-// Drawing a detection over its image, for `linecal detect --overlay`.
+// Drawing over images, for `linecal detect --overlay` and `linecal aftersale`.
+
+#include <array>
+#include <cstdint>
+
+#include <Eigen/Core>
 
 #include "detectors/core/image_view.h"
 #include "detectors/detection.h"
 #include "station/io/image_io.h"
 
 namespace linecal::tools {
+
+using Rgb = std::array<std::uint8_t, 3>;
+
+// The grey image as RGB. The view must be valid. O(pixels).
+RgbImage GreyToRgb(const ImageView8& image);
+
+// Sets pixel (x, y); pixels outside the image are skipped. O(1).
+void PutPixel(RgbImage* img, int x, int y, const Rgb& colour);
+
+// A cross of arms half_px long centred on the rounded uv_px, clipped to the image; nothing for
+// a point far outside it (or not a number). O(half_px).
+void DrawCross(RgbImage* img, const Eigen::Vector2d& uv_px, int half_px, const Rgb& colour);
+
+// A straight segment from a to b (pixel centres), `thickness` pixels wide, clipped to the
+// image; nothing when an end is far outside it. O(length x thickness^2).
+void DrawSegment(RgbImage* img, const Eigen::Vector2d& a, const Eigen::Vector2d& b, int thickness, const Rgb& colour);
 
 // The grey image as RGB with each feature marked: a cross at its (rounded) position, green
 // when the whole board was found and orange otherwise, and its id in small digits to the

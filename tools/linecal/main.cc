@@ -22,6 +22,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"pattern"}, "write a printable board pattern (SVG/PNG)", RunPattern},
       {{"capture", "check"}, "validate a capture directory", RunCaptureCheck},
       {{"sim"}, "simulate a car in a station and write a capture", RunSim},
+      {{"sim", "lanes"}, "render a lane scene for the after-sale tool (PNG + its input JSON)", RunSimLanes},
       {{"lidar", "topview"}, "draw LiDAR scans seen from above (PNG)", RunLidarTopview},
       {{"lidar", "decode"}, "decode LiDAR packets (pcap) into one PCD per rotation", RunLidarDecode},
       {{"radar", "decode"}, "decode a radar CAN log (candump) into detections", RunRadarDecode},
@@ -34,6 +35,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"cycle", "show"}, "show a stored cycle", RunCycleShow},
       {{"cycles", "list"}, "list stored cycles (--vin, --verdict)", RunCyclesList},
       {{"status"}, "the daemon's station status", RunStatus},
+      {{"aftersale"}, "camera calibration from lane lines in one image (--json, --out, --export)", RunAftersale},
   };
   return kTable;
 }
