@@ -1,6 +1,7 @@
 #include "station/solvers/lane_calibration.h"
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <string>
 
@@ -150,6 +151,16 @@ bool GroundPointOfPixel(const CameraModel& camera, const Rigid3d& T_camera_car, 
   if (!CheckBelowHorizon(k_inv, up_camera, q, uv_px, "").ok()) return false;
   *p_ground = (GroundHomography(camera.intrinsics(), T_camera_car).inverse() * q.homogeneous()).hnormalized();
   return true;
+}
+
+double RelativeRangingError(const CameraModel& camera, const Rigid3d& T_car_camera_true,
+                            const Rigid3d& T_car_camera_estimate, const Eigen::Vector2d& p_ground) {
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  Eigen::Vector2d uv, back;
+  const Eigen::Vector3d p_camera = T_car_camera_true.Inverse() * Eigen::Vector3d(p_ground.x(), p_ground.y(), 0);
+  if (!camera.Project(p_camera, &uv) || !camera.IsInImage(uv)) return kNaN;
+  if (!GroundPointOfPixel(camera, T_car_camera_estimate.Inverse(), uv, &back)) return kNaN;
+  return (back - p_ground).norm() / (p_ground - T_car_camera_true.translation().head<2>()).norm();
 }
 
 absl::StatusOr<LaneCalibrationResult> CalibrateFromLanes(const LaneCalibrationInput& input) {

@@ -104,4 +104,12 @@ bool UndistortedPixel(const CameraModel& camera, const Eigen::Vector2d& uv_px, E
 bool GroundPointOfPixel(const CameraModel& camera, const Rigid3d& T_camera_car, const Eigen::Vector2d& uv_px,
                         Eigen::Vector2d* p_ground);
 
+// The ranging error of an estimated mounting at ground point p_ground (car frame, z = 0): the
+// point imaged through the true mounting and the lens, taken back to the ground through the
+// estimate (GroundPointOfPixel), the distance between the two over the point's horizontal
+// distance from the camera's footprint. NaN when the true camera does not see the point or the
+// estimate puts its pixel above the horizon. For evaluations and tests. O(1).
+double RelativeRangingError(const CameraModel& camera, const Rigid3d& T_car_camera_true,
+                            const Rigid3d& T_car_camera_estimate, const Eigen::Vector2d& p_ground);
+
 }  // namespace linecal

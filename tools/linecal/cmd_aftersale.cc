@@ -11,9 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_split.h"
 #include "station/io/image_io.h"
 #include "station/io/json_reader.h"
 #include "station/model/pose_json.h"
@@ -50,17 +48,11 @@ struct AftersaleRequest {
 
 // "u,v,u,v,..." as points; `what` names the flag or field in errors.
 absl::StatusOr<std::vector<Eigen::Vector2d>> ParsePoints(const std::string& text, const std::string& what) {
-  std::vector<double> v;
-  for (const absl::string_view part : absl::StrSplit(text, ',')) {
-    double x;
-    if (!absl::SimpleAtod(part, &x) || !std::isfinite(x)) {
-      return absl::InvalidArgumentError(absl::StrCat(what, ": '", part, "' is not a number (expected U,V,U,V,...)"));
-    }
-    v.push_back(x);
-  }
-  if (v.size() % 2 != 0) return absl::InvalidArgumentError(absl::StrCat(what, ": an odd count of numbers (U,V pairs)"));
+  absl::StatusOr<std::vector<double>> v = cli::ParseNumberList(text, what);
+  if (!v.ok()) return v.status();
+  if (v->size() % 2 != 0) return absl::InvalidArgumentError(absl::StrCat(what, ": an odd count of numbers (U,V pairs)"));
   std::vector<Eigen::Vector2d> points;
-  for (size_t i = 0; i < v.size(); i += 2) points.emplace_back(v[i], v[i + 1]);
+  for (size_t i = 0; i < v->size(); i += 2) points.emplace_back((*v)[i], (*v)[i + 1]);
   return points;
 }
 
@@ -226,14 +218,9 @@ absl::Status ReadFlags(const cli::CommandLine& cl, AftersaleRequest* r) {
   }
   if (cl.Has("rear")) r->looking_backward = true;
   if (cl.Has("distortion")) {
-    r->distortion.clear();
-    for (const absl::string_view part : absl::StrSplit(cl.Get("distortion"), ',')) {
-      double x;
-      if (!absl::SimpleAtod(part, &x) || !std::isfinite(x)) {
-        return absl::InvalidArgumentError(absl::StrCat("--distortion: '", part, "' is not a number"));
-      }
-      r->distortion.push_back(x);
-    }
+    absl::StatusOr<std::vector<double>> d = cli::ParseNumberList(cl.Get("distortion"), "--distortion");
+    if (!d.ok()) return d.status();
+    r->distortion = *d;
   }
   if (cl.Has("lane") && cl.Has("markers")) return absl::InvalidArgumentError("--lane and --markers: give one of them");
   if (cl.Has("lane")) {

@@ -9,9 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_split.h"
 #include "station/io/image_io.h"
 #include "station/io/json_reader.h"
 #include "station/model/car_model.h"
@@ -26,22 +24,6 @@ namespace {
 namespace fs = std::filesystem;
 constexpr char kCommand[] = "sim lanes";
 constexpr double kDeg = std::numbers::pi / 180.0;
-
-// A comma-separated list of `n` numbers (n = 0: any count >= 1) given with --flag.
-absl::StatusOr<std::vector<double>> NumberList(const cli::CommandLine& cl, const std::string& flag, size_t n) {
-  std::vector<double> v;
-  for (const absl::string_view part : absl::StrSplit(cl.Get(flag), ',')) {
-    double x;
-    if (!absl::SimpleAtod(part, &x) || !std::isfinite(x)) {
-      return absl::InvalidArgumentError(absl::StrCat("--", flag, ": '", part, "' is not a number"));
-    }
-    v.push_back(x);
-  }
-  if (n != 0 && v.size() != n) {
-    return absl::InvalidArgumentError(absl::StrCat("--", flag, ": ", n, " comma-separated numbers needed, got ", v.size()));
-  }
-  return v;
-}
 
 nlohmann::json Uv(const Eigen::Vector2d& p) { return {p.x(), p.y()}; }
 
@@ -85,12 +67,12 @@ int RunSimLanes(const Args& args) {
   YawPitchRoll angles = MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
   Eigen::Vector3d xyz = sensor->T_car_sensor_nominal.translation();
   if (cl.Has("ypr-deg")) {
-    absl::StatusOr<std::vector<double>> v = NumberList(cl, "ypr-deg", 3);
+    absl::StatusOr<std::vector<double>> v = cli::ParseNumberList(cl.Get("ypr-deg"), "--ypr-deg", 3);
     if (!v.ok()) return cli::BadInput(kCommand, std::string(v.status().message()));
     angles = {(*v)[0] * kDeg, (*v)[1] * kDeg, (*v)[2] * kDeg};
   }
   if (cl.Has("xyz-m")) {
-    absl::StatusOr<std::vector<double>> v = NumberList(cl, "xyz-m", 3);
+    absl::StatusOr<std::vector<double>> v = cli::ParseNumberList(cl.Get("xyz-m"), "--xyz-m", 3);
     if (!v.ok()) return cli::BadInput(kCommand, std::string(v.status().message()));
     xyz = Eigen::Vector3d((*v)[0], (*v)[1], (*v)[2]);
   }
@@ -112,12 +94,12 @@ int RunSimLanes(const Args& args) {
   if (*seed_flag < 0) return cli::BadInput(kCommand, absl::StrCat("--seed: must be >= 0, got ", *seed_flag));
   seed = *seed_flag;
   if (cl.Has("points-m")) {
-    absl::StatusOr<std::vector<double>> v = NumberList(cl, "points-m", 0);
+    absl::StatusOr<std::vector<double>> v = cli::ParseNumberList(cl.Get("points-m"), "--points-m", 0);
     if (!v.ok()) return cli::BadInput(kCommand, std::string(v.status().message()));
     o.point_distances_m = *v;
   }
   if (cl.Has("markers-m")) {
-    absl::StatusOr<std::vector<double>> v = NumberList(cl, "markers-m", 2);
+    absl::StatusOr<std::vector<double>> v = cli::ParseNumberList(cl.Get("markers-m"), "--markers-m", 2);
     if (!v.ok()) return cli::BadInput(kCommand, std::string(v.status().message()));
     o.marker_distances_m = {(*v)[0], (*v)[1]};
   }

@@ -29,6 +29,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"radar", "calibrate"}, "radar mounting yaw from a capture's corner reflectors", RunRadarCalibrate},
       {{"eval", "radar"}, "Monte Carlo evaluation of radar yaw calibration", RunEvalRadar},
       {{"eval", "calibrate"}, "Monte Carlo evaluation of camera-to-car calibration", RunEvalCalibrate},
+      {{"eval", "aftersale"}, "Monte Carlo evaluation of the after-sale lane calibration", RunEvalAftersale},
       {{"detect"}, "find a calibration board in an image (--json, --overlay)", RunDetect},
       {{"calibrate"}, "compute a calibration cycle from a capture (--json)", RunCalibrate},
       {{"cycle", "start"}, "start a cycle on the daemon (--wait: follow it and print the results)", RunCycleStart},

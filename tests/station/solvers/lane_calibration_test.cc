@@ -99,19 +99,15 @@ double AngleError(double a, double b) { return std::abs(std::remainder(a - b, 2 
 // projected through the true camera, then back to the ground through the estimate.
 double WorstRangingError(const Pose& p, const LaneCalibrationResult& r) {
   const CameraModel camera = *CameraModel::Create(p.intrinsics);
-  const Rigid3d T_camera_car = TrueMounting(p).Inverse();
-  const Rigid3d T_camera_car_estimate = r.T_car_camera.Inverse();
   const double along = std::cos(p.angles_deg.yaw * kDeg) < 0 ? -1 : 1;
   double worst = 0;
   const bool fisheye = p.intrinsics.type == CameraModelType::kFisheye;
   for (double d : fisheye ? std::vector<double>{3, 5, 8, 12} : std::vector<double>{5, 10, 20, 30}) {
     for (double y : {-1.75, 0.0, 1.75}) {
-      const Eigen::Vector3d p_car(p.position_m.x() + along * d, y, 0);
-      Eigen::Vector2d uv, g;
-      EXPECT_TRUE(camera.Project(T_camera_car * p_car, &uv));
-      EXPECT_TRUE(GroundPointOfPixel(camera, T_camera_car_estimate, uv, &g)) << p.name << " " << d;
-      const double distance = (p_car.head<2>() - p.position_m.head<2>()).norm();
-      worst = std::max(worst, (g - p_car.head<2>()).norm() / distance);
+      const double e = RelativeRangingError(camera, TrueMounting(p), r.T_car_camera,
+                                            Eigen::Vector2d(p.position_m.x() + along * d, y));
+      EXPECT_TRUE(std::isfinite(e)) << p.name << " " << d << " " << y;
+      worst = std::max(worst, e);
     }
   }
   return worst;
