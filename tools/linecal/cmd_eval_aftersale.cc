@@ -58,11 +58,8 @@ int RunEvalAftersale(const Args& args) {
   if (auto code = cli::ParseOrExit(cl, kCommand, args)) return *code;
   absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
   if (!car.ok()) return cli::BadInput(kCommand, std::string(car.status().message()));
-  const SensorModel* sensor = nullptr;
-  for (const SensorModel& s : car->sensors) {
-    if (s.name == cl.Get("camera") && s.kind == SensorKind::kCamera && s.intrinsics) sensor = &s;
-  }
-  if (sensor == nullptr) {
+  const SensorModel* sensor = car->FindSensor(cl.Get("camera"));
+  if (sensor == nullptr || sensor->kind != SensorKind::kCamera || !sensor->intrinsics) {
     return cli::BadInput(kCommand, absl::StrCat("--camera: '", cl.Get("camera"), "' is not a camera of ", cl.Get("car")));
   }
   absl::StatusOr<int> trials = cl.GetInt("trials", 1000);

@@ -56,10 +56,7 @@ int RunSimLanes(const Args& args) {
 
   absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
   if (!car.ok()) return cli::BadInput(kCommand, std::string(car.status().message()));
-  const SensorModel* sensor = nullptr;
-  for (const SensorModel& s : car->sensors) {
-    if (s.name == cl.Get("camera")) sensor = &s;
-  }
+  const SensorModel* sensor = car->FindSensor(cl.Get("camera"));
   if (sensor == nullptr || sensor->kind != SensorKind::kCamera || !sensor->intrinsics) {
     return cli::BadInput(kCommand, absl::StrCat("--camera: '", cl.Get("camera"), "' is not a camera of ", cl.Get("car")));
   }
