@@ -209,5 +209,24 @@ TEST_F(AftersaleCliTest, BadInputIsRefusedByName) {
   EXPECT_NE(sim.err.find("--camera: 'roof_lidar' is not a camera"), std::string::npos) << sim.err;
 }
 
+TEST(EvalAftersaleCliTest, SmallRunMeetsTheBarsAtATenthOfAPixel) {
+  const auto run = RunLinecal("eval aftersale" + kCar + " --camera front_camera --trials 100 --noise-px 0,0.1 --json");
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  ASSERT_EQ(j.size(), 2u);
+  EXPECT_EQ(j[0]["trials"], 100);
+  EXPECT_EQ(j[0]["refused"], 0);
+  EXPECT_LT(j[0]["vanishing_point_p95_px"].get<double>(), 1e-6);  // exact points
+  EXPECT_LT(j[0]["ranging_p95_percent"].get<double>(), 1e-6);
+  EXPECT_GT(j[1]["vanishing_point_p95_px"].get<double>(), 0.05);  // the noise is there
+  EXPECT_LE(j[1]["vanishing_point_p95_px"].get<double>(), 0.5);
+  EXPECT_LE(j[1]["yaw_p95_deg"].get<double>(), 0.05);
+  EXPECT_LE(j[1]["pitch_p95_deg"].get<double>(), 0.05);
+  EXPECT_LE(j[1]["ranging_p95_percent"].get<double>(), 1.0);
+  const auto bad = RunLinecal("eval aftersale" + kCar + " --camera front_camera --noise-px 0.1,x");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(bad.err, "linecal eval aftersale: --noise-px: 'x' is not a number\n");
+}
+
 }  // namespace
 }  // namespace linecal
