@@ -9,10 +9,10 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
-#include "station/model/car_model.h"
 #include "station/sim/lane_scene.h"
 #include "station/solvers/lane_calibration.h"
 #include "tools/cli/command_line.h"
+#include "tools/linecal/car_camera.h"
 #include "tools/linecal/commands.h"
 #include "tools/linecal/eval_stats.h"
 
@@ -56,12 +56,10 @@ int RunEvalAftersale(const Args& args) {
        {"seed", "N", "random seed (default 1)"},
        {"json", "", "print the result as JSON"}});
   if (auto code = cli::ParseOrExit(cl, kCommand, args)) return *code;
-  absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
-  if (!car.ok()) return cli::BadInput(kCommand, std::string(car.status().message()));
-  const SensorModel* sensor = car->FindSensor(cl.Get("camera"));
-  if (sensor == nullptr || sensor->kind != SensorKind::kCamera || !sensor->intrinsics) {
-    return cli::BadInput(kCommand, absl::StrCat("--camera: '", cl.Get("camera"), "' is not a camera of ", cl.Get("car")));
-  }
+  absl::StatusOr<SensorModel> camera_sensor = ReadCarCamera(cl.Get("car"), cl.Get("camera"));
+  if (!camera_sensor.ok()) return cli::BadInput(kCommand, std::string(camera_sensor.status().message()));
+  const SensorModel* sensor = &*camera_sensor;
+
   absl::StatusOr<int> trials = cl.GetInt("trials", 1000);
   absl::StatusOr<int> seed = cl.GetInt("seed", 1);
   absl::StatusOr<double> perturb = cl.GetDouble("perturb-deg", 2.0);

@@ -12,10 +12,10 @@
 #include "absl/strings/str_cat.h"
 #include "station/io/image_io.h"
 #include "station/io/json_reader.h"
-#include "station/model/car_model.h"
 #include "station/model/pose_json.h"
 #include "station/sim/lane_scene.h"
 #include "tools/cli/command_line.h"
+#include "tools/linecal/car_camera.h"
 #include "tools/linecal/commands.h"
 
 namespace linecal::tools {
@@ -54,12 +54,10 @@ int RunSimLanes(const Args& args) {
        {"json", "", "print the summary as JSON"}});
   if (auto code = cli::ParseOrExit(cl, kCommand, args)) return *code;
 
-  absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
-  if (!car.ok()) return cli::BadInput(kCommand, std::string(car.status().message()));
-  const SensorModel* sensor = car->FindSensor(cl.Get("camera"));
-  if (sensor == nullptr || sensor->kind != SensorKind::kCamera || !sensor->intrinsics) {
-    return cli::BadInput(kCommand, absl::StrCat("--camera: '", cl.Get("camera"), "' is not a camera of ", cl.Get("car")));
-  }
+  absl::StatusOr<SensorModel> camera_sensor = ReadCarCamera(cl.Get("car"), cl.Get("camera"));
+  if (!camera_sensor.ok()) return cli::BadInput(kCommand, std::string(camera_sensor.status().message()));
+  const SensorModel* sensor = &*camera_sensor;
+
   const Eigen::Matrix3d r_base = CameraBaseRotation();
   YawPitchRoll angles = MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
   Eigen::Vector3d xyz = sensor->T_car_sensor_nominal.translation();
