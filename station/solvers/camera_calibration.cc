@@ -81,6 +81,22 @@ std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3
   return out;
 }
 
+bool CarAxisVanishingPoint(const CameraIntrinsics& intrinsics, const Rigid3d& T_camera_car,
+                           Eigen::Vector2d* vanishing_point_px) {
+  const int along = CarAxisAlong(T_camera_car);
+  if (along == 0) return false;
+  *vanishing_point_px = (PinholeMatrix(intrinsics) * (along * T_camera_car.RotationMatrix().col(0))).hnormalized();
+  return true;
+}
+
+Eigen::Matrix3d GroundHomography(const CameraIntrinsics& intrinsics, const Rigid3d& T_camera_car) {
+  const Eigen::Matrix3d R_camera_car = T_camera_car.RotationMatrix();
+  Eigen::Matrix3d rt;
+  rt << R_camera_car.col(0), R_camera_car.col(1), T_camera_car.translation();
+  Eigen::Matrix3d h = PinholeMatrix(intrinsics) * rt;
+  return h / h(2, 2);
+}
+
 absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& sensor, const StationLayout& station,
                                                         const Rigid3d& T_station_car,
                                                         std::span<const BoardObservation> observations,
@@ -138,16 +154,9 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
 
   // What the car's software derives from the extrinsic (valid whatever the verdict).
   const Eigen::Matrix3d R_camera_car = T_camera_car.RotationMatrix();
-  const Eigen::Matrix3d k = PinholeMatrix(*sensor.intrinsics);
   const int along = CarAxisAlong(T_camera_car);
-  if (along != 0) {
-    result.vanishing_point_px = (k * (along * R_camera_car.col(0))).hnormalized();
-    result.vanishing_point_valid = true;
-  }
-  Eigen::Matrix3d rt;
-  rt << R_camera_car.col(0), R_camera_car.col(1), T_camera_car.translation();
-  result.ground_homography = k * rt;
-  result.ground_homography /= result.ground_homography(2, 2);
+  result.vanishing_point_valid = CarAxisVanishingPoint(*sensor.intrinsics, T_camera_car, &result.vanishing_point_px);
+  result.ground_homography = GroundHomography(*sensor.intrinsics, T_camera_car);
   if (result.vanishing_point_valid) {
     result.ranging = RangingCheckOf(*camera, T_camera_car, result.vanishing_point_px, options.ranging_distances_m);
   }

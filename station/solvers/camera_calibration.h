@@ -126,4 +126,14 @@ std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3
                                          const Eigen::Vector2d& vanishing_point_px,
                                          std::span<const double> distances_m);
 
+// The vanishing point of the car's longitudinal axis in the undistorted image (K of
+// `intrinsics`): of +x_car for a camera looking forward, of -x_car for one looking backward
+// (CarAxisAlong); false for a side camera. O(1).
+bool CarAxisVanishingPoint(const CameraIntrinsics& intrinsics, const Rigid3d& T_camera_car,
+                           Eigen::Vector2d* vanishing_point_px);
+
+// H_image_ground = K [r1 r2 t] of T_camera_car: the ground plane z_car = 0 ((x, y) in metres)
+// to the undistorted image of K, scaled to H(2, 2) = 1. O(1).
+Eigen::Matrix3d GroundHomography(const CameraIntrinsics& intrinsics, const Rigid3d& T_camera_car);
+
 }  // namespace linecal

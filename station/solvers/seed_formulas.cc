@@ -51,7 +51,8 @@ Eigen::Matrix3d PinholeMatrix(const CameraIntrinsics& k) {
 
 bool UndistortedPixel(const CameraModel& camera, const Eigen::Vector2d& uv_px, Eigen::Vector2d* undistorted_px) {
   Eigen::Vector3d ray;
-  if (!camera.Unproject(uv_px, &ray) || !(ray.z() > 0)) return false;
+  // Rays at or beyond 90 degrees (fisheye) have no point in the undistorted image.
+  if (!camera.Unproject(uv_px, &ray) || !(ray.z() > 1e-9)) return false;
   *undistorted_px = (PinholeMatrix(camera.intrinsics()) * ray).hnormalized();
   return true;
 }

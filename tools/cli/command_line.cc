@@ -7,6 +7,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 
 namespace linecal::cli {
 
@@ -115,6 +116,22 @@ absl::StatusOr<double> CommandLine::GetDouble(const std::string& name, double fa
     return absl::InvalidArgumentError(absl::StrCat("--", name, ": '", s, "' is not a number"));
   }
   return v;
+}
+
+absl::StatusOr<std::vector<double>> ParseNumberList(const std::string& text, const std::string& what, size_t count) {
+  std::vector<double> out;
+  for (const absl::string_view part : absl::StrSplit(text, ',')) {
+    double v = 0;
+    const auto [end, ec] = std::from_chars(part.data(), part.data() + part.size(), v);
+    if (part.empty() || ec != std::errc() || end != part.data() + part.size() || !std::isfinite(v)) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ": '", part, "' is not a number"));
+    }
+    out.push_back(v);
+  }
+  if (count > 0 && out.size() != count) {
+    return absl::InvalidArgumentError(absl::StrCat(what, ": ", count, " comma-separated numbers needed, got ", out.size()));
+  }
+  return out;
 }
 
 absl::StatusOr<int> CommandLine::GetInt(const std::string& name, int fallback) const {

@@ -66,13 +66,6 @@ struct CameraSamples {
   int verdicts_judged = 0, verdicts_agree = 0;
 };
 
-Eigen::Matrix3d GroundHomography(const CameraIntrinsics& k, const Rigid3d& T_camera_car) {
-  const Eigen::Matrix3d R = T_camera_car.RotationMatrix();
-  Eigen::Matrix3d rt;
-  rt << R.col(0), R.col(1), T_camera_car.translation();
-  return PinholeMatrix(k) * rt;
-}
-
 void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937_64& rng, double noise_px, int frames,
                  std::map<std::string, CameraSamples>* out) {
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
@@ -157,8 +150,9 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
     // The vanishing point and ranging apply to cameras looking along the car.
     const int along = CarAxisAlong(T_camera_car);
     if (along == 0 || !r->vanishing_point_valid) continue;
-    const Eigen::Vector3d axis_image = along * H_true.col(0);  // K (±r1): the image of ±x_car
-    samples.vp_errors_px.push_back((r->vanishing_point_px - axis_image.hnormalized()).norm());
+    Eigen::Vector2d vp_true;
+    CarAxisVanishingPoint(*s.intrinsics, T_camera_car, &vp_true);
+    samples.vp_errors_px.push_back((r->vanishing_point_px - vp_true).norm());
     // Ranging: a ground point D ahead of the camera, imaged by the true homography, mapped
     // back to the ground by the calibrated one.
     for (double e : GroundDisagreement(H_true, r->ground_homography, T_car_camera.translation(), along,

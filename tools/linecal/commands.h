@@ -25,5 +25,8 @@ int RunCycleStart(const Args& args);  // cmd_cycle.cc
 int RunCycleShow(const Args& args);  // cmd_cycle.cc
 int RunCyclesList(const Args& args);  // cmd_cycle.cc
 int RunStatus(const Args& args);  // cmd_cycle.cc
+int RunAftersale(const Args& args);  // cmd_aftersale.cc
+int RunSimLanes(const Args& args);  // cmd_sim_lanes.cc
+int RunEvalAftersale(const Args& args);  // cmd_eval_aftersale.cc
 
 }  // namespace linecal::tools

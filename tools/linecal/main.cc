@@ -22,18 +22,21 @@ const std::vector<Subcommand>& Subcommands() {
       {{"pattern"}, "write a printable board pattern (SVG/PNG)", RunPattern},
       {{"capture", "check"}, "validate a capture directory", RunCaptureCheck},
       {{"sim"}, "simulate a car in a station and write a capture", RunSim},
+      {{"sim", "lanes"}, "render a lane scene for the after-sale tool (PNG + its input JSON)", RunSimLanes},
       {{"lidar", "topview"}, "draw LiDAR scans seen from above (PNG)", RunLidarTopview},
       {{"lidar", "decode"}, "decode LiDAR packets (pcap) into one PCD per rotation", RunLidarDecode},
       {{"radar", "decode"}, "decode a radar CAN log (candump) into detections", RunRadarDecode},
       {{"radar", "calibrate"}, "radar mounting yaw from a capture's corner reflectors", RunRadarCalibrate},
       {{"eval", "radar"}, "Monte Carlo evaluation of radar yaw calibration", RunEvalRadar},
       {{"eval", "calibrate"}, "Monte Carlo evaluation of camera-to-car calibration", RunEvalCalibrate},
+      {{"eval", "aftersale"}, "Monte Carlo evaluation of the after-sale lane calibration", RunEvalAftersale},
       {{"detect"}, "find a calibration board in an image (--json, --overlay)", RunDetect},
       {{"calibrate"}, "compute a calibration cycle from a capture (--json)", RunCalibrate},
       {{"cycle", "start"}, "start a cycle on the daemon (--wait: follow it and print the results)", RunCycleStart},
       {{"cycle", "show"}, "show a stored cycle", RunCycleShow},
       {{"cycles", "list"}, "list stored cycles (--vin, --verdict)", RunCyclesList},
       {{"status"}, "the daemon's station status", RunStatus},
+      {{"aftersale"}, "camera calibration from lane lines in one image (--json, --out, --export)", RunAftersale},
   };
   return kTable;
 }
