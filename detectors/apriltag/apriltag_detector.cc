@@ -17,7 +17,7 @@ Detection DetectApriltag(const ImageView8& image, const Board& board,
   const int board_tags = static_cast<int>(board.features().size()) / 4;
   const MarkerScan scan = ScanMarkers(
       image, Tag36h11Family(board.params().apriltag_border_bits), options.markers, board_tags);
-  return VerifyMarkerBoard(scan, board, options.markers);
+  return VerifyMarkerBoard(scan, board, options.markers, image, nullptr);
 }
 
 }  // namespace linecal

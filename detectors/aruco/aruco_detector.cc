@@ -1,5 +1,7 @@
 #include "detectors/aruco/aruco_detector.h"
 
+#include <optional>
+
 namespace linecal {
 
 Detection DetectAruco(const ImageView8& image, const Board& board, const ArucoOptions& options) {
@@ -13,7 +15,11 @@ Detection DetectAruco(const ImageView8& image, const Board& board, const ArucoOp
     return detection;
   }
   const MarkerScan scan = ScanMarkers(image, Aruco4x4_50Family(), options.markers);
-  return VerifyMarkerBoard(scan, board, options.markers);
+  // The other board with these four markers, at the same scale: what this board must be told from.
+  BoardParams sibling_params = board.params();
+  sibling_params.type = board.type() == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco;
+  const std::optional<Board> sibling = Board::Create(sibling_params);
+  return VerifyMarkerBoard(scan, board, options.markers, image, sibling ? &*sibling : nullptr);
 }
 
 }  // namespace linecal

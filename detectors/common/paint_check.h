@@ -20,4 +20,17 @@ namespace linecal {
 bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const Image8& dark,
                  double px_per_m, double min_agreement);
 
+// Two boards that print the same features (the ArUco and round-hole boards share their four
+// markers, boards.md) differ only in some of their paint, and a binarisation can be fooled
+// there (a 4:1 illumination gradient darkens plain white paper below its local threshold).
+// This votes on the grey image itself, pair by pair: on a 64 x 64 grid of probes, at each
+// probe that one board prints black and the other white (2 px clear of edges on both), is
+// the image darker than at the nearest probe both print white (within 15% of the page)?
+// Each pair compares two nearby points under the same light, so gradients and gamma cancel.
+// True when at least `min_share` of at least 8 votes go to `board`; false when `other` wins
+// or when there are fewer votes (the boards cannot be told apart at this size). Cost: about
+// 40k paint look-ups, under a millisecond.
+bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::Matrix3d& H_image_board,
+                          const ImageView8& image, double px_per_m, double min_share);
+
 }  // namespace linecal

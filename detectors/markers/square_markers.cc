@@ -409,8 +409,8 @@ Detection Fail(DetectReason reason) {
 
 }  // namespace
 
-Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board,
-                            const MarkerDetectOptions& options) {
+Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerDetectOptions& options,
+                            const ImageView8& image, const Board* sibling) {
   // The board's markers: id -> its four corner features, in corner order (ids 4 k + c).
   std::map<int, std::vector<const BoardFeature*>> board_markers;
   for (const BoardFeature& f : board.features()) {
@@ -465,6 +465,14 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board,
   }
   if (!PaintAgrees(board, fit->H, scan.dark, side_px / side_m, options.min_paint_agreement)) {
     return Fail(DetectReason::kWrongBoard);
+  }
+  if (sibling != nullptr) {
+    const double px_per_m = side_px / side_m;
+    if (!PaintContrastPrefers(board, *sibling, fit->H, image, px_per_m, options.min_paint_agreement)) {
+      return Fail(PaintContrastPrefers(*sibling, board, fit->H, image, px_per_m, options.min_paint_agreement)
+                      ? DetectReason::kWrongBoard
+                      : DetectReason::kAmbiguous);
+    }
   }
   Detection detection;
   detection.found = on_board.size() == board_markers.size();

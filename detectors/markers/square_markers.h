@@ -118,7 +118,11 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
 // kAmbiguous (an id seen twice), kVerificationFailed (residual), kTooFewFeatures (one
 // marker), scan.reason / kNoCandidates (no markers). Cost: O(markers) plus a fixed grid of
 // paint probes (about 0.2 ms).
-Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board,
-                            const MarkerDetectOptions& options);
+// `sibling`: a board that prints the same markers at the same places (the ArUco board for the
+// round-hole board and back), or nullptr; the board is then also told from it by the grey
+// levels where the two print differently (PaintContrastPrefers on `image`, the scanned
+// view), kWrongBoard when the image looks like the sibling, kAmbiguous when it cannot tell.
+Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerDetectOptions& options,
+                            const ImageView8& image, const Board* sibling);
 
 }  // namespace linecal
