@@ -25,5 +25,7 @@ int RunCycleStart(const Args& args);  // cmd_cycle.cc
 int RunCycleShow(const Args& args);  // cmd_cycle.cc
 int RunCyclesList(const Args& args);  // cmd_cycle.cc
 int RunStatus(const Args& args);  // cmd_cycle.cc
+int RunPlan(const Args& args);  // cmd_plan.cc
+int RunPlanCheck(const Args& args);  // cmd_plan.cc
 
 }  // namespace linecal::tools

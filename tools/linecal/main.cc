@@ -34,6 +34,8 @@ const std::vector<Subcommand>& Subcommands() {
       {{"cycle", "show"}, "show a stored cycle", RunCycleShow},
       {{"cycles", "list"}, "list stored cycles (--vin, --verdict)", RunCyclesList},
       {{"status"}, "the daemon's station status", RunStatus},
+      {{"plan"}, "plan board and reflector placement for a car model in a station", RunPlan},
+      {{"plan", "check"}, "can every sensor be calibrated with this layout? (reasons when not)", RunPlanCheck},
   };
   return kTable;
 }
