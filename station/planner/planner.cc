@@ -37,6 +37,15 @@ void AddReason(std::vector<std::string>* reasons, const std::string& code) {
   if (std::find(reasons->begin(), reasons->end(), code) == reasons->end()) reasons->push_back(code);
 }
 
+// too_few_features is reported only when the targets themselves are fine (the solve
+// failed); when a target failed a check, that check is the reason.
+void Finish(SensorAssessment* a) {
+  if (a->reasons.size() > 1) {
+    std::erase(a->reasons, std::string("too_few_features"));
+  }
+  a->calibratable = a->reasons.empty();
+}
+
 Eigen::Vector3d FeaturePoint(const StationBoard& b, const Eigen::Vector2d& p_board) {
   return b.T_station_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0.0);
 }
@@ -192,7 +201,7 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
       AddReason(&a.reasons, "too_few_features");
     }
   }
-  a.calibratable = a.reasons.empty();
+  Finish(&a);
   return a;
 }
 
@@ -332,7 +341,7 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
       AddReason(&a.reasons, "too_few_features");
     }
   }
-  a.calibratable = a.reasons.empty();
+  Finish(&a);
   return a;
 }
 
@@ -411,7 +420,7 @@ absl::StatusOr<SensorAssessment> AssessRadar(const SensorModel& sensor, const St
       AddReason(&a.reasons, "too_few_features");
     }
   }
-  a.calibratable = a.reasons.empty();
+  Finish(&a);
   return a;
 }
 

@@ -34,7 +34,8 @@
 //   outside_usable_area    the footprint leaves the usable area or crosses a wall
 //   outside_height_limits  the target reaches below or above the height limits
 //   board_not_detected     the simulated LiDAR scan does not let the detector find it
-//   too_few_features       not enough usable targets for a solve
+//   too_few_features       the targets pass but are not enough for a solve (not reported
+//                          when a target failed one of the checks above: that is the reason)
 //   uncertainty_above_tolerance  predicted 1-sigma above the fraction of a tolerance
 
 #include <array>
