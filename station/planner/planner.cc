@@ -523,12 +523,18 @@ absl::StatusOr<std::optional<Candidate>> BestCandidate(const SensorModel& sensor
     trial_of(candidates[i], &trial, &s);
     absl::StatusOr<SensorAssessment> a = Assess(s, trial, &floor, o, true, false);
     if (!a.ok()) return a.status();
-    absl::StatusOr<bool> keeps = KeepsOthers(placed, trial, floor, o);
-    if (!keeps.ok()) return keeps.status();
+    // The others are assessed only for candidates that work for this sensor (the costly
+    // part); the rest count as spoiling them.
+    bool keeps = false;
+    if (a->calibratable) {
+      absl::StatusOr<bool> k = KeepsOthers(placed, trial, floor, o);
+      if (!k.ok()) return k.status();
+      keeps = *k;
+    }
     // Never spoil a sensor already planned if it can be helped.
-    const std::tuple<int, size_t, double> badness = {*keeps ? 0 : 1, a->reasons.size(), a->uncertainty_ratio};
+    const std::tuple<int, size_t, double> badness = {keeps ? 0 : 1, a->reasons.size(), a->uncertainty_ratio};
     if (!least_bad || badness < least_bad->first) least_bad = {{badness, i}};
-    if (a->calibratable && *keeps) ranked.push_back({a->uncertainty_ratio, i});
+    if (a->calibratable && keeps) ranked.push_back({a->uncertainty_ratio, i});
   }
   std::sort(ranked.begin(), ranked.end());
   for (size_t k = 0; k < ranked.size() && k < 6; ++k) {
