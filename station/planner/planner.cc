@@ -274,35 +274,63 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
   }
   std::vector<LidarBoardObservation> observations;
   if (predict && simulate && !usable.empty()) {
-    // The detector's own hole-centre sigma on one simulated rotation (fixed seed).
+    // The detector's own hole-centre sigma on simulated rotations (fixed seed). Where the
+    // rings cross the holes depends on the true mounting, and with it the detector's sigma
+    // (by up to 1.6x between cars for two rings per hole): the prediction is its RMS over
+    // the nominal mounting and pitch or roll half a tolerance either way.
     const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
     absl::StatusOr<LidarBeamTable> beams =
         sensor.angles_file.empty() ? DefaultBeamTable(*model) : ReadAngleCorrectionCsv(*model, sensor.angles_file);
     if (!beams.ok()) return beams.status();
-    absl::StatusOr<LidarSimResult> sim = SimulateLidar(*beams, T_station_lidar, layout, LidarSimOptions{}, 0, 1);
-    if (!sim.ok()) return sim.status();
-    std::vector<std::vector<RoundHoleCloudPoint>> frames;
-    for (const LidarScan& scan : sim->scans) {
-      std::vector<RoundHoleCloudPoint>& pts = frames.emplace_back();
-      for (const LidarPoint& p : scan.points) pts.push_back({p.x, p.y, p.z, p.ring});
+    const YawPitchRoll nominal = MountingAngles(T_station_lidar.RotationMatrix(), LidarBaseRotation());
+    const double dp = 0.5 * sensor.tolerance.pitch_rad, dr = 0.5 * sensor.tolerance.roll_rad;
+    const double offsets[5][2] = {{0, 0}, {dp, 0}, {-dp, 0}, {0, dr}, {0, -dr}};
+    std::vector<double> centre_var(usable.size(), 0), normal_var(usable.size(), 0);
+    std::vector<int> found(usable.size(), 0);
+    std::vector<RoundHoleCloudReason> nominal_reason(usable.size(), RoundHoleCloudReason::kBadInput);
+    for (int k = 0; k < 5; ++k) {
+      YawPitchRoll ypr = nominal;
+      ypr.pitch += offsets[k][0];
+      ypr.roll += offsets[k][1];
+      const Rigid3d T_station_true(MountingRotation(ypr, LidarBaseRotation()), T_station_lidar.translation());
+      absl::StatusOr<LidarSimResult> sim = SimulateLidar(*beams, T_station_true, layout, LidarSimOptions{}, 0, 1);
+      if (!sim.ok()) return sim.status();
+      std::vector<std::vector<RoundHoleCloudPoint>> frames;
+      for (const LidarScan& scan : sim->scans) {
+        std::vector<RoundHoleCloudPoint>& pts = frames.emplace_back();
+        for (const LidarPoint& p : scan.points) pts.push_back({p.x, p.y, p.z, p.ring});
+      }
+      const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
+      for (size_t i = 0; i < usable.size(); ++i) {
+        const RoundHoleCloudDetection d =
+            DetectRoundHoleBoardInCloud(usable[i]->board, views, T_lidar_station * usable[i]->T_station_board);
+        if (k == 0) nominal_reason[i] = d.reason;
+        if (!d.found) continue;
+        const LidarBoardObservation o = LidarObservationFromDetection(usable[i]->id, d);
+        centre_var[i] += o.centre_sigma_m * o.centre_sigma_m;
+        normal_var[i] += o.normal_sigma_rad * o.normal_sigma_rad;
+        ++found[i];
+      }
     }
-    const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
-    for (const StationBoard* b : usable) {
-      const RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(b->board, views, T_lidar_station * b->T_station_board);
-      if (!d.found) {
+    for (size_t i = 0; i < usable.size(); ++i) {
+      const StationBoard* b = usable[i];
+      if (nominal_reason[i] != RoundHoleCloudReason::kNone || found[i] == 0) {
         for (TargetAssessment& t : a.targets) {
           if (t.target != b->id) continue;
           AddReason(&t.reasons, "board_not_detected");
-          t.detail += absl::StrCat(" detector: ", RoundHoleCloudReasonName(d.reason), ";");
+          t.detail += absl::StrCat(" detector: ", RoundHoleCloudReasonName(nominal_reason[i]), ";");
         }
         continue;
       }
       // Exact hole centres with the detector's sigma: the prediction, not the measurement.
-      LidarBoardObservation obs = LidarObservationFromDetection(b->id, d);
-      for (LidarHoleCentre& hc : obs.holes) {
-        hc.p_lidar = T_lidar_station * FeaturePoint(*b, b->board.features()[hc.feature_id].p_board);
+      LidarBoardObservation obs;
+      obs.board_id = b->id;
+      for (const BoardFeature& f : b->board.features()) {
+        if (f.kind == FeatureKind::kHoleCentre) obs.holes.push_back({f.id, T_lidar_station * FeaturePoint(*b, f.p_board)});
       }
       obs.normal_lidar = T_lidar_station.RotationMatrix() * b->T_station_board.RotationMatrix().col(2);
+      obs.centre_sigma_m = std::sqrt(centre_var[i] / found[i]);
+      obs.normal_sigma_rad = std::sqrt(normal_var[i] / found[i]);
       observations.push_back(obs);
     }
   } else if (predict) {

@@ -116,11 +116,15 @@ TEST_F(PlanCliTest, EverySensorIsPlannedAndTheFilesAreWritten) {
   }
 }
 
+// The car's mounting errors within ±0.25° (half the LiDARs' tolerance), the range over which
+// the LiDAR prediction averages the detector's sigma (docs/planner.md: at the tolerance's
+// edge the VLP-16's sigma varies up to 1.6x).
 TEST_F(PlanCliTest, SimulatedPlanPassesWithinThirtyPercentOfThePredictedSigma) {
   const fs::path capture = dir_ / "capture";
   const LinecalRun sim = RunLinecal("sim --station " + (dir_ / "plan" / "station.json").string() + " --car " +
                                     (dir_ / "plan" / "car.json").string() + " --sensors " + kVerified +
-                                    " --seed 11 --noise 2 --blur 0.5 --out " + capture.string());
+                                    " --seed 11 --noise 2 --blur 0.5 --perturb-angle-deg 0.25 --out " +
+                                    capture.string());
   ASSERT_EQ(sim.exit_code, 0) << sim.err;
   const LinecalRun cal = RunLinecal("calibrate --json --capture " + capture.string());
   ASSERT_EQ(cal.exit_code, 0) << cal.out << cal.err;

@@ -290,9 +290,15 @@ Drawing SideView(const PlanScene& scene, const SensorModel& sensor) {
   for (double x = 0; x <= far; x += 1) AddLine(&d, v, {x, 0}, {x, -0.12}, kBlack, 1);
   const Rgb c = {0, 114, 178};
   const double reach = far;
-  const auto ray = [&](double elevation, Rgb colour, double w) {
+  // A ray of the sensor at `elevation`, up to `reach` or the floor.
+  const auto ray_end = [&](double elevation) {
     const Eigen::Vector2d o(0, eye.z());
-    AddLine(&d, v, o, o + reach * Eigen::Vector2d(std::cos(elevation), std::sin(elevation)), colour, w);
+    const Eigen::Vector2d dir(std::cos(elevation), std::sin(elevation));
+    const double length = dir.y() < 0 ? std::min(reach, eye.z() / -dir.y()) : reach;
+    return Eigen::Vector2d(o + length * dir);
+  };
+  const auto ray = [&](double elevation, Rgb colour, double w) {
+    AddLine(&d, v, {0, eye.z()}, ray_end(elevation), colour, w);
   };
   if (sensor.kind == SensorKind::kLidar) {
     const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
@@ -312,7 +318,7 @@ Drawing SideView(const PlanScene& scene, const SensorModel& sensor) {
         if (!camera->Unproject({sensor.intrinsics->cx, (sensor.intrinsics->height - 1) * i / 24.0}, &r)) continue;
         const Eigen::Vector3d w = R * r;
         const double e = std::atan2(w.z(), w.head<2>().dot(dir));
-        wedge.push_back(Eigen::Vector2d(0, eye.z()) + reach * Eigen::Vector2d(std::cos(e), std::sin(e)));
+        wedge.push_back(ray_end(e));
       }
       AddPolygon(&d, v, wedge, c, 0.10, c, 1);
     }
@@ -343,6 +349,8 @@ Drawing SideView(const PlanScene& scene, const SensorModel& sensor) {
     caption += a->calibratable ? ": calibratable" : ": NOT calibratable";
     for (const std::string& r : a->reasons) caption += " " + r;
   }
+  // Room for the caption (about 7 px per character at 12 px).
+  d.width_px = std::max(d.width_px, static_cast<int>(7 * caption.size()) + 16);
   DrawShape title;
   title.kind = DrawShape::kText;
   title.points_px = {{8, d.height_px - 10.0}};
