@@ -114,15 +114,61 @@ double RatioOf(const SensorModel& sensor, const Eigen::Matrix<double, 6, 1>& sig
   return ratio;
 }
 
+// The board a camera or LiDAR names as target `id`; null (with the reason) when there is
+// none.
+const StationBoard* TargetBoard(const StationLayout& layout, const std::string& id, TargetAssessment* t) {
+  t->target = id;
+  const StationBoard* b = layout.FindBoard(id);
+  if (b == nullptr) AddReason(&t->reasons, layout.FindReflector(id) ? "wrong_target_type" : "unknown_target");
+  return b;
+}
+
+// The predicted sigma of a solver's mounting estimate and its verdict against the bar.
+void TakeMounting(bool solved, const MountingEstimate& m, const SensorModel& sensor, const PlannerOptions& o,
+                  SensorAssessment* a) {
+  if (!solved) {
+    AddReason(&a->reasons, "too_few_features");
+    return;
+  }
+  a->sigma_valid = true;
+  a->sigma = m.sigma;
+  a->observed = m.observed;
+  a->uncertainty_ratio = RatioOf(sensor, a->sigma, a->observed, o.max_sigma_fraction_of_tolerance);
+  if (a->uncertainty_ratio > 1) AddReason(&a->reasons, "uncertainty_above_tolerance");
+}
+
 absl::StatusOr<std::vector<double>> BeamElevations(const SensorModel& sensor) {
-  const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
-  if (!model) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": unknown LiDAR model '", sensor.model, "'"));
-  absl::StatusOr<LidarBeamTable> beams =
-      sensor.angles_file.empty() ? DefaultBeamTable(*model) : ReadAngleCorrectionCsv(*model, sensor.angles_file);
-  if (!beams.ok()) return beams.status();
+  absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
+  if (!beams.ok()) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": ", beams.status().message()));
   std::vector<double> e;
   for (const LidarBeam& b : beams->beams) e.push_back(b.elevation_rad);
   return e;
+}
+
+// The occlusion reason of a target hidden behind `occluder` (none when null).
+void NoteOccluder(const StationBoard* occluder, TargetAssessment* t) {
+  if (occluder == nullptr) return;
+  AddReason(&t->reasons, "occluded_by_board");
+  t->detail += absl::StrCat(" hidden behind '", occluder->id, "';");
+}
+
+// A sensor's reasons: its targets', each once, in order.
+void CollectTargetReasons(SensorAssessment* a) {
+  for (const TargetAssessment& t : a->targets) {
+    for (const std::string& r : t.reasons) AddReason(&a->reasons, r);
+  }
+}
+
+// A round-hole board's exact hole centres and normal in the LiDAR frame, at `sigma_m`.
+LidarBoardObservation ExactHoles(const StationBoard& b, const Rigid3d& T_lidar_station, double sigma_m) {
+  LidarBoardObservation obs;
+  obs.board_id = b.id;
+  for (const BoardFeature& f : b.board.features()) {
+    if (f.kind == FeatureKind::kHoleCentre) obs.holes.push_back({f.id, T_lidar_station * FeaturePoint(b, f.p_board)});
+  }
+  obs.normal_lidar = T_lidar_station.RotationMatrix() * b.T_station_board.RotationMatrix().col(2);
+  obs.centre_sigma_m = sigma_m;
+  return obs;
 }
 
 // --- cameras --------------------------------------------------------------------------
@@ -141,12 +187,8 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
   std::vector<BoardObservation> observations;
   for (const std::string& id : sensor.targets) {
     TargetAssessment& t = a.targets.emplace_back();
-    t.target = id;
-    const StationBoard* b = layout.FindBoard(id);
-    if (b == nullptr) {
-      AddReason(&t.reasons, layout.FindReflector(id) ? "wrong_target_type" : "unknown_target");
-      continue;
-    }
+    const StationBoard* b = TargetBoard(layout, id, &t);
+    if (b == nullptr) continue;
     const Rigid3d T_camera_board = T_camera_station * b->T_station_board;
     bool inside = BoardFacesCamera(T_camera_board);
     BoardObservation obs;
@@ -171,18 +213,13 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
       AddReason(&t.reasons, "features_too_small");
       t.detail += absl::StrFormat(" smallest cell %.1f px < %.1f px;", t.smallest_feature_px, o.min_feature_px);
     }
-    if (occluder != nullptr) {
-      AddReason(&t.reasons, "occluded_by_board");
-      t.detail += absl::StrCat(" hidden behind '", occluder->id, "';");
-    }
+    NoteOccluder(occluder, &t);
     CheckBoardFloor(floor, *b, &t);
     if (t.reasons.empty()) {
       for (int k = 0; k < o.camera_frames; ++k) observations.push_back(obs);
     }
   }
-  for (const TargetAssessment& t : a.targets) {
-    for (const std::string& r : t.reasons) AddReason(&a.reasons, r);
-  }
+  CollectTargetReasons(&a);
   if (predict) {
     CameraCalibrationOptions co;
     co.pnp.feature_sigma_px = o.corner_noise_px;
@@ -191,15 +228,7 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
         observations.empty() ? absl::StatusOr<CameraCalibrationResult>(CameraCalibrationResult{})
                              : CalibrateCamera(sensor, layout, Rigid3d(), observations, co);
     if (!r.ok()) return r.status();
-    if (r->solved) {
-      a.sigma_valid = true;
-      a.sigma = r->mounting.sigma;
-      a.observed = r->mounting.observed;
-      a.uncertainty_ratio = RatioOf(sensor, a.sigma, a.observed, o.max_sigma_fraction_of_tolerance);
-      if (a.uncertainty_ratio > 1) AddReason(&a.reasons, "uncertainty_above_tolerance");
-    } else {
-      AddReason(&a.reasons, "too_few_features");
-    }
+    TakeMounting(r->solved, r->mounting, sensor, o, &a);
   }
   Finish(&a);
   return a;
@@ -228,12 +257,8 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
   std::vector<const StationBoard*> usable;
   for (const std::string& id : sensor.targets) {
     TargetAssessment& t = a.targets.emplace_back();
-    t.target = id;
-    const StationBoard* b = layout.FindBoard(id);
-    if (b == nullptr) {
-      AddReason(&t.reasons, layout.FindReflector(id) ? "wrong_target_type" : "unknown_target");
-      continue;
-    }
+    const StationBoard* b = TargetBoard(layout, id, &t);
+    if (b == nullptr) continue;
     if (b->board.type() != BoardType::kRoundHole) {
       AddReason(&t.reasons, "wrong_target_type");
       continue;
@@ -265,10 +290,7 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
       AddReason(&t.reasons, "too_few_rings");
       t.detail += absl::StrFormat(" %d ring(s) through the worst hole < %d;", t.fewest_rings, o.min_rings_per_hole);
     }
-    if (occluder != nullptr) {
-      AddReason(&t.reasons, "occluded_by_board");
-      t.detail += absl::StrCat(" hidden behind '", occluder->id, "';");
-    }
+    NoteOccluder(occluder, &t);
     CheckBoardFloor(floor, *b, &t);
     if (t.reasons.empty()) usable.push_back(b);
   }
@@ -278,9 +300,7 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
     // rings cross the holes depends on the true mounting, and with it the detector's sigma
     // (by up to 1.6x between cars for two rings per hole): the prediction is its RMS over
     // the nominal mounting and pitch or roll half a tolerance either way.
-    const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
-    absl::StatusOr<LidarBeamTable> beams =
-        sensor.angles_file.empty() ? DefaultBeamTable(*model) : ReadAngleCorrectionCsv(*model, sensor.angles_file);
+    absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
     if (!beams.ok()) return beams.status();
     const YawPitchRoll nominal = MountingAngles(T_station_lidar.RotationMatrix(), LidarBaseRotation());
     const double dp = 0.5 * sensor.tolerance.pitch_rad, dr = 0.5 * sensor.tolerance.roll_rad;
@@ -323,31 +343,14 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
         continue;
       }
       // Exact hole centres with the detector's sigma: the prediction, not the measurement.
-      LidarBoardObservation obs;
-      obs.board_id = b->id;
-      for (const BoardFeature& f : b->board.features()) {
-        if (f.kind == FeatureKind::kHoleCentre) obs.holes.push_back({f.id, T_lidar_station * FeaturePoint(*b, f.p_board)});
-      }
-      obs.normal_lidar = T_lidar_station.RotationMatrix() * b->T_station_board.RotationMatrix().col(2);
-      obs.centre_sigma_m = std::sqrt(centre_var[i] / found[i]);
+      LidarBoardObservation obs = ExactHoles(*b, T_lidar_station, std::sqrt(centre_var[i] / found[i]));
       obs.normal_sigma_rad = std::sqrt(normal_var[i] / found[i]);
       observations.push_back(obs);
     }
   } else if (predict) {
-    for (const StationBoard* b : usable) {
-      LidarBoardObservation obs;
-      obs.board_id = b->id;
-      for (const BoardFeature& f : b->board.features()) {
-        if (f.kind == FeatureKind::kHoleCentre) obs.holes.push_back({f.id, T_lidar_station * FeaturePoint(*b, f.p_board)});
-      }
-      obs.normal_lidar = T_lidar_station.RotationMatrix() * b->T_station_board.RotationMatrix().col(2);
-      obs.centre_sigma_m = kProxyCentreSigmaM;
-      observations.push_back(obs);
-    }
+    for (const StationBoard* b : usable) observations.push_back(ExactHoles(*b, T_lidar_station, kProxyCentreSigmaM));
   }
-  for (const TargetAssessment& t : a.targets) {
-    for (const std::string& r : t.reasons) AddReason(&a.reasons, r);
-  }
+  CollectTargetReasons(&a);
   if (predict) {
     LidarCalibrationOptions lo;
     lo.max_sigma_fraction_of_tolerance = o.max_sigma_fraction_of_tolerance;
@@ -356,15 +359,7 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
     if (holes >= 3) {
       absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, layout, Rigid3d(), observations, lo);
       if (!r.ok()) return r.status();
-      if (r->solved) {
-        a.sigma_valid = true;
-        a.sigma = r->mounting.sigma;
-        a.observed = r->mounting.observed;
-        a.uncertainty_ratio = RatioOf(sensor, a.sigma, a.observed, o.max_sigma_fraction_of_tolerance);
-        if (a.uncertainty_ratio > 1) AddReason(&a.reasons, "uncertainty_above_tolerance");
-      } else {
-        AddReason(&a.reasons, "too_few_features");
-      }
+      TakeMounting(r->solved, r->mounting, sensor, o, &a);
     } else {
       AddReason(&a.reasons, "too_few_features");
     }
@@ -402,10 +397,7 @@ absl::StatusOr<SensorAssessment> AssessRadar(const SensorModel& sensor, const St
       AddReason(&t.reasons, "reflector_outside_fov");
       t.detail += absl::StrFormat(" azimuth %.1f deg, range %.1f m;", azimuth / kDeg, p.norm());
     }
-    if (const StationBoard* b = Occluder(eye, r->p_station, layout, ""); b != nullptr) {
-      AddReason(&t.reasons, "occluded_by_board");
-      t.detail += absl::StrCat(" hidden behind '", b->id, "';");
-    }
+    NoteOccluder(Occluder(eye, r->p_station, layout, ""), &t);
     CheckFloor(floor, {r->p_station.head<2>()}, r->p_station.z(), r->p_station.z(), &t);
     t.features = 1;
     if (t.reasons.empty()) {
@@ -413,9 +405,7 @@ absl::StatusOr<SensorAssessment> AssessRadar(const SensorModel& sensor, const St
       usable_sensor.targets.push_back(id);
     }
   }
-  for (const TargetAssessment& t : a.targets) {
-    for (const std::string& r : t.reasons) AddReason(&a.reasons, r);
-  }
+  CollectTargetReasons(&a);
   if (predict) {
     absl::StatusOr<std::vector<ExpectedReflector>> expected =
         ExpectedReflectors(usable_sensor, usable_layout, Rigid3d());

@@ -14,7 +14,6 @@
 #include "absl/strings/str_format.h"
 #include "station/camera/camera_model.h"
 #include "station/io/image_io.h"
-#include "station/sensors/lidar_format.h"
 #include "station/sim/radar_sim.h"
 
 namespace linecal::tools {
@@ -301,10 +300,7 @@ Drawing SideView(const PlanScene& scene, const SensorModel& sensor) {
     AddLine(&d, v, {0, eye.z()}, ray_end(elevation), colour, w);
   };
   if (sensor.kind == SensorKind::kLidar) {
-    const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
-    absl::StatusOr<LidarBeamTable> beams = !model ? absl::StatusOr<LidarBeamTable>(absl::NotFoundError("model"))
-                                           : sensor.angles_file.empty() ? DefaultBeamTable(*model)
-                                                                        : ReadAngleCorrectionCsv(*model, sensor.angles_file);
+    const absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
     if (beams.ok()) {
       for (const LidarBeam& b : beams->beams) ray(b.elevation_rad, {150, 190, 230}, 0.6);
     }
