@@ -265,6 +265,28 @@ TEST(AssessRadar, FieldOfViewAndLineOfSight) {
   EXPECT_EQ(blocked.targets[1].reasons, Reasons{"occluded_by_board"});
 }
 
+TEST(ValidRegion, AroundThePlannedPoseAndBoundedByFeatureSize) {
+  // Geometry alone bounds this region: 5 px corners make the uncertainty bar irrelevant
+  // (a 100x looser fraction), and the squares reach 15 px at 10 m.
+  const SensorModel s = Sensor(SensorKind::kCamera, "pinhole", {0, 0, 1.2}, {"b"});
+  const StationLayout layout = Layout(BoardJson("b", "chessboard", 6, 0, 1.2, 0));
+  PlannerOptions o;
+  o.max_sigma_fraction_of_tolerance = 10;
+  absl::StatusOr<ValidRegion> r = ValidRegionOf(s, "b", layout, nullptr, o);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_LE(r->distance_min_m, 6.0);
+  EXPECT_NEAR(r->distance_max_m, 10.0, 0.25 + 1e-9);  // 0.25 m steps; 15 px at exactly 10 m
+  // Nearer than 1.26 m its outer corners (1.2 m off centre) image beyond 951.5 px from the
+  // centre, out of the image with the 8 px margin; the steps from 6 m stop at 1.5 m.
+  EXPECT_GE(r->distance_min_m, 1.26);
+  EXPECT_LE(r->distance_min_m, 1.26 + 0.25);
+  EXPECT_LT(r->lateral_min_m, 0);
+  EXPECT_GT(r->lateral_max_m, 0);
+  EXPECT_TRUE(PointInPolygon({6, 0}, r->polygon));
+  EXPECT_FALSE(PointInPolygon({12, 0}, r->polygon));
+  EXPECT_FALSE(ValidRegionOf(s, "none", layout, nullptr, o).ok());
+}
+
 TEST(FloorLimitsFile, ReferenceFloorAndErrorsNamingTheField) {
   absl::StatusOr<FloorLimits> f = ReadFloorLimits(std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference-floor.json");
   ASSERT_TRUE(f.ok()) << f.status();
