@@ -138,17 +138,7 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
       continue;
     }
     summary.frames_found = static_cast<int>(frames.size());
-    LidarBoardObservation o;
-    o.board_id = id;
-    for (const RoundHoleHole& h : d.holes) o.holes.push_back({h.id, h.p_lidar});
-    o.normal_lidar = d.T_lidar_board.RotationMatrix().col(2);
-    // The five centres share the board's in-plane error; as independent points each carries
-    // sqrt(5) times it, so that their mean is as uncertain as the board's position. 1 mm is
-    // the floor below which the fit's own sigma is not trusted.
-    constexpr double kMinCentreSigmaM = 0.001;
-    o.centre_sigma_m = std::max(kMinCentreSigmaM, std::sqrt(5.0) * d.in_plane_sigma_m.maxCoeff());
-    o.normal_sigma_rad = d.normal_sigma_rad;
-    observations.push_back(std::move(o));
+    observations.push_back(LidarObservationFromDetection(id, d));
   }
   absl::StatusOr<LidarCalibrationResult> r =
       CalibrateLidar(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations);

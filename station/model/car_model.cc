@@ -257,6 +257,12 @@ nlohmann::json CarModelToJson(const CarModel& car) {
           {"description", car.description}, {"sensors", sensors}};
 }
 
+absl::StatusOr<LidarBeamTable> LidarBeamTableOf(const SensorModel& sensor) {
+  const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
+  if (!model) return absl::InvalidArgumentError(absl::StrCat("unknown LiDAR model '", sensor.model, "'"));
+  return sensor.angles_file.empty() ? DefaultBeamTable(*model) : ReadAngleCorrectionCsv(*model, sensor.angles_file);
+}
+
 absl::Status CheckTargetsExist(const CarModel& car, const StationLayout& layout) {
   for (const SensorModel& s : car.sensors) {
     for (const std::string& t : s.targets) {

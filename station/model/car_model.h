@@ -11,6 +11,7 @@
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
 #include "station/camera/camera_model.h"
+#include "station/sensors/lidar_format.h"
 
 namespace linecal {
 
@@ -67,6 +68,11 @@ struct CarModel {
 absl::StatusOr<CarModel> ReadCarModel(const std::string& path);
 absl::StatusOr<CarModel> ParseCarModel(const std::string& text, const std::string& source);
 nlohmann::json CarModelToJson(const CarModel& car);
+
+// The beam table of a LiDAR of the car model: its unit's angle file when it has one, else
+// the model's built-in table. Errors: InvalidArgument for an unknown model (callers add the
+// sensor's name), the angle file's errors (naming it). O(channels).
+absl::StatusOr<LidarBeamTable> LidarBeamTableOf(const SensorModel& sensor);
 
 // Checks that every target a sensor names exists in the layout (boards for cameras and
 // LiDARs, reflectors for radars). Errors name the sensor and the target.

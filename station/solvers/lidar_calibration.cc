@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include <Eigen/Geometry>
@@ -83,6 +84,18 @@ std::string_view LidarCalibrationOptions::Validate() const {
     return "max_sigma_fraction_of_tolerance";
   }
   return {};
+}
+
+LidarBoardObservation LidarObservationFromDetection(const std::string& board_id,
+                                                    const RoundHoleCloudDetection& detection) {
+  constexpr double kMinCentreSigmaM = 0.001;
+  LidarBoardObservation o;
+  o.board_id = board_id;
+  for (const RoundHoleHole& h : detection.holes) o.holes.push_back({h.id, h.p_lidar});
+  o.normal_lidar = detection.T_lidar_board.RotationMatrix().col(2);
+  o.centre_sigma_m = std::max(kMinCentreSigmaM, std::sqrt(5.0) * detection.in_plane_sigma_m.maxCoeff());
+  o.normal_sigma_rad = detection.normal_sigma_rad;
+  return o;
 }
 
 absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor, const StationLayout& station,

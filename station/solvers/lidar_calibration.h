@@ -24,6 +24,7 @@
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
+#include "detectors/round_hole/round_hole_cloud.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
 #include "station/solvers/mounting.h"
@@ -46,6 +47,14 @@ struct LidarBoardObservation {
   double centre_sigma_m = 0;
   double normal_sigma_rad = 0;
 };
+
+// The observation of a found round-hole detection: its hole centres, its normal and their
+// sigmas. The five centres share the board's in-plane error; as independent points each
+// carries sqrt(5) times it, so that their mean is as uncertain as the board's position, and
+// 1 mm is the floor below which the fit's own sigma is not trusted. One conversion for the
+// cycle (daemon/cycle) and the planner's prediction (station/planner). O(holes).
+LidarBoardObservation LidarObservationFromDetection(const std::string& board_id,
+                                                    const RoundHoleCloudDetection& detection);
 
 struct LidarCalibrationOptions {
   // Default per-axis hole-centre sigma, metres: what the detector reaches with 16 rings.

@@ -28,5 +28,7 @@ int RunStatus(const Args& args);  // cmd_cycle.cc
 int RunAftersale(const Args& args);  // cmd_aftersale.cc
 int RunSimLanes(const Args& args);  // cmd_sim_lanes.cc
 int RunEvalAftersale(const Args& args);  // cmd_eval_aftersale.cc
+int RunPlan(const Args& args);  // cmd_plan.cc
+int RunPlanCheck(const Args& args);  // cmd_plan.cc
 
 }  // namespace linecal::tools

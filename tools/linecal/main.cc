@@ -37,6 +37,8 @@ const std::vector<Subcommand>& Subcommands() {
       {{"cycles", "list"}, "list stored cycles (--vin, --verdict)", RunCyclesList},
       {{"status"}, "the daemon's station status", RunStatus},
       {{"aftersale"}, "camera calibration from lane lines in one image (--json, --out, --export)", RunAftersale},
+      {{"plan"}, "plan board and reflector placement for a car model in a station", RunPlan},
+      {{"plan", "check"}, "can every sensor be calibrated with this layout? (reasons when not)", RunPlanCheck},
   };
   return kTable;
 }
