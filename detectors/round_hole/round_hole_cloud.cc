@@ -86,6 +86,40 @@ struct Circle {
   int id = 0;
 };
 
+// The drawing as paper / not paper on a grid of kRasterM over the page, for the coarse
+// search's million look-ups (Board::PaintAt walks the shapes each time). A 5 mm grid is a
+// quarter of the search's 2 cm step; the fine fit uses the exact circles and outline.
+constexpr double kRasterM = 0.005;
+class PaperRaster {
+ public:
+  explicit PaperRaster(const Board& board)
+      : half_(0.5 * board.page_size_m()),
+        nx_(static_cast<int>(std::ceil(board.page_size_m().x() / kRasterM))),
+        ny_(static_cast<int>(std::ceil(board.page_size_m().y() / kRasterM))),
+        paper_(static_cast<std::size_t>(nx_) * ny_) {
+    for (int iy = 0; iy < ny_; ++iy) {
+      for (int ix = 0; ix < nx_; ++ix) {
+        const Paint paint = board.PaintAt(
+            Eigen::Vector2d((ix + 0.5) * kRasterM - half_.x(), (iy + 0.5) * kRasterM - half_.y()));
+        paper_[static_cast<std::size_t>(iy) * nx_ + ix] =
+            paint == Paint::kWhite || paint == Paint::kBlack;
+      }
+    }
+  }
+  bool PaperAt(const Eigen::Vector2d& m_board) const {
+    const double fx = (m_board.x() + half_.x()) / kRasterM;
+    const double fy = (m_board.y() + half_.y()) / kRasterM;
+    if (!(fx >= 0.0 && fy >= 0.0 && fx < nx_ && fy < ny_)) return false;
+    return paper_[static_cast<std::size_t>(fy) * nx_ + static_cast<std::size_t>(fx)];
+  }
+
+ private:
+  Eigen::Vector2d half_;
+  int nx_ = 0;
+  int ny_ = 0;
+  std::vector<bool> paper_;
+};
+
 double Median(std::vector<double> v) {
   if (v.empty()) return 0.0;
   const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
@@ -423,6 +457,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       const std::size_t stride = samples.size() / kMaxSamples + 1;
       const int shifts = static_cast<int>(options.max_in_plane_shift_m / kShiftStepM);
       const int rotations = static_cast<int>(options.max_in_plane_rotation_rad / kRotationStepRad);
+      const PaperRaster raster(board);
       int best_score = -1;
       double best_distance = 0.0;
       for (int ir = -rotations; ir <= rotations; ++ir) {
@@ -432,9 +467,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
             const Eigen::Vector2d t(ix * kShiftStepM, iy * kShiftStepM);
             int score = 0;
             for (std::size_t i = 0; i < samples.size(); i += stride) {
-              const Paint paint = board.PaintAt(Rt * (samples[i].p_plane - t));
-              const bool paper = paint == Paint::kWhite || paint == Paint::kBlack;
-              score += paper == samples[i].paper ? 1 : 0;
+              score += raster.PaperAt(Rt * (samples[i].p_plane - t)) == samples[i].paper ? 1 : 0;
             }
             // Ties go to the pose nearest the prior (1 radian weighs as 1 m).
             const double distance = t.squaredNorm() + std::pow(ir * kRotationStepRad, 2);

@@ -17,70 +17,10 @@
 #include <string>
 #include <vector>
 
-#include "station/model/car_model.h"
-#include "station/model/pose_json.h"
-#include "station/model/station_layout.h"
-#include "station/sensors/lidar_format.h"
-#include "station/sim/lidar_sim.h"
+#include "tests/detectors/round_hole/round_hole_scene.h"
 
 namespace linecal {
 namespace {
-
-constexpr double kDegToRad = std::numbers::pi / 180.0;
-const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
-// The LiDAR and the board centre sit this high above the floor (the reference boards' 1 m).
-constexpr double kHeightM = 1.0;
-
-LidarBeamTable Beams(const std::string& sensor) {
-  const CarModel car = *ReadCarModel(kDeploy + "/cars/reference.json");
-  const SensorModel* s = car.FindSensor(sensor);
-  const LidarModel model = *LidarModelFromName(s->model);
-  return *(s->angles_file.empty() ? DefaultBeamTable(model)
-                                  : ReadAngleCorrectionCsv(model, s->angles_file));
-}
-
-struct Scene {
-  Board board;
-  Rigid3d T_lidar_board;  // truth
-  std::vector<std::vector<RoundHoleCloudPoint>> frames;
-};
-
-// A station with one round-hole board `distance_m` from the LiDAR along `bearing_deg` (0 =
-// the LiDAR's azimuth 0), turned by `heading_deg` about the vertical from facing the LiDAR,
-// its centre `lift_m` above the LiDAR, scanned for `rotations` rotations.
-Scene Simulate(const LidarBeamTable& beams, double distance_m, double bearing_deg,
-               double heading_deg, double sigma_m, int rotations, double scale = 1.0,
-               double lift_m = 0.0) {
-  StationLayout layout;
-  layout.name = "round_hole_test";
-  StationBoard b;
-  b.id = "board";
-  b.params.type = BoardType::kRoundHole;
-  b.params.scale = scale;
-  b.board = *Board::Create(b.params);
-  const double bearing = bearing_deg * kDegToRad;
-  const Eigen::Matrix3d R_station_board =
-      Eigen::AngleAxisd(bearing + heading_deg * kDegToRad, Eigen::Vector3d::UnitZ())
-          .toRotationMatrix() *
-      BoardBaseRotation();
-  b.T_station_board =
-      Rigid3d(R_station_board, Eigen::Vector3d(distance_m * std::cos(bearing),
-                                               distance_m * std::sin(bearing), kHeightM + lift_m));
-  layout.boards.push_back(b);
-  const Rigid3d T_station_lidar(LidarBaseRotation(), Eigen::Vector3d(0, 0, kHeightM));
-  LidarSimOptions o;
-  o.rotations = rotations;
-  o.range_sigma_m = sigma_m;
-  absl::StatusOr<LidarSimResult> sim = SimulateLidar(beams, T_station_lidar, layout, o, 0, 1);
-  EXPECT_TRUE(sim.ok()) << sim.status();
-  Scene scene{b.board, T_station_lidar.Inverse() * b.T_station_board, {}};
-  if (!sim.ok()) return scene;
-  for (const LidarScan& scan : sim->scans) {
-    std::vector<RoundHoleCloudPoint>& f = scene.frames.emplace_back();
-    for (const LidarPoint& p : scan.points) f.push_back({p.x, p.y, p.z, p.ring});
-  }
-  return scene;
-}
 
 // The expected pose: the truth off by the station's mounting tolerance (3 cm, 0.5 degree).
 Rigid3d Prior(const Rigid3d& truth, std::uint64_t seed) {
@@ -139,13 +79,7 @@ TEST(RoundHoleCloudTest, HoleCentresAndNormalWithinTheBars) {
                              std::to_string(c.sigma_m);
     ASSERT_TRUE(d.found) << what << ": " << RoundHoleCloudReasonName(d.reason);
     ASSERT_EQ(d.holes.size(), 5u);
-    double worst = 0.0;
-    for (const RoundHoleHole& h : d.holes) {
-      const Eigen::Vector2d p_board = scene.board.features()[h.id].p_board;
-      const Eigen::Vector3d truth =
-          scene.T_lidar_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0.0);
-      worst = std::max(worst, (h.p_lidar - truth).norm());
-    }
+    const double worst = WorstHoleError(scene, d);
     const double normal_error = std::acos(std::clamp(
         d.T_lidar_board.RotationMatrix().col(2).dot(scene.T_lidar_board.RotationMatrix().col(2)),
         -1.0, 1.0));
