@@ -132,11 +132,13 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
     o.board_id = id;
     for (const RoundHoleHole& h : d.holes) o.holes.push_back({h.id, h.p_lidar});
     o.normal_lidar = d.T_lidar_board.RotationMatrix().col(2);
-    // The five centres share the board's in-plane error; as independent points each carries
-    // sqrt(5) times it, so that their mean is as uncertain as the board's position. 1 mm is
-    // the floor below which the fit's own sigma is not trusted.
-    constexpr double kMinCentreSigmaM = 0.001;
-    o.centre_sigma_m = std::max(kMinCentreSigmaM, std::sqrt(5.0) * d.in_plane_sigma_m.maxCoeff());
+    // The board enters the solve as its pose with the detector's full covariance: the five
+    // centres share the board's in-plane error (with two rings through the holes mostly along
+    // the board's y), which no per-centre sigma can express. The centres' sigma only weighs
+    // the closed-form start.
+    o.T_lidar_board = d.T_lidar_board;
+    o.pose_covariance = d.pose_covariance;
+    o.centre_sigma_m = std::max(0.001, d.in_plane_sigma_m.maxCoeff());
     o.normal_sigma_rad = d.normal_sigma_rad;
     observations.push_back(std::move(o));
   }

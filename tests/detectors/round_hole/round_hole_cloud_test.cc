@@ -193,3 +193,58 @@ TEST(RoundHoleCloudTest, BadInputGivesAReason) {
 
 }  // namespace
 }  // namespace linecal
+
+namespace linecal {
+namespace {
+
+// Monte Carlo of the reported pose covariance (reduced; `linecal eval lidar` runs the
+// LiDAR-to-car version over many cars): boards at random positions around 5.5 m (VLP-16) or
+// 6 m (Pandar64), headings within 25 degrees, sigma 2 cm, 2 rotations. Per pose component
+// the RMS of error / reported 1-sigma should be 1 (acceptance.md: within +-20%). With 40
+// runs one component's RMS scatters by about 11% (1-sigma), so position and tilt components
+// are held to 0.75..1.25 and the six pooled (240 values, 4.6%) to 0.8..1.2. The in-plane
+// rotation theta_z does not meet the bar: over 150 runs its ratio is 1.31 for the VLP-16
+// (under-reported) and 0.73 for the Pandar64 (over-reported), see docs/lidar-radar.md; it is
+// held to 0.6..1.5 here so that a regression shows.
+TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
+  constexpr int kRuns = 40;
+  for (const char* sensor : {"bumper_lidar", "roof_lidar"}) {
+    const LidarBeamTable beams = Beams(sensor);
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Eigen::Matrix<double, 6, 1> sum_z2 = Eigen::Matrix<double, 6, 1>::Zero();
+    int runs = 0;
+    for (int run = 0; run < kRuns; ++run) {
+      const double distance = (std::string(sensor) == "bumper_lidar" ? 5.5 : 6.0) + 1.0 * u(rng);
+      StationLayout layout;
+      layout.name = "mc";
+      layout.boards.push_back(
+          RoundHoleAt(FacingPose(distance, 30.0 * u(rng), 25.0 * u(rng), 0.15 * u(rng))));
+      const Scene scene = SimulateLayout(beams, layout, 0.02, 2, 100 + run);
+      const RoundHoleCloudDetection d = Detect(scene, Prior(scene.T_lidar_board, run));
+      ASSERT_TRUE(d.found) << sensor << " run " << run << ": " << RoundHoleCloudReasonName(d.reason);
+      // The error in the board frame: T_true = T_est * (R(theta), t).
+      const Rigid3d delta = d.T_lidar_board.Inverse() * scene.T_lidar_board;
+      const Eigen::AngleAxisd aa(delta.RotationMatrix());
+      Eigen::Matrix<double, 6, 1> e;
+      e << aa.angle() * aa.axis(), delta.translation();
+      for (int k = 0; k < 6; ++k) sum_z2(k) += e(k) * e(k) / d.pose_covariance(k, k);
+      ++runs;
+    }
+    const Eigen::Matrix<double, 6, 1> ratio = (sum_z2 / runs).cwiseSqrt();
+    const double pooled = std::sqrt(sum_z2.sum() / (6.0 * runs));
+    std::printf("%-12s error / sigma over %d runs: theta_x %.2f theta_y %.2f theta_z %.2f "
+                "t_x %.2f t_y %.2f t_z %.2f, pooled %.2f\n",
+                sensor, runs, ratio(0), ratio(1), ratio(2), ratio(3), ratio(4), ratio(5), pooled);
+    for (int k = 0; k < 6; ++k) {
+      const bool theta_z = k == 2;
+      EXPECT_GT(ratio(k), theta_z ? 0.6 : 0.75) << sensor << " component " << k;
+      EXPECT_LT(ratio(k), theta_z ? 1.5 : 1.25) << sensor << " component " << k;
+    }
+    EXPECT_GT(pooled, 0.8) << sensor;
+    EXPECT_LT(pooled, 1.2) << sensor;
+  }
+}
+
+}  // namespace
+}  // namespace linecal
