@@ -57,6 +57,10 @@ constexpr int kMinEdges = 6;
 // Edges of a fitted board scatter by the azimuth step (at most about 3 cm at 8 m for 0.2
 // degrees); an RMS beyond 5 cm means the model does not fit.
 constexpr double kMaxEdgeRmsM = 0.05;
+// A return this far (metres) in front of the expected plane, whose ray meets the region, is an
+// occluder: beyond the plane fit's reach (its cut-off stays under 0.28 m only for wild data;
+// for range noise of 1-3 cm it is under 0.15 m) and nearer than any hole's background.
+constexpr double kOccluderDepthM = 0.15;
 // See the edge extraction: rings spanning less of the page than this are dropped.
 constexpr double kMinRingSpanPages = 0.1;
 // Edge errors beyond the azimuth quantisation (float rounding of the points, the plane's own
@@ -333,7 +337,11 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
 
   // 1. Region of interest, in the expected board frame.
   const Rigid3d T_board_lidar_prior = T_lidar_board_prior.Inverse();
+  const Eigen::Vector3d sensor_board = T_board_lidar_prior.translation();
   std::vector<RoiPoint> roi;
+  // Returns between the sensor and the board whose rays would meet the region: occluders
+  // (another board's stand, a person), by ring and frame (frame * 2^16 + ring), azimuth.
+  std::map<int, std::vector<double>> occluders;
   for (std::size_t f = 0; f < frames.size(); ++f) {
     for (const RoundHoleCloudPoint& p : frames[f]) {
       const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
@@ -343,6 +351,15 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
           std::abs(q.y()) < half_page.y() + options.roi_margin_m &&
           std::abs(q.z()) < options.roi_depth_m) {
         roi.push_back({p_lidar, p.ring, static_cast<int>(f)});
+      }
+      if (q.z() > kOccluderDepthM && q.z() < sensor_board.z()) {
+        // Where its ray meets the expected plane (board z = 0).
+        const Eigen::Vector3d m =
+            sensor_board + (sensor_board.z() / (sensor_board.z() - q.z())) * (q - sensor_board);
+        if (std::abs(m.x()) < half_page.x() + options.roi_margin_m &&
+            std::abs(m.y()) < half_page.y() + options.roi_margin_m) {
+          occluders[static_cast<int>(f) * 65536 + p.ring].push_back(std::atan2(p.y, p.x));
+        }
       }
     }
   }
@@ -398,6 +415,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   double rms = 0.0;
   int kept = 0;
   bool degenerate = false;
+  const PaperRaster raster(board);
   for (int pass = 0; pass < kPasses; ++pass) {
     // 2. Plane.
     plane = FitPlane(plane_points, n0, options.roi_depth_m);
@@ -417,6 +435,22 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
     // Azimuth about the spin axis (LiDAR z), relative to the expected board centre's, so that a
     // ring's points sort in firing order whatever azimuth the rotation starts at.
     const double azimuth0 = std::atan2(o.y(), o.x());
+    // The occluders' azimuths on the same scale, sorted.
+    std::map<int, std::vector<double>> occluder_azimuths;
+    for (const auto& [group, azimuths] : occluders) {
+      std::vector<double>& a = occluder_azimuths[group];
+      for (double az : azimuths) a.push_back(std::remainder(az - azimuth0, 2.0 * std::numbers::pi));
+      std::sort(a.begin(), a.end());
+    }
+    // True when a ray of ring-frame `group` between azimuths lo and hi hit something in front
+    // of the board: a gap there, or the ring's end, is the occluder's, not a hole's or the
+    // page's.
+    const auto occluded = [&](int group, double lo, double hi) {
+      const auto it = occluder_azimuths.find(group);
+      if (it == occluder_azimuths.end()) return false;
+      const auto first = std::upper_bound(it->second.begin(), it->second.end(), lo);
+      return first != it->second.end() && *first < hi;
+    };
     struct InPlane {
       Eigen::Vector2d p_plane;
       double azimuth_rad = 0.0;
@@ -489,9 +523,17 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
           const auto steps_along = [&](std::size_t i, double half) {
             return (in_plane[i].azimuth_rad - a0) / step + half;
           };
-          edges.push_back({in_plane[begin].p_plane - 0.5 * first_step, group, -1, first_step, -0.5});
-          edges.push_back({in_plane[end - 1].p_plane + 0.5 * last_step, group, -1, last_step,
-                           steps_along(end - 1, 0.5)});
+          const int key = in_plane[begin].group;
+          const double reach = kEndSamples * step;
+          const bool start_hidden = occluded(key, a0 - reach, a0);
+          const bool end_hidden =
+              occluded(key, in_plane[end - 1].azimuth_rad, in_plane[end - 1].azimuth_rad + reach);
+          if (!start_hidden)
+            edges.push_back({in_plane[begin].p_plane - 0.5 * first_step, group, -1, first_step, -0.5});
+          if (!end_hidden) {
+            edges.push_back({in_plane[end - 1].p_plane + 0.5 * last_step, group, -1, last_step,
+                             steps_along(end - 1, 0.5)});
+          }
           // The ring's azimuth phase in this frame: whether the frames fired at the same
           // azimuths (then their edges share their quantisation errors).
           std::complex<double> phasor = 0.0;
@@ -499,14 +541,17 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
             phasor += std::polar(1.0, 2.0 * std::numbers::pi * in_plane[i].azimuth_rad / step);
           group_phase.back() = std::arg(phasor) / (2.0 * std::numbers::pi);
           for (int k = 1; k <= kEndSamples; ++k) {
-            samples.push_back({in_plane[begin].p_plane - k * first_step, false});
-            samples.push_back({in_plane[end - 1].p_plane + k * last_step, false});
+            if (!start_hidden) samples.push_back({in_plane[begin].p_plane - k * first_step, false});
+            if (!end_hidden) samples.push_back({in_plane[end - 1].p_plane + k * last_step, false});
           }
           for (std::size_t i = begin; i < end; ++i) {
             samples.push_back({in_plane[i].p_plane, true});
             if (i + 1 == end) break;
             const double da = in_plane[i + 1].azimuth_rad - in_plane[i].azimuth_rad;
-            if (da <= kGapSteps * step) continue;
+            if (da <= kGapSteps * step ||
+                occluded(key, in_plane[i].azimuth_rad, in_plane[i + 1].azimuth_rad)) {
+              continue;
+            }
             const Eigen::Vector2d s = step_vector(i, i + 1);
             edges.push_back({in_plane[i].p_plane + 0.5 * s, group, gaps, s, steps_along(i, 0.5)});
             edges.push_back(
@@ -529,7 +574,6 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       const std::size_t stride = samples.size() / kMaxSamples + 1;
       const int shifts = static_cast<int>(options.max_in_plane_shift_m / kShiftStepM);
       const int rotations = static_cast<int>(options.max_in_plane_rotation_rad / kRotationStepRad);
-      const PaperRaster raster(board);
       int best_score = -1;
       double best_distance = 0.0;
       for (int ir = -rotations; ir <= rotations; ++ir) {
@@ -553,7 +597,8 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       }
     }
 
-    // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles.
+    // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles, from `pose`.
+    const auto fit_edges = [&]() {
     which.assign(edges.size(), -1);
     weight.assign(edges.size(), 0.0);
     double gate = kInitialEdgeGateM;
@@ -645,6 +690,8 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       gate = std::max(kTukeyC * kMadToSigma * Median(abs_r), kMinEdgeGateM);
       if (dx.norm() < kConvergence) break;
     }
+    };
+    fit_edges();
     if (degenerate || pass + 1 == kPasses) break;
     // The points on paper, by the board pose of this pass, for the next pass's plane.
     const Eigen::Matrix2d Rt = Rotation2(pose.z()).transpose();

@@ -8,7 +8,6 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -17,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/detectors/board_scene.h"
 #include "tests/detectors/round_hole/round_hole_scene.h"
 
 namespace linecal {
@@ -34,12 +34,12 @@ Rigid3d Prior(const Rigid3d& truth, std::uint64_t seed) {
 RoundHoleCloudDetection Detect(const Scene& scene, const Rigid3d& prior,
                                double* ms_per_frame = nullptr) {
   std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(), scene.frames.end());
-  const auto start = std::chrono::steady_clock::now();
+  // Thread CPU time: the bar is the detector's cost, not the shared machine's load.
+  const double start_ms = test_scene::ThreadCpuMs();
   RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(scene.board, views, prior);
-  const std::chrono::duration<double, std::milli> elapsed =
-      std::chrono::steady_clock::now() - start;
+  const double elapsed_ms = test_scene::ThreadCpuMs() - start_ms;
   if (ms_per_frame != nullptr)
-    *ms_per_frame = elapsed.count() / std::max<std::size_t>(views.size(), 1);
+    *ms_per_frame = elapsed_ms / std::max<std::size_t>(views.size(), 1);
   return d;
 }
 
@@ -100,6 +100,35 @@ TEST(RoundHoleCloudTest, HoleCentresAndNormalWithinTheBars) {
     constexpr double kMsPerFrameBar = 50.0;  // optimised builds only
     EXPECT_LT(ms, kMsPerFrameBar) << what;
 #endif
+  }
+}
+
+// A post between the LiDAR and the board (another board's stand, as on the reference
+// station for the bumper LiDAR) hides a strip of the board in every ring, next to a hole: its
+// gap must not be taken for the hole's. VLP-16, board 0.5 m above it at 4.2 m.
+TEST(RoundHoleCloudTest, AnOccludingPostIsNotAHole) {
+  for (double post_x : {-0.2, -0.12, 0.1}) {
+    StationLayout layout;
+    layout.name = "occluded";
+    layout.boards.push_back(RoundHoleAt(FacingPose(4.2, 0.0, 10.0, 0.5)));
+    // A 6 cm post standing 1.5 m in front of the board, post_x to its side (station -y is
+    // the board's +x for a board facing the LiDAR along +x).
+    StationSurface post;
+    post.id = "post";
+    Eigen::Matrix3d R;
+    R << 0, 0, -1, -1, 0, 0, 0, 1, 0;  // x along -y, y up, z towards the LiDAR (-x)
+    post.T_station_surface = Rigid3d(R, Eigen::Vector3d(2.7, -post_x * 2.7 / 4.2, 1.0));
+    post.size_m = Eigen::Vector2d(0.06, 2.0);
+    layout.surfaces.push_back(post);
+    const Scene scene = SimulateLayout(Beams("bumper_lidar"), layout, 0.02, 10);
+    const RoundHoleCloudDetection d = Detect(scene, Prior(scene.T_lidar_board, 5));
+    ASSERT_TRUE(d.found) << post_x << ": " << RoundHoleCloudReasonName(d.reason);
+    const double worst = WorstHoleError(scene, d);
+    const Rigid3d delta = d.T_lidar_board.Inverse() * scene.T_lidar_board;
+    std::printf("post at board x %.2f: worst hole %.1f mm, board y error %.1f mm (1-sigma %.1f)\n", post_x,
+                1e3 * worst, 1e3 * delta.translation().y(), 1e3 * std::sqrt(d.pose_covariance(4, 4)));
+    EXPECT_LT(worst, 0.02) << post_x;  // acceptance.md, 16 rings
+    EXPECT_LT(std::abs(delta.translation().y()), 4.0 * std::sqrt(d.pose_covariance(4, 4))) << post_x;
   }
 }
 
