@@ -113,39 +113,7 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
     return out;
   }
   const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
-  // Where the boards should be if the LiDAR sits at its nominal mounting.
-  const Rigid3d T_lidar_station =
-      (capture.manifest.aligner.T_station_car() * sensor.T_car_sensor_nominal).Inverse();
-  std::vector<LidarBoardObservation> observations;
-  for (const std::string& id : sensor.targets) {
-    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
-    const StationBoard* board = capture.station.FindBoard(id);
-    if (board == nullptr) continue;  // ReadCapture checked the targets; kept for safety of the data
-    const RoundHoleCloudDetection d =
-        DetectRoundHoleBoardInCloud(board->board, views, T_lidar_station * board->T_station_board);
-    if (!d.found) {
-      summary.last_reason = RoundHoleCloudReasonName(d.reason);
-      continue;
-    }
-    summary.frames_found = static_cast<int>(frames.size());
-    LidarBoardObservation o;
-    o.board_id = id;
-    for (const RoundHoleHole& h : d.holes) o.holes.push_back({h.id, h.p_lidar});
-    o.normal_lidar = d.T_lidar_board.RotationMatrix().col(2);
-    // The board enters the solve as its pose with the detector's full covariance: the five
-    // centres share the board's in-plane error (with two rings through the holes mostly along
-    // the board's y), which no per-centre sigma can express. The centres' sigma only weighs
-    // the closed-form start.
-    o.T_lidar_board = d.T_lidar_board;
-    o.pose_covariance = d.pose_covariance;
-    o.centre_sigma_m = std::max(0.001, d.in_plane_sigma_m.maxCoeff());
-    o.normal_sigma_rad = d.normal_sigma_rad;
-    observations.push_back(std::move(o));
-  }
-  absl::StatusOr<LidarCalibrationResult> r =
-      CalibrateLidar(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations);
-  if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
-  return out;
+  return CalibrateLidarFrames(capture.station, capture.manifest.aligner.T_station_car(), sensor, views);
 }
 
 SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel& sensor,
@@ -316,6 +284,50 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
           {"verdict", SensorVerdictName(cycle.verdict)},
           {"elapsed_ms", cycle.elapsed_ns * 1e-6},
           {"sensors", sensors}};
+}
+
+
+SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid3d& T_station_car,
+                                       const SensorModel& sensor,
+                                       std::span<const std::span<const RoundHoleCloudPoint>> frames,
+                                       std::vector<RoundHoleCloudDetection>* detections) {
+  SensorCalibration out;
+  if (detections != nullptr) detections->clear();
+  // Where the boards should be if the LiDAR sits at its nominal mounting.
+  const Rigid3d T_lidar_station = (T_station_car * sensor.T_car_sensor_nominal).Inverse();
+  std::vector<LidarBoardObservation> observations;
+  for (const std::string& id : sensor.targets) {
+    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
+    const StationBoard* board = station.FindBoard(id);
+    if (board == nullptr) {  // ReadCapture checked the targets; kept for safety of the data
+      if (detections != nullptr) detections->emplace_back();
+      continue;
+    }
+    const RoundHoleCloudDetection d =
+        DetectRoundHoleBoardInCloud(board->board, frames, T_lidar_station * board->T_station_board);
+    if (detections != nullptr) detections->push_back(d);
+    if (!d.found) {
+      summary.last_reason = RoundHoleCloudReasonName(d.reason);
+      continue;
+    }
+    summary.frames_found = static_cast<int>(frames.size());
+    LidarBoardObservation o;
+    o.board_id = id;
+    for (const RoundHoleHole& h : d.holes) o.holes.push_back({h.id, h.p_lidar});
+    o.normal_lidar = d.T_lidar_board.RotationMatrix().col(2);
+    // The board enters the solve as its pose with the detector's full covariance: the five
+    // centres share the board's in-plane error (with two rings through the holes mostly along
+    // the board's y), which no per-centre sigma can express. The centres' sigma only weighs
+    // the closed-form start.
+    o.T_lidar_board = d.T_lidar_board;
+    o.pose_covariance = d.pose_covariance;
+    o.centre_sigma_m = std::max(0.001, d.in_plane_sigma_m.maxCoeff());
+    o.normal_sigma_rad = d.normal_sigma_rad;
+    observations.push_back(std::move(o));
+  }
+  absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, station, T_station_car, observations);
+  if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
+  return out;
 }
 
 }  // namespace linecal

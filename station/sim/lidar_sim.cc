@@ -1,6 +1,7 @@
 #include "station/sim/lidar_sim.h"
 
 #include <cmath>
+#include <optional>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -247,6 +248,14 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
     for (const LidarPoint& p : scan.points) scan.stamp_ns = std::min(scan.stamp_ns, p.time_ns);
   }
   return result;
+}
+
+absl::StatusOr<LidarBeamTable> SensorBeamTable(const SensorModel& sensor) {
+  const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
+  if (!model) {
+    return absl::InvalidArgumentError(absl::StrCat("unknown LiDAR model '", sensor.model, "'"));
+  }
+  return sensor.angles_file.empty() ? DefaultBeamTable(*model) : ReadAngleCorrectionCsv(*model, sensor.angles_file);
 }
 
 }  // namespace linecal

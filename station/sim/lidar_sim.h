@@ -20,6 +20,7 @@
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
+#include "station/model/car_model.h"
 #include "station/model/station_layout.h"
 #include "station/sensors/lidar_format.h"
 #include "station/sensors/lidar_point.h"
@@ -63,6 +64,11 @@ inline constexpr double kLidarLeadDeg = 10.0;
 // VLP-16 and Pandar64, 0.18° for the PandarXT-32 — whole centidegrees close to each model's
 // column period at 10 Hz, so every column's azimuth is exact in the packets.
 int SimulatedColumnStepCentideg(LidarModel model);
+
+// The beam table of a LiDAR of the car model: its model's built-in table, or its per-unit
+// angle correction file (SensorModel::angles_file). InvalidArgument for an unknown model (the
+// caller names the sensor); the file's own errors otherwise.
+absl::StatusOr<LidarBeamTable> SensorBeamTable(const SensorModel& sensor);
 
 // Casts `options.rotations` rotations, the first starting at azimuth 0 at time `start_time_ns`
 // (the lead-in fires before it).

@@ -78,10 +78,7 @@ absl::StatusOr<SensorOutput> SimulateCamera(const SensorModel& sensor, const Rig
 absl::StatusOr<SensorOutput> SimulateLidarSensor(const SensorModel& sensor, const Rigid3d& T_station_sensor,
                                                  const StationLayout& station, const SimulatorOptions& o,
                                                  std::uint64_t stream, const fs::path& dir) {
-  const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
-  if (!model) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": unknown LiDAR model '", sensor.model, "'"));
-  absl::StatusOr<LidarBeamTable> beams =
-      sensor.angles_file.empty() ? DefaultBeamTable(*model) : ReadAngleCorrectionCsv(*model, sensor.angles_file);
+  absl::StatusOr<LidarBeamTable> beams = SensorBeamTable(sensor);
   if (!beams.ok()) return Prefix(sensor.name, beams.status());
   absl::StatusOr<LidarSimResult> sim = SimulateLidar(*beams, T_station_sensor, station, o.lidar, o.time_ns, stream);
   if (!sim.ok()) return Prefix(sensor.name, sim.status());
@@ -100,13 +97,13 @@ absl::StatusOr<SensorOutput> SimulateLidarSensor(const SensorModel& sensor, cons
     const std::string rel = sensor.name + "/packets.pcap";
     absl::StatusOr<PcapWriter> writer = PcapWriter::Create(dir / rel);
     if (!writer.ok()) return writer.status();
-    const LidarModelInfo& info = GetLidarModelInfo(*model);
+    const LidarModelInfo& info = GetLidarModelInfo(beams->model);
     UdpEndpoints endpoints;
     endpoints.dst_port = info.default_udp_port;
     endpoints.src_port = info.default_udp_port;
     absl::StatusOr<std::vector<std::vector<std::uint8_t>>> packets = EncodeLidarPackets(sim->encode, sim->columns);
     if (!packets.ok()) return Prefix(sensor.name, packets.status());
-    const int per_packet = ColumnsPerPacket(*model, 1);
+    const int per_packet = ColumnsPerPacket(beams->model, 1);
     for (size_t p = 0; p < packets->size(); ++p) {
       // A packet leaves the sensor when its last column has fired.
       const std::int64_t t = sim->encode.first_column_time_ns +

@@ -26,10 +26,7 @@ inline constexpr double kHeightM = 1.0;
 // "roof_lidar" (Pandar64, deploy/cars/Pandar64.csv) or "bumper_lidar" (VLP-16, built in).
 inline LidarBeamTable Beams(const std::string& sensor) {
   const CarModel car = *ReadCarModel(kDeploy + "/cars/reference.json");
-  const SensorModel* s = car.FindSensor(sensor);
-  const LidarModel model = *LidarModelFromName(s->model);
-  return *(s->angles_file.empty() ? DefaultBeamTable(model)
-                                  : ReadAngleCorrectionCsv(model, s->angles_file));
+  return *SensorBeamTable(*car.FindSensor(sensor));
 }
 
 struct Scene {
