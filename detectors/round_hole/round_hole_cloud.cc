@@ -61,6 +61,9 @@ constexpr double kMaxEdgeRmsM = 0.05;
 // occluder: beyond the plane fit's reach (its cut-off stays under 0.28 m only for wild data;
 // for range noise of 1-3 cm it is under 0.15 m) and nearer than any hole's background.
 constexpr double kOccluderDepthM = 0.15;
+// With this many rings through the holes or fewer, the board's y gets the profile variance
+// (ProfileYVariance); more rings at more heights keep the fit linear.
+constexpr int kFewRingsThroughHoles = 4;
 // See the edge extraction: rings spanning less of the page than this are dropped.
 constexpr double kMinRingSpanPages = 0.1;
 // Edge errors beyond the azimuth quantisation (float rounding of the points, the plane's own
@@ -286,6 +289,43 @@ double FrameRepeats(const std::vector<int>& group_ring, const std::vector<int>& 
   return repeats.empty() ? 1.0 : Median(repeats);
 }
 
+// With few rings through the holes the board's y rests on a few chords, and a chord's half
+// length c = sqrt(r^2 - h^2) places a ring at h from a hole's centre through dh = -c dc / h:
+// near the centre a chord a step short moves the board by centimetres, far more (and in a
+// direction) the fit's linearisation at its own solution shows. The profile of the edges'
+// whitened cost (each edge's quantisation variance, truncated at `gate_m`) along the board's
+// y, with x and rotation held, gives the honest spread: the farthest shift, within a hole's
+// radius, whose cost is within 1 of the least. Returns its square, metres^2.
+double ProfileYVariance(const std::vector<Edge>& edges, const std::vector<double>& weights,
+                        const std::vector<Circle>& holes, const Eigen::Vector2d& half_page,
+                        const Eigen::Vector3d& pose, double gate_m) {
+  constexpr double kStepM = 0.001;
+  double reach = 0.0;
+  for (const Circle& c : holes) reach = std::max(reach, c.radius_m);
+  const Eigen::Matrix2d R = Rotation2(pose.z());
+  const int n = static_cast<int>(reach / kStepM);
+  std::vector<double> cost(2 * n + 1, 0.0);
+  for (int i = -n; i <= n; ++i) {
+    const Eigen::Vector2d t = pose.head<2>() + R * Eigen::Vector2d(0.0, i * kStepM);
+    double c = 0.0;
+    for (std::size_t k = 0; k < edges.size(); ++k) {
+      if (!(weights[k] > 0.0)) continue;  // the fit's outliers stay out
+      Eigen::Vector2d grad;
+      int which = -1;
+      const double r =
+          NearestBoundary(holes, half_page, R.transpose() * (edges[k].p_plane - t), &grad, &which);
+      const double along = grad.dot(R.transpose() * edges[k].step_plane);
+      c += std::min(r * r, gate_m * gate_m) / (along * along / 12.0 + kEdgeFloorVarM2);
+    }
+    cost[i + n] = c;
+  }
+  const double least = *std::min_element(cost.begin(), cost.end());
+  double farthest = 0.0;
+  for (int i = -n; i <= n; ++i)
+    if (cost[i + n] <= least + 1.0) farthest = std::max(farthest, std::abs(i * kStepM));
+  return farthest * farthest;
+}
+
 }  // namespace
 
 bool RoundHoleCloudOptions::Valid() const {
@@ -413,6 +453,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   std::vector<Eigen::Vector3d> wJa;  // per edge: w J times the step seen through its normal
   std::vector<double> true_steps;    // per edge: where its boundary is, in steps along the ring
   double rms = 0.0;
+  double last_gate = kInitialEdgeGateM;  // the edge fit's last robust gate, metres
   int kept = 0;
   bool degenerate = false;
   const PaperRaster raster(board);
@@ -688,6 +729,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       }
       pose += dx;
       gate = std::max(kTukeyC * kMadToSigma * Median(abs_r), kMinEdgeGateM);
+      last_gate = gate;
       if (dx.norm() < kConvergence) break;
     }
     };
@@ -777,6 +819,10 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   }
   out.pose_covariance =
       M_q * cov_quantisation * M_q.transpose() + M_w * plane.cov_w * M_w.transpose();
+  if (out.rings_through_holes <= kFewRingsThroughHoles) {
+    const double profile = ProfileYVariance(edges, weight, holes, half_page, pose, last_gate);
+    out.pose_covariance(4, 4) = std::max(out.pose_covariance(4, 4), profile);
+  }
   const Eigen::Matrix2d cov_in = out.pose_covariance.block<2, 2>(3, 3);
   out.in_plane_sigma_m = Eigen::Vector2d(std::sqrt(cov_in(0, 0)), std::sqrt(cov_in(1, 1)));
   for (std::size_t i = 0; i < holes.size(); ++i) {

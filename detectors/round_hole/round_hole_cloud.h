@@ -17,6 +17,9 @@
 //     refined by a robust Gauss-Newton fit of all edges of all rings and frames to the five
 //     hole circles and the outline together: a hole that one ring crosses is placed by the
 //     others through the rigid board.
+//  Gaps and ring ends where a ray hit something in front of the board (an occluder) give no
+//  edges, nor do rings spanning under a tenth of the page (the board's stand). The pose's
+//  covariance models each edge as uniform within half an azimuth step (see pose_covariance).
 //
 // Frames and units: points and results are in the LiDAR frame (the sensor's own origin,
 // rays start there), metres; the board frame is that of detectors/boards/board.h. Pure
