@@ -16,7 +16,6 @@
 #include <string>
 #include <vector>
 
-#include "tests/detectors/board_scene.h"
 #include "tests/detectors/round_hole/round_hole_scene.h"
 
 namespace linecal {
@@ -33,14 +32,9 @@ Rigid3d Prior(const Rigid3d& truth, std::uint64_t seed) {
 
 RoundHoleCloudDetection Detect(const Scene& scene, const Rigid3d& prior,
                                double* ms_per_frame = nullptr) {
-  std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(), scene.frames.end());
-  // Thread CPU time: the bar is the detector's cost, not the shared machine's load.
-  const double start_ms = test_scene::ThreadCpuMs();
-  RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(scene.board, views, prior);
-  const double elapsed_ms = test_scene::ThreadCpuMs() - start_ms;
-  if (ms_per_frame != nullptr)
-    *ms_per_frame = elapsed_ms / std::max<std::size_t>(views.size(), 1);
-  return d;
+  return TimedPerFrame(scene, ms_per_frame, [&](auto views) {
+    return DetectRoundHoleBoardInCloud(scene.board, views, prior);
+  });
 }
 
 struct Case {

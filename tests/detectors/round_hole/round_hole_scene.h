@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "detectors/round_hole/round_hole_cloud.h"
+#include "tests/detectors/board_scene.h"
 #include "station/model/car_model.h"
 #include "station/model/pose_json.h"
 #include "station/model/station_layout.h"
@@ -100,6 +101,19 @@ inline double WorstHoleError(const Scene& scene, const RoundHoleCloudDetection& 
     worst = std::max(worst, (h.p_lidar - truth).norm());
   }
   return worst;
+}
+
+// Runs detect(views) on the scene's frames and returns its result, with the thread CPU time
+// per frame in *ms_per_frame when given (the bar is the detector's cost, not the shared
+// machine's load).
+template <typename Detect>
+auto TimedPerFrame(const Scene& scene, double* ms_per_frame, Detect&& detect) {
+  const std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(), scene.frames.end());
+  const double start_ms = test_scene::ThreadCpuMs();
+  auto result = detect(std::span<const std::span<const RoundHoleCloudPoint>>(views));
+  const double elapsed_ms = test_scene::ThreadCpuMs() - start_ms;
+  if (ms_per_frame != nullptr) *ms_per_frame = elapsed_ms / std::max<std::size_t>(views.size(), 1);
+  return result;
 }
 
 }  // namespace linecal

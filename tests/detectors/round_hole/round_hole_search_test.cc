@@ -14,7 +14,6 @@
 #include <vector>
 
 #include "station/io/pcd.h"
-#include "tests/detectors/board_scene.h"
 #include "tests/detectors/round_hole/round_hole_scene.h"
 
 namespace linecal {
@@ -59,14 +58,8 @@ void AddBox(StationLayout& layout, double distance_m, double bearing_deg) {
 }
 
 RoundHoleSearchResult Search(const Scene& scene, double* ms_per_frame = nullptr) {
-  std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(), scene.frames.end());
-  // Thread CPU time: the bar is the detector's cost, not the shared machine's load.
-  const double start_ms = test_scene::ThreadCpuMs();
-  RoundHoleSearchResult r = SearchRoundHoleBoardInCloud(scene.board, views);
-  const double elapsed_ms = test_scene::ThreadCpuMs() - start_ms;
-  if (ms_per_frame != nullptr)
-    *ms_per_frame = elapsed_ms / std::max<std::size_t>(views.size(), 1);
-  return r;
+  return TimedPerFrame(scene, ms_per_frame,
+                       [&](auto views) { return SearchRoundHoleBoardInCloud(scene.board, views); });
 }
 
 struct Case {
