@@ -123,27 +123,7 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
     return out;
   }
   const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
-  // Where the boards should be if the LiDAR sits at its nominal mounting.
-  const Rigid3d T_lidar_station =
-      (capture.manifest.aligner.T_station_car() * sensor.T_car_sensor_nominal).Inverse();
-  std::vector<LidarBoardObservation> observations;
-  for (const std::string& id : sensor.targets) {
-    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
-    const StationBoard* board = capture.station.FindBoard(id);
-    if (board == nullptr) continue;  // ReadCapture checked the targets; kept for safety of the data
-    const RoundHoleCloudDetection d =
-        DetectRoundHoleBoardInCloud(board->board, views, T_lidar_station * board->T_station_board);
-    if (!d.found) {
-      summary.last_reason = RoundHoleCloudReasonName(d.reason);
-      continue;
-    }
-    summary.frames_found = static_cast<int>(frames.size());
-    observations.push_back(LidarObservationFromDetection(id, d));
-  }
-  absl::StatusOr<LidarCalibrationResult> r =
-      CalibrateLidar(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations);
-  if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
-  return out;
+  return CalibrateLidarFrames(capture.station, capture.manifest.aligner.T_station_car(), sensor, views);
 }
 
 SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel& sensor,
@@ -356,6 +336,38 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
           {"verdict", SensorVerdictName(cycle.verdict)},
           {"elapsed_ms", cycle.elapsed_ns * 1e-6},
           {"sensors", sensors}};
+}
+
+
+SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid3d& T_station_car,
+                                       const SensorModel& sensor,
+                                       std::span<const std::span<const RoundHoleCloudPoint>> frames,
+                                       std::vector<RoundHoleCloudDetection>* detections) {
+  SensorCalibration out;
+  if (detections != nullptr) detections->clear();
+  // Where the boards should be if the LiDAR sits at its nominal mounting.
+  const Rigid3d T_lidar_station = (T_station_car * sensor.T_car_sensor_nominal).Inverse();
+  std::vector<LidarBoardObservation> observations;
+  for (const std::string& id : sensor.targets) {
+    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
+    const StationBoard* board = station.FindBoard(id);
+    if (board == nullptr) {  // ReadCapture checked the targets; kept for safety of the data
+      if (detections != nullptr) detections->emplace_back();
+      continue;
+    }
+    const RoundHoleCloudDetection d =
+        DetectRoundHoleBoardInCloud(board->board, frames, T_lidar_station * board->T_station_board);
+    if (detections != nullptr) detections->push_back(d);
+    if (!d.found) {
+      summary.last_reason = RoundHoleCloudReasonName(d.reason);
+      continue;
+    }
+    summary.frames_found = static_cast<int>(frames.size());
+    observations.push_back(LidarObservationFromDetection(id, d));
+  }
+  absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, station, T_station_car, observations);
+  if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
+  return out;
 }
 
 }  // namespace linecal

@@ -16,12 +16,14 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
+#include "detectors/round_hole/round_hole_cloud.h"
 #include "station/capture/capture.h"
 #include "station/solvers/camera_calibration.h"
 
@@ -82,6 +84,16 @@ struct CaptureCalibrationOptions {
 // the other sensors. Cost: the detectors' and solvers' (about 0.1-1 s for the reference car).
 absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture,
                                                   const CaptureCalibrationOptions& options = {});
+
+// The LiDAR path of a cycle on rotations already in memory (CalibrateCapture reads them from
+// the capture's PCD files): each of `sensor`'s target boards detected where the nominal
+// mounting and `T_station_car` put it, every board found entering CalibrateLidar as its pose
+// with the detector's covariance. `detections`, when given, receives the detection of each
+// target in sensor.targets order (for evaluations). Never throws; errors are outcomes.
+SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid3d& T_station_car,
+                                       const SensorModel& sensor,
+                                       std::span<const std::span<const RoundHoleCloudPoint>> frames,
+                                       std::vector<RoundHoleCloudDetection>* detections = nullptr);
 
 // The results document of interfaces.md ("Results"): per sensor name, kind, verdict, reason,
 // message, T_car_sensor (4x4 row-major), yaw/pitch/roll (deg) and x/y/z (m), their deviation

@@ -4,6 +4,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <cstddef>
 #include <limits>
 #include <map>
@@ -56,6 +57,21 @@ constexpr int kMinEdges = 6;
 // Edges of a fitted board scatter by the azimuth step (at most about 3 cm at 8 m for 0.2
 // degrees); an RMS beyond 5 cm means the model does not fit.
 constexpr double kMaxEdgeRmsM = 0.05;
+// A return this far (metres) in front of the expected plane, whose ray meets the region, is an
+// occluder: beyond the plane fit's reach (its cut-off stays under 0.28 m only for wild data;
+// for range noise of 1-3 cm it is under 0.15 m) and nearer than any hole's background.
+constexpr double kOccluderDepthM = 0.15;
+// With this many rings through the holes or fewer, the board's y gets the profile variance
+// (ProfileYVariance); more rings at more heights keep the fit linear.
+constexpr int kFewRingsThroughHoles = 4;
+// See the edge extraction: rings spanning less of the page than this are dropped.
+constexpr double kMinRingSpanPages = 0.1;
+// Edge errors beyond the azimuth quantisation (float rounding of the points, the plane's own
+// error moving the rays' meeting points): 1 mm, as a variance in m^2.
+constexpr double kEdgeFloorVarM2 = 1e-6;
+// Two frames of one ring fired at the same azimuths when their phases (azimuth over the step,
+// modulo 1) differ by less than this.
+constexpr double kSamePhase = 0.05;
 // Convergence of both fits: updates below 1e-7 (relative, m or rad) change nothing measurable.
 constexpr double kConvergence = 1e-7;
 
@@ -71,6 +87,13 @@ struct Edge {
   Eigen::Vector2d p_plane;
   int group = 0;
   int gap = -1;
+  // One azimuth step of the ring at the edge, in the plane: the edge lies somewhere within
+  // half of it of p_plane (uniformly), the error the in-plane covariance is built from.
+  Eigen::Vector2d step_plane = Eigen::Vector2d::Zero();
+  // Where along the ring, in azimuth steps from the ring's first point: the edges of one ring
+  // share its firing phase, so their errors are correlated as sawtooth functions this far
+  // apart.
+  double steps_along = 0.0;
 };
 
 // A sample of the coarse search: a return on the plane (paper = true) or a virtual ray that
@@ -84,6 +107,40 @@ struct Circle {
   Eigen::Vector2d centre_board;
   double radius_m = 0.0;
   int id = 0;
+};
+
+// The drawing as paper / not paper on a grid of kRasterM over the page, for the coarse
+// search's million look-ups (Board::PaintAt walks the shapes each time). A 5 mm grid is a
+// quarter of the search's 2 cm step; the fine fit uses the exact circles and outline.
+constexpr double kRasterM = 0.005;
+class PaperRaster {
+ public:
+  explicit PaperRaster(const Board& board)
+      : half_(0.5 * board.page_size_m()),
+        nx_(static_cast<int>(std::ceil(board.page_size_m().x() / kRasterM))),
+        ny_(static_cast<int>(std::ceil(board.page_size_m().y() / kRasterM))),
+        paper_(static_cast<std::size_t>(nx_) * ny_) {
+    for (int iy = 0; iy < ny_; ++iy) {
+      for (int ix = 0; ix < nx_; ++ix) {
+        const Paint paint = board.PaintAt(
+            Eigen::Vector2d((ix + 0.5) * kRasterM - half_.x(), (iy + 0.5) * kRasterM - half_.y()));
+        paper_[static_cast<std::size_t>(iy) * nx_ + ix] =
+            paint == Paint::kWhite || paint == Paint::kBlack;
+      }
+    }
+  }
+  bool PaperAt(const Eigen::Vector2d& m_board) const {
+    const double fx = (m_board.x() + half_.x()) / kRasterM;
+    const double fy = (m_board.y() + half_.y()) / kRasterM;
+    if (!(fx >= 0.0 && fy >= 0.0 && fx < nx_ && fy < ny_)) return false;
+    return paper_[static_cast<std::size_t>(fy) * nx_ + static_cast<std::size_t>(fx)];
+  }
+
+ private:
+  Eigen::Vector2d half_;
+  int nx_ = 0;
+  int ny_ = 0;
+  std::vector<bool> paper_;
 };
 
 double Median(std::vector<double> v) {
@@ -131,6 +188,7 @@ struct PlaneFit {
   double cutoff_m = 0.0;  // the final Tukey cut-off, on range residuals
   // 1-sigma of the normal's tilt along its worse axis, radians, from the fit's covariance.
   double normal_sigma_rad = 0.0;
+  Eigen::Matrix3d cov_w = Eigen::Matrix3d::Zero();  // of w = n / d, sigma^2 H^-1
   bool ok = false;
 };
 
@@ -200,11 +258,72 @@ PlaneFit FitPlane(const std::vector<RoiPoint>& points, const Eigen::Vector3d& n0
   fit.cutoff_m = cutoff;
   // Cov(w) = sigma^2 H^-1; n = w / |w| moves by (I - n n^T) dw / |w|.
   const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - fit.n_lidar * fit.n_lidar.transpose();
-  const Eigen::Matrix3d cov_n = P * H.inverse() * P * (sigma * sigma * fit.d_m * fit.d_m);
+  fit.cov_w = H.inverse() * (sigma * sigma);
+  const Eigen::Matrix3d cov_n = P * fit.cov_w * P * (fit.d_m * fit.d_m);
   fit.normal_sigma_rad = std::sqrt(
       std::max(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov_n).eigenvalues()(2), 0.0));
   fit.ok = true;
   return fit;
+}
+
+// How many frames share each frame's azimuth quantisation, per ring: the ring's frames
+// clustered by their azimuth phase (circularly, kSamePhase apart); frames / clusters, the
+// median over the rings. 1 when every frame fired at its own azimuths (a free-running
+// sensor), the number of frames when all fired at the same (a phase-locked one, the
+// simulator).
+double FrameRepeats(const std::vector<int>& group_ring, const std::vector<int>& group_frame,
+                    const std::vector<double>& group_phase) {
+  std::map<int, std::map<int, double>> phases;  // ring -> frame -> phase
+  for (std::size_t g = 0; g < group_ring.size(); ++g) {
+    if (std::isfinite(group_phase[g])) phases[group_ring[g]][group_frame[g]] = group_phase[g];
+  }
+  std::vector<double> repeats;
+  for (const auto& [ring, by_frame] : phases) {
+    std::vector<double> p;
+    for (const auto& [frame, phase] : by_frame) p.push_back(phase);
+    std::sort(p.begin(), p.end());
+    int clusters = p.back() - p.front() > 1.0 - kSamePhase ? 0 : 1;  // the wrap-around gap
+    for (std::size_t i = 1; i < p.size(); ++i) clusters += p[i] - p[i - 1] > kSamePhase ? 1 : 0;
+    repeats.push_back(static_cast<double>(p.size()) / std::max(clusters, 1));
+  }
+  return repeats.empty() ? 1.0 : Median(repeats);
+}
+
+// With few rings through the holes the board's y rests on a few chords, and a chord's half
+// length c = sqrt(r^2 - h^2) places a ring at h from a hole's centre through dh = -c dc / h:
+// near the centre a chord a step short moves the board by centimetres, far more (and in a
+// direction) the fit's linearisation at its own solution shows. The profile of the edges'
+// whitened cost (each edge's quantisation variance, truncated at `gate_m`) along the board's
+// y, with x and rotation held, gives the honest spread: the farthest shift, within a hole's
+// radius, whose cost is within 1 of the least. Returns its square, metres^2.
+double ProfileYVariance(const std::vector<Edge>& edges, const std::vector<double>& weights,
+                        const std::vector<Circle>& holes, const Eigen::Vector2d& half_page,
+                        const Eigen::Vector3d& pose, double gate_m) {
+  constexpr double kStepM = 0.001;
+  double reach = 0.0;
+  for (const Circle& c : holes) reach = std::max(reach, c.radius_m);
+  const Eigen::Matrix2d R = Rotation2(pose.z());
+  const int n = static_cast<int>(reach / kStepM);
+  std::vector<double> cost(2 * n + 1, 0.0);
+  for (int i = -n; i <= n; ++i) {
+    const Eigen::Vector2d t = pose.head<2>() + R * Eigen::Vector2d(0.0, i * kStepM);
+    double c = 0.0;
+    for (std::size_t k = 0; k < edges.size(); ++k) {
+      if (!(weights[k] > 0.0)) continue;  // the fit's outliers stay out
+      Eigen::Vector2d grad;
+      int which = -1;
+      const double r =
+          NearestBoundary(holes, half_page, R.transpose() * (edges[k].p_plane - t), &grad, &which);
+      const double along = grad.dot(R.transpose() * edges[k].step_plane);
+      c += std::min(r * r, gate_m * gate_m) / (along * along / 12.0 + kEdgeFloorVarM2);
+    }
+    cost[i + n] = c;
+  }
+  const double least = *std::min_element(cost.begin(), cost.end());
+  double farthest = 0.0;
+  for (int i = -n; i <= n; ++i)
+    if (cost[i + n] <= least + 1.0) farthest = std::max(farthest, std::abs(i * kStepM));
+  return farthest * farthest;
 }
 
 }  // namespace
@@ -258,7 +377,11 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
 
   // 1. Region of interest, in the expected board frame.
   const Rigid3d T_board_lidar_prior = T_lidar_board_prior.Inverse();
+  const Eigen::Vector3d sensor_board = T_board_lidar_prior.translation();
   std::vector<RoiPoint> roi;
+  // Returns between the sensor and the board whose rays would meet the region: occluders
+  // (another board's stand, a person), by ring and frame (frame * 2^16 + ring), azimuth.
+  std::map<int, std::vector<double>> occluders;
   for (std::size_t f = 0; f < frames.size(); ++f) {
     for (const RoundHoleCloudPoint& p : frames[f]) {
       const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
@@ -268,6 +391,15 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
           std::abs(q.y()) < half_page.y() + options.roi_margin_m &&
           std::abs(q.z()) < options.roi_depth_m) {
         roi.push_back({p_lidar, p.ring, static_cast<int>(f)});
+      }
+      if (q.z() > kOccluderDepthM && q.z() < sensor_board.z()) {
+        // Where its ray meets the expected plane (board z = 0).
+        const Eigen::Vector3d m =
+            sensor_board + (sensor_board.z() / (sensor_board.z() - q.z())) * (q - sensor_board);
+        if (std::abs(m.x()) < half_page.x() + options.roi_margin_m &&
+            std::abs(m.y()) < half_page.y() + options.roi_margin_m) {
+          occluders[static_cast<int>(f) * 65536 + p.ring].push_back(std::atan2(p.y, p.x));
+        }
       }
     }
   }
@@ -308,12 +440,23 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   Eigen::Vector3d pose = Eigen::Vector3d::Zero();  // (x, y, theta): p_plane = R(theta) m + (x, y)
   std::vector<Edge> edges;
   std::vector<int> group_ring;
+  std::vector<int> group_frame;
+  std::vector<double> group_phase;  // per group with a step: see Edge::step_plane
   std::vector<int> which;
   std::vector<double> weight;
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  // Sum of w^2 J J^T v over the edges, v the edge's quantisation variance along its normal.
+  Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
+  // Sum of w J (d r / d w): how the plane's error (w = n / d) moves the edges, which the
+  // rays put where they meet the fitted plane, and with them the in-plane pose.
+  Eigen::Matrix3d K = Eigen::Matrix3d::Zero();
+  std::vector<Eigen::Vector3d> wJa;  // per edge: w J times the step seen through its normal
+  std::vector<double> true_steps;    // per edge: where its boundary is, in steps along the ring
   double rms = 0.0;
+  double last_gate = kInitialEdgeGateM;  // the edge fit's last robust gate, metres
   int kept = 0;
   bool degenerate = false;
+  const PaperRaster raster(board);
   for (int pass = 0; pass < kPasses; ++pass) {
     // 2. Plane.
     plane = FitPlane(plane_points, n0, options.roi_depth_m);
@@ -333,6 +476,22 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
     // Azimuth about the spin axis (LiDAR z), relative to the expected board centre's, so that a
     // ring's points sort in firing order whatever azimuth the rotation starts at.
     const double azimuth0 = std::atan2(o.y(), o.x());
+    // The occluders' azimuths on the same scale, sorted.
+    std::map<int, std::vector<double>> occluder_azimuths;
+    for (const auto& [group, azimuths] : occluders) {
+      std::vector<double>& a = occluder_azimuths[group];
+      for (double az : azimuths) a.push_back(std::remainder(az - azimuth0, 2.0 * std::numbers::pi));
+      std::sort(a.begin(), a.end());
+    }
+    // True when a ray of ring-frame `group` between azimuths lo and hi hit something in front
+    // of the board: a gap there, or the ring's end, is the occluder's, not a hole's or the
+    // page's.
+    const auto occluded = [&](int group, double lo, double hi) {
+      const auto it = occluder_azimuths.find(group);
+      if (it == occluder_azimuths.end()) return false;
+      const auto first = std::upper_bound(it->second.begin(), it->second.end(), lo);
+      return first != it->second.end() && *first < hi;
+    };
     struct InPlane {
       Eigen::Vector2d p_plane;
       double azimuth_rad = 0.0;
@@ -371,14 +530,24 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
     edges.clear();
     std::vector<Sample> samples;
     group_ring.clear();
+    group_frame.clear();
+    group_phase.clear();
     int gaps = 0;
     std::vector<double> steps;
     for (std::size_t begin = 0; begin < in_plane.size();) {
       std::size_t end = begin;
       while (end < in_plane.size() && in_plane[end].group == in_plane[begin].group) ++end;
-      if (end - begin >= 2) {
+      // A ring's points on the plane spanning under a tenth of the page are not the board's:
+      // the narrowest paper a ring crosses (hole to page side) is 0.12 of the page, and the
+      // stand's post (6 cm), which a LiDAR below the board sees just behind its lower edge,
+      // would otherwise give edges that pull the page down onto it.
+      const bool board_ring =
+          (in_plane[end - 1].p_plane - in_plane[begin].p_plane).norm() >= kMinRingSpanPages * 2.0 * half_page.x();
+      if (end - begin >= 2 && board_ring) {
         const int group = static_cast<int>(group_ring.size());
         group_ring.push_back(in_plane[begin].group % 65536);
+        group_frame.push_back(in_plane[begin].group / 65536);
+        group_phase.push_back(std::numeric_limits<double>::quiet_NaN());
         steps.clear();
         for (std::size_t i = begin + 1; i < end; ++i)
           steps.push_back(in_plane[i].azimuth_rad - in_plane[i - 1].azimuth_rad);
@@ -391,20 +560,43 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
           };
           const Eigen::Vector2d first_step = step_vector(begin, begin + 1);
           const Eigen::Vector2d last_step = step_vector(end - 2, end - 1);
-          edges.push_back({in_plane[begin].p_plane - 0.5 * first_step, group, -1});
-          edges.push_back({in_plane[end - 1].p_plane + 0.5 * last_step, group, -1});
+          const double a0 = in_plane[begin].azimuth_rad;
+          const auto steps_along = [&](std::size_t i, double half) {
+            return (in_plane[i].azimuth_rad - a0) / step + half;
+          };
+          const int key = in_plane[begin].group;
+          const double reach = kEndSamples * step;
+          const bool start_hidden = occluded(key, a0 - reach, a0);
+          const bool end_hidden =
+              occluded(key, in_plane[end - 1].azimuth_rad, in_plane[end - 1].azimuth_rad + reach);
+          if (!start_hidden)
+            edges.push_back({in_plane[begin].p_plane - 0.5 * first_step, group, -1, first_step, -0.5});
+          if (!end_hidden) {
+            edges.push_back({in_plane[end - 1].p_plane + 0.5 * last_step, group, -1, last_step,
+                             steps_along(end - 1, 0.5)});
+          }
+          // The ring's azimuth phase in this frame: whether the frames fired at the same
+          // azimuths (then their edges share their quantisation errors).
+          std::complex<double> phasor = 0.0;
+          for (std::size_t i = begin; i < end; ++i)
+            phasor += std::polar(1.0, 2.0 * std::numbers::pi * in_plane[i].azimuth_rad / step);
+          group_phase.back() = std::arg(phasor) / (2.0 * std::numbers::pi);
           for (int k = 1; k <= kEndSamples; ++k) {
-            samples.push_back({in_plane[begin].p_plane - k * first_step, false});
-            samples.push_back({in_plane[end - 1].p_plane + k * last_step, false});
+            if (!start_hidden) samples.push_back({in_plane[begin].p_plane - k * first_step, false});
+            if (!end_hidden) samples.push_back({in_plane[end - 1].p_plane + k * last_step, false});
           }
           for (std::size_t i = begin; i < end; ++i) {
             samples.push_back({in_plane[i].p_plane, true});
             if (i + 1 == end) break;
             const double da = in_plane[i + 1].azimuth_rad - in_plane[i].azimuth_rad;
-            if (da <= kGapSteps * step) continue;
+            if (da <= kGapSteps * step ||
+                occluded(key, in_plane[i].azimuth_rad, in_plane[i + 1].azimuth_rad)) {
+              continue;
+            }
             const Eigen::Vector2d s = step_vector(i, i + 1);
-            edges.push_back({in_plane[i].p_plane + 0.5 * s, group, gaps});
-            edges.push_back({in_plane[i + 1].p_plane - 0.5 * s, group, gaps});
+            edges.push_back({in_plane[i].p_plane + 0.5 * s, group, gaps, s, steps_along(i, 0.5)});
+            edges.push_back(
+                {in_plane[i + 1].p_plane - 0.5 * s, group, gaps, s, steps_along(i + 1, -0.5)});
             ++gaps;
             const int missing =
                 static_cast<int>(std::min<double>(std::lround(da / step) - 1, kMaxGapSamples));
@@ -432,9 +624,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
             const Eigen::Vector2d t(ix * kShiftStepM, iy * kShiftStepM);
             int score = 0;
             for (std::size_t i = 0; i < samples.size(); i += stride) {
-              const Paint paint = board.PaintAt(Rt * (samples[i].p_plane - t));
-              const bool paper = paint == Paint::kWhite || paint == Paint::kBlack;
-              score += paper == samples[i].paper ? 1 : 0;
+              score += raster.PaperAt(Rt * (samples[i].p_plane - t)) == samples[i].paper ? 1 : 0;
             }
             // Ties go to the pose nearest the prior (1 radian weighs as 1 m).
             const double distance = t.squaredNorm() + std::pow(ir * kRotationStepRad, 2);
@@ -448,7 +638,8 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       }
     }
 
-    // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles.
+    // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles, from `pose`.
+    const auto fit_edges = [&]() {
     which.assign(edges.size(), -1);
     weight.assign(edges.size(), 0.0);
     double gate = kInitialEdgeGateM;
@@ -463,6 +654,10 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       Eigen::Matrix2d dRt;
       dRt << -std::sin(pose.z()), std::cos(pose.z()), -std::cos(pose.z()), -std::sin(pose.z());
       H.setZero();
+      B.setZero();
+      K.setZero();
+      wJa.assign(edges.size(), Eigen::Vector3d::Zero());
+      true_steps.assign(edges.size(), 0.0);
       Eigen::Vector3d g = Eigen::Vector3d::Zero();
       abs_r.clear();
       double sum_r2_edges = 0.0;
@@ -481,10 +676,45 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
         J.z() = grad.dot(dRt * e);
         H += weight[k] * J * J.transpose();
         g += weight[k] * J * r;
+        // The edge moves along its ring by up to half a step: uniform, variance step^2 / 12,
+        // seen through the boundary's normal.
+        const double along = grad.dot(R.transpose() * edges[k].step_plane);
+        // Beyond the quantisation model, what the edge's residual shows (a chord grazing a
+        // hole, where the model is far from linear), and a floor.
+        B += weight[k] * weight[k] * (std::max(r * r - along * along / 12.0, 0.0) + kEdgeFloorVarM2) *
+             J * J.transpose();
+        wJa[k] = weight[k] * along * J;
+        // Where the fitted boundary crosses the ring, in steps: the edge moved by the residual
+        // along the ring (at most the half step it can be off by).
+        true_steps[k] = edges[k].steps_along -
+                        (std::abs(along) > 0.0 ? std::clamp(r / along, -0.5, 0.5) : 0.0);
+        // A ray meets the plane w . p = 1 at p = ray / (w . ray): dp / dw = -p p^T; the edge
+        // residual sees the in-plane part of that through the boundary's normal.
+        const Eigen::Vector3d p_edge = o + edges[k].p_plane.x() * ex + edges[k].p_plane.y() * ey;
+        const Eigen::Vector2d normal_plane = R * grad;
+        const Eigen::Vector3d normal_lidar = normal_plane.x() * ex + normal_plane.y() * ey;
+        K -= weight[k] * J * (normal_lidar.dot(p_edge) * p_edge.transpose());
         sum_r2_edges += r * r;
         ++kept;
       }
       if (kept < kMinEdges) break;
+      // The quantisation errors: each edge uniform within half a step along its ring, the
+      // edges of one ring (one group) correlated through its common firing phase as two
+      // sawtooth waves delta steps apart: Cov = step^2 (1/12 - f (1 - f) / 2), f = frac(delta).
+      for (std::size_t a = 0; a < edges.size();) {
+        std::size_t b = a;
+        while (b < edges.size() && edges[b].group == edges[a].group) ++b;
+        for (std::size_t i = a; i < b; ++i) {
+          for (std::size_t j = a; j < b; ++j) {
+            // The boundaries' separation along the ring, not the edges': those are whole steps
+            // apart by construction.
+            const double f = true_steps[i] - true_steps[j];
+            const double frac = f - std::floor(f);
+            B += (1.0 / 12.0 - 0.5 * frac * (1.0 - frac)) * wJa[i] * wJa[j].transpose();
+          }
+        }
+        a = b;
+      }
       rms = std::sqrt(sum_r2_edges / kept);
       // Singular: the edges do not fix the board along y (no ring through a hole) or at all.
       const Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
@@ -499,8 +729,11 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       }
       pose += dx;
       gate = std::max(kTukeyC * kMadToSigma * Median(abs_r), kMinEdgeGateM);
+      last_gate = gate;
       if (dx.norm() < kConvergence) break;
     }
+    };
+    fit_edges();
     if (degenerate || pass + 1 == kPasses) break;
     // The points on paper, by the board pose of this pass, for the next pass's plane.
     const Eigen::Matrix2d Rt = Rotation2(pose.z()).transpose();
@@ -544,9 +777,6 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       pose.head<2>().norm() > 2.0 * options.max_in_plane_shift_m) {
     return out;
   }
-  const Eigen::Matrix3d cov = H.inverse() * rms * rms;
-  out.in_plane_sigma_m = Eigen::Vector2d(std::sqrt(cov(0, 0)), std::sqrt(cov(1, 1)));
-
   Eigen::Matrix3d R_lidar_plane;
   R_lidar_plane << ex, ey, plane.n_lidar;
   const Rigid3d T_lidar_plane(R_lidar_plane, o);
@@ -554,6 +784,47 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       Eigen::Quaterniond(Eigen::AngleAxisd(pose.z(), Eigen::Vector3d::UnitZ())),
       Eigen::Vector3d(pose.x(), pose.y(), 0.0));
   out.T_lidar_board = T_lidar_plane * T_plane_board;
+
+  // Covariance of the pose, board frame, (theta_x, theta_y, theta_z, t_x, t_y, t_z).
+  // In-plane (t_x, t_y, theta_z): the sandwich H^-1 B H^-1 of the edges' quantisation errors
+  // (each edge uniform within half a step along its ring), through the fit's Jacobian — a ring
+  // that crosses a hole near its centre hardly places the board's y, one near its top or
+  // bottom does. Frames that fired at the same azimuths repeat those errors exactly, so their
+  // edges count once, not once per frame.
+  // The plane's error moves the in-plane pose too: by -H^-1 K dw (the rays' meeting points
+  // slide across the plane as it moves, by tan(incidence) of its shift).
+  const Eigen::Matrix3d H_inv = H.inverse();
+  const Eigen::Matrix3d cov_quantisation =
+      H_inv * B * H_inv * FrameRepeats(group_ring, group_frame, group_phase);
+  const Eigen::Matrix3d dpose_dw = -H_inv * K;
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();  // (dx, dy, dtheta) -> (t_x, t_y, theta_z)
+  A.topLeftCorner<2, 2>() = Rotation2(-pose.z());
+  A(2, 2) = 1.0;
+  // Out of the plane (theta_x, theta_y, t_z), from the plane fit's covariance of w = n / d:
+  // the normal moves by d (I - n n^T) dw and the plane at the board's centre c by -d c . dw.
+  const Eigen::Matrix3d R_lb = out.T_lidar_board.RotationMatrix();
+  Eigen::Matrix3d G;
+  G.row(0) = -plane.d_m * R_lb.col(1).transpose();
+  G.row(1) = plane.d_m * R_lb.col(0).transpose();
+  G.row(2) = -plane.d_m * out.T_lidar_board.translation().transpose();
+  // pose error = M_q q + M_w dw for the in-plane quantisation error q and the plane's dw.
+  Eigen::Matrix<double, 6, 3> M_q = Eigen::Matrix<double, 6, 3>::Zero();
+  Eigen::Matrix<double, 6, 3> M_w = Eigen::Matrix<double, 6, 3>::Zero();
+  const std::array<int, 3> in_index = {3, 4, 2}, out_index = {0, 1, 5};
+  const Eigen::Matrix3d in_from_w = A * dpose_dw;
+  for (int a = 0; a < 3; ++a) {
+    M_q.row(in_index[a]) = A.row(a);
+    M_w.row(in_index[a]) = in_from_w.row(a);
+    M_w.row(out_index[a]) = G.row(a);
+  }
+  out.pose_covariance =
+      M_q * cov_quantisation * M_q.transpose() + M_w * plane.cov_w * M_w.transpose();
+  if (out.rings_through_holes <= kFewRingsThroughHoles) {
+    const double profile = ProfileYVariance(edges, weight, holes, half_page, pose, last_gate);
+    out.pose_covariance(4, 4) = std::max(out.pose_covariance(4, 4), profile);
+  }
+  const Eigen::Matrix2d cov_in = out.pose_covariance.block<2, 2>(3, 3);
+  out.in_plane_sigma_m = Eigen::Vector2d(std::sqrt(cov_in(0, 0)), std::sqrt(cov_in(1, 1)));
   for (std::size_t i = 0; i < holes.size(); ++i) {
     out.holes.push_back({holes[i].id,
                          out.T_lidar_board * Eigen::Vector3d(holes[i].centre_board.x(),

@@ -17,6 +17,9 @@
 //     refined by a robust Gauss-Newton fit of all edges of all rings and frames to the five
 //     hole circles and the outline together: a hole that one ring crosses is placed by the
 //     others through the rigid board.
+//  Gaps and ring ends where a ray hit something in front of the board (an occluder) give no
+//  edges, nor do rings spanning under a tenth of the page (the board's stand). The pose's
+//  covariance models each edge as uniform within half an azimuth step (see pose_covariance).
 //
 // Frames and units: points and results are in the LiDAR frame (the sensor's own origin,
 // rays start there), metres; the board frame is that of detectors/boards/board.h. Pure
@@ -101,8 +104,13 @@ struct RoundHoleCloudDetection {
   int edges = 0;                // ring edges the in-plane fit kept
   double edge_rms_m = 0.0;      // RMS distance of those edges to the outline and circles
   int rings_through_holes = 0;  // distinct rings crossing at least one hole
-  // 1-sigma of the in-plane position (x, y of the board frame) from the fit's covariance
-  // scaled by the edge RMS, metres.
+  // Covariance of the pose error, in the board frame: T_true = T_lidar_board * (R(theta), t)
+  // for small (theta_x, theta_y, theta_z [rad], t_x, t_y, t_z [m]), in that order. In-plane
+  // (t_x, t_y, theta_z) from the edge fit's Jacobian with each edge uniformly within half an
+  // azimuth step along its ring (frames that fired at the same azimuths share those errors);
+  // out of the plane (theta_x, theta_y, t_z) from the plane fit's range residuals. When found.
+  Eigen::Matrix<double, 6, 6> pose_covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  // 1-sigma of the in-plane position (x, y of the board frame), metres: of pose_covariance.
   Eigen::Vector2d in_plane_sigma_m = Eigen::Vector2d::Zero();
 };
 

@@ -306,6 +306,8 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
     const double dp = 0.5 * sensor.tolerance.pitch_rad, dr = 0.5 * sensor.tolerance.roll_rad;
     const double offsets[5][2] = {{0, 0}, {dp, 0}, {-dp, 0}, {0, dr}, {0, -dr}};
     std::vector<double> centre_var(usable.size(), 0), normal_var(usable.size(), 0);
+    // The detector's board-pose covariance (board frame), which the solve weighs the board by.
+    std::vector<Eigen::Matrix<double, 6, 6>> pose_covariance(usable.size(), Eigen::Matrix<double, 6, 6>::Zero());
     std::vector<int> found(usable.size(), 0);
     std::vector<RoundHoleCloudReason> nominal_reason(usable.size(), RoundHoleCloudReason::kBadInput);
     for (int k = 0; k < 5; ++k) {
@@ -329,6 +331,7 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
         const LidarBoardObservation o = LidarObservationFromDetection(usable[i]->id, d);
         centre_var[i] += o.centre_sigma_m * o.centre_sigma_m;
         normal_var[i] += o.normal_sigma_rad * o.normal_sigma_rad;
+        pose_covariance[i] += o.pose_covariance;
         ++found[i];
       }
     }
@@ -342,9 +345,11 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
         }
         continue;
       }
-      // Exact hole centres with the detector's sigma: the prediction, not the measurement.
+      // The exact board with the detector's sigma: the prediction, not the measurement.
       LidarBoardObservation obs = ExactHoles(*b, T_lidar_station, std::sqrt(centre_var[i] / found[i]));
       obs.normal_sigma_rad = std::sqrt(normal_var[i] / found[i]);
+      obs.T_lidar_board = T_lidar_station * b->T_station_board;
+      obs.pose_covariance = pose_covariance[i] / found[i];
       observations.push_back(obs);
     }
   } else if (predict) {

@@ -1,6 +1,7 @@
 #include "station/sim/lidar_sim.h"
 
 #include <cmath>
+#include <optional>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -248,5 +249,6 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
   }
   return result;
 }
+
 
 }  // namespace linecal

@@ -20,6 +20,7 @@
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
+#include "station/model/car_model.h"
 #include "station/model/station_layout.h"
 #include "station/sensors/lidar_format.h"
 #include "station/sensors/lidar_point.h"

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 
@@ -45,6 +46,52 @@ struct Pair {
   Eigen::Vector3d p_lidar, q_car;
   double sigma;
   bool direction;
+  bool in_solve = true;  // false: the board's pose residual stands for it
+};
+
+// A whitened board-pose residual: L^-1 (theta, t) for the board-frame error between the
+// measured pose and the one the LiDAR pose predicts, T_meas^-1 * T_lidar_car * T_car_board,
+// with small-angle theta = vee(skew part of the rotation) (the errors are far below a
+// degree). L: the Cholesky factor of the measured pose's covariance.
+struct BoardPoseCost {
+  BoardPoseCost(const Eigen::Matrix3d& R0, const Rigid3d& T_lidar_board, const Rigid3d& T_car_board,
+                const Eigen::Matrix<double, 6, 6>& L_inv)
+      : R0(R0),
+        R_meas(T_lidar_board.RotationMatrix()),
+        t_meas(T_lidar_board.translation()),
+        R_cb(T_car_board.RotationMatrix()),
+        t_cb(T_car_board.translation()),
+        L_inv(L_inv) {}
+
+  template <typename T>
+  bool operator()(const T* omega, const T* t, T* residual) const {
+    T dR[9];
+    ceres::AngleAxisToRotationMatrix(omega, ceres::ColumnMajorAdapter3x3(dR));
+    const Eigen::Map<const Eigen::Matrix<T, 3, 3>> dR_map(dR);
+    const Eigen::Matrix<T, 3, 3> R = dR_map * R0.cast<T>();  // R_car_lidar
+    const Eigen::Matrix<T, 3, 1> t_cl(t[0], t[1], t[2]);
+    // Predicted board pose in the LiDAR frame, then its error in the measured board frame.
+    const Eigen::Matrix<T, 3, 3> R_pred = R.transpose() * R_cb.cast<T>();
+    const Eigen::Matrix<T, 3, 1> t_pred = R.transpose() * (t_cb.cast<T>() - t_cl);
+    const Eigen::Matrix<T, 3, 3> M = R_meas.transpose().cast<T>() * R_pred;
+    Eigen::Matrix<T, 6, 1> e;
+    e << T(0.5) * (M(2, 1) - M(1, 2)), T(0.5) * (M(0, 2) - M(2, 0)), T(0.5) * (M(1, 0) - M(0, 1)),
+        R_meas.transpose().cast<T>() * (t_pred - t_meas.cast<T>());
+    const Eigen::Matrix<T, 6, 1> r = L_inv.cast<T>() * e;
+    for (int k = 0; k < 6; ++k) residual[k] = r(k);
+    return true;
+  }
+
+  Eigen::Matrix3d R0, R_meas;
+  Eigen::Vector3d t_meas;
+  Eigen::Matrix3d R_cb;
+  Eigen::Vector3d t_cb;
+  Eigen::Matrix<double, 6, 6> L_inv;
+};
+
+struct BoardPose {
+  Rigid3d T_lidar_board, T_car_board;
+  Eigen::Matrix<double, 6, 6> L_inv;
 };
 
 // Weighted Kabsch: the rotation and translation minimising Σ w |R p + t - q|² over the
@@ -93,7 +140,13 @@ LidarBoardObservation LidarObservationFromDetection(const std::string& board_id,
   o.board_id = board_id;
   for (const RoundHoleHole& h : detection.holes) o.holes.push_back({h.id, h.p_lidar});
   o.normal_lidar = detection.T_lidar_board.RotationMatrix().col(2);
-  o.centre_sigma_m = std::max(kMinCentreSigmaM, std::sqrt(5.0) * detection.in_plane_sigma_m.maxCoeff());
+  // The board enters the solve as its pose with the detector's full covariance: the five
+  // centres share the board's in-plane error (with two rings through the holes mostly along
+  // the board's y), which no per-centre sigma can express. The centres' sigma only weighs
+  // the closed-form start.
+  o.T_lidar_board = detection.T_lidar_board;
+  o.pose_covariance = detection.pose_covariance;
+  o.centre_sigma_m = std::max(kMinCentreSigmaM, detection.in_plane_sigma_m.maxCoeff());
   o.normal_sigma_rad = detection.normal_sigma_rad;
   return o;
 }
@@ -111,6 +164,7 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
   const Rigid3d T_car_station = T_station_car.Inverse();
   LidarCalibrationResult result;
   std::vector<Pair> pairs;
+  std::vector<BoardPose> poses;
   for (const LidarBoardObservation& o : observations) {
     const StationBoard* board = station.FindBoard(o.board_id);
     if (board == nullptr) {
@@ -120,6 +174,18 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
     if (o.holes.empty()) continue;
     const Rigid3d T_car_board = T_car_station * board->T_station_board;
     const double sigma = o.centre_sigma_m > 0 ? o.centre_sigma_m : options.centre_sigma_m;
+    const bool by_pose = o.T_lidar_board.has_value();
+    if (by_pose) {
+      const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(o.pose_covariance);
+      if (!o.T_lidar_board->Matrix().allFinite() || !o.pose_covariance.allFinite() ||
+          !o.pose_covariance.isApprox(o.pose_covariance.transpose()) || llt.info() != Eigen::Success) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            sensor.name, ": board '", o.board_id,
+            "': T_lidar_board must be finite and pose_covariance symmetric positive definite"));
+      }
+      const Eigen::Matrix<double, 6, 6> L = llt.matrixL();
+      poses.push_back({*o.T_lidar_board, T_car_board, L.inverse()});
+    }
     for (const LidarHoleCentre& h : o.holes) {
       const std::vector<BoardFeature>& features = board->board.features();
       if (h.feature_id < 0 || h.feature_id >= static_cast<int>(features.size()) ||
@@ -132,7 +198,7 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
                                                        ": position is not finite"));
       }
       const Eigen::Vector2d& p = features[h.feature_id].p_board;
-      pairs.push_back({h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false});
+      pairs.push_back({h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false, !by_pose});
       ++result.features_used;
     }
     if (o.normal_lidar) {
@@ -141,7 +207,7 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
             absl::StrCat(sensor.name, ": board '", o.board_id, "': normal_lidar must be a finite unit vector"));
       }
       const double nsigma = o.normal_sigma_rad > 0 ? o.normal_sigma_rad : options.normal_sigma_rad;
-      pairs.push_back({*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true});
+      pairs.push_back({*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true, !by_pose});
     }
     ++result.boards_used;
   }
@@ -172,8 +238,14 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
   double t[3] = {start.translation().x(), start.translation().y(), start.translation().z()};
   ceres::Problem problem;
   for (const Pair& x : pairs) {
+    if (!x.in_solve) continue;
     problem.AddResidualBlock(new ceres::AutoDiffCostFunction<AlignmentCost, 3, 3, 3>(
                                  new AlignmentCost(R0 * x.p_lidar, x.q_car, x.sigma, x.direction)),
+                             nullptr, omega, t);
+  }
+  for (const BoardPose& b : poses) {
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BoardPoseCost, 6, 3, 3>(
+                                 new BoardPoseCost(R0, b.T_lidar_board, b.T_car_board, b.L_inv)),
                              nullptr, omega, t);
   }
   const Eigen::Vector3d nominal = sensor.T_car_sensor_nominal.translation();
@@ -215,12 +287,26 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
   Eigen::Matrix<double, 6, 6> JtJ = Eigen::Matrix<double, 6, 6>::Zero();
   double sum_sq = 0;
   for (const Pair& x : pairs) {
+    if (!x.direction) sum_sq += (T_car_lidar * x.p_lidar - x.q_car).squaredNorm();
+    if (!x.in_solve) continue;
     Eigen::Matrix<double, 3, 6> J = Eigen::Matrix<double, 3, 6>::Zero();
     J.leftCols<3>() = -Skew(R * x.p_lidar) / x.sigma;
-    if (!x.direction) {
-      J.rightCols<3>() = Eigen::Matrix3d::Identity() / x.sigma;
-      sum_sq += (T_car_lidar * x.p_lidar - x.q_car).squaredNorm();
-    }
+    if (!x.direction) J.rightCols<3>() = Eigen::Matrix3d::Identity() / x.sigma;
+    JtJ += J.transpose() * J;
+  }
+  // Board poses: their residual's Jacobian at the solution, re-linearised about it (omega = 0
+  // there is the same left perturbation of R as the points' -[R p]x).
+  for (const BoardPose& b : poses) {
+    const ceres::AutoDiffCostFunction<BoardPoseCost, 6, 3, 3> cost(
+        new BoardPoseCost(R, b.T_lidar_board, b.T_car_board, b.L_inv));
+    const double zero[3] = {0, 0, 0};
+    const double* parameters[2] = {zero, t};
+    double residual[6];
+    Eigen::Matrix<double, 6, 3, Eigen::RowMajor> J_omega, J_t;
+    double* jacobians[2] = {J_omega.data(), J_t.data()};
+    cost.Evaluate(parameters, residual, jacobians);
+    Eigen::Matrix<double, 6, 6> J;
+    J << J_omega, J_t;
     JtJ += J.transpose() * J;
   }
   result.residual_rms_m = std::sqrt(sum_sq / result.features_used);

@@ -46,13 +46,22 @@ struct LidarBoardObservation {
   // the options' defaults.
   double centre_sigma_m = 0;
   double normal_sigma_rad = 0;
+  // The board's pose as the detector measured it, with the covariance of its error in the
+  // board frame (T_true = T_lidar_board * (R(theta), t), order theta_x, theta_y, theta_z,
+  // t_x, t_y, t_z: RoundHoleCloudDetection::pose_covariance). When set, the board enters the
+  // solve as one pose residual whitened by that covariance instead of its hole centres and
+  // normal, so that the errors its five centres share (and the board's in-plane rotation)
+  // count once, as the detector measured them; the centres still give the start and the
+  // residual check. Must be symmetric positive definite.
+  std::optional<Rigid3d> T_lidar_board;
+  Eigen::Matrix<double, 6, 6> pose_covariance = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
-// The observation of a found round-hole detection: its hole centres, its normal and their
-// sigmas. The five centres share the board's in-plane error; as independent points each
-// carries sqrt(5) times it, so that their mean is as uncertain as the board's position, and
-// 1 mm is the floor below which the fit's own sigma is not trusted. One conversion for the
-// cycle (daemon/cycle) and the planner's prediction (station/planner). O(holes).
+// The observation of a found round-hole detection: its pose with the detector's 6x6
+// covariance (what the solve uses), its hole centres and normal with their sigmas (for the
+// closed-form start and the residual check; 1 mm is the floor below which the fit's own
+// sigma is not trusted). One conversion for the cycle (daemon/cycle) and the planner's
+// prediction (station/planner). O(holes).
 LidarBoardObservation LidarObservationFromDetection(const std::string& board_id,
                                                     const RoundHoleCloudDetection& detection);
 

@@ -45,9 +45,6 @@ constexpr double kSigmaRatioLow = 0.8, kSigmaRatioHigh = 1.2;
 constexpr double kCoverageLow = 0.93, kCoverageHigh = 0.97;
 // Mounting errors within ±this x the tolerance: about a third of the cars out of tolerance.
 constexpr double kErrorRangeOfTolerance = 1.5;
-// The simulator's default aligner bounds (simulator.h): within ±2 cm, ±0.2°.
-constexpr double kAlignerOffsetM = 0.02;
-constexpr double kAlignerThrustDeg = 0.2;
 // Features closer than this to the image border are not used (a detector's window needs it).
 constexpr double kFeatureMarginPx = 8.0;
 // Ground distances of the ranging bar.
@@ -57,35 +54,24 @@ const char* kComponents[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
 struct CameraSamples {
   int cars = 0;
   std::map<std::string, int> reasons;  // verdict error reasons
-  std::vector<double> errors[6], sigmas[6];
+  MountingSamples mounting;
   std::vector<double> vp_errors_px, ranging_errors;
   // Method (b) against method (a), and the vertical board's roll against the truth and the pose.
   std::vector<double> seed_vp_px, seed_ranging, toolbox_ranging;
   std::vector<double> line_roll_errors, line_roll_vs_pose;
   std::map<std::string, int> seed_refusals;  // reasons of method (b) where the camera saw the chessboard
-  int verdicts_judged = 0, verdicts_agree = 0;
 };
 
 void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937_64& rng, double noise_px, int frames,
                  std::map<std::string, CameraSamples>* out) {
-  std::uniform_real_distribution<double> unit(-1.0, 1.0);
   std::normal_distribution<double> normal(0.0, 1.0);
-  AlignerMeasurement aligner;
-  aligner.longitudinal_offset_m = kAlignerOffsetM * unit(rng);
-  aligner.lateral_offset_m = kAlignerOffsetM * unit(rng);
-  aligner.thrust_angle_rad = kAlignerThrustDeg * kDegToRad * unit(rng);
+  const AlignerMeasurement aligner = RandomAligner(rng);
   for (const SensorModel& s : car.sensors) {
     if (s.kind != SensorKind::kCamera || !s.intrinsics) continue;
     CameraSamples& samples = (*out)[s.name];
     ++samples.cars;
-    const MountingTolerance& tol = s.tolerance;
-    const double tolerances[6] = {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
-    double truth[6];
-    for (int i = 0; i < 6; ++i) truth[i] = kErrorRangeOfTolerance * tolerances[i] * unit(rng);
-    const Eigen::Matrix3d r_base = SensorBaseRotation(s.kind);
-    const YawPitchRoll n = MountingAngles(s.T_car_sensor_nominal.RotationMatrix(), r_base);
-    const Rigid3d T_car_camera(MountingRotation({n.yaw + truth[0], n.pitch + truth[1], n.roll + truth[2]}, r_base),
-                               s.T_car_sensor_nominal.translation() + Eigen::Vector3d(truth[3], truth[4], truth[5]));
+    const TrueMounting truth = RandomMounting(s, kErrorRangeOfTolerance, rng);
+    const Rigid3d& T_car_camera = truth.T_car_sensor;
     const CameraModel camera = *CameraModel::Create(*s.intrinsics);
     const std::vector<RenderedFeature> visible =
         VisibleCameraFeatures(camera, aligner.T_station_car() * T_car_camera, station, {}, kFeatureMarginPx);
@@ -113,23 +99,10 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
       continue;
     }
     if (r->verdict == SensorVerdict::kError) ++samples.reasons[r->reason];
+    samples.mounting.Add(r->mounting, truth, r->verdict);
     const MountingEstimate& m = r->mounting;
-    const double estimate[6] = {m.angles_deviation.yaw,      m.angles_deviation.pitch,    m.angles_deviation.roll,
-                                m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
-    bool judgeable = true, truly_in = true;
-    for (int i = 0; i < 6; ++i) {
-      samples.errors[i].push_back(estimate[i] - truth[i]);
-      samples.sigmas[i].push_back(m.sigma[i]);
-      // acceptance.md: verdicts must agree for true errors more than 2 sigma from the edge.
-      judgeable &= std::abs(std::abs(truth[i]) - tolerances[i]) > 2 * m.sigma[i];
-      truly_in &= std::abs(truth[i]) <= tolerances[i];
-    }
-    if (judgeable && r->verdict != SensorVerdict::kError) {
-      ++samples.verdicts_judged;
-      samples.verdicts_agree += (r->verdict == SensorVerdict::kPass) == truly_in;
-    }
     if (r->vertical_roll.valid) {
-      const double roll_true = MountingAngles(T_car_camera.RotationMatrix(), r_base).roll;
+      const double roll_true = MountingAngles(T_car_camera.RotationMatrix(), SensorBaseRotation(s.kind)).roll;
       samples.line_roll_errors.push_back(std::abs(r->vertical_roll.roll_rad - roll_true));
       samples.line_roll_vs_pose.push_back(std::abs(r->vertical_roll.roll_rad - m.angles.roll));
     }
@@ -185,31 +158,20 @@ int RunEvalCalibrate(const Args& args) {
        {"frames", "F", "frames per camera, each with fresh noise (default 3)"},
        {"json", "", "print one JSON object"}});
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
-  const absl::StatusOr<StationLayout> station = ReadStationLayout(cl.Get("station"));
-  if (!station.ok()) return cli::BadInput(kCommand, std::string(station.status().message()));
-  const absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
-  if (!car.ok()) return cli::BadInput(kCommand, std::string(car.status().message()));
-  // 200 cars put the 95th percentiles and the coverage within about +-1.5 percentage points.
-  const absl::StatusOr<int> cars = cl.GetInt("cars", 200);
-  if (!cars.ok()) return cli::BadInput(kCommand, std::string(cars.status().message()));
-  if (*cars < 1 || *cars > 100000) return cli::BadInput(kCommand, absl::StrCat("--cars: ", *cars, ": must be in [1, 100000]"));
-  const absl::StatusOr<int> seed = cl.GetInt("seed", 1);
-  if (!seed.ok()) return cli::BadInput(kCommand, std::string(seed.status().message()));
   // A station grabs several frames per camera (the daemon's frames_per_sensor); each frame's
   // corners carry fresh noise here, which real detectors' small fixed biases do not.
-  const absl::StatusOr<int> frames = cl.GetInt("frames", 3);
-  if (!frames.ok()) return cli::BadInput(kCommand, std::string(frames.status().message()));
-  if (*frames < 1 || *frames > 100) return cli::BadInput(kCommand, absl::StrCat("--frames: ", *frames, ": must be in [1, 100]"));
+  absl::StatusOr<EvalInputs> inputs = ReadEvalInputs(cl, 3);
+  if (!inputs.ok()) return cli::BadInput(kCommand, std::string(inputs.status().message()));
+  const EvalInputs& in = *inputs;
   const absl::StatusOr<double> noise = cl.GetDouble("noise-px", 0.2);
   if (!noise.ok()) return cli::BadInput(kCommand, std::string(noise.status().message()));
   if (!(*noise >= 0 && *noise <= 10)) return cli::BadInput(kCommand, absl::StrCat("--noise-px: ", *noise, ": must be in [0, 10]"));
-  if (absl::Status s = CheckTargetsExist(*car, *station); !s.ok()) return cli::BadInput(kCommand, std::string(s.message()));
 
-  std::mt19937_64 rng(static_cast<std::uint64_t>(*seed));
+  std::mt19937_64 rng(static_cast<std::uint64_t>(in.seed));
   std::map<std::string, CameraSamples> samples;
-  for (int i = 0; i < *cars; ++i) {
-    EvaluateCar(*station, *car, rng, *noise, *frames, &samples);
-    if ((i + 1) % 50 == 0) std::fprintf(stderr, "eval calibrate: %d / %d cars\n", i + 1, *cars);
+  for (int i = 0; i < in.cars; ++i) {
+    EvaluateCar(in.station, in.car, rng, *noise, in.frames, &samples);
+    if ((i + 1) % 50 == 0) std::fprintf(stderr, "eval calibrate: %d / %d cars\n", i + 1, in.cars);
   }
 
   bool all_meet = true;
@@ -219,18 +181,13 @@ int RunEvalCalibrate(const Args& args) {
                 "solved", "p95 |err| yaw/pitch/roll deg", "p95 |err| x/y/z mm", "vp px", "range %", "err/sigma",
                 "cover95", "verdict", "(b)-(a) vp px/rng%/toolbox%", "roll lines deg", "errors");
   }
-  for (const SensorModel& s : car->sensors) {
+  for (const SensorModel& s : in.car.sensors) {
     if (!samples.count(s.name)) continue;
     const CameraSamples& c = samples[s.name];
-    ErrorSigmaStats stats[6];
-    double ratio_lo = 1e9, ratio_hi = 0, cover_lo = 1, cover_hi = 0;
-    for (int i = 0; i < 6; ++i) {
-      stats[i] = SummariseErrors(c.errors[i], c.sigmas[i]);
-      ratio_lo = std::min(ratio_lo, stats[i].error_over_sigma);
-      ratio_hi = std::max(ratio_hi, stats[i].error_over_sigma);
-      cover_lo = std::min(cover_lo, stats[i].coverage95);
-      cover_hi = std::max(cover_hi, stats[i].coverage95);
-    }
+    const MountingSummary summary = Summarise(c.mounting);
+    const ErrorSigmaStats* stats = summary.stats;
+    const double ratio_lo = summary.ratio_lo, ratio_hi = summary.ratio_hi;
+    const double cover_lo = summary.cover_lo, cover_hi = summary.cover_hi;
     const double vp95 = Percentile(c.vp_errors_px, 0.95);
     const double range95 = Percentile(c.ranging_errors, 0.95);
     const double seed_vp95 = Percentile(c.seed_vp_px, 0.95);
@@ -239,8 +196,8 @@ int RunEvalCalibrate(const Args& args) {
     const double roll_lines95 = Percentile(c.line_roll_errors, 0.95);
     const double roll_lines_pose95 = Percentile(c.line_roll_vs_pose, 0.95);
     const bool seed_meets = seed_vp95 <= kSeedVanishingPointBarPx && seed_range95 <= kSeedRangingBarFraction;
-    const double agreement = c.verdicts_judged ? static_cast<double>(c.verdicts_agree) / c.verdicts_judged : 1.0;
-    const int solved = static_cast<int>(c.errors[0].size());
+    const double agreement = summary.agreement;
+    const int solved = static_cast<int>(c.mounting.errors[0].size());
     const bool meets = solved == c.cars &&
                        std::max({stats[0].p95_abs_error, stats[1].p95_abs_error, stats[2].p95_abs_error}) <=
                            kAngleP95BarDeg * kDegToRad &&
@@ -255,7 +212,7 @@ int RunEvalCalibrate(const Args& args) {
     nlohmann::json row = {{"camera", s.name},           {"cars", c.cars},
                           {"solved", solved},           {"vanishing_point_p95_px", vp95},
                           {"ranging_p95_fraction", range95}, {"verdict_agreement", agreement},
-                          {"verdicts_judged", c.verdicts_judged}, {"errors", c.reasons},
+                          {"verdicts_judged", c.mounting.verdicts_judged}, {"errors", c.reasons},
                           {"meets_bars", meets}};
     // Method (b) and the vertical board's roll, where the camera saw those boards.
     row["board_method_cars"] = c.seed_vp_px.size();
@@ -301,7 +258,7 @@ int RunEvalCalibrate(const Args& args) {
     }
   }
   if (cl.Has("json")) {
-    std::printf("%s\n", nlohmann::json({{"cars", *cars}, {"seed", *seed}, {"noise_px", *noise}, {"frames", *frames}, {"cameras", rows},
+    std::printf("%s\n", nlohmann::json({{"cars", in.cars}, {"seed", in.seed}, {"noise_px", *noise}, {"frames", in.frames}, {"cameras", rows},
                                         {"meets_bars", all_meet}})
                             .dump(2)
                             .c_str());

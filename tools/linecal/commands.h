@@ -18,6 +18,7 @@ int RunLidarDecode(const Args& args);  // cmd_lidar.cc
 int RunRadarDecode(const Args& args);  // cmd_radar.cc
 int RunRadarCalibrate(const Args& args);  // cmd_radar_cal.cc
 int RunEvalRadar(const Args& args);  // cmd_eval_radar.cc
+int RunEvalLidar(const Args& args);  // cmd_eval_lidar.cc
 int RunDetect(const Args& args);  // cmd_detect.cc
 int RunCalibrate(const Args& args);  // cmd_calibrate.cc
 int RunEvalCalibrate(const Args& args);  // cmd_eval_calibrate.cc

@@ -28,6 +28,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"radar", "decode"}, "decode a radar CAN log (candump) into detections", RunRadarDecode},
       {{"radar", "calibrate"}, "radar mounting yaw from a capture's corner reflectors", RunRadarCalibrate},
       {{"eval", "radar"}, "Monte Carlo evaluation of radar yaw calibration", RunEvalRadar},
+      {{"eval", "lidar"}, "Monte Carlo evaluation of LiDAR-to-car calibration", RunEvalLidar},
       {{"eval", "calibrate"}, "Monte Carlo evaluation of camera-to-car calibration", RunEvalCalibrate},
       {{"eval", "aftersale"}, "Monte Carlo evaluation of the after-sale lane calibration", RunEvalAftersale},
       {{"detect"}, "find a calibration board in an image (--json, --overlay)", RunDetect},

@@ -8,7 +8,6 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -17,70 +16,10 @@
 #include <string>
 #include <vector>
 
-#include "station/model/car_model.h"
-#include "station/model/pose_json.h"
-#include "station/model/station_layout.h"
-#include "station/sensors/lidar_format.h"
-#include "station/sim/lidar_sim.h"
+#include "tests/detectors/round_hole/round_hole_scene.h"
 
 namespace linecal {
 namespace {
-
-constexpr double kDegToRad = std::numbers::pi / 180.0;
-const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
-// The LiDAR and the board centre sit this high above the floor (the reference boards' 1 m).
-constexpr double kHeightM = 1.0;
-
-LidarBeamTable Beams(const std::string& sensor) {
-  const CarModel car = *ReadCarModel(kDeploy + "/cars/reference.json");
-  const SensorModel* s = car.FindSensor(sensor);
-  const LidarModel model = *LidarModelFromName(s->model);
-  return *(s->angles_file.empty() ? DefaultBeamTable(model)
-                                  : ReadAngleCorrectionCsv(model, s->angles_file));
-}
-
-struct Scene {
-  Board board;
-  Rigid3d T_lidar_board;  // truth
-  std::vector<std::vector<RoundHoleCloudPoint>> frames;
-};
-
-// A station with one round-hole board `distance_m` from the LiDAR along `bearing_deg` (0 =
-// the LiDAR's azimuth 0), turned by `heading_deg` about the vertical from facing the LiDAR,
-// its centre `lift_m` above the LiDAR, scanned for `rotations` rotations.
-Scene Simulate(const LidarBeamTable& beams, double distance_m, double bearing_deg,
-               double heading_deg, double sigma_m, int rotations, double scale = 1.0,
-               double lift_m = 0.0) {
-  StationLayout layout;
-  layout.name = "round_hole_test";
-  StationBoard b;
-  b.id = "board";
-  b.params.type = BoardType::kRoundHole;
-  b.params.scale = scale;
-  b.board = *Board::Create(b.params);
-  const double bearing = bearing_deg * kDegToRad;
-  const Eigen::Matrix3d R_station_board =
-      Eigen::AngleAxisd(bearing + heading_deg * kDegToRad, Eigen::Vector3d::UnitZ())
-          .toRotationMatrix() *
-      BoardBaseRotation();
-  b.T_station_board =
-      Rigid3d(R_station_board, Eigen::Vector3d(distance_m * std::cos(bearing),
-                                               distance_m * std::sin(bearing), kHeightM + lift_m));
-  layout.boards.push_back(b);
-  const Rigid3d T_station_lidar(LidarBaseRotation(), Eigen::Vector3d(0, 0, kHeightM));
-  LidarSimOptions o;
-  o.rotations = rotations;
-  o.range_sigma_m = sigma_m;
-  absl::StatusOr<LidarSimResult> sim = SimulateLidar(beams, T_station_lidar, layout, o, 0, 1);
-  EXPECT_TRUE(sim.ok()) << sim.status();
-  Scene scene{b.board, T_station_lidar.Inverse() * b.T_station_board, {}};
-  if (!sim.ok()) return scene;
-  for (const LidarScan& scan : sim->scans) {
-    std::vector<RoundHoleCloudPoint>& f = scene.frames.emplace_back();
-    for (const LidarPoint& p : scan.points) f.push_back({p.x, p.y, p.z, p.ring});
-  }
-  return scene;
-}
 
 // The expected pose: the truth off by the station's mounting tolerance (3 cm, 0.5 degree).
 Rigid3d Prior(const Rigid3d& truth, std::uint64_t seed) {
@@ -93,14 +32,9 @@ Rigid3d Prior(const Rigid3d& truth, std::uint64_t seed) {
 
 RoundHoleCloudDetection Detect(const Scene& scene, const Rigid3d& prior,
                                double* ms_per_frame = nullptr) {
-  std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(), scene.frames.end());
-  const auto start = std::chrono::steady_clock::now();
-  RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(scene.board, views, prior);
-  const std::chrono::duration<double, std::milli> elapsed =
-      std::chrono::steady_clock::now() - start;
-  if (ms_per_frame != nullptr)
-    *ms_per_frame = elapsed.count() / std::max<std::size_t>(views.size(), 1);
-  return d;
+  return TimedPerFrame(scene, ms_per_frame, [&](auto views) {
+    return DetectRoundHoleBoardInCloud(scene.board, views, prior);
+  });
 }
 
 struct Case {
@@ -139,13 +73,7 @@ TEST(RoundHoleCloudTest, HoleCentresAndNormalWithinTheBars) {
                              std::to_string(c.sigma_m);
     ASSERT_TRUE(d.found) << what << ": " << RoundHoleCloudReasonName(d.reason);
     ASSERT_EQ(d.holes.size(), 5u);
-    double worst = 0.0;
-    for (const RoundHoleHole& h : d.holes) {
-      const Eigen::Vector2d p_board = scene.board.features()[h.id].p_board;
-      const Eigen::Vector3d truth =
-          scene.T_lidar_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0.0);
-      worst = std::max(worst, (h.p_lidar - truth).norm());
-    }
+    const double worst = WorstHoleError(scene, d);
     const double normal_error = std::acos(std::clamp(
         d.T_lidar_board.RotationMatrix().col(2).dot(scene.T_lidar_board.RotationMatrix().col(2)),
         -1.0, 1.0));
@@ -166,6 +94,35 @@ TEST(RoundHoleCloudTest, HoleCentresAndNormalWithinTheBars) {
     constexpr double kMsPerFrameBar = 50.0;  // optimised builds only
     EXPECT_LT(ms, kMsPerFrameBar) << what;
 #endif
+  }
+}
+
+// A post between the LiDAR and the board (another board's stand, as on the reference
+// station for the bumper LiDAR) hides a strip of the board in every ring, next to a hole: its
+// gap must not be taken for the hole's. VLP-16, board 0.5 m above it at 4.2 m.
+TEST(RoundHoleCloudTest, AnOccludingPostIsNotAHole) {
+  for (double post_x : {-0.2, -0.12, 0.1}) {
+    StationLayout layout;
+    layout.name = "occluded";
+    layout.boards.push_back(RoundHoleAt(FacingPose(4.2, 0.0, 10.0, 0.5)));
+    // A 6 cm post standing 1.5 m in front of the board, post_x to its side (station -y is
+    // the board's +x for a board facing the LiDAR along +x).
+    StationSurface post;
+    post.id = "post";
+    Eigen::Matrix3d R;
+    R << 0, 0, -1, -1, 0, 0, 0, 1, 0;  // x along -y, y up, z towards the LiDAR (-x)
+    post.T_station_surface = Rigid3d(R, Eigen::Vector3d(2.7, -post_x * 2.7 / 4.2, 1.0));
+    post.size_m = Eigen::Vector2d(0.06, 2.0);
+    layout.surfaces.push_back(post);
+    const Scene scene = SimulateLayout(Beams("bumper_lidar"), layout, 0.02, 10);
+    const RoundHoleCloudDetection d = Detect(scene, Prior(scene.T_lidar_board, 5));
+    ASSERT_TRUE(d.found) << post_x << ": " << RoundHoleCloudReasonName(d.reason);
+    const double worst = WorstHoleError(scene, d);
+    const Rigid3d delta = d.T_lidar_board.Inverse() * scene.T_lidar_board;
+    std::printf("post at board x %.2f: worst hole %.1f mm, board y error %.1f mm (1-sigma %.1f)\n", post_x,
+                1e3 * worst, 1e3 * delta.translation().y(), 1e3 * std::sqrt(d.pose_covariance(4, 4)));
+    EXPECT_LT(worst, 0.02) << post_x;  // acceptance.md, 16 rings
+    EXPECT_LT(std::abs(delta.translation().y()), 4.0 * std::sqrt(d.pose_covariance(4, 4))) << post_x;
   }
 }
 
@@ -255,6 +212,61 @@ TEST(RoundHoleCloudTest, BadInputGivesAReason) {
             RoundHoleCloudReason::kBadInput);
   EXPECT_STREQ(RoundHoleCloudReasonName(RoundHoleCloudReason::kTooFewRingsThroughHoles),
                "too_few_rings_through_holes");
+}
+
+}  // namespace
+}  // namespace linecal
+
+namespace linecal {
+namespace {
+
+// Monte Carlo of the reported pose covariance (reduced; `linecal eval lidar` runs the
+// LiDAR-to-car version over many cars): boards at random positions around 5.5 m (VLP-16) or
+// 6 m (Pandar64), headings within 25 degrees, sigma 2 cm, 2 rotations. Per pose component
+// the RMS of error / reported 1-sigma should be 1 (acceptance.md: within +-20%). With 40
+// runs one component's RMS scatters by about 11% (1-sigma), so position and tilt components
+// are held to 0.75..1.25 and the six pooled (240 values, 4.6%) to 0.8..1.2. The in-plane
+// rotation theta_z does not meet the bar: over 150 runs its ratio is 1.31 for the VLP-16
+// (under-reported) and 0.73 for the Pandar64 (over-reported), see docs/lidar-radar.md; it is
+// held to 0.6..1.5 here so that a regression shows.
+TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
+  constexpr int kRuns = 40;
+  for (const char* sensor : {"bumper_lidar", "roof_lidar"}) {
+    const LidarBeamTable beams = Beams(sensor);
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Eigen::Matrix<double, 6, 1> sum_z2 = Eigen::Matrix<double, 6, 1>::Zero();
+    int runs = 0;
+    for (int run = 0; run < kRuns; ++run) {
+      const double distance = (std::string(sensor) == "bumper_lidar" ? 5.5 : 6.0) + 1.0 * u(rng);
+      StationLayout layout;
+      layout.name = "mc";
+      layout.boards.push_back(
+          RoundHoleAt(FacingPose(distance, 30.0 * u(rng), 25.0 * u(rng), 0.15 * u(rng))));
+      const Scene scene = SimulateLayout(beams, layout, 0.02, 2, 100 + run);
+      const RoundHoleCloudDetection d = Detect(scene, Prior(scene.T_lidar_board, run));
+      ASSERT_TRUE(d.found) << sensor << " run " << run << ": " << RoundHoleCloudReasonName(d.reason);
+      // The error in the board frame: T_true = T_est * (R(theta), t).
+      const Rigid3d delta = d.T_lidar_board.Inverse() * scene.T_lidar_board;
+      const Eigen::AngleAxisd aa(delta.RotationMatrix());
+      Eigen::Matrix<double, 6, 1> e;
+      e << aa.angle() * aa.axis(), delta.translation();
+      for (int k = 0; k < 6; ++k) sum_z2(k) += e(k) * e(k) / d.pose_covariance(k, k);
+      ++runs;
+    }
+    const Eigen::Matrix<double, 6, 1> ratio = (sum_z2 / runs).cwiseSqrt();
+    const double pooled = std::sqrt(sum_z2.sum() / (6.0 * runs));
+    std::printf("%-12s error / sigma over %d runs: theta_x %.2f theta_y %.2f theta_z %.2f "
+                "t_x %.2f t_y %.2f t_z %.2f, pooled %.2f\n",
+                sensor, runs, ratio(0), ratio(1), ratio(2), ratio(3), ratio(4), ratio(5), pooled);
+    for (int k = 0; k < 6; ++k) {
+      const bool theta_z = k == 2;
+      EXPECT_GT(ratio(k), theta_z ? 0.6 : 0.75) << sensor << " component " << k;
+      EXPECT_LT(ratio(k), theta_z ? 1.5 : 1.25) << sensor << " component " << k;
+    }
+    EXPECT_GT(pooled, 0.8) << sensor;
+    EXPECT_LT(pooled, 1.2) << sensor;
+  }
 }
 
 }  // namespace

@@ -1,0 +1,498 @@
+#include "detectors/round_hole/round_hole_search.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <deque>
+#include <map>
+#include <numbers>
+#include <set>
+#include <unordered_map>
+
+namespace linecal {
+namespace {
+
+// Steps 1-3 look at no more points than this of the first frame: a 16-ring rotation (30k) in
+// full, every second to fourth point of a 32-128 ring one. That leaves a 64-ring LiDAR's
+// points 3 cm apart along a ring at 3 m, finer than any hole chord to be seen.
+constexpr std::size_t kMaxSearchPoints = 40000;
+// The in-plane shift range of a candidate never exceeds 0.2 m: half the ring spacing of a
+// 16-ring LiDAR (2 degrees) at 8 m, plus margin.
+constexpr double kMaxShiftRangeM = 0.2;
+// Median absolute deviation to sigma for Gaussian noise.
+constexpr double kMadToSigma = 1.4826;
+// A neighbourhood's plane: the inlier gate is 3 robust sigmas, never below 3 cm (range noise
+// of 1-3 cm, acceptance.md), and a neighbourhood is flat when its robust sigma is below 5 cm
+// (range noise of 3 cm seen at any incidence, plus float rounding).
+constexpr double kMinGateM = 0.03;
+constexpr double kMaxFlatSigmaM = 0.05;
+// At least this many points in a neighbourhood (two rings of a VLP-16 at 8 m over 0.75 m hold
+// about 50 per rotation), and this spread across the scan lines: the in-plane minor axis's
+// sigma (two rings 0.28 m apart give 0.14 m).
+constexpr int kMinNeighbourhoodPoints = 12;
+constexpr double kMinMinorSpreadM = 0.06;
+// Neighbouring flat cubes belong to one patch when their normals agree within 12 degrees and
+// each centroid lies within 6 cm of the other's plane.
+constexpr double kPatchCosAngle = 0.978;
+constexpr double kPatchOffsetM = 0.06;
+// A patch gathers the frame's points within 8 cm of its plane (3 sigma of a 3 cm range noise
+// at moderate incidence) and within 0.25 m (a cube, which its edge may have lost) of its
+// cubes' extent in the plane, except those on the plane of a flat cube nearby with another
+// normal: the floor meets the board's plane along a line, and the floor's rings run along it.
+constexpr double kGatherDepthM = 0.08;
+constexpr double kGatherMarginM = 0.25;
+// Floors: a normal within 45 degrees of the spin axis.
+constexpr double kMaxNormalZ = 0.7071;
+// A ring crosses the page when its points span half the page's width and at most 25% more
+// than the page (a wider one runs along something else in the plane, e.g. the floor along
+// the plane's foot). The crossing rings' median span must be the page's width to within -25%
+// (holes or ends lost at the edges, a ring's azimuth step), and they must span at most the
+// page's height plus 15%.
+constexpr double kMinWidthRatio = 0.75;
+constexpr double kMaxWidthRatio = 1.25;
+constexpr double kMaxHeightRatio = 1.15;
+// Two fitted boards whose centres are within half a page of each other are the same board
+// (found from two patches).
+constexpr double kSameBoardPages = 0.5;
+// Empty holes: points of the fitted plane (within 3 plane sigmas, at least 3 cm) inside the
+// hole circles shrunk by 3 cm, against what paper of the same area holds. A real board lets
+// every ray through (0, or a wall touching its back); a plain panel fills them (about 1).
+constexpr double kHoleInsetM = 0.03;
+constexpr double kMaxHoleFill = 0.15;
+// Before the whole-board fit a patch must show as many rings crossing a hole as that fit needs
+// (min_rings_through_holes) in its first frame: a gap along the ring
+// of at least 4 cm (1.5 azimuth steps of a ring at 8 m) and at most the hole's diameter plus
+// 4 cm.
+constexpr double kMinHoleChordM = 0.04;
+
+struct CellKey {
+  int x = 0, y = 0, z = 0;
+  bool operator==(const CellKey&) const = default;
+};
+struct CellKeyHash {
+  std::size_t operator()(const CellKey& k) const {
+    return static_cast<std::size_t>(k.x) * 73856093u ^ static_cast<std::size_t>(k.y) * 19349663u ^
+           static_cast<std::size_t>(k.z) * 83492791u;
+  }
+};
+
+struct Cell {
+  std::vector<int> points;
+  bool flat = false;
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();  // towards the sensor
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  int patch = -1;
+};
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+struct LocalPlane {
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  Eigen::Vector3d major = Eigen::Vector3d::Zero();  // eigenvalues' square roots, descending
+  double gate_m = 0.0;
+  std::vector<int> inliers;
+  bool ok = false;
+};
+
+// Orthogonal plane through `idx` with trimming: three rounds of PCA over the points within
+// 3 robust sigmas of the previous plane.
+LocalPlane FitLocalPlane(const std::vector<Eigen::Vector3d>& pts, const std::vector<int>& idx) {
+  LocalPlane plane;
+  std::vector<int> in = idx;
+  std::vector<double> abs_d;
+  for (int round = 0; round < 3; ++round) {
+    if (static_cast<int>(in.size()) < kMinNeighbourhoodPoints) return plane;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (int i : in) mean += pts[i];
+    mean /= static_cast<double>(in.size());
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (int i : in) cov += (pts[i] - mean) * (pts[i] - mean).transpose();
+    cov /= static_cast<double>(in.size());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    plane.normal = eig.eigenvectors().col(0);
+    plane.centroid = mean;
+    plane.major = eig.eigenvalues().cwiseMax(0.0).cwiseSqrt().reverse();
+    abs_d.clear();
+    for (int i : idx) abs_d.push_back(std::abs(plane.normal.dot(pts[i] - mean)));
+    const double sigma = kMadToSigma * Median(abs_d);
+    plane.gate_m = std::max(3.0 * sigma, kMinGateM);
+    if (round == 2) {
+      if (sigma > kMaxFlatSigmaM) return plane;
+      break;
+    }
+    in.clear();
+    for (int i : idx)
+      if (std::abs(plane.normal.dot(pts[i] - mean)) < plane.gate_m) in.push_back(i);
+  }
+  plane.inliers = std::move(in);
+  plane.ok = true;
+  return plane;
+}
+
+// True when p lies on the plane of a flat cube (the one `key` names or a neighbour) whose
+// normal differs from n: on the floor, say, where it meets the board's plane.
+bool OnAnotherPlane(const std::unordered_map<CellKey, Cell, CellKeyHash>& cells, const CellKey& key,
+                    const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
+  for (int dx = -1; dx <= 1; ++dx)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dz = -1; dz <= 1; ++dz) {
+        const auto it = cells.find({key.x + dx, key.y + dy, key.z + dz});
+        if (it == cells.end() || !it->second.flat || it->second.normal.dot(n) >= kPatchCosAngle)
+          continue;
+        if (std::abs(it->second.normal.dot(p - it->second.centroid)) < kPatchOffsetM) return true;
+      }
+  return false;
+}
+
+// A board-sized patch: the prior pose for the whole-board fit and the in-plane shift range its
+// centre needs.
+struct Candidate {
+  Rigid3d T_lidar_board;
+  double shift_range_m = 0.0;
+  double width_error = 0.0;  // |median crossing width / page width - 1|, for ordering
+};
+
+}  // namespace
+
+bool RoundHoleSearchOptions::Valid() const {
+  return std::isfinite(min_range_m) && min_range_m >= 0.0 && std::isfinite(max_range_m) &&
+         max_range_m > min_range_m && std::isfinite(cell_m) && cell_m > 0.0 &&
+         max_candidates >= 1 && fit.Valid();
+}
+
+const char* RoundHoleSearchReasonName(RoundHoleSearchReason reason) {
+  switch (reason) {
+    case RoundHoleSearchReason::kNone:
+      return "";
+    case RoundHoleSearchReason::kBadInput:
+      return "bad_input";
+    case RoundHoleSearchReason::kNoPoints:
+      return "no_points";
+    case RoundHoleSearchReason::kNoPlane:
+      return "no_plane";
+    case RoundHoleSearchReason::kBoardNotFound:
+      return "board_not_found";
+    case RoundHoleSearchReason::kAmbiguous:
+      return "ambiguous";
+  }
+  return "unknown";
+}
+
+int AssignRingsByElevation(std::span<std::vector<RoundHoleCloudPoint>> frames, double gap_rad) {
+  constexpr double kMinRangeM = 0.3;
+  std::vector<double> elevations;
+  const auto elevation = [](const RoundHoleCloudPoint& p) {
+    return std::atan2(static_cast<double>(p.z), std::hypot(static_cast<double>(p.x), p.y));
+  };
+  const auto usable = [&](const RoundHoleCloudPoint& p) {
+    const double r = std::sqrt(double(p.x) * p.x + double(p.y) * p.y + double(p.z) * p.z);
+    return std::isfinite(r) && r >= kMinRangeM;
+  };
+  for (const auto& frame : frames)
+    for (const RoundHoleCloudPoint& p : frame)
+      if (usable(p)) elevations.push_back(elevation(p));
+  if (elevations.empty()) return 0;
+  std::sort(elevations.begin(), elevations.end());
+  // The lower bound of each ring's cluster.
+  std::vector<double> starts = {elevations.front()};
+  for (std::size_t i = 1; i < elevations.size(); ++i)
+    if (elevations[i] - elevations[i - 1] > gap_rad) starts.push_back(elevations[i]);
+  for (auto& frame : frames) {
+    for (RoundHoleCloudPoint& p : frame) {
+      p.ring = 0;
+      if (!usable(p)) continue;
+      const auto it = std::upper_bound(starts.begin(), starts.end(), elevation(p));
+      p.ring = static_cast<std::uint16_t>(
+          std::clamp<std::ptrdiff_t>(it - starts.begin() - 1, 0, 65535));
+    }
+  }
+  return static_cast<int>(starts.size());
+}
+
+RoundHoleSearchResult SearchRoundHoleBoardInCloud(
+    const Board& board, std::span<const std::span<const RoundHoleCloudPoint>> frames,
+    const RoundHoleSearchOptions& options) {
+  RoundHoleSearchResult out;
+  if (board.type() != BoardType::kRoundHole || !options.Valid()) return out;
+  const Eigen::Vector2d page = board.page_size_m();
+
+  // The first frame with points in range is searched for patches, every stride-th point of
+  // it: a denser frame than kMaxSearchPoints (a 64-ring rotation holds 115k) only adds cost.
+  std::vector<Eigen::Vector3d> pts;
+  std::vector<int> rings;
+  for (const auto& frame : frames) {
+    const std::size_t stride = frame.size() / kMaxSearchPoints + 1;
+    for (std::size_t k = 0; k < frame.size(); k += stride) {
+      const RoundHoleCloudPoint& p = frame[k];
+      const Eigen::Vector3d q(p.x, p.y, p.z);
+      const double r = q.norm();
+      if (!std::isfinite(r) || r < options.min_range_m || r > options.max_range_m) continue;
+      pts.push_back(q);
+      rings.push_back(p.ring);
+    }
+    if (!pts.empty()) break;
+  }
+  out.reason = RoundHoleSearchReason::kNoPoints;
+  if (pts.empty()) return out;
+
+  // 1. Cubes and their neighbourhoods' planes.
+  std::unordered_map<CellKey, Cell, CellKeyHash> cells;
+  const auto key_of = [&](const Eigen::Vector3d& q) {
+    return CellKey{static_cast<int>(std::floor(q.x() / options.cell_m)),
+                   static_cast<int>(std::floor(q.y() / options.cell_m)),
+                   static_cast<int>(std::floor(q.z() / options.cell_m))};
+  };
+  for (std::size_t i = 0; i < pts.size(); ++i) cells[key_of(pts[i])].points.push_back(int(i));
+  std::vector<int> neighbourhood;
+  for (auto& [key, cell] : cells) {
+    if (cell.points.size() < 3) continue;
+    neighbourhood.clear();
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = cells.find({key.x + dx, key.y + dy, key.z + dz});
+          if (it != cells.end())
+            neighbourhood.insert(neighbourhood.end(), it->second.points.begin(),
+                                 it->second.points.end());
+        }
+    const LocalPlane plane = FitLocalPlane(pts, neighbourhood);
+    if (!plane.ok || plane.major(1) < kMinMinorSpreadM) continue;
+    std::set<int> plane_rings;
+    for (int i : plane.inliers) plane_rings.insert(rings[i]);
+    if (plane_rings.size() < 2) continue;
+    const auto own_on_plane = std::count_if(cell.points.begin(), cell.points.end(), [&](int i) {
+      return std::abs(plane.normal.dot(pts[i] - plane.centroid)) < plane.gate_m;
+    });
+    if (2 * own_on_plane < static_cast<std::ptrdiff_t>(cell.points.size())) continue;
+    cell.flat = true;
+    cell.normal = plane.normal.dot(plane.centroid) > 0.0 ? -plane.normal : plane.normal;
+    cell.centroid = plane.centroid;
+    ++out.planar_cells;
+  }
+
+  // 2. Patches: flat cubes joined through flat neighbours on the same plane.
+  std::vector<std::vector<Cell*>> patches;
+  for (auto& [key, cell] : cells) {
+    if (!cell.flat || cell.patch >= 0) continue;
+    const int id = static_cast<int>(patches.size());
+    std::vector<Cell*>& patch = patches.emplace_back();
+    std::deque<std::pair<CellKey, Cell*>> queue = {{key, &cell}};
+    cell.patch = id;
+    while (!queue.empty()) {
+      const auto [k, c] = queue.front();
+      queue.pop_front();
+      patch.push_back(c);
+      for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dz = -1; dz <= 1; ++dz) {
+            const CellKey nk{k.x + dx, k.y + dy, k.z + dz};
+            const auto it = cells.find(nk);
+            if (it == cells.end() || !it->second.flat || it->second.patch >= 0) continue;
+            Cell& n = it->second;
+            if (n.normal.dot(c->normal) < kPatchCosAngle ||
+                std::abs(c->normal.dot(n.centroid - c->centroid)) > kPatchOffsetM ||
+                std::abs(n.normal.dot(c->centroid - n.centroid)) > kPatchOffsetM) {
+              continue;
+            }
+            n.patch = id;
+            queue.push_back({nk, &n});
+          }
+    }
+  }
+
+  // 3. Board-sized patches.
+  double max_hole_chord = 0.0;
+  for (const BoardShape& s : board.shapes())
+    if (s.paint == Paint::kHole) max_hole_chord = std::max(max_hole_chord, 2.0 * s.radius_m());
+  max_hole_chord += kMinHoleChordM;
+  std::vector<Candidate> candidates;
+  for (const std::vector<Cell*>& patch : patches) {
+    std::vector<int> members;
+    for (const Cell* c : patch) members.insert(members.end(), c->points.begin(), c->points.end());
+    const LocalPlane plane = FitLocalPlane(pts, members);
+    if (!plane.ok) continue;
+    Eigen::Vector3d n = plane.normal.dot(plane.centroid) > 0.0 ? -plane.normal : plane.normal;
+    if (std::abs(n.z()) > kMaxNormalZ) continue;
+    // Board axes of an upright board facing the sensor: y up the spin axis projected onto the
+    // plane, z the normal towards the sensor, x = y cross z.
+    const Eigen::Vector3d ey = (Eigen::Vector3d::UnitZ() - n.z() * n).normalized();
+    const Eigen::Vector3d ex = ey.cross(n);
+    double lo_x = 1e9, hi_x = -1e9, lo_y = 1e9, hi_y = -1e9;
+    for (int i : plane.inliers) {
+      const Eigen::Vector3d d = pts[i] - plane.centroid;
+      lo_x = std::min(lo_x, d.dot(ex));
+      hi_x = std::max(hi_x, d.dot(ex));
+      lo_y = std::min(lo_y, d.dot(ey));
+      hi_y = std::max(hi_y, d.dot(ey));
+    }
+    // A patch far larger than the page is a wall or a floor; skip the gathering.
+    // One far narrower than its rings' span on the page is not a board either.
+    if (hi_x - lo_x > 2.0 * page.x() || hi_y - lo_y > 2.0 * page.y() ||
+        hi_x - lo_x < 0.5 * page.x()) {
+      continue;
+    }
+    // Every point of the frame near the plane and the patch, per ring: x span and y.
+    struct RingOnPlane {
+      std::vector<double> x, y;
+    };
+    std::map<int, RingOnPlane> ring_points;
+    const double reach2 = std::pow(hi_x - lo_x + hi_y - lo_y + 2.0 * kGatherMarginM, 2);
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      const Eigen::Vector3d d = pts[i] - plane.centroid;
+      if (d.squaredNorm() > reach2) continue;
+      if (OnAnotherPlane(cells, key_of(pts[i]), pts[i], n)) continue;
+      const double x = d.dot(ex), y = d.dot(ey);
+      if (std::abs(d.dot(n)) > kGatherDepthM || x < lo_x - kGatherMarginM ||
+          x > hi_x + kGatherMarginM || y < lo_y - kGatherMarginM || y > hi_y + kGatherMarginM) {
+        continue;
+      }
+      RingOnPlane& ring = ring_points[rings[i]];
+      ring.x.push_back(x);
+      ring.y.push_back(y);
+    }
+    std::vector<double> widths, mids, ys;
+    int rings_with_gap = 0;
+    for (auto& [ring, on_plane] : ring_points) {
+      std::sort(on_plane.x.begin(), on_plane.x.end());
+      const double width = on_plane.x.back() - on_plane.x.front();
+      // Wider than the page: not the board's (the floor's rings along the plane's foot).
+      if (width < 0.5 * page.x() || width > kMaxWidthRatio * page.x()) continue;
+      widths.push_back(width);
+      mids.push_back(0.5 * (on_plane.x.front() + on_plane.x.back()));
+      ys.push_back(Median(on_plane.y));
+      // A hole's chord: a gap along the ring wider than 2.5 of its point spacings (and 4 cm),
+      // narrower than a hole.
+      std::vector<double> spacing(on_plane.x.size() - 1);
+      for (std::size_t k = 1; k < on_plane.x.size(); ++k)
+        spacing[k - 1] = on_plane.x[k] - on_plane.x[k - 1];
+      const double min_gap = std::max(2.5 * Median(spacing), kMinHoleChordM);
+      rings_with_gap += std::any_of(spacing.begin(), spacing.end(), [&](double g) {
+        return g > min_gap && g < max_hole_chord;
+      }) ? 1 : 0;
+    }
+    if (widths.size() < 2) continue;
+    const double width = Median(widths);
+    if (width < kMinWidthRatio * page.x() || width > kMaxWidthRatio * page.x()) continue;
+    const auto [y_lo, y_hi] = std::minmax_element(ys.begin(), ys.end());
+    const double height = *y_hi - *y_lo;
+    if (height > kMaxHeightRatio * page.y()) continue;
+    ++out.board_sized_patches;
+    // Fewer rings cross a hole than the whole-board fit needs: a plain panel, not worth it.
+    if (rings_with_gap < options.fit.min_rings_through_holes) continue;
+    // The centre: the crossing rings' mid-points across, the middle of the outermost crossing
+    // rings up; the page's true top and bottom lie up to a ring spacing beyond them, which is
+    // what the vertical shift range must cover.
+    const Eigen::Vector3d centre =
+        plane.centroid + Median(mids) * ex + 0.5 * (*y_lo + *y_hi) * ey;
+    Eigen::Matrix3d R;
+    R << ex, ey, n;
+    Candidate c;
+    c.T_lidar_board = Rigid3d(R, centre);
+    c.shift_range_m = std::max(
+        options.fit.max_in_plane_shift_m,
+        std::min(0.5 * std::max(page.y() - height, 0.0) + 0.04, kMaxShiftRangeM));
+    c.width_error = std::abs(width / page.x() - 1.0);
+    candidates.push_back(c);
+  }
+  out.reason = out.board_sized_patches > 0 ? RoundHoleSearchReason::kBoardNotFound
+                                           : RoundHoleSearchReason::kNoPlane;
+  if (candidates.empty()) return out;
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& a, const Candidate& b) { return a.width_error < b.width_error; });
+  if (static_cast<int>(candidates.size()) > options.max_candidates)
+    candidates.resize(options.max_candidates);
+  out.candidates = static_cast<int>(candidates.size());
+
+  // 4. The whole-board fit from each candidate, and the empty-holes test.
+  std::vector<Eigen::Vector2d> hole_centres;
+  std::vector<double> hole_radii;
+  for (const BoardShape& s : board.shapes()) {
+    if (s.paint != Paint::kHole) continue;
+    hole_centres.push_back(s.centre_board());
+    hole_radii.push_back(s.radius_m());
+  }
+  double hole_area = 0.0;
+  for (double r : hole_radii) hole_area += std::numbers::pi * std::pow(std::max(r - kHoleInsetM, 0.0), 2);
+  const double paper_area = page.x() * page.y() - hole_area;
+  std::vector<RoundHoleCloudDetection> boards;
+  RoundHoleCloudDetection best_failure;
+  bool have_failure = false;
+  for (const Candidate& c : candidates) {
+    RoundHoleCloudOptions fit = options.fit;
+    fit.max_in_plane_shift_m = c.shift_range_m;
+    RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(board, frames, c.T_lidar_board, fit);
+    if (d.found) {
+      // Points of the fitted plane in the holes and on the paper.
+      const Rigid3d T_board_lidar = d.T_lidar_board.Inverse();
+      const double depth = std::max(3.0 * d.plane_rms_m, kMinGateM);
+      int in_holes = 0, on_paper = 0;
+      const Eigen::Vector3d centre = d.T_lidar_board.translation();
+      const double reach2 = 0.25 * page.squaredNorm() + depth * depth;
+      for (const auto& frame : frames) {
+        for (const RoundHoleCloudPoint& p : frame) {
+          const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
+          if (!((p_lidar - centre).squaredNorm() <= reach2)) continue;
+          const Eigen::Vector3d q = T_board_lidar * p_lidar;
+          if (!q.allFinite() || std::abs(q.z()) > depth || std::abs(q.x()) > 0.5 * page.x() ||
+              std::abs(q.y()) > 0.5 * page.y()) {
+            continue;
+          }
+          bool in_hole = false, near_hole = false;
+          for (std::size_t h = 0; h < hole_centres.size(); ++h) {
+            const double r = (q.head<2>() - hole_centres[h]).norm();
+            in_hole = in_hole || r < hole_radii[h] - kHoleInsetM;
+            near_hole = near_hole || r < hole_radii[h] + kHoleInsetM;
+          }
+          in_holes += in_hole ? 1 : 0;
+          on_paper += near_hole ? 0 : 1;
+        }
+      }
+      const double fill = on_paper > 0 ? (in_holes / hole_area) / (on_paper / paper_area) : 1.0;
+      if (fill <= kMaxHoleFill) {
+        const auto same = std::find_if(boards.begin(), boards.end(), [&](const auto& b) {
+          return (b.T_lidar_board.translation() - d.T_lidar_board.translation()).norm() <
+                 kSameBoardPages * page.x();
+        });
+        if (same == boards.end()) {
+          boards.push_back(std::move(d));
+        } else if (d.edge_rms_m < same->edge_rms_m) {
+          *same = std::move(d);
+        }
+        continue;
+      }
+      d.found = false;
+      d.reason = RoundHoleCloudReason::kFitFailed;
+    }
+    // The failure that got furthest: most edges fitted.
+    if (!have_failure || d.edges > best_failure.edges) {
+      best_failure = std::move(d);
+      have_failure = true;
+    }
+  }
+  out.boards_fitted = static_cast<int>(boards.size());
+  if (boards.size() == 1) {
+    out.found = true;
+    out.reason = RoundHoleSearchReason::kNone;
+    out.detection = std::move(boards.front());
+    return out;
+  }
+  if (boards.size() > 1) {
+    out.reason = RoundHoleSearchReason::kAmbiguous;
+    out.detection = std::move(boards.front());
+    out.detection.found = false;
+    out.detection.holes.clear();
+    return out;
+  }
+  out.reason = RoundHoleSearchReason::kBoardNotFound;
+  out.detection = std::move(best_failure);
+  return out;
+}
+
+}  // namespace linecal

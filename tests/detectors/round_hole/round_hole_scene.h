@@ -1,0 +1,119 @@
+#pragma once
+// Simulated LiDAR scenes of round-hole boards for the cloud detector's tests: the station
+// simulator scans boards (with their stands and the floor) and optional surfaces with the
+// reference car's beam tables.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "detectors/round_hole/round_hole_cloud.h"
+#include "tests/detectors/board_scene.h"
+#include "station/model/car_model.h"
+#include "station/model/pose_json.h"
+#include "station/model/station_layout.h"
+#include "station/sensors/lidar_format.h"
+#include "station/sim/lidar_sim.h"
+
+namespace linecal {
+
+inline constexpr double kDegToRad = std::numbers::pi / 180.0;
+inline const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
+// The LiDAR and the board centre sit this high above the floor (the reference boards' 1 m).
+inline constexpr double kHeightM = 1.0;
+
+// "roof_lidar" (Pandar64, deploy/cars/Pandar64.csv) or "bumper_lidar" (VLP-16, built in).
+inline LidarBeamTable Beams(const std::string& sensor) {
+  const CarModel car = *ReadCarModel(kDeploy + "/cars/reference.json");
+  return *LidarBeamTableOf(*car.FindSensor(sensor));
+}
+
+struct Scene {
+  Board board;
+  Rigid3d T_lidar_board;  // truth (of the first board)
+  std::vector<std::vector<RoundHoleCloudPoint>> frames;
+};
+
+// The pose in the station of something `distance_m` from the LiDAR (which stands at the
+// station origin, kHeightM up, azimuth 0 along +x) along `bearing_deg`, turned by
+// `heading_deg` about the vertical from facing the LiDAR, its centre `lift_m` above the LiDAR.
+inline Rigid3d FacingPose(double distance_m, double bearing_deg, double heading_deg,
+                          double lift_m = 0.0) {
+  const double bearing = bearing_deg * kDegToRad;
+  const Eigen::Matrix3d R =
+      Eigen::AngleAxisd(bearing + heading_deg * kDegToRad, Eigen::Vector3d::UnitZ())
+          .toRotationMatrix() *
+      BoardBaseRotation();
+  return Rigid3d(R, Eigen::Vector3d(distance_m * std::cos(bearing), distance_m * std::sin(bearing),
+                                    kHeightM + lift_m));
+}
+
+inline StationBoard RoundHoleAt(const Rigid3d& T_station_board, double scale = 1.0,
+                                const std::string& id = "board") {
+  StationBoard b;
+  b.id = id;
+  b.params.type = BoardType::kRoundHole;
+  b.params.scale = scale;
+  b.board = *Board::Create(b.params);
+  b.T_station_board = T_station_board;
+  return b;
+}
+
+// Scans `layout` (its first board is the scene's truth) for `rotations` rotations.
+inline Scene SimulateLayout(const LidarBeamTable& beams, const StationLayout& layout,
+                            double sigma_m, int rotations, std::uint64_t seed = 1) {
+  const Rigid3d T_station_lidar(LidarBaseRotation(), Eigen::Vector3d(0, 0, kHeightM));
+  LidarSimOptions o;
+  o.rotations = rotations;
+  o.range_sigma_m = sigma_m;
+  absl::StatusOr<LidarSimResult> sim = SimulateLidar(beams, T_station_lidar, layout, o, 0, seed);
+  EXPECT_TRUE(sim.ok()) << sim.status();
+  const StationBoard& b = layout.boards.front();
+  Scene scene{b.board, T_station_lidar.Inverse() * b.T_station_board, {}};
+  if (!sim.ok()) return scene;
+  for (const LidarScan& scan : sim->scans) {
+    std::vector<RoundHoleCloudPoint>& f = scene.frames.emplace_back();
+    for (const LidarPoint& p : scan.points) f.push_back({p.x, p.y, p.z, p.ring});
+  }
+  return scene;
+}
+
+// A station with one round-hole board (FacingPose), scanned for `rotations` rotations.
+inline Scene Simulate(const LidarBeamTable& beams, double distance_m, double bearing_deg,
+                      double heading_deg, double sigma_m, int rotations, double scale = 1.0,
+                      double lift_m = 0.0) {
+  StationLayout layout;
+  layout.name = "round_hole_test";
+  layout.boards.push_back(
+      RoundHoleAt(FacingPose(distance_m, bearing_deg, heading_deg, lift_m), scale));
+  return SimulateLayout(beams, layout, sigma_m, rotations);
+}
+
+// The largest distance of the detected hole centres from their true positions, metres.
+inline double WorstHoleError(const Scene& scene, const RoundHoleCloudDetection& d) {
+  double worst = 0.0;
+  for (const RoundHoleHole& h : d.holes) {
+    const Eigen::Vector2d p_board = scene.board.features()[h.id].p_board;
+    const Eigen::Vector3d truth =
+        scene.T_lidar_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0.0);
+    worst = std::max(worst, (h.p_lidar - truth).norm());
+  }
+  return worst;
+}
+
+// Runs detect(views) on the scene's frames and returns its result, with the thread CPU time
+// per frame in *ms_per_frame when given (the bar is the detector's cost, not the shared
+// machine's load).
+template <typename Detect>
+auto TimedPerFrame(const Scene& scene, double* ms_per_frame, Detect&& detect) {
+  const std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(), scene.frames.end());
+  const double start_ms = test_scene::ThreadCpuMs();
+  auto result = detect(std::span<const std::span<const RoundHoleCloudPoint>>(views));
+  const double elapsed_ms = test_scene::ThreadCpuMs() - start_ms;
+  if (ms_per_frame != nullptr) *ms_per_frame = elapsed_ms / std::max<std::size_t>(views.size(), 1);
+  return result;
+}
+
+}  // namespace linecal
