@@ -19,7 +19,7 @@ TEST(EvalCalibrateCliTest, ReferenceCarOnTheReferenceStation) {
   const LinecalRun run = RunLinecal(std::string("eval calibrate --json --cars 200 --seed 1 --station ") +
                                     LINECAL_SOURCE_DIR + "/deploy/stations/reference.json --car " +
                                     LINECAL_SOURCE_DIR + "/deploy/cars/reference.json");
-  // Exit 1: the surround cameras miss the angle bars on this layout (docs/solvers.md).
+  // Exit 1: method (b) on surround_front misses its ranging bar on this layout (docs/solvers.md).
   ASSERT_EQ(run.exit_code, 1) << run.err;
   const nlohmann::json r = nlohmann::json::parse(run.out);
   ASSERT_EQ(r["cameras"].size(), 5u);

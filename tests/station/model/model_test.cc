@@ -21,7 +21,7 @@ TEST(StationLayoutTest, ReferenceStationLoads) {
   absl::StatusOr<StationLayout> s = ReadStationLayout(kDeploy + "/stations/reference.json");
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_EQ(s->name, "reference");
-  EXPECT_EQ(s->boards.size(), 9u);
+  EXPECT_EQ(s->boards.size(), 15u);
   EXPECT_EQ(s->reflectors.size(), 7u);
   const StationBoard* chess = s->FindBoard("front_chessboard");
   ASSERT_NE(chess, nullptr);
