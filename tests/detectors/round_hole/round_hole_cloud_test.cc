@@ -37,15 +37,6 @@ RoundHoleCloudDetection Detect(const Scene& scene, const Rigid3d& prior,
   });
 }
 
-struct Case {
-  const char* sensor;
-  double distance_m;
-  double bearing_deg;
-  double heading_deg;
-  double sigma_m;
-  double bar_m;  // acceptance.md: 1 cm for 64 rings, 2 cm for 16 rings (10 frames)
-};
-
 TEST(RoundHoleCloudTest, HoleCentresAndNormalWithinTheBars) {
   // Bars: acceptance.md "Detectors (point clouds)".
   constexpr double kNormalBarRad = 0.1 * kDegToRad;

@@ -30,6 +30,17 @@ inline LidarBeamTable Beams(const std::string& sensor) {
   return *LidarBeamTableOf(*car.FindSensor(sensor));
 }
 
+// One scene of the accuracy tests: a LiDAR of the reference car (by sensor name), the board
+// at a distance and bearing from it, turned by a heading, scanned with range noise sigma_m.
+struct Case {
+  const char* sensor;
+  double distance_m;
+  double bearing_deg;
+  double heading_deg;
+  double sigma_m;
+  double bar_m;  // acceptance.md: 1 cm for 64 rings, 2 cm for 16 rings (10 frames)
+};
+
 struct Scene {
   Board board;
   Rigid3d T_lidar_board;  // truth (of the first board)

@@ -62,15 +62,6 @@ RoundHoleSearchResult Search(const Scene& scene, double* ms_per_frame = nullptr)
                        [&](auto views) { return SearchRoundHoleBoardInCloud(scene.board, views); });
 }
 
-struct Case {
-  const char* sensor;
-  double distance_m;
-  double bearing_deg;
-  double heading_deg;
-  double sigma_m;
-  double bar_m;  // acceptance.md: 1 cm for 64 rings, 2 cm for 16 rings (10 frames)
-};
-
 TEST(RoundHoleSearchTest, FindsTheBoardAmongFloorWallAndABox) {
   constexpr double kNormalBarRad = 0.1 * kDegToRad;
   const Case cases[] = {
