@@ -32,6 +32,13 @@ TEST(EvalCalibrateCliTest, ReferenceCarOnTheReferenceStation) {
       EXPECT_GT(ratio, 0.8) << k;
       EXPECT_LT(ratio, 1.2) << k;
     }
+    // The accuracy bars hold for every camera, the fisheye surround cameras included.
+    for (const char* k : {"yaw", "pitch", "roll"}) EXPECT_LE(c[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.02) << k;
+    for (const char* k : {"x", "y", "z"}) EXPECT_LE(c[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
+    if (!c["vanishing_point_p95_px"].is_null()) {
+      EXPECT_LE(c["vanishing_point_p95_px"].get<double>(), 0.3);
+      EXPECT_LE(c["ranging_p95_fraction"].get<double>(), 0.005);
+    }
   }
   const nlohmann::json& front = r["cameras"][0];
   ASSERT_EQ(front["camera"], "front_camera");
