@@ -76,8 +76,7 @@ MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimat
                                 double max_sigma_fraction_of_tolerance) {
   const MountingTolerance& tol = sensor.tolerance;
   const double tolerances[6] = {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
-  const double deviations[6] = {m.angles_deviation.yaw,      m.angles_deviation.pitch,    m.angles_deviation.roll,
-                                m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+  const Eigen::Matrix<double, 6, 1> deviations = m.Deviation();
   const char* names[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
   // Angles are shown in degrees, positions in millimetres.
   auto shown = [](int i, double v) { return i < 3 ? v * kDegPerRad : v * 1e3; };

@@ -34,6 +34,13 @@ struct MountingEstimate {
   // Which of yaw, pitch, roll, x, y, z were measured; the others are the nominal values,
   // with no deviation and no sigma to report (e.g. a radar without elevation: yaw only).
   std::array<bool, 6> observed = {true, true, true, true, true, true};
+
+  // yaw, pitch, roll (radians), x, y, z (metres) of the deviation, in the order of `sigma`.
+  Eigen::Matrix<double, 6, 1> Deviation() const {
+    Eigen::Matrix<double, 6, 1> d;
+    d << angles_deviation.yaw, angles_deviation.pitch, angles_deviation.roll, position_deviation_m;
+    return d;
+  }
 };
 
 // The mounting of a sensor whose pose is T_sensor_car, with the covariance of that pose as

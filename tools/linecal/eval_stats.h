@@ -107,8 +107,7 @@ struct MountingSamples {
   int verdicts_judged = 0, verdicts_agree = 0;
 
   void Add(const MountingEstimate& m, const TrueMounting& truth, SensorVerdict verdict) {
-    const double estimate[6] = {m.angles_deviation.yaw,      m.angles_deviation.pitch,    m.angles_deviation.roll,
-                                m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+    const Eigen::Matrix<double, 6, 1> estimate = m.Deviation();
     bool judgeable = true, truly_in = true;
     for (int i = 0; i < 6; ++i) {
       errors[i].push_back(estimate[i] - truth.truth[i]);

@@ -93,8 +93,7 @@ TEST_F(CameraCalibrationTest, FrontCameraIsRecoveredWithinItsSigmaAndPasses) {
   ASSERT_TRUE(r->solved);
   const MountingEstimate& m = r->mounting;
   const double dev_true[6] = {error.yaw, error.pitch, error.roll, offset.x(), offset.y(), offset.z()};
-  const double dev[6] = {m.angles_deviation.yaw, m.angles_deviation.pitch, m.angles_deviation.roll,
-                         m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+  const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
   for (int i = 0; i < 6; ++i) {
     EXPECT_GT(m.sigma[i], 0) << i;
     EXPECT_NEAR(dev[i], dev_true[i], 4 * m.sigma[i]) << "component " << i;
@@ -145,8 +144,7 @@ TEST_F(CameraCalibrationTest, MountingSigmaMatchesTheMonteCarloSpread) {
         CalibrateCamera(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.2, rng), options);
     ASSERT_TRUE(r.ok() && r->solved);
     const MountingEstimate& m = r->mounting;
-    const double dev[6] = {m.angles_deviation.yaw, m.angles_deviation.pitch, m.angles_deviation.roll,
-                           m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+    const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
     for (int i = 0; i < 6; ++i) sum_sq[i] += (dev[i] - dev_true[i]) * (dev[i] - dev_true[i]);
     sum_sigma += m.sigma;
   }

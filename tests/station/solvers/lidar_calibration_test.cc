@@ -87,8 +87,7 @@ TEST_F(LidarCalibrationTest, BothLidarsRecoveredWithinSigma) {
     EXPECT_EQ(r->features_used, 10);
     EXPECT_EQ(r->boards_used, 2);
     const MountingEstimate& m = r->mounting;
-    const double dev[6] = {m.angles_deviation.yaw, m.angles_deviation.pitch, m.angles_deviation.roll,
-                           m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+    const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
     const double truth_dev[6] = {error.yaw, error.pitch, error.roll, offset.x(), offset.y(), offset.z()};
     for (int i = 0; i < 6; ++i) {
       EXPECT_GT(m.sigma[i], 0) << i;
@@ -111,8 +110,7 @@ TEST_F(LidarCalibrationTest, SigmaMatchesTheMonteCarloSpread) {
         CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.01, 0.2 * kDeg, rng));
     ASSERT_TRUE(r.ok() && r->solved);
     const MountingEstimate& m = r->mounting;
-    const double dev[6] = {m.angles_deviation.yaw, m.angles_deviation.pitch, m.angles_deviation.roll,
-                           m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+    const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
     for (int i = 0; i < 6; ++i) sum_sq[i] += dev[i] * dev[i];
     sum_sigma += m.sigma;
   }
@@ -155,8 +153,7 @@ TEST_F(LidarCalibrationTest, BoardPosesWithTheirCovariance) {
     absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(s, station_, aligner_.T_station_car(), obs);
     ASSERT_TRUE(r.ok() && r->solved) << (r.ok() ? r->reason : std::string(r.status().message()));
     const MountingEstimate& m = r->mounting;
-    const double dev[6] = {m.angles_deviation.yaw, m.angles_deviation.pitch, m.angles_deviation.roll,
-                           m.position_deviation_m.x(), m.position_deviation_m.y(), m.position_deviation_m.z()};
+    const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
     for (int i = 0; i < 6; ++i) sum_sq[i] += dev[i] * dev[i];
     sum_sigma += m.sigma;
   }
