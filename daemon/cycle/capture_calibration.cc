@@ -10,6 +10,7 @@
 #include "daemon/drivers/radar_decoder.h"
 #include "detectors/detect.h"
 #include "detectors/round_hole/round_hole_cloud.h"
+#include "station/camera/board_view.h"
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
 #include "station/io/pcd.h"
@@ -54,6 +55,14 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
     if (const StationBoard* b = capture.station.FindBoard(id)) boards.push_back(b);
     out.boards.push_back({id, 0, 0, ""});
   }
+  // The camera model and the nominal pose of the station in the camera frame, for the board
+  // views; without intrinsics CalibrateCamera below reports the sensor's error.
+  std::optional<CameraModel> camera;
+  if (sensor.intrinsics) {
+    if (absl::StatusOr<CameraModel> m = CameraModel::Create(*sensor.intrinsics); m.ok()) camera = *std::move(m);
+  }
+  const Rigid3d T_camera_station =
+      sensor.T_car_sensor_nominal.Inverse() * capture.manifest.aligner.T_station_car().Inverse();
   std::vector<BoardObservation> observations;
   for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
     const CaptureFile& frame = recorded.frames[frame_index];
@@ -64,7 +73,16 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
       return out;
     }
     for (size_t i = 0; i < boards.size(); ++i) {
-      const std::optional<Detection> d = DetectBoard(image->view(), boards[i]->board);
+      std::optional<Detection> d = DetectBoard(image->view(), boards[i]->board);
+      if (d && !d->found && camera) {
+        // Not found in the raw image: look again in a perspective view of where the board is
+        // expected (station/camera/board_view.h), as a wide-angle lens bends it too far.
+        const Rigid3d T_camera_board = T_camera_station * boards[i]->T_station_board;
+        if (std::optional<Detection> v = DetectInBoardView(*camera, image->view(), T_camera_board, boards[i]->board);
+            v && v->found) {
+          d = std::move(v);
+        }
+      }
       if (!d) {
         out.boards[i].last_reason = "no_detector";
         continue;

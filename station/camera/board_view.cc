@@ -1,0 +1,123 @@
+#include "station/camera/board_view.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include <Eigen/SVD>
+
+#include "absl/strings/str_cat.h"
+#include "detectors/common/edge_lines.h"
+#include "detectors/detect.h"
+
+namespace linecal {
+namespace {
+
+// The grey of view pixels that see nothing of the raw image: between a board's black and
+// white, so that the edge of the seen area makes no strong edge of its own.
+constexpr std::uint8_t kUnseenGrey = 128;
+// A page corner must lie at least this far in front of the view (as a share of its distance):
+// a board seen edge-on has no usable perspective view.
+constexpr double kMinCornerDepth = 0.05;
+// A board seen within 6 degrees of edge-on (|cos| of its normal to the line of sight below
+// this) shows no pattern a detector could read.
+constexpr double kMinFacingCos = 0.1;
+
+}  // namespace
+
+absl::Status BoardViewOptions::Validate() const {
+  if (!(margin >= 0 && margin <= 2)) return absl::InvalidArgumentError(absl::StrCat("margin = ", margin, ": must be in [0, 2]"));
+  if (!(scale > 0.1 && scale <= 4)) return absl::InvalidArgumentError(absl::StrCat("scale = ", scale, ": must be in (0.1, 4]"));
+  if (max_side_px < 64 || max_side_px > kMaxImageSide) {
+    return absl::InvalidArgumentError(absl::StrCat("max_side_px = ", max_side_px, ": must be in [64, ", kMaxImageSide, "]"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const ImageView8& raw,
+                                            const Rigid3d& T_camera_board, const Eigen::Vector2d& page_size_m,
+                                            const BoardViewOptions& options) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  if (raw.Validate() != ImageViewError::kOk) return absl::InvalidArgumentError("raw image: invalid view");
+  const Eigen::Vector3d p_centre = T_camera_board.translation();
+  Eigen::Vector2d uv_centre;
+  ProjectionPointJacobian J;
+  if (!camera.Project(p_centre, &uv_centre, &J)) {
+    return absl::InvalidArgumentError("the expected board centre is outside the camera's valid region");
+  }
+  BoardView view;
+  const Eigen::Vector3d z = p_centre.normalized();
+  if (std::abs(z.dot(T_camera_board.rotation() * Eigen::Vector3d::UnitZ())) < kMinFacingCos) {
+    return absl::InvalidArgumentError("the board is expected edge-on: no perspective view");
+  }
+  Eigen::Vector3d x = Eigen::Vector3d::UnitX() - z.x() * z;
+  if (x.norm() < 1e-6) x = Eigen::Vector3d::UnitY() - z.y() * z;  // looking along the camera's x axis
+  x.normalize();
+  view.R_camera_view_.col(0) = x;
+  view.R_camera_view_.col(1) = z.cross(x);
+  view.R_camera_view_.col(2) = z;
+
+  // Raw pixels per radian of view direction at the centre: the Jacobian times the distance,
+  // on the view's x and y; its larger singular value is the finest scale.
+  const Eigen::Matrix2d local = J * view.R_camera_view_.leftCols<2>() * p_centre.norm();
+  double f = options.scale * Eigen::JacobiSVD<Eigen::Matrix2d>(local).singularValues()(0);
+
+  const double grow = options.margin * page_size_m.maxCoeff();
+  const double hx = page_size_m.x() / 2 + grow, hy = page_size_m.y() / 2 + grow;
+  std::array<Eigen::Vector3d, 4> corners_view;
+  int k = 0;
+  for (double sx : {-1.0, 1.0}) {
+    for (double sy : {-1.0, 1.0}) {
+      const Eigen::Vector3d p_view = view.R_camera_view_.transpose() * (T_camera_board * Eigen::Vector3d(sx * hx, sy * hy, 0));
+      if (p_view.z() < kMinCornerDepth * p_view.norm()) {
+        return absl::InvalidArgumentError("the board is expected edge-on or behind the view: no perspective view");
+      }
+      corners_view[k++] = p_view;
+    }
+  }
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(1e300), hi = -lo;
+  for (const Eigen::Vector3d& p : corners_view) {
+    const Eigen::Vector2d q = p.head<2>() / p.z();
+    lo = lo.cwiseMin(q);
+    hi = hi.cwiseMax(q);
+  }
+  f = std::min(f, options.max_side_px / (hi - lo).maxCoeff());
+  view.f_px_ = f;
+  view.c_px_ = -lo * f;
+  const int width = std::max(1, static_cast<int>(std::ceil((hi.x() - lo.x()) * f)) + 1);
+  const int height = std::max(1, static_cast<int>(std::ceil((hi.y() - lo.y()) * f)) + 1);
+  view.image_ = Image8(width, height, kUnseenGrey);
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      if (const std::optional<Eigen::Vector2d> uv = view.ToRaw(camera, Eigen::Vector2d(u, v));
+          uv && InsideForBilinearGrey(raw, *uv)) {
+        view.image_.at(u, v) = static_cast<std::uint8_t>(std::lround(BilinearGrey(raw, uv->x(), uv->y())));
+      }
+    }
+  }
+  return view;
+}
+
+std::optional<Eigen::Vector2d> BoardView::ToRaw(const CameraModel& camera, const Eigen::Vector2d& uv_view_px) const {
+  const Eigen::Vector3d ray_view((uv_view_px.x() - c_px_.x()) / f_px_, (uv_view_px.y() - c_px_.y()) / f_px_, 1.0);
+  Eigen::Vector2d uv;
+  if (!camera.Project(R_camera_view_ * ray_view, &uv)) return std::nullopt;
+  return uv;
+}
+
+std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
+                                           const Rigid3d& T_camera_board, const Board& board,
+                                           const BoardViewOptions& options) {
+  absl::StatusOr<BoardView> view = BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), options);
+  if (!view.ok()) return std::nullopt;
+  std::optional<Detection> d = DetectBoard(view->image().view(), board);
+  if (!d) return std::nullopt;
+  for (DetectedFeature& f : d->features) {
+    const std::optional<Eigen::Vector2d> uv = view->ToRaw(camera, f.uv_px);
+    if (!uv) return std::nullopt;
+    f.uv_px = *uv;
+  }
+  return d;
+}
+
+}  // namespace linecal
