@@ -222,7 +222,10 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
   CollectTargetReasons(&a);
   if (predict) {
     CameraCalibrationOptions co;
-    co.pnp.feature_sigma_px = o.corner_noise_px;
+    co.pnp.feature_sigma_px =
+        sensor.intrinsics && sensor.intrinsics->type == CameraModelType::kFisheye && o.fisheye_corner_noise_px > 0
+            ? o.fisheye_corner_noise_px
+            : o.corner_noise_px;
     co.max_sigma_fraction_of_tolerance = o.max_sigma_fraction_of_tolerance;
     absl::StatusOr<CameraCalibrationResult> r =
         observations.empty() ? absl::StatusOr<CameraCalibrationResult>(CameraCalibrationResult{})
@@ -684,6 +687,9 @@ absl::Status PlannerOptions::Validate() const {
   };
   if (!(min_feature_px > 0 && min_feature_px <= 1000)) return bad("min_feature_px", min_feature_px, "(0, 1000]");
   if (!(corner_noise_px > 0 && corner_noise_px <= 10)) return bad("corner_noise_px", corner_noise_px, "(0, 10]");
+  if (!(fisheye_corner_noise_px >= 0 && fisheye_corner_noise_px <= 10)) {
+    return bad("fisheye_corner_noise_px", fisheye_corner_noise_px, "[0, 10]");
+  }
   if (camera_frames < 1 || camera_frames > 100) return bad("camera_frames", camera_frames, "1..100");
   if (!(image_margin_px >= 0 && image_margin_px <= 500)) return bad("image_margin_px", image_margin_px, "[0, 500]");
   if (!(min_fill_share > 0 && min_fill_share <= 1)) return bad("min_fill_share", min_fill_share, "(0, 1]");

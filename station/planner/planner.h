@@ -54,6 +54,9 @@ namespace linecal {
 struct PlannerOptions {
   double min_feature_px = 15;        // smallest imaged square / marker cell, (0, 1000]
   double corner_noise_px = 0.1;      // camera feature noise of the prediction, (0, 10]
+  // The same for fisheye cameras, whose boards are found in resampled perspective views
+  // (station/camera/board_view.h) and so have their own noise; 0: corner_noise_px. [0, 10]
+  double fisheye_corner_noise_px = 0;
   int camera_frames = 1;             // frames per camera the calibration will use, 1..100
   double image_margin_px = 8;        // features this far inside the image, [0, 500]
   // Plan only: a new camera board's image bounding box covers at least / at most this

@@ -28,10 +28,10 @@ const std::string kCar = std::string(LINECAL_SOURCE_DIR) + "/deploy/cars/referen
 const std::string kFloor = std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference-floor.json";
 // The chessboard detector's corner noise on the simulator's renders at --noise 2 --blur 0.5
 // (docs/planner.md, measured from the residuals of `linecal calibrate` on seeds 6..8).
-constexpr char kCornerNoise[] = " --corner-noise-px 0.04";
-// The sensors the real detectors can calibrate from renders: the fisheye surround cameras are
-// left out, their boards are not found through the fisheye lens (docs/solvers.md).
-constexpr char kVerified[] = "front_camera,roof_lidar,bumper_lidar,front_radar,corner_radar_left,corner_radar_right";
+// The fisheye cameras' boards are found in resampled perspective views, whose corners are less
+// noisy: 0.012 px is the mean over their σ on seeds 6..10 (docs/planner.md).
+constexpr char kCornerNoise[] = " --corner-noise-px 0.04 --fisheye-corner-noise-px 0.012";
+constexpr char kFisheyes[] = "surround_front,surround_rear,surround_left,surround_right";
 
 nlohmann::json ReadJson(const fs::path& path) {
   std::ifstream in(path);
@@ -118,37 +118,58 @@ TEST_F(PlanCliTest, EverySensorIsPlannedAndTheFilesAreWritten) {
 
 // The car's mounting errors within ±0.25° (half the LiDARs' tolerance), the range over which
 // the LiDAR prediction averages the detector's sigma (docs/planner.md: at the tolerance's
-// edge the VLP-16's sigma varies up to 1.6x).
+// edge the VLP-16's sigma varies up to 1.6x). Every sensor of the car, rendered and calibrated
+// by the real detectors and solvers, passes; its σ is within ±30% of the prediction — for the
+// fisheye cameras the mean σ of three cars, as theirs spreads ±19% (1 SD) from car to car
+// where the others' stays within ±10% (docs/planner.md).
 TEST_F(PlanCliTest, SimulatedPlanPassesWithinThirtyPercentOfThePredictedSigma) {
-  const fs::path capture = dir_ / "capture";
-  const LinecalRun sim = RunLinecal("sim --station " + (dir_ / "plan" / "station.json").string() + " --car " +
-                                    (dir_ / "plan" / "car.json").string() + " --sensors " + kVerified +
-                                    " --seed 11 --noise 2 --blur 0.5 --perturb-angle-deg 0.25 --out " +
-                                    capture.string());
-  ASSERT_EQ(sim.exit_code, 0) << sim.err;
-  const LinecalRun cal = RunLinecal("calibrate --json --capture " + capture.string());
-  ASSERT_EQ(cal.exit_code, 0) << cal.out << cal.err;
-  const nlohmann::json results = nlohmann::json::parse(cal.out);
   std::map<std::string, nlohmann::json> predicted;
   for (const nlohmann::json& s : plan_["sensors"]) predicted[s["name"]] = s["predicted_sigma"];
-  ASSERT_EQ(results["sensors"].size(), 6u);
+  std::map<std::pair<std::string, std::string>, std::vector<double>> fisheye_ratios;
   int compared = 0;
-  for (const nlohmann::json& s : results["sensors"]) {
-    const std::string name = s["name"];
-    SCOPED_TRACE(name);
-    EXPECT_EQ(s["verdict"], "pass") << s["reason"] << " " << s["message"];
-    for (const char* k : {"yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m"}) {
-      if (s["sigma"][k].is_null()) {
-        EXPECT_TRUE(predicted[name][k].is_null()) << k;  // the same components observed
-        continue;
+  for (const int seed : {11, 16, 17}) {
+    SCOPED_TRACE(seed);
+    const fs::path capture = dir_ / ("capture_" + std::to_string(seed));
+    // The first car is the whole car; the two more only its fisheye cameras.
+    const std::string sensors = seed == 11 ? "" : std::string(" --sensors ") + kFisheyes;
+    const LinecalRun sim = RunLinecal("sim --station " + (dir_ / "plan" / "station.json").string() + " --car " +
+                                      (dir_ / "plan" / "car.json").string() + sensors + " --seed " +
+                                      std::to_string(seed) + " --noise 2 --blur 0.5 --perturb-angle-deg 0.25 --out " +
+                                      capture.string());
+    ASSERT_EQ(sim.exit_code, 0) << sim.err;
+    const LinecalRun cal = RunLinecal("calibrate --json --capture " + capture.string());
+    ASSERT_EQ(cal.exit_code, 0) << cal.out << cal.err;
+    const nlohmann::json results = nlohmann::json::parse(cal.out);
+    ASSERT_EQ(results["sensors"].size(), seed == 11 ? 10u : 4u);
+    for (const nlohmann::json& s : results["sensors"]) {
+      const std::string name = s["name"];
+      SCOPED_TRACE(name);
+      EXPECT_EQ(s["verdict"], "pass") << s["reason"] << " " << s["message"];
+      const bool fisheye = std::string(kFisheyes).find(name) != std::string::npos;
+      for (const char* k : {"yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m"}) {
+        if (s["sigma"][k].is_null()) {
+          EXPECT_TRUE(predicted[name][k].is_null()) << k;  // the same components observed
+          continue;
+        }
+        const double ratio = s["sigma"][k].get<double>() / predicted[name][k].get<double>();
+        if (fisheye) {
+          fisheye_ratios[{name, k}].push_back(ratio);
+        } else {
+          EXPECT_NEAR(ratio, 1.0, 0.30) << k << ": measured " << s["sigma"][k] << ", predicted " << predicted[name][k];
+          ++compared;
+        }
       }
-      const double measured = s["sigma"][k];
-      const double expected = predicted[name][k];
-      EXPECT_NEAR(measured / expected, 1.0, 0.30) << k << ": measured " << measured << ", predicted " << expected;
-      ++compared;
     }
   }
-  EXPECT_EQ(compared, 3 * 6 + 3);  // six components of the camera and two LiDARs, yaw of three radars
+  // Six components of the front camera and two LiDARs, yaw of three radars.
+  EXPECT_EQ(compared, 3 * 6 + 3);
+  ASSERT_EQ(fisheye_ratios.size(), 4u * 6);
+  for (const auto& [key, ratios] : fisheye_ratios) {
+    ASSERT_EQ(ratios.size(), 3u);
+    const double mean = (ratios[0] + ratios[1] + ratios[2]) / 3;
+    EXPECT_NEAR(mean, 1.0, 0.30) << key.first << " " << key.second << ": measured/predicted " << ratios[0] << ", "
+                                 << ratios[1] << ", " << ratios[2];
+  }
 }
 
 // Each deliberately broken copy of the planned layout: exactly the sensors it breaks, each

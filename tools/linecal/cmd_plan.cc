@@ -92,8 +92,9 @@ std::optional<PlannerOptions> ReadOptions(const cli::CommandLine& cl, const std:
   PlannerOptions o;
   const absl::StatusOr<double> feature = cl.GetDouble("min-feature-px", o.min_feature_px);
   const absl::StatusOr<double> noise = cl.GetDouble("corner-noise-px", o.corner_noise_px);
+  const absl::StatusOr<double> fisheye_noise = cl.GetDouble("fisheye-corner-noise-px", o.fisheye_corner_noise_px);
   const absl::StatusOr<int> frames = cl.GetInt("frames", o.camera_frames);
-  for (const absl::Status& s : {feature.status(), noise.status(), frames.status()}) {
+  for (const absl::Status& s : {feature.status(), noise.status(), fisheye_noise.status(), frames.status()}) {
     if (!s.ok()) {
       cli::BadInput(command, std::string(s.message()));
       return std::nullopt;
@@ -101,6 +102,7 @@ std::optional<PlannerOptions> ReadOptions(const cli::CommandLine& cl, const std:
   }
   o.min_feature_px = *feature;
   o.corner_noise_px = *noise;
+  o.fisheye_corner_noise_px = *fisheye_noise;
   o.camera_frames = *frames;
   o.regions = !cl.Has("no-regions");
   if (absl::Status s = o.Validate(); !s.ok()) {
@@ -108,6 +110,7 @@ std::optional<PlannerOptions> ReadOptions(const cli::CommandLine& cl, const std:
     const std::string m(s.message());
     const std::string flag = m.rfind("min_feature_px", 0) == 0    ? "--min-feature-px"
                              : m.rfind("corner_noise_px", 0) == 0 ? "--corner-noise-px"
+                             : m.rfind("fisheye_corner_noise_px", 0) == 0 ? "--fisheye-corner-noise-px"
                              : m.rfind("camera_frames", 0) == 0   ? "--frames"
                                                                   : "option";
     cli::BadInput(command, absl::StrCat(flag, ": ", m));
@@ -119,6 +122,7 @@ std::optional<PlannerOptions> ReadOptions(const cli::CommandLine& cl, const std:
 const std::vector<cli::OptionSpec> kSharedOptions = {
     {"min-feature-px", "PX", "smallest imaged square or marker cell, pixels (default 15)"},
     {"corner-noise-px", "PX", "camera corner noise of the predicted sigma, pixels (default 0.1)"},
+    {"fisheye-corner-noise-px", "PX", "the same for fisheye cameras (default: --corner-noise-px)"},
     {"frames", "N", "camera frames the calibration will use (default 1)"},
     {"json", "", "print one JSON object"}};
 
@@ -166,6 +170,7 @@ int RunPlan(const Args& args) {
                               {"options",
                                {{"min_feature_px", o->min_feature_px},
                                 {"corner_noise_px", o->corner_noise_px},
+                                {"fisheye_corner_noise_px", o->fisheye_corner_noise_px},
                                 {"camera_frames", o->camera_frames},
                                 {"max_sigma_fraction_of_tolerance", o->max_sigma_fraction_of_tolerance}}},
                               {"calibratable", AllCalibratable(plan->sensors)},
