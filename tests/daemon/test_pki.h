@@ -9,8 +9,9 @@
 #include <fstream>
 #include <string>
 
+#include <gtest/gtest.h>
+
 #include "absl/status/status.h"
-#include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
 
 namespace linecal::testing_daemon {
@@ -58,8 +59,9 @@ inline absl::Status MakeLeaf(const std::filesystem::path& dir, const std::string
 
 }  // namespace pki_internal
 
-// Makes the certificates in `dir` (which must exist). Cost: about 50 ms of openssl runs.
-inline absl::StatusOr<TestPki> MakeTestPki(const std::filesystem::path& dir) {
+// Makes the certificates in `dir` (which must exist) into `pki`; a failure names the openssl
+// command and its log, for ASSERT_TRUE. Cost: about 150 ms of openssl runs.
+inline ::testing::AssertionResult MakeTestPki(const std::filesystem::path& dir, TestPki* pki) {
   using pki_internal::MakeCa;
   using pki_internal::MakeLeaf;
   for (absl::Status s : {MakeCa(dir, "ca"), MakeCa(dir, "other_ca"),
@@ -67,11 +69,12 @@ inline absl::StatusOr<TestPki> MakeTestPki(const std::filesystem::path& dir) {
                                   "subjectAltName=IP:127.0.0.1,DNS:localhost\nextendedKeyUsage=serverAuth\n"),
                          MakeLeaf(dir, "client", "ca", 2, "extendedKeyUsage=clientAuth\n"),
                          MakeLeaf(dir, "other_client", "other_ca", 3, "extendedKeyUsage=clientAuth\n")}) {
-    if (!s.ok()) return s;
+    if (!s.ok()) return ::testing::AssertionFailure() << s.message();
   }
   auto at = [&](const std::string& file) { return (dir / file).string(); };
-  return TestPki{at("ca.pem"),     at("server.pem"),   at("server.key"),         at("client.pem"),
+  *pki = TestPki{at("ca.pem"),     at("server.pem"),   at("server.key"),         at("client.pem"),
                  at("client.key"), at("other_ca.pem"), at("other_client.pem"), at("other_client.key")};
+  return ::testing::AssertionSuccess();
 }
 
 }  // namespace linecal::testing_daemon

@@ -142,9 +142,7 @@ class TlsCycleCliTest : public CycleCliTest {
  protected:
   void SetUp() override {
     MakeDir();
-    absl::StatusOr<testing_daemon::TestPki> pki = testing_daemon::MakeTestPki(dir_);
-    ASSERT_TRUE(pki.ok()) << pki.status();
-    pki_ = *pki;
+    ASSERT_TRUE(testing_daemon::MakeTestPki(dir_, &pki_));
     StartDaemon(
         {{"tls", {{"cert", "server.pem"}, {"key", "server.key"}, {"client_ca", "ca.pem"}, {"require_client_cert", true}}}});
     tls_ = " --tls-ca " + pki_.ca_cert + " --tls-cert " + pki_.client_cert + " --tls-key " + pki_.client_key;
@@ -214,8 +212,8 @@ TEST(LinecaldTls, MismatchedKeyStopsTheStart) {
   const fs::path dir = fs::path(testing::TempDir()) / ("linecald_tls_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
-  absl::StatusOr<testing_daemon::TestPki> pki = testing_daemon::MakeTestPki(dir);
-  ASSERT_TRUE(pki.ok()) << pki.status();
+  testing_daemon::TestPki pki;
+  ASSERT_TRUE(testing_daemon::MakeTestPki(dir, &pki));
   testing_daemon::WriteTwoSensorCar((dir / "car.json").string());
   std::ofstream(dir / "linecald.json") << nlohmann::json{
       {"listen", "127.0.0.1:0"},
@@ -233,8 +231,8 @@ TEST(LinecaldTls, MismatchedKeyStopsTheStart) {
   const int status = pclose(pipe);
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 1);
-  EXPECT_NE(out.find("linecald: tls.key: " + pki->client_key + ": does not match the certificate of tls.cert (" +
-                     pki->server_cert + ")"),
+  EXPECT_NE(out.find("linecald: tls.key: " + pki.client_key + ": does not match the certificate of tls.cert (" +
+                     pki.server_cert + ")"),
             std::string::npos)
       << out;
   fs::remove_all(dir);

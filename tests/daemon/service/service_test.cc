@@ -231,9 +231,7 @@ class TlsServiceTest : public ServiceTest {
  protected:
   void SetUp() override {
     MakeDir();
-    absl::StatusOr<testing_daemon::TestPki> pki = testing_daemon::MakeTestPki(dir_);
-    ASSERT_TRUE(pki.ok()) << pki.status();
-    pki_ = *pki;
+    ASSERT_TRUE(testing_daemon::MakeTestPki(dir_, &pki_));
   }
   // The server's `tls` as the configuration file would give it.
   TlsConfig ServerTls(const std::string& cert, const std::string& key) const {
