@@ -14,6 +14,32 @@ std::string Resolve(const fs::path& base, const std::string& p) {
   return fs::path(p).is_absolute() ? p : (base / p).lexically_normal().string();
 }
 
+absl::StatusOr<TlsConfig> ReadTls(const JsonField& tls, const fs::path& base) {
+  if (absl::Status s = tls.AllowOnlyKeys({"cert", "key", "client_ca", "require_client_cert"}); !s.ok()) return s;
+  TlsConfig c;
+  // One PEM file: a path key, resolved against the configuration's directory, and its text.
+  auto read = [&](const char* key, bool required, std::string* path, std::string* pem) -> absl::Status {
+    absl::StatusOr<std::string> value = required ? tls.String(key) : tls.StringOr(key, "");
+    if (!value.ok()) return value.status();
+    if (value->empty()) return absl::OkStatus();
+    *path = Resolve(base, *value);
+    absl::StatusOr<std::string> text = ReadTextFile(*path);
+    if (!text.ok()) return tls.Error(key, std::string(text.status().message()));
+    *pem = *std::move(text);
+    return absl::OkStatus();
+  };
+  if (absl::Status s = read("cert", true, &c.cert_path, &c.cert_pem); !s.ok()) return s;
+  if (absl::Status s = read("key", true, &c.key_path, &c.key_pem); !s.ok()) return s;
+  if (absl::Status s = read("client_ca", false, &c.client_ca_path, &c.client_ca_pem); !s.ok()) return s;
+  absl::StatusOr<bool> require = tls.BoolOr("require_client_cert", true);
+  if (!require.ok()) return require.status();
+  c.require_client_cert = *require;
+  if (c.require_client_cert && c.client_ca_path.empty()) {
+    return tls.Error("client_ca", "required when require_client_cert is true (the CA of the clients' certificates)");
+  }
+  return c;
+}
+
 }  // namespace
 
 DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::string& data_dir) {
@@ -34,7 +60,7 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   if (!root.ok()) return root.status();
   if (absl::Status s = root->AllowOnlyKeys({"listen", "log_level", "auth_token", "station_id", "station", "car_models",
                                             "data_root", "db", "source", "vin_check_digit", "frames_per_sensor",
-                                            "busy_timeout_ms"});
+                                            "busy_timeout_ms", "tls"});
       !s.ok()) {
     return s;
   }
@@ -99,6 +125,13 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   if (!busy.ok()) return busy.status();
   if (*busy < 0 || *busy > 600000) return root->Error("busy_timeout_ms", "must be in [0, 600000]");
   c.core.busy_timeout = std::chrono::milliseconds(*busy);
+  if (root->Has("tls")) {
+    absl::StatusOr<JsonField> tls_field = root->Object("tls");
+    if (!tls_field.ok()) return tls_field.status();
+    absl::StatusOr<TlsConfig> tls = ReadTls(*tls_field, base);
+    if (!tls.ok()) return tls.status();
+    c.tls = *std::move(tls);
+  }
   return c;
 }
 

@@ -3,6 +3,7 @@
 // file and the key ("linecald.json: source.type: must be 'simulator' or 'replay', got 'usb'").
 // Relative paths in the file are relative to the file's directory.
 
+#include <optional>
 #include <string>
 
 #include "absl/status/statusor.h"
@@ -10,10 +11,30 @@
 
 namespace linecal {
 
+// The `tls` key (docs/daemon.md, "Authentication"): the server's certificate and key and the CA
+// that signs the clients' certificates. The files are read with the configuration, so that a
+// missing one stops the daemon at start-up naming the key and the file; whether the PEM text
+// parses and the key matches the certificate is checked where the gRPC credentials are made
+// (daemon/service/tls_credentials.h).
+struct TlsConfig {
+  // Resolved paths, for messages; client_ca_path is empty when the key is absent.
+  std::string cert_path;
+  std::string key_path;
+  std::string client_ca_path;
+  // The files' contents (PEM).
+  std::string cert_pem;
+  std::string key_pem;
+  std::string client_ca_pem;
+  // True: a client without a certificate signed by client_ca fails the handshake. False with a
+  // client_ca: a certificate is asked for and verified when the client sends one.
+  bool require_client_cert = true;
+};
+
 struct DaemonConfig {
   std::string listen = "127.0.0.1:50051";  // HOST:PORT
   std::string log_level = "info";          // "debug", "info", "warning", "error"
   std::string auth_token;                  // empty: no authentication
+  std::optional<TlsConfig> tls;            // absent: an insecure port
   StationCoreConfig core;
 };
 
@@ -23,7 +44,9 @@ DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::strin
 
 // Reads a configuration file. Keys: listen, log_level, auth_token, station_id, station,
 // car_models (array), data_root, db, source {type: simulator|replay, capture}, vin_check_digit,
-// frames_per_sensor, busy_timeout_ms; unknown keys are errors.
+// frames_per_sensor, busy_timeout_ms, tls {cert, key, client_ca, require_client_cert: cert and
+// key required, client_ca too unless require_client_cert is false}; unknown keys are errors.
+// Cost: reads the file and the tls PEM files.
 absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path);
 
 }  // namespace linecal

@@ -125,14 +125,15 @@ int main(int argc, char** argv) {
     Log("warning", std::to_string((*core)->store().aborted_at_open()) + " cycles interrupted by the last stop are stored as aborted");
   }
   absl::StatusOr<linecal::RunningServer> server =
-      linecal::StartServer(core->get(), config->listen, config->auth_token, LINECAL_VERSION);
+      linecal::StartServer(core->get(), config->listen, config->auth_token, LINECAL_VERSION, config->tls);
   if (!server.ok()) {
     std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
   const std::string listening = "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
-  Log("info", listening + ", database " + config->core.db_path +
-                  (config->auth_token.empty() ? ", no authentication" : ", token authentication"));
+  const char* tls = !config->tls ? ", insecure" : config->tls->require_client_cert ? ", mutual TLS" : ", TLS";
+  Log("info", listening + ", database " + config->core.db_path + tls +
+                  (config->auth_token.empty() ? ", no token" : ", token authentication"));
   const linecal::SystemdNotifier notifier = linecal::SystemdNotifier::FromEnvironment();
   if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok()) Log("warning", std::string(s.message()));
   int signal = 0;

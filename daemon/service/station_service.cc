@@ -7,6 +7,7 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "daemon/service/tls_credentials.h"
 
 namespace linecal {
 namespace {
@@ -246,13 +247,19 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, cons
 }
 
 absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,
-                                          const std::string& version) {
+                                          const std::string& version, const std::optional<TlsConfig>& tls) {
+  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+  if (tls) {
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> secure = ServerTlsCredentials(*tls);
+    if (!secure.ok()) return secure.status();
+    credentials = *std::move(secure);
+  }
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   RunningServer running;
   running.service = std::make_unique<StationService>(core, auth_token, version);
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &running.port);
+  builder.AddListeningPort(address, credentials, &running.port);
   builder.RegisterService(running.service.get());
   running.server = builder.BuildAndStart();
   if (!running.server || running.port == 0) {

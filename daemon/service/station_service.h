@@ -3,16 +3,18 @@
 // check credentials, translate messages and map absl::Status codes to gRPC's; the work is in
 // StationCore.
 //
-// Authentication: with a non-empty token, every call must carry the metadata
+// Authentication: the port may be mutual TLS (StartServer); with a non-empty token, every call must carry the metadata
 // "authorization: Bearer <token>", else UNAUTHENTICATED. Cycle ids are the store's integer
 // ids in decimal; a malformed one is INVALID_ARGUMENT naming cycle_id, an unknown one
 // NOT_FOUND.
 
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <grpcpp/grpcpp.h>
 
+#include "daemon/core/daemon_config.h"
 #include "daemon/core/station_core.h"
 #include "linecal/v1/station.grpc.pb.h"
 
@@ -57,13 +59,17 @@ class StationService final : public v1::Station::Service {
 };
 
 // A started server: listening on `address` ("127.0.0.1:0" picks a free port), with the
-// standard health service and server reflection.
+// standard health service and server reflection on the same port. Without `tls` the port is
+// insecure; with it, TLS with the credentials of ServerTlsCredentials (tls_credentials.h),
+// whose errors (a bad file, a key that does not match the certificate) are returned as they
+// are; the token, when set, is required on top.
 struct RunningServer {
   std::unique_ptr<StationService> service;
   std::unique_ptr<grpc::Server> server;
   int port = 0;
 };
 absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,
-                                          const std::string& version);
+                                          const std::string& version,
+                                          const std::optional<TlsConfig>& tls = std::nullopt);
 
 }  // namespace linecal

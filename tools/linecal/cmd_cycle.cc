@@ -1,6 +1,7 @@
 // The station client: linecal cycle start / cycle show / cycles list / status, over the
 // daemon's gRPC API. The daemon is found by --address or LINECAL_ADDRESS (default
-// 127.0.0.1:50051); a token by --token or LINECAL_TOKEN.
+// 127.0.0.1:50051); a token by --token or LINECAL_TOKEN; TLS (docs/daemon.md,
+// "Authentication") by --tls-ca, --tls-cert, --tls-key or LINECAL_TLS_CA, _CERT, _KEY.
 #include <grpcpp/grpcpp.h>
 
 #include <cctype>
@@ -12,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "linecal/v1/station.grpc.pb.h"
+#include "station/io/json_reader.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
 
@@ -23,6 +25,10 @@ constexpr char kDefaultAddress[] = "127.0.0.1:50051";
 std::vector<cli::OptionSpec> ConnectionOptions(std::vector<cli::OptionSpec> options) {
   options.push_back({"address", "HOST:PORT", "the daemon (default $LINECAL_ADDRESS or 127.0.0.1:50051)"});
   options.push_back({"token", "TOKEN", "authentication token (default $LINECAL_TOKEN)"});
+  options.push_back({"tls-ca", "PEM", "TLS: the CA of the daemon's certificate (default $LINECAL_TLS_CA)"});
+  options.push_back({"tls-cert", "PEM", "TLS: this client's certificate (default $LINECAL_TLS_CERT)"});
+  options.push_back({"tls-key", "PEM", "TLS: this client's private key (default $LINECAL_TLS_KEY)"});
+  options.push_back({"tls-server-name", "NAME", "TLS: the name the daemon's certificate must carry (default: the address's host)"});
   options.push_back({"json", "", "print JSON"});
   return options;
 }
@@ -31,27 +37,63 @@ struct Client {
   std::unique_ptr<v1::Station::Stub> stub;
   std::string token;
   std::string address;
+  bool tls = false;
   void Prepare(grpc::ClientContext* c) const {
     if (!token.empty()) c->AddMetadata("authorization", "Bearer " + token);
   }
 };
 
-Client Connect(const cli::CommandLine& cl) {
+// The flag's value, else the environment variable's, else "".
+std::string FlagOrEnv(const cli::CommandLine& cl, const char* flag, const char* env) {
+  const char* from_env = std::getenv(env);
+  return cl.Get(flag, from_env ? from_env : "");
+}
+
+// The channel to the daemon: TLS when any of --tls-ca, --tls-cert, --tls-key is given
+// (without --tls-ca the system's CAs verify the daemon), else insecure. An unreadable file
+// is an error naming the flag and the file.
+absl::StatusOr<Client> Connect(const cli::CommandLine& cl) {
   const char* env_address = std::getenv("LINECAL_ADDRESS");
-  const char* env_token = std::getenv("LINECAL_TOKEN");
   Client c;
   c.address = cl.Get("address", env_address ? env_address : kDefaultAddress);
-  c.token = cl.Get("token", env_token ? env_token : "");
-  c.stub = v1::Station::NewStub(grpc::CreateChannel(c.address, grpc::InsecureChannelCredentials()));
+  c.token = FlagOrEnv(cl, "token", "LINECAL_TOKEN");
+  grpc::SslCredentialsOptions pem;
+  const struct {
+    const char* flag;
+    const char* env;
+    std::string* text;
+  } files[] = {{"tls-ca", "LINECAL_TLS_CA", &pem.pem_root_certs},
+               {"tls-cert", "LINECAL_TLS_CERT", &pem.pem_cert_chain},
+               {"tls-key", "LINECAL_TLS_KEY", &pem.pem_private_key}};
+  for (const auto& f : files) {
+    const std::string path = FlagOrEnv(cl, f.flag, f.env);
+    if (path.empty()) continue;
+    absl::StatusOr<std::string> text = ReadTextFile(path);
+    if (!text.ok()) return absl::InvalidArgumentError(absl::StrCat("--", f.flag, ": ", text.status().message()));
+    *f.text = *std::move(text);
+    c.tls = true;
+  }
+  if (pem.pem_cert_chain.empty() != pem.pem_private_key.empty()) {
+    return absl::InvalidArgumentError("--tls-cert and --tls-key: give both or neither");
+  }
+  const std::string server_name = cl.Get("tls-server-name");
+  if (!server_name.empty() && !c.tls) return absl::InvalidArgumentError("--tls-server-name: needs --tls-ca or --tls-cert");
+  grpc::ChannelArguments arguments;
+  if (!server_name.empty()) arguments.SetSslTargetNameOverride(server_name);
+  c.stub = v1::Station::NewStub(grpc::CreateCustomChannel(
+      c.address, c.tls ? grpc::SslCredentials(pem) : grpc::InsecureChannelCredentials(), arguments));
   return c;
 }
 
-// A failed call as a one-line message; UNAVAILABLE (no daemon) and bad requests are bad
-// input (2), the rest negative answers (1).
+// A failed call as a one-line message; UNAVAILABLE (no daemon, or over TLS also a failed
+// handshake, which gRPC reports the same way) and bad requests are bad input (2), the rest
+// negative answers (1).
 int CallFailed(const char* command, const Client& client, const grpc::Status& s) {
-  std::fprintf(stderr, "linecal %s: %s (%s): %s\n", command, client.address.c_str(),
-               s.error_code() == grpc::StatusCode::UNAVAILABLE ? "no daemon answers" : "refused",
-               s.error_message().c_str());
+  const char* why = "refused";
+  if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
+    why = client.tls ? "no daemon answers or the TLS handshake failed" : "no daemon answers";
+  }
+  std::fprintf(stderr, "linecal %s: %s (%s): %s\n", command, client.address.c_str(), why, s.error_message().c_str());
   return s.error_code() == grpc::StatusCode::NOT_FOUND ? cli::kExitNegative : cli::kExitBadInput;
 }
 
@@ -126,7 +168,9 @@ int RunCycleStart(const Args& args) {
   request.mutable_aligner()->set_thrust_angle_deg(*thrust);
   request.mutable_options()->set_record_capture(cl.Has("record"));
   request.mutable_options()->set_frames_per_sensor(static_cast<uint32_t>(*frames));
-  Client client = Connect(cl);
+  const absl::StatusOr<Client> connected = Connect(cl);
+  if (!connected.ok()) return cli::BadInput("cycle start", std::string(connected.status().message()));
+  const Client& client = *connected;
   grpc::ClientContext context;
   client.Prepare(&context);
   v1::StartCycleResponse started;
@@ -172,7 +216,9 @@ int RunCycleShow(const Args& args) {
   cli::CommandLine cl("linecal cycle show ID [--json]", "Prints one stored cycle with its per-sensor results.",
                       ConnectionOptions({{"id", "ID", "cycle id", true, false, true}}));
   if (const std::optional<int> exit = cli::ParseOrExit(cl, "cycle show", args)) return *exit;
-  Client client = Connect(cl);
+  const absl::StatusOr<Client> connected = Connect(cl);
+  if (!connected.ok()) return cli::BadInput("cycle show", std::string(connected.status().message()));
+  const Client& client = *connected;
   grpc::ClientContext context;
   client.Prepare(&context);
   v1::GetCycleRequest get;
@@ -209,7 +255,9 @@ int RunCyclesList(const Args& args) {
   const absl::StatusOr<int> limit = cl.GetInt("limit", 50);
   if (!limit.ok() || *limit < 1 || *limit > 1000) return cli::BadInput("cycles list", "--limit: must be in [1, 1000]");
   request.set_page_size(static_cast<uint32_t>(*limit));
-  Client client = Connect(cl);
+  const absl::StatusOr<Client> connected = Connect(cl);
+  if (!connected.ok()) return cli::BadInput("cycles list", std::string(connected.status().message()));
+  const Client& client = *connected;
   grpc::ClientContext context;
   client.Prepare(&context);
   v1::ListCyclesResponse response;
@@ -228,7 +276,9 @@ int RunStatus(const Args& args) {
   cli::CommandLine cl("linecal status [--json]", "The daemon's station: version, car models, sensors, database.",
                       ConnectionOptions({}));
   if (const std::optional<int> exit = cli::ParseOrExit(cl, "status", args)) return *exit;
-  Client client = Connect(cl);
+  const absl::StatusOr<Client> connected = Connect(cl);
+  if (!connected.ok()) return cli::BadInput("status", std::string(connected.status().message()));
+  const Client& client = *connected;
   grpc::ClientContext context;
   client.Prepare(&context);
   v1::StationStatus status;

@@ -70,5 +70,52 @@ TEST_F(DaemonConfigTest, ErrorsNameTheKey) {
   }
 }
 
+// The tls object: paths relative to the file, the files read (their PEM is checked by the
+// service, tests/daemon/service), and every missing piece refused naming key and file.
+TEST_F(DaemonConfigTest, TlsFilesReadNamingKeyAndFile) {
+  fs::create_directories(dir_ / "pki");
+  std::ofstream(dir_ / "pki/server.pem") << "CERT";
+  std::ofstream(dir_ / "pki/server.key") << "KEY";
+  std::ofstream(dir_ / "pki/ca.pem") << "CA";
+  const std::string base = R"("station": "s.json", "car_models": ["c.json"], "data_root": "d")";
+  absl::StatusOr<DaemonConfig> c = Read("{" + base + R"(, "tls": {"cert": "pki/server.pem", "key": "pki/server.key",
+      "client_ca": "pki/ca.pem", "require_client_cert": true}})");
+  ASSERT_TRUE(c.ok()) << c.status();
+  ASSERT_TRUE(c->tls.has_value());
+  EXPECT_EQ(c->tls->cert_path, (dir_ / "pki/server.pem").string());
+  EXPECT_EQ(c->tls->key_path, (dir_ / "pki/server.key").string());
+  EXPECT_EQ(c->tls->client_ca_path, (dir_ / "pki/ca.pem").string());
+  EXPECT_EQ(c->tls->cert_pem, "CERT");
+  EXPECT_EQ(c->tls->key_pem, "KEY");
+  EXPECT_EQ(c->tls->client_ca_pem, "CA");
+  EXPECT_TRUE(c->tls->require_client_cert);
+  // Server-only TLS (the token authenticates): no client_ca, require_client_cert false.
+  c = Read("{" + base + R"(, "tls": {"cert": "pki/server.pem", "key": "pki/server.key", "require_client_cert": false}})");
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_TRUE(c->tls->client_ca_path.empty());
+  EXPECT_FALSE(c->tls->require_client_cert);
+  EXPECT_FALSE(Read("{" + base + "}")->tls.has_value());
+
+  const std::string missing = (dir_ / "pki/missing.pem").string();
+  const std::pair<std::string, std::string> cases[] = {
+      {R"({"cert": "pki/missing.pem", "key": "pki/server.key", "client_ca": "pki/ca.pem"})",
+       "linecald.json: tls.cert: " + missing + ": cannot read"},
+      {R"({"cert": "pki/server.pem", "key": "pki/missing.pem", "client_ca": "pki/ca.pem"})",
+       "linecald.json: tls.key: " + missing + ": cannot read"},
+      {R"({"cert": "pki/server.pem", "key": "pki/server.key", "client_ca": "pki/missing.pem"})",
+       "linecald.json: tls.client_ca: " + missing + ": cannot read"},
+      {R"({"cert": "pki/server.pem", "key": "pki/server.key"})", "linecald.json: tls.client_ca: required"},
+      {R"({"key": "pki/server.key", "client_ca": "pki/ca.pem"})", "linecald.json: tls.cert"},
+      {R"({"cert": "pki/server.pem", "key": "pki/server.key", "client_ca": "pki/ca.pem", "ca": "x"})",
+       "linecald.json: tls.ca"},
+      {R"("on")", "linecald.json: tls"},
+  };
+  for (const auto& [tls, expected] : cases) {
+    const absl::Status s = Read("{" + base + R"(, "tls": )" + tls + "}").status();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << tls;
+    EXPECT_NE(s.message().find(expected), std::string::npos) << expected << " | " << s.message();
+  }
+}
+
 }  // namespace
 }  // namespace linecal

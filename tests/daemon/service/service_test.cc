@@ -1,20 +1,25 @@
 // The gRPC service on a real server on 127.0.0.1 (a free port) over the real core, store and
 // simulator: a cycle started, watched to its end and read back; every RPC's error codes;
-// authentication on and off; two clients watching one cycle.
+// authentication on and off (token, mutual TLS with certificates made by openssl, both); two
+// clients watching one cycle.
 #include "daemon/service/station_service.h"
 
 #include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 
+#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "station/io/json_reader.h"
 #include "tests/daemon/test_car.h"
+#include "tests/daemon/test_pki.h"
 
 namespace linecal {
 namespace {
@@ -25,11 +30,15 @@ constexpr char kVin[] = "1M8GDM9AXKP042788";
 
 class ServiceTest : public ::testing::Test {
  protected:
-  void Start(const std::string& token) {
+  // A scratch directory per test and process (ctest runs tests in parallel processes).
+  void MakeDir() {
     dir_ = fs::path(testing::TempDir()) /
            ("service_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_);
+  }
+  void CreateCore() {
+    if (dir_.empty()) MakeDir();
     // The reference car with two sensors: a short cycle.
     testing_daemon::WriteTwoSensorCar((dir_ / "car.json").string());
     StationCoreConfig config;
@@ -38,7 +47,10 @@ class ServiceTest : public ::testing::Test {
     config.db_path = (dir_ / "station.db").string();
     config.data_root = (dir_ / "data").string();
     core_ = std::move(*StationCore::Create(config));
-    absl::StatusOr<RunningServer> server = StartServer(core_.get(), "127.0.0.1:0", token, "test");
+  }
+  void Start(const std::string& token, const std::optional<TlsConfig>& tls = std::nullopt) {
+    CreateCore();
+    absl::StatusOr<RunningServer> server = StartServer(core_.get(), "127.0.0.1:0", token, "test", tls);
     ASSERT_TRUE(server.ok()) << server.status();
     server_ = std::move(*server);
     channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port), grpc::InsecureChannelCredentials());
@@ -212,6 +224,126 @@ TEST_F(ServiceTest, TokenAuthentication) {
 TEST_F(ServiceTest, HealthServiceIsOn) {
   Start("");
   ASSERT_NE(server_.server->GetHealthCheckService(), nullptr);
+}
+
+// Mutual TLS: a server with the openssl-made certificates of testing_daemon::MakeTestPki.
+class TlsServiceTest : public ServiceTest {
+ protected:
+  void SetUp() override {
+    MakeDir();
+    ASSERT_TRUE(testing_daemon::MakeTestPki(dir_, &pki_));
+  }
+  // The server's `tls` as the configuration file would give it.
+  TlsConfig ServerTls(const std::string& cert, const std::string& key) const {
+    TlsConfig tls;
+    tls.cert_path = cert;
+    tls.key_path = key;
+    tls.client_ca_path = pki_.ca_cert;
+    tls.cert_pem = *ReadTextFile(cert);
+    tls.key_pem = *ReadTextFile(key);
+    tls.client_ca_pem = *ReadTextFile(pki_.ca_cert);
+    return tls;
+  }
+  // A stub over TLS trusting the test CA, with this client certificate (none when empty).
+  std::unique_ptr<v1::Station::Stub> TlsStub(const std::string& cert, const std::string& key) const {
+    return v1::Station::NewStub(TlsChannel(cert, key));
+  }
+  std::shared_ptr<grpc::Channel> TlsChannel(const std::string& cert, const std::string& key) const {
+    grpc::SslCredentialsOptions options;
+    options.pem_root_certs = *ReadTextFile(pki_.ca_cert);
+    if (!cert.empty()) {
+      options.pem_cert_chain = *ReadTextFile(cert);
+      options.pem_private_key = *ReadTextFile(key);
+    }
+    return grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port), grpc::SslCredentials(options));
+  }
+  static grpc::Status Status(v1::Station::Stub& stub, const std::string& token = "") {
+    grpc::ClientContext c;
+    // A refused handshake is retried by gRPC until the deadline; 5 s is far above a loopback
+    // handshake (milliseconds) and keeps a hang from stalling the suite.
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+    if (!token.empty()) c.AddMetadata("authorization", "Bearer " + token);
+    v1::StationStatus status;
+    return stub.GetStationStatus(&c, {}, &status);
+  }
+  // A refused connection: UNAVAILABLE with gRPC's reason, which for TLS names the handshake
+  // or the closed connection (docs/daemon.md, "Authentication", lists what clients see).
+  static void ExpectRefusedHandshake(const grpc::Status& s) {
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::UNAVAILABLE) << s.error_message();
+    EXPECT_TRUE(s.error_message().find("andshake") != std::string::npos ||
+                s.error_message().find("Socket closed") != std::string::npos ||
+                s.error_message().find("Connection reset") != std::string::npos)
+        << s.error_message();
+  }
+  testing_daemon::TestPki pki_;
+};
+
+TEST_F(TlsServiceTest, ClientWithCertificateIsServedHealthIncluded) {
+  Start("", ServerTls(pki_.server_cert, pki_.server_key));
+  const std::shared_ptr<grpc::Channel> channel = TlsChannel(pki_.client_cert, pki_.client_key);
+  const std::unique_ptr<v1::Station::Stub> stub = v1::Station::NewStub(channel);
+  EXPECT_TRUE(Status(*stub).ok());
+  grpc::ClientContext start_context;
+  v1::StartCycleResponse started;
+  ASSERT_TRUE(stub->StartCycle(&start_context, Request(), &started).ok());
+  EXPECT_EQ(started.cycle_id(), "1");
+  core_->WaitIdle();
+
+  // The standard health service on the same TLS port: grpc.health.v1.Health/Check with an
+  // empty request (service "") answers status SERVING, field 1 = 1: the bytes 08 01.
+  grpc::GenericStub generic(channel);
+  grpc::ClientContext health_context;
+  // gRPC refuses a buffer without slices; the empty message is one empty slice.
+  grpc::Slice empty_message("");
+  grpc::ByteBuffer request(&empty_message, 1);
+  grpc::ByteBuffer response;
+  std::promise<grpc::Status> done;
+  generic.UnaryCall(&health_context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request, &response,
+                    [&](grpc::Status s) { done.set_value(s); });
+  const grpc::Status health = done.get_future().get();
+  ASSERT_TRUE(health.ok()) << health.error_message();
+  grpc::Slice slice;
+  ASSERT_TRUE(response.DumpToSingleSlice(&slice).ok());
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(slice.begin()), slice.size()), std::string("\x08\x01", 2));
+}
+
+TEST_F(TlsServiceTest, ClientsWithoutAValidCertificateAreRefused) {
+  Start("", ServerTls(pki_.server_cert, pki_.server_key));
+  ExpectRefusedHandshake(Status(*TlsStub("", "")));                                        // no certificate
+  ExpectRefusedHandshake(Status(*TlsStub(pki_.other_client_cert, pki_.other_client_key)));  // another CA's
+  ExpectRefusedHandshake(Status(*stub_));                                                   // no TLS at all
+  EXPECT_TRUE(core_->ListCycles({})->cycles.empty());
+}
+
+TEST_F(TlsServiceTest, TokenAndCertificateBothRequired) {
+  Start("s3cret", ServerTls(pki_.server_cert, pki_.server_key));
+  const std::unique_ptr<v1::Station::Stub> with_cert = TlsStub(pki_.client_cert, pki_.client_key);
+  EXPECT_EQ(Status(*with_cert).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(Status(*with_cert, "wrong").error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  ExpectRefusedHandshake(Status(*TlsStub("", ""), "s3cret"));
+  EXPECT_TRUE(Status(*with_cert, "s3cret").ok());
+}
+
+TEST_F(TlsServiceTest, WrongFilesFailAtStartNamingKeyAndFile) {
+  CreateCore();
+  // The client's key with the server's certificate.
+  absl::StatusOr<RunningServer> mismatched =
+      StartServer(core_.get(), "127.0.0.1:0", "", "test", ServerTls(pki_.server_cert, pki_.client_key));
+  ASSERT_EQ(mismatched.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(mismatched.status().message(), "tls.key: " + pki_.client_key +
+                                               ": does not match the certificate of tls.cert (" + pki_.server_cert + ")");
+  // A key where the certificate belongs.
+  absl::StatusOr<RunningServer> swapped =
+      StartServer(core_.get(), "127.0.0.1:0", "", "test", ServerTls(pki_.server_key, pki_.server_key));
+  ASSERT_EQ(swapped.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(swapped.status().message().rfind("tls.cert: " + pki_.server_key + ": not a PEM certificate", 0), 0u)
+      << swapped.status().message();
+  TlsConfig bad_ca = ServerTls(pki_.server_cert, pki_.server_key);
+  bad_ca.client_ca_pem = "junk";
+  absl::StatusOr<RunningServer> junk = StartServer(core_.get(), "127.0.0.1:0", "", "test", bad_ca);
+  ASSERT_EQ(junk.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(junk.status().message().rfind("tls.client_ca: " + pki_.ca_cert + ": not a PEM certificate", 0), 0u)
+      << junk.status().message();
 }
 
 // The handlers' translations, without a server (the request fuzzer drives them too).
