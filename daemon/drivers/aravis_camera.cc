@@ -129,6 +129,61 @@ absl::StatusOr<ArvDevice*> OpenDevice(const std::string& id) {
   return reopened;
 }
 
+static_assert(kPfncMono8 == ARV_PIXEL_FORMAT_MONO_8 && kPfncMono16 == ARV_PIXEL_FORMAT_MONO_16 &&
+              kPfncRgb8 == ARV_PIXEL_FORMAT_RGB_8_PACKED &&
+              kPfncBgr8 == ARV_PIXEL_FORMAT_BGR_8_PACKED &&
+              kPfncBayerGr8 == ARV_PIXEL_FORMAT_BAYER_GR_8 &&
+              kPfncBayerRg8 == ARV_PIXEL_FORMAT_BAYER_RG_8 &&
+              kPfncBayerGb8 == ARV_PIXEL_FORMAT_BAYER_GB_8 &&
+              kPfncBayerBg8 == ARV_PIXEL_FORMAT_BAYER_BG_8);
+
+std::uint8_t Luma(double r, double g, double b) {
+  return static_cast<std::uint8_t>(std::lround(0.299 * r + 0.587 * g + 0.114 * b));
+}
+
+// The colour (0 red, 1 green, 2 blue) of the Bayer pattern's top-left 2 x 2 cells, row-major.
+struct BayerPattern {
+  int cell[4];
+  int At(int x, int y) const { return cell[2 * (y & 1) + (x & 1)]; }
+};
+
+BayerPattern PatternOf(std::uint32_t pixel_format) {
+  switch (pixel_format) {
+    case kPfncBayerGr8:
+      return {{1, 0, 2, 1}};
+    case kPfncBayerRg8:
+      return {{0, 1, 1, 2}};
+    case kPfncBayerGb8:
+      return {{1, 2, 0, 1}};
+    default:  // kPfncBayerBg8
+      return {{2, 1, 1, 0}};
+  }
+}
+
+// Bilinear demosaicing, then luma. Mirroring (-1 -> 1, w -> w - 2) keeps the pattern's
+// parity at the border, so every 3 x 3 neighbourhood holds all three colours.
+void BayerToGrey(const std::uint8_t* data, int width, int height, BayerPattern pattern,
+                 Image8* out) {
+  auto mirror = [](int i, int n) { return i < 0 ? -i : (i >= n ? 2 * n - 2 - i : i); };
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const int own = pattern.At(x, y);
+      double sum[3] = {0, 0, 0};
+      int count[3] = {0, 0, 0};
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int c = pattern.At(x + dx, y + dy);
+          if (c == own && (dx != 0 || dy != 0)) continue;  // a sample's own colour is its own
+          sum[c] += data[static_cast<std::size_t>(mirror(y + dy, height)) * width +
+                         mirror(x + dx, width)];
+          ++count[c];
+        }
+      }
+      out->at(x, y) = Luma(sum[0] / count[0], sum[1] / count[1], sum[2] / count[2]);
+    }
+  }
+}
+
 }  // namespace
 
 absl::StatusOr<Image8> GigeFrameToGrey(std::uint32_t pixel_format, const std::uint8_t* data,
@@ -137,9 +192,19 @@ absl::StatusOr<Image8> GigeFrameToGrey(std::uint32_t pixel_format, const std::ui
     return absl::InvalidArgumentError(absl::StrCat("frame size ", width, " x ", height,
                                                    ": must be 1..", kMaxImageSide, " per side"));
   }
+  const bool bayer = pixel_format == kPfncBayerGr8 || pixel_format == kPfncBayerRg8 ||
+                     pixel_format == kPfncBayerGb8 || pixel_format == kPfncBayerBg8;
+  if (bayer && (width < 2 || height < 2)) {
+    return absl::InvalidArgumentError(absl::StrCat("Bayer frame of ", width, " x ", height,
+                                                   ": needs at least 2 x 2 pixels"));
+  }
   std::size_t bytes_per_pixel = 0;
   switch (pixel_format) {
     case kPfncMono8:
+    case kPfncBayerGr8:
+    case kPfncBayerRg8:
+    case kPfncBayerGb8:
+    case kPfncBayerBg8:
       bytes_per_pixel = 1;
       break;
     case kPfncMono16:
@@ -152,7 +217,7 @@ absl::StatusOr<Image8> GigeFrameToGrey(std::uint32_t pixel_format, const std::ui
     default:
       return absl::InvalidArgumentError(
           absl::StrCat("pixel format 0x", absl::Hex(pixel_format),
-                       " cannot be converted to grey (Mono8, Mono16, RGB8, BGR8 can)"));
+                       " cannot be converted to grey (Mono8, Mono16, RGB8, BGR8, Bayer 8-bit can)"));
   }
   const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   if (data == nullptr || size < pixels * bytes_per_pixel) {
@@ -172,16 +237,18 @@ absl::StatusOr<Image8> GigeFrameToGrey(std::uint32_t pixel_format, const std::ui
         out.pixels[i] = static_cast<std::uint8_t>(std::lround(v / 257.0));
       }
       break;
-    default: {
+    case kPfncRgb8:
+    case kPfncBgr8: {
       const bool rgb = pixel_format == kPfncRgb8;
       for (std::size_t i = 0; i < pixels; ++i) {
         const std::uint8_t* p = data + 3 * i;
-        const double r = rgb ? p[0] : p[2];
-        const double b = rgb ? p[2] : p[0];
-        out.pixels[i] = static_cast<std::uint8_t>(std::lround(0.299 * r + 0.587 * p[1] + 0.114 * b));
+        out.pixels[i] = rgb ? Luma(p[0], p[1], p[2]) : Luma(p[2], p[1], p[0]);
       }
       break;
     }
+    default:
+      BayerToGrey(data, width, height, PatternOf(pixel_format), &out);
+      break;
   }
   return out;
 }

@@ -87,10 +87,17 @@ inline constexpr std::uint32_t kPfncMono8 = 0x01080001;
 inline constexpr std::uint32_t kPfncMono16 = 0x01100007;
 inline constexpr std::uint32_t kPfncRgb8 = 0x02180014;
 inline constexpr std::uint32_t kPfncBgr8 = 0x02180015;
+inline constexpr std::uint32_t kPfncBayerGr8 = 0x01080008;
+inline constexpr std::uint32_t kPfncBayerRg8 = 0x01080009;
+inline constexpr std::uint32_t kPfncBayerGb8 = 0x0108000A;
+inline constexpr std::uint32_t kPfncBayerBg8 = 0x0108000B;
 
 // Converts one frame's bytes to 8-bit grey: Mono8 as is, Mono16 (little-endian, as GigE
 // Vision sends it) rounded to v / 257, RGB8/BGR8 with the BT.601 luma weights of
-// station/io/image_io.h. Rows are packed (no padding). InvalidArgument for an unsupported
+// station/io/image_io.h, Bayer 8-bit (GR, RG, GB, BG: the colours of the top-left 2 x 2)
+// demosaiced bilinearly (each missing colour the mean of its nearest samples in the 3 x 3
+// neighbourhood, mirrored at the border, so the grey image stays centred on the pixel grid)
+// and then the same luma. Rows are packed (no padding). InvalidArgument for an unsupported
 // format, a size above kMaxImageSide or non-positive, or fewer than the frame's bytes.
 // Cost: one pass over the pixels.
 absl::StatusOr<Image8> GigeFrameToGrey(std::uint32_t pixel_format, const std::uint8_t* data,

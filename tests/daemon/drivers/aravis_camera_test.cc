@@ -5,12 +5,12 @@
 
 #include <chrono>
 #include <cstdint>
-#include <random>
 #include <thread>
 #include <vector>
 
 #include "daemon/drivers/fake_gige_camera.h"
 #include "gtest/gtest.h"
+#include "tests/daemon/random_image.h"
 
 namespace linecal {
 namespace {
@@ -19,14 +19,6 @@ using std::chrono::milliseconds;
 using std::chrono::steady_clock;
 
 constexpr char kLoopback[] = "127.0.0.1";
-
-Image8 RandomImage(int width, int height, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_int_distribution<int> value(0, 255);
-  Image8 image(width, height);
-  for (auto& p : image.pixels) p = static_cast<std::uint8_t>(value(rng));
-  return image;
-}
 
 AravisCameraOptions OptionsFor(const FakeGigeCamera& fake) {
   AravisCameraOptions options;
@@ -256,12 +248,57 @@ TEST(GigeFrameToGreyTest, ConvertsMono8Mono16AndRgb) {
   EXPECT_EQ(grey->pixels, (std::vector<std::uint8_t>{29, 150, 76, 255}));
 }
 
+// A Bayer mosaic of one colour everywhere demosaics to that colour at every pixel, the
+// border included: grey = round(0.299 r + 0.587 g + 0.114 b) = round(17.94 + 58.7 + 22.8) = 99.
+TEST(GigeFrameToGreyTest, DemosaicsTheFourBayerPatterns) {
+  constexpr int kWidth = 6;
+  constexpr int kHeight = 4;
+  const int r = 60, g = 100, b = 200;
+  struct Case {
+    std::uint32_t format;
+    int cells[4];  // colours of the top-left 2 x 2, row-major
+  };
+  for (const Case& c : {Case{kPfncBayerRg8, {r, g, g, b}}, Case{kPfncBayerGr8, {g, r, b, g}},
+                        Case{kPfncBayerGb8, {g, b, r, g}}, Case{kPfncBayerBg8, {b, g, g, r}}}) {
+    std::vector<std::uint8_t> mosaic(kWidth * kHeight);
+    for (int y = 0; y < kHeight; ++y) {
+      for (int x = 0; x < kWidth; ++x) {
+        mosaic[y * kWidth + x] = static_cast<std::uint8_t>(c.cells[2 * (y % 2) + x % 2]);
+      }
+    }
+    auto grey = GigeFrameToGrey(c.format, mosaic.data(), mosaic.size(), kWidth, kHeight);
+    ASSERT_TRUE(grey.ok()) << grey.status();
+    EXPECT_EQ(grey->pixels, std::vector<std::uint8_t>(kWidth * kHeight, 99))
+        << "format 0x" << std::hex << c.format;
+  }
+  // A grey scene (r = g = b at every pixel, so the mosaic is the scene) with a vertical step
+  // between columns 2 and 3: columns whose 3 x 3 neighbourhood lies on one side keep their
+  // value exactly, the two beside the step fall in between, rising: no shift of the edge.
+  std::vector<std::uint8_t> step(kWidth * kHeight);
+  for (int y = 0; y < kHeight; ++y) {
+    for (int x = 0; x < kWidth; ++x) step[y * kWidth + x] = x < 3 ? 40 : 200;
+  }
+  auto grey = GigeFrameToGrey(kPfncBayerRg8, step.data(), step.size(), kWidth, kHeight);
+  ASSERT_TRUE(grey.ok()) << grey.status();
+  for (int y = 0; y < kHeight; ++y) {
+    EXPECT_EQ(grey->at(0, y), 40);
+    EXPECT_EQ(grey->at(1, y), 40);
+    EXPECT_GT(grey->at(2, y), 40);
+    EXPECT_LT(grey->at(2, y), grey->at(3, y));
+    EXPECT_LT(grey->at(3, y), 200);
+    EXPECT_EQ(grey->at(4, y), 200);
+    EXPECT_EQ(grey->at(5, y), 200);
+  }
+}
+
 TEST(GigeFrameToGreyTest, RefusesBadFrames) {
   const std::vector<std::uint8_t> bytes(16, 0);
-  // BayerRG8 (0x01080009) is not converted.
-  auto grey = GigeFrameToGrey(0x01080009, bytes.data(), bytes.size(), 4, 4);
+  // Mono10p (0x010A0046), a packed format, is not converted.
+  auto grey = GigeFrameToGrey(0x010A0046, bytes.data(), bytes.size(), 4, 4);
   EXPECT_EQ(grey.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(grey.status().message().find("0x1080009"), std::string::npos) << grey.status();
+  EXPECT_NE(grey.status().message().find("0x10a0046"), std::string::npos) << grey.status();
+  grey = GigeFrameToGrey(kPfncBayerRg8, bytes.data(), bytes.size(), 1, 4);
+  EXPECT_EQ(grey.status().message(), "Bayer frame of 1 x 4: needs at least 2 x 2 pixels");
   grey = GigeFrameToGrey(kPfncMono8, bytes.data(), bytes.size(), 5, 4);
   EXPECT_EQ(grey.status().message(), "frame of 5 x 4 needs 20 bytes, got 16");
   grey = GigeFrameToGrey(kPfncMono8, bytes.data(), bytes.size(), kMaxImageSide + 1, 1);

@@ -5,12 +5,12 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
-#include <random>
 #include <thread>
 #include <vector>
 
 #include "daemon/drivers/fake_gige_camera.h"
 #include "gtest/gtest.h"
+#include "tests/daemon/random_image.h"
 #include "station/io/image_io.h"
 
 namespace linecal {
@@ -19,14 +19,6 @@ namespace {
 using std::chrono::milliseconds;
 using std::chrono::seconds;
 using std::chrono::steady_clock;
-
-Image8 RandomImage(int width, int height, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_int_distribution<int> value(0, 255);
-  Image8 image(width, height);
-  for (auto& p : image.pixels) p = static_cast<std::uint8_t>(value(rng));
-  return image;
-}
 
 SensorModel Camera(const std::string& name) {
   SensorModel sensor;
