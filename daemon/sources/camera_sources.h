@@ -38,7 +38,12 @@ struct V4l2CameraSourceConfig {
 };
 
 // The sources; the device is opened at each Acquire (a camera that was unplugged and
-// plugged back works on the next cycle), so constructing one does no I/O.
+// plugged back works on the next cycle), so constructing one does no I/O. Acquire opens the
+// camera (Aravis discovery: up to about 1 s for an absent camera), grabs request.frames
+// frames (progress "frame k/n" after each is written) and returns CaptureSensor::frames.
+// An Aravis camera whose Acquire ended DeadlineExceeded may have vanished, and releasing it
+// then takes seconds of unanswered control requests: that happens on a thread of the source,
+// which the next Acquire and the destructor wait for.
 std::unique_ptr<SensorSource> MakeAravisCameraSource(const AravisCameraSourceConfig& config);
 std::unique_ptr<SensorSource> MakeV4l2CameraSource(const V4l2CameraSourceConfig& config);
 
