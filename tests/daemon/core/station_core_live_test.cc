@@ -6,9 +6,6 @@
 // into a real SQLite store. Live cycles give what `linecal calibrate` gives for their recording;
 // a silent sensor gives that sensor error and the others their verdicts; cancel is prompt;
 // a calibration past its deadline ends the cycle in error; configurations name the key.
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -23,17 +20,18 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/loopback_udp.h"
+
 #include "daemon/core/station_core.h"
 #include "daemon/cycle/capture_calibration.h"
 #include "station/capture/capture.h"
-#include "station/io/pcap.h"
 #include "station/sim/simulator.h"
 
 namespace linecal {
 namespace {
 
 namespace fs = std::filesystem;
-using Payload = std::vector<std::uint8_t>;
+using testing_daemon::LoopingSender;
 using Clock = std::chrono::steady_clock;
 const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
 constexpr char kVin[] = "1M8GDM9AXKP042788";
@@ -61,56 +59,6 @@ class PngCopySource : public SensorSource {
 
  private:
   const std::vector<std::string> frames_;
-};
-
-std::uint16_t FreePort() {
-  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  bind(fd, reinterpret_cast<const sockaddr*>(&a), sizeof(a));
-  socklen_t size = sizeof(a);
-  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &size);
-  close(fd);
-  return ntohs(a.sin_port);
-}
-
-// Sends a recording's payloads to 127.0.0.1:port, looped, about 7,000 a second (a Pandar64
-// sends 6,000), from `delay` after construction until destroyed.
-class LoopingSender {
- public:
-  LoopingSender(std::uint16_t port, const std::string& pcap, std::chrono::milliseconds delay) {
-    absl::StatusOr<PcapReader> r = PcapReader::Open(pcap);
-    EXPECT_TRUE(r.ok()) << r.status();
-    PcapRecord rec;
-    while (r.ok() && *r->Next(&rec)) {
-      const UdpFrame f = ParseUdpFrame(r->info().link_type, rec.data);
-      payloads_.emplace_back(f.payload.begin(), f.payload.end());
-    }
-    thread_ = std::thread([this, port, delay] {
-      const auto start = Clock::now() + delay;
-      while (!stop_ && Clock::now() < start) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-      const int fd = socket(AF_INET, SOCK_DGRAM, 0);
-      sockaddr_in to{};
-      to.sin_family = AF_INET;
-      to.sin_port = htons(port);
-      to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-      for (size_t i = 0; !stop_; i = (i + 1) % payloads_.size()) {
-        sendto(fd, payloads_[i].data(), payloads_[i].size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof(to));
-        std::this_thread::sleep_for(std::chrono::microseconds(100));
-      }
-      close(fd);
-    });
-  }
-  ~LoopingSender() {
-    stop_ = true;
-    thread_.join();
-  }
-
- private:
-  std::vector<Payload> payloads_;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
 };
 
 class StationCoreLiveTest : public ::testing::Test {
@@ -141,7 +89,7 @@ class StationCoreLiveTest : public ::testing::Test {
                                 (dir_ / "sim").string())
                     .ok());
 
-    port_ = FreePort();
+    port_ = testing_daemon::FreeUdpPort();
     config_.station_path = kDeploy + "/stations/reference.json";
     config_.car_model_paths = {(dir_ / "car.json").string()};
     config_.db_path = (dir_ / "station.db").string();
@@ -253,7 +201,8 @@ TEST_F(StationCoreLiveTest, LiveCycleEqualsTheOfflineCalibrationOfItsRecording) 
 
   // 300 ms: the cycle has bound its socket by then, so the first rotation it completes is
   // the recording's first, not one spliced across the loop.
-  LoopingSender sender(port_, (dir_ / "sim/roof_lidar/packets.pcap").string(), std::chrono::milliseconds(300));
+  LoopingSender sender(port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
+                       std::chrono::milliseconds(300));
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok()) << id.status();
   const std::vector<std::string> events = Events(*core, *id);
@@ -352,7 +301,8 @@ TEST_F(StationCoreLiveTest, CalibrationPastItsDeadlineEndsTheCycleInError) {
   config_.calibrate_deadline = std::chrono::milliseconds(1);
   std::unique_ptr<StationCore> core = Core();
   ASSERT_NE(core, nullptr);
-  LoopingSender sender(port_, (dir_ / "sim/roof_lidar/packets.pcap").string(), std::chrono::milliseconds(300));
+  LoopingSender sender(port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
+                       std::chrono::milliseconds(300));
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok());
   core->WaitIdle();

@@ -2,9 +2,6 @@
 // (looped) to 127.0.0.1 while the source acquires rotations into a scratch capture directory.
 #include "daemon/sources/lidar_udp_source.h"
 
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -16,6 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/loopback_udp.h"
+
 #include "daemon/drivers/lidar_decoder.h"
 #include "station/io/pcap.h"
 #include "station/io/pcd.h"
@@ -24,22 +23,12 @@ namespace linecal {
 namespace {
 
 namespace fs = std::filesystem;
-using Payload = std::vector<std::uint8_t>;
+using testing_daemon::FreeUdpPort;
+using testing_daemon::LoopingSender;
+using testing_daemon::Payload;
 using Clock = std::chrono::steady_clock;
 
 const std::string kData = std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/";
-
-std::vector<Payload> FilePayloads(const std::string& pcap) {
-  std::vector<Payload> out;
-  absl::StatusOr<PcapReader> r = PcapReader::Open(pcap);
-  EXPECT_TRUE(r.ok()) << r.status();
-  PcapRecord rec;
-  while (*r->Next(&rec)) {
-    const UdpFrame f = ParseUdpFrame(r->info().link_type, rec.data);
-    out.emplace_back(f.payload.begin(), f.payload.end());
-  }
-  return out;
-}
 
 struct Record {
   std::int64_t time_ns;
@@ -58,49 +47,6 @@ std::vector<Record> PcapRecords(const fs::path& pcap) {
   return out;
 }
 
-// A port on 127.0.0.1 that was free a moment ago.
-std::uint16_t FreePort() {
-  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  bind(fd, reinterpret_cast<const sockaddr*>(&a), sizeof(a));
-  socklen_t size = sizeof(a);
-  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &size);
-  close(fd);
-  return ntohs(a.sin_port);
-}
-
-// Sends the payloads to 127.0.0.1:port over and over until destroyed, about 7,000 a second
-// (a Pandar64's rate is 6,000): slow enough for any receive buffer.
-class LoopingSender {
- public:
-  LoopingSender(std::uint16_t port, std::vector<Payload> payloads)
-      : payloads_(std::move(payloads)), thread_([this, port] { Run(port); }) {}
-  ~LoopingSender() {
-    stop_ = true;
-    thread_.join();
-  }
-
- private:
-  void Run(std::uint16_t port) {
-    const int fd = socket(AF_INET, SOCK_DGRAM, 0);
-    sockaddr_in to{};
-    to.sin_family = AF_INET;
-    to.sin_port = htons(port);
-    to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    for (size_t i = 0; !stop_; i = (i + 1) % payloads_.size()) {
-      sendto(fd, payloads_[i].data(), payloads_[i].size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof(to));
-      std::this_thread::sleep_for(std::chrono::microseconds(100));
-    }
-    close(fd);
-  }
-
-  const std::vector<Payload> payloads_;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
-};
-
 SensorModel RoofLidar() {
   SensorModel s;
   s.name = "roof_lidar";
@@ -117,7 +63,7 @@ class LidarUdpSourceTest : public ::testing::Test {
            ("lidar_src_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_);
-    port_ = FreePort();
+    port_ = FreeUdpPort();
     config_.bind_address = "127.0.0.1";
     config_.port = port_;
   }
@@ -140,7 +86,7 @@ class LidarUdpSourceTest : public ::testing::Test {
 // The datagrams the source wrote are the file's, in order from some packet on (looped), and
 // its PCD scans are what a decoder makes of exactly those datagrams.
 TEST_F(LidarUdpSourceTest, AcquiresRotationsThatEqualTheDecodeOfTheReceivedPackets) {
-  const std::vector<Payload> file = FilePayloads(kData + "pandar64/packets.pcap");
+  const std::vector<Payload> file = testing_daemon::PcapPayloads(kData + "pandar64/packets.pcap");
   ASSERT_EQ(file.size(), 2400u);
   LidarUdpSource source(config_);
   std::vector<std::string> progress;
@@ -199,7 +145,7 @@ TEST_F(LidarUdpSourceTest, AcquiresRotationsThatEqualTheDecodeOfTheReceivedPacke
 }
 
 TEST_F(LidarUdpSourceTest, TruncatedPacketsAreCountedAndSkipped) {
-  std::vector<Payload> file = FilePayloads(kData + "pandar64/packets.pcap");
+  std::vector<Payload> file = testing_daemon::PcapPayloads(kData + "pandar64/packets.pcap");
   // Every 50th packet cut to 600 bytes, as a lossy link would.
   for (size_t i = 0; i < file.size(); i += 50) file[i].resize(600);
   LidarUdpSource source(config_);
@@ -236,7 +182,7 @@ TEST_F(LidarUdpSourceTest, AnotherModelsPacketsAreDataLossNamingTheCount) {
   LidarUdpSource source(config_);
   absl::StatusOr<CaptureSensor> got;
   {
-    LoopingSender sender(port_, FilePayloads(kData + "vlp16/packets.pcap"));
+    LoopingSender sender(port_, testing_daemon::PcapPayloads(kData + "vlp16/packets.pcap"));
     got = source.Acquire(RoofLidar(), Request(1, std::chrono::milliseconds(1000)));
   }
   ASSERT_TRUE(absl::IsDataLoss(got.status())) << got.status();
