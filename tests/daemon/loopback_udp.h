@@ -10,6 +10,8 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <cstdio>
+#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -48,13 +50,28 @@ inline std::uint16_t FreeUdpPort() {
   return ntohs(a.sin_port);
 }
 
-// Sends the payloads to 127.0.0.1:port over and over, from `delay` after construction until
-// destroyed, about 7,000 a second (a Pandar64 sends 6,000): slow enough for any receive buffer.
+// Whether a UDP socket is bound to 127.0.0.1:port, from /proc/net/udp (without touching the
+// port, so the owner's bind never races with the question).
+inline bool UdpPortBound(std::uint16_t port) {
+  std::ifstream in("/proc/net/udp");
+  char wanted[16];
+  std::snprintf(wanted, sizeof(wanted), "0100007F:%04X", port);  // little-endian 127.0.0.1
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.find(wanted) != std::string::npos) return true;
+  }
+  return false;
+}
+
+enum class SendStart { kNow, kWhenBound };
+
+// Sends the payloads to 127.0.0.1:port over and over until destroyed, about 7,000 a second
+// (a Pandar64 sends 6,000): slow enough for any receive buffer. kWhenBound: only from when
+// a socket is bound to the port, so the receiver gets the recording from its first packet.
 class LoopingSender {
  public:
-  LoopingSender(std::uint16_t port, std::vector<Payload> payloads,
-                std::chrono::milliseconds delay = std::chrono::milliseconds(0))
-      : payloads_(std::move(payloads)), thread_([this, port, delay] { Run(port, delay); }) {}
+  LoopingSender(std::uint16_t port, std::vector<Payload> payloads, SendStart start = SendStart::kNow)
+      : payloads_(std::move(payloads)), thread_([this, port, start] { Run(port, start); }) {}
   ~LoopingSender() {
     stop_ = true;
     thread_.join();
@@ -63,10 +80,9 @@ class LoopingSender {
   LoopingSender& operator=(const LoopingSender&) = delete;
 
  private:
-  void Run(std::uint16_t port, std::chrono::milliseconds delay) {
-    const auto start = std::chrono::steady_clock::now() + delay;
-    while (!stop_ && std::chrono::steady_clock::now() < start) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  void Run(std::uint16_t port, SendStart start) {
+    while (start == SendStart::kWhenBound && !stop_ && !UdpPortBound(port)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
     const int fd = socket(AF_INET, SOCK_DGRAM, 0);
     sockaddr_in to{};

@@ -199,10 +199,10 @@ TEST_F(StationCoreLiveTest, LiveCycleEqualsTheOfflineCalibrationOfItsRecording) 
   EXPECT_EQ(status.sensor_sources.at("front_radar"), "candump " + (dir_ / "sim/front_radar/can.log").string());
   EXPECT_EQ(status.sensor_sources.at("front_camera"), "png copies");
 
-  // 300 ms: the cycle has bound its socket by then, so the first rotation it completes is
+  // Sending starts once the cycle has bound its socket, so the first rotation it completes is
   // the recording's first, not one spliced across the loop.
   LoopingSender sender(port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
-                       std::chrono::milliseconds(300));
+                       testing_daemon::SendStart::kWhenBound);
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok()) << id.status();
   const std::vector<std::string> events = Events(*core, *id);
@@ -302,7 +302,7 @@ TEST_F(StationCoreLiveTest, CalibrationPastItsDeadlineEndsTheCycleInError) {
   std::unique_ptr<StationCore> core = Core();
   ASSERT_NE(core, nullptr);
   LoopingSender sender(port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
-                       std::chrono::milliseconds(300));
+                       testing_daemon::SendStart::kWhenBound);
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok());
   core->WaitIdle();
