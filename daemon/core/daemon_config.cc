@@ -40,6 +40,106 @@ absl::StatusOr<TlsConfig> ReadTls(const JsonField& tls, const fs::path& base) {
   return c;
 }
 
+// A duration key: integer milliseconds in [1, 600000]; ten minutes is beyond any step of a
+// cycle, so a larger number is a unit mistake.
+absl::StatusOr<std::chrono::milliseconds> Milliseconds(const JsonField& f, const std::string& key,
+                                                      std::chrono::milliseconds fallback) {
+  absl::StatusOr<std::int64_t> ms = f.IntegerOr(key, fallback.count());
+  if (!ms.ok()) return ms.status();
+  if (*ms <= 0 || *ms > 600000) return f.Error(key, absl::StrCat("must be in [1, 600000], got ", *ms));
+  return std::chrono::milliseconds(*ms);
+}
+
+// One sensor's entry of source.sensors (docs/daemon.md, "Live sources"); only parsing and
+// the ranges of the keys here, the sources check the rest when they are built.
+absl::StatusOr<SourceConfig> ParseSensorSource(const JsonField& f, const fs::path& base) {
+  absl::StatusOr<std::string> type = f.String("type");
+  if (!type.ok()) return type.status();
+  SourceConfig c;
+  if (*type == "aravis" || *type == "v4l2") {
+    const bool aravis = *type == "aravis";
+    c.type = aravis ? SourceType::kAravis : SourceType::kV4l2;
+    absl::Status keys = aravis ? f.AllowOnlyKeys({"type", "device_id", "pixel_format", "exposure_us",
+                                                  "frame_timeout_ms", "frame_retries"})
+                               : f.AllowOnlyKeys({"type", "device", "pixel_format", "width", "height",
+                                                  "frame_timeout_ms", "frame_retries"});
+    if (!keys.ok()) return keys;
+    absl::StatusOr<std::chrono::milliseconds> timeout = Milliseconds(f, "frame_timeout_ms", c.aravis.frame_timeout);
+    if (!timeout.ok()) return timeout.status();
+    absl::StatusOr<std::int64_t> retries = f.IntegerOr("frame_retries", c.aravis.frame_retries);
+    if (!retries.ok()) return retries.status();
+    // More than 100 retries of one frame is a camera that does not work.
+    if (*retries < 0 || *retries > 100) return f.Error("frame_retries", "must be in [0, 100]");
+    if (aravis) {
+      absl::StatusOr<std::string> id = f.String("device_id");
+      if (!id.ok()) return id.status();
+      absl::StatusOr<std::string> format = f.StringOr("pixel_format", c.aravis.pixel_format);
+      if (!format.ok()) return format.status();
+      absl::StatusOr<double> exposure = f.NumberOr("exposure_us", c.aravis.exposure_us);
+      if (!exposure.ok()) return exposure.status();
+      if (*exposure < 0) return f.Error("exposure_us", "must be >= 0 (0: the camera's own)");
+      c.aravis = {*id, *format, *exposure, *timeout, static_cast<int>(*retries)};
+    } else {
+      absl::StatusOr<std::string> device = f.StringOr("device", c.v4l2.device);
+      if (!device.ok()) return device.status();
+      absl::StatusOr<std::string> format = f.StringOr("pixel_format", c.v4l2.pixel_format);
+      if (!format.ok()) return format.status();
+      absl::StatusOr<std::int64_t> width = f.IntegerOr("width", 0);
+      if (!width.ok()) return width.status();
+      absl::StatusOr<std::int64_t> height = f.IntegerOr("height", 0);
+      if (!height.ok()) return height.status();
+      // 16384: beyond any V4L2 camera's sensor; 0 keeps the device's format.
+      if (*width < 0 || *width > 16384) return f.Error("width", "must be in [0, 16384]");
+      if (*height < 0 || *height > 16384) return f.Error("height", "must be in [0, 16384]");
+      c.v4l2 = {*device, *format, static_cast<int>(*width), static_cast<int>(*height), *timeout,
+                static_cast<int>(*retries)};
+    }
+    return c;
+  }
+  if (*type == "udp") {
+    c.type = SourceType::kUdp;
+    if (absl::Status s = f.AllowOnlyKeys({"type", "bind", "port", "multicast_group", "receive_buffer_bytes"}); !s.ok()) {
+      return s;
+    }
+    absl::StatusOr<std::string> bind = f.StringOr("bind", c.udp.bind_address);
+    if (!bind.ok()) return bind.status();
+    absl::StatusOr<std::int64_t> port = f.IntegerOr("port", c.udp.port);
+    if (!port.ok()) return port.status();
+    if (*port < 1 || *port > 65535) return f.Error("port", absl::StrCat("must be in [1, 65535], got ", *port));
+    absl::StatusOr<std::string> group = f.StringOr("multicast_group", "");
+    if (!group.ok()) return group.status();
+    absl::StatusOr<std::int64_t> buffer = f.IntegerOr("receive_buffer_bytes", c.udp.receive_buffer_bytes);
+    if (!buffer.ok()) return buffer.status();
+    // 1 GiB: more than any kernel grants; a larger number is a unit mistake.
+    if (*buffer < 1 || *buffer > (1 << 30)) return f.Error("receive_buffer_bytes", "must be in [1, 2^30]");
+    c.udp = {*bind, static_cast<std::uint16_t>(*port), *group, static_cast<int>(*buffer)};
+    if (absl::Status s = c.udp.Validate(); !s.ok()) return f.Error(std::string(s.message()));
+    return c;
+  }
+  if (*type == "socketcan" || *type == "candump") {
+    const bool log = *type == "candump";
+    c.type = log ? SourceType::kCandump : SourceType::kSocketCan;
+    c.can.input = log ? CanRadarSourceConfig::Input::kCandumpLog : CanRadarSourceConfig::Input::kSocketCan;
+    absl::Status keys = log ? f.AllowOnlyKeys({"type", "log", "interface", "record_ms"})
+                            : f.AllowOnlyKeys({"type", "interface", "record_ms"});
+    if (!keys.ok()) return keys;
+    absl::StatusOr<std::string> interface = log ? f.StringOr("interface", "") : f.String("interface");
+    if (!interface.ok()) return interface.status();
+    c.can.interface = *interface;
+    if (log) {
+      absl::StatusOr<std::string> path = f.String("log");
+      if (!path.ok()) return path.status();
+      c.can.log_path = Resolve(base, *path);
+    }
+    absl::StatusOr<std::chrono::milliseconds> record = Milliseconds(f, "record_ms", c.can.record);
+    if (!record.ok()) return record.status();
+    c.can.record = *record;
+    if (absl::Status s = c.can.Validate(); !s.ok()) return f.Error(std::string(s.message()));
+    return c;
+  }
+  return f.Error("type", absl::StrCat("must be aravis, v4l2, udp, socketcan or candump, got '", *type, "'"));
+}
+
 }  // namespace
 
 DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::string& data_dir) {
@@ -60,7 +160,7 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   if (!root.ok()) return root.status();
   if (absl::Status s = root->AllowOnlyKeys({"listen", "log_level", "auth_token", "station_id", "station", "car_models",
                                             "data_root", "db", "source", "vin_check_digit", "frames_per_sensor",
-                                            "busy_timeout_ms", "tls"});
+                                            "busy_timeout_ms", "tls", "deadlines_ms"});
       !s.ok()) {
     return s;
   }
@@ -100,10 +200,25 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   if (root->Has("source")) {
     absl::StatusOr<JsonField> source = root->Object("source");
     if (!source.ok()) return source.status();
-    if (absl::Status s = source->AllowOnlyKeys({"type", "capture"}); !s.ok()) return s;
     absl::StatusOr<std::string> type = source->String("type");
     if (!type.ok()) return type.status();
-    if (*type == "simulator") {
+    if (absl::Status s = *type == "live" ? source->AllowOnlyKeys({"type", "sensors"})
+                                         : source->AllowOnlyKeys({"type", "capture"});
+        !s.ok()) {
+      return s;
+    }
+    if (*type == "live") {
+      c.core.source = CycleSource::kLive;
+      absl::StatusOr<JsonField> sensors = source->Object("sensors");
+      if (!sensors.ok()) return sensors.status();
+      for (const auto& [name, value] : sensors->node().items()) {
+        absl::StatusOr<JsonField> entry = sensors->Object(name);
+        if (!entry.ok()) return entry.status();
+        absl::StatusOr<SourceConfig> sensor = ParseSensorSource(*entry, base);
+        if (!sensor.ok()) return sensor.status();
+        c.core.live_sources[name] = *std::move(sensor);
+      }
+    } else if (*type == "simulator") {
       c.core.source = CycleSource::kSimulator;
     } else if (*type == "replay") {
       c.core.source = CycleSource::kReplay;
@@ -111,7 +226,7 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
       if (!capture.ok()) return capture.status();
       c.core.replay_capture = *capture;
     } else {
-      return source->Error("type", absl::StrCat("must be 'simulator' or 'replay', got '", *type, "'"));
+      return source->Error("type", absl::StrCat("must be 'simulator', 'replay' or 'live', got '", *type, "'"));
     }
   }
   absl::StatusOr<bool> check = root->BoolOr("vin_check_digit", true);
@@ -131,6 +246,18 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
     absl::StatusOr<TlsConfig> tls = ReadTls(*tls_field, base);
     if (!tls.ok()) return tls.status();
     c.tls = *std::move(tls);
+  }
+  if (root->Has("deadlines_ms")) {
+    absl::StatusOr<JsonField> deadlines = root->Object("deadlines_ms");
+    if (!deadlines.ok()) return deadlines.status();
+    if (absl::Status s = deadlines->AllowOnlyKeys({"acquire", "calibrate"}); !s.ok()) return s;
+    absl::StatusOr<std::chrono::milliseconds> acquire = Milliseconds(*deadlines, "acquire", c.core.acquire_deadline);
+    if (!acquire.ok()) return acquire.status();
+    absl::StatusOr<std::chrono::milliseconds> calibrate =
+        Milliseconds(*deadlines, "calibrate", c.core.calibrate_deadline);
+    if (!calibrate.ok()) return calibrate.status();
+    c.core.acquire_deadline = *acquire;
+    c.core.calibrate_deadline = *calibrate;
   }
   return c;
 }

@@ -1,6 +1,6 @@
 #pragma once
 // linecald's configuration file (docs/daemon.md): JSON, every key checked, errors naming the
-// file and the key ("linecald.json: source.type: must be 'simulator' or 'replay', got 'usb'").
+// file and the key ("linecald.json: source.type: must be 'simulator', 'replay' or 'live', got 'usb'").
 // Relative paths in the file are relative to the file's directory.
 
 #include <optional>
@@ -43,10 +43,13 @@ struct DaemonConfig {
 DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::string& data_dir);
 
 // Reads a configuration file. Keys: listen, log_level, auth_token, station_id, station,
-// car_models (array), data_root, db, source {type: simulator|replay, capture}, vin_check_digit,
-// frames_per_sensor, busy_timeout_ms, tls {cert, key, client_ca, require_client_cert: cert and
-// key required, client_ca too unless require_client_cert is false}; unknown keys are errors.
-// Cost: reads the file and the tls PEM files.
+// car_models (array), data_root, db, source {type: simulator|replay, capture} or
+// {type: live, sensors: {NAME: {type: aravis|v4l2|udp|socketcan|candump, ...}}},
+// vin_check_digit, frames_per_sensor, busy_timeout_ms, deadlines_ms {acquire, calibrate},
+// tls {cert, key, client_ca, require_client_cert: cert and key required, client_ca too unless
+// require_client_cert is false}; unknown keys are errors. Whether every sensor has a source of
+// its kind is checked by StationCore::Create, which knows the car models. Cost: reads the file
+// and the tls PEM files.
 absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path);
 
 }  // namespace linecal

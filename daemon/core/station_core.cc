@@ -86,6 +86,54 @@ StoredSensorResult ToStored(const SensorCalibration& s) {
   return r;
 }
 
+// The live sources of `config`, built once: every configured sensor exists in a car model
+// with the kind its source serves, and every sensor of every car model has a source.
+absl::StatusOr<std::map<std::string, std::unique_ptr<SensorSource>>> BuildLiveSources(const StationCoreConfig& config,
+                                                                                      const std::vector<CarModel>& cars) {
+  std::map<std::string, std::unique_ptr<SensorSource>> sources;
+  for (const auto& [name, source] : config.live_sources) {
+    bool found = false;
+    for (const CarModel& car : cars) {
+      const SensorModel* sensor = car.FindSensor(name);
+      if (sensor == nullptr) continue;
+      found = true;
+      if (SourceTypeKind(source.type) != sensor->kind) {
+        return absl::InvalidArgumentError(absl::StrCat("source.sensors.", name, ".type: '", SourceTypeName(source.type),
+                                                       "' serves ", SensorKindName(SourceTypeKind(source.type)),
+                                                       "s, but '", name, "' of car model '", car.id, "' is a ",
+                                                       SensorKindName(sensor->kind)));
+      }
+    }
+    if (!found) {
+      return absl::InvalidArgumentError(absl::StrCat("source.sensors.", name, ": no car model has a sensor '", name, "'"));
+    }
+    absl::StatusOr<std::unique_ptr<SensorSource>> built =
+        config.make_source ? config.make_source(name, source) : MakeSensorSource(source);
+    if (!built.ok()) {
+      return absl::Status(built.status().code(), absl::StrCat("source.sensors.", name, ".", built.status().message()));
+    }
+    sources[name] = std::move(*built);
+  }
+  for (const CarModel& car : cars) {
+    for (const SensorModel& sensor : car.sensors) {
+      if (!sources.contains(sensor.name)) {
+        return absl::InvalidArgumentError(absl::StrCat("source.sensors: no source for sensor '", sensor.name,
+                                                       "' of car model '", car.id, "'"));
+      }
+    }
+  }
+  return sources;
+}
+
+Verdict OverallVerdict(const std::vector<SensorCalibration>& sensors) {
+  bool any_error = sensors.empty(), all_pass = !sensors.empty();
+  for (const SensorCalibration& s : sensors) {
+    any_error |= s.verdict == SensorVerdict::kError;
+    all_pass &= s.verdict == SensorVerdict::kPass;
+  }
+  return all_pass ? Verdict::kPass : any_error ? Verdict::kError : Verdict::kFail;
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCoreConfig& config) {
@@ -114,6 +162,15 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     absl::StatusOr<Capture> capture = ReadCapture((fs::path(config.data_root) / rel).string());
     if (!capture.ok()) return capture.status();
   }
+  std::map<std::string, std::unique_ptr<SensorSource>> sources;
+  if (config.source == CycleSource::kLive) {
+    absl::StatusOr<std::map<std::string, std::unique_ptr<SensorSource>>> built = BuildLiveSources(config, cars);
+    if (!built.ok()) return built.status();
+    sources = std::move(*built);
+  }
+  if (config.acquire_deadline <= std::chrono::milliseconds(0) || config.calibrate_deadline <= std::chrono::milliseconds(0)) {
+    return absl::InvalidArgumentError("deadlines_ms: acquire and calibrate must be > 0");
+  }
   if (config.default_frames_per_sensor < 1 || config.default_frames_per_sensor > kMaxFramesPerSensor) {
     return absl::InvalidArgumentError("default_frames_per_sensor: must be in [1, 100]");
   }
@@ -121,16 +178,89 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   store_options.busy_timeout = config.busy_timeout;
   absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(config.db_path, store_options);
   if (!store.ok()) return store.status();
-  return std::unique_ptr<StationCore>(new StationCore(config, std::move(*station), std::move(cars), std::move(*store)));
+  return std::unique_ptr<StationCore>(
+      new StationCore(config, std::move(*station), std::move(cars), std::move(*store), std::move(sources)));
 }
 
 StationCore::StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
-                         std::unique_ptr<Store> store)
-    : config_(std::move(config)), station_(std::move(station)), cars_(std::move(cars)), store_(std::move(store)) {}
+                         std::unique_ptr<Store> store, std::map<std::string, std::unique_ptr<SensorSource>> sources)
+    : config_(std::move(config)),
+      station_(std::move(station)),
+      cars_(std::move(cars)),
+      store_(std::move(store)),
+      sources_(std::move(sources)) {}
 
 StationCore::~StationCore() {
   cancel_ = true;
   if (worker_.joinable()) worker_.join();
+  JoinAbandoned(/*all=*/true);
+}
+
+// A calibration on its own thread; the thread owns what it reads (the capture) through this.
+struct StationCore::PendingCalibration {
+  Capture capture;
+  std::mutex mutex;
+  std::condition_variable done_changed;
+  bool done = false;
+  absl::StatusOr<CycleCalibration> result = absl::UnknownError("not calibrated");
+};
+
+void StationCore::JoinAbandoned(bool all) {
+  std::vector<std::thread> finished;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto it = abandoned_.begin(); it != abandoned_.end();) {
+      bool done = all;
+      if (!done) {
+        std::lock_guard<std::mutex> pending_lock(it->first->mutex);
+        done = it->first->done;
+      }
+      if (done) {
+        finished.push_back(std::move(it->second));
+        it = abandoned_.erase(it);
+      } else {
+        ++it;
+      }
+    }
+  }
+  for (std::thread& t : finished) t.join();
+}
+
+absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(Capture capture) {
+  const auto deadline = std::chrono::steady_clock::now() + config_.calibrate_deadline;
+  auto pending = std::make_shared<PendingCalibration>();
+  pending->capture = std::move(capture);
+  std::thread thread([pending] {
+    absl::StatusOr<CycleCalibration> result = CalibrateCapture(pending->capture);
+    std::lock_guard<std::mutex> lock(pending->mutex);
+    pending->result = std::move(result);
+    pending->done = true;
+    pending->done_changed.notify_all();
+  });
+  absl::Status stopped;
+  {
+    std::unique_lock<std::mutex> lock(pending->mutex);
+    while (!pending->done) {
+      if (cancel_) {
+        stopped = absl::CancelledError("cancelled");
+        break;
+      }
+      if (std::chrono::steady_clock::now() >= deadline) {
+        stopped = absl::DeadlineExceededError(
+            absl::StrCat("calibration still running after ", config_.calibrate_deadline.count(), " ms"));
+        break;
+      }
+      // 50 ms: how late a cancel is noticed while the calibration runs.
+      pending->done_changed.wait_for(lock, std::chrono::milliseconds(50));
+    }
+  }
+  if (stopped.ok()) {
+    thread.join();
+    return std::move(pending->result);
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  abandoned_.emplace_back(std::move(pending), std::move(thread));
+  return stopped;
 }
 
 const CarModel* StationCore::FindCar(const std::string& id) const {
@@ -173,6 +303,7 @@ absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector
 
 absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
   if (absl::Status s = ValidateCycleRequest(request, cars_, config_.vin_check_digit); !s.ok()) return s;
+  JoinAbandoned(/*all=*/false);
 
   std::lock_guard<std::mutex> lock(mutex_);
   if (running_) return absl::FailedPreconditionError(absl::StrCat("cycle ", *running_, " is running"));
@@ -222,19 +353,44 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
     }
     capture_rel = stored->capture_path;
     const fs::path dir = fs::path(config_.data_root) / capture_rel;
+    const int frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
+    std::map<std::string, std::string> failures;  // live: sensors whose source failed
     if (config_.source == CycleSource::kSimulator) {
       SimulatorOptions o;
       o.vin = request.vin;
       o.aligner = request.aligner;
       o.time_ns = stored->started_ns;
       // Frames per sensor: camera frames and LiDAR rotations alike.
-      o.camera_frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
+      o.camera_frames = frames;
       o.lidar.rotations = o.camera_frames;
       absl::StatusOr<SimulationSummary> sim = SimulateCapture(
           station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
           [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });
       if (!sim.ok()) {
         end_reason = absl::StrCat("acquisition_failed: ", sim.status().message());
+        return;
+      }
+    } else if (config_.source == CycleSource::kLive) {
+      std::error_code ec;
+      fs::create_directories(dir, ec);
+      if (ec) {
+        end_reason = absl::StrCat("acquisition_failed: cannot create '", dir.string(), "': ", ec.message());
+        return;
+      }
+      CaptureManifest manifest;
+      manifest.vin = request.vin;
+      manifest.car_model = car.id;
+      manifest.time_ns = stored->started_ns;
+      manifest.origin = "station";
+      manifest.aligner = request.aligner;
+      manifest.sensors = AcquireLive(id, car, dir.string(), frames, &failures);
+      if (cancel_) {
+        end_state = CycleState::kCancelled;
+        end_reason = "cancelled";
+        return;
+      }
+      if (absl::Status s = WriteCapture(dir.string(), manifest, station_, car); !s.ok()) {
+        end_reason = absl::StrCat("capture_unwritable: ", s.message());
         return;
       }
     }
@@ -248,13 +404,39 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       end_reason = absl::StrCat("capture_unreadable: ", capture.status().message());
       return;
     }
-    absl::StatusOr<CycleCalibration> result = CalibrateCapture(*capture);
+    absl::StatusOr<CycleCalibration> result = CalibrateWithDeadline(*std::move(capture));
+    if (absl::IsCancelled(result.status())) {
+      end_state = CycleState::kCancelled;
+      end_reason = "cancelled";
+      return;
+    }
+    if (absl::IsDeadlineExceeded(result.status())) {
+      end_reason = "calibrate_deadline_exceeded";
+      return;
+    }
     if (!result.ok()) {
       end_reason = absl::StrCat("calibration_failed: ", result.status().message());
       return;
     }
+    // The sensors that failed to acquire take their place in the car model's order.
+    std::vector<SensorCalibration> sensors;
+    for (const SensorModel& m : car.sensors) {
+      if (auto f = failures.find(m.name); f != failures.end()) {
+        SensorCalibration failed;
+        failed.name = m.name;
+        failed.kind = m.kind;
+        failed.verdict = SensorVerdict::kError;
+        failed.reason = absl::StrCat("acquisition_failed: ", f->second);
+        failed.message = f->second;
+        sensors.push_back(std::move(failed));
+        continue;
+      }
+      for (SensorCalibration& c : result->sensors) {
+        if (c.name == m.name) sensors.push_back(std::move(c));
+      }
+    }
     std::vector<std::string> not_passed;
-    for (const SensorCalibration& s : result->sensors) {
+    for (const SensorCalibration& s : sensors) {
       if (absl::Status st = store_->PutSensorResult(id, ToStored(s)); !st.ok()) {
         end_reason = absl::StrCat("store_unavailable: ", st.message());
         return;
@@ -262,13 +444,14 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       Event(id, "sensor_verdict", s.name, s.reason, ToStored(s.verdict)).IgnoreError();
       if (s.verdict != SensorVerdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
     }
-    end_verdict = ToStored(result->verdict);
+    end_verdict = OverallVerdict(sensors);
     end_reason = absl::StrJoin(not_passed, ",");
-    if (!request.record_capture && config_.source == CycleSource::kSimulator) {
-      std::error_code ec;
-      fs::remove_all(dir, ec);
-    }
   }();
+  // The capture of a cycle that acquired it is kept only when asked (a replayed one is never removed).
+  if (!request.record_capture && config_.source != CycleSource::kReplay && !capture_rel.empty()) {
+    std::error_code ec;
+    fs::remove_all(fs::path(config_.data_root) / capture_rel, ec);
+  }
   const Verdict verdict = end_state == CycleState::kCancelled ? Verdict::kError : end_verdict;
   // The last event, then the end in the store, then the station idle: a watcher returns only
   // once the station no longer runs this cycle (WatchCycle), and WaitIdle once it is stored
@@ -278,6 +461,47 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
   std::lock_guard<std::mutex> lock(mutex_);
   running_.reset();
   changed_.notify_all();
+}
+
+std::vector<CaptureSensor> StationCore::AcquireLive(int64_t id, const CarModel& car, const std::string& dir,
+                                                    int frames, std::map<std::string, std::string>* failures) {
+  const auto deadline = std::chrono::steady_clock::now() + config_.acquire_deadline;
+  std::vector<absl::StatusOr<CaptureSensor>> acquired(car.sensors.size(), absl::UnknownError("not acquired"));
+  std::vector<std::thread> threads;
+  for (size_t i = 0; i < car.sensors.size(); ++i) {
+    threads.emplace_back([&, i] {
+      const SensorModel& sensor = car.sensors[i];
+      AcquireRequest request;
+      request.capture_dir = dir;
+      request.sensor_dir = sensor.name;
+      request.frames = frames;
+      request.deadline = deadline;
+      request.cancel = &cancel_;
+      request.progress = [&](const std::string& detail) {
+        Event(id, "sensor_progress", sensor.name, detail).IgnoreError();
+      };
+      acquired[i] = sources_.at(sensor.name)->Acquire(sensor, request);
+      if (acquired[i].ok()) {
+        const CaptureSensor& got = *acquired[i];
+        Event(id, "sensor_acquired", sensor.name,
+              absl::StrCat(got.frames.size(), " frames", got.packets ? ", packets" : "", got.can_log ? ", CAN log" : ""))
+            .IgnoreError();
+      } else {
+        Event(id, "sensor_error", sensor.name, std::string(acquired[i].status().message()), Verdict::kError)
+            .IgnoreError();
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  std::vector<CaptureSensor> sensors;
+  for (size_t i = 0; i < car.sensors.size(); ++i) {
+    if (acquired[i].ok()) {
+      sensors.push_back(*std::move(acquired[i]));
+    } else {
+      (*failures)[car.sensors[i].name] = std::string(acquired[i].status().message());
+    }
+  }
+  return sensors;
 }
 
 absl::Status StationCore::CancelCycle(int64_t cycle_id) {
@@ -322,7 +546,10 @@ StationStatusInfo StationCore::Status() {
   StationStatusInfo s;
   s.station_id = config_.station_id;
   for (const CarModel& c : cars_) s.car_models.push_back(c.id);
-  s.source = config_.source == CycleSource::kSimulator ? "simulator" : "replay";
+  s.source = config_.source == CycleSource::kSimulator ? "simulator"
+             : config_.source == CycleSource::kReplay  ? "replay"
+                                                       : "live";
+  for (const auto& [name, source] : sources_) s.sensor_sources[name] = source->Describe();
   for (const CarModel& c : cars_) {
     for (const SensorModel& sensor : c.sensors) {
       bool listed = false;

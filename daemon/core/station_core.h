@@ -7,8 +7,17 @@
 // Sources: which data a cycle calibrates from is station configuration —
 //   simulator  the car is simulated in the station (the request's aligner measurement, the
 //              cycle id as seed) into the cycle's capture directory, then calibrated;
-//   replay     a recorded capture under the data root is calibrated as it is.
-// Live drivers (Aravis, V4L2, UDP LiDAR, SocketCAN) are not wired to cycles yet.
+//   replay     a recorded capture under the data root is calibrated as it is;
+//   live       every sensor is acquired from its own source (daemon/sources: Aravis, V4L2,
+//              UDP LiDAR, SocketCAN or a candump log), all at once, one thread per sensor,
+//              into the cycle's capture directory, which is then written as a capture
+//              (origin "station") and calibrated. A sensor whose source fails is stored with
+//              verdict error and reason "acquisition_failed: <message>"; the others are
+//              calibrated as usual.
+// Deadlines: acquisition (live) and calibration each have one; a calibration that runs past
+// its deadline ends the cycle in error ("calibrate_deadline_exceeded") and is left to finish
+// on its own thread (it owns what it reads), which the core joins once it is done (at a
+// later StartCycle) or when it is destroyed.
 //
 // Errors (absl::Status): InvalidArgument naming the request field; FailedPrecondition for a
 // second cycle while one runs, or cancelling an ended cycle; NotFound for unknown cycle ids;
@@ -20,6 +29,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -28,6 +38,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "daemon/cycle/capture_calibration.h"
+#include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
@@ -35,7 +47,11 @@
 
 namespace linecal {
 
-enum class CycleSource { kSimulator, kReplay };
+enum class CycleSource { kSimulator, kReplay, kLive };
+
+// Builds the source of a sensor from its configuration (MakeSensorSource by default).
+using SensorSourceFactory =
+    std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(const std::string& sensor, const SourceConfig& config)>;
 
 struct StationCoreConfig {
   std::string station_id = "demo";
@@ -45,6 +61,18 @@ struct StationCoreConfig {
   std::string data_root;                   // captures are written and read below it
   CycleSource source = CycleSource::kSimulator;
   std::string replay_capture;              // replay: a capture directory relative to data_root
+  // live: the source of every sensor of every car model, by sensor name (a name shared by
+  // several car models has one source). Create checks that each sensor has one of its kind.
+  std::map<std::string, SourceConfig> live_sources;
+  // live: how the sources are built; empty: MakeSensorSource. Tests serve sensors from
+  // their own SensorSource implementations through it.
+  SensorSourceFactory make_source;
+  // live: how long all sensors together may take to acquire their data. 10 s: a radar's
+  // default 3.6 s record plus camera frames and LiDAR rotations with margin.
+  std::chrono::milliseconds acquire_deadline{10000};
+  // How long detection and solving of all sensors may take: 20 s is twenty times the
+  // acceptance bar of 1 s per cycle, so only a stuck calibration reaches it.
+  std::chrono::milliseconds calibrate_deadline{20000};
   bool vin_check_digit = true;             // ISO 3779 check digit (markets that use it)
   int default_frames_per_sensor = 1;       // camera frames and LiDAR rotations when the request gives 0
   std::chrono::milliseconds busy_timeout{5000};
@@ -68,7 +96,9 @@ absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector
 struct StationStatusInfo {
   std::string station_id;
   std::vector<std::string> car_models;
-  std::string source;  // "simulator" or "replay": it serves every sensor
+  std::string source;  // "simulator", "replay" (they serve every sensor) or "live"
+  // live: sensor name -> what serves it (SensorSource::Describe, "udp 127.0.0.1:2368").
+  std::map<std::string, std::string> sensor_sources;
   // Every sensor of the car models, by name (first car model first), with its kind.
   std::vector<std::pair<std::string, SensorKind>> sensors;
   std::optional<int64_t> running_cycle;
@@ -104,8 +134,19 @@ class StationCore {
 
  private:
   StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
-              std::unique_ptr<Store> store);
+              std::unique_ptr<Store> store, std::map<std::string, std::unique_ptr<SensorSource>> sources);
+  struct PendingCalibration;
+
   void RunCycle(int64_t id, CycleRequest request);
+  // live: acquires every sensor of `car` into `dir` at once; returns the sensors acquired
+  // (car model order) and, per sensor that failed, its status message.
+  std::vector<CaptureSensor> AcquireLive(int64_t id, const CarModel& car, const std::string& dir, int frames,
+                                         std::map<std::string, std::string>* failures);
+  // Calibrates `capture` on its own thread, waiting until it is done, the calibrate deadline
+  // passed (DeadlineExceeded) or the cycle was cancelled (Cancelled).
+  absl::StatusOr<CycleCalibration> CalibrateWithDeadline(Capture capture);
+  // Joins calibrations abandoned at their deadline: those done, or all when `all`.
+  void JoinAbandoned(bool all);
   absl::Status Event(int64_t id, const std::string& type, const std::string& sensor, const std::string& detail,
                      Verdict verdict = Verdict::kNone);
   const CarModel* FindCar(const std::string& id) const;
@@ -114,12 +155,16 @@ class StationCore {
   const StationLayout station_;
   const std::vector<CarModel> cars_;
   std::unique_ptr<Store> store_;
+  // live: by sensor name; used by one cycle at a time.
+  std::map<std::string, std::unique_ptr<SensorSource>> sources_;
 
   std::mutex mutex_;
   std::condition_variable changed_;  // an event was stored or a cycle ended
   std::optional<int64_t> running_;
   std::atomic<bool> cancel_{false};
   std::thread worker_;
+  // Calibrations abandoned at their deadline, still running or done; guarded by mutex_.
+  std::vector<std::pair<std::shared_ptr<PendingCalibration>, std::thread>> abandoned_;
 };
 
 }  // namespace linecal

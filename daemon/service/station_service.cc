@@ -63,6 +63,8 @@ v1::CycleEvent::Type EventToProto(const std::string& type) {
   if (type == "sensor_solved") return v1::CycleEvent::TYPE_SENSOR_SOLVED;
   if (type == "sensor_verdict") return v1::CycleEvent::TYPE_SENSOR_VERDICT;
   if (type == "cycle_ended") return v1::CycleEvent::TYPE_CYCLE_ENDED;
+  if (type == "sensor_error") return v1::CycleEvent::TYPE_SENSOR_ERROR;
+  if (type == "sensor_progress") return v1::CycleEvent::TYPE_SENSOR_PROGRESS;
   return v1::CycleEvent::TYPE_UNSPECIFIED;
 }
 
@@ -240,8 +242,11 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, cons
     v1::SensorStatus* sensor = response->add_sensors();
     sensor->set_name(name);
     sensor->set_kind(KindToProto(SensorKindName(kind)));
-    sensor->set_source(s.source);
-    sensor->set_connected(true);  // the simulator and a recorded capture are always there
+    const auto live = s.sensor_sources.find(name);
+    sensor->set_source(live != s.sensor_sources.end() ? live->second : s.source);
+    // The simulator and a recorded capture are always there; live devices are not probed
+    // here (they are opened at each cycle, where a missing one is that sensor's error).
+    sensor->set_connected(true);
   }
   return grpc::Status::OK;
 }

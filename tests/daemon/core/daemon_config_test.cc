@@ -117,5 +117,94 @@ TEST_F(DaemonConfigTest, TlsFilesReadNamingKeyAndFile) {
   }
 }
 
+TEST_F(DaemonConfigTest, LiveSourcesAndDeadlinesReadBack) {
+  absl::StatusOr<DaemonConfig> c = Read(R"({
+    "station": "s.json", "car_models": ["c.json"], "data_root": "d",
+    "deadlines_ms": {"acquire": 4000, "calibrate": 9000},
+    "source": {"type": "live", "sensors": {
+      "front_camera": {"type": "aravis", "device_id": "Aravis-Fake-TEST01", "pixel_format": "BayerRG8",
+                       "exposure_us": 5000, "frame_timeout_ms": 1500, "frame_retries": 2},
+      "rear_camera": {"type": "v4l2", "device": "/dev/video2", "width": 1280, "height": 720},
+      "roof_lidar": {"type": "udp", "bind": "127.0.0.1", "port": 2369, "multicast_group": "239.1.1.1",
+                     "receive_buffer_bytes": 1048576},
+      "front_radar": {"type": "candump", "log": "logs/radar.log", "interface": "can1", "record_ms": 2000},
+      "corner_radar": {"type": "socketcan", "interface": "can0"}}}})");
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->core.source, CycleSource::kLive);
+  EXPECT_EQ(c->core.acquire_deadline.count(), 4000);
+  EXPECT_EQ(c->core.calibrate_deadline.count(), 9000);
+  ASSERT_EQ(c->core.live_sources.size(), 5u);
+  const SourceConfig& cam = c->core.live_sources.at("front_camera");
+  EXPECT_EQ(cam.type, SourceType::kAravis);
+  EXPECT_EQ(cam.aravis.device_id, "Aravis-Fake-TEST01");
+  EXPECT_EQ(cam.aravis.pixel_format, "BayerRG8");
+  EXPECT_EQ(cam.aravis.exposure_us, 5000);
+  EXPECT_EQ(cam.aravis.frame_timeout.count(), 1500);
+  EXPECT_EQ(cam.aravis.frame_retries, 2);
+  const SourceConfig& v4l2 = c->core.live_sources.at("rear_camera");
+  EXPECT_EQ(v4l2.type, SourceType::kV4l2);
+  EXPECT_EQ(v4l2.v4l2.device, "/dev/video2");
+  EXPECT_EQ(v4l2.v4l2.pixel_format, "GREY");
+  EXPECT_EQ(v4l2.v4l2.width, 1280);
+  EXPECT_EQ(v4l2.v4l2.height, 720);
+  EXPECT_EQ(v4l2.v4l2.frame_retries, 3);
+  const SourceConfig& lidar = c->core.live_sources.at("roof_lidar");
+  EXPECT_EQ(lidar.type, SourceType::kUdp);
+  EXPECT_EQ(lidar.udp.bind_address, "127.0.0.1");
+  EXPECT_EQ(lidar.udp.port, 2369);
+  EXPECT_EQ(lidar.udp.multicast_group, "239.1.1.1");
+  EXPECT_EQ(lidar.udp.receive_buffer_bytes, 1048576);
+  const SourceConfig& log = c->core.live_sources.at("front_radar");
+  EXPECT_EQ(log.type, SourceType::kCandump);
+  EXPECT_EQ(log.can.input, CanRadarSourceConfig::Input::kCandumpLog);
+  EXPECT_EQ(log.can.log_path, (dir_ / "logs/radar.log").string());
+  EXPECT_EQ(log.can.interface, "can1");
+  EXPECT_EQ(log.can.record.count(), 2000);
+  const SourceConfig& bus = c->core.live_sources.at("corner_radar");
+  EXPECT_EQ(bus.type, SourceType::kSocketCan);
+  EXPECT_EQ(bus.can.interface, "can0");
+  EXPECT_EQ(bus.can.record.count(), 3600);
+}
+
+TEST_F(DaemonConfigTest, DeadlinesDefaultAndLiveErrorsNameTheKey) {
+  const std::string base = R"("station": "s.json", "car_models": ["c.json"], "data_root": "d")";
+  absl::StatusOr<DaemonConfig> plain = Read("{" + base + "}");
+  ASSERT_TRUE(plain.ok());
+  EXPECT_EQ(plain->core.acquire_deadline.count(), 10000);
+  EXPECT_EQ(plain->core.calibrate_deadline.count(), 20000);
+  const auto live = [&](const std::string& sensors) {
+    return "{" + base + R"(, "source": {"type": "live", "sensors": )" + sensors + "}}";
+  };
+  const std::pair<std::string, std::string> cases[] = {
+      {live(R"({"front_camera": {"type": "usb"}})"),
+       "source.sensors.front_camera.type: must be aravis, v4l2, udp, socketcan or candump, got 'usb'"},
+      {live(R"({"front_camera": {"type": "aravis"}})"), "source.sensors.front_camera.device_id"},
+      {live(R"({"front_camera": {"type": "aravis", "device_id": "x", "colour": 1}})"),
+       "source.sensors.front_camera.colour"},
+      {live(R"({"front_camera": {"type": "aravis", "device_id": "x", "frame_retries": -1}})"),
+       "source.sensors.front_camera.frame_retries: must be in [0, 100]"},
+      {live(R"({"roof_lidar": {"type": "udp", "port": 70000}})"),
+       "source.sensors.roof_lidar.port: must be in [1, 65535], got 70000"},
+      {live(R"({"roof_lidar": {"type": "udp", "bind": "localhost"}})"), "source.sensors.roof_lidar: "},
+      {live(R"({"roof_lidar": {"type": "udp", "log": "x"}})"), "source.sensors.roof_lidar.log"},
+      {live(R"({"front_radar": {"type": "socketcan"}})"), "source.sensors.front_radar.interface"},
+      {live(R"({"front_radar": {"type": "candump", "log": "r.log", "record_ms": 0}})"),
+       "source.sensors.front_radar.record_ms: must be in [1, 600000], got 0"},
+      {live(R"({"front_radar": {"type": "candump", "log": "r.log", "record_ms": 70000}})"),
+       "source.sensors.front_radar: record_ms: 70000 must be in [1, 60000]"},
+      {live(R"({"front_radar": 3})"), "source.sensors.front_radar"},
+      {"{" + base + R"(, "source": {"type": "live"}})", "source.sensors"},
+      {"{" + base + R"(, "source": {"type": "live", "sensors": {}, "capture": "x"}})", "source.capture"},
+      {"{" + base + R"(, "deadlines_ms": {"acquire": 0}})", "deadlines_ms.acquire: must be in [1, 600000], got 0"},
+      {"{" + base + R"(, "deadlines_ms": {"solve": 5}})", "deadlines_ms.solve"},
+  };
+  for (const auto& [text, key] : cases) {
+    const absl::Status s = Read(text).status();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << text;
+    EXPECT_NE(s.message().find("linecald.json: "), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find(key), std::string::npos) << key << ": " << s.message();
+  }
+}
+
 }  // namespace
 }  // namespace linecal
