@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <mutex>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -258,6 +259,11 @@ AravisCamera::AravisCamera(AravisCameraOptions options, _ArvCamera* camera)
 
 absl::StatusOr<std::unique_ptr<AravisCamera>> AravisCamera::Open(
     const AravisCameraOptions& options) {
+  // One camera opened at a time in the process: Aravis's device discovery and GenICam parsing
+  // are not safe to run on several threads at once (five cameras of one cycle opened together
+  // failed with "Port not found for node" and cleared buffers); grabbing runs in parallel.
+  static std::mutex open_mutex;
+  std::lock_guard<std::mutex> lock(open_mutex);
   const std::string& id = options.device_id;
   absl::StatusOr<ArvDevice*> device = OpenDevice(id);
   if (!device.ok()) return device.status();

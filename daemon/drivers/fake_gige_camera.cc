@@ -8,6 +8,7 @@
 
 #include <cerrno>
 
+#include <cmath>
 #include <cstring>
 #include <utility>
 
@@ -87,7 +88,8 @@ FakeGigeCamera::FakeGigeCamera(std::string address, std::string serial)
 absl::StatusOr<std::unique_ptr<FakeGigeCamera>> FakeGigeCamera::Start(const std::string& address,
                                                                       const std::string& serial,
                                                                       Image8 initial,
-                                                                      double lost_ratio) {
+                                                                      double lost_ratio,
+                                                                      double frames_per_second) {
   if (serial.empty() || serial.size() > kMaxSerialLength) {
     return absl::InvalidArgumentError(absl::StrCat("fake camera serial '", serial, "': must be 1..",
                                                    kMaxSerialLength, " characters"));
@@ -95,6 +97,10 @@ absl::StatusOr<std::unique_ptr<FakeGigeCamera>> FakeGigeCamera::Start(const std:
   if (!(lost_ratio >= 0.0 && lost_ratio <= 1.0)) {
     return absl::InvalidArgumentError(
         absl::StrCat("fake camera gvsp-lost-ratio ", lost_ratio, ": must be in 0..1"));
+  }
+  if (!(frames_per_second >= 0.1 && frames_per_second <= 100.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("fake camera frame rate ", frames_per_second, ": must be in 0.1..100 frames/s"));
   }
   if (absl::Status s = CheckImage(initial); !s.ok()) return s;
   if (absl::Status s = CheckControlPortFree(address); !s.ok()) return s;
@@ -111,6 +117,8 @@ absl::StatusOr<std::unique_ptr<FakeGigeCamera>> FakeGigeCamera::Start(const std:
   g_object_set(fake->camera_, "gvsp-lost-ratio", lost_ratio, nullptr);
   ArvFakeCamera* camera = arv_gv_fake_camera_get_fake_camera(fake->camera_);
   WriteSizeRegisters(camera, fake->image_.width, fake->image_.height);
+  arv_fake_camera_write_register(camera, ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US,
+                                 static_cast<guint32>(std::lround(1e6 / frames_per_second)));
   arv_fake_camera_set_fill_pattern(camera, &FakeGigeCamera::Fill, fake.get());
   return fake;
 }

@@ -29,15 +29,18 @@ class FakeGigeCamera {
   // Starts a fake camera on the IPv4 `address` with the serial number `serial` (1..15
   // characters, Aravis's limit), serving `initial`, and dropping each stream packet with
   // probability `lost_ratio` (0..1; the fake camera never resends, so a frame that lost a
-  // packet arrives as incomplete).
-  // Errors: InvalidArgument (empty or too large image, serial length, ratio outside 0..1,
+  // packet arrives as incomplete), at `frames_per_second` (0.1..100; Aravis's default is 25:
+  // several full-HD fake cameras at that rate overrun loopback's default socket buffers on a
+  // small machine).
+  // Errors: InvalidArgument (empty or too large image, serial length, ratio outside 0..1, rate,
   // not an IPv4 address), Unavailable "cannot listen on ADDRESS:3956: ..." (no local
   // interface has the address, or another camera or program holds the port). Cost: binds
   // a few UDP sockets and starts a thread.
   static absl::StatusOr<std::unique_ptr<FakeGigeCamera>> Start(const std::string& address,
                                                                const std::string& serial,
                                                                Image8 initial,
-                                                               double lost_ratio = 0.0);
+                                                               double lost_ratio = 0.0,
+                                                               double frames_per_second = 25.0);
 
   // Stops the camera thread and closes its sockets: a client streaming from it stops
   // receiving frames and its control requests go unanswered.

@@ -31,5 +31,6 @@ int RunSimLanes(const Args& args);  // cmd_sim_lanes.cc
 int RunEvalAftersale(const Args& args);  // cmd_eval_aftersale.cc
 int RunPlan(const Args& args);  // cmd_plan.cc
 int RunPlanCheck(const Args& args);  // cmd_plan.cc
+int RunServeSensors(const Args& args);  // cmd_serve_sensors.cc
 
 }  // namespace linecal::tools

@@ -40,6 +40,7 @@ const std::vector<Subcommand>& Subcommands() {
       {{"aftersale"}, "camera calibration from lane lines in one image (--json, --out, --export)", RunAftersale},
       {{"plan"}, "plan board and reflector placement for a car model in a station", RunPlan},
       {{"plan", "check"}, "can every sensor be calibrated with this layout? (reasons when not)", RunPlanCheck},
+      {{"serve-sensors"}, "serve a capture as live sensors (fake GigE cameras, UDP LiDAR, candump radar)", RunServeSensors},
   };
   return kTable;
 }
