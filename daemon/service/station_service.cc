@@ -264,6 +264,9 @@ absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& 
   RunningServer running;
   running.service = std::make_unique<StationService>(core, auth_token, version);
   grpc::ServerBuilder builder;
+  // gRPC sets SO_REUSEPORT by default: a second linecald on the same port would start without
+  // error and the kernel would split the station controller's calls between the two.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(address, credentials, &running.port);
   builder.RegisterService(running.service.get());
   running.server = builder.BuildAndStart();

@@ -199,6 +199,19 @@ TEST_F(ServiceTest, ErrorCodesOfEveryRpc) {
   EXPECT_EQ(stub_->ListCycles(&list_context, list, &listed).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
 }
 
+// A second server on a port in use fails to start (gRPC's SO_REUSEPORT is off): two daemons
+// would otherwise share the station controller's calls.
+TEST_F(ServiceTest, SecondServerOnTheSamePortFailsToStart) {
+  Start("");
+  absl::StatusOr<RunningServer> second =
+      StartServer(core_.get(), "127.0.0.1:" + std::to_string(server_.port), "", "test");
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(second.status().message().find("cannot listen on '127.0.0.1:" + std::to_string(server_.port)),
+            std::string::npos)
+      << second.status();
+}
+
 TEST_F(ServiceTest, TokenAuthentication) {
   Start("s3cret");
   {
