@@ -483,8 +483,7 @@ struct Refined {
 // checks the whole board. *reason on failure.
 std::optional<Refined> RefineBoard(const ImageView8& image, const Board& board,
                                    const ChessModel& model, const Eigen::Matrix3d& H_coarse,
-                                   const Image8& dark, const ChessboardOptions& options,
-                                   DetectReason* reason) {
+                                   const ChessboardOptions& options, DetectReason* reason) {
   *reason = DetectReason::kVerificationFailed;
   const std::vector<BoardFeature>& features = board.features();
   std::vector<Eigen::Vector2d> p_board;
@@ -557,7 +556,7 @@ std::optional<Refined> RefineBoard(const ImageView8& image, const Board& board,
   }
   const double px_per_m =
       LocalSquareSide(r.H, Eigen::Vector2d::Zero(), model.square_m) / model.square_m;
-  if (!PaintAgrees(board, r.H, dark, px_per_m, options.min_paint_agreement)) {
+  if (!PaintAgrees(board, r.H, image, px_per_m, options.min_paint_agreement)) {
     *reason = DetectReason::kWrongBoard;
     return std::nullopt;
   }
@@ -693,7 +692,7 @@ std::optional<Refined> FitAndRefineBoard(const ImageView8& image, const Board& b
                                          const ChessModel& model,
                                          std::span<const Eigen::Vector2d> board_pts,
                                          std::span<const Eigen::Vector2d> image_pts,
-                                         std::span<const double> tolerance, const Image8& dark,
+                                         std::span<const double> tolerance,
                                          const ChessboardOptions& options, DetectReason* failure) {
   *failure = std::max(*failure, DetectReason::kVerificationFailed);
   HomographyFitOptions dlt;
@@ -711,7 +710,7 @@ std::optional<Refined> FitAndRefineBoard(const ImageView8& image, const Board& b
   const Eigen::Vector2d x_axis = ApplyHomography(H, Eigen::Vector2d(model.square_m, 0.0)) - centre;
   if (x_axis.x() < 0.0) H = H * Eigen::Vector3d(-1.0, -1.0, 1.0).asDiagonal();
   DetectReason reason = DetectReason::kNone;
-  std::optional<Refined> refined = RefineBoard(image, board, model, H, dark, options, &reason);
+  std::optional<Refined> refined = RefineBoard(image, board, model, H, options, &reason);
   if (!refined) *failure = std::max(*failure, reason);
   return refined;
 }
@@ -721,8 +720,7 @@ std::optional<Refined> FitAndRefineBoard(const ImageView8& image, const Board& b
 // raised to the furthest stage reached (DetectReason's order).
 std::vector<Refined> SearchBoards(const ImageView8& image, const Board& board,
                                   const ChessModel& model, const std::vector<SquareQuad>& quads,
-                                  const Image8& dark, const ChessboardOptions& options,
-                                  DetectReason* failure) {
+                                  const ChessboardOptions& options, DetectReason* failure) {
   std::vector<Refined> found;
   if (quads.empty()) return found;
   const std::vector<Triple> triples = FindTriples(quads, options);
@@ -752,7 +750,7 @@ std::vector<Refined> SearchBoards(const ImageView8& image, const Board& board,
         tolerance.resize(image_pts.size(), CoarseTolerancePx(options, t.side_px));
       }
       std::optional<Refined> refined = FitAndRefineBoard(image, board, model, board_pts, image_pts,
-                                                         tolerance, dark, options, failure);
+                                                         tolerance, options, failure);
       if (refined) found.push_back(*std::move(refined));
     }
   }
@@ -952,7 +950,7 @@ bool OnOneLine(const std::vector<XCorner>& corners, const PairGroup& a, const Pa
 // pairs, and every two groups with distinct corners as the board's left and right group
 // (either way round) through FitAndRefineBoard.
 std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& board,
-                                      const ChessModel& model, int min_contrast, const Image8& dark,
+                                      const ChessModel& model, int min_contrast,
                                       const ChessboardOptions& options, DetectReason* failure) {
   std::vector<Refined> found;
   XCornerOptions corner_options;
@@ -1000,7 +998,7 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& boar
           }
         }
         std::optional<Refined> refined = FitAndRefineBoard(
-            image, board, model, board_pts, image_pts, tolerance, dark, options, failure);
+            image, board, model, board_pts, image_pts, tolerance, options, failure);
         if (refined) {
           found.push_back(*std::move(refined));
           break;
@@ -1052,18 +1050,18 @@ Detection DetectChessboard(const ImageView8& image, const Board& board,
   DetectReason failure = DetectReason::kNoCandidates;
   ComponentLabels labels;
   std::vector<SquareQuad> quads = SquareQuads(dark, options, &labels);
-  std::vector<Refined> found = SearchBoards(image, board, *model, quads, dark, options, &failure);
+  std::vector<Refined> found = SearchBoards(image, board, *model, quads, options, &failure);
   if (found.empty()) {
     // Second chance: squares merged at X-corners, split and searched again.
     std::vector<bool> has_quad(labels.components.size(), false);
     for (const SquareQuad& q : quads) has_quad[q.component] = true;
     if (SplitAtXCorners(image, labels, has_quad, options.min_square_side_px, &dark) > 0) {
       quads = SquareQuads(dark, options, &labels);
-      found = SearchBoards(image, board, *model, quads, dark, options, &failure);
+      found = SearchBoards(image, board, *model, quads, options, &failure);
     }
   }
   if (found.empty()) {
-    found = SearchPairBoards(image, board, *model, min_contrast, dark, options, &failure);
+    found = SearchPairBoards(image, board, *model, min_contrast, options, &failure);
   }
   if (found.empty()) return Fail(failure);
   // Two verified boards: the same board from duplicate groups, or two boards in view.

@@ -15,18 +15,114 @@ namespace {
 // Probes per side of the board's page for the paint check: a 1100 mm board gets a probe
 // every 34 mm, several per printed area of any of the marker boards.
 constexpr int kPaintProbesPerSide = 32;
-// A paint probe is used only when the board is uniform this many pixels around it (blur of
-// up to 1.5 px, plus the homography's error, must not reach an edge).
-constexpr double kPaintProbeClearancePx = 3.0;
+// A paint probe is used only when the board is uniform this many pixels around it. Blur of
+// up to 1.5 px still mixes in a quarter of the other paint 1.5 px from an edge, which keeps
+// black below 0.35 of white (kBlackToWhiteMax is 0.6); more clearance would leave no black
+// probe in the 6 px squares of a small chessboard seen 50 degrees off axis.
+constexpr double kPaintProbeClearancePx = 1.5;
+// PaintAgreesBinarised's clearance: a binarisation moves edges by up to blur (1.5 px) plus the
+// homography's error, so its probes keep farther from them than the grey comparisons do.
+constexpr double kBinarisedClearancePx = 3.0;
 // Fewer probes of a paint than this say nothing about it.
 constexpr int kMinPaintProbes = 8;
+// A probe is compared with probes at most this share of the page away: near enough to share
+// the light (a 4:1 gradient across the page changes it by at most 4^0.15 = 1.23 over that
+// distance), far enough to reach the next area of other paint on every board of boards.md.
+constexpr double kPaintNeighbourReach = 0.15;
+// Printed black reflects a tenth of white or less; under any gamma of 0.6-1.6 it stays below
+// 60% of the white beside it, while white beside white is near 100%.
+constexpr double kBlackToWhiteMax = 0.6;
+// PaintAgrees compares each probe with this many nearest probes of the opposite paint. One is
+// fooled by a board identified on a larger checker (a white probe on a black square paired
+// with a black probe on a white one); four make a probe agree only when its whole
+// neighbourhood has the printed contrast.
+constexpr int kPaintComparisons = 4;
+
+// Up to `count` probes of a side x side grid nearest to probe `from` (Euclidean distance in
+// probe steps, at most `reach`) for which `wanted(index)` holds, nearest first; ties in the
+// grid's order. O(reach^2 + count log count).
+template <typename Wanted>
+std::vector<int> NearestProbes(int side, int from, int reach, int count, const Wanted& wanted) {
+  const int ix = from % side, iy = from / side;
+  std::vector<std::pair<int, int>> found;  // distance², index
+  for (int dy = -reach; dy <= reach; ++dy) {
+    for (int dx = -reach; dx <= reach; ++dx) {
+      const int x = ix + dx, y = iy + dy;
+      if ((dx == 0 && dy == 0) || x < 0 || y < 0 || x >= side || y >= side) continue;
+      if (dx * dx + dy * dy > reach * reach || !wanted(y * side + x)) continue;
+      found.emplace_back(dx * dx + dy * dy, y * side + x);
+    }
+  }
+  const std::size_t n = std::min<std::size_t>(count, found.size());
+  std::partial_sort(found.begin(), found.begin() + n, found.end());
+  std::vector<int> out(n);
+  for (std::size_t i = 0; i < n; ++i) out[i] = found[i].second;
+  return out;
+}
 
 }  // namespace
 
-bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const Image8& dark,
+bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const ImageView8& image,
                  double px_per_m, double min_agreement) {
   const Eigen::Vector2d page = board.page_size_m();
   const double clearance_m = kPaintProbeClearancePx / px_per_m;
+  // Per grid probe: its grey and paint (kOffBoard where it is not used).
+  std::vector<double> grey(kPaintProbesPerSide * kPaintProbesPerSide, 0.0);
+  std::vector<Paint> paint(kPaintProbesPerSide * kPaintProbesPerSide, Paint::kOffBoard);
+  for (int iy = 0; iy < kPaintProbesPerSide; ++iy) {
+    for (int ix = 0; ix < kPaintProbesPerSide; ++ix) {
+      const Eigen::Vector2d p(page.x() * ((ix + 0.5) / kPaintProbesPerSide - 0.5),
+                              page.y() * ((iy + 0.5) / kPaintProbesPerSide - 0.5));
+      const Paint here = board.PaintAt(p);
+      if (here != Paint::kWhite && here != Paint::kBlack) continue;
+      bool uniform = true;
+      for (int k = 0; k < 4 && uniform; ++k) {
+        const Eigen::Vector2d q(p.x() + ((k & 1) ? clearance_m : -clearance_m),
+                                p.y() + ((k & 2) ? clearance_m : -clearance_m));
+        uniform = board.PaintAt(q) == here;
+      }
+      if (!uniform) continue;
+      const Eigen::Vector2d uv = ApplyHomography(H_image_board, p);
+      if (!(uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= image.width - 1.0 && uv.y() <= image.height - 1.0)) {
+        continue;
+      }
+      const int i = iy * kPaintProbesPerSide + ix;
+      paint[i] = here;
+      grey[i] = image.At(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
+    }
+  }
+  const int reach = static_cast<int>(std::ceil(kPaintNeighbourReach * kPaintProbesPerSide));
+  std::array<int, 2> total = {0, 0};  // white probes, black probes with neighbours to compare
+  std::array<int, 2> agree = {0, 0};
+  for (int i = 0; i < kPaintProbesPerSide * kPaintProbesPerSide; ++i) {
+    if (paint[i] == Paint::kOffBoard) continue;
+    const Paint opposite = paint[i] == Paint::kBlack ? Paint::kWhite : Paint::kBlack;
+    const std::vector<int> near = NearestProbes(kPaintProbesPerSide, i, reach, kPaintComparisons,
+                                                [&](int k) { return paint[k] == opposite; });
+    if (near.empty()) continue;
+    const int kind = paint[i] == Paint::kBlack ? 1 : 0;
+    ++total[kind];
+    // Against every neighbour: one black-printed neighbour that is as bright as a white probe
+    // (or one white-printed neighbour as dark as a black probe) is paint the board does not
+    // have there.
+    if (std::all_of(near.begin(), near.end(), [&](int j) {
+          const double black = kind == 1 ? grey[i] : grey[j];
+          const double white = kind == 1 ? grey[j] : grey[i];
+          return black < kBlackToWhiteMax * white;
+        })) {
+      ++agree[kind];
+    }
+  }
+  for (int k = 0; k < 2; ++k) {
+    if (total[k] >= kMinPaintProbes && agree[k] < min_agreement * total[k]) return false;
+  }
+  return total[0] + total[1] >= kMinPaintProbes;
+}
+
+bool PaintAgreesBinarised(const Board& board, const Eigen::Matrix3d& H_image_board, const Image8& dark,
+                 double px_per_m, double min_agreement) {
+  const Eigen::Vector2d page = board.page_size_m();
+  const double clearance_m = kBinarisedClearancePx / px_per_m;
   std::array<int, 2> total = {0, 0};  // white, black
   std::array<int, 2> agree = {0, 0};
   for (int iy = 0; iy < kPaintProbesPerSide; ++iy) {
@@ -103,33 +199,15 @@ bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::M
       }
     }
   }
-  // The nearest both-white probe, searched ring by ring out to 15% of the page.
-  const int reach = static_cast<int>(std::ceil(0.15 * kProbes));
+  // Each differing probe against the nearest probe both print white.
+  const int reach = static_cast<int>(std::ceil(kPaintNeighbourReach * kProbes));
   int votes = 0;
   int for_board = 0;
   for (std::size_t i = 0; i < differing.size(); ++i) {
-    const int ix = differing[i].first % kProbes;
-    const int iy = differing[i].first / kProbes;
-    double reference = -1.0;
-    int best_d2 = reach * reach + 1;
-    for (int r = 1; r <= reach && reference < 0.0; ++r) {
-      for (int dy = -r; dy <= r; ++dy) {
-        for (int dx = -r; dx <= r; ++dx) {
-          if (std::max(std::abs(dx), std::abs(dy)) != r) continue;  // this ring only
-          const int x = ix + dx, y = iy + dy;
-          if (x < 0 || y < 0 || x >= kProbes || y >= kProbes) continue;
-          const double g = white_grey[y * kProbes + x];
-          if (g >= 0.0 && dx * dx + dy * dy < best_d2) {
-            best_d2 = dx * dx + dy * dy;
-            reference = g;
-          }
-        }
-      }
-    }
-    if (reference < 0.0) continue;
-    // Printed black reflects a tenth of white or less; under any gamma of 0.6-1.6 it stays
-    // below 60% of the white beside it, while white beside white is near 100%.
-    const bool dark = differing_grey[i] < 0.6 * reference;
+    const std::vector<int> near =
+        NearestProbes(kProbes, differing[i].first, reach, 1, [&](int k) { return white_grey[k] >= 0.0; });
+    if (near.empty()) continue;
+    const bool dark = differing_grey[i] < kBlackToWhiteMax * white_grey[near[0]];
     ++votes;
     if (dark == differing[i].second) ++for_board;
   }

@@ -1,8 +1,10 @@
 #pragma once
-// The whole-board paint check of the board detectors: does the image, binarised by
-// BinariseDark (binarise.h), show the board's printed black and white where a fitted
-// homography puts them? A board identified on the wrong pattern (another board, clutter)
-// fails it even when its features fit the homography.
+// The whole-board paint checks of the board detectors: does the image show the board's
+// printed black and white where a fitted homography puts them? A board identified on the
+// wrong pattern (another board, clutter) fails them even when its features fit the
+// homography. Both compare grey levels of nearby points of opposite (or differing) paint,
+// which see the same light: an illumination gradient or a gamma cancels, where a
+// binarisation by local contrast reads large white areas under a 4:1 gradient as dark.
 
 #include <Eigen/Core>
 
@@ -11,14 +13,24 @@
 
 namespace linecal {
 
-// True when the image agrees with the board's printed paint: of a 32 x 32 grid of probes
-// over the page, those clear of printed edges by 3 px and inside the image, at least
-// min_agreement of the black ones are dark in `dark` (1 = dark) and of the white ones light
-// (each paint checked only when it has 8 probes or more; false with fewer than 8 in all).
-// H_image_board maps board metres to image pixels; px_per_m is the board's scale in the
-// image (for the edge clearance). Cost: 1024 paint look-ups, about 20 microseconds.
-bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const Image8& dark,
+// True when the image agrees with the board's printed paint. Of a 32 x 32 grid of probes over
+// the page, those clear of printed edges by 1.5 px and inside the image are compared each with
+// its 4 nearest probes of the opposite paint within 15% of the page; a probe agrees when every
+// black one of its pairs is darker than 0.6 of the white one. At least min_agreement of the
+// black probes and of the white probes must agree (each paint counted only with 8 probes or
+// more; false with fewer than 8 in all). H_image_board maps board metres to image pixels;
+// px_per_m is the board's scale in the image (for the edge clearance). Cost: 1024 paint
+// look-ups and a neighbour search of about 80 probes per probe, about 100 microseconds.
+bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const ImageView8& image,
                  double px_per_m, double min_agreement);
+
+// The older check on a binarised image (`dark`, 1 = dark; binarise.h): of the same grid of
+// probes, 3 px clear of printed edges, at least min_agreement of the black ones dark and of
+// the white ones light (each paint checked with 8 probes or more; false with fewer than 8 in
+// all). It reads large white areas under a 4:1 gradient as dark and refuses such boards; the
+// marker detector keeps it all the same (square_markers.cc says why). Cost: about 20 us.
+bool PaintAgreesBinarised(const Board& board, const Eigen::Matrix3d& H_image_board, const Image8& dark,
+                          double px_per_m, double min_agreement);
 
 // Two boards that print the same features (the ArUco and round-hole boards share their four
 // markers, boards.md) differ only in some of their paint, and a binarisation can be fooled

@@ -463,7 +463,11 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       return Fail(DetectReason::kWrongBoard);
     }
   }
-  if (!PaintAgrees(board, fit->H, scan.dark, side_px / side_m, options.min_paint_agreement)) {
+  // The binarised paint check, not PaintAgrees's grey comparisons: those also pass boards of
+  // 4 px cells under noise 6, blur 1.5 and JPEG 80, whose marker corners can then be 1.7 px
+  // off (detectors_eval, full grid: one such "wrong" board); the binarisation refuses them,
+  // and with them every marker board under a 4:1 gradient (docs/detectors.md).
+  if (!PaintAgreesBinarised(board, fit->H, scan.dark, side_px / side_m, options.min_paint_agreement)) {
     return Fail(DetectReason::kWrongBoard);
   }
   if (sibling != nullptr) {
