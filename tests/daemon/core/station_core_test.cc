@@ -53,6 +53,23 @@ class StationCoreTest : public ::testing::Test {
     return core.ok() ? std::move(*core) : nullptr;
   }
 
+  // The replay source on a capture of the reference car's front camera and front radar
+  // (seed 9), recorded as data_root/recorded; returns its directory.
+  fs::path UseReplay() {
+    SimulatorOptions o;
+    o.sensors = {"front_camera", "front_radar"};
+    const fs::path rec = fs::path(config_.data_root) / "recorded";
+    fs::create_directories(config_.data_root);
+    const absl::Status simulated = SimulateCapture(*ReadStationLayout(config_.station_path),
+                                                   *ReadCarModel(kDeploy + "/cars/reference.json"), o, 9, rec.string())
+                                       .status();
+    EXPECT_TRUE(simulated.ok()) << simulated;
+    config_.source = CycleSource::kReplay;
+    config_.replay_capture = "recorded";
+    config_.car_model_paths = {kDeploy + "/cars/reference.json"};
+    return rec;
+  }
+
   static CycleRequest Request() {
     CycleRequest r;
     r.vin = kVin;
@@ -124,16 +141,7 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
 }
 
 TEST_F(StationCoreTest, ReplaySourceGivesTheOfflineResult) {
-  SimulatorOptions o;
-  o.sensors = {"front_camera", "front_radar"};
-  const fs::path rec = fs::path(config_.data_root) / "recorded";
-  fs::create_directories(config_.data_root);
-  ASSERT_TRUE(SimulateCapture(*ReadStationLayout(config_.station_path), *ReadCarModel(kDeploy + "/cars/reference.json"),
-                              o, 9, rec.string())
-                  .ok());
-  config_.source = CycleSource::kReplay;
-  config_.replay_capture = "recorded";
-  config_.car_model_paths = {kDeploy + "/cars/reference.json"};
+  const fs::path rec = UseReplay();
   std::unique_ptr<StationCore> core = Core();
   CycleRequest request = Request();
   request.car_model_id = "reference";
@@ -251,15 +259,7 @@ TEST_F(StationCoreTest, DatabaseLockedMidCycleEndsInErrorStoredOnceTheLockIsGone
 // during or after the sensors are computed); one refused came after the end was decided, and
 // that cycle ends done. Replay cycles, cancels after growing delays.
 TEST_F(StationCoreTest, AcceptedCancelAlwaysEndsTheCycleCancelled) {
-  SimulatorOptions o;
-  o.sensors = {"front_camera", "front_radar"};
-  fs::create_directories(config_.data_root);
-  ASSERT_TRUE(SimulateCapture(*ReadStationLayout(config_.station_path), *ReadCarModel(kDeploy + "/cars/reference.json"),
-                              o, 9, (fs::path(config_.data_root) / "recorded").string())
-                  .ok());
-  config_.source = CycleSource::kReplay;
-  config_.replay_capture = "recorded";
-  config_.car_model_paths = {kDeploy + "/cars/reference.json"};
+  UseReplay();
   std::unique_ptr<StationCore> core = Core();
   CycleRequest request = Request();
   request.car_model_id = "reference";
