@@ -119,6 +119,13 @@ absl::StatusOr<Workspace> PrepareWorkspace(const ProgramFlags& flags, const std:
   std::ifstream in(reference);
   nlohmann::json car = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
   if (car.is_discarded()) return absl::InternalError(absl::StrCat(reference, ": not JSON"));
+  // The car file moves: files it names relative to itself (LiDAR angle tables) stay where
+  // they are.
+  for (nlohmann::json& s : car["sensors"]) {
+    if (s.contains("angles_file") && fs::path(s["angles_file"].get<std::string>()).is_relative()) {
+      s["angles_file"] = (fs::path(reference).parent_path() / s["angles_file"].get<std::string>()).string();
+    }
+  }
   nlohmann::json kept = nlohmann::json::array();
   for (const std::string& name : flags.sensors) {
     bool found = false;
