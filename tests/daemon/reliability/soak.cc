@@ -16,6 +16,7 @@
 // outcome it must have. A live-source fault (a camera that vanishes, a silent CAN bus) is one
 // more entry, run on a core configured with that source.
 #include <fcntl.h>
+#include <malloc.h>
 #include <spawn.h>
 #include <sqlite3.h>
 #include <sys/wait.h>
@@ -117,8 +118,8 @@ class DatabaseLock {
     posix_spawn_file_actions_init(&actions);
     posix_spawn_file_actions_adddup2(&actions, to_child[0], STDIN_FILENO);
     posix_spawn_file_actions_adddup2(&actions, from_child[1], STDOUT_FILENO);
-    std::error_code ec;
-    std::string self = fs::read_symlink("/proc/self/exe", ec).string(), flag = "--hold-lock", db = db_path;
+    // /proc/self/exe: this very binary, even when a rebuild has replaced the file meanwhile.
+    std::string self = "/proc/self/exe", flag = "--hold-lock", db = db_path;
     char* argv[] = {self.data(), flag.data(), db.data(), nullptr};
     const bool spawned = posix_spawn(&pid_, self.c_str(), &actions, nullptr, argv, environ) == 0;
     posix_spawn_file_actions_destroy(&actions);
@@ -489,6 +490,12 @@ std::vector<Fault> Faults() {
 
 double Mb(std::int64_t kb) { return kb / 1024.0; }
 
+// Bytes malloc has handed out and not got back, every arena (glibc's mallinfo2).
+std::size_t HeapInUseBytes() {
+  const struct mallinfo2 m = mallinfo2();
+  return m.uordblks + m.hblkhd;
+}
+
 int Run(const ProgramFlags& flags, int rss_from) {
   absl::StatusOr<Workspace> workspace = PrepareWorkspace(flags, "soak", kCarId, "pristine");
   if (!workspace.ok()) {
@@ -536,6 +543,7 @@ int Run(const ProgramFlags& flags, int rss_from) {
   const int fds_before = SettledEntryCount("/proc/self/fd");
   int threads_baseline = 0, fds_baseline = 0;
   std::int64_t rss_reference_kb = 0;
+  std::size_t heap_reference_bytes = 0;
   const Clock::time_point start = Clock::now();
   std::printf("linecal-soak: %d cycles, seed %llu, %zu sensors, scratch %s\n", flags.cycles,
               static_cast<unsigned long long>(flags.seed), s.layout.manifest.sensors.size(), dir.c_str());
@@ -567,7 +575,10 @@ int Run(const ProgramFlags& flags, int rss_from) {
       threads_baseline = SettledEntryCount("/proc/self/task");
       fds_baseline = SettledEntryCount("/proc/self/fd");
     }
-    if (cycle + 1 == rss_from) rss_reference_kb = ReadProcessStatus().value_or(ProcessStatus{}).rss_kb;
+    if (cycle + 1 == rss_from) {
+      rss_reference_kb = ReadProcessStatus().value_or(ProcessStatus{}).rss_kb;
+      heap_reference_bytes = HeapInUseBytes();
+    }
     if ((cycle + 1) % 50 == 0 || cycle + 1 == flags.cycles) {
       const ProcessStatus p = ReadProcessStatus().value_or(ProcessStatus{});
       std::printf("  cycle %4d  %7.1f s  rss %.1f MB  threads %d  violations %zu\n", cycle + 1,
@@ -639,6 +650,9 @@ int Run(const ProgramFlags& flags, int rss_from) {
   if (rss_checked) {
     std::printf("RSS: %.1f MB after cycle %d, %.1f MB at the end (%+.2f%%), peak %.1f MB\n", Mb(rss_reference_kb),
                 rss_from, Mb(end.rss_kb), growth, Mb(end.hwm_kb));
+    // Allocated and not freed, against what the allocator holds: a leak grows the first.
+    std::printf("heap in use (malloc): %.1f MB after cycle %d, %.1f MB at the end\n", heap_reference_bytes / 1048576.0,
+                rss_from, HeapInUseBytes() / 1048576.0);
   } else {
     std::printf("RSS: %.1f MB at the end, peak %.1f MB (growth not checked: fewer than %d cycles)\n", Mb(end.rss_kb),
                 Mb(end.hwm_kb), rss_from + 1);
