@@ -670,6 +670,9 @@ int Run(const ProgramFlags& flags, int rss_from) {
 int main(int argc, char** argv) {
   using linecal::reliability::ProgramFlags;
   if (argc == 3 && std::string(argv[1]) == "--hold-lock") return linecal::reliability::HoldLock(argv[2]);
+  // The allocator as linecald's main sets it (daemon/linecald/main.cc): the soak's memory
+  // figures are the daemon's.
+  mallopt(M_ARENA_MAX, 2);
   ProgramFlags defaults;
   defaults.cycles = 1000;  // acceptance.md's soak
   const absl::StatusOr<ProgramFlags> flags = linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--rss-from"});
