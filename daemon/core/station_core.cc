@@ -191,6 +191,7 @@ StationCore::StationCore(StationCoreConfig config, StationLayout station, std::v
       sources_(std::move(sources)) {}
 
 StationCore::~StationCore() {
+  stopping_ = true;
   cancel_ = true;
   if (worker_.joinable()) worker_.join();
   JoinAbandoned(/*all=*/true);
@@ -325,6 +326,7 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
   if (!id.ok()) return id.status();
   running_ = *id;
   cancel_ = false;
+  ending_ = false;
   worker_ = std::thread(&StationCore::RunCycle, this, *id, request);
   return *id;
 }
@@ -418,6 +420,11 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       end_reason = absl::StrCat("calibration_failed: ", result.status().message());
       return;
     }
+    if (cancel_) {  // asked while the sensors were computed: their results are not stored
+      end_state = CycleState::kCancelled;
+      end_reason = "cancelled";
+      return;
+    }
     // The sensors that failed to acquire take their place in the car model's order.
     std::vector<SensorCalibration> sensors;
     for (const SensorModel& m : car.sensors) {
@@ -447,17 +454,37 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
     end_verdict = OverallVerdict(sensors);
     end_reason = absl::StrJoin(not_passed, ",");
   }();
+  {
+    // The end is decided here: a cancel accepted until now makes the cycle cancelled whatever
+    // it stored; CancelCycle refuses from now on, as for an ended cycle.
+    std::lock_guard<std::mutex> lock(mutex_);
+    ending_ = true;
+    if (cancel_ && end_state == CycleState::kDone) {
+      end_state = CycleState::kCancelled;
+      end_reason = "cancelled";
+    }
+  }
   // The capture of a cycle that acquired it is kept only when asked (a replayed one is never removed).
   if (!request.record_capture && config_.source != CycleSource::kReplay && !capture_rel.empty()) {
     std::error_code ec;
     fs::remove_all(fs::path(config_.data_root) / capture_rel, ec);
   }
   const Verdict verdict = end_state == CycleState::kCancelled ? Verdict::kError : end_verdict;
+  // A database locked past the busy timeout (another process holding it) must not leave the
+  // cycle `running` while the station takes the next car: the end is retried until the lock
+  // is gone (each try waits the busy timeout), and the station stays busy meanwhile. Only
+  // the destructor gives up; the cycle is then aborted at the next start.
+  const auto until_stored = [&](const std::function<absl::Status()>& write) {
+    while (write().code() == absl::StatusCode::kUnavailable && !stopping_) {
+      // 50 ms between tries: with a busy timeout of 0, not a busy loop on the lock.
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  };
   // The last event, then the end in the store, then the station idle: a watcher returns only
   // once the station no longer runs this cycle (WatchCycle), and WaitIdle once it is stored
   // as ended, so whoever sees the end sees all of it.
-  Event(id, "cycle_ended", "", end_reason, verdict).IgnoreError();
-  store_->EndCycle(id, end_state, verdict, end_reason, NowNs()).IgnoreError();
+  until_stored([&] { return Event(id, "cycle_ended", "", end_reason, verdict); });
+  until_stored([&] { return store_->EndCycle(id, end_state, verdict, end_reason, NowNs()); });
   std::lock_guard<std::mutex> lock(mutex_);
   running_.reset();
   changed_.notify_all();
@@ -512,6 +539,7 @@ absl::Status StationCore::CancelCycle(int64_t cycle_id) {
     return absl::FailedPreconditionError(
         absl::StrCat("cycle ", cycle_id, " is not running (", CycleStateName(cycle->state), ")"));
   }
+  if (ending_) return absl::FailedPreconditionError(absl::StrCat("cycle ", cycle_id, " is ending"));
   cancel_ = true;
   return absl::OkStatus();
 }

@@ -21,8 +21,9 @@
 //
 // Errors (absl::Status): InvalidArgument naming the request field; FailedPrecondition for a
 // second cycle while one runs, or cancelling an ended cycle; NotFound for unknown cycle ids;
-// Unavailable when the store is locked. Thread safety: every method may be called from any
-// thread.
+// Unavailable when the store is locked. A cycle whose writes meet a store locked past the busy
+// timeout ends in error ("store_unavailable: ..."), its end stored once the lock is gone.
+// Thread safety: every method may be called from any thread.
 
 #include <atomic>
 #include <chrono>
@@ -118,7 +119,8 @@ class StationCore {
 
   // Validates and starts a cycle; returns its id once it is stored as running.
   absl::StatusOr<int64_t> StartCycle(const CycleRequest& request);
-  // Asks the running cycle to stop at its next step; it ends as cancelled.
+  // Asks the running cycle to stop at its next step; it ends as cancelled (OK means it
+  // will). FailedPrecondition once the cycle has ended or is storing its end.
   absl::Status CancelCycle(int64_t cycle_id);
   absl::StatusOr<StoredCycle> GetCycle(int64_t cycle_id);
   absl::StatusOr<CyclePage> ListCycles(const CycleFilter& filter);
@@ -162,6 +164,8 @@ class StationCore {
   std::condition_variable changed_;  // an event was stored or a cycle ended
   std::optional<int64_t> running_;
   std::atomic<bool> cancel_{false};
+  bool ending_ = false;  // the running cycle's end is decided: cancels are refused (under mutex_)
+  std::atomic<bool> stopping_{false};  // the destructor runs: stop retrying a locked store
   std::thread worker_;
   // Calibrations abandoned at their deadline, still running or done; guarded by mutex_.
   std::vector<std::pair<std::shared_ptr<PendingCalibration>, std::thread>> abandoned_;

@@ -4,6 +4,7 @@
 // SIGTERM or SIGINT: stop taking calls, let a running cycle end as cancelled, exit 0.
 // Under systemd (Type=notify): READY=1 once calls are served, WATCHDOG=1 while the core
 // answers, STOPPING=1 on the signal (daemon/systemd/sd_notify.h).
+#include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
 
@@ -70,6 +71,11 @@ class Watchdog {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Two malloc arenas instead of glibc's 8 per core: each cycle computes its sensors on new
+  // threads, and with an arena each the allocator kept every arena's peak of frames and
+  // clouds after the cycle, so the resident set climbed to 170 MB over the soak's cycles
+  // with under 9 MB in use; with two it stays near 60-110 MB, no slower (docs/reliability.md).
+  mallopt(M_ARENA_MAX, 2);
   std::string config_path, listen, db, log_level, data_dir = "linecald-data";
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];

@@ -5,6 +5,7 @@
 // calibration of the same capture.
 #include "daemon/core/station_core.h"
 
+#include <sqlite3.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -12,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <string>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -49,6 +51,23 @@ class StationCoreTest : public ::testing::Test {
     absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config_);
     EXPECT_TRUE(core.ok()) << core.status();
     return core.ok() ? std::move(*core) : nullptr;
+  }
+
+  // The replay source on a capture of the reference car's front camera and front radar
+  // (seed 9), recorded as data_root/recorded; returns its directory.
+  fs::path UseReplay() {
+    SimulatorOptions o;
+    o.sensors = {"front_camera", "front_radar"};
+    const fs::path rec = fs::path(config_.data_root) / "recorded";
+    fs::create_directories(config_.data_root);
+    const absl::Status simulated = SimulateCapture(*ReadStationLayout(config_.station_path),
+                                                   *ReadCarModel(kDeploy + "/cars/reference.json"), o, 9, rec.string())
+                                       .status();
+    EXPECT_TRUE(simulated.ok()) << simulated;
+    config_.source = CycleSource::kReplay;
+    config_.replay_capture = "recorded";
+    config_.car_model_paths = {kDeploy + "/cars/reference.json"};
+    return rec;
   }
 
   static CycleRequest Request() {
@@ -122,16 +141,7 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
 }
 
 TEST_F(StationCoreTest, ReplaySourceGivesTheOfflineResult) {
-  SimulatorOptions o;
-  o.sensors = {"front_camera", "front_radar"};
-  const fs::path rec = fs::path(config_.data_root) / "recorded";
-  fs::create_directories(config_.data_root);
-  ASSERT_TRUE(SimulateCapture(*ReadStationLayout(config_.station_path), *ReadCarModel(kDeploy + "/cars/reference.json"),
-                              o, 9, rec.string())
-                  .ok());
-  config_.source = CycleSource::kReplay;
-  config_.replay_capture = "recorded";
-  config_.car_model_paths = {kDeploy + "/cars/reference.json"};
+  const fs::path rec = UseReplay();
   std::unique_ptr<StationCore> core = Core();
   CycleRequest request = Request();
   request.car_model_id = "reference";
@@ -203,6 +213,77 @@ TEST_F(StationCoreTest, OneCycleAtATimeCancelAndUnknownIds) {
   EXPECT_EQ(status.car_models, std::vector<std::string>{"two_sensor"});
   EXPECT_EQ(status.running_cycle, std::nullopt);
   EXPECT_GT(status.disk_free_bytes, 0u);
+}
+
+// Another process holds the database's write lock past the busy timeout while a cycle runs:
+// the cycle cannot store its results, ends in error with reason store_unavailable, and that
+// end is stored once the lock is gone (the station stays busy until then, never idle with
+// the cycle left running).
+TEST_F(StationCoreTest, DatabaseLockedMidCycleEndsInErrorStoredOnceTheLockIsGone) {
+  config_.busy_timeout = std::chrono::milliseconds(100);
+  std::unique_ptr<StationCore> core = Core();
+  // A clean cycle first: how long one takes on this machine and build (sanitizers included).
+  const auto t0 = std::chrono::steady_clock::now();
+  const int64_t clean = *core->StartCycle(Request());
+  core->WaitIdle();
+  const auto cycle_time = std::chrono::steady_clock::now() - t0;
+  ASSERT_EQ(core->GetCycle(clean)->state, CycleState::kDone);
+
+  const int64_t id = *core->StartCycle(Request());
+  sqlite3* other = nullptr;
+  ASSERT_EQ(sqlite3_open(config_.db_path.c_str(), &other), SQLITE_OK);
+  sqlite3_busy_timeout(other, 5000);  // the cycle's own first write may hold the lock briefly
+  ASSERT_EQ(sqlite3_exec(other, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK);
+  // Held for twice a whole cycle and a second: the cycle meets the lock when it stores.
+  std::this_thread::sleep_for(2 * cycle_time + std::chrono::seconds(1));
+  EXPECT_EQ(core->Status().running_cycle, std::optional<int64_t>(id));
+  EXPECT_EQ(core->GetCycle(id)->state, CycleState::kRunning);
+  ASSERT_EQ(sqlite3_exec(other, "COMMIT", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_close(other);
+  core->WaitIdle();
+  absl::StatusOr<StoredCycle> cycle = core->GetCycle(id);
+  ASSERT_TRUE(cycle.ok()) << cycle.status();
+  EXPECT_EQ(cycle->state, CycleState::kDone);
+  EXPECT_EQ(cycle->verdict, Verdict::kError);
+  EXPECT_EQ(cycle->reason.rfind("store_unavailable: ", 0), 0u) << cycle->reason;
+  EXPECT_NE(cycle->reason.find(config_.db_path), std::string::npos) << cycle->reason;
+  EXPECT_TRUE(cycle->sensors.empty());
+  const std::vector<StoredEvent> events = *core->store().Events(id);
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().type, "cycle_ended");
+  EXPECT_EQ(events.back().detail, cycle->reason);
+  EXPECT_TRUE(core->store().IntegrityCheck().ok());
+}
+
+// A cancel that CancelCycle accepted ends the cycle cancelled wherever it lands (before,
+// during or after the sensors are computed); one refused came after the end was decided, and
+// that cycle ends done. Replay cycles, cancels after growing delays.
+TEST_F(StationCoreTest, AcceptedCancelAlwaysEndsTheCycleCancelled) {
+  UseReplay();
+  std::unique_ptr<StationCore> core = Core();
+  CycleRequest request = Request();
+  request.car_model_id = "reference";
+  int accepted = 0, refused = 0;
+  for (const int delay_ms : {0, 1, 5, 20, 50, 100, 200, 400, 800, 1600}) {
+    SCOPED_TRACE(delay_ms);
+    const int64_t id = *core->StartCycle(request);
+    std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
+    const absl::Status cancel = core->CancelCycle(id);
+    core->WaitIdle();
+    const StoredCycle cycle = *core->GetCycle(id);
+    if (cancel.ok()) {
+      ++accepted;
+      EXPECT_EQ(cycle.state, CycleState::kCancelled);
+      EXPECT_EQ(cycle.verdict, Verdict::kError);
+      EXPECT_EQ(cycle.reason, "cancelled");
+    } else {
+      ++refused;
+      EXPECT_EQ(cancel.code(), absl::StatusCode::kFailedPrecondition) << cancel;
+      EXPECT_EQ(cycle.state, CycleState::kDone);
+      EXPECT_EQ(cycle.sensors.size(), 2u);
+    }
+  }
+  EXPECT_EQ(accepted + refused, 10);
 }
 
 TEST_F(StationCoreTest, BadConfigurationNamesTheFile) {

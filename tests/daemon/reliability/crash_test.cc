@@ -1,0 +1,418 @@
+// linecal-crash-test: linecald as a child process (replay source, its own SQLite file), cycles
+// started and watched over gRPC on loopback, the daemon killed with SIGKILL at random moments
+// and restarted. After every restart nothing the client saw committed may be lost or changed,
+// and every interrupted cycle must be stored as aborted with reason daemon_restarted
+// (acceptance.md, "kill -9 at random moments in 100 cycles"; docs/reliability.md).
+// `tools/crash-test` runs it.
+//
+//   linecal-crash-test [--cycles N] [--seed S] [--sensors a,b,...] [--linecald PATH] [--dir DIR]
+//
+// Round 0 measures the daemon's start-up and one cycle (no kill). Then N rounds: the client
+// runs cycles back to back (StartCycle, WatchCycle to the end, GetCycle) and a killer thread
+// sends SIGKILL at a moment drawn uniformly from 0 to 2.2 cycle times after the round's first
+// StartCycle; every fifth round also kills the daemon once while it starts (opening the store,
+// aborting the cycle left running), at a moment drawn up to its start-up time. Exit status 0
+// when every check held, 1 otherwise, 2 for bad flags or a failed setup.
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <google/protobuf/util/message_differencer.h>
+#include <grpcpp/grpcpp.h>
+#include <nlohmann/json.hpp>
+
+#include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+#include "daemon/store/store.h"
+#include "linecal/v1/station.grpc.pb.h"
+#include "tests/daemon/reliability/reliability_support.h"
+
+namespace linecal::reliability {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+constexpr char kCarId[] = "crash";
+// Generous for loopback calls and for a start-up on a loaded machine; a call that takes
+// longer is a hang worth reporting.
+constexpr std::chrono::seconds kCallDeadline{30};
+constexpr std::chrono::seconds kStartTimeout{30};
+// Every this many rounds the daemon is also killed while it starts.
+constexpr int kStartupKillEvery = 5;
+
+// What the client was doing when the daemon was killed.
+enum Phase : int { kIdle, kStarting, kWatching, kReading, kPhases };
+constexpr const char* kPhaseNames[kPhases] = {"between calls", "in StartCycle", "in WatchCycle (cycle running)",
+                                              "in GetCycle (cycle ended)"};
+
+std::chrono::system_clock::time_point Deadline() { return std::chrono::system_clock::now() + kCallDeadline; }
+
+struct Client {
+  explicit Client(int port)
+      : stub(v1::Station::NewStub(
+            grpc::CreateChannel(absl::StrCat("127.0.0.1:", port), grpc::InsecureChannelCredentials()))) {}
+
+  grpc::Status Get(const std::string& id, v1::Cycle* out) {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    v1::GetCycleRequest request;
+    request.set_cycle_id(id);
+    return stub->GetCycle(&context, request, out);
+  }
+
+  // Every cycle stored, newest first.
+  grpc::Status ListAll(std::vector<v1::Cycle>* out) {
+    v1::ListCyclesRequest request;
+    request.set_page_size(1000);  // the API's largest page
+    do {
+      grpc::ClientContext context;
+      context.set_deadline(Deadline());
+      v1::ListCyclesResponse page;
+      if (grpc::Status s = stub->ListCycles(&context, request, &page); !s.ok()) return s;
+      out->insert(out->end(), page.cycles().begin(), page.cycles().end());
+      request.set_page_token(page.next_page_token());
+    } while (!request.page_token().empty());
+    return grpc::Status::OK;
+  }
+
+  std::unique_ptr<v1::Station::Stub> stub;
+};
+
+struct Run {
+  ProgramFlags flags;
+  std::string linecald;
+  fs::path dir;
+  std::string config_path, log_path, db_path;
+  std::mt19937_64 rng;
+  // Cycles the client saw ended (GetCycle after the watch): exactly this after every restart.
+  std::map<std::string, v1::Cycle> committed;
+  // Started (StartCycle answered) but not seen ended; `watched_to_end`: the watch stream
+  // ended OK, so the end was committed even if GetCycle did not get through.
+  std::map<std::string, bool> pending;
+  std::vector<std::string> violations;
+  int interrupted = 0, ended_unseen = 0, unacknowledged = 0, started = 0, startup_kills = 0, cycle_kills = 0;
+  int phase_kills[kPhases] = {};
+  double startup_s = 0, cycle_s = 0;
+  std::int64_t rss_after_cycle_kb = 0;
+};
+
+void Violation(Run& r, const std::string& what) {
+  r.violations.push_back(what);
+  std::fprintf(stderr, "linecal-crash-test: %s\n", what.c_str());
+}
+
+absl::StatusOr<std::unique_ptr<LinecaldProcess>> Spawn(const Run& r) {
+  return LinecaldProcess::Spawn(r.linecald, {"--config", r.config_path}, r.log_path);
+}
+
+std::string Describe(const v1::Cycle& c) {
+  return absl::StrCat(v1::CycleState_Name(c.state()), " ", v1::Verdict_Name(c.verdict()), " '", c.reason(), "'");
+}
+
+// After a restart: every committed cycle as it was, every pending one ended or aborted,
+// nothing running, and cycles the client never heard of (killed inside StartCycle) ended.
+void Verify(Run& r, Client& client, const std::string& when) {
+  for (const auto& [id, before] : r.committed) {
+    v1::Cycle now;
+    if (grpc::Status s = client.Get(id, &now); !s.ok()) {
+      Violation(r, absl::StrCat(when, ": committed cycle ", id, " lost: ", s.error_message()));
+    } else if (!google::protobuf::util::MessageDifferencer::Equals(before, now)) {
+      Violation(r, absl::StrCat(when, ": committed cycle ", id, " changed: was ", Describe(before), ", now ",
+                                Describe(now)));
+    }
+  }
+  for (const auto& [id, watched_to_end] : r.pending) {
+    v1::Cycle now;
+    if (grpc::Status s = client.Get(id, &now); !s.ok()) {
+      Violation(r, absl::StrCat(when, ": started cycle ", id, " lost: ", s.error_message()));
+      continue;
+    }
+    if (now.state() == v1::CYCLE_STATE_ABORTED) {
+      if (now.reason() != "daemon_restarted" || now.verdict() != v1::VERDICT_ERROR) {
+        Violation(r, absl::StrCat(when, ": interrupted cycle ", id, " is ", Describe(now)));
+      }
+      if (watched_to_end) Violation(r, absl::StrCat(when, ": cycle ", id, " was seen ended, now aborted"));
+      ++r.interrupted;
+    } else if (now.state() == v1::CYCLE_STATE_DONE || now.state() == v1::CYCLE_STATE_CANCELLED) {
+      ++r.ended_unseen;  // its end was committed just before the kill
+    } else {
+      Violation(r, absl::StrCat(when, ": cycle ", id, " is ", Describe(now), " after a restart"));
+    }
+    r.committed[id] = now;
+  }
+  r.pending.clear();
+  std::vector<v1::Cycle> all;
+  if (grpc::Status s = client.ListAll(&all); !s.ok()) {
+    Violation(r, absl::StrCat(when, ": ListCycles: ", s.error_message()));
+    return;
+  }
+  for (const v1::Cycle& c : all) {
+    if (r.committed.count(c.cycle_id())) continue;
+    // Stored by a StartCycle whose answer the kill cut off.
+    if (c.state() == v1::CYCLE_STATE_RUNNING || c.state() == v1::CYCLE_STATE_UNSPECIFIED) {
+      Violation(r, absl::StrCat(when, ": unacknowledged cycle ", c.cycle_id(), " is ", Describe(c)));
+    }
+    ++r.unacknowledged;
+    v1::Cycle full;
+    if (client.Get(c.cycle_id(), &full).ok()) r.committed[c.cycle_id()] = full;
+  }
+  if (all.size() != r.committed.size()) {
+    Violation(r, absl::StrCat(when, ": ", all.size(), " cycles listed, ", r.committed.size(), " known"));
+  }
+}
+
+// One cycle through the API, as `linecal cycle start --wait` runs it: StartCycle, WatchCycle
+// to the stream's end, GetCycle. `phase` follows the calls; on_started gets the id as soon
+// as StartCycle answers. Fails with the first failed call, named.
+struct CycleCall {
+  std::string id;
+  bool watched_to_end = false;  // the stream ended OK after cycle_ended: the end is committed
+  v1::Cycle cycle;
+};
+absl::Status OneCycle(Client& client, std::atomic<int>* phase, const std::function<void(const std::string&)>& on_started,
+                      CycleCall* out) {
+  const auto failed = [](const char* call, const grpc::Status& s) {
+    return absl::UnavailableError(absl::StrCat(call, ": ", s.error_message()));
+  };
+  *phase = kStarting;
+  {
+    v1::StartCycleRequest request;
+    request.set_vin(kVin);
+    request.set_car_model_id(kCarId);
+    v1::StartCycleResponse response;
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    if (grpc::Status s = client.stub->StartCycle(&context, request, &response); !s.ok()) return failed("StartCycle", s);
+    out->id = response.cycle_id();
+  }
+  on_started(out->id);
+  *phase = kWatching;
+  {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    v1::WatchCycleRequest watch;
+    watch.set_cycle_id(out->id);
+    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = client.stub->WatchCycle(&context, watch);
+    v1::CycleEvent event;
+    bool ended = false;
+    while (reader->Read(&event)) ended |= event.type() == v1::CycleEvent::TYPE_CYCLE_ENDED;
+    if (grpc::Status s = reader->Finish(); !s.ok()) return failed("WatchCycle", s);
+    if (!ended) return absl::InternalError(absl::StrCat("cycle ", out->id, ": the watch ended OK without cycle_ended"));
+    out->watched_to_end = true;
+  }
+  *phase = kReading;
+  if (grpc::Status s = client.Get(out->id, &out->cycle); !s.ok()) return failed("GetCycle", s);
+  *phase = kIdle;
+  if (out->cycle.state() == v1::CYCLE_STATE_RUNNING) {
+    return absl::InternalError(absl::StrCat("cycle ", out->id, " still running after its watch ended"));
+  }
+  return absl::OkStatus();
+}
+
+// Runs cycles back to back until a call fails; a failure before `killed` is a violation.
+void CycleLoop(Run& r, Client& client, const std::atomic<bool>& killed, std::atomic<int>* phase) {
+  while (true) {
+    CycleCall call;
+    const absl::Status s = OneCycle(client, phase, [&](const std::string& id) {
+      ++r.started;
+      r.pending[id] = false;
+    }, &call);
+    if (call.watched_to_end) r.pending[call.id] = true;
+    if (!s.ok()) {
+      if (!killed || s.code() != absl::StatusCode::kUnavailable) {
+        Violation(r, absl::StrCat(s.message(), killed ? "" : " (the daemon alive)"));
+      }
+      return;
+    }
+    r.committed[call.id] = call.cycle;
+    r.pending.erase(call.id);
+  }
+}
+
+int Main(const ProgramFlags& flags, const std::string& linecald) {
+  absl::StatusOr<Workspace> workspace = PrepareWorkspace(flags, "crash", kCarId, "data/replay");
+  if (!workspace.ok()) {
+    std::fprintf(stderr, "linecal-crash-test: setup: %s\n", workspace.status().ToString().c_str());
+    return 2;
+  }
+  Run r;
+  r.flags = flags;
+  r.linecald = linecald;
+  r.rng.seed(flags.seed);
+  r.dir = workspace->dir;
+  const auto setup_failed = [&](const absl::Status& s) {
+    std::fprintf(stderr, "linecal-crash-test: setup: %s\n", s.ToString().c_str());
+    if (workspace->owned) fs::remove_all(r.dir);
+    return 2;
+  };
+  r.config_path = (r.dir / "linecald.json").string();
+  r.log_path = (r.dir / "linecald.log").string();
+  r.db_path = (r.dir / "data" / "linecal.db").string();
+  std::ofstream(r.config_path) << nlohmann::json{{"listen", "127.0.0.1:0"},
+                                                 {"station_id", "crash"},
+                                                 {"station", ReferenceStationPath()},
+                                                 {"car_models", {workspace->car_path}},
+                                                 {"data_root", "data"},
+                                                 {"db", "linecal.db"},
+                                                 {"source", {{"type", "replay"}, {"capture", "replay"}}}}
+                                      .dump(2);
+  std::printf("linecal-crash-test: %d rounds, seed %llu, scratch %s\n", flags.cycles,
+              static_cast<unsigned long long>(flags.seed), r.dir.c_str());
+  const Clock::time_point start = Clock::now();
+
+  // Round 0: the times the kill moments are drawn against.
+  {
+    const Clock::time_point t0 = Clock::now();
+    absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+    if (!daemon.ok()) return setup_failed(daemon.status());
+    absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
+    if (!port.ok()) return setup_failed(port.status());
+    r.startup_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    Client client(*port);
+    std::atomic<int> phase{kIdle};
+    CycleCall call;
+    const Clock::time_point c0 = Clock::now();
+    if (absl::Status s = OneCycle(client, &phase, [](const std::string&) {}, &call); !s.ok()) return setup_failed(s);
+    r.cycle_s = std::chrono::duration<double>(Clock::now() - c0).count();
+    if (call.cycle.state() != v1::CYCLE_STATE_DONE) {
+      return setup_failed(absl::InternalError("round 0's cycle ended " + Describe(call.cycle)));
+    }
+    ++r.started;
+    r.committed[call.id] = call.cycle;
+    r.rss_after_cycle_kb = ReadProcessStatus(std::to_string((*daemon)->pid())).value_or(ProcessStatus{}).rss_kb;
+    (*daemon)->Signal(SIGTERM);
+    const int status = (*daemon)->Wait();
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+      Violation(r, "round 0: SIGTERM: " + DescribeWaitStatus(status));
+    }
+  }
+  std::printf("  start-up %.0f ms, one cycle %.0f ms (round 0)\n", r.startup_s * 1e3, r.cycle_s * 1e3);
+
+  for (int round = 1; round <= flags.cycles; ++round) {
+    const std::string when = absl::StrCat("round ", round);
+    if (round % kStartupKillEvery == 0) {
+      absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+      if (!daemon.ok()) return setup_failed(daemon.status());
+      std::this_thread::sleep_for(std::chrono::duration<double>(
+          std::uniform_real_distribution<double>(0, r.startup_s)(r.rng)));
+      (*daemon)->Signal(SIGKILL);
+      const int status = (*daemon)->Wait();
+      // Killed, or it had already started and was killed idle: both fine; exiting otherwise is not.
+      if (!(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)) {
+        Violation(r, absl::StrCat(when, ": killed while starting: ", DescribeWaitStatus(status)));
+      }
+      ++r.startup_kills;
+    }
+    absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+    if (!daemon.ok()) return setup_failed(daemon.status());
+    absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
+    if (!port.ok()) {
+      Violation(r, absl::StrCat(when, ": restart: ", port.status().message()));
+      break;
+    }
+    Client client(*port);
+    Verify(r, client, when);
+
+    // Armed now, just before the round's first StartCycle.
+    std::atomic<bool> killed{false};
+    std::atomic<int> phase{kIdle};
+    const double kill_after_s = std::uniform_real_distribution<double>(0, 2.2 * r.cycle_s)(r.rng);
+    std::thread killer([&] {
+      std::this_thread::sleep_for(std::chrono::duration<double>(kill_after_s));
+      ++r.phase_kills[phase.load()];
+      killed = true;
+      (*daemon)->Signal(SIGKILL);
+    });
+    CycleLoop(r, client, killed, &phase);
+    killer.join();
+    const int status = (*daemon)->Wait();
+    if (!(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)) {
+      Violation(r, absl::StrCat(when, ": the daemon ended by itself: ", DescribeWaitStatus(status)));
+    }
+    ++r.cycle_kills;
+    if (round % 10 == 0 || round == flags.cycles) {
+      std::printf("  round %3d  %6.1f s  cycles started %d  violations %zu\n", round,
+                  std::chrono::duration<double>(Clock::now() - start).count(), r.started, r.violations.size());
+      std::fflush(stdout);
+    }
+  }
+
+  // The last restart: everything verified once more, then a clean stop and the file itself.
+  int final_status = -1;
+  {
+    absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+    if (!daemon.ok()) return setup_failed(daemon.status());
+    absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
+    if (port.ok()) {
+      Client client(*port);
+      Verify(r, client, "final restart");
+    } else {
+      Violation(r, absl::StrCat("final restart: ", port.status().message()));
+    }
+    (*daemon)->Signal(SIGTERM);
+    final_status = (*daemon)->Wait();
+    if (!WIFEXITED(final_status) || WEXITSTATUS(final_status) != 0) {
+      Violation(r, "final SIGTERM: " + DescribeWaitStatus(final_status));
+    }
+  }
+  absl::Status integrity = absl::UnknownError("not opened");
+  int aborted_at_open = -1;
+  if (absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(r.db_path); store.ok()) {
+    integrity = (*store)->IntegrityCheck();
+    aborted_at_open = (*store)->aborted_at_open();
+  } else {
+    integrity = store.status();
+  }
+  if (!integrity.ok()) Violation(r, "integrity_check: " + integrity.ToString());
+  if (aborted_at_open != 0) Violation(r, absl::StrCat(aborted_at_open, " cycles running after the clean stop"));
+
+  std::printf("\n%d rounds in %.1f s: %d kills during cycles, %d during start-up\n", flags.cycles,
+              std::chrono::duration<double>(Clock::now() - start).count(), r.cycle_kills, r.startup_kills);
+  std::printf("kills by what the client was doing:\n");
+  for (int p = 0; p < kPhases; ++p) std::printf("  %-32s %d\n", kPhaseNames[p], r.phase_kills[p]);
+  std::printf("cycles started (answered): %d; stored in all: %zu\n", r.started, r.committed.size());
+  std::printf("  interrupted, stored aborted (daemon_restarted): %d\n", r.interrupted);
+  std::printf("  ended just before the kill, unseen by the client: %d\n", r.ended_unseen);
+  std::printf("  stored by a StartCycle whose answer the kill cut off: %d\n", r.unacknowledged);
+  std::printf("daemon RSS after one cycle: %.1f MB\n", r.rss_after_cycle_kb / 1024.0);
+  std::printf("integrity_check: %s; final SIGTERM: %s; running at the last open: %d\n",
+              integrity.ok() ? "ok" : std::string(integrity.message()).c_str(),
+              DescribeWaitStatus(final_status).c_str(), aborted_at_open);
+  std::printf("violations: %zu\n", r.violations.size());
+  for (const std::string& v : r.violations) std::printf("  %s\n", v.c_str());
+  if (workspace->owned && r.violations.empty()) fs::remove_all(r.dir);
+  return r.violations.empty() ? 0 : 1;
+}
+
+}  // namespace
+}  // namespace linecal::reliability
+
+int main(int argc, char** argv) {
+  using linecal::reliability::ProgramFlags;
+  ProgramFlags defaults;
+  defaults.cycles = 100;  // acceptance.md: kill -9 at random moments in 100 cycles
+  const absl::StatusOr<ProgramFlags> flags = linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--linecald"});
+  if (!flags.ok()) {
+    std::fprintf(stderr,
+                 "linecal-crash-test: %s\nusage: linecal-crash-test [--cycles N] [--seed S] [--sensors a,b,...] "
+                 "[--linecald PATH] [--dir DIR]\n",
+                 std::string(flags.status().message()).c_str());
+    return 2;
+  }
+  const auto linecald = flags->own.find("--linecald");
+  return linecal::reliability::Main(
+      *flags, linecald != flags->own.end() ? linecald->second : std::string(LINECAL_BINARY_DIR) + "/bin/linecald");
+}

@@ -1,0 +1,692 @@
+// linecal-soak: many cycles of a real StationCore (replay source, a real SQLite file) with
+// faults injected, checking that every cycle ends stored with a state and a reason, that the
+// database stays intact, and that threads, descriptors and memory do not leak
+// (acceptance.md, "soak"; docs/reliability.md). `tools/soak` runs it.
+//
+//   linecal-soak [--cycles N] [--seed S] [--sensors a,b,...] [--rss-from K] [--dir DIR]
+//
+// Cycle 0 is clean: its results are what every undisturbed sensor must give again, bit for
+// bit (a replayed capture computes the same every time). Cycles 1..F inject each fault of
+// the table once, in order; the rest draw a fault by weight from a generator seeded with S.
+// (`linecal-soak --hold-lock DB` is the soak's own helper process that locks the database.)
+// Exit status 0 when every expectation and every final check held, 1 otherwise, 2 for bad
+// flags or a setup that failed.
+//
+// The faults are a table (Faults()); each runs one cycle with its fault and checks the
+// outcome it must have. A live-source fault (a camera that vanishes, a silent CAN bus) is one
+// more entry, run on a core configured with that source.
+#include <fcntl.h>
+#include <malloc.h>
+#include <spawn.h>
+#include <sqlite3.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <map>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "daemon/core/station_core.h"
+#include "station/capture/capture.h"
+#include "tests/daemon/reliability/reliability_support.h"
+
+namespace linecal::reliability {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+constexpr char kCarId[] = "soak";
+// The store's busy timeout in the soak: long enough that a briefly locked database is waited
+// out, short enough that the locked-database faults cost seconds, not minutes.
+constexpr std::chrono::milliseconds kBusyTimeout{500};
+
+// The run's state the faults work on.
+struct Soak {
+  StationCore* core = nullptr;
+  fs::path capture;   // the replayed capture (data_root/replay), restored after each fault
+  fs::path pristine;  // the untouched copy
+  Capture layout;     // the pristine capture as read: which files each sensor has
+  std::string db_path;
+  std::mt19937_64 rng;
+  CycleRequest request;
+  Clock::duration clean_time{};          // of cycle 0
+  StoredCycle clean;                     // cycle 0, elapsed times zeroed
+  std::vector<std::int64_t> started;     // every id StartCycle returned
+  std::vector<std::string> changed;      // capture files a fault changed (relative)
+  std::vector<Clock::duration> cycle_times;
+};
+
+absl::Status Violation(const std::string& what) { return absl::InternalError(what); }
+
+double Uniform(Soak& s, double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(s.rng); }
+size_t Pick(Soak& s, size_t n) { return std::uniform_int_distribution<size_t>(0, n - 1)(s.rng); }
+
+// Every sensor of the capture of `kind`.
+std::vector<const CaptureSensor*> SensorsOf(const Soak& s, SensorKind kind) {
+  std::vector<const CaptureSensor*> out;
+  for (const CaptureSensor& c : s.layout.manifest.sensors) {
+    if (c.kind == kind) out.push_back(&c);
+  }
+  return out;
+}
+
+// A file of the capture about to be changed: remembered, to be restored from the pristine copy.
+fs::path Change(Soak& s, const std::string& relative) {
+  s.changed.push_back(relative);
+  return s.capture / relative;
+}
+
+absl::Status Restore(Soak& s) {
+  for (const std::string& rel : s.changed) {
+    std::error_code ec;
+    fs::copy_file(s.pristine / rel, s.capture / rel, fs::copy_options::overwrite_existing, ec);
+    if (ec) return Violation(absl::StrCat("restore ", rel, ": ", ec.message()));
+  }
+  s.changed.clear();
+  return absl::OkStatus();
+}
+
+// Another process holding the database's write lock (BEGIN EXCLUSIVE) for as long as this
+// object lives: linecal-soak itself, run as `linecal-soak --hold-lock DB` (HoldLock below). It
+// is a process, not a second connection of ours, because SQLite keeps a closed connection's
+// descriptor open while another connection of the same process holds a lock on the file.
+class DatabaseLock {
+ public:
+  explicit DatabaseLock(const std::string& db_path) {
+    int to_child[2], from_child[2];
+    if (::pipe2(to_child, O_CLOEXEC) != 0) return;
+    if (::pipe2(from_child, O_CLOEXEC) != 0) {
+      ::close(to_child[0]);
+      ::close(to_child[1]);
+      return;
+    }
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, to_child[0], STDIN_FILENO);
+    posix_spawn_file_actions_adddup2(&actions, from_child[1], STDOUT_FILENO);
+    // /proc/self/exe: this very binary, even when a rebuild has replaced the file meanwhile.
+    std::string self = "/proc/self/exe", flag = "--hold-lock", db = db_path;
+    char* argv[] = {self.data(), flag.data(), db.data(), nullptr};
+    const bool spawned = posix_spawn(&pid_, self.c_str(), &actions, nullptr, argv, environ) == 0;
+    posix_spawn_file_actions_destroy(&actions);
+    ::close(to_child[0]);
+    ::close(from_child[1]);
+    release_ = to_child[1];
+    char answer = 0;
+    held_ = spawned && ::read(from_child[0], &answer, 1) == 1 && answer == 'L';
+    ::close(from_child[0]);
+    if (!spawned) pid_ = -1;
+  }
+  // Closing the pipe tells the holder to commit and exit.
+  ~DatabaseLock() {
+    ::close(release_);
+    if (pid_ > 0) ::waitpid(pid_, nullptr, 0);
+  }
+  bool held() const { return held_; }
+
+ private:
+  pid_t pid_ = -1;
+  int release_ = -1;
+  bool held_ = false;
+};
+
+// The lock holder's side: takes the lock, says 'L' on stdout (or 'E'), holds it until stdin
+// closes, commits.
+int HoldLock(const char* db_path) {
+  sqlite3* db = nullptr;
+  const bool held = sqlite3_open(db_path, &db) == SQLITE_OK && sqlite3_busy_timeout(db, 10000) == SQLITE_OK &&
+                    sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr) == SQLITE_OK;
+  const char answer = held ? 'L' : 'E';
+  if (::write(STDOUT_FILENO, &answer, 1) != 1) return 1;
+  char byte;
+  while (::read(STDIN_FILENO, &byte, 1) > 0) {
+  }
+  if (held) sqlite3_exec(db, "COMMIT", nullptr, nullptr, nullptr);
+  sqlite3_close(db);
+  return held ? 0 : 1;
+}
+
+// Starts the cycle, runs `during` while it runs, waits for its stored end and reads it.
+absl::StatusOr<StoredCycle> RunOneCycle(Soak& s, const std::function<absl::Status(std::int64_t)>& during = nullptr) {
+  const Clock::time_point t0 = Clock::now();
+  absl::StatusOr<std::int64_t> id = s.core->StartCycle(s.request);
+  if (!id.ok()) return Violation(absl::StrCat("StartCycle: ", id.status().ToString()));
+  s.started.push_back(*id);
+  const absl::Status d = during ? during(*id) : absl::OkStatus();
+  s.core->WaitIdle();
+  s.cycle_times.push_back(Clock::now() - t0);
+  if (!d.ok()) return d;
+  absl::StatusOr<StoredCycle> cycle = s.core->GetCycle(*id);
+  if (!cycle.ok()) return Violation(absl::StrCat("GetCycle ", *id, ": ", cycle.status().ToString()));
+  for (StoredSensorResult& r : cycle->sensors) r.elapsed_ns = 0;
+  return cycle;
+}
+
+// The rule for every stored cycle: ended, with end time, and a reason unless it passed.
+absl::Status ExpectEnded(const StoredCycle& c) {
+  if (c.state == CycleState::kRunning) return Violation(absl::StrCat("cycle ", c.id, " still running"));
+  if (c.ended_ns < c.started_ns || c.started_ns <= 0) {
+    return Violation(absl::StrCat("cycle ", c.id, ": ended_ns ", c.ended_ns, " before started_ns ", c.started_ns));
+  }
+  const bool passed = c.state == CycleState::kDone && c.verdict == Verdict::kPass;
+  if (!passed && c.reason.empty()) {
+    return Violation(absl::StrCat("cycle ", c.id, " (", CycleStateName(c.state), ", ", VerdictName(c.verdict),
+                                  ") has no reason"));
+  }
+  return absl::OkStatus();
+}
+
+// Every sensor but `except` gave what it gave in cycle 0.
+absl::Status ExpectSensorsAsClean(const Soak& s, const StoredCycle& c, const std::string& except = "") {
+  if (c.state != CycleState::kDone) {
+    return Violation(absl::StrCat("cycle ", c.id, ": ", CycleStateName(c.state), " (", c.reason, "), expected done"));
+  }
+  if (c.sensors.size() != s.clean.sensors.size()) {
+    return Violation(absl::StrCat("cycle ", c.id, ": ", c.sensors.size(), " sensor results, expected ",
+                                  s.clean.sensors.size(), " (", c.reason, ")"));
+  }
+  for (size_t i = 0; i < c.sensors.size(); ++i) {
+    if (c.sensors[i].sensor != except && !(c.sensors[i] == s.clean.sensors[i])) {
+      return Violation(absl::StrCat("cycle ", c.id, ": ", c.sensors[i].sensor, " differs from cycle 0 (",
+                                    VerdictName(c.sensors[i].verdict), " ", c.sensors[i].reason, ")"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ExpectClean(const Soak& s, const StoredCycle& c) {
+  if (absl::Status st = ExpectSensorsAsClean(s, c); !st.ok()) return st;
+  if (c.verdict != s.clean.verdict || c.reason != s.clean.reason) {
+    return Violation(absl::StrCat("cycle ", c.id, ": verdict ", VerdictName(c.verdict), " '", c.reason,
+                                  "', cycle 0 had ", VerdictName(s.clean.verdict), " '", s.clean.reason, "'"));
+  }
+  return absl::OkStatus();
+}
+
+// The one damaged sensor is in error with data_unreadable naming the file; the others as in
+// cycle 0; the cycle done in error with the sensor in its reason.
+absl::Status ExpectUnreadable(const Soak& s, const StoredCycle& c, const std::string& sensor, const std::string& file) {
+  if (absl::Status st = ExpectSensorsAsClean(s, c, sensor); !st.ok()) return st;
+  for (const StoredSensorResult& r : c.sensors) {
+    if (r.sensor != sensor) continue;
+    if (r.verdict != Verdict::kError || r.reason != "data_unreadable") {
+      return Violation(absl::StrCat("cycle ", c.id, ": ", sensor, " ", VerdictName(r.verdict), " '", r.reason,
+                                    "', expected error data_unreadable (", file, ")"));
+    }
+    if (r.message.find(fs::path(file).filename().string()) == std::string::npos) {
+      return Violation(absl::StrCat("cycle ", c.id, ": ", sensor, "'s message does not name ", file, ": ", r.message));
+    }
+  }
+  if (c.verdict != Verdict::kError || c.reason.find(sensor + ":data_unreadable") == std::string::npos) {
+    return Violation(absl::StrCat("cycle ", c.id, ": ", VerdictName(c.verdict), " '", c.reason, "', expected error with ",
+                                  sensor, ":data_unreadable"));
+  }
+  return absl::OkStatus();
+}
+
+// One fault: runs one cycle (or attempts one) with it and checks the outcome it must have;
+// returns the outcome's name for the summary, or a violated expectation.
+struct Fault {
+  std::string name;
+  int weight;  // relative frequency after the first pass over the table
+  std::string what;
+  std::function<absl::StatusOr<std::string>(Soak&)> run;
+};
+
+absl::StatusOr<std::string> Clean(Soak& s) {
+  absl::StatusOr<StoredCycle> c = RunOneCycle(s);
+  if (!c.ok()) return c.status();
+  if (absl::Status st = ExpectClean(s, *c); !st.ok()) return st;
+  return std::string("done as cycle 0");
+}
+
+// A camera frame, LiDAR scan or CAN log damaged by `damage` (given the file's bytes).
+absl::StatusOr<std::string> DamagedSensor(Soak& s, SensorKind kind,
+                                          const std::function<void(std::string*)>& damage) {
+  const std::vector<const CaptureSensor*> sensors = SensorsOf(s, kind);
+  if (sensors.empty()) return std::string("skipped: no sensor of this kind");
+  const CaptureSensor& sensor = *sensors[Pick(s, sensors.size())];
+  const std::string rel = kind == SensorKind::kRadar ? sensor.can_log->path : sensor.frames[Pick(s, sensor.frames.size())].path;
+  const fs::path path = Change(s, rel);
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  damage(&bytes);
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+  absl::StatusOr<StoredCycle> c = RunOneCycle(s);
+  if (!c.ok()) return c.status();
+  if (absl::Status st = ExpectUnreadable(s, *c, sensor.name, rel); !st.ok()) return st;
+  return std::string("sensor error data_unreadable, others as cycle 0");
+}
+
+absl::StatusOr<std::string> CorruptCameraFrame(Soak& s) {
+  return DamagedSensor(s, SensorKind::kCamera, [&](std::string* png) {
+    // 32 random bytes in the second half: inside the compressed image data, whose chunk CRCs
+    // and zlib checks must catch it.
+    for (int i = 0; i < 32; ++i) {
+      (*png)[png->size() / 2 + Pick(s, png->size() / 2)] = static_cast<char>(Pick(s, 256));
+    }
+  });
+}
+
+absl::StatusOr<std::string> TruncatedCameraFrame(Soak& s) {
+  return DamagedSensor(s, SensorKind::kCamera,
+                       [&](std::string* png) { png->resize(static_cast<size_t>(png->size() * Uniform(s, 0.1, 0.9))); });
+}
+
+absl::StatusOr<std::string> TruncatedLidarScan(Soak& s) {
+  return DamagedSensor(s, SensorKind::kLidar,
+                       [&](std::string* pcd) { pcd->resize(static_cast<size_t>(pcd->size() * Uniform(s, 0.3, 0.95))); });
+}
+
+absl::StatusOr<std::string> TruncatedCanLog(Soak& s) {
+  return DamagedSensor(s, SensorKind::kRadar, [&](std::string* log) {
+    // Cut inside the "(seconds.micros)" stamp of a line in the middle: a partial last line.
+    const size_t from = log->size() / 4 + Pick(s, log->size() / 2);
+    const size_t line = log->rfind('\n', from);
+    const size_t start = line == std::string::npos ? 0 : line + 1;
+    log->resize(start + 1 + Pick(s, 10));
+  });
+}
+
+absl::StatusOr<std::string> MissingFile(Soak& s) {
+  std::vector<std::string> files = {kCaptureManifestFile, kCaptureStationFile, kCaptureCarFile};
+  for (const CaptureSensor& c : s.layout.manifest.sensors) {
+    for (const CaptureFile& f : c.frames) files.push_back(f.path);
+    if (c.packets) files.push_back(c.packets->path);
+    if (c.can_log) files.push_back(c.can_log->path);
+  }
+  const std::string rel = files[Pick(s, files.size())];
+  fs::remove(Change(s, rel));
+  absl::StatusOr<StoredCycle> c = RunOneCycle(s);
+  if (!c.ok()) return c.status();
+  if (c->state != CycleState::kDone || c->verdict != Verdict::kError ||
+      c->reason.rfind("capture_unreadable: ", 0) != 0 || !c->sensors.empty()) {
+    return Violation(absl::StrCat("cycle ", c->id, " without ", rel, ": ", CycleStateName(c->state), " ",
+                                  VerdictName(c->verdict), " '", c->reason, "' with ", c->sensors.size(),
+                                  " sensors, expected done error capture_unreadable"));
+  }
+  if (c->reason.find(fs::path(rel).filename().string()) == std::string::npos) {
+    return Violation(absl::StrCat("cycle ", c->id, ": the reason does not name ", rel, ": ", c->reason));
+  }
+  return std::string("done error capture_unreadable naming the file");
+}
+
+absl::StatusOr<std::string> DatabaseLockedBriefly(Soak& s) {
+  absl::StatusOr<StoredCycle> c = RunOneCycle(s, [&](std::int64_t) {
+    DatabaseLock lock(s.db_path);
+    if (!lock.held()) return Violation("could not lock the database");
+    // Under the busy timeout: the cycle's writes wait for it and go through.
+    std::this_thread::sleep_for(kBusyTimeout / 3);
+    return absl::OkStatus();
+  });
+  if (!c.ok()) return c.status();
+  if (absl::Status st = ExpectClean(s, *c); !st.ok()) return st;
+  return std::string("done as cycle 0");
+}
+
+absl::StatusOr<std::string> DatabaseLockedAtStart(Soak& s) {
+  absl::StatusOr<std::int64_t> newest_before;
+  {
+    CycleFilter newest;
+    newest.page_size = 1;
+    absl::StatusOr<CyclePage> page = s.core->ListCycles(newest);
+    if (!page.ok()) return page.status();
+    newest_before = page->cycles.empty() ? 0 : page->cycles[0].id;
+    DatabaseLock lock(s.db_path);
+    if (!lock.held()) return Violation("could not lock the database");
+    const absl::StatusOr<std::int64_t> id = s.core->StartCycle(s.request);
+    if (id.ok()) {
+      s.started.push_back(*id);
+      return Violation(absl::StrCat("StartCycle on a locked database started cycle ", *id));
+    }
+    if (id.status().code() != absl::StatusCode::kUnavailable ||
+        id.status().message().find(s.db_path) == std::string::npos) {
+      return Violation(absl::StrCat("StartCycle on a locked database: ", id.status().ToString(),
+                                    ", expected UNAVAILABLE naming the database"));
+    }
+  }
+  CycleFilter newest;
+  newest.page_size = 1;
+  absl::StatusOr<CyclePage> page = s.core->ListCycles(newest);
+  if (!page.ok()) return page.status();
+  if ((page->cycles.empty() ? 0 : page->cycles[0].id) != *newest_before) {
+    return Violation("a refused StartCycle left a cycle in the store");
+  }
+  if (s.core->Status().running_cycle) return Violation("the station is busy after a refused StartCycle");
+  return std::string("refused UNAVAILABLE, nothing stored");
+}
+
+absl::StatusOr<std::string> DatabaseLockedMidCycle(Soak& s) {
+  absl::StatusOr<StoredCycle> c = RunOneCycle(s, [&](std::int64_t id) {
+    DatabaseLock lock(s.db_path);
+    if (!lock.held()) return Violation("could not lock the database");
+    // Longer than two whole cycles: the cycle meets the lock when it stores its results.
+    std::this_thread::sleep_for(2 * s.clean_time + 4 * kBusyTimeout);
+    if (s.core->Status().running_cycle != id) {
+      return Violation(absl::StrCat("cycle ", id, ": the station went idle while its end could not be stored"));
+    }
+    return absl::OkStatus();
+  });
+  if (!c.ok()) return c.status();
+  if (c->state != CycleState::kDone || c->verdict != Verdict::kError ||
+      c->reason.rfind("store_unavailable: ", 0) != 0) {
+    return Violation(absl::StrCat("cycle ", c->id, " under a lock: ", CycleStateName(c->state), " ",
+                                  VerdictName(c->verdict), " '", c->reason, "', expected done error store_unavailable"));
+  }
+  return std::string("done error store_unavailable, stored after the lock");
+}
+
+absl::StatusOr<std::string> CancelAtRandom(Soak& s) {
+  absl::Status cancel;
+  absl::StatusOr<StoredCycle> c = RunOneCycle(s, [&](std::int64_t id) {
+    // Anywhere from the start to a little after a clean cycle's end.
+    std::this_thread::sleep_for(std::chrono::duration_cast<Clock::duration>(s.clean_time * Uniform(s, 0, 1.2)));
+    cancel = s.core->CancelCycle(id);
+    return absl::OkStatus();
+  });
+  if (!c.ok()) return c.status();
+  if (cancel.ok()) {
+    if (c->state != CycleState::kCancelled || c->verdict != Verdict::kError || c->reason != "cancelled") {
+      return Violation(absl::StrCat("cycle ", c->id, ": cancel accepted, yet ", CycleStateName(c->state), " ",
+                                    VerdictName(c->verdict), " '", c->reason, "'"));
+    }
+    return std::string("cancel accepted, cancelled");
+  }
+  if (cancel.code() != absl::StatusCode::kFailedPrecondition) {
+    return Violation(absl::StrCat("CancelCycle of the running cycle: ", cancel.ToString()));
+  }
+  if (absl::Status st = ExpectClean(s, *c); !st.ok()) return st;
+  return std::string("cancel refused after the end, done as cycle 0");
+}
+
+absl::StatusOr<std::string> InvalidRequests(Soak& s) {
+  struct Bad {
+    std::function<void(CycleRequest*)> change;
+    std::string field;
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<Bad> bad = {
+      {[](CycleRequest* r) { r->vin = "1M8GDM9AXKP04278O"; }, "vin"},  // the letter O
+      {[](CycleRequest* r) { r->vin = "1M8GDM9AXKP042789"; }, "vin"},  // wrong check digit
+      {[](CycleRequest* r) { r->vin.clear(); }, "vin"},
+      {[](CycleRequest* r) { r->car_model_id = "sedan"; }, "car_model_id"},
+      {[](CycleRequest* r) { r->aligner.longitudinal_offset_m = 1e9; }, "aligner.longitudinal_offset_m"},
+      {[=](CycleRequest* r) { r->aligner.lateral_offset_m = nan; }, "aligner.lateral_offset_m"},
+      {[](CycleRequest* r) { r->aligner.thrust_angle_rad = std::numeric_limits<double>::infinity(); },
+       "aligner.thrust_angle_deg"},
+      {[](CycleRequest* r) { r->frames_per_sensor = -1; }, "options.frames_per_sensor"},
+      {[](CycleRequest* r) { r->frames_per_sensor = 101; }, "options.frames_per_sensor"},
+  };
+  for (const Bad& b : bad) {
+    CycleRequest r = s.request;
+    b.change(&r);
+    const absl::StatusOr<std::int64_t> id = s.core->StartCycle(r);
+    if (id.ok()) s.started.push_back(*id);
+    if (id.status().code() != absl::StatusCode::kInvalidArgument || id.status().message().rfind(b.field, 0) != 0) {
+      return Violation(absl::StrCat("bad ", b.field, ": ", id.status().ToString(), ", expected INVALID_ARGUMENT naming it"));
+    }
+  }
+  const std::int64_t unknown = (s.started.empty() ? 0 : s.started.back()) + 1000000;
+  if (s.core->GetCycle(unknown).status().code() != absl::StatusCode::kNotFound ||
+      s.core->CancelCycle(unknown).code() != absl::StatusCode::kNotFound ||
+      s.core->WatchCycle(unknown, [](const StoredEvent&) { return true; }).code() != absl::StatusCode::kNotFound) {
+    return Violation("an unknown cycle id is not NOT_FOUND everywhere");
+  }
+  absl::StatusOr<StoredCycle> c = RunOneCycle(s, [&](std::int64_t id) {
+    const absl::StatusOr<std::int64_t> second = s.core->StartCycle(s.request);
+    if (second.ok()) s.started.push_back(*second);
+    if (second.status().code() != absl::StatusCode::kFailedPrecondition) {
+      return Violation(absl::StrCat("a second StartCycle while ", id, " runs: ", second.status().ToString()));
+    }
+    return absl::OkStatus();
+  });
+  if (!c.ok()) return c.status();
+  if (absl::Status st = ExpectClean(s, *c); !st.ok()) return st;
+  CycleFilter newest;
+  newest.page_size = 1;
+  absl::StatusOr<CyclePage> page = s.core->ListCycles(newest);
+  if (!page.ok() || page->cycles.empty() || page->cycles[0].id != c->id) {
+    return Violation("refused requests left cycles in the store");
+  }
+  return std::string("9 refused INVALID_ARGUMENT, NOT_FOUND, busy FAILED_PRECONDITION, then done as cycle 0");
+}
+
+std::vector<Fault> Faults() {
+  return {
+      {"clean", 30, "no fault: the result must equal cycle 0's", Clean},
+      {"corrupt_camera_frame", 8, "32 random bytes in the second half of a camera's PNG", CorruptCameraFrame},
+      {"truncated_camera_frame", 8, "a camera's PNG cut to 10-90% of its length", TruncatedCameraFrame},
+      {"truncated_lidar_scan", 8, "a LiDAR's PCD scan cut to 30-95% of its length", TruncatedLidarScan},
+      {"truncated_can_log", 8, "a radar's candump log cut inside a line's time stamp", TruncatedCanLog},
+      {"missing_file", 6, "one file of the capture (manifest, station, car or sensor data) deleted", MissingFile},
+      {"db_locked_briefly", 6, "another connection holds the write lock for a third of the busy timeout",
+       DatabaseLockedBriefly},
+      {"db_locked_at_start", 4, "the write lock held by another connection when the cycle is started",
+       DatabaseLockedAtStart},
+      {"db_locked_mid_cycle", 3, "the write lock held from the start for two cycles and 4 busy timeouts",
+       DatabaseLockedMidCycle},
+      {"cancel", 12, "CancelCycle at a random moment from the start to 1.2 clean cycles", CancelAtRandom},
+      {"invalid_requests", 7, "9 invalid requests, unknown ids, a second start while running; then a cycle",
+       InvalidRequests},
+  };
+}
+
+double Mb(std::int64_t kb) { return kb / 1024.0; }
+
+// Bytes malloc has handed out and not got back, every arena (glibc's mallinfo2).
+std::size_t HeapInUseBytes() {
+  const struct mallinfo2 m = mallinfo2();
+  return m.uordblks + m.hblkhd;
+}
+
+int Run(const ProgramFlags& flags, int rss_from) {
+  absl::StatusOr<Workspace> workspace = PrepareWorkspace(flags, "soak", kCarId, "pristine");
+  if (!workspace.ok()) {
+    std::fprintf(stderr, "linecal-soak: setup: %s\n", workspace.status().ToString().c_str());
+    return 2;
+  }
+  const fs::path dir = workspace->dir;
+  const auto setup_failed = [&](const absl::Status& s) {
+    std::fprintf(stderr, "linecal-soak: setup: %s\n", s.ToString().c_str());
+    if (workspace->owned) fs::remove_all(dir);
+    return 2;
+  };
+  Soak s;
+  s.rng.seed(flags.seed);
+  s.pristine = dir / "pristine";
+  s.capture = dir / "data" / "replay";
+  s.db_path = (dir / "soak.db").string();
+  fs::copy(s.pristine, s.capture, fs::copy_options::recursive);
+  absl::StatusOr<Capture> layout = ReadCapture(s.pristine.string());
+  if (!layout.ok()) return setup_failed(layout.status());
+  s.layout = *std::move(layout);
+
+  StationCoreConfig config;
+  config.station_id = "soak";
+  config.station_path = ReferenceStationPath();
+  config.car_model_paths = {workspace->car_path};
+  config.db_path = s.db_path;
+  config.data_root = (dir / "data").string();
+  config.source = CycleSource::kReplay;
+  config.replay_capture = "replay";
+  config.busy_timeout = kBusyTimeout;
+  absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
+  if (!core.ok()) return setup_failed(core.status());
+  s.core = core->get();
+  s.request.vin = kVin;
+  s.request.car_model_id = kCarId;
+
+  const std::vector<Fault> faults = Faults();
+  std::vector<int> weights;
+  for (const Fault& f : faults) weights.push_back(f.weight);
+  std::discrete_distribution<size_t> draw(weights.begin(), weights.end());
+  std::map<std::string, std::map<std::string, int>> outcomes;  // fault -> outcome -> cycles
+  std::vector<std::string> violations;
+  const int threads_before = SettledEntryCount("/proc/self/task");
+  const int fds_before = SettledEntryCount("/proc/self/fd");
+  int threads_baseline = 0, fds_baseline = 0;
+  std::int64_t rss_reference_kb = 0;
+  std::size_t heap_reference_bytes = 0;
+  const Clock::time_point start = Clock::now();
+  std::printf("linecal-soak: %d cycles, seed %llu, %zu sensors, scratch %s\n", flags.cycles,
+              static_cast<unsigned long long>(flags.seed), s.layout.manifest.sensors.size(), dir.c_str());
+
+  for (int cycle = 0; cycle < flags.cycles; ++cycle) {
+    const Fault& fault = cycle == 0 ? faults[0] : cycle <= static_cast<int>(faults.size()) ? faults[cycle - 1] : faults[draw(s.rng)];
+    absl::StatusOr<std::string> outcome;
+    if (cycle == 0) {
+      const Clock::time_point t0 = Clock::now();
+      absl::StatusOr<StoredCycle> c = RunOneCycle(s);
+      s.clean_time = Clock::now() - t0;
+      if (!c.ok()) return setup_failed(c.status());
+      if (c->state != CycleState::kDone) return setup_failed(Violation("cycle 0 did not end done: " + c->reason));
+      s.clean = *std::move(c);
+      outcome = std::string("done (the reference)");
+    } else {
+      outcome = fault.run(s);
+    }
+    if (absl::Status st = Restore(s); !st.ok()) return setup_failed(st);
+    if (outcome.ok()) {
+      ++outcomes[fault.name][*outcome];
+    } else {
+      ++outcomes[fault.name]["VIOLATION"];
+      violations.push_back(absl::StrCat("cycle ", cycle, " (", fault.name, "): ", outcome.status().message()));
+      std::fprintf(stderr, "linecal-soak: %s\n", violations.back().c_str());
+    }
+    if (cycle == 0) {
+      // After the first cycle: one-time allocations (thread pools, caches) are made by now.
+      threads_baseline = SettledEntryCount("/proc/self/task");
+      fds_baseline = SettledEntryCount("/proc/self/fd");
+    }
+    if (cycle + 1 == rss_from) {
+      rss_reference_kb = ReadProcessStatus().value_or(ProcessStatus{}).rss_kb;
+      heap_reference_bytes = HeapInUseBytes();
+    }
+    if ((cycle + 1) % 50 == 0 || cycle + 1 == flags.cycles) {
+      const ProcessStatus p = ReadProcessStatus().value_or(ProcessStatus{});
+      std::printf("  cycle %4d  %7.1f s  rss %.1f MB  threads %d  violations %zu\n", cycle + 1,
+                  std::chrono::duration<double>(Clock::now() - start).count(), Mb(p.rss_kb), p.threads,
+                  violations.size());
+      std::fflush(stdout);
+    }
+  }
+  const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
+
+  // Every started cycle is stored, ended, with a reason; nothing else is stored.
+  int ended = 0;
+  for (const std::int64_t id : s.started) {
+    absl::StatusOr<StoredCycle> c = s.core->GetCycle(id);
+    absl::Status st = c.ok() ? ExpectEnded(*c) : c.status();
+    if (st.ok()) {
+      ++ended;
+    } else {
+      violations.push_back(absl::StrCat("final check: cycle ", id, ": ", st.message()));
+    }
+  }
+  int stored = 0;
+  CycleFilter all;
+  all.page_size = 1000;
+  do {
+    absl::StatusOr<CyclePage> page = s.core->ListCycles(all);
+    if (!page.ok()) {
+      violations.push_back(absl::StrCat("ListCycles: ", page.status().ToString()));
+      break;
+    }
+    stored += static_cast<int>(page->cycles.size());
+    all.page_token = page->next_page_token;
+  } while (!all.page_token.empty());
+  if (stored != static_cast<int>(s.started.size())) {
+    violations.push_back(absl::StrCat(stored, " cycles stored, ", s.started.size(), " started"));
+  }
+  const absl::Status integrity = s.core->store().IntegrityCheck();
+  if (!integrity.ok()) violations.push_back(absl::StrCat("integrity_check: ", integrity.ToString()));
+  const int threads_end = SettledEntryCount("/proc/self/task");
+  const int fds_end = SettledEntryCount("/proc/self/fd");
+  if (threads_end != threads_baseline) {
+    violations.push_back(absl::StrCat("threads: ", threads_baseline, " after cycle 0, ", threads_end, " at the end"));
+  }
+  if (fds_end != fds_baseline) {
+    violations.push_back(absl::StrCat("descriptors: ", fds_baseline, " after cycle 0, ", fds_end, " at the end"));
+  }
+  const ProcessStatus end = ReadProcessStatus().value_or(ProcessStatus{});
+  const bool rss_checked = flags.cycles > rss_from && rss_reference_kb > 0;
+  const double growth = rss_checked ? 100.0 * (end.rss_kb - rss_reference_kb) / rss_reference_kb : 0;
+  // acceptance.md: memory growth over the soak below 5%.
+  if (rss_checked && growth >= 5.0) {
+    violations.push_back(absl::StrCat("RSS grew ", growth, "% from cycle ", rss_from, " to the end"));
+  }
+
+  std::vector<Clock::duration> times = s.cycle_times;
+  std::sort(times.begin(), times.end());
+  const auto ms = [](Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); };
+  std::printf("\nfaults (cycles, outcome):\n");
+  for (const Fault& f : faults) {
+    for (const auto& [what, n] : outcomes[f.name]) std::printf("  %-24s %5d  %s\n", f.name.c_str(), n, what.c_str());
+  }
+  std::printf("\n%d cycles in %.1f s; cycle wall time median %.0f ms, p95 %.0f ms, max %.0f ms (clean: %.0f ms)\n",
+              flags.cycles, wall_s, ms(times[times.size() / 2]), ms(times[times.size() * 95 / 100]), ms(times.back()),
+              ms(s.clean_time));
+  std::printf("started %zu, stored %d, ended with state and reason %d\n", s.started.size(), stored, ended);
+  std::printf("integrity_check: %s\n", integrity.ok() ? "ok" : std::string(integrity.message()).c_str());
+  std::printf("threads: %d before cycle 0, %d after it, %d at the end\n", threads_before, threads_baseline, threads_end);
+  std::printf("descriptors: %d before cycle 0, %d after it, %d at the end\n", fds_before, fds_baseline, fds_end);
+  if (rss_checked) {
+    std::printf("RSS: %.1f MB after cycle %d, %.1f MB at the end (%+.2f%%), peak %.1f MB\n", Mb(rss_reference_kb),
+                rss_from, Mb(end.rss_kb), growth, Mb(end.hwm_kb));
+    // Allocated and not freed, against what the allocator holds: a leak grows the first.
+    std::printf("heap in use (malloc): %.1f MB after cycle %d, %.1f MB at the end\n", heap_reference_bytes / 1048576.0,
+                rss_from, HeapInUseBytes() / 1048576.0);
+  } else {
+    std::printf("RSS: %.1f MB at the end, peak %.1f MB (growth not checked: fewer than %d cycles)\n", Mb(end.rss_kb),
+                Mb(end.hwm_kb), rss_from + 1);
+  }
+  std::printf("violations: %zu\n", violations.size());
+  for (const std::string& v : violations) std::printf("  %s\n", v.c_str());
+  core->reset();
+  if (workspace->owned) fs::remove_all(dir);
+  return violations.empty() ? 0 : 1;
+}
+
+}  // namespace
+}  // namespace linecal::reliability
+
+int main(int argc, char** argv) {
+  using linecal::reliability::ProgramFlags;
+  if (argc == 3 && std::string(argv[1]) == "--hold-lock") return linecal::reliability::HoldLock(argv[2]);
+  // The allocator as linecald's main sets it (daemon/linecald/main.cc): the soak's memory
+  // figures are the daemon's.
+  mallopt(M_ARENA_MAX, 2);
+  ProgramFlags defaults;
+  defaults.cycles = 1000;  // acceptance.md's soak
+  const absl::StatusOr<ProgramFlags> flags = linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--rss-from"});
+  int rss_from = 100;  // memory growth is measured from after this cycle (one-time allocations done)
+  if (flags.ok() && flags->own.count("--rss-from") &&
+      (!absl::SimpleAtoi(flags->own.at("--rss-from"), &rss_from) || rss_from < 1)) {
+    rss_from = 0;
+  }
+  if (!flags.ok() || rss_from < 1) {
+    std::fprintf(stderr,
+                 "linecal-soak: %s\nusage: linecal-soak [--cycles N] [--seed S] [--sensors a,b,...] [--rss-from K] "
+                 "[--dir DIR]\n",
+                 flags.ok() ? "--rss-from: not a positive number" : std::string(flags.status().message()).c_str());
+    return 2;
+  }
+  return linecal::reliability::Run(*flags, rss_from);
+}
