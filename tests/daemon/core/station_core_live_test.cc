@@ -20,6 +20,9 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/scratch_dir.h"
+#include "tests/daemon/test_car.h"
+
 #include "tests/daemon/loopback_udp.h"
 
 #include "daemon/core/station_core.h"
@@ -64,21 +67,10 @@ class PngCopySource : public SensorSource {
 class StationCoreLiveTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::path(testing::TempDir()) /
-           ("live_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = testing_daemon::FreshTestDir("live");
     // The reference car cut down to one sensor of each kind.
-    std::ifstream in(kDeploy + "/cars/reference.json");
-    nlohmann::json car = nlohmann::json::parse(in);
-    nlohmann::json kept = nlohmann::json::array();
-    for (nlohmann::json s : car["sensors"]) {
-      if (s["name"] == "roof_lidar") s["angles_file"] = kDeploy + "/cars/Pandar64.csv";
-      if (s["name"] == "front_camera" || s["name"] == "roof_lidar" || s["name"] == "front_radar") kept.push_back(s);
-    }
-    car["sensors"] = kept;
-    car["id"] = "three_sensor";
-    std::ofstream(dir_ / "car.json") << car.dump(2);
+    testing_daemon::WriteCutDownCar((dir_ / "car.json").string(), {"front_camera", "roof_lidar", "front_radar"},
+                                    "three_sensor");
 
     // The simulator's recording of the car: what the devices send.
     SimulatorOptions o;

@@ -17,6 +17,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/scratch_dir.h"
+
 #include "tests/daemon/test_car.h"
 
 #include "daemon/cycle/capture_calibration.h"
@@ -34,10 +36,7 @@ constexpr char kVin[] = "1M8GDM9AXKP042788";
 class StationCoreTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::path(testing::TempDir()) /
-           ("core_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = testing_daemon::FreshTestDir("core");
     // The reference car with two sensors only: a cycle of well under a second.
     testing_daemon::WriteTwoSensorCar((dir_ / "car.json").string(), "two_sensor");
     config_.station_path = kDeploy + "/stations/reference.json";

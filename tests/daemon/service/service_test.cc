@@ -17,6 +17,8 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "tests/daemon/scratch_dir.h"
+
 #include "station/io/json_reader.h"
 #include "tests/daemon/test_car.h"
 #include "tests/daemon/test_pki.h"
@@ -32,10 +34,7 @@ class ServiceTest : public ::testing::Test {
  protected:
   // A scratch directory per test and process (ctest runs tests in parallel processes).
   void MakeDir() {
-    dir_ = fs::path(testing::TempDir()) /
-           ("service_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = testing_daemon::FreshTestDir("service");
   }
   void CreateCore() {
     if (dir_.empty()) MakeDir();

@@ -13,6 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/scratch_dir.h"
+
 #include "tests/daemon/loopback_udp.h"
 
 #include "daemon/drivers/lidar_decoder.h"
@@ -59,10 +61,7 @@ SensorModel RoofLidar() {
 class LidarUdpSourceTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::path(testing::TempDir()) /
-           ("lidar_src_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = testing_daemon::FreshTestDir("lidar_src");
     port_ = FreeUdpPort();
     config_.bind_address = "127.0.0.1";
     config_.port = port_;
