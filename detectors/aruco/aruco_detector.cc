@@ -14,12 +14,13 @@ Detection DetectAruco(const ImageView8& image, const Board& board, const ArucoOp
     detection.reason = DetectReason::kBadImage;
     return detection;
   }
-  const MarkerScan scan = ScanMarkers(image, Aruco4x4_50Family(), options.markers);
+  const MarkerFamily family = Aruco4x4_50Family();
+  const MarkerScan scan = ScanMarkers(image, family, options.markers);
   // The other board with these four markers, at the same scale: what this board must be told from.
   BoardParams sibling_params = board.params();
   sibling_params.type = board.type() == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco;
   const std::optional<Board> sibling = Board::Create(sibling_params);
-  return VerifyMarkerBoard(scan, board, options.markers, image, sibling ? &*sibling : nullptr);
+  return VerifyMarkerBoard(scan, board, family, options.markers, image, sibling ? &*sibling : nullptr);
 }
 
 }  // namespace linecal

@@ -24,14 +24,6 @@ namespace linecal {
 bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const ImageView8& image,
                  double px_per_m, double min_agreement);
 
-// The older check on a binarised image (`dark`, 1 = dark; binarise.h): of the same grid of
-// probes, 3 px clear of printed edges, at least min_agreement of the black ones dark and of
-// the white ones light (each paint checked with 8 probes or more; false with fewer than 8 in
-// all). It reads large white areas under a 4:1 gradient as dark and refuses such boards; the
-// marker detector keeps it all the same (square_markers.cc says why). Cost: about 20 us.
-bool PaintAgreesBinarised(const Board& board, const Eigen::Matrix3d& H_image_board, const Image8& dark,
-                          double px_per_m, double min_agreement);
-
 // Two boards that print the same features (the ArUco and round-hole boards share their four
 // markers, boards.md) differ only in some of their paint, and a binarisation can be fooled
 // there (a 4:1 illumination gradient darkens plain white paper below its local threshold).

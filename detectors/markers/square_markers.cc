@@ -263,8 +263,6 @@ std::optional<ReadResult> ReadMarker(const ImageView8& image,
   result.light = grid;
   result.marker.id = decode.id;
   result.marker.hamming = decode.hamming;
-  result.marker.dark_level = dark;
-  result.marker.light_level = light;
   for (int c = 0; c < 4; ++c) result.marker.corners_px[c] = corners[(decode.rotation + c) % 4];
   return result;
 }
@@ -290,6 +288,102 @@ std::optional<DecodedMarker> ReadQuad(const ImageView8& image, const Quad& quad,
   }
   for (int c = 0; c < 4; ++c) marker->marker.corners_px[c] = corners[(marker->rotation + c) % 4];
   return marker->marker;
+}
+
+// The cells of marker `id` in its canonical orientation (row-major, 1 = light). O(cells^2).
+std::vector<std::uint8_t> MarkerCells(const MarkerFamily& family, int id) {
+  const int n = family.cells;
+  const int bits = static_cast<int>(family.bit_cells.size());
+  std::vector<std::uint8_t> light(static_cast<std::size_t>(n) * n, 0);
+  for (int i = 0; i < bits; ++i) {
+    const auto& rc = family.bit_cells[i];
+    light[rc[0] * n + rc[1]] = static_cast<std::uint8_t>((family.codes[id] >> (bits - 1 - i)) & 1U);
+  }
+  return light;
+}
+
+// A marker placed by the board homography may disagree with its printed cells in this
+// fraction of its code bits (over all its cells, border included). A blind read needs a
+// margin against decoding some other pattern as a code (at most family.max_correction_bits);
+// a placed read only has to show that the marker sampled is the board's, in the board's
+// orientation: a read a cell off puts a side of its border on the light surround and
+// disagrees in a whole row of cells, and a random pattern is within 6 of 36 bits of a given
+// code with a probability of 2e-5 (within 2 of 16: 2e-3, and the board is already
+// identified). Small, foreshortened and blurred markers lose a few cells on their edges:
+// this is what finds them.
+constexpr double kPlacedMarkerMaxWrongFraction = 1.0 / 6.0;
+// How far, in cells, the edges may move a placed marker's corner from where the board's
+// homography puts it (ReadPredictedMarker).
+constexpr double kPlacedMarkerMaxMoveCells = 0.25;
+
+// How many of a marker's cells disagree with its printed cells `expected` (1 = light), and
+// whether their contrast is at least min_contrast. The grey levels are modelled as
+// a + b x + c y + d expected (x, y: the cell's column and row): the plane takes out the
+// illumination gradient and the gamma's local slope across the marker, which a single
+// threshold between the light and dark levels would read as wrong cells at the dim end; a
+// cell disagrees when it lies on the other side of the plane + d / 2. nullopt when d <
+// min_contrast or the fit is singular. O(cells^2).
+std::optional<int> CellsDisagreeing(const std::vector<double>& values, const std::vector<std::uint8_t>& expected,
+                                    int cells, double min_contrast) {
+  Eigen::Matrix4d normal = Eigen::Matrix4d::Zero();
+  Eigen::Vector4d rhs = Eigen::Vector4d::Zero();
+  const double mid = 0.5 * (cells - 1);
+  for (int r = 0; r < cells; ++r) {
+    for (int c = 0; c < cells; ++c) {
+      const std::size_t i = static_cast<std::size_t>(r) * cells + c;
+      const Eigen::Vector4d row(1.0, c - mid, r - mid, expected[i]);
+      normal += row * row.transpose();
+      rhs += row * values[i];
+    }
+  }
+  const Eigen::LDLT<Eigen::Matrix4d> solve(normal);
+  if (solve.info() != Eigen::Success || !solve.isPositive()) return std::nullopt;
+  const Eigen::Vector4d m = solve.solve(rhs);
+  if (!(m(3) >= min_contrast)) return std::nullopt;
+  int wrong = 0;
+  for (int r = 0; r < cells; ++r) {
+    for (int c = 0; c < cells; ++c) {
+      const std::size_t i = static_cast<std::size_t>(r) * cells + c;
+      const bool light = values[i] > m(0) + m(1) * (c - mid) + m(2) * (r - mid) + 0.5 * m(3);
+      wrong += light != (expected[i] != 0);
+    }
+  }
+  return wrong;
+}
+
+// Reads marker `id` where the board puts it: `corners` (canonical corner order, clockwise in
+// the image) come from the board homography. They are refined on the marker's edges knowing
+// its cells (the prediction is within a fraction of a cell; lens distortion and the
+// homography's own error are what is left), and the marker is accepted when its cells show
+// its print (CellsDisagreeing) within kPlacedMarkerMaxWrongFraction of its code bits.
+std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image, const MarkerFamily& family, int id,
+                                                 std::array<Eigen::Vector2d, 4> corners, double min_contrast) {
+  double side = 0.0;
+  for (int k = 0; k < 4; ++k) side += 0.25 * (corners[(k + 1) % 4] - corners[k]).norm();
+  const int samples = std::clamp(static_cast<int>(side), 8, 80);
+  const std::vector<std::uint8_t> expected = MarkerCells(family, id);
+  const std::array<Eigen::Vector2d, 4> predicted = corners;
+  if (!RefineQuadCorners(image, family, &expected, samples, 0.5, &corners)) return std::nullopt;
+  std::vector<double> values;
+  if (!SampleCells(image, corners, family.cells, &values)) return std::nullopt;
+  const std::optional<int> wrong = CellsDisagreeing(values, expected, family.cells, min_contrast);
+  const int bits = static_cast<int>(family.bit_cells.size());
+  if (!wrong.has_value() ||
+      *wrong > std::max<int>(family.max_correction_bits, static_cast<int>(kPlacedMarkerMaxWrongFraction * bits))) {
+    return std::nullopt;
+  }
+  if (!RefineQuadCorners(image, family, &expected, samples, 0.34, &corners)) return std::nullopt;
+  // The board's homography through its other markers places a corner within a small part of
+  // a cell (what is left is lens distortion over a marker pitch or two); edges that pull a
+  // corner farther are not this marker's edges, or too blurred to place it.
+  for (int k = 0; k < 4; ++k) {
+    if ((corners[k] - predicted[k]).norm() > kPlacedMarkerMaxMoveCells * side / family.cells) return std::nullopt;
+  }
+  DecodedMarker marker;
+  marker.id = id;
+  marker.hamming = *wrong;
+  marker.corners_px = corners;
+  return marker;
 }
 
 // True when p is inside the convex quad (corners in either winding). O(1).
@@ -364,8 +458,10 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
   const int min_contrast =
       std::max(options.min_contrast,
                static_cast<int>(std::ceil(options.noise_contrast_factor * noise_sigma)));
+  scan.min_contrast = min_contrast;
   int max_contrast = 0;
-  scan.dark = BinariseDark(image, min_contrast, &max_contrast);
+  // 1 where the pixel is darker than its local threshold.
+  const Image8 dark = BinariseDark(image, min_contrast, &max_contrast);
   if (max_contrast < min_contrast) {
     scan.reason = DetectReason::kLowContrast;
     return scan;
@@ -378,8 +474,8 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
         static_cast<int>(scan.markers.size()) >= enough_markers) {
       break;
     }
-    if (erosion > 0) eroded = Erode(erosion == 1 ? scan.dark : eroded);
-    const ComponentLabels labels = LabelComponents((erosion == 0 ? scan.dark : eroded).view());
+    if (erosion > 0) eroded = Erode(erosion == 1 ? dark : eroded);
+    const ComponentLabels labels = LabelComponents((erosion == 0 ? dark : eroded).view());
     for (const Quad& quad : FindQuads(labels, quad_options)) {
       if (scan.quads >= options.max_candidates) break;
       // A quad around a marker already read (at a smaller erosion) is that marker again.
@@ -409,8 +505,8 @@ Detection Fail(DetectReason reason) {
 
 }  // namespace
 
-Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerDetectOptions& options,
-                            const ImageView8& image, const Board* sibling) {
+Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
+                            const MarkerDetectOptions& options, const ImageView8& image, const Board* sibling) {
   // The board's markers: id -> its four corner features, in corner order (ids 4 k + c).
   std::map<int, std::vector<const BoardFeature*>> board_markers;
   for (const BoardFeature& f : board.features()) {
@@ -448,10 +544,45 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   }
   side_px /= 4.0 * on_board.size();
   side_m /= 4.0 * on_board.size();
-  const std::optional<HomographyFit> fit = FitHomography(p_board, uv);
+  std::optional<HomographyFit> fit = FitHomography(p_board, uv);
   if (!fit.has_value() || fit->max_residual > options.max_residual_fraction * side_px) {
     return Fail(DetectReason::kVerificationFailed);
   }
+  // The markers the scan missed, where the checked homography puts them. Again after each
+  // round that placed some: the homography through more of the board extrapolates less.
+  std::vector<DecodedMarker> placed;
+  placed.reserve(board_markers.size() - on_board.size());
+  std::vector<int> missing;
+  for (const auto& [id, f] : board_markers) {
+    if (std::none_of(on_board.begin(), on_board.end(), [id](const DecodedMarker* m) { return m->id == id; })) {
+      missing.push_back(id);
+    }
+  }
+  for (std::size_t placed_before = 0; !missing.empty(); placed_before = placed.size()) {
+    std::vector<int> still_missing;
+    for (int id : missing) {
+      const std::vector<const BoardFeature*>& f = board_markers.at(id);
+      std::array<Eigen::Vector2d, 4> corners;
+      for (int c = 0; c < 4; ++c) corners[c] = ApplyHomography(fit->H, f[c]->p_board);
+      std::optional<DecodedMarker> marker = ReadPredictedMarker(image, family, id, corners, scan.min_contrast);
+      if (!marker.has_value()) {
+        still_missing.push_back(id);
+        continue;
+      }
+      placed.push_back(*marker);
+      for (int c = 0; c < 4; ++c) {
+        p_board.push_back(f[c]->p_board);
+        uv.push_back(marker->corners_px[c]);
+      }
+    }
+    if (placed.size() == placed_before) break;
+    fit = FitHomography(p_board, uv);
+    if (!fit.has_value() || fit->max_residual > options.max_residual_fraction * side_px) {
+      return Fail(DetectReason::kVerificationFailed);
+    }
+    missing = std::move(still_missing);
+  }
+  for (const DecodedMarker& m : placed) on_board.push_back(&m);
   // A marker of another id on this board's page: another board that shares some ids.
   const Eigen::Matrix3d H_board_image = fit->H.inverse();
   const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
@@ -463,11 +594,13 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       return Fail(DetectReason::kWrongBoard);
     }
   }
-  // The binarised paint check, not PaintAgrees's grey comparisons: those also pass boards of
-  // 4 px cells under noise 6, blur 1.5 and JPEG 80, whose marker corners can then be 1.7 px
-  // off (detectors_eval, full grid: one such "wrong" board); the binarisation refuses them,
-  // and with them every marker board under a 4:1 gradient (docs/detectors.md).
-  if (!PaintAgreesBinarised(board, fit->H, scan.dark, side_px / side_m, options.min_paint_agreement)) {
+  // The paint compared between nearby points under the same light (PaintAgrees), not on the
+  // binarised image: that reads white paper at the dim end of a 4:1 gradient as dark and
+  // refused every marker board so lit. The grey check once also passed boards of 4 px cells
+  // under the hard lighting with a corner 1.7 px off; the corners the scan read are now
+  // checked against the others through the homography's residual, and the corners placed by
+  // the board within a quarter of a cell of the homography (ReadPredictedMarker).
+  if (!PaintAgrees(board, fit->H, image, side_px / side_m, options.min_paint_agreement)) {
     return Fail(DetectReason::kWrongBoard);
   }
   if (sibling != nullptr) {

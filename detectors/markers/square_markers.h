@@ -85,18 +85,19 @@ struct DecodedMarker {
   // Corners 0 top-left, 1 top-right, 2 bottom-right, 3 bottom-left of the marker in its
   // canonical orientation, sub-pixel (edge-line intersections), pixels.
   std::array<Eigen::Vector2d, 4> corners_px;
-  int hamming = 0;           // corrected bits
-  double dark_level = 0.0;   // mean grey of its dark cells
-  double light_level = 0.0;  // mean grey of its light cells
+  // Corrected bits; for a marker placed by the board (VerifyMarkerBoard), the cells that
+  // disagree with its print.
+  int hamming = 0;
 };
 
-// Everything found in one image: decoded markers and the binary image (1 = dark) they
-// were found in, for the whole-board paint check.
+// Everything found in one image.
 struct MarkerScan {
   DetectReason reason = DetectReason::kNone;  // kBadImage, kLowContrast, kNoCandidates, kNone
   int quads = 0;                              // candidate quads examined
+  // The contrast a marker's light and dark cells had to show (options.min_contrast raised
+  // for the image's noise); markers placed by the board model must show it too.
+  int min_contrast = 0;
   std::vector<DecodedMarker> markers;
-  Image8 dark;  // 1 where the pixel is darker than its local threshold
 };
 
 // Finds and decodes the markers of `family` in `image`. The view must be valid (the caller
@@ -108,21 +109,25 @@ struct MarkerScan {
 MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
                        const MarkerDetectOptions& options, int enough_markers = 0);
 
-// Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features) from the
-// markers of `scan`, and checks the whole board: every marker id at most once, one board
-// homography through all their corners within the residual bound, no marker of another id on
-// the board's page, and the board's printed paint where it is projected.
+// Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features, markers of
+// `family`) from the markers of `scan`, and checks the whole board: every marker id at most
+// once, one board homography through all their corners within the residual bound, no marker
+// of another id on the board's page, and the board's printed paint where it is projected.
+// Markers the scan missed (too small, blurred or touching other shapes for a quad to be
+// found) are then looked for where that homography puts them: their corners refined on the
+// edges, read as in the scan, and kept only when they decode to the expected id in the
+// expected orientation; the homography is fitted again through all corners and checked.
 // found = true when all of the board's markers pass; with 2 or more markers but not all:
 // found = false, kPartial, their corners. Otherwise no features and the reason: kWrongBoard
 // (markers of other ids only, another id on the page, or the paint disagrees),
 // kAmbiguous (an id seen twice), kVerificationFailed (residual), kTooFewFeatures (one
 // marker), scan.reason / kNoCandidates (no markers). Cost: O(markers) plus a fixed grid of
-// paint probes (about 0.2 ms).
+// paint probes (about 0.2 ms), plus O(side) per missed marker.
 // `sibling`: a board that prints the same markers at the same places (the ArUco board for the
 // round-hole board and back), or nullptr; the board is then also told from it by the grey
 // levels where the two print differently (PaintContrastPrefers on `image`, the scanned
 // view), kWrongBoard when the image looks like the sibling, kAmbiguous when it cannot tell.
-Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerDetectOptions& options,
-                            const ImageView8& image, const Board* sibling);
+Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
+                            const MarkerDetectOptions& options, const ImageView8& image, const Board* sibling);
 
 }  // namespace linecal

@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
+#include <utility>
 #include <vector>
 
 #include "detectors/detect.h"
@@ -124,6 +126,64 @@ TEST(ApriltagDetectorTest, TurnedGridsAreFound) {
     EXPECT_LE(FeatureRmsPx(d, frame, &matched, &unknown), kNoisyRmsBarPx);
     EXPECT_EQ(unknown, 0);
   }
+}
+
+// acceptance.md's smallest grid (4 px bits) turned 50 degrees: the far tags' bits are about
+// 2.6 px wide, too small for the scan to read every tag from its own quad. The tags read
+// fix the board's homography, which places the rest; all 144 corners are reported.
+TEST(ApriltagDetectorTest, SmallTurnedGridIsCompletedFromTheBoard) {
+  const Board board = Grid(2);
+  std::uint64_t seed = 50;
+  for (const double yaw_deg : {50.0, -50.0}) {
+    BoardView view;
+    view.params = board.params();
+    view.distance_m = 2.15;
+    view.offset_m = Eigen::Vector2d(-0.008, -0.150);
+    view.yaw_deg = yaw_deg;
+    view.roll_deg = 30.0;
+    const CameraFrame frame = RenderView(view, NoisyRender(), seed++);
+    ASSERT_EQ(frame.features.size(), 144u) << "the whole grid must be in view";
+    SCOPED_TRACE(::testing::Message() << "yaw " << yaw_deg);
+    const Detection d = DetectApriltag(frame.image8.view(), board);
+    ExpectAllTagCorners(d, board);
+    int matched = 0;
+    int unknown = 0;
+    EXPECT_LE(FeatureRmsPx(d, frame, &matched, &unknown), kNoisyRmsBarPx);
+    EXPECT_EQ(matched, 144);
+    EXPECT_EQ(unknown, 0);
+  }
+}
+
+// A tag whose print is not the board's is not placed by the board: tag 14 mirrored in the
+// image (its black border unchanged, its code not tag 14's in any orientation the board
+// allows) leaves the grid partial without it.
+TEST(ApriltagDetectorTest, TagThatDoesNotShowItsCodeIsNotPlaced) {
+  const Board board = Grid(2);
+  BoardView view;
+  view.params = board.params();
+  view.distance_m = 1.5;
+  view.offset_m = Eigen::Vector2d(-0.008, -0.150);
+  CameraFrame frame = RenderView(view, CleanRender(), 60);
+  ASSERT_EQ(frame.features.size(), 144u);
+  constexpr int kTag = 14;
+  Eigen::AlignedBox2d box;
+  for (const RenderedFeature& f : frame.features) {
+    if (f.feature_id / 4 == kTag) box.extend(f.uv_px);
+  }
+  const int x0 = static_cast<int>(std::ceil(box.min().x()));
+  const int x1 = static_cast<int>(std::floor(box.max().x()));
+  for (int y = static_cast<int>(std::ceil(box.min().y())); y <= static_cast<int>(box.max().y()); ++y) {
+    for (int x = x0; x < x0 + (x1 - x0 + 1) / 2; ++x) std::swap(frame.image8.at(x, y), frame.image8.at(x1 - (x - x0), y));
+  }
+  const Detection d = DetectApriltag(frame.image8.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kPartial);
+  EXPECT_EQ(d.features.size(), 140u);
+  for (const DetectedFeature& f : d.features) EXPECT_NE(f.marker, kTag);
+  int matched = 0;
+  int unknown = 0;
+  EXPECT_LE(FeatureRmsPx(d, frame, &matched, &unknown), kCleanRmsBarPx);
+  EXPECT_EQ(unknown, 0);
 }
 
 TEST(ApriltagDetectorTest, PartialGridReportsOnlyCertainTags) {
