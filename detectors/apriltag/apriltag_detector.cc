@@ -16,8 +16,7 @@ Detection DetectApriltag(const ImageView8& image, const Board& board,
   // Four corner features per tag: once every tag of the board is read, stop eroding.
   const int board_tags = static_cast<int>(board.features().size()) / 4;
   const MarkerFamily family = Tag36h11Family(board.params().apriltag_border_bits);
-  const MarkerScan scan = ScanMarkers(image, family, options.markers, board_tags);
-  return VerifyMarkerBoard(scan, board, family, options.markers, image, nullptr);
+  return DetectMarkerBoard(image, board, family, options.markers, nullptr, board_tags);
 }
 
 }  // namespace linecal

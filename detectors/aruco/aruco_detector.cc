@@ -15,12 +15,11 @@ Detection DetectAruco(const ImageView8& image, const Board& board, const ArucoOp
     return detection;
   }
   const MarkerFamily family = Aruco4x4_50Family();
-  const MarkerScan scan = ScanMarkers(image, family, options.markers);
   // The other board with these four markers, at the same scale: what this board must be told from.
   BoardParams sibling_params = board.params();
   sibling_params.type = board.type() == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco;
   const std::optional<Board> sibling = Board::Create(sibling_params);
-  return VerifyMarkerBoard(scan, board, family, options.markers, image, sibling ? &*sibling : nullptr);
+  return DetectMarkerBoard(image, board, family, options.markers, sibling ? &*sibling : nullptr);
 }
 
 }  // namespace linecal

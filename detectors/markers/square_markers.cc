@@ -630,4 +630,65 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   return detection;
 }
 
+namespace {
+
+// The image averaged over 2 x 2 blocks: pixel (x, y) is centred on full-resolution
+// (2x + 0.5, 2y + 0.5). O(width * height).
+Image8 HalveImage(const ImageView8& image) {
+  Image8 half(image.width / 2, image.height / 2);
+  for (int y = 0; y < half.height; ++y) {
+    const std::uint8_t* r0 = image.Row(2 * y);
+    const std::uint8_t* r1 = image.Row(2 * y + 1);
+    std::uint8_t* out = &half.at(0, y);
+    for (int x = 0; x < half.width; ++x) {
+      out[x] = static_cast<std::uint8_t>((r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1] + 2) >> 2);
+    }
+  }
+  return half;
+}
+
+}  // namespace
+
+Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const MarkerFamily& family,
+                            const MarkerDetectOptions& options, const Board* sibling, int enough_markers) {
+  Image8 half;
+  Image8 quarter;
+  for (const int factor : {4, 2}) {
+    // The reduced image must still hold a marker of the smallest side the options allow,
+    // twice over.
+    if (image.width < 2 * factor * options.min_marker_side_px ||
+        image.height < 2 * factor * options.min_marker_side_px) {
+      continue;
+    }
+    if (half.pixels.empty()) half = HalveImage(image);
+    if (factor == 4) quarter = HalveImage(half.view());
+    MarkerScan scan = ScanMarkers((factor == 4 ? quarter : half).view(), family, options, enough_markers);
+    std::vector<DecodedMarker> refined;
+    refined.reserve(scan.markers.size());
+    for (DecodedMarker m : scan.markers) {
+      // Reduced pixel (x, y) is centred on full-resolution factor (x, y) + (factor - 1) / 2.
+      for (int k = 0; k < 4; ++k) {
+        m.corners_px[k] = factor * m.corners_px[k] + Eigen::Vector2d::Constant(0.5 * (factor - 1));
+      }
+      double side = 0.0;
+      for (int k = 0; k < 4; ++k) side += 0.25 * (m.corners_px[(k + 1) % 4] - m.corners_px[k]).norm();
+      const int samples = std::clamp(static_cast<int>(side), 8, 80);
+      // The corners are in the canonical order (clockwise in the image from the marker's
+      // top-left), so the cells are the marker's own. The reduced corners are within a
+      // reduced pixel or so; the second pass re-centres the edge windows.
+      const std::vector<std::uint8_t> light = MarkerCells(family, m.id);
+      if (!RefineQuadCorners(image, family, &light, samples, 0.5, &m.corners_px) ||
+          !RefineQuadCorners(image, family, &light, samples, 0.34, &m.corners_px)) {
+        continue;
+      }
+      refined.push_back(m);
+    }
+    scan.markers = std::move(refined);
+    Detection coarse = VerifyMarkerBoard(scan, board, family, options, image, sibling);
+    if (coarse.found) return coarse;
+  }
+  return VerifyMarkerBoard(ScanMarkers(image, family, options, enough_markers), board, family, options, image,
+                           sibling);
+}
+
 }  // namespace linecal

@@ -207,6 +207,38 @@ TEST(ArucoDetectorTest, HardLightingFindsBothMarkerBoards) {
   }
 }
 
+// Large markers are found in the reduced images (DetectMarkerBoard) and refined at full
+// resolution: the corners are those of a scan of the full image, within the clean bar's
+// share, and as near the truth.
+TEST(ArucoDetectorTest, CoarseLevelsGiveTheFullScansCorners) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  const MarkerFamily family = Aruco4x4_50Family();
+  std::uint64_t seed = 80;
+  for (const double distance_m : {1.5, 2.2}) {
+    BoardView view;
+    view.params = board.params();
+    view.distance_m = distance_m;
+    view.yaw_deg = 25.0;
+    view.roll_deg = 10.0;
+    const CameraFrame frame = RenderView(view, CleanRender(), seed++);
+    SCOPED_TRACE(::testing::Message() << "distance " << distance_m);
+    const Detection coarse = DetectAruco(frame.image8.view(), board);
+    const Detection full = VerifyMarkerBoard(ScanMarkers(frame.image8.view(), family, MarkerDetectOptions{}), board,
+                                             family, MarkerDetectOptions{}, frame.image8.view(), nullptr);
+    ASSERT_TRUE(coarse.found) << DetectReasonName(coarse.reason);
+    ASSERT_TRUE(full.found) << DetectReasonName(full.reason);
+    ASSERT_EQ(coarse.features.size(), full.features.size());
+    for (std::size_t i = 0; i < full.features.size(); ++i) {
+      EXPECT_EQ(coarse.features[i].id, full.features[i].id);
+      EXPECT_LE((coarse.features[i].uv_px - full.features[i].uv_px).norm(), 0.5 * kCleanRmsBarPx) << "corner " << i;
+    }
+    int matched = 0;
+    int unknown = 0;
+    EXPECT_LE(FeatureRmsPx(coarse, frame, &matched, &unknown), kCleanRmsBarPx);
+    EXPECT_EQ(matched, 16);
+  }
+}
+
 TEST(ArucoDetectorTest, PartialViewReportsOnlyTheVisibleMarkers) {
   const Board board = MakeBoard(BoardType::kAruco);
   BoardView view;
