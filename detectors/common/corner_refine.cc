@@ -1,5 +1,6 @@
 #include "detectors/common/corner_refine.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <Eigen/Dense>
@@ -72,6 +73,34 @@ std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::
     if (step.norm() < options.converged_px) return p;
   }
   return p;
+}
+
+std::optional<Eigen::Vector2d> RefineXCornerOnPatch(const ImageView8& image,
+                                                    const Eigen::Vector2d& start_px,
+                                                    double side_px, double blur_sigma_px) {
+  SaddleFitOptions saddle;
+  saddle.half_window = std::clamp(static_cast<int>(side_px / 3.0), 2, 7);
+  // The patch holds the window, a pixel of movement and the blur kernel (3 sigma) clear of
+  // its clamped border, plus two pixels for the saddle fit's own border rule.
+  const int radius =
+      saddle.half_window + 1 + static_cast<int>(std::ceil(3.0 * blur_sigma_px)) + 2;
+  if (!start_px.allFinite()) return std::nullopt;
+  const int x0 = static_cast<int>(std::floor(start_px.x())) - radius;
+  const int y0 = static_cast<int>(std::floor(start_px.y())) - radius;
+  const int size = 2 * radius + 2;
+  if (x0 < 0 || y0 < 0 || x0 + size > image.width || y0 + size > image.height) {
+    return std::nullopt;
+  }
+  ImageView8 patch;
+  patch.data = image.Row(y0) + x0;
+  patch.width = size;
+  patch.height = size;
+  patch.stride_bytes = image.stride_bytes;
+  const ImageF blurred = GaussianBlur(patch, blur_sigma_px);
+  const Eigen::Vector2d offset(x0, y0);
+  const std::optional<Eigen::Vector2d> refined = RefineSaddle(blurred, start_px - offset, saddle);
+  if (!refined || (*refined + offset - start_px).norm() > 1.0) return std::nullopt;
+  return *refined + offset;
 }
 
 }  // namespace linecal

@@ -37,4 +37,16 @@ struct SaddleFitOptions {
 std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::Vector2d& start_px,
                                             const SaddleFitOptions& options = {});
 
+// The X-corner near start_px (pixels of the 8-bit `image`, which must be valid) refined by
+// RefineSaddle on a patch of the image blurred by blur_sigma_px (0.5..4), with a window of
+// a third of side_px, the local square side (2..7 px: below a third it stays inside the
+// four squares; beyond 7 px the saddle of a 1.5 px blur is flat and more pixels add
+// nothing). The patch keeps the blur's clamped border out of the window's reach, so the
+// result equals RefineSaddle on the whole image blurred alike; blurring the patch alone
+// costs far less. nullopt when the patch leaves the image, the fit fails, or it ends more
+// than a pixel from start_px. Cost: O((half_window + 3 sigma)^2 * sigma) for the blur.
+std::optional<Eigen::Vector2d> RefineXCornerOnPatch(const ImageView8& image,
+                                                    const Eigen::Vector2d& start_px,
+                                                    double side_px, double blur_sigma_px);
+
 }  // namespace linecal

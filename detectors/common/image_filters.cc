@@ -23,6 +23,18 @@ std::vector<float> GaussianTaps(double sigma_px) {
 
 }  // namespace
 
+int GreyRange(const ImageView8& image) {
+  std::uint8_t lo = 255, hi = 0;
+  for (int y = 0; y < image.height; ++y) {
+    const std::uint8_t* row = image.Row(y);
+    for (int x = 0; x < image.width; ++x) {
+      lo = std::min(lo, row[x]);
+      hi = std::max(hi, row[x]);
+    }
+  }
+  return hi >= lo ? hi - lo : 0;
+}
+
 ImageF GaussianBlur(const ImageView8& image, double sigma_px) {
   const int w = image.width;
   const int h = image.height;
@@ -72,6 +84,37 @@ ImageF GaussianBlur(const ImageView8& image, double sigma_px) {
     }
   }
   return out;
+}
+
+Image8 HalveImage(const ImageView8& image) {
+  const int w = image.width / 2;
+  const int h = image.height / 2;
+  Image8 out(w, h);
+  for (int y = 0; y < h; ++y) {
+    const std::uint8_t* __restrict r0 = image.Row(2 * y);
+    const std::uint8_t* __restrict r1 = image.Row(2 * y + 1);
+    std::uint8_t* __restrict dst = out.pixels.data() + static_cast<std::size_t>(y) * w;
+    // +2 rounds the mean of four to nearest; the sum fits 10 bits.
+    for (int x = 0; x < w; ++x) {
+      dst[x] = static_cast<std::uint8_t>((r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1] + 2) >> 2);
+    }
+  }
+  return out;
+}
+
+std::vector<Image8> HalvingPyramid(const ImageView8& image, int min_short_side_px) {
+  std::vector<Image8> levels;
+  ImageView8 source = image;
+  while (std::min(source.width, source.height) / 2 >= std::max(1, min_short_side_px)) {
+    levels.push_back(HalveImage(source));
+    source = levels.back().view();
+  }
+  return levels;
+}
+
+Eigen::Vector2d LevelToImage(const Eigen::Vector2d& uv_level, int level) {
+  const double scale = static_cast<double>(1 << level);
+  return scale * uv_level + Eigen::Vector2d::Constant(0.5 * (scale - 1.0));
 }
 
 float SampleBilinear(const ImageF& image, double u, double v) {

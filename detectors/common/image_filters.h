@@ -25,11 +25,32 @@ struct ImageF {
   float* Row(int y) { return pixels.data() + static_cast<std::size_t>(y) * width; }
 };
 
+// The brightest minus the darkest pixel of the (valid) view, grey levels: bounds the
+// contrast of anything in it, blurred or not. Cost: one pass over the image (vectorised).
+int GreyRange(const ImageView8& image);
+
 // The image blurred by a Gaussian of sigma_px (the kernel is cut at 3 sigma, where its tail
 // holds 0.3 % of the weight). sigma_px <= 0 copies the image. The view must be valid
 // (ImageView::Validate() == kOk). Cost: O(width * height * sigma) (two 1-D passes);
 // about 3 ms for 1280 x 720 at sigma 1.5.
 ImageF GaussianBlur(const ImageView8& image, double sigma_px);
+
+// The image at half resolution: pixel (x, y) is the rounded mean of the 2 x 2 block
+// (2x..2x+1, 2y..2y+1), so its centre lies at (2x + 0.5, 2y + 0.5) in the input (an odd last
+// row or column is dropped). The view must be valid and at least 2 x 2. The 2 x 2 mean is
+// all the anti-aliasing the corner search needs: it blurs the half image again (sigma 1.5
+// px) before taking derivatives. Cost: one pass over the input, O(width * height).
+Image8 HalveImage(const ImageView8& image);
+
+// The coarse levels of a coarse-to-fine search: levels[k - 1] is the image halved k times
+// (HalveImage), for every k >= 1 whose short side keeps at least min_short_side_px pixels;
+// empty when even the first halving would go below. Cost: 1/3 of a pass over the image.
+std::vector<Image8> HalvingPyramid(const ImageView8& image, int min_short_side_px);
+
+// A point of pyramid level `level` (0: the image itself; k: halved k times) in the image's
+// own pixel coordinates: a level-k pixel spans 2^k input pixels, its centre sits at
+// 2^k u + (2^k - 1) / 2. O(1).
+Eigen::Vector2d LevelToImage(const Eigen::Vector2d& uv_level, int level);
 
 // The bilinear interpolation of `image` at (u, v), pixel-centre convention; coordinates
 // outside the image are clamped to its border. The image must not be empty. O(1).

@@ -2,8 +2,10 @@
 // images with exactly known geometry.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include "detectors/common/corner_refine.h"
 #include "detectors/common/image_filters.h"
@@ -76,6 +78,90 @@ TEST(ImageFiltersTest, BilinearInterpolatesAndClamps) {
   EXPECT_FLOAT_EQ(SampleBilinear(img, 0.5, 0.5), 15.0f);
   EXPECT_FLOAT_EQ(SampleBilinear(img, 0.25, 0.0), 2.5f);
   EXPECT_FLOAT_EQ(SampleBilinear(img, -3.0, 7.0), 20.0f);
+}
+
+TEST(ImageFiltersTest, GreyRangeIsBrightestMinusDarkestOfTheView) {
+  Image8 img(7, 3, 100);
+  EXPECT_EQ(GreyRange(img.view()), 0);
+  img.at(6, 2) = 250;
+  img.at(0, 0) = 20;
+  EXPECT_EQ(GreyRange(img.view()), 230);
+  // A sub-view sees only its own pixels.
+  ImageView8 sub = img.view();
+  sub.data += 1;
+  sub.width = 5;
+  EXPECT_EQ(GreyRange(sub), 0);
+}
+
+TEST(ImageFiltersTest, HalvingAveragesBlocksAndKeepsPixelCentres) {
+  // Odd sizes: the last row and column are dropped.
+  Image8 img(5, 3);
+  for (int y = 0; y < 3; ++y) {
+    for (int x = 0; x < 5; ++x) img.at(x, y) = static_cast<std::uint8_t>(10 * x + 50 * y);
+  }
+  const Image8 half = HalveImage(img.view());
+  ASSERT_EQ(half.width, 2);
+  ASSERT_EQ(half.height, 1);
+  // Block (0..1, 0..1): 0, 10, 50, 60 -> 30; block (2..3, 0..1): 20, 30, 70, 80 -> 50.
+  EXPECT_EQ(half.at(0, 0), 30);
+  EXPECT_EQ(half.at(1, 0), 50);
+  // The mean of four rounds to nearest: 1, 1, 2, 2 -> 1.5 -> 2.
+  const Image8 ones_twos = [] {
+    Image8 m(2, 2, 1);
+    m.at(0, 1) = 2;
+    m.at(1, 1) = 2;
+    return m;
+  }();
+  EXPECT_EQ(HalveImage(ones_twos.view()).at(0, 0), 2);
+  // A strided view (a sub-image) halves like a packed one.
+  Image8 wide(8, 4, 0);
+  for (int y = 0; y < 4; ++y) wide.at(4 + (y % 2), y) = 200;
+  ImageView8 sub = wide.view();
+  sub.data += 4;
+  sub.width = 4;
+  EXPECT_EQ(HalveImage(sub).at(0, 0), 100);
+  EXPECT_EQ(HalveImage(sub).at(1, 1), 0);
+
+  // Level-k pixel centres in image pixels: a level-1 pixel covers 2x..2x+1.
+  EXPECT_EQ(LevelToImage(Eigen::Vector2d(3, 4), 0), Eigen::Vector2d(3, 4));
+  EXPECT_EQ(LevelToImage(Eigen::Vector2d(3, 4), 1), Eigen::Vector2d(6.5, 8.5));
+  EXPECT_EQ(LevelToImage(Eigen::Vector2d(0, 1), 2), Eigen::Vector2d(1.5, 5.5));
+
+  // A vertex seen at every level maps back to where it is: an X-corner at (61.3, 40.7)
+  // found on the image halved twice lies within the coarse saddle fit's error (a few
+  // hundredths of a level pixel, times 4) of it.
+  const Image8 x = Render(128, 96, XCornerPaint(61.3, 40.7, 0.2, 1.5));
+  const std::vector<Image8> levels = HalvingPyramid(x.view(), 24);
+  ASSERT_EQ(levels.size(), 2u);  // 64 x 48, 32 x 24; 16 x 12 is below 24
+  EXPECT_EQ(levels[1].width, 32);
+  EXPECT_EQ(levels[1].height, 24);
+  XCornerOptions small_ring;
+  small_ring.ring_radius_px = 2.0;  // the corner's squares are only 8 level pixels wide
+  const std::vector<XCorner> coarse = FindXCorners(GaussianBlur(levels[1].view(), 1.0), small_ring);
+  ASSERT_EQ(coarse.size(), 1u);
+  EXPECT_LT((LevelToImage(coarse[0].uv_px, 2) - Eigen::Vector2d(61.3, 40.7)).norm(), 0.5);
+  EXPECT_TRUE(HalvingPyramid(x.view(), 97).empty());
+}
+
+TEST(SaddleFitTest, PatchRefinementEqualsTheWholeBlurredImage) {
+  // The patch keeps the clamped border out of reach, so the fit sees the same samples.
+  const Image8 img = Render(80, 60, XCornerPaint(37.6, 22.3, 0.4, 1.6));
+  const ImageF blurred = GaussianBlur(img.view(), 1.5);
+  for (const double side_px : {9.0, 30.0}) {
+    SaddleFitOptions saddle;
+    saddle.half_window = std::clamp(static_cast<int>(side_px / 3.0), 2, 7);
+    const Eigen::Vector2d start(38.1, 21.9);
+    const std::optional<Eigen::Vector2d> whole = RefineSaddle(blurred, start, saddle);
+    const std::optional<Eigen::Vector2d> patch = RefineXCornerOnPatch(img.view(), start, side_px, 1.5);
+    ASSERT_TRUE(whole.has_value());
+    ASSERT_TRUE(patch.has_value());
+    EXPECT_NEAR((*whole - *patch).norm(), 0.0, 1e-4);
+    EXPECT_NEAR(patch->x(), 37.6, 0.03);
+    EXPECT_NEAR(patch->y(), 22.3, 0.03);
+  }
+  // Too near the border for the patch, or no corner there: nullopt.
+  EXPECT_FALSE(RefineXCornerOnPatch(img.view(), Eigen::Vector2d(3, 30), 9.0, 1.5).has_value());
+  EXPECT_FALSE(RefineXCornerOnPatch(img.view(), Eigen::Vector2d(70, 50), 9.0, 1.5).has_value());
 }
 
 TEST(SaddleFitTest, FindsSkewedXCornersToHundredthsOfAPixel) {
