@@ -13,6 +13,7 @@
 #include "detectors/common/contours.h"
 #include "detectors/common/edge_lines.h"
 #include "detectors/common/homography.h"
+#include "detectors/common/image_filters.h"
 #include "detectors/common/paint_check.h"
 
 namespace linecal {
@@ -630,46 +631,18 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   return detection;
 }
 
-namespace {
-
-// The image averaged over 2 x 2 blocks: pixel (x, y) is centred on full-resolution
-// (2x + 0.5, 2y + 0.5). O(width * height).
-Image8 HalveImage(const ImageView8& image) {
-  Image8 half(image.width / 2, image.height / 2);
-  for (int y = 0; y < half.height; ++y) {
-    const std::uint8_t* r0 = image.Row(2 * y);
-    const std::uint8_t* r1 = image.Row(2 * y + 1);
-    std::uint8_t* out = &half.at(0, y);
-    for (int x = 0; x < half.width; ++x) {
-      out[x] = static_cast<std::uint8_t>((r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1] + 2) >> 2);
-    }
-  }
-  return half;
-}
-
-}  // namespace
-
 Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const MarkerFamily& family,
                             const MarkerDetectOptions& options, const Board* sibling, int enough_markers) {
-  Image8 half;
-  Image8 quarter;
-  for (const int factor : {4, 2}) {
-    // The reduced image must still hold a marker of the smallest side the options allow,
-    // twice over.
-    if (image.width < 2 * factor * options.min_marker_side_px ||
-        image.height < 2 * factor * options.min_marker_side_px) {
-      continue;
-    }
-    if (half.pixels.empty()) half = HalveImage(image);
-    if (factor == 4) quarter = HalveImage(half.view());
-    MarkerScan scan = ScanMarkers((factor == 4 ? quarter : half).view(), family, options, enough_markers);
+  // Levels halved once and twice, each still holding a marker of the smallest side the
+  // options allow twice over; the coarsest first.
+  std::vector<Image8> levels = HalvingPyramid(image, 2 * options.min_marker_side_px);
+  if (levels.size() > 2) levels.resize(2);
+  for (int level = static_cast<int>(levels.size()); level >= 1; --level) {
+    MarkerScan scan = ScanMarkers(levels[level - 1].view(), family, options, enough_markers);
     std::vector<DecodedMarker> refined;
     refined.reserve(scan.markers.size());
     for (DecodedMarker m : scan.markers) {
-      // Reduced pixel (x, y) is centred on full-resolution factor (x, y) + (factor - 1) / 2.
-      for (int k = 0; k < 4; ++k) {
-        m.corners_px[k] = factor * m.corners_px[k] + Eigen::Vector2d::Constant(0.5 * (factor - 1));
-      }
+      for (int k = 0; k < 4; ++k) m.corners_px[k] = LevelToImage(m.corners_px[k], level);
       double side = 0.0;
       for (int k = 0; k < 4; ++k) side += 0.25 * (m.corners_px[(k + 1) % 4] - m.corners_px[k]).norm();
       const int samples = std::clamp(static_cast<int>(side), 8, 80);
