@@ -281,15 +281,31 @@ std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners
       }
     }
   }
-  // Keep mutual links only: j is i's nearest along k and i is j's nearest back.
+  // Along one board line, the next vertex is at most kMaxLinkStretch times as far as the
+  // previous one: perspective changes neighbouring squares by far less (2x would need the
+  // line's vanishing point within two squares). A corner of clutter beyond a board's edge,
+  // which can be the nearest along the outward direction of an edge vertex and link back
+  // to it, is usually much farther; such a link would join the board's grid to clutter
+  // and make it larger than it is.
+  constexpr double kMaxLinkStretch = 2.0;
+  const auto within_stretch = [&](int i, int k, double dist) {
+    const int opposite = best[i][(k + 2) & 3];
+    return opposite < 0 ||
+           dist <= kMaxLinkStretch * (corners[opposite].uv_px - corners[i].uv_px).norm();
+  };
+  // Keep mutual links only: j is i's nearest along k and i is j's nearest back, and neither
+  // end stretches the line.
   std::vector<std::array<int, 4>> links(n, {-1, -1, -1, -1});
   for (int i = 0; i < n; ++i) {
     for (int k = 0; k < 4; ++k) {
       const int j = best[i][k];
       if (j < 0) continue;
-      const Eigen::Vector2d back = (corners[i].uv_px - corners[j].uv_px).normalized();
+      const double dist = (corners[i].uv_px - corners[j].uv_px).norm();
+      if (!within_stretch(i, k, dist)) continue;
+      const Eigen::Vector2d back = (corners[i].uv_px - corners[j].uv_px) / dist;
       for (int m = 0; m < 4; ++m) {
-        if (best[j][m] == i && XCornerDirection(corners[j], m).dot(back) >= kCosLinkTolerance) {
+        if (best[j][m] == i && XCornerDirection(corners[j], m).dot(back) >= kCosLinkTolerance &&
+            within_stretch(j, m, dist)) {
           links[i][k] = j;
         }
       }

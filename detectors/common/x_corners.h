@@ -68,7 +68,9 @@ Eigen::Vector2d XCornerDirection(const XCorner& corner, int k);
 // corner linked to corner i along its local direction k (XCornerDirection), or -1. A link
 // joins a corner to its nearest corner within 25 degrees of that direction, which must lie
 // on one of its own edge lines and have its dark axis turned by about 90 degrees (the
-// vertices of one square edge); only mutual links are kept. Image pixels; no failure (a
+// vertices of one square edge); only mutual links are kept, and only those at most twice
+// as long as the link on from either end along the same line (when there is one): a
+// board's grid does not reach out to clutter beyond its edge. Image pixels; no failure (a
 // lone corner has no links). Cost: O(n^2) for n corners (about 1 ms for 1000).
 std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners);
 
