@@ -314,8 +314,15 @@ std::optional<std::vector<DetectedFeature>> RefineGrid(const ImageView8& image, 
                                 .norm());
     }
     const Eigen::Vector2d uv = LevelToImage(uv_level, level);
-    const std::optional<Eigen::Vector2d> refined =
+    std::optional<Eigen::Vector2d> refined =
         RefineXCornerOnPatch(image, uv, scale * side, options.blur_sigma_px);
+    // The fit stops once its step is below converged_px, so where it stops depends a little
+    // on where it started: from a coarse level's corner, a few tenths of a pixel off, it
+    // stopped earlier on its way than from the image's own search (clean 2448 x 2048 RMS
+    // 0.0017 px against 0.0014). A second fit from there starts as close as that search's.
+    if (refined && level > 0) {
+      refined = RefineXCornerOnPatch(image, *refined, scale * side, options.blur_sigma_px);
+    }
     if (!refined && level > 0) return std::nullopt;
     DetectedFeature& f = features[id];
     f.id = id;
