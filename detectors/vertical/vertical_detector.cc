@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <span>
 #include <tuple>
@@ -411,18 +412,41 @@ std::vector<EdgePoint> SegmentPoints(const Frame& frame, const Eigen::Matrix3d& 
   return points;
 }
 
+// The edge points of the segments (SegmentPoints) measured under one homography and edge
+// bias, each measured once: the lines of neighbouring L-corners share up to three of their
+// four segments (the outer vertical lines carry an L-corner on almost every row), which
+// made a pass measure most edges several times.
+class SegmentCache {
+ public:
+  SegmentCache(const Frame& frame, const Eigen::Matrix3d& H, double edge_bias_px)
+      : frame_(frame), H_(H), edge_bias_px_(edge_bias_px) {}
+
+  const std::vector<EdgePoint>& Points(int gx, int gy, bool vertical) {
+    const auto key = std::make_tuple(gx, gy, vertical);
+    auto it = segments_.find(key);
+    if (it == segments_.end()) {
+      it = segments_.emplace(key, SegmentPoints(frame_, H_, gx, gy, vertical, edge_bias_px_)).first;
+    }
+    return it->second;
+  }
+
+ private:
+  const Frame& frame_;
+  const Eigen::Matrix3d H_;
+  const double edge_bias_px_;
+  std::map<std::tuple<int, int, bool>, std::vector<EdgePoint>> segments_;
+};
+
 // Edge points of the board line through vertex (gx, gy), vertical (x = gx) or horizontal
 // (y = gy), over the two cells on either side of the vertex: up to four cells of edge, where
 // the vertex's own two edges alone would give one each (four times the points against
 // noise, a longer base for the direction), short enough for a lens's bending of the line to
 // stay negligible.
-std::vector<EdgePoint> LinePoints(const Frame& frame, const Eigen::Matrix3d& H, int gx, int gy,
-                                  bool vertical, double edge_bias_px) {
+std::vector<EdgePoint> LinePoints(SegmentCache& segments, int gx, int gy, bool vertical) {
   std::vector<EdgePoint> points;
   for (int k = -2; k < 2; ++k) {
-    const std::vector<EdgePoint> segment =
-        vertical ? SegmentPoints(frame, H, gx, gy + k, true, edge_bias_px)
-                 : SegmentPoints(frame, H, gx + k, gy, false, edge_bias_px);
+    const std::vector<EdgePoint>& segment =
+        vertical ? segments.Points(gx, gy + k, true) : segments.Points(gx + k, gy, false);
     points.insert(points.end(), segment.begin(), segment.end());
   }
   return points;
@@ -464,9 +488,10 @@ double EdgeBias(const Frame& frame, const Eigen::Matrix3d& H,
   return weight > 0.0 ? sum / weight : 0.0;
 }
 
-// The refined image position of feature f predicted by H, or nullopt.
+// The refined image position of feature f predicted by H, or nullopt; L-corners from the
+// edge points of `segments` (measured under the same H).
 std::optional<Eigen::Vector2d> RefineFeature(const Frame& frame, const Eigen::Matrix3d& H,
-                                             const LayoutFeature& f, double edge_bias_px) {
+                                             const LayoutFeature& f, SegmentCache& segments) {
   const Eigen::Vector2d predicted = Map(H, f.gx, f.gy);
   const double side = LocalCellPx(H, f.gx, f.gy);
   std::optional<Eigen::Vector2d> refined;
@@ -478,9 +503,9 @@ std::optional<Eigen::Vector2d> RefineFeature(const Frame& frame, const Eigen::Ma
     refined = RefineSaddle(frame.blurred, predicted, saddle);
   } else {
     const std::vector<EdgePoint> a =
-        LinePoints(frame, H, f.gx, f.gy, /*vertical=*/false, edge_bias_px);
+        LinePoints(segments, f.gx, f.gy, /*vertical=*/false);
     const std::vector<EdgePoint> b =
-        LinePoints(frame, H, f.gx, f.gy, /*vertical=*/true, edge_bias_px);
+        LinePoints(segments, f.gx, f.gy, /*vertical=*/true);
     // Three points fix a line and show an outlier; fewer means the edge is not there.
     if (a.size() < 3 || b.size() < 3) return std::nullopt;
     const std::optional<Line2d> la = FitWeightedLine(a, Map(H, f.gx + 1, f.gy) - predicted);
@@ -629,11 +654,12 @@ BoardFit FitBoard(const Frame& frame, const Placement& seed, const VerticalOptio
   constexpr int kGrowRows = 2;
   for (int round = 0; round < kPageRows; ++round) {
     int added = 0;
+    SegmentCache segments(frame, h->H, /*edge_bias_px=*/0.0);
     for (int i = 0; i < nf; ++i) {
       const LayoutFeature& f = layout.features[i];
       if (fit.uv[i].has_value() || f.gy < lo - kGrowRows || f.gy > hi + kGrowRows) continue;
       if (!feature_visible(h->H, f)) continue;
-      fit.uv[i] = RefineFeature(frame, h->H, f, /*edge_bias_px=*/0.0);
+      fit.uv[i] = RefineFeature(frame, h->H, f, segments);
       if (fit.uv[i].has_value()) {
         ++added;
         lo = std::min(lo, f.gy);
@@ -650,9 +676,10 @@ BoardFit FitBoard(const Frame& frame, const Placement& seed, const VerticalOptio
   // true edges), then the residual check against the refitted homography.
   const double edge_bias_px = EdgeBias(frame, h->H, fit.uv);
   for (int pass = 0; pass < 2; ++pass) {
+    SegmentCache segments(frame, h->H, edge_bias_px);
     for (int i = 0; i < nf; ++i) {
       if (fit.uv[i].has_value()) {
-        fit.uv[i] = RefineFeature(frame, h->H, layout.features[i], edge_bias_px);
+        fit.uv[i] = RefineFeature(frame, h->H, layout.features[i], segments);
       }
     }
     std::optional<HomographyFit> next = refit();
