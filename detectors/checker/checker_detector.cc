@@ -159,41 +159,28 @@ ColourCheck CheckColours(const ImageF& blurred, const Eigen::Matrix3d& H_image_g
   return check;
 }
 
-}  // namespace
+// A hypothesis: a complete grid and the map (gi, gj) -> (c, r) of one of its rotations.
+struct GridHypothesis {
+  std::vector<std::pair<int, Eigen::Vector2d>> id_uv;  // feature id, image position
+  Eigen::Matrix3d H_image_grid = Eigen::Matrix3d::Identity();
+  double score = 0.0;
+  double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
+};
 
-std::string_view CheckerOptions::Validate() const {
-  if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
-  if (const std::string_view bad = corners.Validate(); !bad.empty()) return bad;
-  if (!(max_residual_square_fraction > 0.0 && max_residual_square_fraction <= 0.5)) {
-    return "max_residual_square_fraction";
-  }
-  return {};
-}
+// The outcome of the search on one pyramid level: reason kNone and the chosen grid (its
+// coordinates are the level's pixels), or the reason it failed.
+struct GridSearch {
+  DetectReason reason = DetectReason::kNoCandidates;
+  GridHypothesis grid;
+};
 
-Detection DetectChecker(const ImageView8& image, const Board& board,
-                        const CheckerOptions& options) {
-  Detection result;
-  result.reason = CheckDetectorInput(image, board, BoardType::kChecker, options.Validate().empty());
-  if (result.reason != DetectReason::kNone) return result;
-  const int cols = board.params().cols;
-  const int rows = board.params().rows;
-
-  // The raw range bounds the blurred one: an image without min_contrast anywhere has no
-  // corner. (Byte rows: the loop vectorises.)
-  std::uint8_t lo = 255, hi = 0;
-  for (int y = 0; y < image.height; ++y) {
-    const std::uint8_t* row = image.Row(y);
-    for (int x = 0; x < image.width; ++x) {
-      lo = std::min(lo, row[x]);
-      hi = std::max(hi, row[x]);
-    }
-  }
-  if (hi - lo < options.corners.min_contrast) {
-    result.reason = DetectReason::kLowContrast;
-    return result;
-  }
-  const ImageF blurred = GaussianBlur(image, options.blur_sigma_px);
+// Steps 1-4 of the header's method on `view` (the image or one of its halvings): the
+// corners, their grid components, the one complete cols x rows grid verified by its colours
+// and its homography, and the upright rule among the rotations the colours allow.
+GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerOptions& options) {
+  const ImageF blurred = GaussianBlur(view, options.blur_sigma_px);
   const std::vector<XCorner> corners = FindXCorners(blurred, options.corners);
+  GridSearch result;
   if (corners.empty()) {
     result.reason = DetectReason::kNoCandidates;
     return result;
@@ -204,14 +191,7 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
   }
   const std::vector<Component> components = GridComponents(corners, LinkXCorners(corners));
 
-  // A hypothesis: a complete grid and the map (gi, gj) -> (c, r) of one of its rotations.
-  struct Hypothesis {
-    std::vector<std::pair<int, Eigen::Vector2d>> id_uv;  // feature id, image position
-    Eigen::Matrix3d H_image_grid;
-    double score = 0.0;
-    double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
-  };
-  std::vector<Hypothesis> found_grids;
+  std::vector<GridHypothesis> found_grids;
   DetectReason best_failure = DetectReason::kTooFewFeatures;
   for (const Component& comp : components) {
     if (!comp.consistent || comp.corners.size() < 4) continue;
@@ -235,7 +215,7 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
     for (int k = 0; k < 4; ++k) {
       const bool swapped = k % 2 == 1;
       if ((swapped ? h : w) != cols || (swapped ? w : h) != rows) continue;
-      Hypothesis hyp;
+      GridHypothesis hyp;
       std::vector<Eigen::Vector2d> grid_pts, image_pts;
       for (const GridCorner& gc : comp.corners) {
         const int di = gc.gi - i0, dj = gc.gj - j0;
@@ -289,9 +269,9 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
   // Several hypotheses: rotations of one symmetric grid (same corners) are resolved by the
   // upright rule of the header; two different grids are ambiguous.
   std::sort(found_grids.begin(), found_grids.end(),
-            [](const Hypothesis& a, const Hypothesis& b) { return a.x_axis_u > b.x_axis_u; });
-  const Hypothesis& chosen = found_grids.front();
-  for (const Hypothesis& other : found_grids) {
+            [](const GridHypothesis& a, const GridHypothesis& b) { return a.x_axis_u > b.x_axis_u; });
+  const GridHypothesis& chosen = found_grids.front();
+  for (const GridHypothesis& other : found_grids) {
     std::vector<Eigen::Vector2d> a, b;
     for (const auto& [id, uv] : chosen.id_uv) a.push_back(uv);
     for (const auto& [id, uv] : other.id_uv) b.push_back(uv);
@@ -306,31 +286,100 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
       return result;
     }
   }
+  result.reason = DetectReason::kNone;
+  result.grid = chosen;
+  return result;
+}
 
-  // Final refinement with a window of a third of the local square side (at most 7 px: beyond
-  // that the saddle of a 1.5 px blur is flat and more pixels add nothing).
-  result.features.resize(cols * rows);
-  for (const auto& [id, uv] : chosen.id_uv) {
+// The grid's corners refined at full resolution (level: the pyramid level its positions
+// are in) by the saddle fit on patches of `image` with a window of a third of the local
+// square side (RefineXCornerOnPatch). On the image itself (level 0) a corner whose fit
+// fails keeps its position from the search, which is already a saddle fit of the same
+// blur; from a coarse level every corner must refine (else nullopt, and the finer levels
+// are tried), so a board found coarse is as accurate as one found on the image.
+std::optional<std::vector<DetectedFeature>> RefineGrid(const ImageView8& image, const Board& board,
+                                                       const GridHypothesis& grid, int level,
+                                                       const CheckerOptions& options) {
+  const int cols = board.params().cols;
+  std::vector<DetectedFeature> features(grid.id_uv.size());
+  const double scale = static_cast<double>(1 << level);
+  for (const auto& [id, uv_level] : grid.id_uv) {
     const int c = id % cols;
     const int r = id / cols;
-    const Eigen::Vector2d p = ApplyHomography(chosen.H_image_grid, Eigen::Vector2d(c, r));
+    const Eigen::Vector2d p = ApplyHomography(grid.H_image_grid, Eigen::Vector2d(c, r));
     double side = 1e300;
     for (const Eigen::Vector2d& d : {Eigen::Vector2d(1, 0), Eigen::Vector2d(-1, 0),
                                      Eigen::Vector2d(0, 1), Eigen::Vector2d(0, -1)}) {
-      side = std::min(side, (ApplyHomography(chosen.H_image_grid, Eigen::Vector2d(c, r) + d) - p)
+      side = std::min(side, (ApplyHomography(grid.H_image_grid, Eigen::Vector2d(c, r) + d) - p)
                                 .norm());
     }
-    SaddleFitOptions saddle = options.corners.saddle;
-    saddle.half_window = std::clamp(static_cast<int>(side / 3.0), 2, 7);
-    const std::optional<Eigen::Vector2d> refined = RefineSaddle(blurred, uv, saddle);
-    DetectedFeature& f = result.features[id];
+    const Eigen::Vector2d uv = LevelToImage(uv_level, level);
+    std::optional<Eigen::Vector2d> refined =
+        RefineXCornerOnPatch(image, uv, scale * side, options.blur_sigma_px);
+    // The fit stops once its step is below converged_px, so where it stops depends a little
+    // on where it started: from a coarse level's corner, a few tenths of a pixel off, it
+    // stopped earlier on its way than from the image's own search (clean 2448 x 2048 RMS
+    // 0.0017 px against 0.0014). A second fit from there starts as close as that search's.
+    if (refined && level > 0) {
+      refined = RefineXCornerOnPatch(image, *refined, scale * side, options.blur_sigma_px);
+    }
+    if (!refined && level > 0) return std::nullopt;
+    DetectedFeature& f = features[id];
     f.id = id;
-    f.uv_px = refined && (*refined - uv).norm() < 1.0 ? *refined : uv;
+    f.uv_px = refined ? *refined : uv;
     f.p_board = board.features()[id].p_board;
     f.marker = board.features()[id].marker;
   }
-  result.found = true;
-  result.reason = DetectReason::kNone;
+  return features;
+}
+
+}  // namespace
+
+std::string_view CheckerOptions::Validate() const {
+  if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
+  if (const std::string_view bad = corners.Validate(); !bad.empty()) return bad;
+  if (!(max_residual_square_fraction > 0.0 && max_residual_square_fraction <= 0.5)) {
+    return "max_residual_square_fraction";
+  }
+  return {};
+}
+
+Detection DetectChecker(const ImageView8& image, const Board& board,
+                        const CheckerOptions& options) {
+  Detection result;
+  result.reason = CheckDetectorInput(image, board, BoardType::kChecker, options.Validate().empty());
+  if (result.reason != DetectReason::kNone) return result;
+  const int cols = board.params().cols;
+  const int rows = board.params().rows;
+
+  // The raw range bounds the blurred one: an image without min_contrast anywhere has no
+  // corner.
+  if (GreyRange(image) < options.corners.min_contrast) {
+    result.reason = DetectReason::kLowContrast;
+    return result;
+  }
+  // Coarse to fine (x_corners.h, kMinCoarseLevelSidePx): a board found on a halved image
+  // needs only its corners refined at full resolution (on patches), which costs far less
+  // than searching the full image; anything else on a coarse level (nothing, a larger or a
+  // second grid, a corner that does not refine) passes on to the next finer one, down to
+  // the image itself, which decides as without the coarse levels. Boards too small for the
+  // coarse levels pay for them on top (at most a third more).
+  const std::vector<Image8> pyramid = HalvingPyramid(image, kMinCoarseLevelSidePx);
+  for (int level = static_cast<int>(pyramid.size()); level >= 0; --level) {
+    const GridSearch search =
+        SearchGrid(level == 0 ? image : pyramid[level - 1].view(), cols, rows, options);
+    if (search.reason != DetectReason::kNone) {
+      result.reason = search.reason;
+      continue;
+    }
+    if (std::optional<std::vector<DetectedFeature>> features =
+            RefineGrid(image, board, search.grid, level, options)) {
+      result.features = *std::move(features);
+      result.found = true;
+      result.reason = DetectReason::kNone;
+      return result;
+    }
+  }
   return result;
 }
 

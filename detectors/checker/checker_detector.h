@@ -10,7 +10,10 @@
 // of its squares (sampled through a homography fitted to the corners), and verified as a
 // whole: every pair of neighbouring squares, margin included, has the right colours, and
 // the homography fits every corner. Corners are then refined by the saddle fit with a
-// window scaled to the local square size.
+// window scaled to the local square size. All but that refinement run coarse to fine: on
+// the image halved while its short side keeps kMinCoarseLevelSidePx (x_corners.h) first,
+// then on each finer level until one finds the board; the refinement is always at full
+// resolution.
 //
 // Orientation: boards.md numbers corner (col c, row r) from the top-left square, which is
 // black. The colours fix the orientation unless the board is symmetric under a rotation
@@ -49,7 +52,8 @@ struct CheckerOptions {
 // a reason and no features: kBadImage (invalid view, or below 16 px a side, or invalid
 // options), kLowContrast, kNoCandidates, kTooFewFeatures (no complete grid), kWrongBoard
 // (a larger checker), kAmbiguous (two complete grids), kVerificationFailed. Pure function;
-// cost: a few ms at 1280 x 720.
+// cost: about 2 ms at 1280 x 720 and 3 ms at 2448 x 2048 when the half image holds the board
+// (squares of 20 px or more at 1280 x 720), the full-resolution search on top for smaller.
 Detection DetectChecker(const ImageView8& image, const Board& board,
                         const CheckerOptions& options = {});
 

@@ -302,35 +302,6 @@ std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
 // squares; the window is a third of the local square side, 2..7 px).
 constexpr double kSaddleBlurSigmaPx = 1.5;
 
-// The X-corner near start_px refined by the saddle fit on a blurred patch of the image
-// (blurring the patch alone costs far less than the whole image); nullopt when the patch
-// leaves the image or the fit fails or wanders more than a pixel from the start.
-std::optional<Eigen::Vector2d> RefineXCorner(const ImageView8& image,
-                                             const Eigen::Vector2d& start_px, double side_px) {
-  SaddleFitOptions saddle;
-  saddle.half_window = std::clamp(static_cast<int>(side_px / 3.0), 2, 7);
-  // The patch holds the window, a pixel of movement and the blur kernel (3 sigma) clear of
-  // its clamped border, plus two pixels for the saddle fit's own border rule.
-  const int radius =
-      saddle.half_window + 1 + static_cast<int>(std::ceil(3.0 * kSaddleBlurSigmaPx)) + 2;
-  const int x0 = static_cast<int>(std::floor(start_px.x())) - radius;
-  const int y0 = static_cast<int>(std::floor(start_px.y())) - radius;
-  const int size = 2 * radius + 2;
-  if (x0 < 0 || y0 < 0 || x0 + size > image.width || y0 + size > image.height) {
-    return std::nullopt;
-  }
-  ImageView8 patch;
-  patch.data = image.Row(y0) + x0;
-  patch.width = size;
-  patch.height = size;
-  patch.stride_bytes = image.stride_bytes;
-  const ImageF blurred = GaussianBlur(patch, kSaddleBlurSigmaPx);
-  const Eigen::Vector2d offset(x0, y0);
-  const std::optional<Eigen::Vector2d> refined = RefineSaddle(blurred, start_px - offset, saddle);
-  if (!refined || (*refined + offset - start_px).norm() > 1.0) return std::nullopt;
-  return *refined + offset;
-}
-
 // Edge points keep this far from the ends of a side (at least a tenth of it, at most 0.35):
 // near a vertex the window across the edge also sees the blurred perpendicular side or
 // the neighbour's corner, which pulls the point towards it. 3 px is the window of half
@@ -513,7 +484,7 @@ std::optional<Refined> RefineBoard(const ImageView8& image, const Board& board,
       if (!uv) return std::nullopt;
       if (pass == kPasses - 1) {
         const double side_px = LocalSquareSide(r.H, p_board[id], model.square_m);
-        uv = RefineXCorner(image, *uv, side_px);
+        uv = RefineXCornerOnPatch(image, *uv, side_px, kSaddleBlurSigmaPx);
         if (!uv) return std::nullopt;
       }
       r.uv_px[id] = *uv;
@@ -715,10 +686,11 @@ std::optional<Refined> FitAndRefineBoard(const ImageView8& image, const Board& b
   return refined;
 }
 
-// Every pair of groups with distinct quads: the coarse board homography from their 24
-// corners, then refinement and the whole-board checks. The verified boards; *failure is
-// raised to the furthest stage reached (DetectReason's order).
-std::vector<Refined> SearchBoards(const ImageView8& image, const Board& board,
+// Every pair of groups with distinct quads (found on pyramid level `level`, in its pixels):
+// the coarse board homography from their 24 corners in full-resolution pixels, then
+// refinement and the whole-board checks on the full-resolution `image`. The verified
+// boards; *failure is raised to the furthest stage reached (DetectReason's order).
+std::vector<Refined> SearchBoards(const ImageView8& image, int level, const Board& board,
                                   const ChessModel& model, const std::vector<SquareQuad>& quads,
                                   const ChessboardOptions& options, DetectReason* failure) {
   std::vector<Refined> found;
@@ -747,8 +719,9 @@ std::vector<Refined> SearchBoards(const ImageView8& image, const Board& board,
         local.clear();
         TriplePoints(t, quads, &local, &image_pts);
         for (const Eigen::Vector2d& l : local) board_pts.push_back(model.groups[g].ToBoard(l));
-        tolerance.resize(image_pts.size(), CoarseTolerancePx(options, t.side_px));
+        tolerance.resize(image_pts.size(), (1 << level) * CoarseTolerancePx(options, t.side_px));
       }
+      for (Eigen::Vector2d& p : image_pts) p = LevelToImage(p, level);
       std::optional<Refined> refined = FitAndRefineBoard(image, board, model, board_pts, image_pts,
                                                          tolerance, options, failure);
       if (refined) found.push_back(*std::move(refined));
@@ -933,28 +906,34 @@ std::vector<PairGroup> PairGroups(const ImageF& blurred, const std::vector<XCorn
 }
 
 // Both groups' X-corners lie on one board line (MakeModel checks it), so b's are on the
-// image line through a's: within half of the larger side plus a pixel (the line's
-// direction from two saddle points a side apart, extrapolated over the 13 sides between
-// the groups, is good to a quarter of a side). A cheap gate before the board homography:
-// clutter and checkers give many pairs of groups, few of them on one line. O(1).
-bool OnOneLine(const std::vector<XCorner>& corners, const PairGroup& a, const PairGroup& b) {
+// image line through a's: within half of the larger side plus a pixel of the level the
+// corners were found on, `scale` image pixels (the line's direction from two saddle points
+// a side apart, extrapolated over the 13 sides between the groups, is good to a quarter of
+// a side). A cheap gate before the board homography: clutter and checkers give many pairs
+// of groups, few of them on one line. O(1).
+bool OnOneLine(const std::vector<XCorner>& corners, const PairGroup& a, const PairGroup& b,
+               double scale) {
   const Eigen::Vector2d& p = corners[a.corners[0]].uv_px;
   const Eigen::Vector2d d = (corners[a.corners[1]].uv_px - p).normalized();
   const Eigen::Vector2d n(-d.y(), d.x());
-  const double tol = 0.5 * std::max(a.side_px, b.side_px) + 1.0;
+  const double tol = 0.5 * std::max(a.side_px, b.side_px) + scale;
   return std::abs(n.dot(corners[b.corners[0]].uv_px - p)) <= tol &&
          std::abs(n.dot(corners[b.corners[1]].uv_px - p)) <= tol;
 }
 
-// The second path (header, step 6): X-corners over the whole image, groups from their
-// pairs, and every two groups with distinct corners as the board's left and right group
-// (either way round) through FitAndRefineBoard.
-std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& board,
-                                      const ChessModel& model, int min_contrast,
-                                      const ChessboardOptions& options, DetectReason* failure) {
+// The second path on one pyramid level (`view`: the image halved `level` times, level 0
+// the image itself; header, step 6): X-corners over the level, groups from their pairs, and
+// every two groups with distinct corners as the board's left and right group (either way
+// round) through FitAndRefineBoard, which refines and verifies on the full-resolution
+// `image` (its coarse tolerance scaled to it with the points).
+std::vector<Refined> SearchPairBoards(const ImageView8& image, const ImageView8& view, int level,
+                                      const Board& board, const ChessModel& model,
+                                      int min_contrast, const ChessboardOptions& options,
+                                      DetectReason* failure) {
   std::vector<Refined> found;
   XCornerOptions corner_options;
-  // The ring's contrast floor rises with the image's noise like the binarisation's.
+  // The ring's contrast floor rises with the image's noise like the binarisation's (halving
+  // only lowers the noise).
   corner_options.min_contrast =
       std::max(corner_options.min_contrast, static_cast<double>(min_contrast));
   // A 3 px ring (default 4): 12 px squares at 50 degrees of yaw and pitch are 5-8 px along
@@ -962,16 +941,23 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& boar
   // sector test; 3 px stays outside the 1.5 px blur.
   constexpr double kPairRingRadiusPx = 3.0;
   corner_options.ring_radius_px = kPairRingRadiusPx;
-  const ImageF blurred = GaussianBlur(image, kSaddleBlurSigmaPx);
-  const std::vector<XCorner> corners = FindXCorners(blurred, corner_options);
+  const ImageF blurred = GaussianBlur(view, kSaddleBlurSigmaPx);
+  std::vector<XCorner> corners = FindXCorners(blurred, corner_options);
   // A group's pair is one square apart: a square is 150 / 2600 of a board at most the
   // image's width (acceptance.md: 80 %); a tenth of the larger side allows perspective.
   constexpr double kMaxPairImageFraction = 0.1;
-  const double max_pair_px = kMaxPairImageFraction * std::max(image.width, image.height);
-  const std::vector<PairGroup> groups = PairGroups(blurred, corners, max_pair_px, options);
+  const double max_pair_px = kMaxPairImageFraction * std::max(view.width, view.height);
+  std::vector<PairGroup> groups = PairGroups(blurred, corners, max_pair_px, options);
   if (groups.size() < 2) {
     *failure = std::max(*failure, DetectReason::kTooFewFeatures);
     return found;
+  }
+  // From here on full-resolution pixels: the points, and the tolerances scaled with them.
+  const double scale = static_cast<double>(1 << level);
+  for (XCorner& c : corners) c.uv_px = LevelToImage(c.uv_px, level);
+  for (PairGroup& g : groups) {
+    for (Eigen::Vector2d& p : g.image_px) p = LevelToImage(p, level);
+    g.side_px *= scale;
   }
   std::vector<Eigen::Vector2d> image_pts, board_pts;
   std::vector<double> tolerance;
@@ -984,7 +970,7 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& boar
           })) {
         continue;
       }
-      if (!OnOneLine(corners, ga, gb) || !OnOneLine(corners, gb, ga)) continue;
+      if (!OnOneLine(corners, ga, gb, scale) || !OnOneLine(corners, gb, ga, scale)) continue;
       for (int left_first = 0; left_first < 2; ++left_first) {
         board_pts.clear();
         image_pts.clear();
@@ -994,7 +980,7 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& boar
           for (std::size_t k = 0; k < pg.local.size(); ++k) {
             board_pts.push_back(model.groups[g].ToBoard(pg.local[k]));
             image_pts.push_back(pg.image_px[k]);
-            tolerance.push_back(CoarseTolerancePx(options, pg.side_px));
+            tolerance.push_back(scale * CoarseTolerancePx(options, pg.side_px / scale));
           }
         }
         std::optional<Refined> refined = FitAndRefineBoard(
@@ -1005,6 +991,49 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const Board& boar
         }
       }
     }
+  }
+  return found;
+}
+
+// The verified boards are one board found more than once (from duplicate groups): every
+// feature within a pixel of the first's; otherwise two boards are in view. O(boards).
+bool OneBoard(const std::vector<Refined>& found) {
+  for (const Refined& other : found) {
+    for (std::size_t id = 0; id < other.uv_px.size(); ++id) {
+      if ((other.uv_px[id] - found[0].uv_px[id]).norm() > 1.0) return false;
+    }
+  }
+  return true;
+}
+
+// Steps 1-6 of the header on pyramid level `level` (`view`: the image halved `level`
+// times, level 0 the image itself): the blob path, the split and the second path, with
+// the candidates found on `view` and refined and verified on `image`. The verified boards;
+// *failure is raised to the furthest stage reached, kLowContrast when the level has no
+// contrast above min_contrast.
+std::vector<Refined> SearchLevel(const ImageView8& image, const ImageView8& view, int level,
+                                 const Board& board, const ChessModel& model, int min_contrast,
+                                 const ChessboardOptions& options, DetectReason* failure) {
+  int max_contrast = 0;
+  Image8 dark = BinariseDark(view, min_contrast, &max_contrast);
+  if (max_contrast < min_contrast) {
+    *failure = DetectReason::kLowContrast;
+    return {};
+  }
+  ComponentLabels labels;
+  std::vector<SquareQuad> quads = SquareQuads(dark, options, &labels);
+  std::vector<Refined> found = SearchBoards(image, level, board, model, quads, options, failure);
+  if (found.empty()) {
+    // Second chance: squares merged at X-corners, split and searched again.
+    std::vector<bool> has_quad(labels.components.size(), false);
+    for (const SquareQuad& q : quads) has_quad[q.component] = true;
+    if (SplitAtXCorners(view, labels, has_quad, options.min_square_side_px, &dark) > 0) {
+      quads = SquareQuads(dark, options, &labels);
+      found = SearchBoards(image, level, board, model, quads, options, failure);
+    }
+  }
+  if (found.empty()) {
+    found = SearchPairBoards(image, view, level, board, model, min_contrast, options, failure);
   }
   return found;
 }
@@ -1041,37 +1070,25 @@ Detection DetectChessboard(const ImageView8& image, const Board& board,
   const int min_contrast =
       std::max(options.min_contrast,
                static_cast<int>(std::ceil(options.noise_contrast_factor * noise_sigma)));
-  int max_contrast = 0;
-  Image8 dark = BinariseDark(image, min_contrast, &max_contrast);
-  if (max_contrast < min_contrast) return Fail(DetectReason::kLowContrast);
-
-  // The reason reported when nothing is found: the furthest stage reached, which is the
-  // largest in DetectReason's order (no candidates, too few, verification, wrong board).
+  // Coarse to fine (x_corners.h, kMinCoarseLevelSidePx): the whole search on each halving of
+  // the image from the coarsest, then on the image itself, until a level finds one board
+  // (duplicates of it allowed). Refinement and the whole-board checks are at full
+  // resolution whatever the level, so a board found coarse is as accurate as one found on
+  // the image. Anything else on a coarse level (nothing, or two boards that disagree)
+  // passes on to the finer levels, so the image itself decides, with the reason reported
+  // without the coarse levels; boards too small for the coarse levels, and images without
+  // a board, pay for the coarse levels on top (at most a third more).
+  const std::vector<Image8> pyramid = HalvingPyramid(image, kMinCoarseLevelSidePx);
+  std::vector<Refined> found;
   DetectReason failure = DetectReason::kNoCandidates;
-  ComponentLabels labels;
-  std::vector<SquareQuad> quads = SquareQuads(dark, options, &labels);
-  std::vector<Refined> found = SearchBoards(image, board, *model, quads, options, &failure);
-  if (found.empty()) {
-    // Second chance: squares merged at X-corners, split and searched again.
-    std::vector<bool> has_quad(labels.components.size(), false);
-    for (const SquareQuad& q : quads) has_quad[q.component] = true;
-    if (SplitAtXCorners(image, labels, has_quad, options.min_square_side_px, &dark) > 0) {
-      quads = SquareQuads(dark, options, &labels);
-      found = SearchBoards(image, board, *model, quads, options, &failure);
-    }
-  }
-  if (found.empty()) {
-    found = SearchPairBoards(image, board, *model, min_contrast, options, &failure);
+  for (int level = static_cast<int>(pyramid.size()); level >= 0; --level) {
+    failure = DetectReason::kNoCandidates;
+    found = SearchLevel(image, level == 0 ? image : pyramid[level - 1].view(), level, board,
+                        *model, min_contrast, options, &failure);
+    if (!found.empty() && OneBoard(found)) break;
   }
   if (found.empty()) return Fail(failure);
-  // Two verified boards: the same board from duplicate groups, or two boards in view.
-  for (const Refined& other : found) {
-    for (std::size_t id = 0; id < other.uv_px.size(); ++id) {
-      if ((other.uv_px[id] - found[0].uv_px[id]).norm() > 1.0) {
-        return Fail(DetectReason::kAmbiguous);
-      }
-    }
-  }
+  if (!OneBoard(found)) return Fail(DetectReason::kAmbiguous);
   Detection d;
   d.found = true;
   d.reason = DetectReason::kNone;

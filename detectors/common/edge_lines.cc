@@ -35,12 +35,17 @@ std::optional<EdgePoint> MeasureEdgePoint(const ImageView8& image, const Eigen::
   double g_max = 0.0;
   std::array<double, kMaxSamples> g;
   std::array<double, kMaxSamples> s;
+  // The grey level half a step before each sample: the one half a step after it is the
+  // next sample's (the profile's steps are equal), so each is read once.
+  const Eigen::Vector2d p_first = q + (-half_window_px - 0.5 * step) * n;
+  double before = BilinearGrey(image, p_first.x(), p_first.y());
   int m = 0;
   for (double o = -half_window_px; o <= half_window_px + 1e-9 && m < kMaxSamples;
        o += step, ++m) {
     const Eigen::Vector2d p1 = q + (o + 0.5 * step) * n;
-    const Eigen::Vector2d p0 = q + (o - 0.5 * step) * n;
-    g[m] = BilinearGrey(image, p1.x(), p1.y()) - BilinearGrey(image, p0.x(), p0.y());
+    const double after = BilinearGrey(image, p1.x(), p1.y());
+    g[m] = after - before;
+    before = after;
     s[m] = o;
     g_max = std::max(g_max, g[m]);
   }

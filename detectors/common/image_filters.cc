@@ -58,7 +58,12 @@ ImageF GaussianBlur(const ImageView8& image, double sigma_px) {
   auto ring_row = [&](int y) { return ring.data() + static_cast<std::size_t>(y % ring_rows) * w; };
   auto filter_row = [&](int y) {
     const std::uint8_t* src = image.Row(y);
-    for (int x = 0; x < w + 2 * r; ++x) padded[x] = src[std::clamp(x - r, 0, w - 1)];
+    // Borders apart from the middle: the middle's plain conversion loop vectorises, a
+    // clamped index in it did not (a quarter of the blur's time).
+    float* __restrict pad = padded.data();
+    for (int x = 0; x < r; ++x) pad[x] = src[0];
+    for (int x = 0; x < w; ++x) pad[r + x] = src[x];
+    for (int x = 0; x < r; ++x) pad[r + w + x] = src[w - 1];
     float* __restrict dst = ring_row(y);
     const float* c = padded.data() + r;
     // Tap-outer loops: the inner loop runs over contiguous pixels and vectorises.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <numbers>
 
 namespace linecal {
@@ -128,16 +129,22 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
   const float floor = static_cast<float>(ixy_floor * ixy_floor);
   // The response is computed row by row into a ring of five rows, enough for the 5 x 5
   // non-maximum suppression below (an image-sized buffer would cost more in fresh pages
-  // than the arithmetic).
+  // than the arithmetic), with each row's maximum over 5 columns in a second ring.
   constexpr int kRingRows = 5;
   std::vector<float> response_ring(static_cast<std::size_t>(kRingRows) * w, 0.0f);
+  std::vector<float> row_max_ring(static_cast<std::size_t>(kRingRows) * w, 0.0f);
   auto response_row = [&](int y) {
     return response_ring.data() + static_cast<std::size_t>(y % kRingRows) * w;
   };
+  auto row_max_row = [&](int y) {
+    return row_max_ring.data() + static_cast<std::size_t>(y % kRingRows) * w;
+  };
   auto compute_row = [&](int y) {
     float* __restrict out = response_row(y);
+    float* __restrict out_max = row_max_row(y);
     if (y < 1 || y > h - 2) {
       std::fill(out, out + w, 0.0f);
+      std::fill(out_max, out_max + w, 0.0f);
       return;
     }
     const float* up = blurred.Row(y - 1);
@@ -151,30 +158,47 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
       const float ixy = 0.25f * (down[x + 1] - down[x - 1] - up[x + 1] + up[x - 1]);
       out[x] = ixy * ixy - ixx * iyy;
     }
+    // Columns 0, 1, w - 2, w - 1 are never a maximum's centre (margin >= 2).
+    for (int x = 2; x < w - 2; ++x) {
+      out_max[x] = std::max(std::max(std::max(out[x - 2], out[x - 1]), std::max(out[x], out[x + 1])),
+                            out[x + 2]);
+    }
   };
 
   // Local maxima in a 5 x 5 neighbourhood (vertices of the smallest squares are 8 px apart),
-  // far enough from the border for the ring; ties go to the first in raster order.
+  // far enough from the border for the ring; ties go to the first in raster order. The
+  // vectorised pass keeps the pixels above the floor that no neighbour exceeds (at most a
+  // few hundred); only those are checked for ties one by one.
   struct Peak {
     float r;
     int x;
     int y;
   };
   std::vector<Peak> peaks;
+  std::vector<std::uint8_t> candidate(w, 0);
   const int margin = std::max(2, static_cast<int>(std::ceil(options.ring_radius_px)) + 1);
   for (int y = margin - 2; y < std::min(h, margin + 2); ++y) compute_row(y);
   for (int y = margin; y < h - margin; ++y) {
     compute_row(y + 2);
     const float* row = response_row(y);
+    const float* m0 = row_max_row(y - 2);
+    const float* m1 = row_max_row(y - 1);
+    const float* m2 = row_max_row(y);
+    const float* m3 = row_max_row(y + 1);
+    const float* m4 = row_max_row(y + 2);
+    std::uint8_t* __restrict is_candidate = candidate.data();
     for (int x = margin; x < w - margin; ++x) {
+      const float m = std::max(std::max(std::max(m0[x], m1[x]), std::max(m3[x], m4[x])), m2[x]);
+      is_candidate[x] = row[x] >= floor && row[x] >= m;
+    }
+    for (int x = margin; x < w - margin; ++x) {
+      if (!is_candidate[x]) continue;
       const float r = row[x];
-      if (r < floor) continue;
       bool is_max = true;
-      for (int dy = -2; dy <= 2 && is_max; ++dy) {
+      for (int dy = -2; dy <= 0 && is_max; ++dy) {
         const float* other = response_row(y + dy);
-        for (int dx = -2; dx <= 2; ++dx) {
-          const float o = other[x + dx];
-          if ((dy != 0 || dx != 0) && (o > r || (o == r && (dy < 0 || (dy == 0 && dx < 0))))) {
+        for (int dx = -2; dx <= (dy < 0 ? 2 : -1); ++dx) {
+          if (other[x + dx] == r) {
             is_max = false;
             break;
           }
@@ -257,15 +281,31 @@ std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners
       }
     }
   }
-  // Keep mutual links only: j is i's nearest along k and i is j's nearest back.
+  // Along one board line, the next vertex is at most kMaxLinkStretch times as far as the
+  // previous one: perspective changes neighbouring squares by far less (2x would need the
+  // line's vanishing point within two squares). A corner of clutter beyond a board's edge,
+  // which can be the nearest along the outward direction of an edge vertex and link back
+  // to it, is usually much farther; such a link would join the board's grid to clutter
+  // and make it larger than it is.
+  constexpr double kMaxLinkStretch = 2.0;
+  const auto within_stretch = [&](int i, int k, double dist) {
+    const int opposite = best[i][(k + 2) & 3];
+    return opposite < 0 ||
+           dist <= kMaxLinkStretch * (corners[opposite].uv_px - corners[i].uv_px).norm();
+  };
+  // Keep mutual links only: j is i's nearest along k and i is j's nearest back, and neither
+  // end stretches the line.
   std::vector<std::array<int, 4>> links(n, {-1, -1, -1, -1});
   for (int i = 0; i < n; ++i) {
     for (int k = 0; k < 4; ++k) {
       const int j = best[i][k];
       if (j < 0) continue;
-      const Eigen::Vector2d back = (corners[i].uv_px - corners[j].uv_px).normalized();
+      const double dist = (corners[i].uv_px - corners[j].uv_px).norm();
+      if (!within_stretch(i, k, dist)) continue;
+      const Eigen::Vector2d back = (corners[i].uv_px - corners[j].uv_px) / dist;
       for (int m = 0; m < 4; ++m) {
-        if (best[j][m] == i && XCornerDirection(corners[j], m).dot(back) >= kCosLinkTolerance) {
+        if (best[j][m] == i && XCornerDirection(corners[j], m).dot(back) >= kCosLinkTolerance &&
+            within_stretch(j, m, dist)) {
           links[i][k] = j;
         }
       }

@@ -21,6 +21,16 @@
 
 namespace linecal {
 
+// Coarse-to-fine X-corner searches (the checker, vertical and chessboard detectors) first
+// search the image halved (HalvingPyramid) while its short side keeps this many pixels:
+// one coarse level at 1280 x 720 (640 x 360), two at 2448 x 2048 (down to 612 x 512).
+// A board is found on a level when its squares there are at least about 10 px (the 4 px
+// ring and the 5 x 5 maxima need that): squares of 20 px and more at 1280 x 720, 40 px at
+// 2448 x 2048; smaller boards pass down to the finer levels, which adds at most a third of
+// the full-resolution search to their time. A coarser level would hold only boards that
+// fill most of the image.
+constexpr int kMinCoarseLevelSidePx = 360;
+
 struct XCornerOptions {
   // Radius of the test ring, pixels. It must be below the distance to the nearest other
   // vertex (the smallest square side seen: boards.md's smallest squares are 12 px, 8 px
@@ -68,7 +78,9 @@ Eigen::Vector2d XCornerDirection(const XCorner& corner, int k);
 // corner linked to corner i along its local direction k (XCornerDirection), or -1. A link
 // joins a corner to its nearest corner within 25 degrees of that direction, which must lie
 // on one of its own edge lines and have its dark axis turned by about 90 degrees (the
-// vertices of one square edge); only mutual links are kept. Image pixels; no failure (a
+// vertices of one square edge); only mutual links are kept, and only those at most twice
+// as long as the link on from either end along the same line (when there is one): a
+// board's grid does not reach out to clutter beyond its edge. Image pixels; no failure (a
 // lone corner has no links). Cost: O(n^2) for n corners (about 1 ms for 1000).
 std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners);
 

@@ -4,11 +4,14 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <span>
 #include <tuple>
 #include <utility>
 #include <vector>
+
+#include <Eigen/Geometry>
 
 #include "detectors/common/corner_refine.h"
 #include "detectors/common/edge_lines.h"
@@ -409,18 +412,41 @@ std::vector<EdgePoint> SegmentPoints(const Frame& frame, const Eigen::Matrix3d& 
   return points;
 }
 
+// The edge points of the segments (SegmentPoints) measured under one homography and edge
+// bias, each measured once: the lines of neighbouring L-corners share up to three of their
+// four segments (the outer vertical lines carry an L-corner on almost every row), which
+// made a pass measure most edges several times.
+class SegmentCache {
+ public:
+  SegmentCache(const Frame& frame, const Eigen::Matrix3d& H, double edge_bias_px)
+      : frame_(frame), H_(H), edge_bias_px_(edge_bias_px) {}
+
+  const std::vector<EdgePoint>& Points(int gx, int gy, bool vertical) {
+    const auto key = std::make_tuple(gx, gy, vertical);
+    auto it = segments_.find(key);
+    if (it == segments_.end()) {
+      it = segments_.emplace(key, SegmentPoints(frame_, H_, gx, gy, vertical, edge_bias_px_)).first;
+    }
+    return it->second;
+  }
+
+ private:
+  const Frame& frame_;
+  const Eigen::Matrix3d H_;
+  const double edge_bias_px_;
+  std::map<std::tuple<int, int, bool>, std::vector<EdgePoint>> segments_;
+};
+
 // Edge points of the board line through vertex (gx, gy), vertical (x = gx) or horizontal
 // (y = gy), over the two cells on either side of the vertex: up to four cells of edge, where
 // the vertex's own two edges alone would give one each (four times the points against
 // noise, a longer base for the direction), short enough for a lens's bending of the line to
 // stay negligible.
-std::vector<EdgePoint> LinePoints(const Frame& frame, const Eigen::Matrix3d& H, int gx, int gy,
-                                  bool vertical, double edge_bias_px) {
+std::vector<EdgePoint> LinePoints(SegmentCache& segments, int gx, int gy, bool vertical) {
   std::vector<EdgePoint> points;
   for (int k = -2; k < 2; ++k) {
-    const std::vector<EdgePoint> segment =
-        vertical ? SegmentPoints(frame, H, gx, gy + k, true, edge_bias_px)
-                 : SegmentPoints(frame, H, gx + k, gy, false, edge_bias_px);
+    const std::vector<EdgePoint>& segment =
+        vertical ? segments.Points(gx, gy + k, true) : segments.Points(gx + k, gy, false);
     points.insert(points.end(), segment.begin(), segment.end());
   }
   return points;
@@ -462,9 +488,10 @@ double EdgeBias(const Frame& frame, const Eigen::Matrix3d& H,
   return weight > 0.0 ? sum / weight : 0.0;
 }
 
-// The refined image position of feature f predicted by H, or nullopt.
+// The refined image position of feature f predicted by H, or nullopt; L-corners from the
+// edge points of `segments` (measured under the same H).
 std::optional<Eigen::Vector2d> RefineFeature(const Frame& frame, const Eigen::Matrix3d& H,
-                                             const LayoutFeature& f, double edge_bias_px) {
+                                             const LayoutFeature& f, SegmentCache& segments) {
   const Eigen::Vector2d predicted = Map(H, f.gx, f.gy);
   const double side = LocalCellPx(H, f.gx, f.gy);
   std::optional<Eigen::Vector2d> refined;
@@ -476,9 +503,9 @@ std::optional<Eigen::Vector2d> RefineFeature(const Frame& frame, const Eigen::Ma
     refined = RefineSaddle(frame.blurred, predicted, saddle);
   } else {
     const std::vector<EdgePoint> a =
-        LinePoints(frame, H, f.gx, f.gy, /*vertical=*/false, edge_bias_px);
+        LinePoints(segments, f.gx, f.gy, /*vertical=*/false);
     const std::vector<EdgePoint> b =
-        LinePoints(frame, H, f.gx, f.gy, /*vertical=*/true, edge_bias_px);
+        LinePoints(segments, f.gx, f.gy, /*vertical=*/true);
     // Three points fix a line and show an outlier; fewer means the edge is not there.
     if (a.size() < 3 || b.size() < 3) return std::nullopt;
     const std::optional<Line2d> la = FitWeightedLine(a, Map(H, f.gx + 1, f.gy) - predicted);
@@ -627,11 +654,12 @@ BoardFit FitBoard(const Frame& frame, const Placement& seed, const VerticalOptio
   constexpr int kGrowRows = 2;
   for (int round = 0; round < kPageRows; ++round) {
     int added = 0;
+    SegmentCache segments(frame, h->H, /*edge_bias_px=*/0.0);
     for (int i = 0; i < nf; ++i) {
       const LayoutFeature& f = layout.features[i];
       if (fit.uv[i].has_value() || f.gy < lo - kGrowRows || f.gy > hi + kGrowRows) continue;
       if (!feature_visible(h->H, f)) continue;
-      fit.uv[i] = RefineFeature(frame, h->H, f, /*edge_bias_px=*/0.0);
+      fit.uv[i] = RefineFeature(frame, h->H, f, segments);
       if (fit.uv[i].has_value()) {
         ++added;
         lo = std::min(lo, f.gy);
@@ -648,9 +676,10 @@ BoardFit FitBoard(const Frame& frame, const Placement& seed, const VerticalOptio
   // true edges), then the residual check against the refitted homography.
   const double edge_bias_px = EdgeBias(frame, h->H, fit.uv);
   for (int pass = 0; pass < 2; ++pass) {
+    SegmentCache segments(frame, h->H, edge_bias_px);
     for (int i = 0; i < nf; ++i) {
       if (fit.uv[i].has_value()) {
-        fit.uv[i] = RefineFeature(frame, h->H, layout.features[i], edge_bias_px);
+        fit.uv[i] = RefineFeature(frame, h->H, layout.features[i], segments);
       }
     }
     std::optional<HomographyFit> next = refit();
@@ -697,50 +726,30 @@ BoardFit FitBoard(const Frame& frame, const Placement& seed, const VerticalOptio
   return fit;
 }
 
-}  // namespace
+// The outcome of steps 1-5 on one pyramid level: failure kNone and the board's fit (its
+// positions in the level's pixels), or the reason no single board was found.
+struct LevelSearch {
+  DetectReason failure = DetectReason::kTooFewFeatures;
+  BoardFit fit;
+};
 
-std::string_view VerticalOptions::Validate() const {
-  if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
-  if (const std::string_view bad = corners.Validate(); !bad.empty()) return bad;
-  if (min_chain_corners < 3 || min_chain_corners > 17) return "min_chain_corners";
-  if (!(max_residual_cell_fraction > 0.0 && max_residual_cell_fraction <= 0.5)) {
-    return "max_residual_cell_fraction";
-  }
-  if (!(min_cell_margin_fraction > 0.0 && min_cell_margin_fraction < 0.5)) {
-    return "min_cell_margin_fraction";
-  }
-  return {};
-}
-
-Detection DetectVertical(const ImageView8& image, const Board& board,
-                         const VerticalOptions& options) {
-  Detection result;
-  result.reason = CheckDetectorInput(image, board, BoardType::kVertical, options.Validate().empty());
-  if (result.reason != DetectReason::kNone) return result;
-  std::uint8_t lo = 255, hi = 0;
-  for (int y = 0; y < image.height; ++y) {
-    const std::uint8_t* row = image.Row(y);
-    for (int x = 0; x < image.width; ++x) {
-      lo = std::min(lo, row[x]);
-      hi = std::max(hi, row[x]);
-    }
-  }
-  if (hi - lo < options.corners.min_contrast) {
-    result.reason = DetectReason::kLowContrast;
-    return result;
-  }
-  const Layout layout = MakeLayout(board);
-  const ImageF blurred = GaussianBlur(image, options.blur_sigma_px);
+// Steps 1-5 of the header's method on `view` (the image or one of its halvings): runs of
+// X-corners, their placements on the code, and the verified boards grown from them; two
+// boards that disagree are kAmbiguous.
+LevelSearch SearchLevel(const ImageView8& view, const Layout& layout,
+                        const VerticalOptions& options) {
+  LevelSearch search;
+  const ImageF blurred = GaussianBlur(view, options.blur_sigma_px);
   const std::vector<XCorner> corners = FindXCorners(blurred, options.corners);
   if (corners.empty()) {
-    result.reason = DetectReason::kNoCandidates;
-    return result;
+    search.failure = DetectReason::kNoCandidates;
+    return search;
   }
   int max_run = 0;
   for (bool x : layout.x_corner_at_gy) max_run += x ? 1 : 0;
   const std::vector<std::vector<int>> runs =
       StraightRuns(corners, LinkXCorners(corners), options.min_chain_corners, max_run);
-  const Frame frame{image, blurred, layout};
+  const Frame frame{view, blurred, layout};
   DetectReason failure = DetectReason::kTooFewFeatures;
   std::vector<BoardFit> fits;
   std::vector<std::array<Walk, 2>> rows;
@@ -766,8 +775,8 @@ Detection DetectVertical(const ImageView8& image, const Board& board,
     }
   }
   if (fits.empty()) {
-    result.reason = failure;
-    return result;
+    search.failure = failure;
+    return search;
   }
   // Two verified boards that do not share features at the same places: two boards in view,
   // or one board placed two ways (then some id sits at two places).
@@ -782,23 +791,123 @@ Detection DetectVertical(const ImageView8& image, const Board& board,
       if ((*a - *b).norm() > 1.0) common = -1000000;
     }
     if (common <= 0) {
-      result.reason = DetectReason::kAmbiguous;
-      return result;
+      search.failure = DetectReason::kAmbiguous;
+      return search;
     }
   }
-  const BoardFit& best = fits.front();
-  for (std::size_t i = 0; i < best.uv.size(); ++i) {
-    if (!best.uv[i].has_value()) continue;
-    const BoardFeature& bf = board.features()[layout.features[i].id];
-    DetectedFeature f;
-    f.id = bf.id;
-    f.uv_px = *best.uv[i];
-    f.p_board = bf.p_board;
-    f.marker = bf.marker;
-    result.features.push_back(f);
+  search.failure = DetectReason::kNone;
+  search.fit = std::move(fits.front());
+  return search;
+}
+
+// The board found on pyramid level `level` (its fit in that level's pixels) fitted again at
+// full resolution: FitBoard seeded with its features, on the part of the image that holds
+// the page (blurred alone: a fraction of the image's cost). The crop keeps the blur's
+// clamped border a kernel away from the page, and its own border is the image's wherever
+// the page reaches that, so every cell, edge and window FitBoard looks at is as on the
+// whole image. A fit that fails at full resolution is returned with ok = false.
+BoardFit RefineAtFullResolution(const ImageView8& image, const Layout& layout,
+                                const BoardFit& coarse, int level,
+                                const VerticalOptions& options) {
+  BoardFit failed;
+  Placement seed;
+  seed.gy_min = kPageRows;
+  seed.gy_max = 0;
+  for (std::size_t i = 0; i < coarse.uv.size(); ++i) {
+    if (!coarse.uv[i].has_value()) continue;
+    const LayoutFeature& f = layout.features[i];
+    seed.grid.emplace_back(f.gx, f.gy);
+    seed.image.push_back(LevelToImage(*coarse.uv[i], level));
+    seed.gy_min = std::min(seed.gy_min, f.gy);
+    seed.gy_max = std::max(seed.gy_max, f.gy);
   }
-  result.found = best.certain == static_cast<int>(layout.features.size());
-  result.reason = result.found ? DetectReason::kNone : DetectReason::kPartial;
+  const std::optional<HomographyFit> h = FitHomography(seed.grid, seed.image);
+  if (!h.has_value()) return failed;
+  Eigen::AlignedBox2d page;
+  for (int k = 0; k < 4; ++k) page.extend(Map(h->H, (k & 1) * kPageCols, (k >> 1) * kPageRows));
+  // The blur kernel (3 sigma) and two pixels of rounding clear of the page.
+  const double pad = std::ceil(3.0 * options.blur_sigma_px) + 2.0;
+  if (!page.min().allFinite() || !page.max().allFinite()) return failed;
+  const int x0 = static_cast<int>(std::clamp(std::floor(page.min().x() - pad), 0.0, image.width - 1.0));
+  const int y0 = static_cast<int>(std::clamp(std::floor(page.min().y() - pad), 0.0, image.height - 1.0));
+  const int x1 = static_cast<int>(std::clamp(std::ceil(page.max().x() + pad), 0.0, image.width - 1.0));
+  const int y1 = static_cast<int>(std::clamp(std::ceil(page.max().y() + pad), 0.0, image.height - 1.0));
+  // FitBoard's smallest use: a saddle window and its border rule.
+  constexpr int kMinCropPx = 16;
+  if (x1 - x0 + 1 < kMinCropPx || y1 - y0 + 1 < kMinCropPx) return failed;
+  ImageView8 crop = image;
+  crop.data = image.Row(y0) + x0;
+  crop.width = x1 - x0 + 1;
+  crop.height = y1 - y0 + 1;
+  const Eigen::Vector2d origin(x0, y0);
+  for (Eigen::Vector2d& uv : seed.image) uv -= origin;
+  const ImageF blurred = GaussianBlur(crop, options.blur_sigma_px);
+  BoardFit fit = FitBoard(Frame{crop, blurred, layout}, seed, options);
+  for (auto& uv : fit.uv) {
+    if (uv.has_value()) *uv += origin;
+  }
+  return fit;
+}
+
+}  // namespace
+
+std::string_view VerticalOptions::Validate() const {
+  if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
+  if (const std::string_view bad = corners.Validate(); !bad.empty()) return bad;
+  if (min_chain_corners < 3 || min_chain_corners > 17) return "min_chain_corners";
+  if (!(max_residual_cell_fraction > 0.0 && max_residual_cell_fraction <= 0.5)) {
+    return "max_residual_cell_fraction";
+  }
+  if (!(min_cell_margin_fraction > 0.0 && min_cell_margin_fraction < 0.5)) {
+    return "min_cell_margin_fraction";
+  }
+  return {};
+}
+
+Detection DetectVertical(const ImageView8& image, const Board& board,
+                         const VerticalOptions& options) {
+  Detection result;
+  result.reason = CheckDetectorInput(image, board, BoardType::kVertical, options.Validate().empty());
+  if (result.reason != DetectReason::kNone) return result;
+  // The raw range bounds the blurred one: an image without min_contrast anywhere has no
+  // corner.
+  if (GreyRange(image) < options.corners.min_contrast) {
+    result.reason = DetectReason::kLowContrast;
+    return result;
+  }
+  const Layout layout = MakeLayout(board);
+  // Coarse to fine (x_corners.h, kMinCoarseLevelSidePx): the search on each halving of the
+  // image from the coarsest, then on the image itself, until a level finds one board; a
+  // board found coarse is fitted again at full resolution (RefineAtFullResolution), so it
+  // is as accurate as one found on the image. Anything else on a coarse level (nothing,
+  // two boards, or a fit that fails at full resolution) passes on to the finer levels, so
+  // the image itself decides, with the reason reported without the coarse levels; boards
+  // too small for the coarse levels pay for them on top (at most a third more).
+  const std::vector<Image8> pyramid = HalvingPyramid(image, kMinCoarseLevelSidePx);
+  for (int level = static_cast<int>(pyramid.size()); level >= 0; --level) {
+    LevelSearch search =
+        SearchLevel(level == 0 ? image : pyramid[level - 1].view(), layout, options);
+    result.reason = search.failure;
+    if (search.failure != DetectReason::kNone) continue;
+    if (level > 0) {
+      search.fit = RefineAtFullResolution(image, layout, search.fit, level, options);
+      if (!search.fit.ok) continue;
+    }
+    const BoardFit& best = search.fit;
+    for (std::size_t i = 0; i < best.uv.size(); ++i) {
+      if (!best.uv[i].has_value()) continue;
+      const BoardFeature& bf = board.features()[layout.features[i].id];
+      DetectedFeature f;
+      f.id = bf.id;
+      f.uv_px = *best.uv[i];
+      f.p_board = bf.p_board;
+      f.marker = bf.marker;
+      result.features.push_back(f);
+    }
+    result.found = best.certain == static_cast<int>(layout.features.size());
+    result.reason = result.found ? DetectReason::kNone : DetectReason::kPartial;
+    return result;
+  }
   return result;
 }
 

@@ -227,5 +227,37 @@ TEST(XCornersTest, FindsTheXCornerNotTheLCornerWithItsGeometry) {
   EXPECT_LE(corners[0].contrast, 190.0f);
 }
 
+// A row of X-corners on the u axis at the given u positions, as on one line of a frontal
+// board: edge lines along u and v, dark axes alternating between the two diagonals.
+std::vector<XCorner> RowOfCorners(const std::vector<double>& us) {
+  std::vector<XCorner> corners;
+  for (std::size_t i = 0; i < us.size(); ++i) {
+    XCorner c;
+    c.uv_px = Eigen::Vector2d(us[i], 50.0);
+    c.dark_axis = Eigen::Vector2d(1.0, i % 2 == 0 ? 1.0 : -1.0).normalized();
+    c.contrast = 100.0f;
+    corners.push_back(c);
+  }
+  return corners;
+}
+
+TEST(XCornersTest, LinksNeighboursAlongALineButNotFarCornersBeyondItsEnd) {
+  // Squares of 10 px, growing by perspective to 17 px; then a corner 40 px beyond the last
+  // vertex (clutter past the board's edge, more than twice the last square).
+  const std::vector<XCorner> corners = RowOfCorners({10, 20, 31, 43, 60, 100});
+  const std::vector<std::array<int, 4>> links = LinkXCorners(corners);
+  // Direction 0 is +line_a = +u, direction 2 is -u.
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(links[i][0], i + 1) << i;
+    EXPECT_EQ(links[i + 1][2], i) << i;
+  }
+  EXPECT_EQ(links[4][0], -1);
+  EXPECT_EQ(links[5][2], -1);
+  // Without a link on from the far end (two corners alone), nothing bounds the distance.
+  const std::vector<std::array<int, 4>> pair = LinkXCorners(RowOfCorners({10, 60}));
+  EXPECT_EQ(pair[0][0], 1);
+  EXPECT_EQ(pair[1][2], 0);
+}
+
 }  // namespace
 }  // namespace linecal
