@@ -116,7 +116,7 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
       // A radar measures yaw only: pitch, roll and the position stay nominal (null).
       EXPECT_TRUE(s["deviation"]["pitch_deg"].is_null());
       EXPECT_TRUE(s["sigma"]["x_m"].is_null());
-      EXPECT_EQ(s["features_used"], 3);  // the three front reflectors
+      EXPECT_EQ(s["features_used"], 6);  // the six front reflectors
     }
   }
 }

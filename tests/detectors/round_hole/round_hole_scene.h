@@ -21,7 +21,8 @@ namespace linecal {
 
 inline constexpr double kDegToRad = std::numbers::pi / 180.0;
 inline const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
-// The LiDAR and the board centre sit this high above the floor (the reference boards' 1 m).
+// The LiDAR and the board centre sit this high above the floor: the floor stays well below
+// the board, whose lowest rings would otherwise hit it just behind the page.
 inline constexpr double kHeightM = 1.0;
 
 // "roof_lidar" (Pandar64, deploy/cars/Pandar64.csv) or "bumper_lidar" (VLP-16, built in).

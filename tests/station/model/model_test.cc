@@ -21,8 +21,8 @@ TEST(StationLayoutTest, ReferenceStationLoads) {
   absl::StatusOr<StationLayout> s = ReadStationLayout(kDeploy + "/stations/reference.json");
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_EQ(s->name, "reference");
-  EXPECT_EQ(s->boards.size(), 15u);
-  EXPECT_EQ(s->reflectors.size(), 7u);
+  EXPECT_EQ(s->boards.size(), 19u);
+  EXPECT_EQ(s->reflectors.size(), 10u);
   const StationBoard* chess = s->FindBoard("front_chessboard");
   ASSERT_NE(chess, nullptr);
   EXPECT_EQ(chess->params.type, BoardType::kChessboard);

@@ -88,11 +88,11 @@ TEST_F(SimTest, LidarPointsLieOnBoardsAndNeverInHoles) {
       const Rigid3d pose = NominalPose(sensor);
       absl::StatusOr<LidarSimResult> sim = SimulateLidar(Beams(sensor), pose, *station_, o, 0, 7);
       ASSERT_TRUE(sim.ok()) << sim.status();
-      for (const char* id : {"lidar_left", "lidar_right"}) {
+      for (const std::string& id : car_->FindSensor(sensor)->targets) {
         int n = 0;
         double rms = 0;
         CheckBoardPoints(*sim, pose, *station_->FindBoard(id), sigma, &n, &rms);
-        // Both LiDARs put dozens of returns on each board at 4-7 m.
+        // Each LiDAR puts dozens of returns on each of its boards at 2.8-5 m.
         EXPECT_GT(n, 30) << sensor << " " << id;
         // Without noise only the distance unit's rounding (2-4 mm) remains; with noise the
         // spread along the normal is about sigma times the cosine of the incidence angle
@@ -109,14 +109,14 @@ TEST_F(SimTest, LidarPointsLieOnBoardsAndNeverInHoles) {
 }
 
 TEST_F(SimTest, LidarRaysPassThroughEveryHole) {
-  // The Pandar64's dense central beams cross every hole of both boards: count, per hole, the
-  // rays that cross the board plane inside it and return from farther away.
+  // The Pandar64's dense central beams cross every hole of both its boards: count, per hole,
+  // the rays that cross the board plane inside it and return from farther away.
   const Rigid3d pose = NominalPose("roof_lidar");
   LidarSimOptions o;
   o.range_sigma_m = 0;
   absl::StatusOr<LidarSimResult> sim = SimulateLidar(Beams("roof_lidar"), pose, *station_, o, 0, 1);
   ASSERT_TRUE(sim.ok());
-  for (const char* id : {"lidar_left", "lidar_right"}) {
+  for (const std::string& id : car_->FindSensor("roof_lidar")->targets) {
     const StationBoard& b = *station_->FindBoard(id);
     const Rigid3d T_board_lidar = b.T_station_board.Inverse() * pose;
     std::map<int, int> through;
