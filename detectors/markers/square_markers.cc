@@ -414,6 +414,7 @@ std::string_view MarkerDetectOptions::Validate() const {
   if (!(max_residual_fraction > 0.0 && max_residual_fraction <= 1.0)) {
     return "max_residual_fraction";
   }
+  if (!(max_residual_cells > 0.0 && max_residual_cells <= 10.0)) return "max_residual_cells";
   if (!(min_paint_agreement >= 0.0 && min_paint_agreement <= 1.0)) return "min_paint_agreement";
   return {};
 }
@@ -621,8 +622,10 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   }
   side_px /= 4.0 * on_board.size();
   side_m /= 4.0 * on_board.size();
+  const double max_residual_px = std::min(options.max_residual_fraction * side_px,
+                                           options.max_residual_cells * side_px / family.cells);
   std::optional<BoardFit> board_fit = FitBoard(p_board, diagonal, uv, on_board.size());
-  if (!board_fit.has_value() || board_fit->fit.max_residual > options.max_residual_fraction * side_px) {
+  if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
     return Fail(DetectReason::kVerificationFailed);
   }
   // The markers the scan missed, where the checked board fit puts them. Again after each
@@ -654,7 +657,7 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
     }
     if (placed.size() == placed_before) break;
     board_fit = FitBoard(p_board, diagonal, uv, on_board.size() + placed.size());
-    if (!board_fit.has_value() || board_fit->fit.max_residual > options.max_residual_fraction * side_px) {
+    if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
       return Fail(DetectReason::kVerificationFailed);
     }
     missing = std::move(still_missing);

@@ -71,6 +71,12 @@ struct MarkerDetectOptions {
   // swapped or misread marker moves corners by whole marker pitches; lens distortion over a
   // large board moves them by a few percent of a marker side at most).
   double max_residual_fraction = 0.06;
+  // ... and at most this many of the markers' cells: where the cells are a few pixels, blur
+  // and noise can leave a corner read from a misjudged edge half a cell off, within 6% of a
+  // marker's side (detectors_eval, full grid: an ArUco board of 4 px cells under the hard
+  // lighting with a corner 1.8 px off and a residual of 1.3 px). A quarter of a cell is the
+  // same limit the board's placed markers keep (ReadPredictedMarker).
+  double max_residual_cells = 0.25;
   // Whole-board check: at least this fraction of the board's sampled printed points
   // (black and white separately) must show that paint.
   double min_paint_agreement = 0.85;

@@ -239,6 +239,43 @@ TEST(ArucoDetectorTest, CoarseLevelsGiveTheFullScansCorners) {
   }
 }
 
+// A marker whose corners are a good part of a cell off the board is not reported: marker 19
+// of a board of 5 px cells moved 3 px sideways in the image (0.6 of a cell). The board fit
+// through all four markers takes up much of that: its largest residual is within 6% of a
+// marker's side (0.36 of a cell), but not within a quarter of a cell.
+TEST(ArucoDetectorTest, MarkerOffTheBoardByPartOfACellFailsVerification) {
+  const Board board = MakeBoard(BoardType::kAruco);
+  BoardView view;
+  view.params = board.params();
+  view.distance_m = 8.0;
+  CameraFrame frame = RenderView(view, CleanRender(), 90);
+  ASSERT_EQ(frame.features.size(), 16u);
+  Eigen::AlignedBox2d box;
+  for (int id = 12; id < 16; ++id) box.extend(frame.features.at(id).uv_px);
+  const double cell_px = box.sizes().x() / kAruco4x4MarkerCells;
+  ASSERT_NEAR(cell_px, 5.0, 0.2);
+  // As rendered, the board is found.
+  const Detection as_rendered = DetectAruco(frame.image8.view(), board);
+  ASSERT_TRUE(as_rendered.found) << DetectReasonName(as_rendered.reason);
+  int matched = 0;
+  int unknown = 0;
+  EXPECT_LE(FeatureRmsPx(as_rendered, frame, &matched, &unknown), kCleanRmsBarPx);
+  constexpr int kShiftPx = 3;
+  const int x0 = static_cast<int>(box.min().x()) - 3;
+  const int x1 = static_cast<int>(box.max().x()) + 3;
+  for (int y = static_cast<int>(box.min().y()) - 3; y <= static_cast<int>(box.max().y()) + 3; ++y) {
+    for (int x = x1; x >= x0 + kShiftPx; --x) frame.image8.at(x, y) = frame.image8.at(x - kShiftPx, y);
+  }
+  const Detection d = DetectAruco(frame.image8.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kVerificationFailed);
+  EXPECT_TRUE(d.features.empty());
+  // The limit relative to the marker's side alone lets it through.
+  ArucoOptions side_only;
+  side_only.markers.max_residual_cells = 10.0;
+  EXPECT_TRUE(DetectAruco(frame.image8.view(), board, side_only).found);
+}
+
 TEST(ArucoDetectorTest, PartialViewReportsOnlyTheVisibleMarkers) {
   const Board board = MakeBoard(BoardType::kAruco);
   BoardView view;
@@ -372,6 +409,9 @@ TEST(ArucoDetectorTest, BadInputGivesAReasonAndNoFeatures) {
   ArucoOptions bad;
   bad.markers.max_residual_fraction = 0.0;
   EXPECT_EQ(bad.Validate(), "max_residual_fraction");
+  bad.markers.max_residual_fraction = 0.06;
+  bad.markers.max_residual_cells = 0.0;
+  EXPECT_EQ(bad.Validate(), "max_residual_cells");
   EXPECT_EQ(DetectAruco(black.view(), board, bad).reason, DetectReason::kBadImage);
   EXPECT_EQ(DetectAruco(black.view(), MakeBoard(BoardType::kChessboard)).reason,
             DetectReason::kWrongBoard);
