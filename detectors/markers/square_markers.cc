@@ -677,10 +677,9 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   }
   // The paint compared between nearby points under the same light (PaintAgrees), not on the
   // binarised image: that reads white paper at the dim end of a 4:1 gradient as dark and
-  // refused every marker board so lit. The grey check once also passed boards of 4 px cells
-  // under the hard lighting with a corner 1.7 px off; the corners the scan read are now
-  // checked against the others through the homography's residual, and the corners placed by
-  // the board within a quarter of a cell of the homography (ReadPredictedMarker).
+  // refused every marker board so lit. The binarised check had been kept for a board of 4 px
+  // cells that the grey one passed with a corner 1.7 px off; the quarter-cell residual limit
+  // (max_residual_cells) refuses such boards now.
   if (!PaintAgrees(board, fit->H, image, side_px / side_m, options.min_paint_agreement)) {
     return Fail(DetectReason::kWrongBoard);
   }
