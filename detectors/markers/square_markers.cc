@@ -324,8 +324,9 @@ constexpr double kPlacedMarkerMaxMoveCells = 0.25;
 // threshold between the light and dark levels would read as wrong cells at the dim end; a
 // cell disagrees when it lies on the other side of the plane + d / 2. nullopt when d <
 // min_contrast or the fit is singular. O(cells^2).
-std::optional<int> CellsDisagreeing(const std::vector<double>& values, const std::vector<std::uint8_t>& expected,
-                                    int cells, double min_contrast) {
+std::optional<int> CellsDisagreeing(const std::vector<double>& values,
+                                    const std::vector<std::uint8_t>& expected, int cells,
+                                    double min_contrast) {
   Eigen::Matrix4d normal = Eigen::Matrix4d::Zero();
   Eigen::Vector4d rhs = Eigen::Vector4d::Zero();
   const double mid = 0.5 * (cells - 1);
@@ -357,8 +358,10 @@ std::optional<int> CellsDisagreeing(const std::vector<double>& values, const std
 // its cells (the prediction is within a fraction of a cell; lens distortion and the
 // homography's own error are what is left), and the marker is accepted when its cells show
 // its print (CellsDisagreeing) within kPlacedMarkerMaxWrongFraction of its code bits.
-std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image, const MarkerFamily& family, int id,
-                                                 std::array<Eigen::Vector2d, 4> corners, double min_contrast) {
+std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image,
+                                                 const MarkerFamily& family, int id,
+                                                 std::array<Eigen::Vector2d, 4> corners,
+                                                 double min_contrast) {
   double side = 0.0;
   for (int k = 0; k < 4; ++k) side += 0.25 * (corners[(k + 1) % 4] - corners[k]).norm();
   const int samples = std::clamp(static_cast<int>(side), 8, 80);
@@ -370,7 +373,8 @@ std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image, const 
   const std::optional<int> wrong = CellsDisagreeing(values, expected, family.cells, min_contrast);
   const int bits = static_cast<int>(family.bit_cells.size());
   if (!wrong.has_value() ||
-      *wrong > std::max<int>(family.max_correction_bits, static_cast<int>(kPlacedMarkerMaxWrongFraction * bits))) {
+      *wrong > std::max<int>(family.max_correction_bits,
+                             static_cast<int>(kPlacedMarkerMaxWrongFraction * bits))) {
     return std::nullopt;
   }
   if (!RefineQuadCorners(image, family, &expected, samples, 0.34, &corners)) return std::nullopt;
@@ -378,7 +382,8 @@ std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image, const 
   // a cell (what is left is lens distortion over a marker pitch or two); edges that pull a
   // corner farther are not this marker's edges, or too blurred to place it.
   for (int k = 0; k < 4; ++k) {
-    if ((corners[k] - predicted[k]).norm() > kPlacedMarkerMaxMoveCells * side / family.cells) return std::nullopt;
+    if ((corners[k] - predicted[k]).norm() > kPlacedMarkerMaxMoveCells * side / family.cells)
+      return std::nullopt;
   }
   DecodedMarker marker;
   marker.id = id;
@@ -529,7 +534,8 @@ Eigen::Vector2d ApplyHomographyWithJacobian(const Eigen::Matrix3d& H, const Eige
 // the homography through the dilated points and the dilation by one Gauss-Newton step (they
 // are nearly independent, so a few rounds converge). The residuals are those of the dilated
 // points. O(n) per round.
-std::optional<BoardFit> FitBoard(const std::vector<Eigen::Vector2d>& p, const std::vector<Eigen::Vector2d>& d,
+std::optional<BoardFit> FitBoard(const std::vector<Eigen::Vector2d>& p,
+                                 const std::vector<Eigen::Vector2d>& d,
                                  const std::vector<Eigen::Vector2d>& uv, std::size_t markers) {
   BoardFit board;
   std::vector<Eigen::Vector2d> dilated = p;
@@ -576,7 +582,8 @@ Detection Fail(DetectReason reason) {
 }  // namespace
 
 Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
-                            const MarkerDetectOptions& options, const ImageView8& image, const Board* sibling) {
+                            const MarkerDetectOptions& options, const ImageView8& image,
+                            const Board* sibling) {
   // The board's markers: id -> its four corner features, in corner order (ids 4 k + c).
   std::map<int, std::vector<const BoardFeature*>> board_markers;
   for (const BoardFeature& f : board.features()) {
@@ -623,7 +630,7 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   side_px /= 4.0 * on_board.size();
   side_m /= 4.0 * on_board.size();
   const double max_residual_px = std::min(options.max_residual_fraction * side_px,
-                                           options.max_residual_cells * side_px / family.cells);
+                                          options.max_residual_cells * side_px / family.cells);
   std::optional<BoardFit> board_fit = FitBoard(p_board, diagonal, uv, on_board.size());
   if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
     return Fail(DetectReason::kVerificationFailed);
@@ -634,7 +641,8 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   placed.reserve(board_markers.size() - on_board.size());
   std::vector<int> missing;
   for (const auto& [id, f] : board_markers) {
-    if (std::none_of(on_board.begin(), on_board.end(), [id](const DecodedMarker* m) { return m->id == id; })) {
+    if (std::none_of(on_board.begin(), on_board.end(),
+                     [id](const DecodedMarker* m) { return m->id == id; })) {
       missing.push_back(id);
     }
   }
@@ -645,9 +653,11 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       const std::array<Eigen::Vector2d, 4> d = OutwardDiagonals(f);
       std::array<Eigen::Vector2d, 4> corners;
       for (int c = 0; c < 4; ++c) {
-        corners[c] = ApplyHomography(board_fit->fit.H, f[c]->p_board + board_fit->dilation_m * d[c]);
+        corners[c] =
+            ApplyHomography(board_fit->fit.H, f[c]->p_board + board_fit->dilation_m * d[c]);
       }
-      std::optional<DecodedMarker> marker = ReadPredictedMarker(image, family, id, corners, scan.min_contrast);
+      std::optional<DecodedMarker> marker =
+          ReadPredictedMarker(image, family, id, corners, scan.min_contrast);
       if (!marker.has_value()) {
         still_missing.push_back(id);
         continue;
@@ -701,8 +711,9 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       DetectedFeature feature;
       feature.id = f[c]->id;
       // The corner as printed: the dilation taken out where the fit places it.
-      feature.uv_px = m->corners_px[c] - (ApplyHomography(fit->H, f[c]->p_board + board_fit->dilation_m * d[c]) -
-                                          ApplyHomography(fit->H, f[c]->p_board));
+      feature.uv_px = m->corners_px[c] -
+                      (ApplyHomography(fit->H, f[c]->p_board + board_fit->dilation_m * d[c]) -
+                       ApplyHomography(fit->H, f[c]->p_board));
       feature.p_board = f[c]->p_board;
       feature.marker = m->id;
       detection.features.push_back(feature);
@@ -714,7 +725,8 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
 }
 
 Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const MarkerFamily& family,
-                            const MarkerDetectOptions& options, const Board* sibling, int enough_markers) {
+                            const MarkerDetectOptions& options, const Board* sibling,
+                            int enough_markers) {
   // Levels halved once and twice, each still holding a marker of the smallest side the
   // options allow twice over; the coarsest first.
   std::vector<Image8> levels = HalvingPyramid(image, 2 * options.min_marker_side_px);
@@ -726,7 +738,8 @@ Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const M
     for (DecodedMarker m : scan.markers) {
       for (int k = 0; k < 4; ++k) m.corners_px[k] = LevelToImage(m.corners_px[k], level);
       double side = 0.0;
-      for (int k = 0; k < 4; ++k) side += 0.25 * (m.corners_px[(k + 1) % 4] - m.corners_px[k]).norm();
+      for (int k = 0; k < 4; ++k)
+        side += 0.25 * (m.corners_px[(k + 1) % 4] - m.corners_px[k]).norm();
       const int samples = std::clamp(static_cast<int>(side), 8, 80);
       // The corners are in the canonical order (clockwise in the image from the marker's
       // top-left), so the cells are the marker's own. The reduced corners are within a
@@ -742,8 +755,8 @@ Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const M
     Detection coarse = VerifyMarkerBoard(scan, board, family, options, image, sibling);
     if (coarse.found) return coarse;
   }
-  return VerifyMarkerBoard(ScanMarkers(image, family, options, enough_markers), board, family, options, image,
-                           sibling);
+  return VerifyMarkerBoard(ScanMarkers(image, family, options, enough_markers), board, family,
+                           options, image, sibling);
 }
 
 }  // namespace linecal

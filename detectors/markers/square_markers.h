@@ -134,7 +134,8 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
 // levels where the two print differently (PaintContrastPrefers on `image`, the scanned
 // view), kWrongBoard when the image looks like the sibling, kAmbiguous when it cannot tell.
 Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
-                            const MarkerDetectOptions& options, const ImageView8& image, const Board* sibling);
+                            const MarkerDetectOptions& options, const ImageView8& image,
+                            const Board* sibling);
 
 // Finds `board` as ScanMarkers then VerifyMarkerBoard do, coarse to fine: the markers are
 // first looked for in the image averaged over 4 x 4, then over 2 x 2 pixels (a sixteenth and
@@ -145,6 +146,7 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
 // Cost: a fraction of the full scan when a reduced level finds the board (the larger the
 // markers, the coarser the level); about 1.3 times it when none does.
 Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const MarkerFamily& family,
-                            const MarkerDetectOptions& options, const Board* sibling, int enough_markers = 0);
+                            const MarkerDetectOptions& options, const Board* sibling,
+                            int enough_markers = 0);
 
 }  // namespace linecal

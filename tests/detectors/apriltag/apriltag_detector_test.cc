@@ -172,8 +172,10 @@ TEST(ApriltagDetectorTest, TagThatDoesNotShowItsCodeIsNotPlaced) {
   }
   const int x0 = static_cast<int>(std::ceil(box.min().x()));
   const int x1 = static_cast<int>(std::floor(box.max().x()));
-  for (int y = static_cast<int>(std::ceil(box.min().y())); y <= static_cast<int>(box.max().y()); ++y) {
-    for (int x = x0; x < x0 + (x1 - x0 + 1) / 2; ++x) std::swap(frame.image8.at(x, y), frame.image8.at(x1 - (x - x0), y));
+  for (int y = static_cast<int>(std::ceil(box.min().y())); y <= static_cast<int>(box.max().y());
+       ++y) {
+    for (int x = x0; x < x0 + (x1 - x0 + 1) / 2; ++x)
+      std::swap(frame.image8.at(x, y), frame.image8.at(x1 - (x - x0), y));
   }
   const Detection d = DetectApriltag(frame.image8.view(), board);
   EXPECT_FALSE(d.found);

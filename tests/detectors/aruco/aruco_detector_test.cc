@@ -169,7 +169,8 @@ TEST(ArucoDetectorTest, HardLightingFindsBothMarkerBoards) {
   std::uint64_t seed = 70;
   for (const BoardType type : {BoardType::kAruco, BoardType::kRoundHole}) {
     const Board board = MakeBoard(type);
-    const Board sibling = MakeBoard(type == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco);
+    const Board sibling =
+        MakeBoard(type == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco);
     for (const double gamma : {0.6, 1.6}) {
       BoardView view;
       view.params = board.params();
@@ -194,7 +195,8 @@ TEST(ArucoDetectorTest, HardLightingFindsBothMarkerBoards) {
       // blurred edge, the marker's dark square grows or shrinks, and its corners move out or
       // in along the diagonals (0.7-0.8 px RMS here; 0.15 px with the same blur and noise at
       // gamma 1). acceptance.md sets no accuracy bar for this lighting.
-      const double cell_px = (frame.features[1].uv_px - frame.features[0].uv_px).norm() / kAruco4x4MarkerCells;
+      const double cell_px =
+          (frame.features[1].uv_px - frame.features[0].uv_px).norm() / kAruco4x4MarkerCells;
       for (const DetectedFeature& f : d.features) {
         const RenderedFeature& truth = frame.features.at(f.id);
         ASSERT_EQ(truth.feature_id, f.id);
@@ -223,14 +225,16 @@ TEST(ArucoDetectorTest, CoarseLevelsGiveTheFullScansCorners) {
     const CameraFrame frame = RenderView(view, CleanRender(), seed++);
     SCOPED_TRACE(::testing::Message() << "distance " << distance_m);
     const Detection coarse = DetectAruco(frame.image8.view(), board);
-    const Detection full = VerifyMarkerBoard(ScanMarkers(frame.image8.view(), family, MarkerDetectOptions{}), board,
-                                             family, MarkerDetectOptions{}, frame.image8.view(), nullptr);
+    const Detection full =
+        VerifyMarkerBoard(ScanMarkers(frame.image8.view(), family, MarkerDetectOptions{}), board,
+                          family, MarkerDetectOptions{}, frame.image8.view(), nullptr);
     ASSERT_TRUE(coarse.found) << DetectReasonName(coarse.reason);
     ASSERT_TRUE(full.found) << DetectReasonName(full.reason);
     ASSERT_EQ(coarse.features.size(), full.features.size());
     for (std::size_t i = 0; i < full.features.size(); ++i) {
       EXPECT_EQ(coarse.features[i].id, full.features[i].id);
-      EXPECT_LE((coarse.features[i].uv_px - full.features[i].uv_px).norm(), 0.5 * kCleanRmsBarPx) << "corner " << i;
+      EXPECT_LE((coarse.features[i].uv_px - full.features[i].uv_px).norm(), 0.5 * kCleanRmsBarPx)
+          << "corner " << i;
     }
     int matched = 0;
     int unknown = 0;
@@ -264,7 +268,8 @@ TEST(ArucoDetectorTest, MarkerOffTheBoardByPartOfACellFailsVerification) {
   const int x0 = static_cast<int>(box.min().x()) - 3;
   const int x1 = static_cast<int>(box.max().x()) + 3;
   for (int y = static_cast<int>(box.min().y()) - 3; y <= static_cast<int>(box.max().y()) + 3; ++y) {
-    for (int x = x1; x >= x0 + kShiftPx; --x) frame.image8.at(x, y) = frame.image8.at(x - kShiftPx, y);
+    for (int x = x1; x >= x0 + kShiftPx; --x)
+      frame.image8.at(x, y) = frame.image8.at(x - kShiftPx, y);
   }
   const Detection d = DetectAruco(frame.image8.view(), board);
   EXPECT_FALSE(d.found);
