@@ -640,7 +640,9 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   std::vector<DecodedMarker> placed;
   placed.reserve(board_markers.size() - on_board.size());
   std::vector<int> missing;
-  for (const auto& [id, f] : board_markers) {
+  for (const auto& entry : board_markers) {
+    // Not a structured binding: clang 14 (the fuzz build) cannot capture one in a lambda.
+    const int id = entry.first;
     if (std::none_of(on_board.begin(), on_board.end(),
                      [id](const DecodedMarker* m) { return m->id == id; })) {
       missing.push_back(id);
