@@ -5,6 +5,7 @@
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <random>
 #include <set>
 #include <tuple>
 
@@ -418,25 +419,48 @@ absl::StatusOr<SensorAssessment> AssessRadar(const SensorModel& sensor, const St
     absl::StatusOr<std::vector<ExpectedReflector>> expected =
         ExpectedReflectors(usable_sensor, usable_layout, Rigid3d());
     if (!expected.ok()) return expected.status();
-    // Exact detections every cycle: the association's standard errors are then its floor,
-    // the sensor's noise over sqrt(cycles) and the resolution its noise does not dither.
-    std::vector<RadarCycle> cycles(o.radar_cycles);
-    for (RadarCycle& c : cycles) {
-      for (size_t k = 0; k < expected->size(); ++k) {
-        RadarDetection d;
-        d.id = static_cast<int>(k);
-        d.range_m = (*expected)[k].range_m;
-        d.azimuth_rad = (*expected)[k].azimuth_rad;
-        d.rcs_dbsm = usable_layout.reflectors[k].rcs_dbsm;
-        c.detections.push_back(d);
-      }
-    }
     absl::StatusOr<ReflectorAssociationOptions> ao = ReflectorAssociationOptions::ForSensor(sensor);
     if (!ao.ok()) return ao.status();
-    const ReflectorAssociation association = AssociateReflectors(cycles, *expected, *ao);
+    // Detections as the radar reports them: the sensor's noise, then its resolution. A
+    // position grid (ARS408) makes the σ depend on where the reflectors land in it (a reflector
+    // on a cell edge flips between cells, one in the middle never moves), so the prediction is
+    // the RMS σ over lateral shifts of the grid by eighths of a cell: what a car sees on
+    // average. Fixed seed: the same plan gives the same prediction.
+    const RadarResolution& res = ao->resolution;
+    const int phases = res.position_step_m > 0 ? 8 : 1;
+    std::mt19937_64 rng(1);
+    std::normal_distribution<double> normal;
+    const auto quantise = [](double v, double step, double origin) {
+      return step > 0 ? origin + step * std::round((v - origin) / step) : v;
+    };
     RadarCalibrationOptions ro;
     ro.max_sigma_fraction_of_tolerance = o.max_sigma_fraction_of_tolerance;
-    const RadarCalibrationResult r = CalibrateRadarYaw(sensor, *expected, association, ro);
+    RadarCalibrationResult r;
+    double sum_sigma2 = 0;
+    for (int phase = 0; phase < phases; ++phase) {
+      const double y_origin = res.position_step_m * phase / phases;
+      std::vector<RadarCycle> cycles(o.radar_cycles);
+      for (RadarCycle& c : cycles) {
+        for (size_t k = 0; k < expected->size(); ++k) {
+          const double range = (*expected)[k].range_m + ao->detection_range_sigma_m * normal(rng);
+          const double azimuth =
+              (*expected)[k].azimuth_rad + ao->detection_azimuth_sigma_rad * normal(rng);
+          const double x =
+              quantise(range * std::cos(azimuth), res.position_step_m, res.position_x_origin_m);
+          const double y = quantise(range * std::sin(azimuth), res.position_step_m, y_origin);
+          RadarDetection d;
+          d.id = static_cast<int>(k);
+          d.range_m = quantise(std::hypot(x, y), res.range_step_m, 0);
+          d.azimuth_rad = quantise(std::atan2(y, x), res.azimuth_step_rad, 0);
+          d.rcs_dbsm = usable_layout.reflectors[k].rcs_dbsm;
+          c.detections.push_back(d);
+        }
+      }
+      const ReflectorAssociation association = AssociateReflectors(cycles, *expected, *ao);
+      r = CalibrateRadarYaw(sensor, *expected, association, ro);
+      sum_sigma2 += r.yaw_sigma_rad * r.yaw_sigma_rad;
+    }
+    r.yaw_sigma_rad = std::sqrt(sum_sigma2 / phases);
     if (r.reflectors_used >= ro.min_reflectors) {
       a.sigma_valid = true;
       a.sigma[0] = r.yaw_sigma_rad;

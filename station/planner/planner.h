@@ -16,8 +16,9 @@
 //   LiDAR   one rotation of the LiDAR simulator over the layout, the real round-hole
 //           detector on it (its fit's hole-centre sigma), CalibrateLidar on the exact hole
 //           centres with that sigma;
-//   radar   exact detections of the reflectors over radar_cycles cycles through the real
-//           association (its standard errors: noise and resolution) and CalibrateRadarYaw.
+//   radar   detections of the reflectors over radar_cycles cycles with the sensor's noise
+//           and resolution (fixed seed) through the real association and CalibrateRadarYaw;
+//           for a position grid (ARS408) the RMS over eight lateral shifts of the grid.
 //
 // Reason codes (a sensor lists each code once, in this order of checks):
 //   unknown_target         a target id the layout does not have

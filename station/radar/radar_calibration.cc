@@ -24,6 +24,53 @@ Eigen::Vector3d YawFramePoint(double yaw, const Eigen::Vector3d& t, const Eigen:
   return Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()) * (p_car - t);
 }
 
+// Lateral shifts of the position grid over which the joint rounding error is averaged. The
+// error of one reflector is a sawtooth of its place in the cell; 16 points resolve the
+// weighted sum of a few of them to well under 1% of its RMS.
+constexpr int kGridShifts = 16;
+
+// The two-sided 95% point of the standard normal distribution.
+constexpr double kZ95 = 1.959963984540054;
+
+// The half-width h of the interval that holds 95% of b + n, b drawn evenly from `offsets` and
+// n ~ N(0, σ²): mean over b of P(|b + n| ≤ h) = 0.95, by bisection (the share grows with h).
+// A grid error dominated by a few reflectors is close to uniform, whose 95% interval is
+// 1.65σ wide, not 1.96σ.
+double HalfWidth95(std::span<const double> offsets, double sigma) {
+  double widest = 0;
+  for (double b : offsets) widest = std::max(widest, std::abs(b));
+  const auto share = [&](double h) {
+    double p = 0;
+    for (double b : offsets) {
+      p += 0.5 * (std::erfc((-h - b) / (sigma * std::numbers::sqrt2)) -
+                  std::erfc((h - b) / (sigma * std::numbers::sqrt2)));
+    }
+    return p / static_cast<double>(offsets.size());
+  };
+  double lo = 0, hi = widest + kZ95 * sigma;  // share(hi) ≥ 0.95
+  for (int i = 0; i < 60; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (share(mid) < 0.95 ? lo : hi) = mid;
+  }
+  return hi;
+}
+
+// E[round(v + n)] − v for n ~ N(0, r²), v and r in steps: the error left in the mean of many
+// readings of v quantised to whole steps, once noise of r steps dithers the rounding. The sum
+// runs over the steps within 8r of v (the rest has probability < 1e-15).
+double MeanRoundingError(double v, double r) {
+  const double f = v - std::round(v);  // the error is periodic in v: take v within ½ step of 0
+  if (r < 1e-9) return -f;
+  const double reach = std::ceil(8 * r) + 1;
+  const double scale = 1 / (r * std::numbers::sqrt2);
+  double mean = 0;
+  for (double m = -reach; m <= reach; ++m) {
+    // P(round(f + n) = m) = Φ((m + ½ − f) / r) − Φ((m − ½ − f) / r), Φ(z) = erfc(−z/√2) / 2.
+    mean += m * 0.5 * (std::erfc(-(m + 0.5 - f) * scale) - std::erfc(-(m - 0.5 - f) * scale));
+  }
+  return mean - f;
+}
+
 }  // namespace
 
 absl::Status RadarCalibrationOptions::Validate() const {
@@ -103,12 +150,20 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
     return out;
   }
 
+  // Weights from each reflector's error taken alone. Not from the scatter without the grid's
+  // part: the grid makes it uneven (a reflector on a cell edge flips between two cells, one in
+  // the middle never moves), and uneven weights would undo the cancellation of the grid's
+  // errors between reflectors that a layout can provide. The σ below propagates each part of
+  // the error through these weights.
+  const auto weight = [](const Used& u) {
+    return 1 / (u.observed->azimuth_se_rad * u.observed->azimuth_se_rad);
+  };
   YawPitchRoll angles = nominal;
   double information = 0;
   for (int it = 0; it < kMaxIterations; ++it) {
     double jtj = 0, jtr = 0;
     for (const Used& u : used) {
-      const double w = 1 / (u.observed->azimuth_se_rad * u.observed->azimuth_se_rad);
+      const double w = weight(u);
       const double r =
           std::remainder(u.observed->azimuth_rad - PredictedAzimuth(angles, t, u.expected->p_car),
                          2 * std::numbers::pi);
@@ -123,7 +178,16 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
   }
 
   out.yaw_rad = angles.yaw;
-  out.yaw_sigma_measurement_rad = 1 / std::sqrt(information);
+  // Σ (w ∂azimuth/∂yaw / information)² se², se without the position grid's part; equals
+  // 1 / √information when the grid has none.
+  double measurement_variance = 0;
+  for (const Used& u : used) {
+    const double k =
+        weight(u) * PredictedAzimuthYawDerivative(angles, t, u.expected->p_car) / information;
+    const double se = u.observed->azimuth_se_without_position_steps_rad;
+    measurement_variance += k * k * se * se;
+  }
+  out.yaw_sigma_measurement_rad = std::sqrt(measurement_variance);
   // The yaw shift that pitch and roll off nominal by (dp, dr) cause: one Gauss-Newton step
   // from the solution towards azimuths predicted with them (the shift is far below a degree,
   // where one step is exact to well below the noise). Its mean square over dp, dr uniform in
@@ -138,7 +202,7 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
       tilted.roll += kNodes[b] * sensor.tolerance.roll_rad;
       double jtr = 0;
       for (const Used& u : used) {
-        const double w = 1 / (u.observed->azimuth_se_rad * u.observed->azimuth_se_rad);
+        const double w = weight(u);
         const double shift = std::remainder(PredictedAzimuth(tilted, t, u.expected->p_car) -
                                                 PredictedAzimuth(angles, t, u.expected->p_car),
                                             2 * std::numbers::pi);
@@ -149,7 +213,66 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
     }
   }
   out.yaw_sigma_pitch_roll_rad = std::sqrt(mean_square_shift);
-  out.yaw_sigma_rad = std::hypot(out.yaw_sigma_measurement_rad, out.yaw_sigma_pitch_roll_rad);
+
+  // The position grid (ARS408 clusters: 0.2 m in x and y). The noise hardly dithers it across
+  // the line of sight (0.1° is 0.017 m at 10 m), so each reflector's mean azimuth keeps an
+  // error fixed by where the reflector sits in its cell, and averaging cycles does not remove
+  // it. These errors are not independent between reflectors: where they sit relative to each
+  // other is known (surveyed layout, estimated yaw), and a row laid out at different places in
+  // the cell cancels them, a row at one place adds them up. Across the line of sight, where
+  // the whole set sits in the grid is not known beforehand: the yaw being measured moves it
+  // (0.17 m per degree at 10 m, a cell within the tolerance). Along it, the reflectors ahead
+  // stay where the layout and the mounting put them, which the calibration takes as nominal.
+  // So the yaw error the reflectors cause together (one Gauss-Newton step as above) is
+  // averaged in square over lateral shifts of the set across a whole cell, at the x the
+  // estimate gives. (Averaging over x too overstated the σ by 10% on the reference station,
+  // whose row stands at one x: 97% coverage over 3 x 1000 cars.)
+  const double step = association.resolution.position_step_m;
+  std::vector<double> grid_errors;  // the yaw error at each lateral shift of the grid
+  if (step > 0) {
+    struct Lever {
+      Eigen::Vector2d p;          // radar frame, metres
+      Eigen::Vector2d noise;      // per-detection σ along x and y, in steps
+      Eigen::Vector2d d_azimuth;  // ∂azimuth/∂(x, y) times the yaw step's weight
+    };
+    std::vector<Lever> levers;
+    const Eigen::Matrix3d m = PitchRollTransposed(angles);
+    for (const Used& u : used) {
+      const Eigen::Vector3d p = m * YawFramePoint(angles.yaw, t, u.expected->p_car);
+      const double r2 = p.head<2>().squaredNorm();
+      const double c = p.x() / std::sqrt(r2), s = p.y() / std::sqrt(r2);
+      // Polar noise in Cartesian axes: range noise along the line of sight, azimuth noise
+      // across it.
+      const double along = association.detection_range_sigma_m;
+      const double across = association.detection_azimuth_sigma_rad * std::sqrt(r2);
+      const double k =
+          weight(u) * PredictedAzimuthYawDerivative(angles, t, u.expected->p_car) / information;
+      levers.push_back(
+          {p.head<2>(),
+           Eigen::Vector2d(std::hypot(along * c, across * s), std::hypot(along * s, across * c)) /
+               step,
+           k * Eigen::Vector2d(-p.y(), p.x()) / r2});
+    }
+    double mean_square = 0;
+    for (int i = 0; i < kGridShifts; ++i) {
+      const double shift = (i + 0.5) / kGridShifts;
+      double yaw_error = 0;
+      for (const Lever& l : levers) {
+        const double vx = (l.p.x() - association.resolution.position_x_origin_m) / step;
+        const double vy = l.p.y() / step + shift;
+        yaw_error += step * (l.d_azimuth.x() * MeanRoundingError(vx, l.noise.x()) +
+                             l.d_azimuth.y() * MeanRoundingError(vy, l.noise.y()));
+      }
+      grid_errors.push_back(yaw_error);
+      mean_square += yaw_error * yaw_error;
+    }
+    out.yaw_sigma_position_steps_rad = std::sqrt(mean_square / kGridShifts);
+  }
+  const double gaussian_sigma =
+      std::hypot(out.yaw_sigma_measurement_rad, out.yaw_sigma_pitch_roll_rad);
+  out.yaw_sigma_rad = std::hypot(gaussian_sigma, out.yaw_sigma_position_steps_rad);
+  out.yaw_ci95_rad =
+      grid_errors.empty() ? kZ95 * out.yaw_sigma_rad : HalfWidth95(grid_errors, gaussian_sigma);
   out.yaw_deviation_rad = std::remainder(angles.yaw - nominal.yaw, 2 * std::numbers::pi);
   out.T_car_radar = Rigid3d(MountingRotation(angles, r_base), t);
   out.dof = out.reflectors_used - 1;

@@ -12,12 +12,15 @@
 // identity for radars); a reflector at p_car is expected at azimuth
 // atan2(y, x) of p_radar = R_car_radarᵀ · (p_car − t_car_radar_nominal). The yaw minimises
 // Σ ((azimuth_measured − azimuth_expected(yaw)) / se)² over the found reflectors (Gauss-Newton
-// in one unknown). Its 1-σ combines, in quadrature, the measurement part (the inverse square
-// root of the summed information Σ (∂azimuth/∂yaw / se)²) and the part that pitch and roll
-// errors within their tolerance alias into yaw: Ry(pitch)·Rx(roll) turns the boresight about
-// the vertical by about pitch·roll/2, and pitch moves off-axis azimuths to second order. That
-// part is the RMS over pitch and roll uniform in ±tolerance of the yaw shift they cause
-// (3x3-point Gauss-Legendre quadrature). It does not cover the position, taken as nominal.
+// in one unknown). Its 1-σ combines, in quadrature, the
+// measurement part (the inverse square root of the summed information Σ (∂azimuth/∂yaw / se)²),
+// the part that pitch and roll errors within their tolerance alias into yaw (Ry(pitch)·Rx(roll)
+// turns the boresight about the vertical by about pitch·roll/2, and pitch moves off-axis
+// azimuths to second order: the RMS over pitch and roll uniform in ±tolerance of the yaw shift
+// they cause, 3x3-point Gauss-Legendre quadrature), and, for radars that report Cartesian
+// positions in a grid (ARS408), the part the grid's rounding leaves: the reflectors' rounding
+// errors are modelled jointly, as the RMS over every lateral place of the reflector set in the
+// grid of the yaw error they cause together. It does not cover the position, taken as nominal.
 
 #include <span>
 #include <string>
@@ -64,9 +67,16 @@ struct RadarCalibrationResult {
   // Mounting angles (conventions.md), radians. Pitch and roll are the nominal ones: not
   // observable without elevation.
   double yaw_rad = 0;
-  double yaw_sigma_rad = 0;              // total 1-σ: the two parts below in quadrature
+  double yaw_sigma_rad = 0;              // total 1-σ: the three parts below in quadrature
   double yaw_sigma_measurement_rad = 0;  // from the reflectors' standard errors
   double yaw_sigma_pitch_roll_rad = 0;   // pitch and roll unknown within their tolerance
+  // The radar's position grid (ARS408), whose rounding errors all reflectors share; 0 for
+  // radars that report polar values (ESR), whose steps are in the standard errors.
+  double yaw_sigma_position_steps_rad = 0;
+  // Half-width of the 95% interval around yaw_rad. 1.96 yaw_sigma_rad when the error is
+  // Gaussian; a position grid's error is not (a sum of a few sawtooths is closer to uniform),
+  // so then the mixture over its lateral shifts of the Gaussian parts around the grid's error.
+  double yaw_ci95_rad = 0;
   double nominal_yaw_rad = 0;
   double yaw_deviation_rad = 0;  // yaw − nominal yaw
   double yaw_tolerance_rad = 0;

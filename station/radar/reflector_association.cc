@@ -52,9 +52,11 @@ struct Candidate {
 
 std::optional<RadarResolution> RadarResolutionOf(const std::string& model) {
   // The factors of the position signals in radar_format.h.
-  if (model == "ars408") return RadarResolution{ars408::kClusterDistLong.factor, 0, 0};
+  if (model == "ars408") {
+    return RadarResolution{ars408::kClusterDistLong.factor, ars408::kClusterDistLong.offset, 0, 0};
+  }
   if (model == "esr") {
-    return RadarResolution{0, esr::kTrackRange.factor, esr::kTrackAngle.factor * kDegToRad};
+    return RadarResolution{0, 0, esr::kTrackRange.factor, esr::kTrackAngle.factor * kDegToRad};
   }
   return std::nullopt;
 }
@@ -176,6 +178,9 @@ ReflectorAssociation AssociateReflectors(std::span<const RadarCycle> cycles,
                                          const ReflectorAssociationOptions& options) {
   ReflectorAssociation out;
   out.cycles = static_cast<int>(cycles.size());
+  out.resolution = options.resolution;
+  out.detection_azimuth_sigma_rad = options.detection_azimuth_sigma_rad;
+  out.detection_range_sigma_m = options.detection_range_sigma_m;
   const auto in_gate = [&](const ExpectedReflector& e, double range_m, double azimuth_rad) {
     return std::abs(range_m - e.range_m) <= options.range_gate_m &&
            std::abs(WrapAngle(azimuth_rad - e.azimuth_rad)) <= options.azimuth_gate_rad;
@@ -282,18 +287,22 @@ ReflectorAssociation AssociateReflectors(std::span<const RadarCycle> cycles,
     const double sigma_r = std::max(std::sqrt(var_r), options.detection_range_sigma_m);
     // Resolution steps the noise does not dither: the ESR's polar steps directly; the ARS408's
     // Cartesian step moves the azimuth by step / range in either axis.
-    const double azimuth_bias = std::hypot(
-        UnditheredBias(options.resolution.azimuth_step_rad, options.detection_azimuth_sigma_rad),
+    const double polar_azimuth_bias =
+        UnditheredBias(options.resolution.azimuth_step_rad, options.detection_azimuth_sigma_rad);
+    const double position_azimuth_bias =
         UnditheredBias(options.resolution.position_step_m,
                        options.detection_azimuth_sigma_rad * e.range_m) /
-            e.range_m);
+        e.range_m;
     const double range_bias = std::hypot(
         UnditheredBias(options.resolution.range_step_m, options.detection_range_sigma_m),
         UnditheredBias(options.resolution.position_step_m, options.detection_range_sigma_m));
     obs.status = ReflectorStatus::kFound;
     obs.azimuth_rad = WrapAngle(azimuth_median + mean_da);
     obs.range_m = range_median + mean_dr;
-    obs.azimuth_se_rad = std::hypot(sigma_a / std::sqrt(n), azimuth_bias);
+    obs.azimuth_se_without_position_steps_rad =
+        std::hypot(sigma_a / std::sqrt(n), polar_azimuth_bias);
+    obs.azimuth_se_rad =
+        std::hypot(obs.azimuth_se_without_position_steps_rad, position_azimuth_bias);
     obs.range_se_m = std::hypot(sigma_r / std::sqrt(n), range_bias);
     out.reflectors.push_back(obs);
   }

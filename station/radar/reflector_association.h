@@ -30,12 +30,13 @@ namespace linecal {
 // the detection noise does not dither leaves a bias that averaging over cycles cannot remove.
 struct RadarResolution {
   double position_step_m = 0;   // Cartesian x and y steps (ARS408 clusters: DistLong/DistLat)
-  double range_step_m = 0;      // polar range step (ESR)
-  double azimuth_step_rad = 0;  // polar azimuth step (ESR)
+  double position_x_origin_m = 0;  // an x value the grid holds (ARS408: DistLong's offset)
+  double range_step_m = 0;         // polar range step (ESR)
+  double azimuth_step_rad = 0;     // polar azimuth step (ESR)
 };
 
-// "ars408": 0.2 m per axis (cluster DistLong/DistLat); "esr": 0.1 m and 0.1° (track range and
-// angle), as radar_format.h's signals. nullopt for other names. O(1).
+// "ars408": 0.2 m per axis (cluster DistLong/DistLat), x grid through −500 m; "esr": 0.1 m and
+// 0.1° (track range and angle), as radar_format.h's signals. nullopt for other names. O(1).
 std::optional<RadarResolution> RadarResolutionOf(const std::string& model);
 
 // A target reflector as the radar should see it if mounted exactly as nominal.
@@ -120,11 +121,21 @@ struct ReflectorObservation {
   double range_se_m = 0;
   double azimuth_rad = 0;
   double azimuth_se_rad = 0;
+  // azimuth_se_rad without the bias of Cartesian position steps (RadarResolution::
+  // position_step_m). That bias depends on where the reflector sits in the position grid, which
+  // is shared by every reflector of a radar; radar_calibration.h models it jointly over the
+  // reflectors instead of as an independent error of each.
+  double azimuth_se_without_position_steps_rad = 0;
 };
 
 struct ReflectorAssociation {
   int cycles = 0;                                // cycles examined
   std::vector<ReflectorObservation> reflectors;  // in the order of `expected`
+  // The measurement model the standard errors assume (from the options): how the radar
+  // quantises positions and how much the per-detection noise dithers that.
+  RadarResolution resolution;
+  double detection_azimuth_sigma_rad = 0;
+  double detection_range_sigma_m = 0;
 };
 
 // Associates detections with reflectors over `cycles` (one radar; cycles of one list kind,

@@ -51,6 +51,7 @@ constexpr int kCycles = 50;
 struct Sample {
   double error_deg = 0;  // estimated − true yaw
   double sigma_deg = 0;  // reported 1-σ
+  double ci95_deg = 0;   // reported half-width of the 95% interval
   bool verdict_agrees = false;
 };
 
@@ -68,7 +69,7 @@ struct Summary {
   double rms_error_deg = 0;
   double rms_sigma_deg = 0;
   double sigma_ratio = 0;  // RMS error / RMS reported σ (1 when σ is right)
-  double coverage95 = 0;   // share of |error| <= 1.96 σ
+  double coverage95 = 0;   // share of |error| within the reported 95% interval
   double verdict_agreement = 0;
   bool meets_bars = false;
   std::map<std::string, int> reasons;
@@ -87,7 +88,7 @@ Summary Summarise(const Group& g) {
     abs_errors.push_back(std::abs(x.error_deg));
     sum_e2 += x.error_deg * x.error_deg;
     sum_s2 += x.sigma_deg * x.sigma_deg;
-    covered += std::abs(x.error_deg) <= kZ95 * x.sigma_deg;
+    covered += std::abs(x.error_deg) <= x.ci95_deg;
     agree += x.verdict_agrees;
   }
   const double n = static_cast<double>(g.samples.size());
@@ -208,6 +209,7 @@ int RunEvalRadar(const Args& args) {
       const double true_deviation = truth.yaw - nominal.yaw;
       const bool truly_in = std::abs(true_deviation) <= sensor.tolerance.yaw_rad;
       g.samples.push_back({(r.yaw_rad - truth.yaw) * kRadToDeg, r.yaw_sigma_rad * kRadToDeg,
+                           r.yaw_ci95_rad * kRadToDeg,
                            truly_in == (r.verdict == RadarVerdict::kPass)});
     }
     if ((c + 1) % 50 == 0) {

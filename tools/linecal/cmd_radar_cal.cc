@@ -58,6 +58,7 @@ nlohmann::json ResultJson(const SensorModel& sensor, const RadarCalibrationRun& 
           {"reflectors_used", r.reflectors_used},
           {"yaw_deg", r.yaw_rad * kDegPerRad},
           {"yaw_sigma_deg", r.yaw_sigma_rad * kDegPerRad},
+          {"yaw_ci95_deg", r.yaw_ci95_rad * kDegPerRad},
           {"nominal_yaw_deg", r.nominal_yaw_rad * kDegPerRad},
           {"yaw_deviation_deg", r.yaw_deviation_rad * kDegPerRad},
           {"yaw_tolerance_deg", r.yaw_tolerance_rad * kDegPerRad},
@@ -77,10 +78,11 @@ void PrintTable(const SensorModel& sensor, const RadarCalibrationRun& run) {
               RadarVerdictName(r.verdict), r.reason.empty() ? "" : " ", r.reason.c_str());
   if (r.reflectors_used > 0) {
     std::printf(
-        "  yaw %.4f deg (1-sigma %.4f deg), nominal %.4f deg, deviation %+.4f deg, tolerance "
-        "+-%.3f deg\n",
-        r.yaw_rad * kDegPerRad, r.yaw_sigma_rad * kDegPerRad, r.nominal_yaw_rad * kDegPerRad,
-        r.yaw_deviation_rad * kDegPerRad, r.yaw_tolerance_rad * kDegPerRad);
+        "  yaw %.4f deg (1-sigma %.4f deg, 95%% +-%.4f deg), nominal %.4f deg, deviation %+.4f "
+        "deg, tolerance +-%.3f deg\n",
+        r.yaw_rad * kDegPerRad, r.yaw_sigma_rad * kDegPerRad, r.yaw_ci95_rad * kDegPerRad,
+        r.nominal_yaw_rad * kDegPerRad, r.yaw_deviation_rad * kDegPerRad,
+        r.yaw_tolerance_rad * kDegPerRad);
   }
   std::printf(
       "  pitch and roll not observable (no elevation): nominal %.3f / %.3f deg; position nominal\n",
