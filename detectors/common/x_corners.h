@@ -6,9 +6,10 @@
 // at a saddle, so R = Ixy^2 - Ixx Iyy has a local maximum at every X-corner (and at little
 // else); local maxima of R above a floor set by the smallest printed contrast are checked
 // on a ring of samples around them (exactly two dark and two bright sectors, opposite
-// sectors alike, the centre mid-grey: an X-corner, not an L-corner, edge or blob), then
-// refined by the saddle fit of corner_refine.h. The ring also gives the directions of the
-// two edge lines through the vertex and the axis of the dark sectors.
+// sectors alike, the centre the mean of the sectors: an X-corner, not an L-corner, edge,
+// blob or two corners with a gap), then refined by the saddle fit of corner_refine.h; a
+// peak whose ring fails is tested again at its saddle. The ring also gives the directions
+// of the two edge lines through the vertex and the axis of the dark sectors.
 
 #include <array>
 #include <string_view>

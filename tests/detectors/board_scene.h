@@ -113,6 +113,18 @@ inline double FeatureRmsPx(const Detection& detection, const CameraFrame& frame,
   return *matched > 0 ? std::sqrt(sum_sq / *matched) : 0.0;
 }
 
+// The largest error of any detected feature against the render's truth: a wrong id is
+// off by a whole square (tens of pixels), a right one by a fraction of a pixel.
+inline double MaxErrorPx(const Detection& d, const CameraFrame& frame) {
+  double worst = 0.0;
+  for (const DetectedFeature& f : d.features) {
+    for (const RenderedFeature& t : frame.features) {
+      if (t.feature_id == f.id) worst = std::max(worst, (f.uv_px - t.uv_px).norm());
+    }
+  }
+  return worst;
+}
+
 // acceptance.md's sub-pixel bars for the two conditions above.
 inline constexpr double kCleanRmsBarPx = 0.05;  // noise 0, blur 0.5
 inline constexpr double kNoisyRmsBarPx = 0.12;  // noise sigma 4, blur 1.0

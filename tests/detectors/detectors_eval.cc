@@ -117,15 +117,7 @@ std::vector<double> Distances(const Board& board, const CameraModel& camera, boo
 }
 
 CameraRenderOptions EffectsOf(const EffectSet& set, std::uint64_t seed) {
-  CameraRenderOptions o = circle_scene::Effects(set.noise, set.blur);
-  if (set.hard) {
-    o.illumination_gradient_ratio = 4.0;
-    o.illumination_gradient_direction_deg = 37.0 * static_cast<double>(seed);
-    o.gamma = seed % 2 == 0 ? 0.6 : 1.6;
-    o.jpeg_quality = 80;
-    o.clutter = true;
-  }
-  return o;
+  return set.hard ? circle_scene::HardEffects(seed) : circle_scene::Effects(set.noise, set.blur);
 }
 
 // Runs every other board's detector on a render of `shown` (nullptr: no board).
@@ -164,8 +156,7 @@ int Run(const Options& options) {
       for (const double roll : rolls) {
         for (const auto& [yaw, pitch] : yaw_pitch) {
           for (std::size_t s = 0; s < kSets.size(); ++s) {
-            const Pose pose{distance, yaw, pitch, roll, 0.05 * static_cast<double>(seed % 5) - 0.1,
-                            0.03 * static_cast<double>(seed % 3) - 0.03};
+            const Pose pose = circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed);
             const absl::StatusOr<CameraFrame> frame =
                 circle_scene::RenderScene(circle_scene::OneBoard(type, pose), EffectsOf(kSets[s], seed), seed, camera);
             ++seed;
