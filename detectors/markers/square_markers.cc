@@ -271,8 +271,8 @@ std::optional<ReadResult> ReadMarker(const ImageView8& image,
 // Refines, reads and decodes one candidate quad. A coarse pass (8 edge points per side)
 // for every candidate, since the contour corners may be a cell off on blurred, small quads;
 // the fine pass (an edge point per pixel of side, up to 80) only for decoded markers,
-// twice: the second re-centres the edge windows on the refined lines, within a third of a
-// cell.
+// twice: the first within half a cell of the coarse corners, the second re-centring the edge
+// windows on the refined lines within a third of a cell.
 std::optional<DecodedMarker> ReadQuad(const ImageView8& image, const Quad& quad,
                                       const MarkerFamily& family, double min_contrast) {
   std::array<Eigen::Vector2d, 4> corners = quad.corners_px;
@@ -282,10 +282,13 @@ std::optional<DecodedMarker> ReadQuad(const ImageView8& image, const Quad& quad,
   std::optional<ReadResult> marker = ReadMarker(image, corners, family, min_contrast);
   if (!marker.has_value()) return std::nullopt;
   const int fine_samples = std::clamp(static_cast<int>(side), 8, 80);
-  for (int pass = 0; pass < 2; ++pass) {
-    if (!RefineQuadCorners(image, family, &marker->light, fine_samples, 0.34, &corners)) {
-      return std::nullopt;
-    }
+  // Half a cell for the first, as for markers found on a halved image (DetectMarkerBoard):
+  // the coarse pass's eight points on a side of a few cells, blind to the cells, can leave a
+  // corner more than a third of a cell off (markers of 4 px cells foreshortened by 50
+  // degrees, noise 4).
+  if (!RefineQuadCorners(image, family, &marker->light, fine_samples, 0.5, &corners) ||
+      !RefineQuadCorners(image, family, &marker->light, fine_samples, 0.34, &corners)) {
+    return std::nullopt;
   }
   for (int c = 0; c < 4; ++c) marker->marker.corners_px[c] = corners[(marker->rotation + c) % 4];
   return marker->marker;
