@@ -8,9 +8,10 @@
 // noise; the cycle's own LiDAR path (CalibrateLidarFrames: the cloud detector where the
 // nominal mounting expects each board, then CalibrateLidar) gives the estimate, compared with
 // the truth. The detections are compared with the true hole centres and normals as well.
-#include <ctime>
+#include <array>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -53,6 +54,10 @@ struct LidarSamples {
   std::map<std::string, int> reasons;  // not solved or verdict error: reason
   MountingSamples mounting;
   std::vector<double> centre_errors_m, normal_errors_rad;
+  // Per found board, the detector's pose error in the board frame (theta_x, theta_y, theta_z,
+  // t_x, t_y, t_z: RoundHoleCloudDetection::pose_covariance's order) and its reported 1-sigma:
+  // the solve's sigma is only as good as these.
+  std::array<std::vector<double>, 6> board_errors, board_sigmas;
   double detect_ms = 0.0;  // CPU time of detection + solve, summed
   int frames = 0;          // rotations processed, summed
 };
@@ -115,6 +120,15 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, const std::m
       samples.centre_errors_m.push_back(worst);
       const double c = d.T_lidar_board.RotationMatrix().col(2).dot(T_lidar_board.RotationMatrix().col(2));
       samples.normal_errors_rad.push_back(std::acos(std::clamp(c, -1.0, 1.0)));
+      // T_true = T_est * (R(theta), t), as the covariance is defined.
+      const Rigid3d delta = d.T_lidar_board.Inverse() * T_lidar_board;
+      const Eigen::AngleAxisd aa(delta.RotationMatrix());
+      Eigen::Matrix<double, 6, 1> e;
+      e << aa.angle() * aa.axis(), delta.translation();
+      for (int k = 0; k < 6; ++k) {
+        samples.board_errors[k].push_back(e(k));
+        samples.board_sigmas[k].push_back(std::sqrt(d.pose_covariance(k, k)));
+      }
     }
     if (!r.solved) {
       ++samples.reasons[r.reason.empty() ? "not_solved" : r.reason];
@@ -225,6 +239,14 @@ int RunEvalLidar(const Args& args) {
       row[absl::StrCat(kComponents[i], "_error_over_sigma")] = stats[i].error_over_sigma;
       row[absl::StrCat(kComponents[i], "_coverage95")] = stats[i].coverage95;
     }
+    const char* kBoardComponents[6] = {"theta_x", "theta_y", "theta_z", "t_x", "t_y", "t_z"};
+    std::array<ErrorSigmaStats, 6> board;
+    for (int k = 0; k < 6; ++k) {
+      board[k] = SummariseErrors(c.board_errors[k], c.board_sigmas[k]);
+      row[absl::StrCat("board_", kBoardComponents[k], "_error_over_sigma")] =
+          board[k].error_over_sigma;
+      row[absl::StrCat("board_", kBoardComponents[k], "_coverage95")] = board[k].coverage95;
+    }
     rows.push_back(row);
     if (!cl.Has("json")) {
       std::printf("%-13s %5d %4d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %5.2f..%-5.2f %4.2f..%-4.2f | %6.1f%% | "
@@ -239,6 +261,14 @@ int RunEvalLidar(const Args& args) {
                   stats[3].error_over_sigma, stats[4].error_over_sigma, stats[5].error_over_sigma, stats[0].coverage95,
                   stats[1].coverage95, stats[2].coverage95, stats[3].coverage95, stats[4].coverage95,
                   stats[5].coverage95);
+      std::printf(
+          "%-13s board pose (%zu boards) error/sigma theta_x %.2f theta_y %.2f theta_z %.2f t_x "
+          "%.2f t_y "
+          "%.2f t_z %.2f; coverage %.2f %.2f %.2f %.2f %.2f %.2f\n",
+          "", c.board_errors[0].size(), board[0].error_over_sigma, board[1].error_over_sigma,
+          board[2].error_over_sigma, board[3].error_over_sigma, board[4].error_over_sigma,
+          board[5].error_over_sigma, board[0].coverage95, board[1].coverage95, board[2].coverage95,
+          board[3].coverage95, board[4].coverage95, board[5].coverage95);
     }
   }
   if (cl.Has("json")) {
