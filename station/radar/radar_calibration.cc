@@ -178,14 +178,19 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
   }
 
   out.yaw_rad = angles.yaw;
-  // Σ (w ∂azimuth/∂yaw / information)² se², se without the position grid's part; equals
-  // 1 / √information when the grid has none.
-  double measurement_variance = 0;
+  // How much the yaw moves per radian of each reflector's azimuth error: w ∂azimuth/∂yaw /
+  // information, the Gauss-Newton step's gain.
+  std::vector<double> gain;
   for (const Used& u : used) {
-    const double k =
-        weight(u) * PredictedAzimuthYawDerivative(angles, t, u.expected->p_car) / information;
-    const double se = u.observed->azimuth_se_without_position_steps_rad;
-    measurement_variance += k * k * se * se;
+    gain.push_back(weight(u) * PredictedAzimuthYawDerivative(angles, t, u.expected->p_car) /
+                   information);
+  }
+  // Σ gain² se², se without the position grid's part; equals 1 / √information when the grid
+  // has none.
+  double measurement_variance = 0;
+  for (std::size_t i = 0; i < used.size(); ++i) {
+    const double se = used[i].observed->azimuth_se_without_position_steps_rad;
+    measurement_variance += gain[i] * gain[i] * se * se;
   }
   out.yaw_sigma_measurement_rad = std::sqrt(measurement_variance);
   // The yaw shift that pitch and roll off nominal by (dp, dr) cause: one Gauss-Newton step
@@ -233,25 +238,23 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
     struct Lever {
       Eigen::Vector2d p;          // radar frame, metres
       Eigen::Vector2d noise;      // per-detection σ along x and y, in steps
-      Eigen::Vector2d d_azimuth;  // ∂azimuth/∂(x, y) times the yaw step's weight
+      Eigen::Vector2d d_azimuth;  // ∂azimuth/∂(x, y) times the reflector's gain
     };
     std::vector<Lever> levers;
     const Eigen::Matrix3d m = PitchRollTransposed(angles);
-    for (const Used& u : used) {
-      const Eigen::Vector3d p = m * YawFramePoint(angles.yaw, t, u.expected->p_car);
+    for (std::size_t i = 0; i < used.size(); ++i) {
+      const Eigen::Vector3d p = m * YawFramePoint(angles.yaw, t, used[i].expected->p_car);
       const double r2 = p.head<2>().squaredNorm();
       const double c = p.x() / std::sqrt(r2), s = p.y() / std::sqrt(r2);
       // Polar noise in Cartesian axes: range noise along the line of sight, azimuth noise
       // across it.
       const double along = association.detection_range_sigma_m;
       const double across = association.detection_azimuth_sigma_rad * std::sqrt(r2);
-      const double k =
-          weight(u) * PredictedAzimuthYawDerivative(angles, t, u.expected->p_car) / information;
       levers.push_back(
           {p.head<2>(),
            Eigen::Vector2d(std::hypot(along * c, across * s), std::hypot(along * s, across * c)) /
                step,
-           k * Eigen::Vector2d(-p.y(), p.x()) / r2});
+           gain[i] * Eigen::Vector2d(-p.y(), p.x()) / r2});
     }
     double mean_square = 0;
     for (int i = 0; i < kGridShifts; ++i) {
