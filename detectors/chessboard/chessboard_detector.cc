@@ -757,6 +757,11 @@ constexpr double kMinEndOffsetPx = 1.0;
 // contrast (the same print's edge; the ring sees it at 4 px, an edge sample at 1.5 px sees
 // about half of it): contrast-adaptive, so a dim or low-gamma print works.
 constexpr double kMinEndContrastFraction = 0.3;
+// At most this many pairs of groups are fitted and refined as a board on one level (the
+// groups of the strongest X-corners first): a board's two groups are among them, while a
+// texture of X-corners (a fuzzed image: 25 s under the sanitizers) makes hundreds of groups
+// whose pairs on one line are then tried one by one.
+constexpr int kMaxPairBoardFits = 64;
 // A square's side along one edge line is at most this many times its side along the
 // other: 50 degrees of foreshortening (1 / cos 50 = 1.6) with the rest of the
 // perspective of acceptance.md's views; plus 2 px for the smallest squares.
@@ -961,8 +966,9 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const ImageView8&
   }
   std::vector<Eigen::Vector2d> image_pts, board_pts;
   std::vector<double> tolerance;
-  for (std::size_t a = 0; a < groups.size(); ++a) {
-    for (std::size_t b = a + 1; b < groups.size(); ++b) {
+  int fits = 0;
+  for (std::size_t a = 0; a < groups.size() && fits < kMaxPairBoardFits; ++a) {
+    for (std::size_t b = a + 1; b < groups.size() && fits < kMaxPairBoardFits; ++b) {
       const PairGroup& ga = groups[a];
       const PairGroup& gb = groups[b];
       if (std::any_of(ga.corners.begin(), ga.corners.end(), [&](int c) {
@@ -983,6 +989,7 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const ImageView8&
             tolerance.push_back(scale * CoarseTolerancePx(options, pg.side_px / scale));
           }
         }
+        ++fits;
         std::optional<Refined> refined = FitAndRefineBoard(
             image, board, model, board_pts, image_pts, tolerance, options, failure);
         if (refined) {
