@@ -15,6 +15,7 @@
 #include "detectors/common/homography.h"
 #include "detectors/common/image_filters.h"
 #include "detectors/common/paint_check.h"
+#include "detectors/markers/page_edge_fit.h"
 
 namespace linecal {
 namespace {
@@ -522,6 +523,14 @@ struct BoardFit {
 // all there is to tell it from the homography's scale.
 constexpr std::size_t kMinMarkersForDilation = 3;
 
+// Markers whose black border is narrower than this (px) get their sides fitted to the page
+// model (page_edge_fit.h). Below it the blur of the border's inner edge, and of what lies
+// behind and beyond, reaches the edge's gradient centroid (ArUco at 4 px cells, blur 1:
+// 0.2-0.3 px off); above it the centroids meet the bars at a tenth of the cost. The
+// AprilTag grid's two-cell border is 8 px at acceptance.md's smallest cells, so its 36 tags
+// keep their centroids (docs/detectors.md).
+constexpr double kPageFitMaxBorderPx = 5.0;
+
 // The image of H at p and its 2 x 2 derivative there. O(1).
 Eigen::Vector2d ApplyHomographyWithJacobian(const Eigen::Matrix3d& H, const Eigen::Vector2d& p,
                                             Eigen::Matrix2d* J) {
@@ -678,6 +687,39 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
     missing = std::move(still_missing);
   }
   for (const DecodedMarker& m : placed) on_board.push_back(&m);
+  // Small markers: their sides placed again on a model of the page around them
+  // (page_edge_fit.h), then the board fitted again. Where that fit fails its check, the
+  // edge-point corners stay.
+  std::vector<DecodedMarker> page_fitted;
+  page_fitted.reserve(on_board.size());
+  std::vector<const DecodedMarker*> refined = on_board;
+  for (const DecodedMarker*& m : refined) {
+    double side = 0.0;
+    for (int k = 0; k < 4; ++k)
+      side += 0.25 * (m->corners_px[(k + 1) % 4] - m->corners_px[k]).norm();
+    if (side * family.border_cells >= kPageFitMaxBorderPx * family.cells) continue;
+    const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
+    std::array<Eigen::Vector2d, 4> corners_board;
+    for (int c = 0; c < 4; ++c) corners_board[c] = f[c]->p_board;
+    DecodedMarker fitted = *m;
+    if (!FitMarkerSidesToPage(image, board, family.cells, corners_board, scan.min_contrast,
+                              &fitted.corners_px)) {
+      continue;
+    }
+    page_fitted.push_back(fitted);
+    m = &page_fitted.back();
+  }
+  if (!page_fitted.empty()) {
+    // uv holds the corners of on_board's markers in on_board's order (add_corners).
+    for (std::size_t i = 0; i < refined.size(); ++i) {
+      for (int c = 0; c < 4; ++c) uv[4 * i + c] = refined[i]->corners_px[c];
+    }
+    std::optional<BoardFit> page_fit = FitBoard(p_board, diagonal, uv, refined.size());
+    if (page_fit.has_value() && page_fit->fit.max_residual <= max_residual_px) {
+      board_fit = page_fit;
+      on_board = refined;
+    }
+  }
   const HomographyFit* fit = &board_fit->fit;
   // A marker of another id on this board's page: another board that shares some ids.
   const Eigen::Matrix3d H_board_image = fit->H.inverse();

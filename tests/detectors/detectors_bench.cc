@@ -5,7 +5,8 @@
 // tests, run by hand (docs/detectors.md):
 //   build-dir/bin/detectors_bench --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 // Each image: the board over 45% of the image width (at most 80% of its height), turned 30 degrees, noise 2, blur 0.7, in
-// front of a cluttered wall; the same field of view at both sizes.
+// front of a cluttered wall; the same field of view at both sizes. The marker boards also at
+// their smallest (4 px data cells), 1280 x 720, with OpenCV on the same images.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -35,17 +36,21 @@ const Board& BoardOf(BoardType type) {
   return it->second;
 }
 
-const Image8& Frame(BoardType type, int width, int height) {
-  static auto* frames = new std::map<std::tuple<BoardType, int, int>, Image8>;
-  const auto key = std::make_tuple(type, width, height);
+// cell_px > 0: the board as far as makes its smallest cell (a marker's data cell) that many
+// pixels, as the evaluation's farthest boards.
+const Image8& Frame(BoardType type, int width, int height, int cell_px = 0) {
+  static auto* frames = new std::map<std::tuple<BoardType, int, int, int>, Image8>;
+  const auto key = std::make_tuple(type, width, height, cell_px);
   auto it = frames->find(key);
   if (it != frames->end()) return it->second;
   const CameraModel camera = circle_scene::Camera(width, height);
   const Eigen::Vector2d page_m = BoardOf(type).page_size_m();
   // 45% of the width seen straight on (the 30 degree turn narrows it by cos 30), and a tall
   // board (the vertical one) no more than 80% of the height.
-  const double distance_m = std::max(camera.intrinsics().fx * page_m.x() / (0.45 * width),
-                                     camera.intrinsics().fy * page_m.y() / (0.8 * height));
+  const double distance_m =
+      cell_px > 0 ? camera.intrinsics().fx * circle_scene::SmallestFeatureM(BoardOf(type)) / cell_px
+                  : std::max(camera.intrinsics().fx * page_m.x() / (0.45 * width),
+                             camera.intrinsics().fy * page_m.y() / (0.8 * height));
   CameraRenderOptions o = circle_scene::Effects(2.0, 0.7);
   o.clutter = true;
   absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
@@ -61,10 +66,11 @@ cv::Mat MatOf(const Image8& image) {
   return cv::Mat(image.height, image.width, CV_8UC1, const_cast<std::uint8_t*>(image.pixels.data()));
 }
 
-// Args: board type, width, height.
+// Args: board type, width, height, the smallest cell in pixels (Frame; 0: the usual framing).
 void BM_Detect(benchmark::State& state) {
   const BoardType type = static_cast<BoardType>(state.range(0));
-  const Image8& image = Frame(type, static_cast<int>(state.range(1)), static_cast<int>(state.range(2)));
+  const Image8& image = Frame(type, static_cast<int>(state.range(1)),
+                              static_cast<int>(state.range(2)), static_cast<int>(state.range(3)));
   state.SetLabel(BoardTypeName(type));
   for (auto _ : state) {
     const std::optional<Detection> d = DetectBoard(image.view(), BoardOf(type));
@@ -78,20 +84,27 @@ void BM_Detect(benchmark::State& state) {
 
 void DetectArgs(benchmark::internal::Benchmark* b) {
   for (BoardType type : kAllBoardTypes) {
-    b->Args({static_cast<int>(type), 1280, 720});
-    b->Args({static_cast<int>(type), 2448, 2048});
+    b->Args({static_cast<int>(type), 1280, 720, 0});
+    b->Args({static_cast<int>(type), 2448, 2048, 0});
+  }
+  // The marker boards at their smallest (4 px data cells), where every marker's sides are
+  // fitted to the page model (detectors/markers/page_edge_fit.h).
+  for (BoardType type : {BoardType::kAruco, BoardType::kApriltag, BoardType::kRoundHole}) {
+    b->Args({static_cast<int>(type), 1280, 720, 4});
   }
 }
 BENCHMARK(BM_Detect)->Apply(DetectArgs)->Unit(benchmark::kMillisecond);
 
 // OpenCV's aruco module on the same image: DICT_4X4_50 with its default parameters on the
 // ArUco board (the reference toolbox's call), and the AprilTag 36h11 dictionary with
-// markerBorderBits = 2 on the AprilTag grid (Kalibr's layout). Args: dictionary, width, height.
+// markerBorderBits = 2 on the AprilTag grid (Kalibr's layout). Args: dictionary, width, height,
+// the smallest cell in pixels (Frame; 0: the usual framing).
 void BM_OpenCvDetectMarkers(benchmark::State& state) {
   const int dictionary_id = static_cast<int>(state.range(0));
   const bool apriltag = dictionary_id == cv::aruco::DICT_APRILTAG_36h11;
-  const Image8& image = Frame(apriltag ? BoardType::kApriltag : BoardType::kAruco,
-                              static_cast<int>(state.range(1)), static_cast<int>(state.range(2)));
+  const Image8& image =
+      Frame(apriltag ? BoardType::kApriltag : BoardType::kAruco, static_cast<int>(state.range(1)),
+            static_cast<int>(state.range(2)), static_cast<int>(state.range(3)));
   const cv::Mat mat = MatOf(image);
   const cv::Ptr<cv::aruco::Dictionary> dictionary = cv::aruco::getPredefinedDictionary(dictionary_id);
   const cv::Ptr<cv::aruco::DetectorParameters> params = cv::aruco::DetectorParameters::create();
@@ -110,10 +123,12 @@ void BM_OpenCvDetectMarkers(benchmark::State& state) {
   state.counters["markers_printed"] = apriltag ? 36 : 4;
 }
 BENCHMARK(BM_OpenCvDetectMarkers)
-    ->Args({cv::aruco::DICT_4X4_50, 1280, 720})
-    ->Args({cv::aruco::DICT_4X4_50, 2448, 2048})
-    ->Args({cv::aruco::DICT_APRILTAG_36h11, 1280, 720})
-    ->Args({cv::aruco::DICT_APRILTAG_36h11, 2448, 2048})
+    ->Args({cv::aruco::DICT_4X4_50, 1280, 720, 0})
+    ->Args({cv::aruco::DICT_4X4_50, 2448, 2048, 0})
+    ->Args({cv::aruco::DICT_APRILTAG_36h11, 1280, 720, 0})
+    ->Args({cv::aruco::DICT_APRILTAG_36h11, 2448, 2048, 0})
+    ->Args({cv::aruco::DICT_4X4_50, 1280, 720, 4})
+    ->Args({cv::aruco::DICT_APRILTAG_36h11, 1280, 720, 4})
     ->Unit(benchmark::kMillisecond);
 
 // The candidate stage of cv::findCirclesGrid (the reference toolbox's circle detector):

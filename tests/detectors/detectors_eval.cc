@@ -90,16 +90,6 @@ bool IsMarkerBoard(BoardType t) {
   return t == BoardType::kAruco || t == BoardType::kApriltag || t == BoardType::kRoundHole;
 }
 
-// The smallest printed square, cell or circle of a board, metres: the smallest side of the
-// shapes drawn on its page (a marker's white bits are drawn over its black square).
-double SmallestFeatureM(const Board& board) {
-  double smallest = board.page_size_m().x();
-  for (std::size_t i = 1; i < board.shapes().size(); ++i) {
-    smallest = std::min(smallest, board.shapes()[i].box_board.sizes().minCoeff());
-  }
-  return smallest;
-}
-
 int CameraFeatureCount(const Board& board) {
   return static_cast<int>(std::count_if(board.features().begin(), board.features().end(),
                                         [](const BoardFeature& f) { return f.kind != FeatureKind::kHoleCentre; }));
@@ -111,7 +101,7 @@ std::vector<double> Distances(const Board& board, const CameraModel& camera, boo
   const double near_m = std::max(f * board.page_size_m().x() / (0.8 * camera.intrinsics().width),
                                  camera.intrinsics().fy * board.page_size_m().y() / (0.8 * camera.intrinsics().height));
   const double min_px = IsMarkerBoard(board.type()) ? 4.0 : 12.0;
-  const double far_m = f * SmallestFeatureM(board) / min_px;
+  const double far_m = f * circle_scene::SmallestFeatureM(board) / min_px;
   if (reduced) return {std::sqrt(near_m * far_m)};
   return {near_m, std::sqrt(near_m * far_m), far_m};
 }
@@ -148,11 +138,13 @@ int Run(const Options& options) {
     const Board& board = BoardOf(type);
     const int expected = CameraFeatureCount(board);
     const std::vector<double> distances = Distances(board, camera, options.reduced);
-    std::printf("%s: smallest feature %.1f mm; distances", BoardTypeName(type), 1e3 * SmallestFeatureM(board));
+    std::printf("%s: smallest feature %.1f mm; distances", BoardTypeName(type),
+                1e3 * circle_scene::SmallestFeatureM(board));
     for (double d : distances) std::printf(" %.2f m", d);
     std::printf("\n");
     for (const double distance : distances) {
-      const double feature_px = camera.intrinsics().fx * SmallestFeatureM(board) / distance;
+      const double feature_px =
+          camera.intrinsics().fx * circle_scene::SmallestFeatureM(board) / distance;
       for (const double roll : rolls) {
         for (const auto& [yaw, pitch] : yaw_pitch) {
           for (std::size_t s = 0; s < kSets.size(); ++s) {

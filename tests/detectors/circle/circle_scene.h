@@ -5,6 +5,7 @@
 // detector's test, benchmark and evaluation.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cstdint>
 #include <numbers>
 #include <string>
@@ -125,6 +126,16 @@ inline absl::StatusOr<CameraFrame> RenderScene(const StationLayout& layout,
                                                std::uint64_t seed,
                                                const CameraModel& camera = Camera()) {
   return RenderCameraFrame(camera, CameraPose(), layout, options, seed);
+}
+
+// The smallest printed square, cell or circle of a board, metres: the smallest side of the
+// shapes drawn on its page (a marker's white bits are drawn over its black square).
+inline double SmallestFeatureM(const Board& board) {
+  double smallest = board.page_size_m().x();
+  for (std::size_t i = 1; i < board.shapes().size(); ++i) {
+    smallest = std::min(smallest, board.shapes()[i].box_board.sizes().minCoeff());
+  }
+  return smallest;
 }
 
 // The default circle board, built once.
