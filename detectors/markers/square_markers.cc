@@ -618,6 +618,27 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   if (on_board.size() < 2) {
     return Fail(others.empty() ? DetectReason::kTooFewFeatures : DetectReason::kWrongBoard);
   }
+  // Small markers' sides placed on a model of the page around them (page_edge_fit.h) before
+  // any board fit: their edge-point corners are off by up to a quarter of a cell, which the
+  // fit's residual test refuses. Where the page fit fails, the edge-point corners stay.
+  const auto fit_to_page = [&](DecodedMarker* m) {
+    double side = 0.0;
+    for (int k = 0; k < 4; ++k)
+      side += 0.25 * (m->corners_px[(k + 1) % 4] - m->corners_px[k]).norm();
+    if (side * family.border_cells >= kPageFitMaxBorderPx * family.cells) return;
+    const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
+    std::array<Eigen::Vector2d, 4> corners_board;
+    for (int c = 0; c < 4; ++c) corners_board[c] = f[c]->p_board;
+    FitMarkerSidesToPage(image, board, family.cells, corners_board, scan.min_contrast,
+                         &m->corners_px);
+  };
+  std::vector<DecodedMarker> read;
+  read.reserve(on_board.size());
+  for (const DecodedMarker*& m : on_board) {
+    read.push_back(*m);
+    fit_to_page(&read.back());
+    m = &read.back();
+  }
   std::vector<Eigen::Vector2d> p_board;
   std::vector<Eigen::Vector2d> diagonal;
   std::vector<Eigen::Vector2d> uv;
@@ -676,6 +697,7 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
         still_missing.push_back(id);
         continue;
       }
+      fit_to_page(&*marker);
       placed.push_back(*marker);
       add_corners(f, *marker);
     }
@@ -687,39 +709,6 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
     missing = std::move(still_missing);
   }
   for (const DecodedMarker& m : placed) on_board.push_back(&m);
-  // Small markers: their sides placed again on a model of the page around them
-  // (page_edge_fit.h), then the board fitted again. Where that fit fails its check, the
-  // edge-point corners stay.
-  std::vector<DecodedMarker> page_fitted;
-  page_fitted.reserve(on_board.size());
-  std::vector<const DecodedMarker*> refined = on_board;
-  for (const DecodedMarker*& m : refined) {
-    double side = 0.0;
-    for (int k = 0; k < 4; ++k)
-      side += 0.25 * (m->corners_px[(k + 1) % 4] - m->corners_px[k]).norm();
-    if (side * family.border_cells >= kPageFitMaxBorderPx * family.cells) continue;
-    const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
-    std::array<Eigen::Vector2d, 4> corners_board;
-    for (int c = 0; c < 4; ++c) corners_board[c] = f[c]->p_board;
-    DecodedMarker fitted = *m;
-    if (!FitMarkerSidesToPage(image, board, family.cells, corners_board, scan.min_contrast,
-                              &fitted.corners_px)) {
-      continue;
-    }
-    page_fitted.push_back(fitted);
-    m = &page_fitted.back();
-  }
-  if (!page_fitted.empty()) {
-    // uv holds the corners of on_board's markers in on_board's order (add_corners).
-    for (std::size_t i = 0; i < refined.size(); ++i) {
-      for (int c = 0; c < 4; ++c) uv[4 * i + c] = refined[i]->corners_px[c];
-    }
-    std::optional<BoardFit> page_fit = FitBoard(p_board, diagonal, uv, refined.size());
-    if (page_fit.has_value() && page_fit->fit.max_residual <= max_residual_px) {
-      board_fit = page_fit;
-      on_board = refined;
-    }
-  }
   const HomographyFit* fit = &board_fit->fit;
   // A marker of another id on this board's page: another board that shares some ids.
   const Eigen::Matrix3d H_board_image = fit->H.inverse();

@@ -259,8 +259,8 @@ TEST(ArucoDetectorTest, SmallestMarkersMeetTheNoisyBar) {
     const Board board = MakeBoard(type);
     for (const Case& c : cases) {
       // The round-hole board at this size under noise is not always found (docs/detectors.md:
-      // 94% of the evaluation's noisy renders); these two renders are among its misses.
-      if (type == BoardType::kRoundHole && (c.seed == 22 || c.seed == 23)) continue;
+      // 98% of the evaluation's noisy renders); this render shows only three of its markers.
+      if (type == BoardType::kRoundHole && c.seed == 22) continue;
       SCOPED_TRACE(::testing::Message() << BoardTypeName(type) << " yaw " << c.yaw << " pitch "
                                         << c.pitch << " roll " << c.roll);
       const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
