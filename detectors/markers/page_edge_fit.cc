@@ -239,12 +239,12 @@ double Evaluate(std::span<const Profile> profiles, const Params& x,
   return cost;
 }
 
-// Levenberg-Marquardt from delta = theta = 0, sigma 1 px, and the light and dark levels that
+// Levenberg-Marquardt from delta = theta = 0, sigma = sigma_start, and the light and dark levels that
 // fit best at those. nullopt when the fit leaves the plausible range.
-std::optional<Params> FitSide(std::span<const Profile> profiles, double max_shift_px,
+std::optional<Params> FitSide(std::span<const Profile> profiles, double sigma_start, double max_shift_px,
                               double min_contrast) {
   Params x;
-  x << 0.0, 0.0, 1.0, 0.0, 0.0;
+  x << 0.0, 0.0, sigma_start, 0.0, 0.0;
   {
     // At fixed geometry the model is linear in L and D.
     Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
@@ -371,7 +371,7 @@ bool FitOnce(const ImageView8& image, const Board& board, int cells,
       profiles.push_back(std::move(p));
     }
     if (static_cast<int>(profiles.size()) < kMinProfilesPerSide) return false;
-    const std::optional<Params> x = FitSide(profiles, 0.5 * cell_px, min_contrast);
+    const std::optional<Params> x = FitSide(profiles, sigma_hint, 0.5 * cell_px, min_contrast);
     if (!x.has_value()) return false;
     sigma_sum += (*x)(2);
     // The side moved by delta + theta u: the line through its moved middle, turned by theta.
