@@ -87,8 +87,9 @@ void DetectArgs(benchmark::internal::Benchmark* b) {
     b->Args({static_cast<int>(type), 1280, 720, 0});
     b->Args({static_cast<int>(type), 2448, 2048, 0});
   }
-  // The marker boards at their smallest (4 px data cells), where every marker's sides are
-  // fitted to the page model (detectors/markers/page_edge_fit.h).
+  // The marker boards at their smallest (4 px data cells), where the ArUco and round-hole
+  // markers' sides are fitted to the page model (detectors/markers/page_edge_fit.h); the
+  // AprilTag grid's two-cell borders are wide enough not to be.
   for (BoardType type : {BoardType::kAruco, BoardType::kApriltag, BoardType::kRoundHole}) {
     b->Args({static_cast<int>(type), 1280, 720, 4});
   }
