@@ -119,7 +119,9 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
 // `family`) from the markers of `scan`, and checks the whole board: every marker id at most
 // once, one board homography through all their corners within the residual bound, no marker
 // of another id on the board's page, and the board's printed paint where it is projected.
-// Markers the scan missed (too small, blurred or touching other shapes for a quad to be
+// Markers whose black border is under 5 px have their sides fitted to the board's blurred
+// page (page_edge_fit.h) before they enter the homography: their edge-point corners are
+// biased by the edges next to the border. Markers the scan missed (too small, blurred or touching other shapes for a quad to be
 // found) are then looked for where that homography puts them: their corners refined on the
 // edges, read as in the scan, and kept only when they decode to the expected id in the
 // expected orientation; the homography is fitted again through all corners and checked.
@@ -128,7 +130,8 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
 // (markers of other ids only, another id on the page, or the paint disagrees),
 // kAmbiguous (an id seen twice), kVerificationFailed (residual), kTooFewFeatures (one
 // marker), scan.reason / kNoCandidates (no markers). Cost: O(markers) plus a fixed grid of
-// paint probes (about 0.2 ms), plus O(side) per missed marker.
+// paint probes (about 0.2 ms), plus O(side) per missed marker, plus about 0.4 ms per small
+// marker fitted to the page.
 // `sibling`: a board that prints the same markers at the same places (the ArUco board for the
 // round-hole board and back), or nullptr; the board is then also told from it by the grey
 // levels where the two print differently (PaintContrastPrefers on `image`, the scanned
