@@ -15,6 +15,8 @@
 namespace linecal {
 namespace {
 
+// Profile samples along the normal, px: one per pixel's width (every half pixel gained 0.002
+// px RMS on the evaluation for 10% more time).
 constexpr double kSampleStepPx = 1.0;
 // The paint along a ray is read every kPaintStepPx (a printed shape narrower than that is
 // lost to the blur anyway) and each change bisected to kPaintTolerancePx: far finer than the
@@ -28,14 +30,16 @@ constexpr double kMaxSigmaPx = 3.0;
 // Dark intervals are read this many largest sigmas beyond the samples: the rest of the
 // normal CDF is under 1e-3.
 constexpr double kReachSigmas = 3.0;
-constexpr int kMaxProfilesPerSide = 32;
 // Samples reach this many blur sigmas past the side's edge and past the border's inner edge
 // (no farther than a cell outside and two inside): beyond it the profile holds nothing of
 // the side, and the page is less one-dimensional (neighbouring cells along the side).
 constexpr double kRangeSigmas = 3.0;
 // The blur assumed for the first pass's sample range; the second uses the first's fit.
 constexpr double kFirstSigmaPx = 1.2;
+// Profiles per side: four points fix a line and average noise; more than 32 add little.
 constexpr int kMinProfilesPerSide = 4;
+constexpr int kMaxProfilesPerSide = 32;
+// Levenberg-Marquardt iterations: 3-6 from the edge-point corners, 13 at most seen.
 constexpr int kMaxIterations = 20;
 
 // The normal CDF and density, tabulated: the fit evaluates them some 10^5 times per marker,
