@@ -3,11 +3,13 @@
 //   even: a render of the board (made once, in the simulator) with the remaining bytes XORed
 //         in from the pixel offset given by bytes 1-3, so mutations land on the board's
 //         features, its edges and the background alike and reach refinement and verification;
+//         bit 2 of byte 0 picks the board far away (its page over 17% of the width: the
+//         marker boards' cells about 4 px, where their sides are fitted to the page model);
 //   odd:  bytes 1-4 give width, height and stride padding (bit 1 of byte 0: 16-bit pixels),
 //         the rest the pixels, repeated to fill the view: odd sizes, tiny images, strides,
 //         flat and noisy images.
-// Invariants: no crash; a found board has every feature a camera sees; features are ordered by id, of this
-// board, finite and inside the image; the reason is kNone exactly when found.
+// Invariants: no crash; a found board has every feature a camera sees; features are ordered by id,
+// of this board, finite and inside the image; the reason is kNone exactly when found.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -46,8 +48,8 @@ const Board& TheBoard() {
 }
 
 // The board upright and a little turned, 1.5 m up, at the distance where its page spans
-// 70% of the image width.
-linecal::Image8 Render() {
+// `width_fraction` of the image width.
+linecal::Image8 Render(double width_fraction) {
   linecal::CameraIntrinsics c;
   c.type = linecal::CameraModelType::kPinhole;
   c.width = kWidth;
@@ -60,7 +62,7 @@ linecal::Image8 Render() {
       linecal::RotationFromYawPitchRoll({0.0, 0.0, 0.0}) * linecal::CameraBaseRotation(),
       Eigen::Vector3d(0.0, 0.0, 1.5));
   const Eigen::Vector2d page = TheBoard().page_size_m();
-  const double distance_m = kFocalPx * page.x() / (0.7 * kWidth);
+  const double distance_m = kFocalPx * page.x() / (width_fraction * kWidth);
   // Upright, print facing the camera (-x), turned 10 degrees about its vertical axis.
   Eigen::Matrix3d base;
   base.col(0) = -Eigen::Vector3d::UnitY();
@@ -102,8 +104,9 @@ void Check(const linecal::Detection& d, int width, int height) {
 }
 
 void FuzzRender(const std::uint8_t* data, std::size_t size) {
-  static const linecal::Image8 render = Render();
-  linecal::Image8 image = render;
+  static const linecal::Image8 near = Render(0.7);
+  static const linecal::Image8 far = Render(0.17);
+  linecal::Image8 image = (data[0] & 4) != 0 ? far : near;
   if (size >= 4) {
     const std::size_t n = image.pixels.size();
     const std::size_t offset = (data[1] | data[2] << 8 | data[3] << 16) % n;
