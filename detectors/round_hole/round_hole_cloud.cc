@@ -66,9 +66,13 @@ constexpr double kOccluderDepthM = 0.15;
 constexpr int kFewRingsThroughHoles = 4;
 // See the edge extraction: rings spanning less of the page than this are dropped.
 constexpr double kMinRingSpanPages = 0.1;
-// Edge errors beyond the azimuth quantisation (float rounding of the points, the plane's own
-// error moving the rays' meeting points): 1 mm, as a variance in m^2.
-constexpr double kEdgeFloorVarM2 = 1e-6;
+// Edge errors beyond the azimuth quantisation and the plane's error (the points' float and
+// packet rounding, well under a millimetre): 0.3 mm, as a variance in m^2. 1 mm had made the
+// VLP-16 boards' x 6% too uncertain (a step is 1 cm on them, variance 8 mm^2).
+constexpr double kEdgeFloorVarM2 = 1e-7;
+// An edge whose ring runs along its boundary this closely (the step seen through the
+// boundary's normal, metres) cannot say where along the ring the boundary is.
+constexpr double kMinAlongM = 1e-6;
 // Two frames of one ring fired at the same azimuths when their phases (azimuth over the step,
 // modulo 1) differ by less than this.
 constexpr double kSamePhase = 0.05;
@@ -289,31 +293,104 @@ double FrameRepeats(const std::vector<int>& group_ring, const std::vector<int>& 
   return repeats.empty() ? 1.0 : Median(repeats);
 }
 
-// With few rings through the holes the board's y rests on a few chords, and a chord's half
-// length c = sqrt(r^2 - h^2) places a ring at h from a hole's centre through dh = -c dc / h:
-// near the centre a chord a step short moves the board by centimetres, far more (and in a
-// direction) the fit's linearisation at its own solution shows. The profile of the edges'
-// whitened cost (each edge's quantisation variance, truncated at `gate_m`) along the board's
-// y, with x and rotation held, gives the honest spread: the farthest shift, within a hole's
-// radius, whose cost is within 1 of the least. Returns its square, metres^2.
-double ProfileYVariance(const std::vector<Edge>& edges, const std::vector<double>& weights,
-                        const std::vector<Circle>& holes, const Eigen::Vector2d& half_page,
-                        const Eigen::Vector3d& pose, double gate_m) {
-  constexpr double kStepM = 0.001;
-  double reach = 0.0;
-  for (const Circle& c : holes) reach = std::max(reach, c.radius_m);
-  const Eigen::Matrix2d R = Rotation2(pose.z());
-  const int n = static_cast<int>(reach / kStepM);
+// The covariance of two sawtooth errors, each uniform within half a step, of edges whose
+// boundaries lie f steps apart along rings that fire on one azimuth grid (one ring, or the
+// rings of one rotation, whose firing offsets are fixed): B2(frac f) / 2 = 1/12 - f (1 - f) / 2,
+// in steps^2. f is known only to sigma_f steps (the pose's own error moves the boundaries);
+// the covariance is averaged over that. The cusp at f = 0 makes the average matter: two
+// rings crossing a vertical side a twelfth of a step apart in phase are nearly one error or
+// nearly two, and taking the fitted f as exact made the rotation's sigma swing with it,
+// smallest where the error was largest.
+double SawtoothCovariance(double f, double sigma_f) {
+  constexpr double kTwoPiSq = 2.0 * std::numbers::pi * std::numbers::pi;
+  const auto exact = [](double x) {
+    const double frac = x - std::floor(x);
+    return 1.0 / 12.0 - 0.5 * frac * (1.0 - frac);
+  };
+  if (!std::isfinite(sigma_f)) return 0.0;
+  if (sigma_f < 1e-3) return exact(f);
+  if (sigma_f < 0.1) {
+    // Gauss-Hermite, 7 points: smooth enough over the cusp at this width.
+    constexpr std::array<double, 4> kNodes = {0.0, 0.8162878828589647, 1.6735516287674714,
+                                              2.6519613568352334};
+    constexpr std::array<double, 4> kWeights = {0.8102646175568073, 0.4256072526101278,
+                                                0.05451558281912703, 0.0009717812450995192};
+    const double scale = std::numbers::sqrt2 * sigma_f;
+    double sum = kWeights[0] * exact(f);
+    for (int i = 1; i < 4; ++i)
+      sum += kWeights[i] * (exact(f + kNodes[i] * scale) + exact(f - kNodes[i] * scale));
+    return sum / std::sqrt(std::numbers::pi);
+  }
+  // Wider: the Fourier series sum cos(2 pi k f) / (2 pi^2 k^2), each term damped by the
+  // Gaussian's exp(-2 pi^2 k^2 sigma^2); beyond k = 8 the damping leaves under 1e-5.
+  double sum = 0.0;
+  for (int k = 1; k <= 8; ++k) {
+    const double kk = static_cast<double>(k * k);
+    sum += std::exp(-kTwoPiSq * kk * sigma_f * sigma_f) * std::cos(2.0 * std::numbers::pi * k * f) /
+           (kTwoPiSq * kk);
+  }
+  return sum;
+}
+
+// The edges' quantisation errors as the sandwich's middle: sum over edge pairs of one
+// rotation of SawtoothCovariance(their boundaries' separation) (w a J)_i (w a J)_j^T, with
+// `pose_covariance` (x, y, theta) giving each separation's uncertainty. Edges of different
+// rotations are left independent; FrameRepeats accounts for rotations that repeat. The edges
+// of one rotation are consecutive (the extraction goes frame by frame, ring by ring).
+Eigen::Matrix3d QuantisationB(const std::vector<Edge>& edges, const std::vector<int>& group_frame,
+                              const std::vector<Eigen::Vector3d>& wJa,
+                              const std::vector<double>& true_steps,
+                              const std::vector<Eigen::Vector3d>& steps_dpose,
+                              const Eigen::Matrix3d& pose_covariance) {
+  Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
+  for (std::size_t a = 0; a < edges.size();) {
+    std::size_t b = a;
+    while (b < edges.size() && group_frame[edges[b].group] == group_frame[edges[a].group]) ++b;
+    for (std::size_t i = a; i < b; ++i) {
+      if (wJa[i].isZero()) continue;
+      B += (1.0 / 12.0) * wJa[i] * wJa[i].transpose();
+      for (std::size_t j = i + 1; j < b; ++j) {
+        if (wJa[j].isZero()) continue;
+        const Eigen::Vector3d d = steps_dpose[i] - steps_dpose[j];
+        const double sigma_f = d.allFinite() ? std::sqrt(std::max(d.dot(pose_covariance * d), 0.0))
+                                             : std::numeric_limits<double>::infinity();
+        // The boundaries' separation along the rings, not the edges': those are whole steps
+        // apart by construction.
+        const double c = SawtoothCovariance(true_steps[i] - true_steps[j], sigma_f);
+        const Eigen::Matrix3d outer = wJa[i] * wJa[j].transpose();
+        B += c * (outer + outer.transpose());
+      }
+    }
+    a = b;
+  }
+  return B;
+}
+
+// With few rings through the holes the board rests on a few chords, and a chord's half length
+// c = sqrt(r^2 - h^2) places a ring at h from a hole's centre through dh = -c dc / h: near the
+// centre a chord a step short moves the board by centimetres, far more (and in a direction)
+// than the fit's linearisation at its own solution shows. So does its rotation, which the y of
+// the holes left and right of the centre sets. The profile of the edges' whitened cost
+// (each edge's quantisation variance, truncated at `gate_m`) along `direction` in
+// (x, y, theta) — a unit of the component profiled, the others moving with it — gives the
+// honest spread: the farthest move within `reach` whose cost is within 1 of the least.
+// Returns its square (of `direction`'s unit).
+double ProfileVariance(const std::vector<Edge>& edges, const std::vector<double>& weights,
+                       const std::vector<Circle>& holes, const Eigen::Vector2d& half_page,
+                       const Eigen::Vector3d& pose, double gate_m, const Eigen::Vector3d& direction,
+                       double step, double reach) {
+  const int n = static_cast<int>(reach / step);
   std::vector<double> cost(2 * n + 1, 0.0);
   for (int i = -n; i <= n; ++i) {
-    const Eigen::Vector2d t = pose.head<2>() + R * Eigen::Vector2d(0.0, i * kStepM);
+    const Eigen::Vector3d moved = pose + (i * step) * direction;
+    const Eigen::Matrix2d R = Rotation2(moved.z());
     double c = 0.0;
     for (std::size_t k = 0; k < edges.size(); ++k) {
       if (!(weights[k] > 0.0)) continue;  // the fit's outliers stay out
       Eigen::Vector2d grad;
       int which = -1;
-      const double r =
-          NearestBoundary(holes, half_page, R.transpose() * (edges[k].p_plane - t), &grad, &which);
+      const double r = NearestBoundary(
+          holes, half_page, R.transpose() * (edges[k].p_plane - moved.head<2>()), &grad, &which);
       const double along = grad.dot(R.transpose() * edges[k].step_plane);
       c += std::min(r * r, gate_m * gate_m) / (along * along / 12.0 + kEdgeFloorVarM2);
     }
@@ -322,7 +399,7 @@ double ProfileYVariance(const std::vector<Edge>& edges, const std::vector<double
   const double least = *std::min_element(cost.begin(), cost.end());
   double farthest = 0.0;
   for (int i = -n; i <= n; ++i)
-    if (cost[i + n] <= least + 1.0) farthest = std::max(farthest, std::abs(i * kStepM));
+    if (cost[i + n] <= least + 1.0) farthest = std::max(farthest, std::abs(i * step));
   return farthest * farthest;
 }
 
@@ -452,6 +529,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   Eigen::Matrix3d K = Eigen::Matrix3d::Zero();
   std::vector<Eigen::Vector3d> wJa;  // per edge: w J times the step seen through its normal
   std::vector<double> true_steps;    // per edge: where its boundary is, in steps along the ring
+  std::vector<Eigen::Vector3d> steps_dpose;  // per edge: d true_steps / d pose
   double rms = 0.0;
   double last_gate = kInitialEdgeGateM;  // the edge fit's last robust gate, metres
   int kept = 0;
@@ -658,6 +736,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
       K.setZero();
       wJa.assign(edges.size(), Eigen::Vector3d::Zero());
       true_steps.assign(edges.size(), 0.0);
+      steps_dpose.assign(edges.size(), Eigen::Vector3d::Zero());
       Eigen::Vector3d g = Eigen::Vector3d::Zero();
       abs_r.clear();
       double sum_r2_edges = 0.0;
@@ -667,23 +746,32 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
         Eigen::Vector2d grad;
         const double r = NearestBoundary(holes, half_page, R.transpose() * e, &grad, &which[k]);
         weight[k] = 0.0;
-        if (std::abs(r) >= gate) continue;
-        abs_r.push_back(std::abs(r));
-        const double u = r / gate;
+        // The edge moves along its ring by up to half a step, seen through the boundary's
+        // normal: only what lies beyond that can be an outlier (a chord through a stand's
+        // post, an occluder, an edge of the wrong hole). Gating the residual itself dropped
+        // and down-weighted edges at their quantisation's extremes, and the fit then swung
+        // on the rest (the rotation by up to a degree on a 16-ring board).
+        const double along = grad.dot(R.transpose() * edges[k].step_plane);
+        const double excess = std::max(std::abs(r) - 0.5 * std::abs(along), 0.0);
+        if (excess >= gate) continue;
+        abs_r.push_back(excess);
+        const double u = excess / gate;
         weight[k] = (1.0 - u * u) * (1.0 - u * u);
         Eigen::Vector3d J;
         J.head<2>() = -(R * grad);
         J.z() = grad.dot(dRt * e);
         H += weight[k] * J * J.transpose();
         g += weight[k] * J * r;
-        // The edge moves along its ring by up to half a step: uniform, variance step^2 / 12,
-        // seen through the boundary's normal.
-        const double along = grad.dot(R.transpose() * edges[k].step_plane);
-        // Beyond the quantisation model, what the edge's residual shows (a chord grazing a
-        // hole, where the model is far from linear), and a floor.
-        B += weight[k] * weight[k] * (std::max(r * r - along * along / 12.0, 0.0) + kEdgeFloorVarM2) *
-             J * J.transpose();
+        // Beyond the quantisation (below), what the edge's residual shows past the half step
+        // (a chord grazing a hole, where the model is far from linear), and a floor. Not
+        // r^2 - step^2 / 12: a quantisation error exceeds its RMS 42% of the time, and that
+        // would count it twice.
+        B += weight[k] * weight[k] * (excess * excess + kEdgeFloorVarM2) * J * J.transpose();
         wJa[k] = weight[k] * along * J;
+        // How the boundary's crossing of the ring (in steps) moves with the pose.
+        steps_dpose[k] = std::abs(along) > kMinAlongM
+                             ? Eigen::Vector3d(-J / along)
+                             : Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
         // Where the fitted boundary crosses the ring, in steps: the edge moved by the residual
         // along the ring (at most the half step it can be off by).
         true_steps[k] = edges[k].steps_along -
@@ -698,23 +786,6 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
         ++kept;
       }
       if (kept < kMinEdges) break;
-      // The quantisation errors: each edge uniform within half a step along its ring, the
-      // edges of one ring (one group) correlated through its common firing phase as two
-      // sawtooth waves delta steps apart: Cov = step^2 (1/12 - f (1 - f) / 2), f = frac(delta).
-      for (std::size_t a = 0; a < edges.size();) {
-        std::size_t b = a;
-        while (b < edges.size() && edges[b].group == edges[a].group) ++b;
-        for (std::size_t i = a; i < b; ++i) {
-          for (std::size_t j = a; j < b; ++j) {
-            // The boundaries' separation along the ring, not the edges': those are whole steps
-            // apart by construction.
-            const double f = true_steps[i] - true_steps[j];
-            const double frac = f - std::floor(f);
-            B += (1.0 / 12.0 - 0.5 * frac * (1.0 - frac)) * wJa[i] * wJa[j].transpose();
-          }
-        }
-        a = b;
-      }
       rms = std::sqrt(sum_r2_edges / kept);
       // Singular: the edges do not fix the board along y (no ring through a hole) or at all.
       const Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
@@ -794,8 +865,15 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   // The plane's error moves the in-plane pose too: by -H^-1 K dw (the rays' meeting points
   // slide across the plane as it moves, by tan(incidence) of its shift).
   const Eigen::Matrix3d H_inv = H.inverse();
-  const Eigen::Matrix3d cov_quantisation =
-      H_inv * B * H_inv * FrameRepeats(group_ring, group_frame, group_phase);
+  const double repeats = FrameRepeats(group_ring, group_frame, group_phase);
+  // The quantisation's correlations need the boundaries' separations, which the pose places
+  // only to its own uncertainty: first without it, then with the covariance that gives.
+  Eigen::Matrix3d cov_quantisation = Eigen::Matrix3d::Zero();
+  for (int round = 0; round < 2; ++round) {
+    const Eigen::Matrix3d B_quantisation =
+        QuantisationB(edges, group_frame, wJa, true_steps, steps_dpose, cov_quantisation);
+    cov_quantisation = H_inv * (B + B_quantisation) * H_inv * repeats;
+  }
   const Eigen::Matrix3d dpose_dw = -H_inv * K;
   Eigen::Matrix3d A = Eigen::Matrix3d::Zero();  // (dx, dy, dtheta) -> (t_x, t_y, theta_z)
   A.topLeftCorner<2, 2>() = Rotation2(-pose.z());
@@ -820,8 +898,21 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   out.pose_covariance =
       M_q * cov_quantisation * M_q.transpose() + M_w * plane.cov_w * M_w.transpose();
   if (out.rings_through_holes <= kFewRingsThroughHoles) {
-    const double profile = ProfileYVariance(edges, weight, holes, half_page, pose, last_gate);
-    out.pose_covariance(4, 4) = std::max(out.pose_covariance(4, 4), profile);
+    double reach = 0.0;
+    for (const Circle& c : holes) reach = std::max(reach, c.radius_m);
+    // y along the board's own y, x and rotation held: nothing else moves with it by symmetry.
+    const Eigen::Vector3d along_y(-std::sin(pose.z()), std::cos(pose.z()), 0.0);
+    const double y_profile =
+        ProfileVariance(edges, weight, holes, half_page, pose, last_gate, along_y, 1e-3, reach);
+    out.pose_covariance(4, 4) = std::max(out.pose_covariance(4, 4), y_profile);
+    // The rotation with x and y as the fit moves them with it (H^-1's column), reaching as far
+    // as turns the outer holes by a radius.
+    const Eigen::Vector3d with_theta = H_inv.col(2) / H_inv(2, 2);
+    double outer = 0.0;
+    for (const Circle& c : holes) outer = std::max(outer, c.centre_board.norm());
+    const double theta_profile = ProfileVariance(edges, weight, holes, half_page, pose, last_gate,
+                                                 with_theta, 5e-4, reach / outer);
+    out.pose_covariance(2, 2) = std::max(out.pose_covariance(2, 2), theta_profile);
   }
   const Eigen::Matrix2d cov_in = out.pose_covariance.block<2, 2>(3, 3);
   out.in_plane_sigma_m = Eigen::Vector2d(std::sqrt(cov_in(0, 0)), std::sqrt(cov_in(1, 1)));
