@@ -1,10 +1,9 @@
 // Camera board detector evaluation over acceptance.md's test set, rendered by the station
 // simulator with exact ground truth (docs/detectors.md):
 //   - every board at three distances: its page over 80% of the image width (or height), its
-//   smallest
-//     square or cell 12 px (marker boards: a data cell 4 px) in the image, and their geometric
-//     mean (see Distances: a turned board stands nearer so that its far edge's cells keep that
-//     size; --fronto-size sizes it face-on instead);
+//     smallest square or cell 12 px (marker boards: a data cell 4 px) in the image, and their
+//     geometric mean (see Distances: a turned board stands nearer so that its far edge's cells
+//     keep that size; --fronto-size sizes it face-on instead);
 //   - in-plane roll -30 / 0 / 30 degrees, seven yaw-pitch pairs up to 50 degrees;
 //   - three sets of effects: clean (noise 0, blur 0.5), noisy (noise 4, blur 1.0), hard
 //     (noise 6, blur 1.5, a 4:1 illumination gradient, gamma 0.6 or 1.6, JPEG 80, clutter);
@@ -169,11 +168,9 @@ int Run(const Options& options) {
       const std::vector<double> distances =
           Distances(board, camera, options.reduced, yaw, pitch, options.fronto_size);
       if (distances.empty()) {
-        std::printf(
-            "no size: %s turned yaw %.0f pitch %.0f has cells under the smallest size at 80%% of "
-            "the "
-            "image\n",
-            BoardTypeName(type), yaw, pitch);
+        std::printf("no size: %s turned yaw %.0f pitch %.0f: cells under the smallest size even at "
+                    "80%% of the image\n",
+                    BoardTypeName(type), yaw, pitch);
       }
       for (const double distance : distances) {
         // The smallest feature face-on at this distance; turned, it is smaller at the far edge.
