@@ -168,9 +168,10 @@ int Run(const Options& options) {
       const std::vector<double> distances =
           Distances(board, camera, options.reduced, yaw, pitch, options.fronto_size);
       if (distances.empty()) {
-        std::printf("no size: %s turned yaw %.0f pitch %.0f: cells under the smallest size even at "
-                    "80%% of the image\n",
-                    BoardTypeName(type), yaw, pitch);
+        std::printf(
+            "no size: %s turned yaw %.0f pitch %.0f: cells under the smallest size even at "
+            "80%% of the image\n",
+            BoardTypeName(type), yaw, pitch);
       }
       for (const double distance : distances) {
         // The smallest feature face-on at this distance; turned, it is smaller at the far edge.
