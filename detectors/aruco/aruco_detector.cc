@@ -1,5 +1,6 @@
 #include "detectors/aruco/aruco_detector.h"
 
+#include <algorithm>
 #include <optional>
 
 namespace linecal {
@@ -19,7 +20,13 @@ Detection DetectAruco(const ImageView8& image, const Board& board, const ArucoOp
   BoardParams sibling_params = board.params();
   sibling_params.type = board.type() == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco;
   const std::optional<Board> sibling = Board::Create(sibling_params);
-  return DetectMarkerBoard(image, board, family, options.markers, sibling ? &*sibling : nullptr);
+  // Once the board's markers are read, the scan's later passes have nothing to find.
+  const int board_markers = static_cast<int>(
+      std::count_if(board.features().begin(), board.features().end(),
+                    [](const BoardFeature& f) { return f.kind == FeatureKind::kMarkerCorner; }) /
+      4);
+  return DetectMarkerBoard(image, board, family, options.markers, sibling ? &*sibling : nullptr,
+                           board_markers);
 }
 
 }  // namespace linecal

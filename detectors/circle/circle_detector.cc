@@ -419,10 +419,31 @@ double BoxGrey(const ImageView8& image, const Eigen::Vector2d& uv) {
 // their ellipses (an ellipse is the image of a circle: S = R^2 A A^T for the local affine
 // map A, so A is S^1/2 / R times a rotation, and the print seen from the front fixes the
 // reflection).
-Eigen::Matrix3d PairAffine(const CircleBoardModel& m, const Blob& left, const Blob& right) {
+//
+// undo_edge_shift: the blobs' threshold moves their edges by about the same number of
+// pixels all round (blur with gamma: 2-3 px on dark circles of 12 px at 50 degrees), which
+// changes a foreshortened ellipse's aspect: its minor axis loses a larger part. Along a_x
+// the printed circle reaches exactly radius |a_x| (the image of its point (radius, 0)), so
+// the blobs' reach there gives that shift, and each semi-axis gets it back. The estimate
+// can also mislead (two hard renders of the smallest circles pitched 50 degrees lost their
+// grid with it: CircleDetectorTest.SmallestCirclesUnderTheHardEffects), so the search
+// seeds with the blobs as they are first.
+Eigen::Matrix3d PairAffine(const CircleBoardModel& m, const Blob& left, const Blob& right,
+                           bool undo_edge_shift) {
   const Eigen::Vector2d a_x = (right.ellipse.centre - left.ellipse.centre) /
                               (m.p_board[m.pair[1]] - m.p_board[m.pair[0]]).norm();
-  const Eigen::Matrix2d s = 0.5 * (left.shape + right.shape) / (m.radius_m * m.radius_m);
+  Eigen::Matrix2d shape = 0.5 * (left.shape + right.shape);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> axes(shape);
+  if (undo_edge_shift && axes.info() == Eigen::Success && axes.eigenvalues().minCoeff() > 0.0) {
+    const Eigen::Vector2d u = a_x.normalized();
+    const double reach_px = 1.0 / std::sqrt(u.dot(shape.inverse() * u));
+    const double shift_px = m.radius_m * a_x.norm() - reach_px;
+    const Eigen::Vector2d semi = (axes.eigenvalues().cwiseSqrt().array() + shift_px).matrix();
+    if (semi.minCoeff() > 0.0) {
+      shape = axes.eigenvectors() * semi.cwiseAbs2().asDiagonal() * axes.eigenvectors().transpose();
+    }
+  }
+  const Eigen::Matrix2d s = shape / (m.radius_m * m.radius_m);
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(s);
   const Eigen::Matrix2d root = eig.operatorSqrt();
   const Eigen::Matrix2d root_inverse = eig.operatorInverseSqrt();
@@ -458,17 +479,17 @@ struct Grid {
   std::vector<int> blob;                            // per id, a blob index or -1
 };
 
-// Grows the grid from the pair (blobs `left`, `right`) outwards; nullopt when fewer than
-// kMinMatchedBlobs circles match.
+// Grows the grid from the pair (blobs `left`, `right`) outwards, seeded by PairAffine with
+// undo_edge_shift; nullopt when fewer than kMinMatchedBlobs circles match.
 std::optional<Grid> GrowGrid(const CircleBoardModel& m, const std::vector<Blob>& blobs, int left,
-                             int right) {
+                             int right, bool undo_edge_shift) {
   Grid g;
   g.blob.assign(m.p_board.size(), -1);
   g.blob[m.pair[0]] = left;
   g.blob[m.pair[1]] = right;
   std::vector<bool> used(blobs.size(), false);
   used[left] = used[right] = true;
-  Eigen::Matrix3d H = PairAffine(m, blobs[left], blobs[right]);
+  Eigen::Matrix3d H = PairAffine(m, blobs[left], blobs[right], undo_edge_shift);
   std::vector<Eigen::Vector2d> src = {m.p_board[m.pair[0]], m.p_board[m.pair[1]]};
   std::vector<Eigen::Vector2d> dst = {blobs[left].ellipse.centre, blobs[right].ellipse.centre};
   HomographyFitOptions fast;
@@ -827,7 +848,12 @@ std::optional<Detection> SearchAtFactor(const ImageView8& image, const Board& bo
         continue;
       }
       // The left circle of the pair is either blob: the orientation test settles it.
-      const std::optional<Grid> grid = GrowGrid(m, blobs, static_cast<int>(i), static_cast<int>(j));
+      // A pair of blobs shrunk by the threshold seeds the rows next to it a radius off
+      // unless their edge shift is undone (PairAffine); seen as they are first, so that
+      // blobs that are not shrunk ellipses keep the seed that finds them.
+      std::optional<Grid> grid =
+          GrowGrid(m, blobs, static_cast<int>(i), static_cast<int>(j), false);
+      if (!grid) grid = GrowGrid(m, blobs, static_cast<int>(i), static_cast<int>(j), true);
       if (!grid) continue;
       Measured measured;
       if (MeasureBoard(image, m, *grid, options, &measured) != Outcome::kFound) {

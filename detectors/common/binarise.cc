@@ -46,10 +46,11 @@ double EstimateNoiseSigma(const ImageView8& image) {
   return 0.0;
 }
 
-// 1 where a pixel is darker than halfway between the local minimum and maximum (over the
-// 3 x 3 tiles around its tile); 0 elsewhere, including areas without printed contrast that
-// no threshold reaches. *max_contrast: the largest local max - min seen.
-Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast) {
+// 1 where a pixel is darker than the local minimum plus dark_fraction of the local range (over
+// the 3 x 3 tiles around its tile); 0 elsewhere, including areas without printed contrast
+// that no threshold reaches. *max_contrast: the largest local max - min seen.
+Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast,
+                    double dark_fraction) {
   const int tw = (image.width + kTile - 1) / kTile;
   const int th = (image.height + kTile - 1) / kTile;
   std::vector<std::uint8_t> tmin(static_cast<std::size_t>(tw) * th, 255);
@@ -101,7 +102,10 @@ Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast
         }
       }
       *max_contrast = std::max(*max_contrast, hi - lo);
-      if (hi - lo >= min_contrast) thr2[static_cast<std::size_t>(ty) * tw + tx] = lo + hi;
+      if (hi - lo >= min_contrast) {
+        thr2[static_cast<std::size_t>(ty) * tw + tx] =
+            2 * lo + static_cast<int>(std::lround(2.0 * dark_fraction * (hi - lo)));
+      }
     }
   }
   // Breadth-first, one ring of tiles per pass: each unknown tile next to known ones takes

@@ -17,12 +17,14 @@ namespace linecal {
 // The view must be valid. Cost: O(W * H / 8), about 0.2 ms at 1280 x 720.
 double EstimateNoiseSigma(const ImageView8& image);
 
-// 1 where a pixel is darker than halfway between the local minimum and maximum (over the
-// 3 x 3 tiles of 4 x 4 pixels around its tile, taken on 2 x 2 pixel means); 0 elsewhere,
-// including areas without min_contrast grey levels of local range that no neighbour's
-// threshold reaches within 64 px. *max_contrast: the largest local range seen. The view
-// must be valid. Cost: O(W * H), about 2 ms at 1280 x 720; allocates one byte per pixel.
-Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast);
+// 1 where a pixel is darker than the local minimum plus dark_fraction (in (0, 1); halfway by
+// default) of the local range (over the 3 x 3 tiles of 4 x 4 pixels around its tile, taken
+// on 2 x 2 pixel means); 0 elsewhere, including areas without min_contrast grey levels of
+// local range that no neighbour's threshold reaches within 64 px. *max_contrast: the largest
+// local range seen. The view must be valid. Cost: O(W * H), about 2 ms at 1280 x 720;
+// allocates one byte per pixel.
+Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast,
+                    double dark_fraction = 0.5);
 
 // The binary image eroded by one pixel (a set pixel stays set only when its four neighbours
 // are set; off-image counts as unset). Breaks one-pixel bridges between shapes that touch

@@ -411,7 +411,7 @@ bool FitMarkerSidesToPage(const ImageView8& image, const Board& board, int cells
   }
   for (int k = 0; k < 4; ++k) {
     if ((corners[k] - (*corners_px)[k]).norm() >
-        0.5 * ((*corners_px)[(k + 1) % 4] - (*corners_px)[k]).norm() / cells) {
+        0.75 * ((*corners_px)[(k + 1) % 4] - (*corners_px)[k]).norm() / cells) {
       return false;
     }
   }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <span>
 
@@ -361,7 +362,9 @@ std::optional<int> CellsDisagreeing(const std::vector<double>& values,
 // the image) come from the board homography. They are refined on the marker's edges knowing
 // its cells (the prediction is within a fraction of a cell; lens distortion and the
 // homography's own error are what is left), and the marker is accepted when its cells show
-// its print (CellsDisagreeing) within kPlacedMarkerMaxWrongFraction of its code bits.
+// its print (CellsDisagreeing) within kPlacedMarkerMaxWrongFraction of its code bits. The
+// caller checks how far the corners moved (kPlacedMarkerMaxMoveCells), after placing small
+// markers' sides on the page.
 std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image,
                                                  const MarkerFamily& family, int id,
                                                  std::array<Eigen::Vector2d, 4> corners,
@@ -370,7 +373,6 @@ std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image,
   for (int k = 0; k < 4; ++k) side += 0.25 * (corners[(k + 1) % 4] - corners[k]).norm();
   const int samples = std::clamp(static_cast<int>(side), 8, 80);
   const std::vector<std::uint8_t> expected = MarkerCells(family, id);
-  const std::array<Eigen::Vector2d, 4> predicted = corners;
   if (!RefineQuadCorners(image, family, &expected, samples, 0.5, &corners)) return std::nullopt;
   std::vector<double> values;
   if (!SampleCells(image, corners, family.cells, &values)) return std::nullopt;
@@ -382,18 +384,23 @@ std::optional<DecodedMarker> ReadPredictedMarker(const ImageView8& image,
     return std::nullopt;
   }
   if (!RefineQuadCorners(image, family, &expected, samples, 0.34, &corners)) return std::nullopt;
-  // The board's homography through its other markers places a corner within a small part of
-  // a cell (what is left is lens distortion over a marker pitch or two); edges that pull a
-  // corner farther are not this marker's edges, or too blurred to place it.
-  for (int k = 0; k < 4; ++k) {
-    if ((corners[k] - predicted[k]).norm() > kPlacedMarkerMaxMoveCells * side / family.cells)
-      return std::nullopt;
-  }
   DecodedMarker marker;
   marker.id = id;
   marker.hamming = *wrong;
   marker.corners_px = corners;
   return marker;
+}
+
+// True when every corner of `moved` is within `max_cells` cells (of `predicted`'s mean side,
+// `cells` cells per side) of its corner in `predicted`. O(1).
+bool WithinCells(const std::array<Eigen::Vector2d, 4>& moved,
+                 const std::array<Eigen::Vector2d, 4>& predicted, int cells, double max_cells) {
+  double side = 0.0;
+  for (int k = 0; k < 4; ++k) side += 0.25 * (predicted[(k + 1) % 4] - predicted[k]).norm();
+  for (int k = 0; k < 4; ++k) {
+    if ((moved[k] - predicted[k]).norm() > max_cells * side / cells) return false;
+  }
+  return true;
 }
 
 // True when p is inside the convex quad (corners in either winding). O(1).
@@ -420,6 +427,7 @@ std::string_view MarkerDetectOptions::Validate() const {
   if (min_marker_side_px < 8 || min_marker_side_px > kMaxImageSide) return "min_marker_side_px";
   if (max_candidates < 1) return "max_candidates";
   if (max_erosion_px < 0 || max_erosion_px > 4) return "max_erosion_px";
+  if (!(near_dark_fraction >= 0.0 && near_dark_fraction < 0.5)) return "near_dark_fraction";
   if (!(max_residual_fraction > 0.0 && max_residual_fraction <= 1.0)) {
     return "max_residual_fraction";
   }
@@ -479,17 +487,11 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
   }
   QuadOptions quad_options;
   quad_options.min_side_px = options.min_marker_side_px;
-  Image8 eroded;
-  for (int erosion = 0; erosion <= options.max_erosion_px; ++erosion) {
-    if (erosion > 0 && enough_markers > 0 &&
-        static_cast<int>(scan.markers.size()) >= enough_markers) {
-      break;
-    }
-    if (erosion > 0) eroded = Erode(erosion == 1 ? dark : eroded);
-    const ComponentLabels labels = LabelComponents((erosion == 0 ? dark : eroded).view());
+  const auto read_quads = [&](const Image8& binary) {
+    const ComponentLabels labels = LabelComponents(binary.view());
     for (const Quad& quad : FindQuads(labels, quad_options)) {
       if (scan.quads >= options.max_candidates) break;
-      // A quad around a marker already read (at a smaller erosion) is that marker again.
+      // A quad around a marker already read (in an earlier pass) is that marker again.
       Eigen::Vector2d centre = Eigen::Vector2d::Zero();
       for (const Eigen::Vector2d& c : quad.corners_px) centre += 0.25 * c;
       if (std::any_of(scan.markers.begin(), scan.markers.end(),
@@ -500,6 +502,19 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
       std::optional<DecodedMarker> marker = ReadQuad(image, quad, family, min_contrast);
       if (marker.has_value()) scan.markers.push_back(*marker);
     }
+  };
+  const auto enough = [&] {
+    return enough_markers > 0 && static_cast<int>(scan.markers.size()) >= enough_markers;
+  };
+  Image8 eroded;
+  for (int erosion = 0; erosion <= options.max_erosion_px && !(erosion > 0 && enough());
+       ++erosion) {
+    if (erosion > 0) eroded = Erode(erosion == 1 ? dark : eroded);
+    read_quads(erosion == 0 ? dark : eroded);
+  }
+  if (options.near_dark_fraction > 0.0 && !enough()) {
+    int unused_max_contrast = 0;
+    read_quads(BinariseDark(image, min_contrast, &unused_max_contrast, options.near_dark_fraction));
   }
   if (scan.markers.empty()) scan.reason = DetectReason::kNoCandidates;
   return scan;
@@ -622,9 +637,10 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   // any board fit: their edge-point corners are off by up to a quarter of a cell, which the
   // fit's residual test refuses. Where the page fit fails, the edge-point corners stay.
   const auto fit_to_page = [&](DecodedMarker* m) {
-    double side = 0.0;
+    // The shortest side: a turned marker's border is narrowest across its foreshortened sides.
+    double side = std::numeric_limits<double>::infinity();
     for (int k = 0; k < 4; ++k)
-      side += 0.25 * (m->corners_px[(k + 1) % 4] - m->corners_px[k]).norm();
+      side = std::min(side, (m->corners_px[(k + 1) % 4] - m->corners_px[k]).norm());
     if (side * family.border_cells >= kPageFitMaxBorderPx * family.cells) return;
     const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
     std::array<Eigen::Vector2d, 4> corners_board;
@@ -693,11 +709,18 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       }
       std::optional<DecodedMarker> marker =
           ReadPredictedMarker(image, family, id, corners, scan.min_contrast);
-      if (!marker.has_value()) {
+      if (marker.has_value()) fit_to_page(&*marker);
+      // The board's homography through its other markers places a corner within a small part
+      // of a cell (what is left is lens distortion over a marker pitch or two); edges that
+      // pull a corner farther are not this marker's edges, or too blurred to place it. Small
+      // markers are judged after their page fit: dark print within a cell of their border
+      // (the round-hole board's black cells) pulls their edge-point corners by up to half a
+      // cell.
+      if (!marker.has_value() ||
+          !WithinCells(marker->corners_px, corners, family.cells, kPlacedMarkerMaxMoveCells)) {
         still_missing.push_back(id);
         continue;
       }
-      fit_to_page(&*marker);
       placed.push_back(*marker);
       add_corners(f, *marker);
     }

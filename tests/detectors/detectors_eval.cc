@@ -2,8 +2,8 @@
 // simulator with exact ground truth (docs/detectors.md):
 //   - every board at three distances: its page over 80% of the image width (or height), its
 //     smallest square or cell 12 px (marker boards: a data cell 4 px) in the image, and their
-//     geometric mean (see Distances: a turned board stands nearer so that its far edge's cells
-//     keep that size; --fronto-size sizes it face-on instead);
+//     geometric mean (circle_scene::EvaluationDistances: a turned board stands nearer so
+//     that its far edge's cells keep that size; --fronto-size sizes it face-on instead);
 //   - in-plane roll -30 / 0 / 30 degrees, seven yaw-pitch pairs up to 50 degrees;
 //   - three sets of effects: clean (noise 0, blur 0.5), noisy (noise 4, blur 1.0), hard
 //     (noise 6, blur 1.5, a 4:1 illumination gradient, gamma 0.6 or 1.6, JPEG 80, clutter);
@@ -15,7 +15,7 @@
 // the clean circle-board renders). With --check, exits 1 when a bar is missed (see Options);
 // detection rates are printed, not checked.
 //   detectors_eval [--board NAME] [--width W --height H] [--reduced] [--board-free N]
-//                  [--check] [--fronto-size]
+//                  [--check] [--fronto-size] [--seed S] [--repeat N] [--misses DIR]
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "detectors/detect.h"
+#include "station/io/image_io.h"
 #include "tests/detectors/circle/circle_scene.h"
 
 namespace linecal {
@@ -46,7 +47,13 @@ struct Options {
   // --check: exit 1 when a bar on accuracy, false or wrong detections is missed (what CI
   // holds on the reduced grid; docs/detectors.md). Detection rates are printed only.
   bool check = false;
-  bool fronto_size = false;  // --fronto-size: see Distances
+  bool fronto_size = false;  // --fronto-size: see circle_scene::EvaluationDistances
+  // The first render's seed (noise, clutter, the board's offset), and how many times the
+  // grid is rendered, each time with the next seeds: one render moves a hard-set rate by
+  // 1.6%, so a rate near the 99.5% bar needs several passes to be told from it.
+  std::uint64_t seed = 1;
+  int repeat = 1;
+  std::string misses_dir;  // --misses DIR: each missed render written there as a PNG
 };
 
 struct EffectSet {
@@ -87,44 +94,9 @@ const Board& BoardOf(BoardType type) {
   return (*boards)[static_cast<int>(type)];
 }
 
-bool IsMarkerBoard(BoardType t) {
-  return t == BoardType::kAruco || t == BoardType::kApriltag || t == BoardType::kRoundHole;
-}
-
 int CameraFeatureCount(const Board& board) {
   return static_cast<int>(std::count_if(board.features().begin(), board.features().end(),
                                         [](const BoardFeature& f) { return f.kind != FeatureKind::kHoleCentre; }));
-}
-
-// The render distances for a board turned by yaw and pitch: its page over 80% of the image
-// width (or height) face-on, its smallest square or cell `min_px` (12 px; marker boards: a
-// data cell 4 px) in the image, and their geometric mean. acceptance.md sizes a board by its
-// smallest cell in the image, and a turned board's cells shrink across the turn and with the
-// depth of its far edge, so its smallest size stands nearer. Empty when even at the near end
-// the turned cells are under `min_px` (the AprilTag grid turned 35-50 degrees in 1280 x 720:
-// no size of it in that image is in the grid). With --fronto-size the smallest size is taken
-// face-on and then turned, which leaves the far edge's cells at 2.5-3 px for a 50 degree
-// turn: a set beyond the grid (docs/detectors.md).
-std::vector<double> Distances(const Board& board, const CameraModel& camera, bool reduced,
-                              double yaw_deg, double pitch_deg, bool fronto_size) {
-  const double f = camera.intrinsics().fx;
-  const Eigen::Vector2d page = board.page_size_m();
-  // 80% of the width, and a tall page (the vertical board) at most 80% of the height.
-  const double near_m =
-      std::max(f * page.x() / (0.8 * camera.intrinsics().width),
-               camera.intrinsics().fy * page.y() / (0.8 * camera.intrinsics().height));
-  const double min_px = IsMarkerBoard(board.type()) ? 4.0 : 12.0;
-  const double yaw = fronto_size ? 0.0 : yaw_deg * circle_scene::kDeg;
-  const double pitch = fronto_size ? 0.0 : pitch_deg * circle_scene::kDeg;
-  // The far edge's extra depth, and the foreshortening of a cell across the turn.
-  const double far_edge_m =
-      0.5 * (page.x() * std::abs(std::sin(yaw)) + page.y() * std::abs(std::sin(pitch)));
-  const double far_m =
-      f * circle_scene::SmallestFeatureM(board) * std::cos(yaw) * std::cos(pitch) / min_px -
-      far_edge_m;
-  if (far_m < near_m) return {};
-  if (reduced) return {std::sqrt(near_m * far_m)};
-  return {near_m, std::sqrt(near_m * far_m), far_m};
 }
 
 CameraRenderOptions EffectsOf(const EffectSet& set, std::uint64_t seed) {
@@ -154,78 +126,95 @@ int Run(const Options& options) {
                                                     : std::vector<double>{-30.0, 0.0, 30.0};
   std::vector<std::array<double, 2>> yaw_pitch = {{0, 0}, {50, 0}, {-50, 0}, {0, 50}, {0, -50}, {35, 35}, {-35, -35}};
   if (options.reduced) yaw_pitch = {{0, 0}, {45, 0}, {-30, -30}};
-  std::uint64_t seed = 1;
-  for (BoardType type : options.boards) {
-    const Board& board = BoardOf(type);
-    const int expected = CameraFeatureCount(board);
-    std::printf("%s: smallest feature %.1f mm; face-on distances", BoardTypeName(type),
-                1e3 * circle_scene::SmallestFeatureM(board));
-    for (double d : Distances(board, camera, options.reduced, 0.0, 0.0, options.fronto_size)) {
-      std::printf(" %.2f m", d);
-    }
-    std::printf("\n");
-    for (const auto& [yaw, pitch] : yaw_pitch) {
-      const std::vector<double> distances =
-          Distances(board, camera, options.reduced, yaw, pitch, options.fronto_size);
-      if (distances.empty()) {
-        std::printf(
-            "no size: %s turned yaw %.0f pitch %.0f: cells under the smallest size even at "
-            "80%% of the image\n",
-            BoardTypeName(type), yaw, pitch);
+  std::uint64_t seed = options.seed;
+  for (int pass = 0; pass < options.repeat; ++pass) {
+    for (BoardType type : options.boards) {
+      const Board& board = BoardOf(type);
+      const int expected = CameraFeatureCount(board);
+      std::printf("%s: smallest feature %.1f mm; face-on distances", BoardTypeName(type),
+                  1e3 * circle_scene::SmallestFeatureM(board));
+      for (double d : circle_scene::EvaluationDistances(board, camera, options.reduced, 0.0, 0.0,
+                                                        options.fronto_size)) {
+        std::printf(" %.2f m", d);
       }
-      for (const double distance : distances) {
-        // The smallest feature face-on at this distance; turned, it is smaller at the far edge.
-        const double feature_px =
-            camera.intrinsics().fx * circle_scene::SmallestFeatureM(board) / distance;
-        for (const double roll : rolls) {
-          for (std::size_t s = 0; s < kSets.size(); ++s) {
-            const Pose pose = circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed);
-            const absl::StatusOr<CameraFrame> frame =
-                circle_scene::RenderScene(circle_scene::OneBoard(type, pose), EffectsOf(kSets[s], seed), seed, camera);
-            ++seed;
-            if (!frame.ok()) {
-              std::fprintf(stderr, "render: %s\n", frame.status().ToString().c_str());
-              return 2;
-            }
-            CountFalseDetections(frame->image8, &type, options, &results);
-            const auto visible = std::count_if(frame->features.begin(), frame->features.end(), [](const RenderedFeature& f) {
-              return f.kind != FeatureKind::kHoleCentre;
-            });
-            if (visible != expected) {
-              if (visible > 0 && visible < expected / 2) continue;  // mostly out of view
-              if (visible > 0) {
-                std::printf("not wholly in view: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: %d of %d\n",
-                            BoardTypeName(type), kSets[s].name, distance, roll, yaw, pitch, static_cast<int>(visible),
-                            expected);
+      std::printf("\n");
+      for (const auto& [yaw, pitch] : yaw_pitch) {
+        const std::vector<double> distances = circle_scene::EvaluationDistances(
+            board, camera, options.reduced, yaw, pitch, options.fronto_size);
+        if (distances.empty()) {
+          std::printf(
+              "no size: %s turned yaw %.0f pitch %.0f: cells under the smallest size even at "
+              "80%% of the image\n",
+              BoardTypeName(type), yaw, pitch);
+        }
+        for (const double distance : distances) {
+          // The smallest feature face-on at this distance; turned, it is smaller at the far edge.
+          const double feature_px =
+              camera.intrinsics().fx * circle_scene::SmallestFeatureM(board) / distance;
+          for (const double roll : rolls) {
+            for (std::size_t s = 0; s < kSets.size(); ++s) {
+              const Pose pose = circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed);
+              const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
+                  circle_scene::OneBoard(type, pose), EffectsOf(kSets[s], seed), seed, camera);
+              ++seed;
+              if (!frame.ok()) {
+                std::fprintf(stderr, "render: %s\n", frame.status().ToString().c_str());
+                return 2;
               }
-              continue;
-            }
-            const Detection d = *DetectBoard(frame->image8.view(), board);
-            Tally& t = results[static_cast<int>(type)].sets[s];
-            ++t.frames;
-            if (!d.found) {
-              std::printf("miss: %s %s, distance %.2f m (feature %.1f px) roll %.0f yaw %.0f pitch %.0f: %s\n",
-                          BoardTypeName(type), kSets[s].name, distance, feature_px, roll, yaw, pitch,
-                          DetectReasonName(d.reason));
-              continue;
-            }
-            ++t.found;
-            double worst = 0.0;
-            for (const DetectedFeature& f : d.features) {
-              const auto truth = std::find_if(frame->features.begin(), frame->features.end(),
-                                              [&](const RenderedFeature& r) { return r.feature_id == f.id; });
-              if (truth == frame->features.end()) continue;
-              const Eigen::Vector2d e = f.uv_px - truth->uv_px;
-              t.sum_sq_px += e.squaredNorm();
-              t.sum_error_px += e;
-              ++t.features;
-              worst = std::max(worst, e.norm());
-            }
-            t.max_px = std::max(t.max_px, worst);
-            if (worst > 0.4 * feature_px) {
-              ++t.wrong;
-              std::printf("wrong: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: a feature %.1f px off\n",
-                          BoardTypeName(type), kSets[s].name, distance, roll, yaw, pitch, worst);
+              CountFalseDetections(frame->image8, &type, options, &results);
+              const auto visible = std::count_if(
+                  frame->features.begin(), frame->features.end(),
+                  [](const RenderedFeature& f) { return f.kind != FeatureKind::kHoleCentre; });
+              if (visible != expected) {
+                if (visible > 0 && visible < expected / 2) continue;  // mostly out of view
+                if (visible > 0) {
+                  std::printf(
+                      "not wholly in view: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: "
+                      "%d of %d\n",
+                      BoardTypeName(type), kSets[s].name, distance, roll, yaw, pitch,
+                      static_cast<int>(visible), expected);
+                }
+                continue;
+              }
+              const Detection d = *DetectBoard(frame->image8.view(), board);
+              Tally& t = results[static_cast<int>(type)].sets[s];
+              ++t.frames;
+              if (!d.found) {
+                std::printf(
+                    "miss: %s %s, distance %.2f m (feature %.1f px) roll %.0f yaw %.0f pitch %.0f "
+                    "seed %llu: %s\n",
+                    BoardTypeName(type), kSets[s].name, distance, feature_px, roll, yaw, pitch,
+                    static_cast<unsigned long long>(seed - 1), DetectReasonName(d.reason));
+                if (!options.misses_dir.empty()) {
+                  const std::string path = options.misses_dir + "/" + BoardTypeName(type) + "_" +
+                                           kSets[s].name + "_seed" + std::to_string(seed - 1) +
+                                           ".png";
+                  const absl::Status written = WritePng8(path, frame->image8.view());
+                  if (!written.ok()) std::fprintf(stderr, "%s\n", written.ToString().c_str());
+                }
+                continue;
+              }
+              ++t.found;
+              double worst = 0.0;
+              for (const DetectedFeature& f : d.features) {
+                const auto truth =
+                    std::find_if(frame->features.begin(), frame->features.end(),
+                                 [&](const RenderedFeature& r) { return r.feature_id == f.id; });
+                if (truth == frame->features.end()) continue;
+                const Eigen::Vector2d e = f.uv_px - truth->uv_px;
+                t.sum_sq_px += e.squaredNorm();
+                t.sum_error_px += e;
+                ++t.features;
+                worst = std::max(worst, e.norm());
+              }
+              t.max_px = std::max(t.max_px, worst);
+              if (worst > 0.4 * feature_px) {
+                ++t.wrong;
+                std::printf(
+                    "wrong: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: a feature %.1f "
+                    "px off\n",
+                    BoardTypeName(type), kSets[s].name, distance, roll, yaw, pitch, worst);
+              }
             }
           }
         }
@@ -244,8 +233,9 @@ int Run(const Options& options) {
   }
 
   bool bars_met = true;
-  std::printf("\n%d x %d, %s grid, %d board-free renders\n\n", options.width, options.height,
-              options.reduced ? "reduced" : "full", options.board_free);
+  std::printf("\n%d x %d, %s grid x %d from seed %llu, %d board-free renders\n\n", options.width,
+              options.height, options.reduced ? "reduced" : "full", options.repeat,
+              static_cast<unsigned long long>(options.seed), options.board_free);
   std::printf("| board | renders (whole board) | found | rate clean / noisy / hard | false | wrong | "
               "RMS clean px | max clean px | RMS noisy px | max noisy px | circle bias px |\n");
   std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
@@ -304,13 +294,22 @@ bool ParseArgs(int argc, char** argv, Options* o) {
       o->check = true;
     } else if (a == "--fronto-size") {
       o->fronto_size = true;
+    } else if (a == "--seed" && has_value) {
+      o->seed = std::strtoull(argv[++i], nullptr, 10);
+    } else if (a == "--repeat" && has_value) {
+      o->repeat = std::atoi(argv[++i]);
+    } else if (a == "--misses" && has_value) {
+      o->misses_dir = argv[++i];
     } else {
       std::fprintf(stderr, "detectors_eval: unknown or incomplete argument '%s'\n", a.c_str());
       return false;
     }
   }
-  if (o->width < 64 || o->height < 64 || o->board_free < 0) {
-    std::fprintf(stderr, "detectors_eval: --width/--height must be >= 64, --board-free >= 0\n");
+  if (o->width < 64 || o->height < 64 || o->board_free < 0 || o->repeat < 1 || o->seed == 0) {
+    std::fprintf(
+        stderr,
+        "detectors_eval: --width/--height must be >= 64, --board-free >= 0, --repeat >= 1, "
+        "--seed >= 1\n");
     return false;
   }
   return true;

@@ -186,6 +186,27 @@ TEST(CircleDetectorTest, SmallestCirclesUnderTheHardEffects) {
   }
 }
 
+// The evaluation's hard render of the board turned 50 degrees at its middle distance (the
+// far strip's circles 7 px across) that it missed: the black pair's blobs came out 2.7 px
+// smaller than printed all round, which made their ellipses narrower than the circles'
+// images, so the pair's affine seed put the rows next to it a radius off and the growth
+// matched 5 circles. When the blobs as they are grow no grid, the seed now gives their
+// edges that shift back (PairAffine).
+TEST(CircleDetectorTest, ShrunkBlackPairStillSeedsTheGrid) {
+  const CameraModel camera = Camera();
+  const std::vector<double> distances =
+      circle_scene::EvaluationDistances(CircleBoard(), camera, false, -50.0, 0.0);
+  ASSERT_EQ(distances.size(), 3u);
+  const std::uint64_t seed = 81;
+  const CameraFrame frame =
+      Render(OneBoard(BoardType::kCircle,
+                      circle_scene::EvaluationPose(distances[1], -50.0, 0.0, 30.0, seed)),
+             circle_scene::HardEffects(seed), seed, camera);
+  const Errors e = Compare(frame);
+  EXPECT_TRUE(e.found) << DetectReasonName(e.reason);
+  EXPECT_LT(e.max_px, 1.0);
+}
+
 // 2448 x 2048: a large board is found at the coarse candidate factor (4), a small one
 // (circles 13 px across, 8 m away, so without the wall at 6 m) after falling back to
 // factor 2.

@@ -6,9 +6,11 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <numbers>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "detectors/boards/board.h"
@@ -146,6 +148,43 @@ inline const Board& CircleBoard() {
     return new Board(*Board::Create(p));
   }();
   return *board;
+}
+
+// The boards acceptance.md sizes by a marker's data cell (4 px) rather than a square (12 px).
+inline bool IsMarkerBoard(BoardType t) {
+  return t == BoardType::kAruco || t == BoardType::kApriltag || t == BoardType::kRoundHole;
+}
+
+// The evaluation's render distances (tests/detectors/detectors_eval.cc) for a board turned
+// by yaw and pitch: its page over 80% of the image width (or height) face-on, its smallest
+// square or cell `min_px` (12 px; marker boards: a data cell 4 px) in the image, and their
+// geometric mean (`reduced`: the mean only). acceptance.md sizes a board by its smallest cell
+// in the image, and a turned board's cells shrink across the turn and with the depth of its
+// far edge, so its smallest size stands nearer. Empty when even at the near end the turned
+// cells are under `min_px` (the AprilTag grid turned 35-50 degrees in 1280 x 720: no size of
+// it in that image is in the grid). `fronto_size`: the smallest size taken face-on and then
+// turned, which leaves the far edge's cells at 2.5-3 px for a 50 degree turn: a set beyond
+// the grid (docs/detectors.md).
+inline std::vector<double> EvaluationDistances(const Board& board, const CameraModel& camera,
+                                               bool reduced, double yaw_deg, double pitch_deg,
+                                               bool fronto_size = false) {
+  const double f = camera.intrinsics().fx;
+  const Eigen::Vector2d page = board.page_size_m();
+  // 80% of the width, and a tall page (the vertical board) at most 80% of the height.
+  const double near_m =
+      std::max(f * page.x() / (0.8 * camera.intrinsics().width),
+               camera.intrinsics().fy * page.y() / (0.8 * camera.intrinsics().height));
+  const double min_px = IsMarkerBoard(board.type()) ? 4.0 : 12.0;
+  const double yaw = fronto_size ? 0.0 : yaw_deg * kDeg;
+  const double pitch = fronto_size ? 0.0 : pitch_deg * kDeg;
+  // The far edge's extra depth, and the foreshortening of a cell across the turn.
+  const double far_edge_m =
+      0.5 * (page.x() * std::abs(std::sin(yaw)) + page.y() * std::abs(std::sin(pitch)));
+  const double far_m =
+      f * SmallestFeatureM(board) * std::cos(yaw) * std::cos(pitch) / min_px - far_edge_m;
+  if (far_m < near_m) return {};
+  if (reduced) return {std::sqrt(near_m * far_m)};
+  return {near_m, std::sqrt(near_m * far_m), far_m};
 }
 
 }  // namespace linecal::circle_scene
