@@ -409,6 +409,8 @@ bool FitMarkerSidesToPage(const ImageView8& image, const Board& board, int cells
       return false;
     }
   }
+  // Three quarters of a cell in all: a start up to half a cell off (dark print within a cell
+  // of the border pulls the edge points) plus what the fit may rightly move beyond it.
   for (int k = 0; k < 4; ++k) {
     if ((corners[k] - (*corners_px)[k]).norm() >
         0.75 * ((*corners_px)[(k + 1) % 4] - (*corners_px)[k]).norm() / cells) {

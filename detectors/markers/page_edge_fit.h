@@ -38,8 +38,11 @@ namespace linecal {
 // their samples are skipped (what shows there is unknown).
 // Returns false and leaves *corners_px as it was when a side keeps fewer than four profiles,
 // a fit fails (no convergence, sigma outside [0.3, 3] px, contrast under min_contrast grey
-// levels) or a corner would move more than half a cell. Cost: O(profiles x samples x fit
-// iterations); about 0.4 ms per ArUco marker of 4 px cells (docs/detectors.md).
+// levels) or a corner would move more than half a cell in a pass or three quarters of a
+// cell in all (the edge-point corners of the round-hole board's markers at 4 px cells, its
+// black cells within a cell of their border, start up to half a cell off). Cost:
+// O(profiles x samples x fit iterations); about 0.4 ms per ArUco marker of 4 px cells
+// (docs/detectors.md).
 bool FitMarkerSidesToPage(const ImageView8& image, const Board& board, int cells,
                           const std::array<Eigen::Vector2d, 4>& corners_board, double min_contrast,
                           std::array<Eigen::Vector2d, 4>* corners_px);

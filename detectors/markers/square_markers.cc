@@ -487,7 +487,7 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
   }
   QuadOptions quad_options;
   quad_options.min_side_px = options.min_marker_side_px;
-  const auto read_quads = [&](const Image8& binary) {
+  const auto read_quads = [&](const Image8& binary, const MarkerFamily& codes) {
     const ComponentLabels labels = LabelComponents(binary.view());
     for (const Quad& quad : FindQuads(labels, quad_options)) {
       if (scan.quads >= options.max_candidates) break;
@@ -499,7 +499,7 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
         continue;
       }
       ++scan.quads;
-      std::optional<DecodedMarker> marker = ReadQuad(image, quad, family, min_contrast);
+      std::optional<DecodedMarker> marker = ReadQuad(image, quad, codes, min_contrast);
       if (marker.has_value()) scan.markers.push_back(*marker);
     }
   };
@@ -510,11 +510,18 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
   for (int erosion = 0; erosion <= options.max_erosion_px && !(erosion > 0 && enough());
        ++erosion) {
     if (erosion > 0) eroded = Erode(erosion == 1 ? dark : eroded);
-    read_quads(erosion == 0 ? dark : eroded);
+    read_quads(erosion == 0 ? dark : eroded, family);
   }
   if (options.near_dark_fraction > 0.0 && !enough()) {
     int unused_max_contrast = 0;
-    read_quads(BinariseDark(image, min_contrast, &unused_max_contrast, options.near_dark_fraction));
+    // Exact reads only: the lower threshold also turns texture and the insides of dark print
+    // into quads (a black cell with the clutter behind its hole read as DICT_4X4_50 id 17
+    // with one corrected bit on a round-hole board turned 50 degrees, which then refused the
+    // board for another id on its page).
+    MarkerFamily exact = family;
+    exact.max_correction_bits = 0;
+    read_quads(BinariseDark(image, min_contrast, &unused_max_contrast, options.near_dark_fraction),
+               exact);
   }
   if (scan.markers.empty()) scan.reason = DetectReason::kNoCandidates;
   return scan;
@@ -538,10 +545,10 @@ struct BoardFit {
 // all there is to tell it from the homography's scale.
 constexpr std::size_t kMinMarkersForDilation = 3;
 
-// Markers whose black border is narrower than this (px) get their sides fitted to the page
-// model (page_edge_fit.h). Below it the blur of the border's inner edge, and of what lies
-// behind and beyond, reaches the edge's gradient centroid (ArUco at 4 px cells, blur 1:
-// 0.2-0.3 px off); above it the centroids meet the bars at a tenth of the cost. The
+// Markers whose black border is narrower than this (px) across their shortest side get their
+// sides fitted to the page model (page_edge_fit.h). Below it the blur of the border's inner edge,
+// and of what lies behind and beyond, reaches the edge's gradient centroid (ArUco at 4 px cells,
+// blur 1: 0.2-0.3 px off); above it the centroids meet the bars at a tenth of the cost. The
 // AprilTag grid's two-cell border is 8 px at acceptance.md's smallest cells, so its 36 tags
 // keep their centroids (docs/detectors.md).
 constexpr double kPageFitMaxBorderPx = 5.0;

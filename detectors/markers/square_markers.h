@@ -127,15 +127,15 @@ MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
 // `family`) from the markers of `scan`, and checks the whole board: every marker id at most
 // once, one board homography through all their corners within the residual bound, no marker
 // of another id on the board's page, and the board's printed paint where it is projected.
-// Markers whose black border is under 5 px have their sides fitted to the board's blurred
-// page (page_edge_fit.h) before they enter the homography: their edge-point corners are
-// biased by the edges next to the border. Markers the scan missed (too small, blurred or touching other shapes for a quad to be
-// found) are then looked for where that homography puts them: their corners refined on the
-// edges, read as in the scan, and kept only when they decode to the expected id in the
-// expected orientation; the homography is fitted again through all corners and checked.
-// found = true when all of the board's markers pass; with 2 or more markers but not all:
-// found = false, kPartial, their corners. Otherwise no features and the reason: kWrongBoard
-// (markers of other ids only, another id on the page, or the paint disagrees),
+// Markers whose black border is under 5 px across their shortest side have their sides
+// fitted to the board's blurred page (page_edge_fit.h) before they enter the homography:
+// their edge-point corners are biased by the edges next to the border. Markers the scan missed (too
+// small, blurred or touching other shapes for a quad to be found) are then looked for where that
+// homography puts them: their corners refined on the edges, read as in the scan, and kept only when
+// they decode to the expected id in the expected orientation; the homography is fitted again
+// through all corners and checked. found = true when all of the board's markers pass; with 2 or
+// more markers but not all: found = false, kPartial, their corners. Otherwise no features and the
+// reason: kWrongBoard (markers of other ids only, another id on the page, or the paint disagrees),
 // kAmbiguous (an id seen twice), kVerificationFailed (residual), kTooFewFeatures (one
 // marker), scan.reason / kNoCandidates (no markers). Cost: O(markers) plus a fixed grid of
 // paint probes (about 0.2 ms), plus O(side) per missed marker, plus about 0.4 ms per small
