@@ -1,16 +1,22 @@
 // `linecal detect` run as a program (interfaces.md): the JSON object, the exit codes
-// (0 found, 1 not found, 2 bad usage or input), 16-bit input and the overlay.
+// (0 found, 1 not found, 2 bad usage or input), 16-bit input, the overlay, and photo-like
+// input (a phone-sized colour JPEG through a distorting lens).
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "station/io/image_io.h"
 #include "tests/detectors/board_scene.h"
+#include "tests/station/io/jpeg_test_writer.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -90,6 +96,100 @@ TEST_F(DetectCliTest, SixteenBitImageAndOverlay) {
   ASSERT_TRUE(overlay.ok()) << overlay.status();
   EXPECT_EQ(overlay->width, 1280);
   EXPECT_EQ(overlay->height, 720);
+}
+
+// A photo rather than a render: what a phone writes, a 4032 x 3024 colour JPEG (quality 90,
+// 4:2:0 chroma, a warm white balance, sRGB-like encoding gamma), through a lens with barrel
+// distortion (k1 -0.05, k2 0.01: up to 8 px at the ArUco board's corners) and vignetting,
+// under an uneven light. `linecal detect` reads its luma; every feature of each board must
+// be found with its id, within half a pixel of where the lens put it. (acceptance.md's
+// 0.12 px RMS is for linear renders without distortion. Measured here: chessboard 0.037,
+// circle 0.064, ArUco 0.146 px RMS; the ArUco board 0.116 px with gamma 1: the encoding
+// gamma moves blurred edges by a fraction of a pixel, which its markers' dilation, fitted in
+// board units, takes out only in part under perspective, and its sides, 300 px long, are
+// fitted as lines through the lens's bend.)
+TEST_F(DetectCliTest, ColourJpegPhotoThroughADistortingLens) {
+  const CameraIntrinsics lens = {.type = CameraModelType::kPinhole,
+                                 .width = 4032,
+                                 .height = 3024,
+                                 .fx = 3150.0,
+                                 .fy = 3150.0,
+                                 .cx = 2021.5,
+                                 .cy = 1508.0,
+                                 .k1 = -0.05,
+                                 .k2 = 0.01};
+  const absl::StatusOr<CameraModel> camera = CameraModel::Create(lens);
+  ASSERT_TRUE(camera.ok()) << camera.status();
+  const CameraRenderOptions options = {.illumination_gradient_ratio = 1.8,
+                                       .illumination_gradient_direction_deg = 60.0,
+                                       .vignetting = 0.4,
+                                       .blur_sigma_px = 1.3,
+                                       .gamma = 2.2,
+                                       .noise_sigma = 3.0,
+                                       .threads = 2};
+  struct Shot {
+    BoardType type;
+    const char* name;
+    double distance_m, yaw_deg, pitch_deg, roll_deg;
+    Eigen::Vector2d offset_m;
+  };
+  const std::vector<Shot> shots = {
+      {BoardType::kAruco, "aruco", 2.4, 25.0, -10.0, 8.0, {0.3, 0.1}},
+      {BoardType::kChessboard, "chessboard", 4.5, -15.0, 10.0, -5.0, {0.0, -0.2}},
+      {BoardType::kCircle, "circle", 2.0, 20.0, 15.0, 4.0, {-0.2, 0.1}},
+  };
+  std::uint64_t seed = 31;
+  for (const Shot& shot : shots) {
+    SCOPED_TRACE(shot.name);
+    test_scene::BoardView view;
+    view.params.type = shot.type;
+    view.distance_m = shot.distance_m;
+    view.yaw_deg = shot.yaw_deg;
+    view.pitch_deg = shot.pitch_deg;
+    view.roll_deg = shot.roll_deg;
+    view.offset_m = shot.offset_m;
+    const absl::StatusOr<CameraFrame> frame = RenderCameraFrame(
+        *camera, test_scene::TestCameraPose(), test_scene::SceneOf(view), options, seed++);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    const std::size_t printed = static_cast<std::size_t>(
+        std::count_if(frame->features.begin(), frame->features.end(),
+                      [](const RenderedFeature& f) { return f.kind != FeatureKind::kHoleCentre; }));
+    ASSERT_GT(printed, 0u);
+    // The grey render as a camera's colour: red and blue scaled as a warm white balance leaves
+    // them, luma (BT.601) within a grey level of the render.
+    std::vector<std::uint8_t> rgb(static_cast<std::size_t>(lens.width) * lens.height * 3);
+    for (std::size_t i = 0; i < frame->image8.pixels.size(); ++i) {
+      const double g = frame->image8.pixels[i];
+      rgb[3 * i] = static_cast<std::uint8_t>(std::min(255.0, std::round(1.08 * g)));
+      rgb[3 * i + 1] = static_cast<std::uint8_t>(g);
+      rgb[3 * i + 2] = static_cast<std::uint8_t>(std::round(0.82 * g));
+    }
+    const std::string path = Path(std::string(shot.name) + ".jpg");
+    testing_jpeg::WriteJpeg(path, lens.width, lens.height, 3, rgb.data(), 90);
+    const auto run =
+        RunLinecal(std::string("detect --board ") + shot.name + " --image " + path + " --json");
+    ASSERT_EQ(run.exit_code, 0) << run.err << run.out;
+    const nlohmann::json j = nlohmann::json::parse(run.out);
+    EXPECT_EQ(j.at("found"), true) << j.at("reason");
+    ASSERT_EQ(j.at("features").size(), printed);
+    double sum_sq = 0.0;
+    double max_px = 0.0;
+    int matched = 0;
+    for (const nlohmann::json& f : j.at("features")) {
+      for (const RenderedFeature& t : frame->features) {
+        if (t.feature_id != f.at("id").get<int>()) continue;
+        const double du = f.at("u").get<double>() - t.uv_px.x();
+        const double dv = f.at("v").get<double>() - t.uv_px.y();
+        sum_sq += du * du + dv * dv;
+        ++matched;
+        max_px = std::max(max_px, std::hypot(du, dv));
+      }
+    }
+    ASSERT_EQ(matched, static_cast<int>(printed));
+    EXPECT_LT(max_px, 0.5);
+    std::printf("%s: RMS %.3f px, largest %.3f px over %d features\n", shot.name,
+                std::sqrt(sum_sq / matched), max_px, matched);
+  }
 }
 
 TEST_F(DetectCliTest, NotFoundExitsOneWithAReason) {

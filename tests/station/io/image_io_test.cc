@@ -2,25 +2,25 @@
 // writing with pHYs, and errors that name the file.
 #include "station/io/image_io.h"
 
-// jpeglib.h needs <cstdio> (FILE) before it.
-// clang-format off
-#include <cstdio>
-#include <jpeglib.h>
-// clang-format on
 #include <gtest/gtest.h>
 #include <png.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <csetjmp>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
 
+#include "tests/station/io/jpeg_test_writer.h"
+
 namespace linecal {
 namespace {
+
+using testing_jpeg::WriteJpeg;
 
 class ImageIoTest : public ::testing::Test {
  protected:
@@ -60,32 +60,6 @@ void WriteRawPng(const std::string& path, int w, int h, int bit_depth, int colou
   png_write_image(png, ptrs.data());
   png_write_end(png, info);
   png_destroy_write_struct(&png, &info);
-  std::fclose(f);
-}
-
-// Writes packed 8-bit rows as a JPEG: components 1 (grey) or 3 (RGB).
-void WriteJpeg(const std::string& path, int w, int h, int components, const std::uint8_t* pixels,
-               int quality) {
-  jpeg_compress_struct cinfo{};
-  jpeg_error_mgr err;
-  cinfo.err = jpeg_std_error(&err);
-  jpeg_create_compress(&cinfo);
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  ASSERT_NE(f, nullptr);
-  jpeg_stdio_dest(&cinfo, f);
-  cinfo.image_width = w;
-  cinfo.image_height = h;
-  cinfo.input_components = components;
-  cinfo.in_color_space = components == 1 ? JCS_GRAYSCALE : JCS_RGB;
-  jpeg_set_defaults(&cinfo);
-  jpeg_set_quality(&cinfo, quality, TRUE);
-  jpeg_start_compress(&cinfo, TRUE);
-  for (int y = 0; y < h; ++y) {
-    JSAMPROW row = const_cast<JSAMPROW>(pixels + static_cast<std::size_t>(y) * w * components);
-    jpeg_write_scanlines(&cinfo, &row, 1);
-  }
-  jpeg_finish_compress(&cinfo);
-  jpeg_destroy_compress(&cinfo);
   std::fclose(f);
 }
 
