@@ -80,9 +80,9 @@ bool RefineQuadCorners(const ImageView8& image, const MarkerFamily& family,
       }
       // The wide points alone must still fix the line's direction: at least four of them,
       // spread over half the side (its length, corner to corner: the line is extrapolated to
-      // the corners, so a short spread multiplies the points' noise; a tag's wide points
-      // over a quarter of its side tilted it by 2 px, 0.05 px of noise each). Otherwise use
-      // all.
+      // the corners, so a short spread multiplies the points' scatter; the wide points of a
+      // tag of 4 px bits, over a quarter of its side and within 0.3 px of its edge, tilted it
+      // by 2 px). Otherwise use all.
       int first_wide = samples;
       int last_wide = -1;
       int wide_count = 0;
