@@ -17,6 +17,7 @@
 #include <string>
 
 #include "station/io/image_io.h"
+#include "tests/support/external_data.h"
 
 namespace linecal {
 namespace {
@@ -27,11 +28,6 @@ Board MakeBoard(BoardType type) {
   std::optional<Board> b = Board::Create(p);
   EXPECT_TRUE(b.has_value());
   return *b;
-}
-
-// The repository is a sibling of shared/ (here and in CI).
-std::string PatternPath(const std::string& name) {
-  return std::string(LINECAL_SOURCE_DIR) + "/../shared/spec/patterns/" + name;
 }
 
 class BoardRasterTest : public ::testing::Test {
@@ -74,8 +70,9 @@ TEST_F(BoardRasterTest, DefaultBoardsMatchTheirPdfs) {
     const Board board = MakeBoard(c.type);
     const int w = static_cast<int>(std::lround(1e3 * board.page_size_m().x()));
     const int h = static_cast<int>(std::lround(1e3 * board.page_size_m().y()));
-    const std::string pdf = PatternPath(c.pdf);
-    ASSERT_TRUE(std::filesystem::exists(pdf)) << pdf;
+    // The reference PDFs of the boards (docs/external-data.md).
+    LINECAL_EXTERNAL_IN_OR_SKIP(pdf, std::string("patterns/") + c.pdf,
+                                testing_support::ExternalRoot::kSpec);
     const std::string prefix = (dir_ / board.name()).string();
     const std::string command = "pdftoppm -gray -png -singlefile -scale-to-x " + std::to_string(w) +
                                 " -scale-to-y " + std::to_string(h) + " '" + pdf + "' '" + prefix +
@@ -109,7 +106,7 @@ TEST_F(BoardRasterTest, DefaultBoardsMatchTheirPdfs) {
 
 // The 1-bit-border AprilGrid is the ordinary tag36h11 layout: stock libapriltag must decode
 // every tag of our rendering, with corners where the board says; the 2-bit (Kalibr) grid
-// must give it nothing (boards.md).
+// must give it nothing (docs/boards.md).
 TEST_F(BoardRasterTest, StockAprilTagDecodesOnlyTheOneBitGrid) {
   using Family = std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)>;
   using Detector = std::unique_ptr<apriltag_detector_t, void (*)(apriltag_detector_t*)>;

@@ -1,7 +1,7 @@
-// `linecal detect --board round_hole --cloud ...` run as a program (interfaces.md): simulated
+// `linecal detect --board round_hole --cloud ...` run as a program (docs/interfaces.md): simulated
 // scans written as PCD files (binary, binary_compressed, and ascii without a ring field), the
 // JSON object checked against the truth, the exit codes (0 found, 1 not found, 2 bad usage or
-// input) and the real reference scans of shared/data, which hold no board.
+// input) and the real reference scans of docs/external-data.md, which hold no board.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -12,6 +12,7 @@
 
 #include "station/io/pcd.h"
 #include "tests/detectors/round_hole/round_hole_scene.h"
+#include "tests/support/external_data.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -161,8 +162,7 @@ TEST_F(DetectCloudCliTest, NotFoundAndBadInput) {
 // field: nebula calls it "channel"): not found, exit 1, never a false board.
 TEST_F(DetectCloudCliTest, RealScansHoldNoBoard) {
   for (const char* model : {"vlp16", "pandar64"}) {
-    const std::string path =
-        std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/" + model + "/reference_scan.pcd";
+    LINECAL_EXTERNAL_OR_SKIP(path, std::string("lidar/") + model + "/reference_scan.pcd");
     const auto run = RunLinecal("detect --board round_hole --cloud " + path + " --json");
     EXPECT_EQ(run.exit_code, 1) << model << ": " << run.err << run.out;
     const nlohmann::json j = nlohmann::json::parse(run.out);

@@ -10,12 +10,12 @@
 #include "station/io/pcap.h"
 #include "station/io/pcd.h"
 #include "station/sensors/lidar_format.h"
+#include "tests/support/external_data.h"
+#include "tests/support/lidar_recording.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
 namespace {
-
-const std::string kData = std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/";
 
 using testing_tools::LinecalRun;
 using testing_tools::RunLinecal;
@@ -30,12 +30,24 @@ class LidarDecodeCli : public ::testing::Test {
     std::filesystem::create_directories(dir_);
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
+  // 5 turns of dual-return VLP-16 packets (150 a turn) from the project's encoder, as
+  // dir_/vlp16.pcap.
+  std::string EncodedVlp16() const {
+    const std::filesystem::path path = dir_ / "vlp16.pcap";
+    EXPECT_TRUE(
+        testing_support::WriteRecordingPcap(
+            testing_support::EncodeRecording(LidarModel::kVlp16, LidarReturnMode::kDual, 5.0), path)
+            .ok());
+    return path.string();
+  }
   std::filesystem::path dir_;
 };
 
+// The real recordings (docs/external-data.md), decoded by the command.
 TEST_F(LidarDecodeCli, Vlp16WritesOnePcdPerRotation) {
-  const LinecalRun r = RunLinecal("lidar decode --model vlp16 --pcap " + kData +
-                                  "vlp16/packets.pcap --out " + (dir_ / "out").string());
+  LINECAL_EXTERNAL_OR_SKIP(pcap, "lidar/vlp16/packets.pcap");
+  const LinecalRun r =
+      RunLinecal("lidar decode --model vlp16 --pcap " + pcap + " --out " + (dir_ / "out").string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("packets read:        603"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("packets skipped:     0\n"), std::string::npos) << r.out;
@@ -54,9 +66,10 @@ TEST_F(LidarDecodeCli, Vlp16WritesOnePcdPerRotation) {
 }
 
 TEST_F(LidarDecodeCli, Pandar64JsonSummary) {
-  const LinecalRun r = RunLinecal(
-      "lidar decode --model pandar64 --angles " + kData + "pandar64/Pandar64.csv --pcap " + kData +
-      "pandar64/packets.pcap --out " + dir_.string() + " --port 2368 --json");
+  LINECAL_EXTERNAL_OR_SKIP(pcap, "lidar/pandar64/packets.pcap");
+  LINECAL_EXTERNAL_OR_SKIP(angles, "lidar/pandar64/Pandar64.csv");
+  const LinecalRun r = RunLinecal("lidar decode --model pandar64 --angles " + angles + " --pcap " +
+                                  pcap + " --out " + dir_.string() + " --port 2368 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["model"], "pandar64");
@@ -71,7 +84,7 @@ TEST_F(LidarDecodeCli, Pandar64JsonSummary) {
   EXPECT_EQ(scan->points.size(), 93591u);  // nebula's reference scan, point for point
 }
 
-// No PandarXT-32 recording exists in shared/data: write one with the encoder, with a few
+// No real PandarXT-32 recording exists: write one with the encoder, with a few
 // damaged packets, and decode it through the CLI.
 TEST_F(LidarDecodeCli, PandarXt32FromAnEncodedRecording) {
   std::string csv = "Channel,Elevation,Azimuth\n";
@@ -112,7 +125,9 @@ TEST_F(LidarDecodeCli, PandarXt32FromAnEncodedRecording) {
 }
 
 TEST_F(LidarDecodeCli, BadInputExitsWithTwoAndNamesTheProblem) {
-  const std::string pcap = kData + "vlp16/packets.pcap";
+  const std::string pcap = EncodedVlp16();
+  const std::string pandar64_angles = (dir_ / "Pandar64.csv").string();
+  std::ofstream(pandar64_angles) << testing_support::SyntheticAngleCsv(LidarModel::kPandar64);
   const std::string out = " --out " + dir_.string();
   struct Case {
     std::string args;
@@ -125,8 +140,7 @@ TEST_F(LidarDecodeCli, BadInputExitsWithTwoAndNamesTheProblem) {
       {"lidar decode --model pandar64 --pcap " + pcap + out, "--angles: pandar64"},
       {"lidar decode --model pandar64 --angles /nonexistent.csv --pcap " + pcap + out,
        "/nonexistent.csv"},
-      {"lidar decode --model pandarxt32 --angles " + kData + "pandar64/Pandar64.csv --pcap " +
-           pcap + out,
+      {"lidar decode --model pandarxt32 --angles " + pandar64_angles + " --pcap " + pcap + out,
        "more than 32 channels"},
       {"lidar decode --model vlp16 --pcap " + (dir_ / "not.pcap").string() + out,
        "not.pcap: not a pcap file"},
@@ -146,8 +160,8 @@ TEST_F(LidarDecodeCli, BadInputExitsWithTwoAndNamesTheProblem) {
 }
 
 TEST_F(LidarDecodeCli, NoFullRotationExitsWithOne) {
-  // The first 100 packets of the VLP-16 recording: less than one turn.
-  absl::StatusOr<PcapReader> in = PcapReader::Open(kData + "vlp16/packets.pcap");
+  // The first 100 packets of a VLP-16 recording: less than one turn.
+  absl::StatusOr<PcapReader> in = PcapReader::Open(EncodedVlp16());
   absl::StatusOr<PcapWriter> w = PcapWriter::Create(dir_ / "short.pcap");
   ASSERT_TRUE(in.ok() && w.ok());
   PcapRecord rec;

@@ -8,23 +8,23 @@
 
 #include "daemon/drivers/lidar_decoder.h"
 #include "station/io/pcap.h"
+#include "tests/support/external_data.h"
+#include "tests/support/lidar_recording.h"
 
 namespace linecal {
 namespace {
 
-const std::string kData = std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/";
+using testing_support::EncodedRecording;
+using testing_support::ExternalPath;
+using Recording = EncodedRecording;
 
-struct Recording {
-  LidarBeamTable table;
-  std::vector<std::vector<std::uint8_t>> payloads;
-  std::vector<std::int64_t> times_ns;
-};
-
-Recording FromPcap(const std::string& pcap, LidarBeamTable table) {
+// A real recording (docs/external-data.md); empty, and its benchmark skipped with the path
+// named, when the external data is absent.
+Recording FromPcap(const std::string& pcap, absl::StatusOr<LidarBeamTable> table) {
   Recording r;
-  r.table = std::move(table);
   absl::StatusOr<PcapReader> reader = PcapReader::Open(pcap);
-  if (!reader.ok()) return r;
+  if (!reader.ok() || !table.ok()) return r;
+  r.table = *std::move(table);
   PcapRecord rec;
   while (reader->Next(&rec).value_or(false)) {
     const UdpFrame f = ParseUdpFrame(reader->info().link_type, rec.data);
@@ -35,35 +35,12 @@ Recording FromPcap(const std::string& pcap, LidarBeamTable table) {
   return r;
 }
 
-// PandarXT-32 (no recording exists): 4 turns of dual-return packets from the encoder, every
-// beam hitting something 10-60 m away.
-Recording Xt32() {
-  Recording r;
-  std::string csv = "Channel,Elevation,Azimuth\n";
-  for (int c = 1; c <= 32; ++c) {
-    csv += std::to_string(c) + "," + std::to_string(16 - c) + "," + (c % 2 ? "1" : "-1") + "\n";
-  }
-  r.table = *ParseAngleCorrectionCsv(LidarModel::kPandarXt32, csv, "xt32");
-  LidarEncodeSettings s;
-  s.model = LidarModel::kPandarXt32;
-  s.return_mode = LidarReturnMode::kDual;
-  s.first_column_time_ns = 1'700'000'000'000'000'000;
-  std::vector<LidarColumn> cols(8000);  // 4 turns of 0.18°
-  for (int k = 0; k < 8000; ++k) {
-    cols[k].azimuth_centideg = static_cast<std::uint16_t>(k * 18 % 36000);
-    for (int e = 0; e < 64; ++e) cols[k].echoes.push_back({10.0 + (k + e) % 50, 80});
-  }
-  r.payloads = *EncodeLidarPackets(s, cols);
-  for (std::size_t i = 0; i < r.payloads.size(); ++i) {
-    r.times_ns.push_back(s.first_column_time_ns + static_cast<std::int64_t>(i) * 200'000);
-  }
-  return r;
-}
-
 void BM_Decode(benchmark::State& state, const Recording* rec) {
   absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(rec->table);
   if (!decoder.ok() || rec->payloads.empty()) {
-    state.SkipWithError("no recording");
+    state.SkipWithError(
+        ("no recording; " + testing_support::MissingExternalMessage(ExternalPath("lidar")))
+            .c_str());
     return;
   }
   std::int64_t bytes = 0;
@@ -89,17 +66,19 @@ void BM_Decode(benchmark::State& state, const Recording* rec) {
 
 const Recording& Vlp16() {
   static const Recording r =
-      FromPcap(kData + "vlp16/packets.pcap", *DefaultBeamTable(LidarModel::kVlp16));
+      FromPcap(ExternalPath("lidar/vlp16/packets.pcap"), DefaultBeamTable(LidarModel::kVlp16));
   return r;
 }
 const Recording& Pandar64() {
-  static const Recording r =
-      FromPcap(kData + "pandar64/packets.pcap",
-               *ReadAngleCorrectionCsv(LidarModel::kPandar64, kData + "pandar64/Pandar64.csv"));
+  static const Recording r = FromPcap(
+      ExternalPath("lidar/pandar64/packets.pcap"),
+      ReadAngleCorrectionCsv(LidarModel::kPandar64, ExternalPath("lidar/pandar64/Pandar64.csv")));
   return r;
 }
 const Recording& PandarXt32() {
-  static const Recording r = Xt32();
+  // No real PandarXT-32 recording exists: 4 turns of dual-return packets from the encoder.
+  static const Recording r =
+      testing_support::EncodeRecording(LidarModel::kPandarXt32, LidarReturnMode::kDual, 4.0);
   return r;
 }
 

@@ -11,13 +11,16 @@
 #include "station/io/byte_io.h"
 #include "station/io/pcap.h"
 #include "station/io/pcd.h"
+#include "tests/support/external_data.h"
+#include "tests/support/lidar_recording.h"
 
 namespace linecal {
 namespace {
 
+using testing_support::SyntheticBeamTable;
+
 constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
-const std::string kData = std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/";
 
 struct Decoded {
   std::vector<LidarScan> scans;
@@ -46,11 +49,13 @@ double Range(const LidarPoint& p) { return std::sqrt(p.x * p.x + p.y * p.y + p.z
 double Azimuth(double x, double y) { return std::atan2(x, y); }
 double AngleDiff(double a, double b) { return std::remainder(a - b, 2 * kPi); }
 
-// nebula's reference decode of shared/data/lidar/vlp16 (data/README.md). Found by matching:
-// it is our third full rotation (rotation 3: packets 451 to 602), and it uses ROS's frame,
-// x forward (our +y), y left (our -x): p_ours = (-y_ref, x_ref, z_ref).
+// nebula's reference decode of the real VLP-16 recording (docs/external-data.md). Found by
+// matching: it is our third full rotation (rotation 3: packets 451 to 602), and it uses ROS's
+// frame, x forward (our +y), y left (our -x): p_ours = (-y_ref, x_ref, z_ref).
 TEST(LidarDecoderVlp16, MatchesTheReferenceDecode) {
-  const Decoded d = DecodeFile(kData + "vlp16/packets.pcap", *DefaultBeamTable(LidarModel::kVlp16));
+  LINECAL_EXTERNAL_OR_SKIP(pcap, "lidar/vlp16/packets.pcap");
+  LINECAL_EXTERNAL_OR_SKIP(reference, "lidar/vlp16/reference_scan.pcd");
+  const Decoded d = DecodeFile(pcap, *DefaultBeamTable(LidarModel::kVlp16));
   EXPECT_EQ(d.stats.packets, 603);
   EXPECT_EQ(d.stats.packets_decoded, 603);
   EXPECT_EQ(d.stats.skipped_total(), 0);
@@ -60,7 +65,7 @@ TEST(LidarDecoderVlp16, MatchesTheReferenceDecode) {
   for (int i = 0; i < 3; ++i) EXPECT_EQ(d.scans[i].rotation, i + 1);
   const LidarScan& scan = d.scans[2];
 
-  absl::StatusOr<PcdCloud> ref = ReadPcd(kData + "vlp16/reference_scan.pcd");
+  absl::StatusOr<PcdCloud> ref = ReadPcd(reference);
   ASSERT_TRUE(ref.ok()) << ref.status();
   const std::vector<LidarPoint>& r = ref->points;
   ASSERT_EQ(r.size(), 14831u);
@@ -117,7 +122,8 @@ TEST(LidarDecoderVlp16, MatchesTheReferenceDecode) {
 }
 
 TEST(LidarDecoderVlp16, RingsAndTimesFollowTheSensor) {
-  const Decoded d = DecodeFile(kData + "vlp16/packets.pcap", *DefaultBeamTable(LidarModel::kVlp16));
+  LINECAL_EXTERNAL_OR_SKIP(pcap, "lidar/vlp16/packets.pcap");
+  const Decoded d = DecodeFile(pcap, *DefaultBeamTable(LidarModel::kVlp16));
   ASSERT_EQ(d.scans.size(), 3u);
   // Every ring is the sensor's: ring r has elevation -15° + 2°·r.
   for (const LidarPoint& p : d.scans[1].points) {
@@ -145,12 +151,14 @@ TEST(LidarDecoderVlp16, RingsAndTimesFollowTheSensor) {
   EXPECT_EQ(d.scans[2].points[10].time_ns, kHourStartNs + 140'854'497'000 + 2304);
 }
 
-// nebula's reference decode of shared/data/lidar/pandar64: our second full rotation
-// (packets 1190 to 1807), point for point, in the same frame (Hesai's: y at azimuth 0).
+// nebula's reference decode of the real Pandar64 recording (docs/external-data.md): our
+// second full rotation (packets 1190 to 1807), point for point, in the same frame (Hesai's: y
+// at azimuth 0).
 TEST(LidarDecoderPandar64, MatchesTheReferenceDecode) {
-  const Decoded d =
-      DecodeFile(kData + "pandar64/packets.pcap",
-                 *ReadAngleCorrectionCsv(LidarModel::kPandar64, kData + "pandar64/Pandar64.csv"));
+  LINECAL_EXTERNAL_OR_SKIP(pcap, "lidar/pandar64/packets.pcap");
+  LINECAL_EXTERNAL_OR_SKIP(angles, "lidar/pandar64/Pandar64.csv");
+  LINECAL_EXTERNAL_OR_SKIP(reference, "lidar/pandar64/reference_scan.pcd");
+  const Decoded d = DecodeFile(pcap, *ReadAngleCorrectionCsv(LidarModel::kPandar64, angles));
   EXPECT_EQ(d.stats.packets, 2400);
   EXPECT_EQ(d.stats.packets_decoded, 2400);
   EXPECT_EQ(d.stats.skipped_total(), 0);
@@ -159,7 +167,7 @@ TEST(LidarDecoderPandar64, MatchesTheReferenceDecode) {
   EXPECT_EQ(d.stats.partial_rotations, 3);
   ASSERT_EQ(d.scans.size(), 3u);
 
-  absl::StatusOr<PcdCloud> ref = ReadPcd(kData + "pandar64/reference_scan.pcd");
+  absl::StatusOr<PcdCloud> ref = ReadPcd(reference);
   ASSERT_TRUE(ref.ok()) << ref.status();
   const LidarScan& scan = d.scans[1];
   ASSERT_EQ(scan.points.size(), ref->points.size());
@@ -184,29 +192,6 @@ TEST(LidarDecoderPandar64, MatchesTheReferenceDecode) {
 // ---------------------------------------------------------------------------------------
 // Encoder → decoder round trips.
 
-LidarBeamTable Xt32Table() {
-  std::string csv = "Channel,Elevation,Azimuth\n";
-  for (int c = 0; c < 32; ++c) {
-    // Elevations -16..15°, offsets alternating ±1.2°: like a real unit, beams cross 0° at
-    // different block azimuths.
-    csv += std::to_string(c + 1) + "," + std::to_string(15 - c) + "," + (c % 2 ? "1.2" : "-1.2") +
-           "\n";
-  }
-  return *ParseAngleCorrectionCsv(LidarModel::kPandarXt32, csv, "xt32.csv");
-}
-
-LidarBeamTable TableFor(LidarModel model) {
-  switch (model) {
-    case LidarModel::kVlp16:
-      return *DefaultBeamTable(model);
-    case LidarModel::kPandar64:
-      return *ReadAngleCorrectionCsv(model, kData + "pandar64/Pandar64.csv");
-    case LidarModel::kPandarXt32:
-      return Xt32Table();
-  }
-  return {};
-}
-
 struct RoundTripCase {
   LidarModel model;
   LidarReturnMode mode;
@@ -218,7 +203,7 @@ TEST_P(LidarRoundTrip, DecodesWhatWasEncoded) {
   const LidarModel model = GetParam().model;
   const LidarReturnMode mode = GetParam().mode;
   const LidarModelInfo& info = GetLidarModelInfo(model);
-  const LidarBeamTable table = TableFor(model);
+  const LidarBeamTable table = SyntheticBeamTable(model);
   const int returns = mode == LidarReturnMode::kDual ? 2 : 1;
   const int per_packet = ColumnsPerPacket(model, returns);
   // 600 rpm: one turn per 100 ms, i.e. the column step in 0.01° is 3600°/s × period.
@@ -400,7 +385,7 @@ TEST(LidarDecoder, SkipsAndCountsBadPackets) {
       {LidarModel::kPandarXt32, LidarSkipReason::kBadReturnMode, [](auto& p) { p[1062] = 0; }},
   };
   for (const BadPacketCase& c : cases) {
-    absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(TableFor(c.model));
+    absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(SyntheticBeamTable(c.model));
     ASSERT_TRUE(decoder.ok());
     std::vector<std::uint8_t> p = GoodPacket(c.model);
     std::vector<LidarScan> scans;
@@ -418,7 +403,7 @@ TEST(LidarDecoder, SkipsAndCountsBadPackets) {
 }
 
 TEST(LidarDecoder, OtherModelsPacketsAreSkippedBySize) {
-  absl::StatusOr<LidarDecoder> vlp = LidarDecoder::Create(TableFor(LidarModel::kVlp16));
+  absl::StatusOr<LidarDecoder> vlp = LidarDecoder::Create(SyntheticBeamTable(LidarModel::kVlp16));
   std::vector<LidarScan> scans;
   vlp->AddPacket(GoodPacket(LidarModel::kPandar64), 0, &scans);  // 1198 bytes
   vlp->AddPacket(GoodPacket(LidarModel::kPandarXt32), 0, &scans);
@@ -426,7 +411,8 @@ TEST(LidarDecoder, OtherModelsPacketsAreSkippedBySize) {
 }
 
 TEST(LidarDecoder, HesaiPacketsWithoutAValidDateTakeTheSecondFromTheHost) {
-  absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(TableFor(LidarModel::kPandarXt32));
+  absl::StatusOr<LidarDecoder> decoder =
+      LidarDecoder::Create(SyntheticBeamTable(LidarModel::kPandarXt32));
   std::vector<LidarScan> scans;
   for (int i = 0; i < 2; ++i) {
     // Two consecutive packets (8 columns of 0.2° each).
@@ -447,7 +433,7 @@ TEST(LidarDecoder, NeverCrashesOnRandomBytes) {
   std::mt19937 rng(1234);
   std::uniform_int_distribution<int> byte(0, 255);
   for (LidarModel model : {LidarModel::kVlp16, LidarModel::kPandar64, LidarModel::kPandarXt32}) {
-    absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(TableFor(model));
+    absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(SyntheticBeamTable(model));
     std::vector<LidarScan> scans;
     const std::vector<std::uint8_t> good = GoodPacket(model);
     for (int i = 0; i < 3000; ++i) {
@@ -471,13 +457,13 @@ TEST(LidarDecoder, NeverCrashesOnRandomBytes) {
 TEST(LidarDecoder, RejectsBadOptions) {
   LidarDecoderOptions o;
   o.min_range_m = -1;
-  EXPECT_EQ(LidarDecoder::Create(TableFor(LidarModel::kVlp16), o).status().code(),
+  EXPECT_EQ(LidarDecoder::Create(SyntheticBeamTable(LidarModel::kVlp16), o).status().code(),
             absl::StatusCode::kInvalidArgument);
   o.min_range_m = 5;
   o.max_range_m = 4;
-  EXPECT_EQ(LidarDecoder::Create(TableFor(LidarModel::kVlp16), o).status().code(),
+  EXPECT_EQ(LidarDecoder::Create(SyntheticBeamTable(LidarModel::kVlp16), o).status().code(),
             absl::StatusCode::kInvalidArgument);
-  LidarBeamTable t = TableFor(LidarModel::kVlp16);
+  LidarBeamTable t = SyntheticBeamTable(LidarModel::kVlp16);
   t.beams.pop_back();
   EXPECT_EQ(LidarDecoder::Create(t).status().code(), absl::StatusCode::kInvalidArgument);
 }

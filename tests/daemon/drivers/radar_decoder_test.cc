@@ -31,7 +31,7 @@ TEST(RadarDecoderTest, ParsesModelNames) {
 }
 
 TEST(RadarDecoderTest, WorkedExampleAsALog) {
-  // One cluster announced (near 1, far 0, counter 0x0102), then sensors.md's 0x701 example.
+  // One cluster announced (near 1, far 0, counter 0x0102), then docs/sensors.md's 0x701 example.
   const std::vector<CanFrame> frames = Parse(
       "(1600000000.000000) can0 600#0100010210\n"
       "(1600000000.000250) can0 701#0564FE8E800160A4\n");
@@ -45,7 +45,7 @@ TEST(RadarDecoderTest, WorkedExampleAsALog) {
   EXPECT_TRUE(c.complete());
   ASSERT_EQ(c.detections.size(), 1u);
   const RadarDetection& d = c.detections[0];
-  constexpr double kPrintedDigits = 0.005;  // sensors.md rounds to two decimals
+  constexpr double kPrintedDigits = 0.005;  // docs/sensors.md rounds to two decimals
   EXPECT_EQ(d.id, 5);
   EXPECT_NEAR(d.x_m(), 146.2, kFloatSlack);
   EXPECT_NEAR(d.y_m(), 28.5, kFloatSlack);

@@ -17,7 +17,7 @@ namespace {
 
 using std::chrono::milliseconds;
 
-// This machine's kernel has no CAN (sensors.md): the real socket(PF_CAN) fails. Tests that
+// This machine's kernel has no CAN (docs/sensors.md): the real socket(PF_CAN) fails. Tests that
 // need to get past it hand Open() a stand-in socket through SocketCanSyscalls.
 bool KernelHasCan() {
   const int fd = ::socket(PF_CAN, SOCK_RAW, CAN_RAW);

@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <string>
 #include <thread>
 #include <vector>
@@ -15,11 +16,23 @@
 #include "daemon/drivers/lidar_pcap.h"
 #include "gtest/gtest.h"
 #include "station/io/pcap.h"
+#include "tests/support/lidar_recording.h"
 
 namespace linecal {
 namespace {
 
-const std::string kData = std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/";
+// A recording from the project's encoder, as a pcap file in the temporary folder (the
+// receiver is under test here; the decode of real recordings is lidar_decoder_test's).
+std::string EncodedPcap(LidarModel model, double turns) {
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("udp_receiver_" + std::string(GetLidarModelInfo(model).name) + "_" +
+                             std::to_string(getpid()) + ".pcap"))
+                               .string();
+  const testing_support::EncodedRecording rec =
+      testing_support::EncodeRecording(model, LidarReturnMode::kDual, turns);
+  EXPECT_TRUE(testing_support::WriteRecordingPcap(rec, path).ok());
+  return path;
+}
 
 // A UDP socket that sends to 127.0.0.1:port (loopback only).
 class LoopbackSender {
@@ -117,15 +130,16 @@ std::vector<LidarScan> DecodeOverLoopback(const std::string& pcap, const LidarBe
 }
 
 TEST(UdpReceiver, LoopbackReplayOfPandar64GivesTheFileDecode) {
-  const LidarBeamTable table =
-      *ReadAngleCorrectionCsv(LidarModel::kPandar64, kData + "pandar64/Pandar64.csv");
-  const std::vector<LidarScan> from_file = DecodeFile(kData + "pandar64/packets.pcap", table);
+  const LidarBeamTable table = testing_support::SyntheticBeamTable(LidarModel::kPandar64);
+  // 4.5 turns of dual-return packets: 600 a turn, rotations 1-3 complete.
+  const std::string pcap = EncodedPcap(LidarModel::kPandar64, 4.5);
+  const std::vector<LidarScan> from_file = DecodeFile(pcap, table);
   UdpReceiverStats stats;
-  const std::vector<LidarScan> live =
-      DecodeOverLoopback(kData + "pandar64/packets.pcap", table, &stats);
+  const std::vector<LidarScan> live = DecodeOverLoopback(pcap, table, &stats);
+  std::filesystem::remove(pcap);
   EXPECT_EQ(stats.truncated, 0);
   EXPECT_EQ(stats.kernel_drops, 0);
-  EXPECT_EQ(stats.bytes, 2400 * 1198);
+  EXPECT_EQ(stats.bytes, 2700 * 1198);
   ASSERT_EQ(from_file.size(), 3u);
   ASSERT_EQ(live.size(), from_file.size());
   // Hesai packets carry their own UTC date: identical, times included.
@@ -138,10 +152,11 @@ TEST(UdpReceiver, LoopbackReplayOfPandar64GivesTheFileDecode) {
 
 TEST(UdpReceiver, LoopbackReplayOfVlp16GivesTheFileDecode) {
   const LidarBeamTable table = *DefaultBeamTable(LidarModel::kVlp16);
-  const std::vector<LidarScan> from_file = DecodeFile(kData + "vlp16/packets.pcap", table);
+  const std::string pcap = EncodedPcap(LidarModel::kVlp16, 4.5);
+  const std::vector<LidarScan> from_file = DecodeFile(pcap, table);
   UdpReceiverStats stats;
-  const std::vector<LidarScan> live =
-      DecodeOverLoopback(kData + "vlp16/packets.pcap", table, &stats);
+  const std::vector<LidarScan> live = DecodeOverLoopback(pcap, table, &stats);
+  std::filesystem::remove(pcap);
   EXPECT_EQ(stats.kernel_drops, 0);
   ASSERT_EQ(from_file.size(), 3u);
   ASSERT_EQ(live.size(), from_file.size());

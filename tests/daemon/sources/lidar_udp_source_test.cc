@@ -1,25 +1,25 @@
-// The UDP LiDAR source on loopback: a sender thread replays shared/data's Pandar64 recording
-// (looped) to 127.0.0.1 while the source acquires rotations into a scratch capture directory.
+// The UDP LiDAR source on loopback: a sender thread replays a Pandar64 recording made with
+// the project's encoder (looped) to 127.0.0.1 while the source acquires rotations into a scratch
+// capture directory.
 #include "daemon/sources/lidar_udp_source.h"
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
 
-#include <gtest/gtest.h>
-
-#include "tests/daemon/scratch_dir.h"
-
-#include "tests/daemon/loopback_udp.h"
-
 #include "daemon/drivers/lidar_decoder.h"
 #include "station/io/pcap.h"
 #include "station/io/pcd.h"
+#include "tests/daemon/loopback_udp.h"
+#include "tests/daemon/scratch_dir.h"
+#include "tests/support/lidar_recording.h"
 
 namespace linecal {
 namespace {
@@ -30,7 +30,12 @@ using testing_daemon::LoopingSender;
 using testing_daemon::Payload;
 using Clock = std::chrono::steady_clock;
 
-const std::string kData = std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/";
+// Recordings from the project's encoder: 4.5 turns of the Pandar64 in dual return (600
+// packets a turn), and of a VLP-16 for another model's packets.
+constexpr std::size_t kPandar64PacketsPerTurn = 600;
+std::vector<Payload> EncodedPayloads(LidarModel model) {
+  return testing_support::EncodeRecording(model, LidarReturnMode::kDual, 4.5).payloads;
+}
 
 struct Record {
   std::int64_t time_ns;
@@ -49,15 +54,6 @@ std::vector<Record> PcapRecords(const fs::path& pcap) {
   return out;
 }
 
-SensorModel RoofLidar() {
-  SensorModel s;
-  s.name = "roof_lidar";
-  s.kind = SensorKind::kLidar;
-  s.model = "pandar64";
-  s.angles_file = kData + "pandar64/Pandar64.csv";
-  return s;
-}
-
 class LidarUdpSourceTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -65,6 +61,8 @@ class LidarUdpSourceTest : public ::testing::Test {
     port_ = FreeUdpPort();
     config_.bind_address = "127.0.0.1";
     config_.port = port_;
+    angles_file_ = dir_ / "Pandar64.csv";
+    std::ofstream(angles_file_) << testing_support::SyntheticAngleCsv(LidarModel::kPandar64);
   }
   void TearDown() override { fs::remove_all(dir_); }
 
@@ -77,7 +75,17 @@ class LidarUdpSourceTest : public ::testing::Test {
     return r;
   }
 
+  SensorModel RoofLidar() const {
+    SensorModel s;
+    s.name = "roof_lidar";
+    s.kind = SensorKind::kLidar;
+    s.model = "pandar64";
+    s.angles_file = angles_file_.string();
+    return s;
+  }
+
   fs::path dir_;
+  fs::path angles_file_;
   std::uint16_t port_ = 0;
   LidarUdpSourceConfig config_;
 };
@@ -85,8 +93,8 @@ class LidarUdpSourceTest : public ::testing::Test {
 // The datagrams the source wrote are the file's, in order from some packet on (looped), and
 // its PCD scans are what a decoder makes of exactly those datagrams.
 TEST_F(LidarUdpSourceTest, AcquiresRotationsThatEqualTheDecodeOfTheReceivedPackets) {
-  const std::vector<Payload> file = testing_daemon::PcapPayloads(kData + "pandar64/packets.pcap");
-  ASSERT_EQ(file.size(), 2400u);
+  const std::vector<Payload> file = EncodedPayloads(LidarModel::kPandar64);
+  ASSERT_EQ(file.size(), 4 * kPandar64PacketsPerTurn + kPandar64PacketsPerTurn / 2);
   LidarUdpSource source(config_);
   std::vector<std::string> progress;
   AcquireRequest request = Request(2, std::chrono::milliseconds(10000));
@@ -122,9 +130,10 @@ TEST_F(LidarUdpSourceTest, AcquiresRotationsThatEqualTheDecodeOfTheReceivedPacke
   EXPECT_EQ(counters.receiver.kernel_drops, 0);
   EXPECT_EQ(counters.decoder.skipped_total(), 0);
   EXPECT_EQ(counters.decoder.scans, 2);
-  // Two rotations of ~750 packets each, after up to one partial rotation.
-  EXPECT_GT(written.size(), 1400u);
-  EXPECT_LT(written.size(), 2500u);
+  // Two rotations, after up to one partial rotation, and the few packets past the second
+  // that its beams with positive azimuth offsets (up to 2.6 degrees) still fire in.
+  EXPECT_GE(written.size(), 2 * kPandar64PacketsPerTurn);
+  EXPECT_LE(written.size(), 3 * kPandar64PacketsPerTurn + kPandar64PacketsPerTurn / 20);
 
   // The scans: a fresh decoder over the same datagrams with the same receive times.
   absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(*LidarBeamTableOf(RoofLidar()));
@@ -144,7 +153,7 @@ TEST_F(LidarUdpSourceTest, AcquiresRotationsThatEqualTheDecodeOfTheReceivedPacke
 }
 
 TEST_F(LidarUdpSourceTest, TruncatedPacketsAreCountedAndSkipped) {
-  std::vector<Payload> file = testing_daemon::PcapPayloads(kData + "pandar64/packets.pcap");
+  std::vector<Payload> file = EncodedPayloads(LidarModel::kPandar64);
   // Every 50th packet cut to 600 bytes, as a lossy link would.
   for (size_t i = 0; i < file.size(); i += 50) file[i].resize(600);
   LidarUdpSource source(config_);
@@ -158,7 +167,8 @@ TEST_F(LidarUdpSourceTest, TruncatedPacketsAreCountedAndSkipped) {
   std::int64_t short_packets = 0;
   for (const Record& r : written) short_packets += r.payload.size() == 600;
   const LidarUdpCounters counters = source.last_counters();
-  EXPECT_GE(short_packets, 28);  // ~1500 packets received, one in 50 cut
+  // At least two turns received (1200 consecutive packets of the loop), one in 50 cut.
+  EXPECT_GE(short_packets, static_cast<std::int64_t>(2 * kPandar64PacketsPerTurn / 50));
   EXPECT_EQ(counters.decoder.skipped[static_cast<int>(LidarSkipReason::kTruncated)], short_packets);
   EXPECT_EQ(counters.decoder.skipped_total(), short_packets);
   EXPECT_EQ(counters.decoder.packets_decoded, static_cast<std::int64_t>(written.size()) - short_packets);
@@ -181,7 +191,7 @@ TEST_F(LidarUdpSourceTest, AnotherModelsPacketsAreDataLossNamingTheCount) {
   LidarUdpSource source(config_);
   absl::StatusOr<CaptureSensor> got;
   {
-    LoopingSender sender(port_, testing_daemon::PcapPayloads(kData + "vlp16/packets.pcap"));
+    LoopingSender sender(port_, EncodedPayloads(LidarModel::kVlp16));
     got = source.Acquire(RoofLidar(), Request(1, std::chrono::milliseconds(1000)));
   }
   ASSERT_TRUE(absl::IsDataLoss(got.status())) << got.status();

@@ -1,9 +1,9 @@
 // Closed-loop tests of the prior-free round-hole board search: the station simulator scans a
 // board on its stand with the floor, a wall behind it and a plain box of the board's size
 // beside it, with the reference car's Pandar64 and VLP-16 beam tables at 3-8 m and several
-// headings; the search must find the board (hole centres within acceptance.md's bars) and
+// headings; the search must find the board (hole centres within docs/acceptance.md's bars) and
 // never report the box; two boards are ambiguous; empty and board-less clouds (including the
-// real reference scans in shared/data) give their reasons.
+// real reference scans of docs/external-data.md) give their reasons.
 #include "detectors/round_hole/round_hole_search.h"
 
 #include <gtest/gtest.h>
@@ -15,11 +15,10 @@
 
 #include "station/io/pcd.h"
 #include "tests/detectors/round_hole/round_hole_scene.h"
+#include "tests/support/external_data.h"
 
 namespace linecal {
 namespace {
-
-const std::string kSharedData = std::string(LINECAL_SOURCE_DIR) + "/../shared/data";
 
 // A surface `size_m` wide and high whose centre is at `centre_station`, facing along the
 // horizontal direction `facing_rad` (station frame).
@@ -104,7 +103,7 @@ TEST(RoundHoleSearchTest, FindsTheBoardAmongFloorWallAndABox) {
     // The box's sides are board-sized planes too: seen and refused.
     EXPECT_GE(r.board_sized_patches, 2) << what;
 #if defined(NDEBUG) && !defined(__SANITIZE_ADDRESS__)
-    EXPECT_LT(ms, 50.0) << what;  // acceptance.md, optimised builds only
+    EXPECT_LT(ms, 50.0) << what;  // docs/acceptance.md, optimised builds only
 #endif
   }
 }
@@ -165,12 +164,12 @@ TEST(RoundHoleSearchTest, EmptyAndBoardlessClouds) {
   EXPECT_STREQ(RoundHoleSearchReasonName(RoundHoleSearchReason::kAmbiguous), "ambiguous");
 }
 
-// The real scans in shared/data (a VLP-16 and a Pandar64 in ordinary surroundings, no board):
-// never a false board.
+// The real scans of docs/external-data.md (a VLP-16 and a Pandar64 in ordinary surroundings, no
+// board): never a false board.
 TEST(RoundHoleSearchTest, RealScansWithoutABoard) {
   const Board board = *Board::Create({.type = BoardType::kRoundHole});
   for (const char* model : {"vlp16", "pandar64"}) {
-    const std::string path = kSharedData + "/lidar/" + model + "/reference_scan.pcd";
+    LINECAL_EXTERNAL_OR_SKIP(path, std::string("lidar/") + model + "/reference_scan.pcd");
     const absl::StatusOr<PcdCloud> cloud = ReadPcd(path);
     ASSERT_TRUE(cloud.ok()) << cloud.status();
     std::vector<std::vector<RoundHoleCloudPoint>> frames(1);

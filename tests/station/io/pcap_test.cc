@@ -1,5 +1,7 @@
 #include "station/io/pcap.h"
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -7,12 +9,11 @@
 
 #include "gtest/gtest.h"
 #include "station/io/byte_io.h"
+#include "tests/support/external_data.h"
+#include "tests/support/lidar_recording.h"
 
 namespace linecal {
 namespace {
-
-const std::string kVlp16Pcap =
-    std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/vlp16/packets.pcap";
 
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -27,8 +28,29 @@ std::filesystem::path TempPath(const std::string& name) {
           name);
 }
 
+// 603 VLP-16 packets (1206-byte payloads, 1248-byte Ethernet frames) from the encoder, as
+// bytes of a nanosecond pcap file: the layout of the real recording, made here.
+constexpr int kEncodedRecords = 603;
+const std::string& EncodedVlp16File() {
+  static const std::string bytes = [] {
+    const std::filesystem::path path = std::filesystem::temp_directory_path() /
+                                       ("pcap_test_vlp16_" + std::to_string(::getpid()) + ".pcap");
+    testing_support::EncodedRecording rec =
+        testing_support::EncodeRecording(LidarModel::kVlp16, LidarReturnMode::kStrongest, 8.1);
+    rec.payloads.resize(kEncodedRecords);
+    rec.times_ns.resize(kEncodedRecords);
+    EXPECT_TRUE(testing_support::WriteRecordingPcap(rec, path).ok());
+    std::string file = ReadFile(path.string());
+    std::filesystem::remove(path);
+    return file;
+  }();
+  return bytes;
+}
+
+// The real VLP-16 recording (docs/external-data.md): what a sensor sent, not our encoder.
 TEST(PcapReader, ReadsTheRecordedVlp16File) {
-  absl::StatusOr<PcapReader> r = PcapReader::Open(kVlp16Pcap);
+  LINECAL_EXTERNAL_OR_SKIP(pcap, "lidar/vlp16/packets.pcap");
+  absl::StatusOr<PcapReader> r = PcapReader::Open(pcap);
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_TRUE(r->info().nanosecond);
   EXPECT_FALSE(r->info().big_endian);
@@ -50,7 +72,7 @@ TEST(PcapReader, ReadsTheRecordedVlp16File) {
     ASSERT_EQ(f.kind, FrameKind::kUdp);
     EXPECT_EQ(f.payload.size(), 1206u);
     EXPECT_FALSE(f.payload_truncated);
-    EXPECT_EQ(f.endpoints.src_ip, 0xC0A801C9u);  // 192.168.1.201 (data/README.md)
+    EXPECT_EQ(f.endpoints.src_ip, 0xC0A801C9u);  // 192.168.1.201 (docs/sensors.md)
     EXPECT_EQ(f.endpoints.dst_ip, 0xFFFFFFFFu);
     EXPECT_EQ(f.endpoints.src_port, 2368);
     EXPECT_EQ(f.endpoints.dst_port, 2368);
@@ -63,9 +85,11 @@ TEST(PcapReader, ReadsTheRecordedVlp16File) {
 }
 
 TEST(PcapUdp, BuildsTheSameHeadersAsTheRecording) {
-  // The recording's headers (data/README.md: written afresh) are what BuildUdpFrame writes
-  // for IP id 0, checksum included: a byte-exact check of the Ethernet/IPv4/UDP layout.
-  absl::StatusOr<PcapReader> r = PcapReader::Open(kVlp16Pcap);
+  // The real recording's headers (written afresh, docs/external-data.md) are what
+  // BuildUdpFrame writes for IP id 0, checksum included: a byte-exact check of the
+  // Ethernet/IPv4/UDP layout against bytes this project did not write.
+  LINECAL_EXTERNAL_OR_SKIP(pcap, "lidar/vlp16/packets.pcap");
+  absl::StatusOr<PcapReader> r = PcapReader::Open(pcap);
   ASSERT_TRUE(r.ok());
   PcapRecord rec;
   ASSERT_TRUE(*r->Next(&rec));
@@ -163,7 +187,7 @@ std::string ToBigEndian(const std::string& little) {
 }
 
 TEST(PcapReader, ReadsBigEndianFiles) {
-  const std::string little = ReadFile(kVlp16Pcap);
+  const std::string& little = EncodedVlp16File();
   absl::StatusOr<PcapReader> a = PcapReader::FromBytes(little, "le");
   absl::StatusOr<PcapReader> b = PcapReader::FromBytes(ToBigEndian(little), "be");
   ASSERT_TRUE(a.ok() && b.ok());
@@ -179,11 +203,11 @@ TEST(PcapReader, ReadsBigEndianFiles) {
     ++n;
   }
   EXPECT_FALSE(*b->Next(&rb));
-  EXPECT_EQ(n, 603);
+  EXPECT_EQ(n, kEncodedRecords);
 }
 
 TEST(PcapReader, TruncatedFilesEndAtTheLastWholeRecord) {
-  const std::string file = ReadFile(kVlp16Pcap);
+  const std::string& file = EncodedVlp16File();
   constexpr std::size_t kRecord = 16 + 1248;
   struct Cut {
     std::size_t bytes;
@@ -210,7 +234,7 @@ TEST(PcapReader, TruncatedFilesEndAtTheLastWholeRecord) {
 }
 
 TEST(PcapReader, RejectsWhatIsNotAPcapFile) {
-  const std::string file = ReadFile(kVlp16Pcap);
+  const std::string& file = EncodedVlp16File();
   auto code = [](const std::string& bytes) {
     return PcapReader::FromBytes(bytes, "x.pcap").status().code();
   };

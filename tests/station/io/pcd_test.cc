@@ -10,14 +10,10 @@
 #include <tuple>
 
 #include "gtest/gtest.h"
+#include "tests/support/external_data.h"
 
 namespace linecal {
 namespace {
-
-const std::string kVlp16Reference =
-    std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/vlp16/reference_scan.pcd";
-const std::string kPandar64Reference =
-    std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/pandar64/reference_scan.pcd";
 
 std::filesystem::path TempPath(const std::string& name) {
   return std::filesystem::temp_directory_path() /
@@ -94,10 +90,13 @@ TEST(Pcd, EmptyCloudsRoundTrip) {
   }
 }
 
+// The real recordings' reference decodes (docs/external-data.md), written by another program.
 TEST(Pcd, ReadsTheReferenceScans) {
+  LINECAL_EXTERNAL_OR_SKIP(vlp16_reference, "lidar/vlp16/reference_scan.pcd");
+  LINECAL_EXTERNAL_OR_SKIP(pandar64_reference, "lidar/pandar64/reference_scan.pcd");
   // nebula's fields: x y z intensity(U1) return_type channel azimuth elevation distance
   // time_stamp. "channel" and "time_stamp" are not read as ring and time (see pcd.h).
-  absl::StatusOr<PcdCloud> vlp = ReadPcd(kVlp16Reference);
+  absl::StatusOr<PcdCloud> vlp = ReadPcd(vlp16_reference);
   ASSERT_TRUE(vlp.ok()) << vlp.status();
   ASSERT_EQ(vlp->points.size(), 14831u);
   EXPECT_TRUE(vlp->has_intensity);
@@ -109,7 +108,7 @@ TEST(Pcd, ReadsTheReferenceScans) {
   EXPECT_FLOAT_EQ(vlp->points[0].z, 0.0168590247631073f);
   EXPECT_EQ(vlp->points[0].intensity, 100.0f);
 
-  absl::StatusOr<PcdCloud> p64 = ReadPcd(kPandar64Reference);
+  absl::StatusOr<PcdCloud> p64 = ReadPcd(pandar64_reference);
   ASSERT_TRUE(p64.ok()) << p64.status();
   ASSERT_EQ(p64->points.size(), 93591u);
   EXPECT_FALSE(p64->has_intensity);

@@ -7,13 +7,12 @@
 #include "Eigen/Dense"
 #include "gtest/gtest.h"
 #include "station/io/byte_io.h"
+#include "tests/support/external_data.h"
 
 namespace linecal {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-const std::string kPandar64Csv =
-    std::string(LINECAL_SOURCE_DIR) + "/../shared/data/lidar/pandar64/Pandar64.csv";
 
 TEST(LidarModelInfo, PacketSizesAddUpFromTheLayouts) {
   // 12 blocks of 100 bytes, u32 time, return mode, product id.
@@ -151,9 +150,10 @@ TEST(LidarBeamTable, Vlp16Default) {
   EXPECT_NE(hesai.status().message().find("pandar64"), std::string::npos);
 }
 
+// The angle file of the real Pandar64 (docs/external-data.md), written by its maker.
 TEST(LidarBeamTable, ReadsTheRecordedPandar64File) {
-  const absl::StatusOr<LidarBeamTable> t =
-      ReadAngleCorrectionCsv(LidarModel::kPandar64, kPandar64Csv);
+  LINECAL_EXTERNAL_OR_SKIP(csv, "lidar/pandar64/Pandar64.csv");
+  const absl::StatusOr<LidarBeamTable> t = ReadAngleCorrectionCsv(LidarModel::kPandar64, csv);
   ASSERT_TRUE(t.ok()) << t.status();
   ASSERT_EQ(t->beams.size(), 64u);
   // First line "1,14.9,-1.042": channel 1 is the highest beam.

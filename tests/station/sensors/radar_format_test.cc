@@ -10,6 +10,8 @@
 #include <regex>
 #include <sstream>
 
+#include "tests/support/external_data.h"
+
 namespace linecal {
 namespace {
 
@@ -31,7 +33,7 @@ TEST(CanSignalTest, BytesNeeded) {
   EXPECT_EQ(SignalBytesNeeded(ars408::kClusterMeasCounterLe), 4);  // 16|16 little-endian
 }
 
-// sensors.md spells the 0x701 layout as byte arithmetic; that is an oracle independent of
+// docs/sensors.md spells the 0x701 layout as byte arithmetic; that is an oracle independent of
 // the DBC bit walk.
 TEST(CanSignalTest, MotorolaExtractionMatchesTheByteFormulasOf0x701) {
   std::mt19937 rng(1);  // fixed seed
@@ -142,7 +144,7 @@ TEST(Ars408Test, WorkedExampleOfSensorsMd) {
   EXPECT_NEAR(t->vrel_lat_mps, -61.25, kFloatSlack);
   EXPECT_EQ(t->dyn_prop, 0);
   const RadarDetection det = Ars408TargetToDetection(*t, RadarDetectionKind::kCluster, {});
-  constexpr double kPrintedDigits = 0.005;  // sensors.md rounds to two decimals
+  constexpr double kPrintedDigits = 0.005;  // docs/sensors.md rounds to two decimals
   EXPECT_NEAR(det.range_m, 148.95, kPrintedDigits);
   EXPECT_NEAR(det.azimuth_rad / kRadPerDeg, 11.03, kPrintedDigits);
   EXPECT_NEAR(det.range_rate_mps, -61.25 * 28.5 / std::hypot(146.2, 28.5), kFloatSlack);
@@ -374,8 +376,6 @@ std::map<uint32_t, DbcMessage> ParseDbc(const std::string& path) {
   return messages;
 }
 
-const std::string kEsrDbc = std::string(LINECAL_SOURCE_DIR) + "/../shared/data/radar/ESR.dbc";
-
 void ExpectSameSignals(const DbcMessage& dbc, std::span<const CanSignal> ours) {
   ASSERT_EQ(dbc.signals.size(), ours.size()) << dbc.name;
   for (const DbcSignal& d : dbc.signals) {
@@ -392,7 +392,8 @@ void ExpectSameSignals(const DbcMessage& dbc, std::span<const CanSignal> ours) {
 }
 
 TEST(EsrDbcTest, ConstantsMatchEveryTrackAndStatusSignalOfTheDbc) {
-  const std::map<uint32_t, DbcMessage> dbc = ParseDbc(kEsrDbc);
+  LINECAL_EXTERNAL_OR_SKIP(esr_dbc, "radar/ESR.dbc");
+  const std::map<uint32_t, DbcMessage> dbc = ParseDbc(esr_dbc);
   for (int n = 1; n <= esr::kTrackCount; ++n) {
     const uint32_t id = esr::kFirstTrackId + static_cast<uint32_t>(n - 1);
     ASSERT_TRUE(dbc.contains(id)) << std::hex << id;
@@ -408,7 +409,8 @@ TEST(EsrDbcTest, ConstantsMatchEveryTrackAndStatusSignalOfTheDbc) {
 
 // Frames built with the DBC's own definitions (not our constants) decode to the same values.
 TEST(EsrDbcTest, FramesBuiltFromTheDbcDecode) {
-  const std::map<uint32_t, DbcMessage> dbc = ParseDbc(kEsrDbc);
+  LINECAL_EXTERNAL_OR_SKIP(esr_dbc, "radar/ESR.dbc");
+  const std::map<uint32_t, DbcMessage> dbc = ParseDbc(esr_dbc);
   std::mt19937 rng(5);  // fixed seed
   for (int trial = 0; trial < 500; ++trial) {
     const int n = static_cast<int>(Uniform(rng, 1, 64.99));
