@@ -1,7 +1,7 @@
 # cmake -DMODULE=detectors|station -DROOT=<tree> -P check_includes.cmake
 #
 # Reads every C/C++ file under ROOT/MODULE and fails (FATAL_ERROR, listing file:line) when
-# an #include names something the module may not use (conventions.md):
+# an #include names something the module may not use (docs/conventions.md):
 #   detectors: the C++ standard library, Eigen, libapriltag and detectors/ itself - an
 #              allow-list, so any new library must be added here on purpose;
 #   station:   anything but gRPC, protobuf, SQLite, sockets, OpenCV, daemon/, tools/, proto/.
@@ -55,7 +55,7 @@ foreach(f IN LISTS files)
   endforeach()
 endforeach()
 if(problems)
-  message(FATAL_ERROR "${MODULE}/ includes what conventions.md forbids:${problems}")
+  message(FATAL_ERROR "${MODULE}/ includes what docs/conventions.md forbids:${problems}")
 endif()
 list(LENGTH files n)
 message(STATUS "${MODULE}/: ${n} files, includes within the rules")

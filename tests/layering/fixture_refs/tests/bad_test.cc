@@ -1,0 +1,1 @@
+// Reads ../shared/data/lidar/vlp16/packets.pcap directly.
