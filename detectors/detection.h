@@ -1,5 +1,5 @@
 #pragma once
-// What every board detector returns (interfaces.md, `linecal detect`), and the reasons it can
+// What every board detector returns (docs/interfaces.md, `linecal detect`), and the reasons it can
 // give when it finds no board. Detectors are pure functions over non-owning image views: no
 // I/O, no threads, no global state; a detector either finds the whole board (found = true),
 // or reports found = false with a reason and, only when they are certain, the features of a
@@ -44,7 +44,7 @@ struct Detection {
   std::vector<DetectedFeature> features;  // ordered by id
 };
 
-// Below this side no board of boards.md (smallest squares and cells 12 px, circles a few
+// Below this side no board of docs/boards.md (smallest squares and cells 12 px, circles a few
 // pixels wide) fits in an image.
 inline constexpr int kMinDetectImageSide = 16;
 

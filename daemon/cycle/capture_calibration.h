@@ -1,7 +1,7 @@
 #pragma once
 // One calibration cycle computed from a capture: what `linecal calibrate --capture DIR` prints
 // and what the daemon stores for a cycle replayed from, or recorded into, that capture. One
-// function for both, so that they give identical results (interfaces.md, "Captures").
+// function for both, so that they give identical results (docs/interfaces.md, "Captures").
 //
 // Per sensor of the capture (in parallel, one thread per sensor; results do not depend on
 // the scheduling):
@@ -95,7 +95,7 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
                                        std::span<const std::span<const RoundHoleCloudPoint>> frames,
                                        std::vector<RoundHoleCloudDetection>* detections = nullptr);
 
-// The results document of interfaces.md ("Results"): per sensor name, kind, verdict, reason,
+// The results document of docs/interfaces.md ("Results"): per sensor name, kind, verdict, reason,
 // message, T_car_sensor (4x4 row-major), yaw/pitch/roll (deg) and x/y/z (m), their deviation
 // and 1-sigma, residual RMS, features used; cameras also the vanishing point, the ground
 // homography and the ranging check, and (docs/solvers.md) "board_method" (method (b) and its

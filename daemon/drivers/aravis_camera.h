@@ -1,6 +1,6 @@
 #pragma once
 // Grabbing frames from a GigE Vision (or USB3 Vision) camera through Aravis 0.8
-// (sensors.md "GigE Vision cameras"), converted to 8-bit grey for the detectors.
+// (docs/sensors.md "GigE Vision cameras"), converted to 8-bit grey for the detectors.
 //
 // Errors, each naming the camera:
 //   Unavailable       "camera 'X' not found" (no camera answers to the id), or the camera

@@ -62,7 +62,8 @@ inline constexpr int kMaxBlockStepCentideg = 500;
 struct LidarDecoderOptions {
   // Returns nearer than 0.3 m come from the sensor's own window and housing (and are below
   // both vendors' specified minimum range); 200 m is the Pandar64's specified maximum and
-  // beyond the VLP-16's 131 m field. The reference decodes in shared/data used the same.
+  // beyond the VLP-16's 131 m field. The reference decodes of the real recordings
+  // (docs/external-data.md) used the same.
   double min_range_m = 0.3;
   double max_range_m = 200.0;
 

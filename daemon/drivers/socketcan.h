@@ -2,7 +2,7 @@
 // Reading CAN frames from a Linux SocketCAN interface (raw socket, classic and CAN FD, with
 // error frames and kernel receive timestamps).
 //
-// Opening tells apart the failures an installer meets (sensors.md):
+// Opening tells apart the failures an installer meets (docs/sensors.md):
 //   FailedPrecondition "kernel has no CAN support"  socket(PF_CAN) fails with EAFNOSUPPORT
 //   NotFound           "no such interface"          if_nametoindex() = 0
 //   FailedPrecondition "interface ... is down"      SIOCGIFFLAGS without IFF_UP

@@ -1,5 +1,5 @@
 #pragma once
-// Capturing frames from a V4L2 camera (sensors.md "V4L2"): memory-mapped streaming, frames
+// Capturing frames from a V4L2 camera (docs/sensors.md "V4L2"): memory-mapped streaming, frames
 // converted to 8-bit grey.
 //
 // Opening tells apart what an installer meets, all Unavailable with the device path:

@@ -1,4 +1,4 @@
-// linecald: the station daemon (interfaces.md). `linecald --config FILE` with --listen,
+// linecald: the station daemon (docs/interfaces.md). `linecald --config FILE` with --listen,
 // --db and --log-level overriding the file; without --config it starts on the bundled demo
 // station (simulated sensors) with its data under --data-dir (default ./linecald-data).
 // SIGTERM or SIGINT: stop taking calls, let a running cycle end as cancelled, exit 0.

@@ -36,10 +36,10 @@ enum class Verdict { kNone, kPass, kFail, kError };
 
 // "running", "done", "cancelled", "aborted" — the words stored in the database.
 const char* CycleStateName(CycleState state);
-// "", "pass", "fail", "error" — the words of interfaces.md's results.
+// "", "pass", "fail", "error" — the words of docs/interfaces.md's results.
 const char* VerdictName(Verdict verdict);
 
-// Yaw/pitch/roll (degrees, conventions.md) and position (metres) of a sensor in the car.
+// Yaw/pitch/roll (degrees, docs/conventions.md) and position (metres) of a sensor in the car.
 struct MountingValues {
   double yaw_deg = 0, pitch_deg = 0, roll_deg = 0;
   double x_m = 0, y_m = 0, z_m = 0;

@@ -12,7 +12,7 @@
 namespace linecal {
 namespace {
 
-// Collects a board's shapes and features. Layouts are written in the units of boards.md,
+// Collects a board's shapes and features. Layouts are written in the units of docs/boards.md,
 // millimetres, either in PDF coordinates (origin at the page's top-left, y down) or in
 // board-frame millimetres (origin at the page centre, y up); both end up in metres, scaled.
 class Drawing {
@@ -74,7 +74,7 @@ class Drawing {
 
 void DrawChessboard(Drawing& d) {
   constexpr double kSquare = 150.0;
-  // Black squares, top-left corners in PDF coordinates (boards.md, checked against the PDF).
+  // Black squares, top-left corners in PDF coordinates (docs/boards.md, checked against the PDF).
   constexpr double kSquares[6][2] = {{100, 100},  {400, 100},  {250, 250},    // left "V"
                                      {2200, 100}, {2050, 250}, {2350, 250}};  // right "Λ"
   for (const auto& s : kSquares) d.PdfRect(Paint::kBlack, s[0], s[1], kSquare, kSquare);
@@ -135,7 +135,7 @@ void DrawVerticalBoard(Drawing& d) {
   constexpr double kCell = 50.0;
   constexpr double kLeft = 50.0;  // PDF x of cell column 0
   constexpr double kTop = 50.0;   // PDF y of cell row 0
-  // boards.md's cell table, '#' black, row 0 at the top (checked against the PDF).
+  // docs/boards.md's cell table, '#' black, row 0 at the top (checked against the PDF).
   constexpr std::string_view kCells[kCellRows] = {"#.##", "##.#", "#.##", "##.#", "#.##", "##..",
                                                   "#.#.", "##..", "#.#.", "##..", "..#.", ".#..",
                                                   "..#.", ".#..", "..#.", "##..", "#.#.", "##.."};
@@ -189,7 +189,7 @@ void DrawArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf) {
 }
 
 // The four markers of the ArUco and round-hole boards, in id order (so feature id =
-// 4 * rank of the marker id + corner). Positions: boards.md's table, checked against both
+// 4 * rank of the marker id + corner). Positions: docs/boards.md's table, checked against both
 // PDFs; they are deliberately not symmetric.
 void DrawArucoMarkers(Drawing& d) {
   DrawArucoMarker(d, 4, 434, 130);   // top
@@ -228,7 +228,7 @@ void DrawApriltagBoard(Drawing& d, int border_bits) {
                   cy + 0.5 * kSpacing);
     }
   }
-  // Tag id = 6 * row + col, row 0 at the bottom, col 0 at the left (boards.md).
+  // Tag id = 6 * row + col, row 0 at the bottom, col 0 at the left (docs/boards.md).
   for (int id = 0; id < kTagsPerSide * kTagsPerSide; ++id) {
     const int row = id / kTagsPerSide, col = id % kTagsPerSide;
     const double cx = kGridCentreX + (col - 0.5 * (kTagsPerSide - 1)) * kPitch;

@@ -1,9 +1,9 @@
 #pragma once
-// Parametric definitions of the calibration boards of boards.md: their features (with stable
+// Parametric definitions of the calibration boards of docs/boards.md: their features (with stable
 // ids and exact board-frame coordinates), the shapes they are printed with, and a fast point
 // query of what is printed where. docs/boards.md documents every board's ids and layout.
 //
-// Board frame (boards.md, conventions.md): origin at the centre of the printed page, x to
+// Board frame (docs/boards.md, docs/conventions.md): origin at the centre of the printed page, x to
 // the right and y up as seen facing the print, z out of the print towards the viewer.
 // Everything here is in metres in that frame. The default layouts are 1 PDF unit = 1 mm
 // (april_board.pdf: an A0 page); `scale` multiplies every length about the page centre.
@@ -36,7 +36,7 @@ inline constexpr std::array<BoardType, 7> kAllBoardTypes = {
     BoardType::kApriltag,   BoardType::kRoundHole, BoardType::kChecker};
 
 // The board's command-line and config name: "chessboard", "circle", "vertical", "aruco",
-// "apriltag", "round_hole", "checker" (interfaces.md).
+// "apriltag", "round_hole", "checker" (docs/interfaces.md).
 const char* BoardTypeName(BoardType type);
 // The inverse of BoardTypeName; nullopt for any other text. Case-sensitive.
 std::optional<BoardType> BoardTypeFromName(std::string_view name);
@@ -44,10 +44,10 @@ std::optional<BoardType> BoardTypeFromName(std::string_view name);
 struct BoardParams {
   BoardType type = BoardType::kChessboard;
   // Multiplies every length of the layout (a board printed at another size is the same
-  // board with another scale, boards.md). For kChecker it multiplies square_m too.
+  // board with another scale, docs/boards.md). For kChecker it multiplies square_m too.
   double scale = 1.0;
   // kChecker only: inner corners along x (cols) and y (rows), and the square side.
-  // Defaults: the classic 9 x 6, 25 mm board of boards.md.
+  // Defaults: the classic 9 x 6, 25 mm board of docs/boards.md.
   int cols = 9;
   int rows = 6;
   double square_m = 0.025;

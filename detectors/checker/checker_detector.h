@@ -15,7 +15,7 @@
 // then on each finer level until one finds the board; the refinement is always at full
 // resolution.
 //
-// Orientation: boards.md numbers corner (col c, row r) from the top-left square, which is
+// Orientation: docs/boards.md numbers corner (col c, row r) from the top-left square, which is
 // black. The colours fix the orientation unless the board is symmetric under a rotation
 // that keeps them: under 180 degrees when cols + rows is even (then the bottom-right square
 // is black too), and under 90 degrees when cols == rows and both are even. For such boards

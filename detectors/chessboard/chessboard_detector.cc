@@ -73,7 +73,7 @@ std::array<Eigen::Vector2d, 4> BoxCorners(const Eigen::AlignedBox2d& b) {
           Eigen::Vector2d(b.max().x(), b.min().y()), b.min()};
 }
 
-// The model of a board made of groups of three squares (boards.md §1); nullopt when the
+// The model of a board made of groups of three squares (docs/boards.md §1); nullopt when the
 // board is not such a board (two groups, every feature on one vertical and one horizontal
 // edge line of its group, every X-corner on one horizontal board line) or is not symmetric
 // under 180 degrees (see the header).
@@ -240,7 +240,7 @@ std::vector<Triple> FindTriples(const std::vector<SquareQuad>& quads,
       const SquareQuad& a = quads[i];
       const SquareQuad& b = quads[j];
       // Squares of one group differ in size only by perspective over two squares: a factor
-      // of 2 is far beyond any view of acceptance.md.
+      // of 2 is far beyond any view of docs/acceptance.md.
       const double small = std::min(a.side_px, b.side_px);
       const double large = std::max(a.side_px, b.side_px);
       if (large > 2.0 * small) continue;
@@ -306,7 +306,7 @@ constexpr double kSaddleBlurSigmaPx = 1.5;
 // near a vertex the window across the edge also sees the blurred perpendicular side or
 // the neighbour's corner, which pulls the point towards it. 3 px is the window of half
 // the edge (up to 4 px across) seen from the perpendicular side at the blur of
-// acceptance.md (1.5 px at most).
+// docs/acceptance.md (1.5 px at most).
 constexpr double kEdgeEndMarginPx = 3.0;
 
 // The edge points of one edge line, each with the unit image normal of its segment towards
@@ -546,7 +546,7 @@ Detection Fail(DetectReason reason) {
 
 // Components up to this fraction of the image's larger side are searched for X-corners: a
 // group spans 550 / 2600 of the board's width, and the board at most the image's width
-// (acceptance.md: 80 %), so a third holds a group with clutter attached and skips walls.
+// (docs/acceptance.md: 80 %), so a third holds a group with clutter attached and skips walls.
 constexpr double kMaxSplitComponentFraction = 1.0 / 3.0;
 // Dark pixels closer than this to either edge line of a split X-corner turn light: two
 // pixels in opposite dark sectors that are 4-neighbours would have to change their distance
@@ -747,7 +747,7 @@ constexpr double kMinPairPx = 4.0;
 
 // Edge-end scan (EdgeEndPx): samples every half pixel (the end is interpolated between
 // them); the grey-level difference across the edge is taken at this fraction of the square
-// side on either side of it (beyond the blur of the edge, 2 px at most in acceptance.md,
+// side on either side of it (beyond the blur of the edge, 2 px at most in docs/acceptance.md,
 // well inside the square), at least 1 px (where an edge blurred by 2 px still shows 40 % of
 // its contrast, and the scan can start within 3 px of the vertex: 5 px squares).
 constexpr double kEndScanStepPx = 0.5;
@@ -764,7 +764,7 @@ constexpr double kMinEndContrastFraction = 0.3;
 constexpr int kMaxPairBoardFits = 64;
 // A square's side along one edge line is at most this many times its side along the
 // other: 50 degrees of foreshortening (1 / cos 50 = 1.6) with the rest of the
-// perspective of acceptance.md's views; plus 2 px for the smallest squares.
+// perspective of docs/acceptance.md's views; plus 2 px for the smallest squares.
 constexpr double kMaxSideRatio = 3.0;
 constexpr double kMaxEndExtraPx = 2.0;
 
@@ -949,7 +949,7 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const ImageView8&
   const ImageF blurred = GaussianBlur(view, kSaddleBlurSigmaPx);
   std::vector<XCorner> corners = FindXCorners(blurred, corner_options);
   // A group's pair is one square apart: a square is 150 / 2600 of a board at most the
-  // image's width (acceptance.md: 80 %); a tenth of the larger side allows perspective.
+  // image's width (docs/acceptance.md: 80 %); a tenth of the larger side allows perspective.
   constexpr double kMaxPairImageFraction = 0.1;
   const double max_pair_px = kMaxPairImageFraction * std::max(view.width, view.height);
   std::vector<PairGroup> groups = PairGroups(blurred, corners, max_pair_px, options);

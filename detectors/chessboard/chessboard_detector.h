@@ -1,5 +1,5 @@
 #pragma once
-// Detector of the wide two-group chessboard (`chessboard`, boards.md §1, docs/boards.md):
+// Detector of the wide two-group chessboard (`chessboard`, docs/boards.md §1, docs/boards.md):
 // two groups of three black squares touching diagonally, 4 X-corners and 16 L-corners,
 // ids 0..9 on the left group and 10..19 on the right (Board::features()).
 //
@@ -54,7 +54,7 @@
 // right whenever the board is rolled by less than 90 degrees in the image, which holds for
 // every station camera (boards stand upright, cameras are mounted upright).
 //
-// Frames and units: image pixels, pixel-centre convention (conventions.md); board frame in
+// Frames and units: image pixels, pixel-centre convention (docs/conventions.md); board frame in
 // metres (board.h).
 
 #include <string_view>
@@ -75,7 +75,7 @@ struct ChessboardOptions {
   // the range of 144 of them with a probability of about 1e-4. [0, 100].
   double noise_contrast_factor = 4.0;
   // Smallest bounding-box side of a square's component, pixels: the smallest squares of
-  // acceptance.md are 12 px, about 7.7 px foreshortened by 50 degrees. [4, 64].
+  // docs/acceptance.md are 12 px, about 7.7 px foreshortened by 50 degrees. [4, 64].
   int min_square_side_px = 6;
   // Two quads touch when the centre of each is the other's reflection through their nearest
   // corners' midpoint within this fraction of the mean side (a quad of another square is at

@@ -28,7 +28,7 @@ constexpr double kPi = std::numbers::pi;
 // 50 px per circle of a board over a third of the image, plenty for the blob stage.
 constexpr double kMinCandidatePixels = 2e5;
 // The most a thresholded blob's edge moves from the printed circle's, full-resolution
-// pixels: blur 1.5 px, gamma 0.6-1.6 and noise 6 of acceptance.md's hardest renders moved
+// pixels: blur 1.5 px, gamma 0.6-1.6 and noise 6 of docs/acceptance.md's hardest renders moved
 // the 12 px circles' dark blobs by up to 1.8 px.
 constexpr double kMaxEdgeShiftPx = 2.0;
 
@@ -85,7 +85,7 @@ std::optional<CircleBoardModel> MakeModel(const Board& board) {
   std::stable_sort(m.growth_order.begin(), m.growth_order.end(), [&](int a, int b) {
     return (m.p_board[a] - m.pair_mid).norm() < (m.p_board[b] - m.pair_mid).norm();
   });
-  // boards.md: the black areas span PDF y 50..550 while the rows of circles span 100..380,
+  // docs/boards.md: the black areas span PDF y 50..550 while the rows of circles span 100..380,
   // so PDF y 455 (75 mm below the last row's centres, 50 mm clear of its circles) is black
   // in every strip, and its image under the grid's 180-degree symmetry, PDF y 25, lies in
   // the middle of the white top margin. Board frame: PDF (x, y) -> (x - 450, 300 - y) mm.

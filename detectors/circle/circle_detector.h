@@ -1,5 +1,5 @@
 #pragma once
-// Detector of the circle board (`circle`, boards.md §2, docs/boards.md): 30 circles of
+// Detector of the circle board (`circle`, docs/boards.md §2, docs/boards.md): 30 circles of
 // 50 mm (times the board's scale) on three black areas, 28 white on black and the black
 // pair (ids 14, 15) on a white bar. Features: the 30 circle centres, id 6 * row + col.
 //
@@ -32,7 +32,7 @@
 //     the last row must be dark and their 180-degree images (in the white top margin) light,
 //     measured against the bar (white) and the black between circles.
 //
-// Frames and units: image pixels, pixel-centre convention (conventions.md); board frame in
+// Frames and units: image pixels, pixel-centre convention (docs/conventions.md); board frame in
 // metres (board.h).
 
 #include <string_view>

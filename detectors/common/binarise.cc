@@ -9,7 +9,7 @@
 namespace linecal {
 namespace {
 
-// Binarisation tiles: 4 x 4 pixels, the smallest marker cell of acceptance.md, so that a
+// Binarisation tiles: 4 x 4 pixels, the smallest marker cell of docs/acceptance.md, so that a
 // 3 x 3 tile window (12 px) always spans a dark and a light cell of the smallest markers.
 constexpr int kTile = 4;
 // Low-contrast tiles take the mean threshold of their known neighbours, repeatedly: this

@@ -6,7 +6,7 @@
 // touching at a corner.
 //
 // Binary images are Image8 with 1 = set (dark), 0 = unset; pixel-centre convention
-// (conventions.md). Pure functions, no state.
+// (docs/conventions.md). Pure functions, no state.
 
 #include "detectors/core/image_view.h"
 

@@ -5,7 +5,7 @@
 //
 // A binary image here is an ImageView8 whose non-zero pixels are "set" (foreground, e.g. the
 // dark pixels of a thresholded image). Coordinates are pixel indices (x right, y down); a
-// contour point is the centre of a boundary pixel (conventions.md: pixel centres are
+// contour point is the centre of a boundary pixel (docs/conventions.md: pixel centres are
 // integers).
 
 #include <array>
@@ -59,7 +59,7 @@ std::vector<int> ApproximateClosedPolygon(const std::vector<Eigen::Vector2i>& co
 
 struct QuadOptions {
   // Components with a bounding box side below this many pixels are skipped (the smallest
-  // marker of acceptance.md is 6 cells of 4 px, 24 px; perspective shortens it).
+  // marker of docs/acceptance.md is 6 cells of 4 px, 24 px; perspective shortens it).
   int min_side_px = 10;
   // Skipped above this fraction of the image's larger side (a marker never fills the
   // image).

@@ -5,7 +5,7 @@
 // lines fitted to their edges: unlike a saddle fit, this needs no point symmetry around the
 // vertex.
 //
-// Image coordinates: pixels, pixel-centre convention (conventions.md). Pure functions.
+// Image coordinates: pixels, pixel-centre convention (docs/conventions.md). Pure functions.
 
 #include <optional>
 #include <span>

@@ -1,7 +1,7 @@
 #pragma once
 // Image filters for the board detectors: a float image, separable Gaussian blur, and
 // bilinear sampling. Pixel (x, y) has its centre at image coordinate (u, v) = (x, y)
-// (conventions.md); borders are handled by clamping (replicating the edge pixel).
+// (docs/conventions.md); borders are handled by clamping (replicating the edge pixel).
 
 #include <vector>
 

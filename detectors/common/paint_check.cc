@@ -24,7 +24,7 @@ constexpr double kPaintProbeClearancePx = 1.5;
 constexpr int kMinPaintProbes = 8;
 // A probe is compared with probes at most this share of the page away: near enough to share
 // the light (a 4:1 gradient across the page changes it by at most 4^0.15 = 1.23 over that
-// distance), far enough to reach the next area of other paint on every board of boards.md.
+// distance), far enough to reach the next area of other paint on every board of docs/boards.md.
 constexpr double kPaintNeighbourReach = 0.15;
 // Printed black reflects a tenth of white or less; under any gamma of 0.6-1.6 it stays below
 // 60% of the white beside it, while white beside white is near 100%.

@@ -25,7 +25,7 @@ bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const
                  double px_per_m, double min_agreement);
 
 // Two boards that print the same features (the ArUco and round-hole boards share their four
-// markers, boards.md) differ only in some of their paint, and a binarisation can be fooled
+// markers, docs/boards.md) differ only in some of their paint, and a binarisation can be fooled
 // there (a 4:1 illumination gradient darkens plain white paper below its local threshold).
 // This votes on the grey image itself, pair by pair: on a 64 x 64 grid of probes, at each
 // probe that one board prints black and the other white (2 px clear of edges on both), is

@@ -134,7 +134,7 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
   // R = Ixy^2 - Ixx Iyy from central differences. For an ideal X-corner of contrast C
   // blurred to sigma, Ixy at the vertex is C / (pi sigma^2); the floor takes half of that
   // for min_contrast at sigma 2.5 px (detector blur plus a camera blur of 1.5 px, the
-  // worst of acceptance.md), so any printed corner passes and flat noise does not.
+  // worst of docs/acceptance.md), so any printed corner passes and flat noise does not.
   constexpr double kWorstSigmaPx = 2.5;
   const double ixy_floor =
       0.5 * options.min_contrast / (std::numbers::pi * kWorstSigmaPx * kWorstSigmaPx);

@@ -34,11 +34,11 @@ constexpr int kMinCoarseLevelSidePx = 360;
 
 struct XCornerOptions {
   // Radius of the test ring, pixels. It must be below the distance to the nearest other
-  // vertex (the smallest square side seen: boards.md's smallest squares are 12 px, 8 px
+  // vertex (the smallest square side seen: docs/boards.md's smallest squares are 12 px, 8 px
   // when foreshortened by 50 degrees) and well above the blur. 2..32.
   double ring_radius_px = 4.0;
   // The darkest and brightest ring samples differ by at least this many grey levels: a
-  // printed board under the dimmest lighting of acceptance.md (gamma, 4:1 gradient) keeps
+  // printed board under the dimmest lighting of docs/acceptance.md (gamma, 4:1 gradient) keeps
   // far more than this, while noise of sigma 6 rarely makes it alone. (0, 255].
   double min_contrast = 20.0;
   // At most this many response maxima are examined (the strongest first), bounding the

@@ -2,7 +2,7 @@
 // Non-owning views of grey images, and a small owning image for those who need one.
 //
 // Pixel (x, y) of a view is at byte offset y * stride_bytes + x * sizeof(T) from `data`; its
-// centre is image coordinate (u, v) = (x, y) (conventions.md). Views never own memory: the
+// centre is image coordinate (u, v) = (x, y) (docs/conventions.md). Views never own memory: the
 // caller keeps the buffer alive while a view of it is used.
 
 #include <cstddef>

@@ -112,7 +112,7 @@ inline YawPitchRoll YawPitchRollFromRotation(const Eigen::Matrix3d& r) {
   return a;
 }
 
-// R_base of a camera (conventions.md): maps z_camera to x_car, x_camera to -y_car and
+// R_base of a camera (docs/conventions.md): maps z_camera to x_car, x_camera to -y_car and
 // y_camera to -z_car, so a camera looking straight forward has yaw = pitch = roll = 0.
 inline Eigen::Matrix3d CameraBaseRotation() {
   Eigen::Matrix3d r;

@@ -10,7 +10,7 @@
 // out (docs/detectors.md). The board knows what is printed around each side, so the model
 // of the profile can hold all of it.
 //
-// Image coordinates: pixels, pixel-centre convention (conventions.md). Pure function.
+// Image coordinates: pixels, pixel-centre convention (docs/conventions.md). Pure function.
 
 #include <Eigen/Core>
 #include <array>

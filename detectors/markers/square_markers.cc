@@ -554,7 +554,7 @@ constexpr std::size_t kMinMarkersForDilation = 3;
 // sides fitted to the page model (page_edge_fit.h). Below it the blur of the border's inner edge,
 // and of what lies behind and beyond, reaches the edge's gradient centroid (ArUco at 4 px cells,
 // blur 1: 0.2-0.3 px off); above it the centroids meet the bars at a tenth of the cost. The
-// AprilTag grid's two-cell border is 8 px at acceptance.md's smallest cells, so its 36 tags
+// AprilTag grid's two-cell border is 8 px at docs/acceptance.md's smallest cells, so its 36 tags
 // keep their centroids (docs/detectors.md).
 constexpr double kPageFitMaxBorderPx = 5.0;
 

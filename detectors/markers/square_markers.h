@@ -1,6 +1,6 @@
 #pragma once
 // Square fiducial markers (ArUco, AprilTag): finding and decoding them in an image, and
-// verifying a board of them. One implementation for every marker board of boards.md; the
+// verifying a board of them. One implementation for every marker board of docs/boards.md; the
 // families differ only through MarkerFamily and the board through Board::features().
 //
 // Pipeline: local-contrast binarisation (a threshold halfway between the local minimum and
@@ -10,7 +10,7 @@
 // sampling of the cell grid through the quad's homography, and decoding against the whole
 // family in all four rotations within a Hamming distance.
 //
-// Image coordinates: pixel-centre convention (conventions.md). Pure functions, no state.
+// Image coordinates: pixel-centre convention (docs/conventions.md). Pure functions, no state.
 
 #include <array>
 #include <cstdint>
@@ -56,7 +56,7 @@ struct MarkerDetectOptions {
   // a probability of about 1e-4 (the range of 144 normal samples averages 5.4 of their
   // sigma, with a spread of 0.6).
   double noise_contrast_factor = 4.0;
-  // Smallest marker side in pixels (acceptance.md: data cells of 4 px, so an ArUco marker
+  // Smallest marker side in pixels (docs/acceptance.md: data cells of 4 px, so an ArUco marker
   // is 24 px; a 50-degree view shortens a side to about 15 px).
   int min_marker_side_px = 12;
   // Largest number of candidate quads decoded: bounds the cost of a pathological image

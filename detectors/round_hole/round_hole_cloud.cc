@@ -21,7 +21,7 @@ constexpr double kMadToSigma = 1.4826;
 // The plane fit's robust sigma never goes below 2 mm: the sensors' distance unit (2-4 mm)
 // rounds ranges that coarsely even without noise.
 constexpr double kMinPlaneSigmaM = 0.002;
-// A plane whose robust sigma exceeds 6 cm (twice the largest range noise of acceptance.md)
+// A plane whose robust sigma exceeds 6 cm (twice the largest range noise of docs/acceptance.md)
 // is clutter, not a board.
 constexpr double kMaxPlaneSigmaM = 0.06;
 // Fewer points than this on the plane cannot hold a board (a 16-ring LiDAR at 8 m puts about

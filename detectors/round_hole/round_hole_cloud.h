@@ -1,5 +1,5 @@
 #pragma once
-// The LiDAR side of the round-hole board (boards.md section 6): finds the board in point
+// The LiDAR side of the round-hole board (docs/boards.md section 6): finds the board in point
 // clouds of a spinning LiDAR, near where it is expected, and measures its pose and its five
 // hole centres. The method (docs/lidar-radar.md, "Round-hole board in point clouds"):
 //
@@ -62,7 +62,7 @@ struct RoundHoleCloudOptions {
   double max_in_plane_shift_m = 0.12;
   double max_in_plane_rotation_rad = 0.035;
   // Fewer rings than this crossing the holes (over all holes and frames) cannot place the
-  // board along its y axis (acceptance.md: fewer than two rings through a hole).
+  // board along its y axis (docs/acceptance.md: fewer than two rings through a hole).
   int min_rings_through_holes = 2;
   // OK when every field is finite and in range (margins > 0, 0 < max_tilt_rad < pi/2,
   // shifts >= 0, min_rings_through_holes >= 1). O(1).

@@ -23,7 +23,7 @@ constexpr double kMaxShiftRangeM = 0.2;
 // Median absolute deviation to sigma for Gaussian noise.
 constexpr double kMadToSigma = 1.4826;
 // A neighbourhood's plane: the inlier gate is 3 robust sigmas, never below 3 cm (range noise
-// of 1-3 cm, acceptance.md), and a neighbourhood is flat when its robust sigma is below 5 cm
+// of 1-3 cm, docs/acceptance.md), and a neighbourhood is flat when its robust sigma is below 5 cm
 // (range noise of 3 cm seen at any incidence, plus float rounding).
 constexpr double kMinGateM = 0.03;
 constexpr double kMaxFlatSigmaM = 0.05;

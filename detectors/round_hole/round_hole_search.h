@@ -1,5 +1,5 @@
 #pragma once
-// Finding the round-hole board (boards.md section 6) in point clouds without knowing where it
+// Finding the round-hole board (docs/boards.md section 6) in point clouds without knowing where it
 // is: `linecal detect --cloud` and any caller with no expected pose. The method
 // (docs/lidar-radar.md, "Finding the board without a prior"):
 //
@@ -33,7 +33,7 @@ namespace linecal {
 
 struct RoundHoleSearchOptions {
   // Points nearer or farther than this from the sensor are not searched (the sensor's own
-  // car and housing; boards at 3-8 m, acceptance.md), metres.
+  // car and housing; boards at 3-8 m, docs/acceptance.md), metres.
   double min_range_m = 1.0;
   double max_range_m = 20.0;
   // Edge of the cubes of step 1, metres: a quarter of the page, so that a neighbourhood

@@ -21,7 +21,7 @@
 namespace linecal {
 namespace {
 
-// The page in cells (boards.md §3: 300 x 1000 mm of 50 mm cells, the 4 x 18 pattern inside
+// The page in cells (docs/boards.md §3: 300 x 1000 mm of 50 mm cells, the 4 x 18 pattern inside
 // a one-cell white margin).
 constexpr int kPageCols = 6;
 constexpr int kPageRows = 20;
@@ -29,7 +29,7 @@ constexpr int kPageRows = 20;
 // LinkXCorners' own tolerance (a board line bends far less between neighbouring vertices).
 const double kCosRunTolerance = std::cos(25.0 * 3.14159265358979 / 180.0);
 // The cell width across the middle line relative to the cell height along it: 1 in a frontal
-// view, cos(50 deg) = 0.64 .. 1 / cos(50 deg) = 1.56 at acceptance.md's largest yaw or pitch;
+// view, cos(50 deg) = 0.64 .. 1 / cos(50 deg) = 1.56 at docs/acceptance.md's largest yaw or pitch;
 // the range leaves room for perspective and shear.
 constexpr double kMinWidthRatio = 0.3;
 constexpr double kMaxWidthRatio = 3.3;

@@ -1,5 +1,5 @@
 #pragma once
-// Detector of the vertical board (`vertical`, boards.md §3): a column of 4 x 18 cells with a
+// Detector of the vertical board (`vertical`, docs/boards.md §3): a column of 4 x 18 cells with a
 // one-cell white margin, whose 51 corners lie on three vertical lines: the middle line is a
 // run of 17 X-corners between two L-corners, the outer lines carry 16 L-corners each. The
 // board stands upright and is often cut by the image's top or bottom border; such partial

@@ -1,5 +1,5 @@
 #pragma once
-// CAN frames and can-utils `candump -l` log files (the CAN part of a capture, interfaces.md).
+// CAN frames and can-utils `candump -l` log files (the CAN part of a capture, docs/interfaces.md).
 //
 // One frame a line: `(1600000000.000000) can0 123#DEADBEEF` — `(seconds.microseconds)`,
 // the interface, then the frame in can-utils' compact form:

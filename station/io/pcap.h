@@ -1,6 +1,6 @@
 #pragma once
 // pcap files (the classic libpcap format, not pcapng) and the UDP datagrams inside them: how
-// LiDAR packets are recorded (captures, shared/data/lidar) and replayed.
+// LiDAR packets are recorded (captures; the real recordings of docs/external-data.md) and replayed.
 //
 // Reading accepts microsecond (magic a1b2c3d4) and nanosecond (a1b23c4d) time stamps in
 // either byte order; writing produces little-endian files with nanosecond time stamps

@@ -3,7 +3,7 @@
 // capture scans, `linecal detect --cloud` input. The implementation uses PCL's reader and
 // writer; this header stays free of PCL so that including it is cheap.
 //
-// Written files hold one LidarPoint per point with the fields (interfaces.md)
+// Written files hold one LidarPoint per point with the fields (docs/interfaces.md)
 //   x y z      F 4   metres, the LiDAR frame
 //   intensity  F 4
 //   ring       U 2   0 = lowest beam

@@ -50,7 +50,7 @@ struct SensorModel {
   std::vector<std::string> targets;
 };
 
-// R_base of each sensor kind (conventions.md): the orientation at yaw = pitch = roll = 0.
+// R_base of each sensor kind (docs/conventions.md): the orientation at yaw = pitch = roll = 0.
 // Cameras: CameraBaseRotation(). LiDARs: LidarBaseRotation() (the vendor frame has y at
 // azimuth 0, which faces forward). Radars: identity (x along the boresight, y left, z up).
 Eigen::Matrix3d SensorBaseRotation(SensorKind kind);

@@ -3,7 +3,7 @@
 //
 // A pose is written either as mounting angles and a position, the form people edit,
 //   {"xyz_m": [x, y, z], "ypr_deg": [yaw, pitch, roll]}
-// meaning R = Rz(yaw) * Ry(pitch) * Rx(roll) * R_base (conventions.md) with the R_base of what
+// meaning R = Rz(yaw) * Ry(pitch) * Rx(roll) * R_base (docs/conventions.md) with the R_base of what
 // is being placed (camera, board, ...), or as a full 4x4 row-major matrix,
 //   {"matrix": [r00, r01, r02, tx, r10, ..., 0, 0, 0, 1]}
 // whose rotation part must be orthonormal (to 1e-6) with determinant +1.

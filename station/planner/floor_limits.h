@@ -1,6 +1,6 @@
 #pragma once
 // The floor limits of a station for the board placement planner (docs/planner.md): where
-// boards and reflectors may stand. Station frame (conventions.md), metres; polygons lie in
+// boards and reflectors may stand. Station frame (docs/conventions.md), metres; polygons lie in
 // the floor plane z = 0 and are given as [x, y] vertices in order (either orientation).
 
 #include <string>

@@ -64,7 +64,7 @@ struct RadarCalibrationResult {
   // "uncertainty_too_high" for error.
   std::string reason;
   int reflectors_used = 0;
-  // Mounting angles (conventions.md), radians. Pitch and roll are the nominal ones: not
+  // Mounting angles (docs/conventions.md), radians. Pitch and roll are the nominal ones: not
   // observable without elevation.
   double yaw_rad = 0;
   double yaw_sigma_rad = 0;              // total 1-σ: the three parts below in quadrature

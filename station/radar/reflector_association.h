@@ -77,7 +77,7 @@ struct ReflectorAssociationOptions {
   // the noise and the resolution) from the median azimuth or range is an outlier. 3.5 is the
   // usual modified-z-score cut (Iglewicz and Hoaglin); Gaussian noise loses < 0.1%.
   double outlier_z = 3.5;
-  // Per-detection noise of the sensor (acceptance.md: 0.1° azimuth); floors the robust scale
+  // Per-detection noise of the sensor (docs/acceptance.md: 0.1° azimuth); floors the robust scale
   // and tells whether the resolution steps are dithered.
   double detection_azimuth_sigma_rad = 0.1 * std::numbers::pi / 180;
   double detection_range_sigma_m = 0.05;

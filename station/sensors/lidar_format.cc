@@ -508,7 +508,7 @@ absl::StatusOr<std::vector<std::vector<std::uint8_t>>> EncodeLidarPackets(
         out[pandarxt32::kReturnCountOffset] = static_cast<std::uint8_t>(returns);
         StoreLe32(out.data() + pandarxt32::kUdpSequenceOffset, sequence);
       } else {
-        // The factory byte of the recorded Pandar64 (shared/data/lidar/pandar64).
+        // The factory byte of the recorded Pandar64 (docs/external-data.md).
         out[pandar64::kFactoryOffset] = 0x42;
         if (settings.pandar64_udp_sequence) {
           StoreLe32(out.data() + pandar64::kUdpSequenceOffset, sequence);

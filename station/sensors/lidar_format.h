@@ -3,7 +3,8 @@
 // that write vendor packets (the simulator's LiDAR output). The decoders are in
 // daemon/drivers/lidar_decoder.h; both sides share the facts here.
 //
-// Models (sensors.md, checked against the real recordings in shared/data/lidar):
+// Models (docs/sensors.md, checked against the real recordings of
+// docs/external-data.md):
 // - Velodyne VLP-16: 1206-byte payload, 12 blocks of 2 firing sequences × 16 lasers.
 // - Hesai Pandar64: 1194-byte payload (1198 with a trailing UDP sequence number), 6 blocks
 //   × 64 channels.
@@ -14,7 +15,7 @@
 // columns that share one azimuth field, a Hesai block one column. In dual-return mode two
 // consecutive blocks hold the two returns of the same columns.
 //
-// LiDAR frame (conventions.md: "as the vendor defines it"), the same for all three models,
+// LiDAR frame (docs/conventions.md: "as the vendor defines it"), the same for all three models,
 // as both vendors' manuals define it:
 //   origin  the sensor's origin on the rotation axis (VLP-16: 37.7 mm above its base, per
 //           its manual; Hesai: as their manuals draw it)
@@ -240,7 +241,7 @@ double BeamAzimuthRad(const LidarBeam& beam, double column_azimuth_rad, double c
 // p_lidar of a return (see the frame above). Cost: O(1).
 Eigen::Vector3d LidarPointFromPolar(double range_m, double azimuth_rad, double elevation_rad);
 
-// R_base of a LiDAR (conventions.md "mounting angles"): maps y_lidar (azimuth 0) to x_car,
+// R_base of a LiDAR (docs/conventions.md "mounting angles"): maps y_lidar (azimuth 0) to x_car,
 // x_lidar to −y_car and z_lidar to z_car, so that a LiDAR mounted upright with azimuth 0
 // looking forward has yaw = pitch = roll = 0. Columns are the LiDAR axes in the car frame.
 Eigen::Matrix3d LidarBaseRotation();

@@ -8,7 +8,7 @@
 // - Delphi ESR 2.5: status 0x4E0 and 64 track messages 0x500..0x53F, as in opendbc's ESR.dbc
 //   (tests/station/sensors parse that file and compare it with the constants here).
 // - RadarDetection / RadarCycle: what a radar reports in one measurement cycle, in the radar
-//   frame of conventions.md (x along the boresight, y left, z up); the simulator encodes
+//   frame of docs/conventions.md (x along the boresight, y left, z up); the simulator encodes
 //   them into frames here and daemon/drivers/radar_decoder turns frames back into them.
 //
 // Conventions that public sources disagree on are options (RadarConventions).
@@ -74,7 +74,7 @@ struct RadarConventions {
   // default; some open drivers read it little-endian.
   ByteOrder ars408_counter_byte_order = ByteOrder::kBigEndian;
   // ARS408 object DistLat (0x60B). Default true: positive to the left, the radar frame's +y,
-  // as the cluster DistLat (whose sign the worked example of sensors.md fixes) and as the
+  // as the cluster DistLat (whose sign the worked example of docs/sensors.md fixes) and as the
   // ISO 8855 coordinate system Continental documents for both lists; some drivers negate it.
   bool ars408_object_lat_left_positive = true;
   // ESR CAN_TX_TRACK_ANGLE. Default true: positive clockwise seen from above (to the right),
@@ -146,7 +146,7 @@ inline constexpr uint32_t kObjectGeneralId = 0x60B;
 inline constexpr uint32_t kSensorIdStride = 0x10;
 inline constexpr int kMaxSensorId = 7;  // 3-bit SensorID in RadarCfg
 
-// Signals (sensors.md; Continental ARS408 DBC). Status messages:
+// Signals (docs/sensors.md; Continental ARS408 DBC). Status messages:
 inline constexpr CanSignal kNofClustersNear{
     "Cluster_NofClustersNear", 7, 8, ByteOrder::kBigEndian, false, 1, 0};
 inline constexpr CanSignal kNofClustersFar{

@@ -27,7 +27,7 @@
 // vignetting, then Gaussian blur, then gamma, Gaussian noise, JPEG-like block quantisation,
 // and rounding to 8 or 16 bits.
 //
-// Frames and units: T_station_camera maps camera points (conventions.md: x right, y down,
+// Frames and units: T_station_camera maps camera points (docs/conventions.md: x right, y down,
 // z along the optical axis) into the station frame; metres; image coordinates as in
 // camera_model.h (centre of the top-left pixel at (0, 0)).
 

@@ -29,7 +29,7 @@ namespace linecal {
 
 struct LidarSimOptions {
   int rotations = 1;             // full rotations to simulate, 1..100
-  double range_sigma_m = 0.02;   // Gaussian range noise, [0, 1] (acceptance.md: 1-3 cm)
+  double range_sigma_m = 0.02;   // Gaussian range noise, [0, 1] (docs/acceptance.md: 1-3 cm)
   double dropout_probability = 0.0;  // a return is lost with this probability, [0, 1)
   double min_range_m = 0.3;      // the sensors see nothing nearer (their own window)
   double max_range_m = 120.0;    // and nothing beyond (station walls are far closer)

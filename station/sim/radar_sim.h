@@ -24,7 +24,7 @@ namespace linecal {
 struct RadarSimOptions {
   int cycles = 20;                  // measurement cycles to simulate, 1..10000
   double range_sigma_m = 0.05;      // per-detection range noise, [0, 5]
-  double azimuth_sigma_deg = 0.1;   // per-detection azimuth noise, [0, 10] (acceptance.md: 0.1)
+  double azimuth_sigma_deg = 0.1;   // per-detection azimuth noise, [0, 10] (docs/acceptance.md)
   double rcs_sigma_db = 1.0;        // per-detection RCS noise, [0, 20]
   double range_rate_sigma_mps = 0.03;  // noise on the (zero) range rate of static targets, [0, 5]
   double detection_probability = 0.98;  // a reflector is reported in a cycle with this, (0, 1]

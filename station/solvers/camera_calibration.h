@@ -8,7 +8,7 @@
 // camera-to-ground homography and a ranging check.
 //
 // Frames: T_car_camera maps camera coordinates to the car frame (ISO 8855, origin on the
-// ground under the rear axle). Angles per conventions.md: R_car_camera = Rz(yaw) Ry(pitch)
+// ground under the rear axle). Angles per docs/conventions.md: R_car_camera = Rz(yaw) Ry(pitch)
 // Rx(roll) R_base.
 //
 // Verdicts: pass; fail with "<yaw|pitch|roll|x|y|z>_out_of_tolerance" (the first of them in

@@ -14,7 +14,7 @@
 //     the flat-ground formula's reading of that pose (RangingCheckOf);
 //   - with a marked point and its measured distance: the ranging error, pass or fail.
 //
-// Frames and units per conventions.md: car frame (x forward, y left, z up, origin on the
+// Frames and units per docs/conventions.md: car frame (x forward, y left, z up, origin on the
 // ground under the rear axle), R_car_camera = Rz(yaw) Ry(pitch) Rx(roll) CameraBaseRotation().
 // Image points are distorted pixels as stored in the image; the vanishing point and the
 // homography are in the undistorted image of K = (fx, fy, cx, cy).

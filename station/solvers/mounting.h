@@ -3,7 +3,7 @@
 // model's tolerances: one implementation for cameras and LiDARs (and the vocabulary radars
 // report in).
 //
-// Angles per conventions.md: R_car_sensor = Rz(yaw) Ry(pitch) Rx(roll) R_base, R_base by the
+// Angles per docs/conventions.md: R_car_sensor = Rz(yaw) Ry(pitch) Rx(roll) R_base, R_base by the
 // sensor kind (SensorBaseRotation).
 
 #include <array>
@@ -18,7 +18,7 @@ namespace linecal {
 
 enum class SensorVerdict { kPass, kFail, kError };
 
-// "pass", "fail", "error" (interfaces.md).
+// "pass", "fail", "error" (docs/interfaces.md).
 const char* SensorVerdictName(SensorVerdict verdict);
 
 // A sensor's mounting in the car: angles (radians) and position (metres) with their 1-sigma,

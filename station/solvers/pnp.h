@@ -47,7 +47,7 @@ enum class PnpOutcome {
 };
 
 // "", "too_few_features", "collinear_features", "no_initial_pose", "did_not_converge": the
-// reason codes of results (interfaces.md).
+// reason codes of results (docs/interfaces.md).
 const char* PnpOutcomeName(PnpOutcome outcome);
 
 struct PnpOptions {
@@ -82,7 +82,7 @@ struct PnpResult {
 absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const PnpCorrespondence> points,
                                    const PnpOptions& options = {});
 
-// True when a board's printed face (its +z, boards.md) is turned towards the camera, i.e.
+// True when a board's printed face (its +z, docs/boards.md) is turned towards the camera, i.e.
 // the camera is on the print's side of the board plane. A board "seen from behind" is a
 // mis-identified or mirrored board, never a real view of the print. O(1).
 bool BoardFacesCamera(const Rigid3d& T_camera_board);

@@ -5,7 +5,7 @@
 // ranging formula, and the roll from the vertical board's corner lines. One implementation,
 // for the station's solver and the after-sale tool.
 //
-// Frames (conventions.md): car x forward, y left, z up, origin on the ground; board x right
+// Frames (docs/conventions.md): car x forward, y left, z up, origin on the ground; board x right
 // and y up as seen facing the print, z out of the print; camera x right, y down, z forward.
 // Every pixel here is in the *undistorted* image of K = (fx, fy, cx, cy) of the intrinsics:
 // observed pixels are unprojected through the full lens model and projected by K, as
@@ -131,7 +131,7 @@ struct VerticalBoardRoll {
   // "degenerate_lines".
   std::string reason;
   std::string message;
-  double roll_rad = 0;  // per conventions.md
+  double roll_rad = 0;  // per docs/conventions.md
   int lines_used = 0;   // corner columns with at least 3 corners
 };
 

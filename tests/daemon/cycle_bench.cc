@@ -1,6 +1,6 @@
 // The daemon's cycle times for the reference car (deploy/stations/reference.json,
 // deploy/cars/reference.json: 5 cameras, 2 LiDARs, 3 radars; one frame or rotation per
-// sensor, the daemon's default), against acceptance.md's bars (docs/performance.md has the
+// sensor, the daemon's default), against docs/acceptance.md's bars (docs/performance.md has the
 // table). Built with the tests, run by hand, not by ctest:
 //   BUILD/bin/daemon_cycle_bench
 //
@@ -52,7 +52,7 @@ namespace fs = std::filesystem;
 
 const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
 constexpr char kVin[] = "1M8GDM9AXKP042788";
-// acceptance.md: compute per cycle is judged on the p95 of 50 cycles.
+// docs/acceptance.md: compute per cycle is judged on the p95 of 50 cycles.
 constexpr int kComputeRepetitions = 50;
 // End to end: enough cycles for a p95 that means something, few enough for a shared machine.
 constexpr int kEndToEndRepetitions = 20;

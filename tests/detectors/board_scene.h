@@ -30,7 +30,7 @@ struct BoardView {
   Eigen::Vector2d offset_m = Eigen::Vector2d::Zero();  // board centre, right and up
 };
 
-// acceptance.md's two measuring conditions for sub-pixel errors: "clean" (noise 0, blur
+// docs/acceptance.md's two measuring conditions for sub-pixel errors: "clean" (noise 0, blur
 // 0.5 px) and "noisy" (noise sigma 4 grey levels, blur 1.0 px).
 inline CameraRenderOptions CleanRender() {
   CameraRenderOptions o;
@@ -125,7 +125,7 @@ inline double MaxErrorPx(const Detection& d, const CameraFrame& frame) {
   return worst;
 }
 
-// acceptance.md's sub-pixel bars for the two conditions above.
+// docs/acceptance.md's sub-pixel bars for the two conditions above.
 inline constexpr double kCleanRmsBarPx = 0.05;  // noise 0, blur 0.5
 inline constexpr double kNoisyRmsBarPx = 0.12;  // noise sigma 4, blur 1.0
 

@@ -52,7 +52,7 @@ TEST(DetectBoardTest, CheckerIn8And16BitsGivesTheCheckerDetectorsResult) {
   EXPECT_EQ(bad->reason, DetectReason::kBadImage);
 }
 
-// acceptance.md's bad input, for every board: a reason, never a crash or a board. Views that
+// docs/acceptance.md's bad input, for every board: a reason, never a crash or a board. Views that
 // no detector may read (empty, over kMaxImageSide, short or misaligned stride) are refused
 // before a pixel is touched: the 20000 x 20000 view points at one byte.
 TEST(DetectBoardTest, BadInputGivesAReasonForEveryBoard) {

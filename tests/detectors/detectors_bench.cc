@@ -1,12 +1,12 @@
-// Speed of every camera board detector (acceptance.md: chessboard, circle, vertical <= 4 ms
+// Speed of every camera board detector (docs/acceptance.md: chessboard, circle, vertical <= 4 ms
 // at 1280 x 720 on one thread; ArUco board <= OpenCV's detectMarkers; AprilTag grid <= 0.8 x
 // OpenCV's aruco AprilTag 36h11 detector with a 2-bit border; 2448 x 2048 <= 3 x 1280 x 720),
 // with OpenCV 4.6 on the same images in the same process as the baseline. Built with the
 // tests, run by hand (docs/detectors.md):
 //   build-dir/bin/detectors_bench --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
-// Each image: the board over 45% of the image width (at most 80% of its height), turned 30 degrees, noise 2, blur 0.7, in
-// front of a cluttered wall; the same field of view at both sizes. The marker boards also at
-// their smallest (4 px data cells), 1280 x 720, with OpenCV on the same images.
+// Each image: the board over 45% of the image width (at most 80% of its height), turned 30 degrees,
+// noise 2, blur 0.7, in front of a cluttered wall; the same field of view at both sizes. The marker
+// boards also at their smallest (4 px data cells), 1280 x 720, with OpenCV on the same images.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>

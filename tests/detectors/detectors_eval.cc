@@ -1,4 +1,4 @@
-// Camera board detector evaluation over acceptance.md's test set, rendered by the station
+// Camera board detector evaluation over docs/acceptance.md's test set, rendered by the station
 // simulator with exact ground truth (docs/detectors.md):
 //   - every board at three distances: its page over 80% of the image width (or height), its
 //     smallest square or cell 12 px (marker boards: a data cell 4 px) in the image, and their
@@ -33,7 +33,7 @@ namespace {
 
 using circle_scene::Pose;
 
-// acceptance.md, Detectors (images).
+// docs/acceptance.md, Detectors (images).
 constexpr double kCleanRmsBarPx = 0.05;
 constexpr double kNoisyRmsBarPx = 0.12;
 constexpr double kCircleBiasBarPx = 0.02;
@@ -108,7 +108,7 @@ void CountFalseDetections(const Image8& image, const BoardType* shown, const Opt
                           std::array<BoardResult, kAllBoardTypes.size()>* results) {
   for (BoardType other : options.boards) {
     if (shown != nullptr && other == *shown) continue;
-    // The ArUco board and the round-hole board share their four markers (boards.md): the
+    // The ArUco board and the round-hole board share their four markers (docs/boards.md): the
     // ArUco detector on the round-hole board is told apart by the paint check, so both count.
     const std::optional<Detection> d = DetectBoard(image.view(), BoardOf(other));
     if (d && d->found) {

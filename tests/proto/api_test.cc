@@ -1,5 +1,5 @@
-// The gRPC API as station integrators rely on it (interfaces.md): the service and its methods,
-// which of them stream, and the house rule that units live in field names (conventions.md).
+// The gRPC API as station integrators rely on it (docs/interfaces.md): the service and its methods,
+// which of them stream, and the house rule that units live in field names (docs/conventions.md).
 #include <set>
 #include <string>
 

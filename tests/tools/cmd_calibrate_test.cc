@@ -1,6 +1,6 @@
 // linecal calibrate through the built binary: a simulated capture of the reference car's
 // front camera and front radar is calibrated; the JSON results document has the fields of
-// interfaces.md, and the estimates agree with ground_truth.json within their reported sigma.
+// docs/interfaces.md, and the estimates agree with ground_truth.json within their reported sigma.
 #include <gtest/gtest.h>
 #include <unistd.h>
 

@@ -1,4 +1,4 @@
-// `linecal detect` run as a program (interfaces.md): the JSON object, the exit codes
+// `linecal detect` run as a program (docs/interfaces.md): the JSON object, the exit codes
 // (0 found, 1 not found, 2 bad usage or input), 16-bit input, the overlay, and photo-like
 // input (a phone-sized colour JPEG through a distorting lens).
 #include <gtest/gtest.h>
@@ -74,7 +74,7 @@ TEST_F(DetectCliTest, JsonOfAFoundCheckerMatchesTheTruth) {
   EXPECT_NEAR(f0.at("x").get<double>(), -0.09, 1e-12);
   EXPECT_NEAR(f0.at("y").get<double>(), 0.06, 1e-12);
   EXPECT_EQ(f0.at("marker"), -1);
-  // Positions within the noisy bar of acceptance.md (sigma 2 here is gentler).
+  // Positions within the noisy bar of docs/acceptance.md (sigma 2 here is gentler).
   constexpr double kTolPx = 0.12;
   for (const nlohmann::json& f : j.at("features")) {
     for (const RenderedFeature& t : frame.features) {
@@ -102,7 +102,7 @@ TEST_F(DetectCliTest, SixteenBitImageAndOverlay) {
 // 4:2:0 chroma, a warm white balance, sRGB-like encoding gamma), through a lens with barrel
 // distortion (k1 -0.05, k2 0.01: up to 8 px at the ArUco board's corners) and vignetting,
 // under an uneven light. `linecal detect` reads its luma; every feature of each board must
-// be found with its id, within half a pixel of where the lens put it. (acceptance.md's
+// be found with its id, within half a pixel of where the lens put it. (docs/acceptance.md's
 // 0.12 px RMS is for linear renders without distortion. Measured here: chessboard 0.037,
 // circle 0.064, ArUco 0.146 px RMS; the ArUco board 0.116 px with gamma 1: the encoding
 // gamma moves blurred edges by a fraction of a pixel, which its markers' dilation, fitted in

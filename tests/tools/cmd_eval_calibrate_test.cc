@@ -1,5 +1,5 @@
 // linecal eval calibrate through the built binary, on the reference station and car with the
-// acceptance.md settings (corner noise 0.2 px, 1000 cars): the bars the reference layout lets
+// docs/acceptance.md settings (corner noise 0.2 px, 1000 cars): the bars the reference layout lets
 // each camera reach (docs/solvers.md). The front camera meets every bar; for every camera the
 // reported sigma matches the spread and the verdicts agree with the truth.
 #include <gtest/gtest.h>
@@ -58,7 +58,7 @@ TEST(EvalCalibrateCliTest, ReferenceCarOnTheReferenceStation) {
     EXPECT_LE(coverage, 0.97) << k;
   }
   // The seed formulas (method (b), the board method) against the extrinsic: 0.5 px, 0.5%
-  // (acceptance.md), on every car; the toolbox's small-angle ranging formula misses the
+  // (docs/acceptance.md), on every car; the toolbox's small-angle ranging formula misses the
   // 0.5% on pitched cameras (docs/solvers.md), so it is reported, not judged.
   EXPECT_EQ(front["board_method_cars"], kCars);
   EXPECT_TRUE(front["board_method_meets_bars"].get<bool>());

@@ -1,5 +1,5 @@
 // linecal eval lidar through the built binary, reduced (4 cars, 10 rotations, range noise
-// 2 cm) on the reference station and car: the accuracy bars of acceptance.md that the full
+// 2 cm) on the reference station and car: the accuracy bars of docs/acceptance.md that the full
 // evaluation (docs/lidar-radar.md) meets with room for the p95 of 4 cars (their largest error)
 // are asserted here; the VLP-16's normal, which it misses, is checked to be reported missed.
 #include <gtest/gtest.h>

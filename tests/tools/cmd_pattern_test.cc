@@ -1,5 +1,5 @@
 // `linecal boards` and `linecal pattern` run as programs: output, files and exit codes
-// (interfaces.md: 0 success, 2 bad usage or input with a one-line message).
+// (docs/interfaces.md: 0 success, 2 bad usage or input with a one-line message).
 #include <gtest/gtest.h>
 #include <unistd.h>
 

@@ -1,4 +1,4 @@
-// `linecal radar decode` run as a program: output, summary and exit codes (interfaces.md).
+// `linecal radar decode` run as a program: output, summary and exit codes (docs/interfaces.md).
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -32,7 +32,7 @@ std::vector<nlohmann::json> JsonLines(const std::string& out) {
   return lines;
 }
 
-// A status frame announcing one cluster, sensors.md's worked example, a remote frame and an
+// A status frame announcing one cluster, docs/sensors.md's worked example, a remote frame and an
 // unknown id.
 constexpr char kArsLog[] =
     "(1600000000.000000) can0 600#0100000710\n"
@@ -47,7 +47,7 @@ TEST(CmdRadarTest, Ars408JsonLinesCarryTheWorkedExample) {
   const std::vector<nlohmann::json> lines = JsonLines(run.out);
   ASSERT_EQ(lines.size(), 1u) << run.out;
   const nlohmann::json& j = lines[0];
-  constexpr double kPrintedDigits = 0.005;  // sensors.md rounds to two decimals
+  constexpr double kPrintedDigits = 0.005;  // docs/sensors.md rounds to two decimals
   EXPECT_EQ(j["t_ns"].get<int64_t>(), 1600000000LL * 1000000000LL);
   EXPECT_EQ(j["id"], 5);
   EXPECT_EQ(j["kind"], "cluster");

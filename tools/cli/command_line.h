@@ -3,7 +3,7 @@
 //
 // Every subcommand declares its options; the parser handles `--help`, rejects unknown
 // options, missing values and bad numbers with a one-line message naming the option and the
-// value, and the caller maps that to exit code 2 (interfaces.md).
+// value, and the caller maps that to exit code 2 (docs/interfaces.md).
 
 #include <map>
 #include <optional>
@@ -14,7 +14,7 @@
 
 namespace linecal::cli {
 
-// Exit codes fixed by interfaces.md.
+// Exit codes fixed by docs/interfaces.md.
 enum ExitCode : int {
   kExitOk = 0,        // success
   kExitNegative = 1,  // the work ran, the answer is negative (no board, out of tolerance)

@@ -1,5 +1,5 @@
 #pragma once
-// The command-line options that choose a board (boards.md), shared by every subcommand that
+// The command-line options that choose a board (docs/boards.md), shared by every subcommand that
 // takes --board: --board NAME [--scale S] [--cols N --rows M --square METRES]
 // [--border-bits 1|2].
 

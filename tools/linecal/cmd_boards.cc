@@ -1,5 +1,5 @@
 // linecal boards: the board types the station knows, with their default parameters, page
-// size and features (boards.md, docs/boards.md).
+// size and features (docs/boards.md, docs/boards.md).
 #include <cstdio>
 #include <map>
 #include <nlohmann/json.hpp>

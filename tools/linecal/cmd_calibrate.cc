@@ -76,12 +76,14 @@ int RunCalibrate(const Args& args) {
       "boards in its frames and solves its mounting in the car frame, calibrates the radars from "
       "their corner reflectors, and judges each sensor against the car model's tolerances. "
       "Prints a table (deviations from nominal; residual RMS in pixels for cameras, degrees for "
-      "radars), or with --json the results document of interfaces.md. Exit 0 when every sensor "
+      "radars), or with --json the results document of docs/interfaces.md. Exit 0 when every "
+      "sensor "
       "passes, 1 when any fails or could not be calibrated, 2 on bad usage or input.",
       {{"capture", "DIR", "capture directory (docs/capture-format.md)", true},
        {"json", "", "print one JSON object"},
-       {"report", "DIR", "write DIR/<camera>.png per camera: its first frame with the detected features, the "
-                         "reprojected boards, the horizon, a ground grid and a legend (created if missing)"}});
+       {"report", "DIR",
+        "write DIR/<camera>.png per camera: its first frame with the detected features, the "
+        "reprojected boards, the horizon, a ground grid and a legend (created if missing)"}});
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
   std::string report_dir;
   if (cl.Has("report")) {

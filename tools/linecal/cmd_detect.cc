@@ -1,5 +1,5 @@
 // linecal detect: finds a calibration board in an image, or the round-hole board in LiDAR
-// point clouds, and prints its features (interfaces.md, "linecal detect"; fixed, the
+// point clouds, and prints its features (docs/interfaces.md, "linecal detect"; fixed, the
 // acceptance tests call it).
 #include <chrono>
 #include <numbers>
@@ -189,7 +189,7 @@ int RunDetect(const Args& args) {
     if (!written.ok()) return cli::BadInput(kCommand, std::string(written.message()));
   }
 
-  // x, y at the default scale (interfaces.md): the ids' positions on the PDF board.
+  // x, y at the default scale (docs/interfaces.md): the ids' positions on the PDF board.
   const double scale = board->params().scale;
   if (cl.Has("json")) {
     nlohmann::json features = nlohmann::json::array();

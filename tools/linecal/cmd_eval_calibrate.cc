@@ -1,5 +1,5 @@
 // linecal eval calibrate: Monte Carlo evaluation of camera-to-car calibration over random
-// cars on a station (acceptance.md, "Solvers"; the table is in docs/solvers.md).
+// cars on a station (docs/acceptance.md, "Solvers"; the table is in docs/solvers.md).
 //
 // Per car and camera: mounting angle and position errors uniform within ±1.5x the
 // tolerance (so some cars are out of tolerance), a random aligner pose, the simulator's exact
@@ -33,7 +33,7 @@ namespace {
 constexpr char kCommand[] = "eval calibrate";
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
-// Acceptance bars (acceptance.md, "Solvers").
+// Acceptance bars (docs/acceptance.md, "Solvers").
 constexpr double kAngleP95BarDeg = 0.02;
 constexpr double kPositionP95BarM = 0.010;
 constexpr double kVanishingPointBarPx = 0.3;
@@ -139,7 +139,8 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
 
 int RunEvalCalibrate(const Args& args) {
   cli::CommandLine cl(
-      "linecal eval calibrate --station FILE --car FILE [--cars N] [--seed S] [--noise-px P] [--frames F] [--json]",
+      "linecal eval calibrate --station FILE --car FILE [--cars N] [--seed S] [--noise-px P] "
+      "[--frames F] [--json]",
       "Monte Carlo evaluation of camera-to-car calibration: N cars with random mounting errors "
       "(uniform within 1.5x each tolerance) and aligner poses; every camera's visible target "
       "features (exact projections) plus Gaussian corner noise are solved, and the estimates "
@@ -148,7 +149,8 @@ int RunEvalCalibrate(const Args& args) {
       "(RMS error / RMS sigma) and the 95% coverage, the verdict agreement, and for cameras that "
       "see the wide chessboard method (b)'s vanishing point and ground disagreement from the "
       "extrinsic's (levelled, and the toolbox formula's, reported only), each against "
-      "acceptance.md's bar; and the roll from the vertical board against the truth and the pose. "
+      "docs/acceptance.md's bar; and the roll from the vertical board against the truth and the "
+      "pose. "
       "Exit 0 when every camera meets every bar, 1 otherwise.",
       {{"station", "FILE", "station layout", true},
        {"car", "FILE", "car model", true},

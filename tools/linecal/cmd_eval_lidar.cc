@@ -1,5 +1,5 @@
 // linecal eval lidar: Monte Carlo evaluation of LiDAR-to-car calibration over random cars on
-// a station (acceptance.md, "Detectors (point clouds)" and "Solvers"; the table is in
+// a station (docs/acceptance.md, "Detectors (point clouds)" and "Solvers"; the table is in
 // docs/lidar-radar.md).
 //
 // Per car and LiDAR: mounting angle and position errors uniform within ±1.5x the tolerance
@@ -34,7 +34,8 @@ namespace {
 constexpr char kCommand[] = "eval lidar";
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
-// Acceptance bars (acceptance.md): LiDAR-to-car p95 per ring count, hole centres, normal, time.
+// Acceptance bars (docs/acceptance.md): LiDAR-to-car p95 per ring count, hole centres, normal,
+// time.
 struct LidarBars {
   double angle_deg, position_m, centre_m;
 };
@@ -143,7 +144,8 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, const std::m
 
 int RunEvalLidar(const Args& args) {
   cli::CommandLine cl(
-      "linecal eval lidar --station FILE --car FILE [--cars N] [--seed S] [--frames F] [--noise-m M] [--json]",
+      "linecal eval lidar --station FILE --car FILE [--cars N] [--seed S] [--frames F] [--noise-m "
+      "M] [--json]",
       "Monte Carlo evaluation of LiDAR-to-car calibration: N cars with random mounting errors "
       "(uniform within 1.5x each tolerance) and aligner poses; every LiDAR scans the station "
       "(the simulator: boards, stands, floor, walls) for F rotations with Gaussian range noise, "
@@ -151,7 +153,7 @@ int RunEvalLidar(const Args& args) {
       "Prints per LiDAR the 95th-percentile angle and position errors, the reported sigma "
       "against the spread (RMS error / RMS sigma) and the 95% coverage, the verdict agreement, "
       "the worst hole-centre and normal errors (95th percentile over boards) and the time per "
-      "rotation, each against acceptance.md's bar. Exit 0 when every LiDAR meets every bar, "
+      "rotation, each against docs/acceptance.md's bar. Exit 0 when every LiDAR meets every bar, "
       "1 otherwise.",
       {{"station", "FILE", "station layout", true},
        {"car", "FILE", "car model", true},

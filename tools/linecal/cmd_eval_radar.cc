@@ -1,5 +1,5 @@
 // linecal eval radar: Monte Carlo evaluation of radar calibration on simulated CAN traffic
-// (acceptance.md, "Solvers"; the table is in docs/lidar-radar.md, "Radar calibration").
+// (docs/acceptance.md, "Solvers"; the table is in docs/lidar-radar.md, "Radar calibration").
 //
 // Per car and radar: a random mounting yaw error within ±2x the yaw tolerance (so about half
 // the cars are out of tolerance), pitch and roll errors within ±their tolerance, a position
@@ -33,7 +33,7 @@ namespace {
 constexpr char kCommand[] = "eval radar";
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
-// Acceptance bars (acceptance.md, "Solvers").
+// Acceptance bars (docs/acceptance.md, "Solvers").
 constexpr double kYawP95BarDeg = 0.05;
 constexpr double kSigmaRatioLow = 0.8;
 constexpr double kSigmaRatioHigh = 1.2;
@@ -44,7 +44,7 @@ constexpr double kYawErrorRangeOfTolerance = 2.0;
 // The simulator's default aligner bounds (simulator.h): the car stands within ±2 cm, ±0.2°.
 constexpr double kAlignerOffsetM = 0.02;
 constexpr double kAlignerThrustDeg = 0.2;
-// acceptance.md: σ 0.1° per detection, 50 cycles.
+// docs/acceptance.md: σ 0.1° per detection, 50 cycles.
 constexpr double kAzimuthSigmaDeg = 0.1;
 constexpr int kCycles = 50;
 

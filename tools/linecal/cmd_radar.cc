@@ -1,4 +1,4 @@
-// linecal radar decode: radar detections from a recorded candump log (interfaces.md).
+// linecal radar decode: radar detections from a recorded candump log (docs/interfaces.md).
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <numbers>

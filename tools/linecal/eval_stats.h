@@ -1,7 +1,7 @@
 #pragma once
 // What the `linecal eval ...` programs share: their common flags, random cars, percentiles and
 // the checks of a reported 1-sigma against the spread of the errors it describes
-// (acceptance.md).
+// (docs/acceptance.md).
 
 #include <algorithm>
 #include <array>
@@ -101,7 +101,7 @@ inline TrueMounting RandomMounting(const SensorModel& s, double range_of_toleran
 
 // The estimates of one sensor over the cars: per component (yaw, pitch, roll, x, y, z) the
 // errors and reported sigmas, and how often the verdict agreed with the truth where
-// acceptance.md judges it (every true error more than 2 sigma from the tolerance edge).
+// docs/acceptance.md judges it (every true error more than 2 sigma from the tolerance edge).
 struct MountingSamples {
   std::vector<double> errors[6], sigmas[6];
   int verdicts_judged = 0, verdicts_agree = 0;

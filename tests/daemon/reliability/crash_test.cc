@@ -2,7 +2,7 @@
 // started and watched over gRPC on loopback, the daemon killed with SIGKILL at random moments
 // and restarted. After every restart nothing the client saw committed may be lost or changed,
 // and every interrupted cycle must be stored as aborted with reason daemon_restarted
-// (acceptance.md, "kill -9 at random moments in 100 cycles"; docs/reliability.md).
+// (docs/acceptance.md, "kill -9 at random moments in 100 cycles"; docs/reliability.md).
 // `tools/crash-test` runs it.
 //
 //   linecal-crash-test [--cycles N] [--seed S] [--sensors a,b,...] [--linecald PATH] [--dir DIR]
@@ -403,7 +403,7 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
 int main(int argc, char** argv) {
   using linecal::reliability::ProgramFlags;
   ProgramFlags defaults;
-  defaults.cycles = 100;  // acceptance.md: kill -9 at random moments in 100 cycles
+  defaults.cycles = 100;  // docs/acceptance.md: kill -9 at random moments in 100 cycles
   const absl::StatusOr<ProgramFlags> flags = linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--linecald"});
   if (!flags.ok()) {
     std::fprintf(stderr,

@@ -1,4 +1,4 @@
-// linecald's memory when idle (acceptance.md: at most 100 MB): the real binary as it starts
+// linecald's memory when idle (docs/acceptance.md: at most 100 MB): the real binary as it starts
 // without a configuration (the demo station: the reference car, every sensor simulated) on a
 // free loopback port with a scratch data directory; VmRSS and VmHWM read from /proc once it
 // serves calls. The bar is for Release builds: under AddressSanitizer the shadow memory

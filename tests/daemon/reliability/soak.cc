@@ -1,7 +1,7 @@
 // linecal-soak: many cycles of a real StationCore (replay source, a real SQLite file) with
 // faults injected, checking that every cycle ends stored with a state and a reason, that the
 // database stays intact, and that threads, descriptors and memory do not leak
-// (acceptance.md, "soak"; docs/reliability.md). `tools/soak` runs it.
+// (docs/acceptance.md, "soak"; docs/reliability.md). `tools/soak` runs it.
 //
 //   linecal-soak [--cycles N] [--seed S] [--sensors a,b,...] [--rss-from K] [--dir DIR]
 //
@@ -628,7 +628,7 @@ int Run(const ProgramFlags& flags, int rss_from) {
   const ProcessStatus end = ReadProcessStatus().value_or(ProcessStatus{});
   const bool rss_checked = flags.cycles > rss_from && rss_reference_kb > 0;
   const double growth = rss_checked ? 100.0 * (end.rss_kb - rss_reference_kb) / rss_reference_kb : 0;
-  // acceptance.md: memory growth over the soak below 5%.
+  // docs/acceptance.md: memory growth over the soak below 5%.
   if (rss_checked && growth >= 5.0) {
     violations.push_back(absl::StrCat("RSS grew ", growth, "% from cycle ", rss_from, " to the end"));
   }
@@ -674,7 +674,7 @@ int main(int argc, char** argv) {
   // figures are the daemon's.
   mallopt(M_ARENA_MAX, 2);
   ProgramFlags defaults;
-  defaults.cycles = 1000;  // acceptance.md's soak
+  defaults.cycles = 1000;  // docs/acceptance.md's soak
   const absl::StatusOr<ProgramFlags> flags = linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--rss-from"});
   int rss_from = 100;  // memory growth is measured from after this cycle (one-time allocations done)
   if (flags.ok() && flags->own.count("--rss-from") &&

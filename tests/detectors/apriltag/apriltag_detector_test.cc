@@ -23,7 +23,7 @@ using test_scene::NoisyRender;
 using test_scene::FeatureRmsPx;
 using test_scene::RenderView;
 
-// acceptance.md's sub-pixel bars.
+// docs/acceptance.md's sub-pixel bars.
 constexpr double kCleanRmsBarPx = 0.05;  // noise 0, blur 0.5
 constexpr double kNoisyRmsBarPx = 0.12;  // noise sigma 4, blur 1.0
 
@@ -129,7 +129,7 @@ TEST(ApriltagDetectorTest, TurnedGridsAreFound) {
   }
 }
 
-// acceptance.md's smallest grid (4 px bits) turned 50 degrees: the far tags' bits are about
+// docs/acceptance.md's smallest grid (4 px bits) turned 50 degrees: the far tags' bits are about
 // 2.6 px wide, too small for the scan to read every tag from its own quad. The tags read
 // fix the board's homography, which places the rest; all 144 corners are reported.
 TEST(ApriltagDetectorTest, SmallTurnedGridIsCompletedFromTheBoard) {

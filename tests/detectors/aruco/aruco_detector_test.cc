@@ -23,7 +23,7 @@ using test_scene::NoisyRender;
 using test_scene::FeatureRmsPx;
 using test_scene::RenderView;
 
-// acceptance.md's sub-pixel bars.
+// docs/acceptance.md's sub-pixel bars.
 constexpr double kCleanRmsBarPx = 0.05;  // noise 0, blur 0.5
 constexpr double kNoisyRmsBarPx = 0.12;  // noise sigma 4, blur 1.0
 
@@ -110,7 +110,7 @@ TEST(ArucoDetectorTest, FindsTheBoardOverAPoseGrid) {
     o.illumination_gradient_ratio = 4.0;
     o.illumination_gradient_direction_deg = 30.0 * seed;
     // Every other view under a strong gamma, which moves a blurred edge's apparent position
-    // (acceptance.md's error bars are for the linear response): detection and ids only.
+    // (docs/acceptance.md's error bars are for the linear response): detection and ids only.
     const bool linear = seed % 2 == 0;
     if (!linear) o.gamma = (seed % 4 == 1) ? 0.6 : 1.6;
     const CameraFrame frame = RenderView(view, o, seed++);
@@ -161,7 +161,7 @@ TEST(ArucoDetectorTest, RoundHoleBoardIsFoundThroughItsMarkersAndTellsTheBoardsA
   EXPECT_TRUE(as_round_hole.features.empty());
 }
 
-// acceptance.md's hardest lighting: a 4:1 illumination gradient across the board, gamma 0.6
+// docs/acceptance.md's hardest lighting: a 4:1 illumination gradient across the board, gamma 0.6
 // and 1.6, noise 6, blur 1.5, JPEG 80, clutter behind. The white paper at the dim end is
 // darker than the black print at the bright end, so the whole-board paint check compares
 // nearby points under the same light (PaintAgrees); both boards that print these markers
@@ -195,7 +195,7 @@ TEST(ArucoDetectorTest, HardLightingFindsBothMarkerBoards) {
       // (40% of a cell). Not within the noisy bar: a gamma applied after the blur moves every
       // blurred edge, the marker's dark square grows or shrinks, and its corners move out or
       // in along the diagonals (0.7-0.8 px RMS here; 0.15 px with the same blur and noise at
-      // gamma 1). acceptance.md sets no accuracy bar for this lighting.
+      // gamma 1). docs/acceptance.md sets no accuracy bar for this lighting.
       const double cell_px =
           (frame.features[1].uv_px - frame.features[0].uv_px).norm() / kAruco4x4MarkerCells;
       for (const DetectedFeature& f : d.features) {
@@ -220,7 +220,7 @@ TEST(ArucoDetectorTest, HardLightingFindsBothMarkerBoards) {
 TEST(ArucoDetectorTest, SmallestMarkersTurnedFiftyDegreesUnderNoise) {
   const Board board = MakeBoard(BoardType::kAruco);
   const CameraModel camera = circle_scene::Camera();
-  const double far_m = camera.intrinsics().fx * 0.040 / 4.0;  // boards.md: 40 mm cells
+  const double far_m = camera.intrinsics().fx * 0.040 / 4.0;  // docs/boards.md: 40 mm cells
   struct Case {
     double yaw, pitch, roll;
     std::uint64_t seed;
@@ -241,13 +241,13 @@ TEST(ArucoDetectorTest, SmallestMarkersTurnedFiftyDegreesUnderNoise) {
 }
 
 // The same smallest markers, foreshortened across one side or the other: their corners
-// meet acceptance.md's noisy bar. Edge-point centroids were 0.2-0.35 px RMS off on these
+// meet docs/acceptance.md's noisy bar. Edge-point centroids were 0.2-0.35 px RMS off on these
 // renders (the border is one 2.6-4 px cell, and a dark cell behind it or a black board
 // cell beyond the quiet zone moves each side's centroid by its own amount); the sides are
 // now fitted to a model of the blurred page (detectors/markers/page_edge_fit.h).
 TEST(ArucoDetectorTest, SmallestMarkersMeetTheNoisyBar) {
   const CameraModel camera = circle_scene::Camera();
-  const double far_m = camera.intrinsics().fx * 0.040 / 4.0;  // boards.md: 40 mm cells
+  const double far_m = camera.intrinsics().fx * 0.040 / 4.0;  // docs/boards.md: 40 mm cells
   struct Case {
     double yaw, pitch, roll;
     std::uint64_t seed;

@@ -1,4 +1,4 @@
-// The board definitions against the numbers of boards.md (and the PDFs where boards.md is
+// The board definitions against the numbers of docs/boards.md (and the PDFs where docs/boards.md is
 // silent or disagrees: docs/boards.md), and PaintAt against a plain scan of shapes().
 #include "detectors/boards/board.h"
 
@@ -33,7 +33,7 @@ Board MakeBoard(BoardType type) {
   return *b;
 }
 
-// boards.md's PDF coordinates (mm, y down, origin top-left) to board metres.
+// docs/boards.md's PDF coordinates (mm, y down, origin top-left) to board metres.
 Eigen::Vector2d FromPdf(const Board& b, double x_pdf, double y_pdf) {
   const Eigen::Vector2d page_mm = 1e3 * b.page_size_m();
   return Eigen::Vector2d((x_pdf - 0.5 * page_mm.x()) * 1e-3, (0.5 * page_mm.y() - y_pdf) * 1e-3);
@@ -100,7 +100,7 @@ TEST(Board, FeatureCountsPageSizesAndIdOrder) {
 
 TEST(Board, ChessboardCornersMatchBoardsMd) {
   const Board b = MakeBoard(BoardType::kChessboard);
-  // boards.md: left group V squares (100,100), (400,100), (250,250); right group Λ squares
+  // docs/boards.md: left group V squares (100,100), (400,100), (250,250); right group Λ squares
   // (2200,100), (2050,250), (2350,250); X-corners (250,250), (400,250), (2200,250),
   // (2350,250). Ids: left group then right, PDF rows top to bottom, left to right.
   const double expected[20][2] = {{100, 100},  {250, 100},  {400, 100},  {550, 100},  {100, 250},
@@ -134,7 +134,7 @@ TEST(Board, CircleCentresAndPolarity) {
       const BoardFeature& f = b.features()[id];
       ExpectNear(f.p_board, FromPdf(b, xs[c], ys[r]), kExactM, "circle id " + std::to_string(id));
       EXPECT_EQ(f.kind, FeatureKind::kCircleCentre);
-      // boards.md: white circles on black, except (400,240) and (500,240): black on a white
+      // docs/boards.md: white circles on black, except (400,240) and (500,240): black on a white
       // bar. Check the centre and a point 3 mm outside the 25 mm radius.
       const bool black_pair = id == 14 || id == 15;
       EXPECT_EQ(b.PaintAt(f.p_board), black_pair ? Paint::kBlack : Paint::kWhite) << id;
@@ -161,7 +161,7 @@ TEST(Board, VerticalBoardCellsAndCode) {
           << "cell row " << r << " col " << c;
     }
   }
-  // boards.md: rows k = 0..18 carrying a corner on the left (x 100), middle (x 150) and
+  // docs/boards.md: rows k = 0..18 carrying a corner on the left (x 100), middle (x 150) and
   // right (x 200) lines.
   const std::string code[3] = {"1111111111011110110", "1111111111111111111", "0111101111111111110"};
   int id = 0;
@@ -192,7 +192,7 @@ TEST(Board, VerticalBoardCellsAndCode) {
   }
 }
 
-// The four markers of boards.md's table: id, top-left in PDF coordinates.
+// The four markers of docs/boards.md's table: id, top-left in PDF coordinates.
 struct MarkerPlace {
   int id;
   double x, y;
@@ -272,7 +272,7 @@ void ExpectAprilGrid(int border_bits) {
   constexpr double kMmPerPt = 25.4 / 72.0;
   for (int id = 0; id < 36; ++id) {
     const int row = id / 6, col = id % 6;  // id 0 bottom-left, left to right, then up
-    // boards.md: 88 mm tags, 26.4 mm spacing. Board frame from the page centre (420.5, 594.5).
+    // docs/boards.md: 88 mm tags, 26.4 mm spacing. Board frame from the page centre (420.5, 594.5).
     const double left = lefts_pt[col] * kMmPerPt - 420.5;
     const double bottom = bottoms_pt[row] * kMmPerPt - 594.5;
     const double corners[4][2] = {

@@ -58,7 +58,7 @@ TEST(CheckerDetectorTest, PoseGridWithNoiseBlurAndLighting) {
   double sum_sq_clean = 0.0, sum_sq_noisy = 0.0;
   int n_clean = 0, n_noisy = 0;
   std::uint64_t seed = 10;
-  // 12 views (roll, yaw, pitch at the extremes of acceptance.md, two sizes), each rendered
+  // 12 views (roll, yaw, pitch at the extremes of docs/acceptance.md, two sizes), each rendered
   // clean and noisy (sigma 4, blur 1.0, a 3:1 lighting gradient, gamma 1.4).
   int index = 0;
   for (double roll : {-30.0, 30.0}) {

@@ -83,7 +83,7 @@ TEST(ChessboardDetectorTest, PoseGridCleanAndNoisy) {
   double sum_sq_clean = 0.0, sum_sq_noisy = 0.0;
   int n_clean = 0, n_noisy = 0;
   std::uint64_t seed = 10;
-  // 12 poses at the extremes of acceptance.md (roll +-30, yaw -50/0/50, pitch +-50) over
+  // 12 poses at the extremes of docs/acceptance.md (roll +-30, yaw -50/0/50, pitch +-50) over
   // three sizes: 2.6 m (board 77% of the image width, squares 58 px), 6 m (25 px) and 11 m
   // (13.6 px; 8 px wide on the far side at yaw 50); each rendered clean and noisy.
   constexpr std::array<double, 3> kDistances = {2.6, 6.0, 11.0};
@@ -146,7 +146,7 @@ TEST(ChessboardDetectorTest, SmallestSquaresOfTwelvePixelsWithLightingEffects) {
   EXPECT_LT(MaxErrorPx(d, frame), 0.5);
 }
 
-// acceptance.md's harshest effects: a 4:1 illumination gradient across the board in four
+// docs/acceptance.md's harshest effects: a 4:1 illumination gradient across the board in four
 // directions, gamma 0.6 and 1.6, noise 6, blur 1.5, JPEG 80, clutter. The paint check compares
 // nearby probes under the same light, so the dark end of the gradient still reads as white
 // paper (a binarised check refused 88% of such renders as wrong_board).
@@ -190,7 +190,7 @@ TEST(ChessboardDetectorTest, HardLightingAndNoiseStillFindTheBoard) {
 TEST(ChessboardDetectorTest, SmallestSquaresTurnedFiftyDegreesUnderTheHardEffects) {
   const Board board = *Board::Create(Chessboard());
   const CameraModel camera = circle_scene::Camera();
-  const double far_m = camera.intrinsics().fx * 0.150 / 12.0;  // boards.md: 150 mm squares
+  const double far_m = camera.intrinsics().fx * 0.150 / 12.0;  // docs/boards.md: 150 mm squares
   struct Case {
     double yaw, pitch, roll;
     std::uint64_t seed;

@@ -25,7 +25,7 @@
 namespace linecal {
 namespace {
 
-// acceptance.md: feature RMS clean (noise 0, blur 0.5) and at noise 4 + blur 1.0, and the
+// docs/acceptance.md: feature RMS clean (noise 0, blur 0.5) and at noise 4 + blur 1.0, and the
 // centre bias under perspective.
 constexpr double kCleanRmsBarPx = 0.05;
 constexpr double kNoisyRmsBarPx = 0.12;
@@ -124,7 +124,7 @@ TEST(CircleDetectorTest, NoisyBlurredRendersAreFoundWithinTheRmsBar) {
   std::uint64_t seed = 100;
   for (const Pose& pose : PoseGrid()) {
     CameraRenderOptions o = Effects(4.0, 1.0);
-    // Half the frames with the harder effects of acceptance.md: a 4:1 gradient, gamma and
+    // Half the frames with the harder effects of docs/acceptance.md: a 4:1 gradient, gamma and
     // JPEG; every fourth with clutter on the wall (clutter is slow to render).
     if (seed % 2 == 0) {
       o.illumination_gradient_ratio = 4.0;
@@ -147,7 +147,7 @@ TEST(CircleDetectorTest, NoisyBlurredRendersAreFoundWithinTheRmsBar) {
               worst);
 }
 
-// The hardest image effects of acceptance.md on the smallest board (circles 12 px across)
+// The hardest image effects of docs/acceptance.md on the smallest board (circles 12 px across)
 // and on a large one: noise 6 and blur 1.5.
 TEST(CircleDetectorTest, NoisiestBlurriestRendersAreFound) {
   const std::vector<Pose> poses = {
@@ -167,7 +167,7 @@ TEST(CircleDetectorTest, NoisiestBlurriestRendersAreFound) {
 // out 1.8 px smaller in radius than printed, which put their distance beyond the pair
 // test's band of relative sizes.
 TEST(CircleDetectorTest, SmallestCirclesUnderTheHardEffects) {
-  const double far_m = Camera().intrinsics().fx * 0.050 / 12.0;  // boards.md: 50 mm circles
+  const double far_m = Camera().intrinsics().fx * 0.050 / 12.0;  // docs/boards.md: 50 mm circles
   struct Case {
     double yaw, pitch, roll;
     std::uint64_t seed;

@@ -91,7 +91,7 @@ inline CameraRenderOptions Effects(double noise, double blur) {
   return o;
 }
 
-// acceptance.md's harshest effects, as the evaluation's hard set (docs/detectors.md): noise
+// docs/acceptance.md's harshest effects, as the evaluation's hard set (docs/detectors.md): noise
 // 6, blur 1.5, a 4:1 illumination gradient turned by 37 degrees per seed, gamma 0.6 (even
 // seeds) or 1.6, JPEG quality 80, clutter on the wall.
 inline CameraRenderOptions HardEffects(std::uint64_t seed) {
@@ -150,7 +150,7 @@ inline const Board& CircleBoard() {
   return *board;
 }
 
-// The boards acceptance.md sizes by a marker's data cell (4 px) rather than a square (12 px).
+// The boards docs/acceptance.md sizes by a marker's data cell (4 px) rather than a square (12 px).
 inline bool IsMarkerBoard(BoardType t) {
   return t == BoardType::kAruco || t == BoardType::kApriltag || t == BoardType::kRoundHole;
 }
@@ -158,7 +158,7 @@ inline bool IsMarkerBoard(BoardType t) {
 // The evaluation's render distances (tests/detectors/detectors_eval.cc) for a board turned
 // by yaw and pitch: its page over 80% of the image width (or height) face-on, its smallest
 // square or cell `min_px` (12 px; marker boards: a data cell 4 px) in the image, and their
-// geometric mean (`reduced`: the mean only). acceptance.md sizes a board by its smallest cell
+// geometric mean (`reduced`: the mean only). docs/acceptance.md sizes a board by its smallest cell
 // in the image, and a turned board's cells shrink across the turn and with the depth of its
 // far edge, so its smallest size stands nearer. Empty when even at the near end the turned
 // cells are under `min_px` (the AprilTag grid turned 35-50 degrees in 1280 x 720: no size of

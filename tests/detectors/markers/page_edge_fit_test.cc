@@ -26,7 +26,7 @@ struct MarkerTruth {
   std::array<Eigen::Vector2d, 4> image;
 };
 
-// Marker `marker`'s corners (feature ids 4 marker_index + c, boards.md) on the page and in
+// Marker `marker`'s corners (feature ids 4 marker_index + c, docs/boards.md) on the page and in
 // the render.
 MarkerTruth Truth(const Board& board, const CameraFrame& frame, int marker_index) {
   MarkerTruth t;
@@ -49,7 +49,7 @@ MarkerTruth Truth(const Board& board, const CameraFrame& frame, int marker_index
 CameraFrame FarRender(BoardType type, double yaw_deg, double pitch_deg, double roll_deg,
                       std::uint64_t seed) {
   const CameraModel camera = circle_scene::Camera();
-  const double far_m = camera.intrinsics().fx * 0.040 / 4.0;  // boards.md: 40 mm cells
+  const double far_m = camera.intrinsics().fx * 0.040 / 4.0;  // docs/boards.md: 40 mm cells
   absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
       circle_scene::OneBoard(
           type, circle_scene::EvaluationPose(far_m, yaw_deg, pitch_deg, roll_deg, seed)),
@@ -106,7 +106,7 @@ TEST(PageEdgeFitTest, SmallBlurredMarkersComeBackToTheirTruth) {
                 k.pitch, board_rms);
     // Edge-point centroids are 0.2-0.3 px RMS off on these renders (docs/detectors.md); the
     // page fit's own error, before the board fit takes out the common dilation, is under
-    // acceptance.md's noisy bar.
+    // docs/acceptance.md's noisy bar.
     EXPECT_LT(board_rms, 0.1);
   }
 }

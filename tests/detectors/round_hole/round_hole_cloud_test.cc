@@ -1,7 +1,7 @@
 // Closed-loop tests of the round-hole board detector in point clouds: the station simulator
 // scans a round-hole board with the reference car's VLP-16 and Pandar64 beam patterns at 3-8 m
 // and several headings, with range noise 1-3 cm, and the detector must recover the five hole
-// centres and the normal within acceptance.md's bars from ten rotations; it must give the
+// centres and the normal within docs/acceptance.md's bars from ten rotations; it must give the
 // right reason for a board outside the region, an empty or cluttered region, a board too far
 // for its rings to cross the holes, and bad input.
 #include "detectors/round_hole/round_hole_cloud.h"
@@ -38,7 +38,7 @@ RoundHoleCloudDetection Detect(const Scene& scene, const Rigid3d& prior,
 }
 
 TEST(RoundHoleCloudTest, HoleCentresAndNormalWithinTheBars) {
-  // Bars: acceptance.md "Detectors (point clouds)".
+  // Bars: docs/acceptance.md "Detectors (point clouds)".
   constexpr double kNormalBarRad = 0.1 * kDegToRad;
   const Case cases[] = {
       {"roof_lidar", 3.0, 0.0, 0.0, 0.01, 0.01},
@@ -112,7 +112,7 @@ TEST(RoundHoleCloudTest, AnOccludingPostIsNotAHole) {
     const Rigid3d delta = d.T_lidar_board.Inverse() * scene.T_lidar_board;
     std::printf("post at board x %.2f: worst hole %.1f mm, board y error %.1f mm (1-sigma %.1f)\n", post_x,
                 1e3 * worst, 1e3 * delta.translation().y(), 1e3 * std::sqrt(d.pose_covariance(4, 4)));
-    EXPECT_LT(worst, 0.02) << post_x;  // acceptance.md, 16 rings
+    EXPECT_LT(worst, 0.02) << post_x;  // docs/acceptance.md, 16 rings
     EXPECT_LT(std::abs(delta.translation().y()), 4.0 * std::sqrt(d.pose_covariance(4, 4))) << post_x;
   }
 }
@@ -214,7 +214,7 @@ namespace {
 // Monte Carlo of the reported pose covariance (reduced; `linecal eval lidar` runs the
 // LiDAR-to-car version over many cars): boards at random positions around 5.5 m (VLP-16) or
 // 6 m (Pandar64), headings within 25 degrees, sigma 2 cm, 2 rotations. Per pose component
-// the RMS of error / reported 1-sigma should be 1 (acceptance.md: within +-20%). With 40
+// the RMS of error / reported 1-sigma should be 1 (docs/acceptance.md: within +-20%). With 40
 // runs one component's RMS scatters by about 11% (1-sigma), so position and tilt components
 // are held to 0.75..1.25 and the six pooled (240 values, 4.6%) to 0.8..1.2. The in-plane
 // rotation theta_z does not meet the bar: over 150 runs its ratio is 1.31 for the VLP-16

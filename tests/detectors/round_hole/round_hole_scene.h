@@ -39,7 +39,7 @@ struct Case {
   double bearing_deg;
   double heading_deg;
   double sigma_m;
-  double bar_m;  // acceptance.md: 1 cm for 64 rings, 2 cm for 16 rings (10 frames)
+  double bar_m;  // docs/acceptance.md: 1 cm for 64 rings, 2 cm for 16 rings (10 frames)
 };
 
 struct Scene {

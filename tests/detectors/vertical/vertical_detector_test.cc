@@ -76,7 +76,7 @@ TEST(VerticalDetectorTest, PoseGridCleanAndNoisy) {
   double sum_sq_clean = 0.0, sum_sq_noisy = 0.0;
   int n_clean = 0, n_noisy = 0;
   std::uint64_t seed = 10;
-  // Roll -30 / 0 / 30, yaw and pitch at acceptance.md's extremes (+-50) and between, two
+  // Roll -30 / 0 / 30, yaw and pitch at docs/acceptance.md's extremes (+-50) and between, two
   // sizes: cells of 25 px (2 m) and of 13 px (3.8 m); each clean and noisy (sigma 4, blur
   // 1.0, a 3:1 lighting gradient, gamma 1.4).
   int index = 0;

@@ -45,7 +45,7 @@ constexpr double kAutodiffJacobianRelative = 1e-10;
 // theta_d / r * x): a few ulps of coordinates up to 2000 px.
 constexpr double kTemplateValuePx = 1e-11;
 
-// Realistic cameras of the reference car (acceptance.md): a front camera 1920x1080 with mild
+// Realistic cameras of the reference car (docs/acceptance.md): a front camera 1920x1080 with mild
 // and with strong (wide-angle) distortion, and a ~190 degree fisheye 1280x960.
 CameraIntrinsics MildPinhole() {
   CameraIntrinsics c;

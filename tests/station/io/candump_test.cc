@@ -16,7 +16,7 @@ using std::chrono::nanoseconds;
 using std::chrono::seconds;
 using std::string_view_literals::operator""sv;
 
-constexpr int64_t kLogEpochS = 1600000000;  // the timestamp of sensors.md's example line
+constexpr int64_t kLogEpochS = 1600000000;  // the timestamp of docs/sensors.md's example line
 
 CanFrame ParseOk(std::string_view line) {
   absl::StatusOr<CanFrame> frame = ParseCandumpLine(line);

@@ -17,7 +17,7 @@ namespace {
 using radar_test::kDeg;
 
 RadarSimOptions AcceptanceSim() {
-  RadarSimOptions sim;  // acceptance.md: σ 0.1° per detection, 50 cycles
+  RadarSimOptions sim;  // docs/acceptance.md: σ 0.1° per detection, 50 cycles
   sim.cycles = 50;
   sim.azimuth_sigma_deg = 0.1;
   return sim;
@@ -135,7 +135,7 @@ MonteCarloSpread SpreadOverCars(const SensorModel& s, const StationLayout& layou
   return {std::sqrt(sum_e2 / sum_s2), static_cast<double>(covered) / cars};
 }
 
-// acceptance.md's bars: RMS error / RMS σ within ±20%, 95% intervals cover 93-97%; with 400
+// docs/acceptance.md's bars: RMS error / RMS σ within ±20%, 95% intervals cover 93-97%; with 400
 // cars the coverage itself scatters by ±1.1 percentage points.
 TEST(RadarCalibrationTest, ReportedSigmaMatchesMonteCarlo) {
   const MonteCarloSpread m =

@@ -41,7 +41,7 @@ const Setup& Reference() {
 CameraModel Camera(const SensorModel& sensor) { return *CameraModel::Create(*sensor.intrinsics); }
 
 // The defaults, or every distractor and camera effect at once (the hardest case of the
-// detector test set of acceptance.md).
+// detector test set of docs/acceptance.md).
 CameraRenderOptions Options(bool effects, int threads) {
   CameraRenderOptions o;
   o.threads = threads;

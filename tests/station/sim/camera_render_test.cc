@@ -70,7 +70,7 @@ CameraModel Fisheye() {
   return *CameraModel::Create(c);
 }
 
-// The camera 1.5 m above the station origin, looking along +x (conventions.md's camera
+// The camera 1.5 m above the station origin, looking along +x (docs/conventions.md's camera
 // base rotation), turned by yaw about the vertical.
 Rigid3d CameraPose(double yaw_deg = 0.0) {
   return Rigid3d(RotationFromYawPitchRoll({yaw_deg * kDeg, 0, 0}) * CameraBaseRotation(),

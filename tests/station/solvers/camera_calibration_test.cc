@@ -129,7 +129,7 @@ TEST_F(CameraCalibrationTest, FrontCameraIsRecoveredWithinItsSigmaAndPasses) {
 
 // Monte Carlo over fresh noise: the reported 1-sigma of yaw, pitch, roll and x, y, z in the
 // car frame (propagated from the PnP covariance through the inverse pose and the mounting
-// angles) against the spread of 200 solves: within +-20% (acceptance.md).
+// angles) against the spread of 200 solves: within +-20% (docs/acceptance.md).
 TEST_F(CameraCalibrationTest, MountingSigmaMatchesTheMonteCarloSpread) {
   const SensorModel& s = *car_.FindSensor("front_camera");
   const YawPitchRoll error{0.3 * kDeg, -0.4 * kDeg, 0.2 * kDeg};

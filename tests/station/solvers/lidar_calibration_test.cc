@@ -98,7 +98,7 @@ TEST_F(LidarCalibrationTest, BothLidarsRecoveredWithinSigma) {
   }
 }
 
-// The reported sigma against 300 solves with fresh noise (acceptance.md: within ±20%).
+// The reported sigma against 300 solves with fresh noise (docs/acceptance.md: within ±20%).
 TEST_F(LidarCalibrationTest, SigmaMatchesTheMonteCarloSpread) {
   const SensorModel& s = *car_.FindSensor("roof_lidar");
   const Rigid3d truth = TrueMounting(s, {}, Eigen::Vector3d::Zero());
@@ -123,7 +123,7 @@ TEST_F(LidarCalibrationTest, SigmaMatchesTheMonteCarloSpread) {
 // Boards given as poses with the detector's covariance (the cycle's path): an anisotropic
 // covariance like a 16-ring LiDAR's (the board's y 8 mm, x 1.5 mm, in-plane rotation 0.3
 // degree, tilts 0.1 degree, depth 3 mm, with a correlation), errors drawn from it; the
-// reported sigma against 300 solves within +-20% (acceptance.md), and the hole centres do not
+// reported sigma against 300 solves within +-20% (docs/acceptance.md), and the hole centres do not
 // enter the solve a second time.
 TEST_F(LidarCalibrationTest, BoardPosesWithTheirCovariance) {
   const SensorModel& s = *car_.FindSensor("bumper_lidar");

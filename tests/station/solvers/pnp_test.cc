@@ -165,7 +165,7 @@ TEST(PnpTest, FaceOnTiltedAndGrazingViews) {
 }
 
 // Monte Carlo: the reported 1-sigma of each pose component against the spread of 400 solves
-// with fresh noise (acceptance.md: within +-20%), and the 95% intervals' coverage.
+// with fresh noise (docs/acceptance.md: within +-20%), and the 95% intervals' coverage.
 TEST(PnpTest, ReportedUncertaintyMatchesTheMonteCarloSpread) {
   const CameraModel camera = Pinhole();
   const Rigid3d truth = CameraViewing(3.0, 25 * kDeg, 10 * kDeg, 0, {0.2, 0, 0});
