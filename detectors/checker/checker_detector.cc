@@ -5,10 +5,13 @@
 #include <cmath>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <map>
 #include <optional>
 #include <utility>
 #include <vector>
+
+#include <Eigen/Cholesky>
 
 #include "detectors/common/homography.h"
 #include "detectors/common/image_filters.h"
@@ -80,90 +83,259 @@ std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
   return components;
 }
 
-// Mean of the blurred image over a small cross of points around the board point
-// (c, r) in corner-grid units (corner (0, 0) = id 0), mapped through H_image_grid; nullopt
-// when a point falls outside the image.
-std::optional<double> SquareValue(const ImageF& blurred, const Eigen::Matrix3d& H_image_grid,
-                                  double c, double r) {
-  // The centre and four points a quarter square away: averages noise, stays inside the
-  // square under any view the corner test accepts.
-  constexpr std::array<std::array<double, 2>, 5> kOffsets = {
-      {{0.0, 0.0}, {0.25, 0.0}, {-0.25, 0.0}, {0.0, 0.25}, {0.0, -0.25}}};
-  double sum = 0.0;
-  for (const auto& o : kOffsets) {
-    const Eigen::Vector2d uv = ApplyHomography(H_image_grid, Eigen::Vector2d(c + o[0], r + o[1]));
-    if (!uv.allFinite() || uv.x() < 0.0 || uv.y() < 0.0 || uv.x() > blurred.width - 1 ||
-        uv.y() > blurred.height - 1) {
-      return std::nullopt;
-    }
-    sum += SampleBilinear(blurred, uv.x(), uv.y());
+// A complete w x h block of one component's corners, in window coordinates: corner (i, j),
+// i right and j down as the component's grid axes (right-handed in the image), at
+// uv[j * w + i]. Positions are local: every geometric question about the window is answered
+// by homographies of 3 x 3 blocks of its corners, so that the bending of a real lens over
+// the whole board (tens of pixels under a fisheye) never enters a check.
+class Window {
+ public:
+  Window(int w, int h, std::vector<Eigen::Vector2d> uv) : w_(w), h_(h), uv_(std::move(uv)) {}
+  int w() const { return w_; }
+  int h() const { return h_; }
+  const Eigen::Vector2d& uv(int i, int j) const { return uv_[j * w_ + i]; }
+
+  // The image position of window point (x, y) (corner units, any real numbers: square
+  // centres, points beyond the outer corners) through the homography of the 3 x 3 block of
+  // corners nearest to it (2 along a side of two corners). nullopt when that block is
+  // degenerate. Blocks are fitted once and cached.
+  std::optional<Eigen::Vector2d> Map(double x, double y) {
+    const int c0 = BlockOrigin(x, w_);
+    const int r0 = BlockOrigin(y, h_);
+    const std::optional<Eigen::Matrix3d>& H = Block(c0, r0);
+    if (!H) return std::nullopt;
+    const Eigen::Vector2d p = ApplyHomography(*H, Eigen::Vector2d(x, y));
+    if (!p.allFinite()) return std::nullopt;
+    return p;
   }
-  return sum / kOffsets.size();
-}
 
-// The colours of the squares around a grid hypothesis: square (sc, sr), sc in -1..cols+1,
-// sr in -1..rows+1, has its centre at corner coordinates (sc - 0.5, sr - 0.5); the board's
-// squares (0..cols, 0..rows) are black when sc + sr is even, the margin around them white.
-struct ColourCheck {
-  double score = 0.0;  // mean white minus mean black over the board's squares
-  bool all_pairs_ok = false;
-};
+  // The local square side (pixels) at corner (i, j): the shortest link to a neighbour.
+  double SideAt(int i, int j) const {
+    double side = std::numeric_limits<double>::infinity();
+    for (const auto& [di, dj] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+      const int ni = i + di, nj = j + dj;
+      if (ni >= 0 && ni < w_ && nj >= 0 && nj < h_) {
+        side = std::min(side, (uv(ni, nj) - uv(i, j)).norm());
+      }
+    }
+    return side;
+  }
 
-ColourCheck CheckColours(const ImageF& blurred, const Eigen::Matrix3d& H_image_grid, int cols,
-                         int rows) {
-  const int nc = cols + 3;
-  const int nr = rows + 3;
-  std::vector<std::optional<double>> value(nc * nr);
-  std::vector<int> black(nc * nr);
-  double sum_white = 0.0, sum_black = 0.0;
-  int n_white = 0, n_black = 0;
-  for (int sr = -1; sr <= rows + 1; ++sr) {
-    for (int sc = -1; sc <= cols + 1; ++sc) {
-      const int k = (sr + 1) * nc + (sc + 1);
-      const bool on_board = sc >= 0 && sc <= cols && sr >= 0 && sr <= rows;
-      black[k] = on_board && (sc + sr) % 2 == 0;
-      value[k] = SquareValue(blurred, H_image_grid, sc - 0.5, sr - 0.5);
-      if (on_board && value[k]) {
-        if (black[k]) {
-          sum_black += *value[k];
-          ++n_black;
-        } else {
-          sum_white += *value[k];
-          ++n_white;
+  // Every corner against its prediction from the other corners of its 3 x 3 block: within
+  // max(1 px, fraction x local side), the fraction half as large again for each axis along
+  // which the corner lies outside the others (the window's edges and corners, predicted by
+  // extrapolation: a close fisheye view bent them by up to 0.17 of a side). A corner that is not the grid's (clutter linked in
+  // place of a missed one) is off by a good part of a square. The prediction is a quadratic
+  // in (i, j) per image coordinate, not a homography: it follows perspective and the
+  // bending of a real lens alike (a fisheye bends a board's edge by a fifth of a square
+  // over three squares, which a homography extrapolated to a block's corner cannot follow).
+  // Windows of 2 x 2 corners have nothing to predict from: true.
+  bool LocallyConsistent(double fraction) const {
+    if (w_ < 3 && h_ < 3) return true;
+    for (int j = 0; j < h_; ++j) {
+      for (int i = 0; i < w_; ++i) {
+        const std::optional<Eigen::Vector2d> p = PredictFromBlock(i, j);
+        const int extrapolated = (i == 0 || i == w_ - 1) + (j == 0 || j == h_ - 1);
+        const double tol = std::max(1.0, fraction * (1.0 + 0.5 * extrapolated) * SideAt(i, j));
+        if (!p || !((*p - uv(i, j)).norm() <= tol)) {
+          return false;
         }
       }
     }
+    return true;
   }
-  ColourCheck check;
-  if (n_white == 0 || n_black == 0) return check;
-  check.score = sum_white / n_white - sum_black / n_black;
-  if (!(check.score > 0.0)) return check;
-  // Each white square is brighter than each black square next to it by a quarter of the
-  // board's mean contrast: robust to a 4:1 illumination gradient (neighbours are lit
-  // alike), and a grid shifted by a square or laid over another pattern fails it.
-  const double min_step = 0.25 * check.score;
-  for (int sr = 0; sr < nr; ++sr) {
-    for (int sc = 0; sc < nc; ++sc) {
-      const int k = sr * nc + sc;
-      if (!value[k]) continue;
-      const std::array<int, 2> others = {sc + 1 < nc ? k + 1 : -1, sr + 1 < nr ? k + nc : -1};
-      for (int o : others) {
-        if (o < 0 || !value[o] || black[o] == black[k]) continue;
-        const double white_v = black[k] ? *value[o] : *value[k];
-        const double black_v = black[k] ? *value[k] : *value[o];
-        if (white_v - black_v < min_step) return check;
+
+ private:
+  static constexpr HomographyFitOptions kDltOnly{.refine = false};
+
+  // Corner (i, j) predicted by least squares from the others of its block: each image
+  // coordinate as a + b i + c j + d ij (+ e i^2 and f j^2 along a side of three). nullopt
+  // when the block's points do not determine it.
+  std::optional<Eigen::Vector2d> PredictFromBlock(int i, int j) const {
+    const int c0 = std::clamp(i - 1, 0, std::max(0, w_ - 3));
+    const int r0 = std::clamp(j - 1, 0, std::max(0, h_ - 3));
+    const int bw = std::min(3, w_), bh = std::min(3, h_);
+    auto basis = [&](int c, int r) {
+      Eigen::Matrix<double, 6, 1> b;
+      const double x = c - i, y = r - j;  // centred: the prediction is the constant term
+      b << 1.0, x, y, x * y, bw == 3 ? x * x : 0.0, bh == 3 ? y * y : 0.0;
+      return b;
+    };
+    Eigen::Matrix<double, 6, 6> AtA = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 2> Atb = Eigen::Matrix<double, 6, 2>::Zero();
+    for (int r = r0; r < r0 + bh; ++r) {
+      for (int c = c0; c < c0 + bw; ++c) {
+        if (c == i && r == j) continue;
+        const Eigen::Matrix<double, 6, 1> b = basis(c, r);
+        AtA += b * b.transpose();
+        Atb += b * uv(c, r).transpose();
+      }
+    }
+    // Unused terms (a side of two) have zero rows: pin them so the system stays regular.
+    for (int k = 4; k < 6; ++k) {
+      if (AtA(k, k) == 0.0) AtA(k, k) = 1.0;
+    }
+    const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(AtA);
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return std::nullopt;
+    const Eigen::Matrix<double, 6, 2> coef = ldlt.solve(Atb);
+    if (!coef.allFinite()) return std::nullopt;
+    return Eigen::Vector2d(coef(0, 0), coef(0, 1));
+  }
+
+  // The first corner of the block of three that is centred nearest to x, inside 0..n-1.
+  static int BlockOrigin(double x, int n) {
+    return std::clamp(static_cast<int>(std::lround(x)) - 1, 0, std::max(0, n - 3));
+  }
+
+  const std::optional<Eigen::Matrix3d>& Block(int c0, int r0) {
+    const auto key = std::make_pair(c0, r0);
+    if (auto it = blocks_.find(key); it != blocks_.end()) return it->second;
+    std::vector<Eigen::Vector2d> src, dst;
+    for (int r = r0; r < std::min(h_, r0 + 3); ++r) {
+      for (int c = c0; c < std::min(w_, c0 + 3); ++c) {
+        src.emplace_back(c, r);
+        dst.push_back(uv(c, r));
+      }
+    }
+    std::optional<Eigen::Matrix3d> H;
+    if (const std::optional<HomographyFit> fit = FitHomography(src, dst, kDltOnly)) H = fit->H;
+    return blocks_.emplace(key, H).first->second;
+  }
+
+  int w_, h_;
+  std::vector<Eigen::Vector2d> uv_;
+  std::map<std::pair<int, int>, std::optional<Eigen::Matrix3d>> blocks_;
+};
+
+// Mean of the blurred image at window point (x, y) and at the points a quarter square away
+// along the axes in `spread_x` / `spread_y` (averaging noise while staying inside a square
+// under any view the link test accepts); nullopt when a point falls outside the image.
+std::optional<double> SquareValue(const ImageF& blurred, Window& window, double x, double y,
+                                  bool spread_x, bool spread_y) {
+  double sum = 0.0;
+  int n = 0;
+  for (const auto& [dx, dy] : {std::pair{0.0, 0.0}, {0.25, 0.0}, {-0.25, 0.0}, {0.0, 0.25},
+                               {0.0, -0.25}}) {
+    if ((dx != 0.0 && !spread_x) || (dy != 0.0 && !spread_y)) continue;
+    const std::optional<Eigen::Vector2d> uv = window.Map(x + dx, y + dy);
+    if (!uv || uv->x() < 0.0 || uv->y() < 0.0 || uv->x() > blurred.width - 1 ||
+        uv->y() > blurred.height - 1) {
+      return std::nullopt;
+    }
+    sum += SampleBilinear(blurred, uv->x(), uv->y());
+    ++n;
+  }
+  return sum / n;
+}
+
+// Where a square's samples go along one axis of a window of n corners: square s (0..n)
+// lies between corners s - 1 and s. Inner squares are sampled at their centre, spread a
+// quarter square; the outer ones (s = 0, n) only kOuterDepth beyond the outer corner line
+// and not spread across it, because printed boards often cut them to 0.4-0.9 of a square.
+constexpr double kOuterDepth = 0.25;
+double SquareCoordinate(int s, int n) {
+  if (s == 0) return -kOuterDepth;
+  if (s == n) return n - 1 + kOuterDepth;
+  return s - 0.5;
+}
+
+// The paint of a window: which squares are dark, how strongly, and whether the pattern goes
+// on beyond the window.
+struct Paint {
+  bool ok = false;      // every pair of neighbouring squares differs as a checker's do
+  int dark_parity = 0;  // squares (si, sj) with (si + sj) % 2 == dark_parity are the dark ones
+  double contrast = 0.0;  // mean light minus mean dark square
+};
+
+// The squares of the window and its outer ring (docs/boards.md: the board's squares around
+// its inner corners). Neighbouring squares must differ by a quarter of the mean contrast in
+// the right sense: robust to a 4:1 illumination gradient (neighbours are lit alike), while a
+// grid shifted by a square or laid over other texture fails it. Either colour may be dark
+// at a corner (printed boards come both ways); the caller turns the parity into an
+// orientation.
+Paint CheckPaint(const ImageF& blurred, Window& window) {
+  const int w = window.w(), h = window.h();
+  const int nc = w + 1;
+  std::vector<std::optional<double>> value((w + 1) * (h + 1));
+  double sum[2] = {0.0, 0.0};
+  int count[2] = {0, 0};
+  for (int sj = 0; sj <= h; ++sj) {
+    for (int si = 0; si <= w; ++si) {
+      const bool inner_i = si > 0 && si < w, inner_j = sj > 0 && sj < h;
+      std::optional<double>& v = value[sj * nc + si];
+      v = SquareValue(blurred, window, SquareCoordinate(si, w), SquareCoordinate(sj, h), inner_i,
+                      inner_j);
+      if (v) {
+        sum[(si + sj) % 2] += *v;
+        ++count[(si + sj) % 2];
       }
     }
   }
-  check.all_pairs_ok = true;
-  return check;
+  Paint paint;
+  if (count[0] == 0 || count[1] == 0) return paint;
+  const double mean0 = sum[0] / count[0], mean1 = sum[1] / count[1];
+  paint.dark_parity = mean0 < mean1 ? 0 : 1;
+  paint.contrast = std::abs(mean1 - mean0);
+  if (!(paint.contrast > 0.0)) return paint;
+  const double min_step = 0.25 * paint.contrast;
+  for (int sj = 0; sj <= h; ++sj) {
+    for (int si = 0; si <= w; ++si) {
+      const std::optional<double>& a = value[sj * nc + si];
+      if (!a) continue;
+      const double sign = ((si + sj) & 1) == paint.dark_parity ? 1.0 : -1.0;  // a dark: +
+      for (const auto& [di, dj] : {std::pair{1, 0}, {0, 1}}) {
+        if (si + di > w || sj + dj > h) continue;
+        const std::optional<double>& b = value[(sj + dj) * nc + si + di];
+        if (b && sign * (*b - *a) < min_step) return paint;
+      }
+    }
+  }
+  paint.ok = true;
+  return paint;
+}
+
+// True when the checker pattern goes on beyond one side of the window: the next row (or
+// column) of squares, a whole square beyond the outer corner line, alternates in the
+// window's phase for at least three quarters of its neighbouring pairs (all when it has one
+// or two). The window is then part of a larger board or grid, not the board. A board's white
+// margin, its cut edge or the room behind it do not alternate so. Pairs outside the image
+// are not counted; a side with none cannot be judged and does not continue.
+bool PatternContinues(const ImageF& blurred, Window& window, const Paint& paint) {
+  const int w = window.w(), h = window.h();
+  const double min_step = 0.25 * paint.contrast;
+  // Each side: the squares beyond it, square s at (si0 + s * dsi, sj0 + s * dsj).
+  struct Side {
+    int n;  // corners along the side
+    int si0, sj0, dsi, dsj;
+  };
+  const std::array<Side, 4> sides = {Side{w, 0, -1, 1, 0}, Side{w, 0, h + 1, 1, 0},
+                                     Side{h, -1, 0, 0, 1}, Side{h, w + 1, 0, 0, 1}};
+  for (const Side& side : sides) {
+    int judged = 0, alternating = 0;
+    std::optional<double> previous;
+    for (int s = 1; s < side.n; ++s) {  // the squares between two corners of the side
+      const int si = side.si0 + s * side.dsi, sj = side.sj0 + s * side.dsj;
+      const std::optional<double> v =
+          SquareValue(blurred, window, si - 0.5, sj - 0.5, side.dsi != 0, side.dsj != 0);
+      if (v && previous) {
+        ++judged;
+        const double sign = ((si + sj) & 1) == paint.dark_parity ? 1.0 : -1.0;  // v dark: +
+        alternating += sign * (*previous - *v) >= min_step;
+      }
+      previous = v;
+    }
+    if (judged > 0 && alternating >= std::max(std::min(judged, 2), (3 * judged + 3) / 4)) {
+      return true;
+    }
+  }
+  return false;
 }
 
 // A hypothesis: a complete grid and the map (gi, gj) -> (c, r) of one of its rotations.
 struct GridHypothesis {
   std::vector<std::pair<int, Eigen::Vector2d>> id_uv;  // feature id, image position
-  Eigen::Matrix3d H_image_grid = Eigen::Matrix3d::Identity();
-  double score = 0.0;
+  std::vector<double> side_px;  // local square side at each, as id_uv
+  bool standard_colours = true;  // the board's top-left square dark, as docs/boards.md draws it
   double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
 };
 
@@ -174,9 +346,108 @@ struct GridSearch {
   GridHypothesis grid;
 };
 
+// The rotations k of a verified w x h window onto the board's (c, r), each a hypothesis:
+// k = 0: c = i; 1: c = j, r = w-1-i; 2: both reversed; 3: c = h-1-j, r = i. All keep the axes
+// right-handed in the image, as the board's x right and rows down are for a camera facing
+// the print. Rotation k turns the window's square parity by 0, w, w + h, h; the board's
+// colours are standard when its top-left square is the dark one.
+void AddRotations(Window& window, const Paint& paint, int cols, int rows,
+                  std::vector<GridHypothesis>* out) {
+  const int w = window.w(), h = window.h();
+  const int ci = std::min((w - 1) / 2, w - 2), cj = std::min((h - 1) / 2, h - 2);
+  const Eigen::Vector2d step_i = window.uv(ci + 1, cj) - window.uv(ci, cj);
+  const Eigen::Vector2d step_j = window.uv(ci, cj + 1) - window.uv(ci, cj);
+  const std::array<Eigen::Vector2d, 4> x_axis = {step_i, step_j, -step_i, -step_j};
+  const std::array<int, 4> parity_shift = {0, w, w + h, h};
+  for (int k = 0; k < 4; ++k) {
+    const bool swapped = k % 2 == 1;
+    if ((swapped ? h : w) != cols || (swapped ? w : h) != rows) continue;
+    GridHypothesis hyp;
+    hyp.standard_colours = ((paint.dark_parity + parity_shift[k]) & 1) == 0;
+    hyp.x_axis_u = x_axis[k].normalized().x();
+    for (int j = 0; j < h; ++j) {
+      for (int i = 0; i < w; ++i) {
+        int c = 0, r = 0;
+        switch (k) {
+          case 0: c = i; r = j; break;
+          case 1: c = j; r = w - 1 - i; break;
+          case 2: c = w - 1 - i; r = h - 1 - j; break;
+          default: c = h - 1 - j; r = i; break;
+        }
+        hyp.id_uv.emplace_back(cols * r + c, window.uv(i, j));
+        hyp.side_px.push_back(window.SideAt(i, j));
+      }
+    }
+    out->push_back(std::move(hyp));
+  }
+}
+
+// Every complete cols x rows (or rows x cols) window of a component: the component itself
+// when it is the board's size, else each placement inside its extent whose corners are all
+// there (a grid grown into clutter, or a larger board). Each is verified by its local
+// geometry and paint, and refused when the pattern continues beyond it; the verified
+// windows' rotations go to *out. Returns the reason of the last refusal (kNone if none).
+DetectReason SearchComponent(const ImageF& blurred, const std::vector<XCorner>& corners,
+                             const Component& comp, int cols, int rows,
+                             const CheckerOptions& options, std::vector<GridHypothesis>* out) {
+  int i0 = 1 << 30, i1 = -(1 << 30), j0 = 1 << 30, j1 = -(1 << 30);
+  for (const GridCorner& gc : comp.corners) {
+    i0 = std::min(i0, gc.gi);
+    i1 = std::max(i1, gc.gi);
+    j0 = std::min(j0, gc.gj);
+    j1 = std::max(j1, gc.gj);
+  }
+  const int bw = i1 - i0 + 1, bh = j1 - j0 + 1;
+  std::vector<int> at(static_cast<std::size_t>(bw) * bh, -1);  // corner index by grid point
+  for (const GridCorner& gc : comp.corners) at[(gc.gj - j0) * bw + gc.gi - i0] = gc.index;
+  DetectReason refusal = DetectReason::kNone;
+  std::vector<std::pair<int, int>> sizes = {{cols, rows}};
+  if (cols != rows) sizes.emplace_back(rows, cols);
+  for (const auto& [w, h] : sizes) {
+    for (int wj = 0; wj + h <= bh; ++wj) {
+      for (int wi = 0; wi + w <= bw; ++wi) {
+        std::vector<Eigen::Vector2d> uv;
+        for (int j = wj; j < wj + h; ++j) {
+          for (int i = wi; i < wi + w; ++i) {
+            if (at[j * bw + i] >= 0) uv.push_back(corners[at[j * bw + i]].uv_px);
+          }
+        }
+        if (static_cast<int>(uv.size()) != w * h) continue;
+        Window window(w, h, std::move(uv));
+        if (!window.LocallyConsistent(options.max_residual_square_fraction)) {
+          refusal = DetectReason::kVerificationFailed;
+          continue;
+        }
+        const Paint paint = CheckPaint(blurred, window);
+        if (!paint.ok) {
+          refusal = DetectReason::kVerificationFailed;
+          continue;
+        }
+        if (PatternContinues(blurred, window, paint)) {
+          refusal = DetectReason::kWrongBoard;
+          continue;
+        }
+        AddRotations(window, paint, cols, rows, out);
+      }
+    }
+  }
+  return refusal;
+}
+
+// The image positions of a hypothesis, sorted: two hypotheses with the same set are
+// rotations of one symmetric grid.
+std::vector<Eigen::Vector2d> SortedPositions(const GridHypothesis& hyp) {
+  std::vector<Eigen::Vector2d> p;
+  for (const auto& [id, uv] : hyp.id_uv) p.push_back(uv);
+  std::sort(p.begin(), p.end(), [](const auto& a, const auto& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  return p;
+}
+
 // Steps 1-4 of the header's method on `view` (the image or one of its halvings): the
-// corners, their grid components, the one complete cols x rows grid verified by its colours
-// and its homography, and the upright rule among the rotations the colours allow.
+// corners, their grid components, the one complete cols x rows grid verified by its local
+// geometry and paint, and the colour and upright rules among its rotations.
 GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerOptions& options) {
   const ImageF blurred = GaussianBlur(view, options.blur_sigma_px);
   const std::vector<XCorner> corners = FindXCorners(blurred, options.corners);
@@ -189,105 +460,35 @@ GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerO
     result.reason = DetectReason::kTooFewFeatures;
     return result;
   }
-  const std::vector<Component> components = GridComponents(corners, LinkXCorners(corners));
-
   std::vector<GridHypothesis> found_grids;
   DetectReason best_failure = DetectReason::kTooFewFeatures;
-  for (const Component& comp : components) {
-    if (!comp.consistent || comp.corners.size() < 4) continue;
-    int i0 = 1 << 30, i1 = -(1 << 30), j0 = 1 << 30, j1 = -(1 << 30);
-    for (const GridCorner& gc : comp.corners) {
-      i0 = std::min(i0, gc.gi);
-      i1 = std::max(i1, gc.gi);
-      j0 = std::min(j0, gc.gj);
-      j1 = std::max(j1, gc.gj);
-    }
-    const int w = i1 - i0 + 1;
-    const int h = j1 - j0 + 1;
-    if (w * h > cols * rows || std::max(w, h) > std::max(cols, rows) ||
-        std::min(w, h) > std::min(cols, rows)) {
-      best_failure = DetectReason::kWrongBoard;
-      continue;
-    }
-    if (static_cast<int>(comp.corners.size()) != cols * rows) continue;
-    // Rotations k of the grid onto (c, r); both keep the axes right-handed in the image, as
-    // the board's x right and rows down are for a camera facing the print.
-    for (int k = 0; k < 4; ++k) {
-      const bool swapped = k % 2 == 1;
-      if ((swapped ? h : w) != cols || (swapped ? w : h) != rows) continue;
-      GridHypothesis hyp;
-      std::vector<Eigen::Vector2d> grid_pts, image_pts;
-      for (const GridCorner& gc : comp.corners) {
-        const int di = gc.gi - i0, dj = gc.gj - j0;
-        int c = 0, r = 0;
-        switch (k) {
-          case 0: c = di; r = dj; break;
-          case 1: c = dj; r = w - 1 - di; break;
-          case 2: c = w - 1 - di; r = h - 1 - dj; break;
-          default: c = h - 1 - dj; r = di; break;
-        }
-        hyp.id_uv.emplace_back(cols * r + c, corners[gc.index].uv_px);
-        grid_pts.emplace_back(c, r);
-        image_pts.push_back(corners[gc.index].uv_px);
-      }
-      const std::optional<HomographyFit> fit = FitHomography(grid_pts, image_pts);
-      if (!fit) {
-        best_failure = DetectReason::kVerificationFailed;
-        continue;
-      }
-      const ColourCheck colours = CheckColours(blurred, fit->H, cols, rows);
-      if (!(colours.score > 0.0)) continue;  // the colour-flipped rotation of a valid grid
-      if (!colours.all_pairs_ok) {
-        best_failure = DetectReason::kVerificationFailed;
-        continue;
-      }
-      // Every corner fits the whole-board homography within a fraction of its square.
-      const Eigen::Vector2d centre(0.5 * (cols - 1), 0.5 * (rows - 1));
-      const Eigen::Vector2d uc = ApplyHomography(fit->H, centre);
-      const Eigen::Vector2d ux = ApplyHomography(fit->H, centre + Eigen::Vector2d(1.0, 0.0));
-      bool residuals_ok = true;
-      for (std::size_t m = 0; m < grid_pts.size() && residuals_ok; ++m) {
-        const Eigen::Vector2d p = ApplyHomography(fit->H, grid_pts[m]);
-        const double square_px = LocalSquareSide(fit->H, grid_pts[m], 1.0);
-        const double tol = std::max(1.0, options.max_residual_square_fraction * square_px);
-        residuals_ok = (p - image_pts[m]).norm() <= tol;
-      }
-      if (!residuals_ok) {
-        best_failure = DetectReason::kVerificationFailed;
-        continue;
-      }
-      hyp.H_image_grid = fit->H;
-      hyp.score = colours.score;
-      hyp.x_axis_u = (ux - uc).normalized().x();
-      found_grids.push_back(std::move(hyp));
-    }
+  for (const Component& comp : GridComponents(corners, LinkXCorners(corners, &blurred))) {
+    if (!comp.consistent || static_cast<int>(comp.corners.size()) < cols * rows) continue;
+    const DetectReason refusal =
+        SearchComponent(blurred, corners, comp, cols, rows, options, &found_grids);
+    if (refusal != DetectReason::kNone) best_failure = refusal;
   }
   if (found_grids.empty()) {
     result.reason = best_failure;
     return result;
   }
-  // Several hypotheses: rotations of one symmetric grid (same corners) are resolved by the
-  // upright rule of the header; two different grids are ambiguous.
+  // Standard colours first (they fix the orientation where the board is not symmetric
+  // under the rotation that swaps them), then the upright rule of the header; two
+  // different grids are ambiguous.
   std::sort(found_grids.begin(), found_grids.end(),
-            [](const GridHypothesis& a, const GridHypothesis& b) { return a.x_axis_u > b.x_axis_u; });
-  const GridHypothesis& chosen = found_grids.front();
+            [](const GridHypothesis& a, const GridHypothesis& b) {
+              if (a.standard_colours != b.standard_colours) return a.standard_colours;
+              return a.x_axis_u > b.x_axis_u;
+            });
+  const std::vector<Eigen::Vector2d> chosen = SortedPositions(found_grids.front());
   for (const GridHypothesis& other : found_grids) {
-    std::vector<Eigen::Vector2d> a, b;
-    for (const auto& [id, uv] : chosen.id_uv) a.push_back(uv);
-    for (const auto& [id, uv] : other.id_uv) b.push_back(uv);
-    std::sort(a.begin(), a.end(), [](const auto& p, const auto& q) {
-      return p.x() < q.x() || (p.x() == q.x() && p.y() < q.y());
-    });
-    std::sort(b.begin(), b.end(), [](const auto& p, const auto& q) {
-      return p.x() < q.x() || (p.x() == q.x() && p.y() < q.y());
-    });
-    if (a != b) {
+    if (SortedPositions(other) != chosen) {
       result.reason = DetectReason::kAmbiguous;
       return result;
     }
   }
   result.reason = DetectReason::kNone;
-  result.grid = chosen;
+  result.grid = std::move(found_grids.front());
   return result;
 }
 
@@ -300,19 +501,11 @@ GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerO
 std::optional<std::vector<DetectedFeature>> RefineGrid(const ImageView8& image, const Board& board,
                                                        const GridHypothesis& grid, int level,
                                                        const CheckerOptions& options) {
-  const int cols = board.params().cols;
   std::vector<DetectedFeature> features(grid.id_uv.size());
   const double scale = static_cast<double>(1 << level);
-  for (const auto& [id, uv_level] : grid.id_uv) {
-    const int c = id % cols;
-    const int r = id / cols;
-    const Eigen::Vector2d p = ApplyHomography(grid.H_image_grid, Eigen::Vector2d(c, r));
-    double side = 1e300;
-    for (const Eigen::Vector2d& d : {Eigen::Vector2d(1, 0), Eigen::Vector2d(-1, 0),
-                                     Eigen::Vector2d(0, 1), Eigen::Vector2d(0, -1)}) {
-      side = std::min(side, (ApplyHomography(grid.H_image_grid, Eigen::Vector2d(c, r) + d) - p)
-                                .norm());
-    }
+  for (std::size_t m = 0; m < grid.id_uv.size(); ++m) {
+    const auto& [id, uv_level] = grid.id_uv[m];
+    const double side = grid.side_px[m];
     const Eigen::Vector2d uv = LevelToImage(uv_level, level);
     std::optional<Eigen::Vector2d> refined =
         RefineXCornerOnPatch(image, uv, scale * side, options.blur_sigma_px);

@@ -275,7 +275,46 @@ Eigen::Vector2d XCornerDirection(const XCorner& c, int k) {
   }
 }
 
-std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners) {
+namespace {
+
+// True when the segment from corner a to corner b runs along a printed edge: at a quarter,
+// half and three quarters of the way, the points 0.15 of its length to either side
+// differ by at least kMinEdgeContrastFraction of the weaker corner's contrast, dark on the
+// same side each time (a square edge separates one dark and one light square). A saddle
+// of texture inside a square (the dots of an ECoCheck board, print, clutter) lies within
+// one square: its side samples agree.
+bool AlongPrintedEdge(const ImageF& blurred, const XCorner& a, const XCorner& b) {
+  // A third: a saddle inside a square sees the same paint on both sides (steps of a few grey
+  // levels), while along a real edge the step stays near the corners' contrast, dimmed at
+  // most to half by vignetting at a fisheye's rim.
+  constexpr double kMinEdgeContrastFraction = 0.35;
+  // The side samples stay within 0.15 of the segment's length of it: inside a board's outer
+  // squares even where the print cuts them to 0.4 of a square, and outside the blur of the
+  // edge for squares of 12 px and more (1.8 px off it under a blur sigma of 1.5 px).
+  const Eigen::Vector2d d = b.uv_px - a.uv_px;
+  const Eigen::Vector2d side(-0.15 * d.y(), 0.15 * d.x());
+  const double min_step = kMinEdgeContrastFraction * std::min(a.contrast, b.contrast);
+  int sense = 0;
+  for (double t : {0.25, 0.5, 0.75}) {
+    const Eigen::Vector2d p = a.uv_px + t * d;
+    const Eigen::Vector2d l = p + side, r = p - side;
+    for (const Eigen::Vector2d& q : {l, r}) {
+      if (q.x() < 0.0 || q.y() < 0.0 || q.x() > blurred.width - 1 || q.y() > blurred.height - 1) {
+        return false;
+      }
+    }
+    const double step = SampleBilinear(blurred, l.x(), l.y()) - SampleBilinear(blurred, r.x(), r.y());
+    const int s = step >= min_step ? 1 : step <= -min_step ? -1 : 0;
+    if (s == 0 || (sense != 0 && s != sense)) return false;
+    sense = s;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners,
+                                             const ImageF* blurred) {
   const int n = static_cast<int>(corners.size());
   std::vector<std::array<int, 4>> best(n, {-1, -1, -1, -1});
   // Two corners nearer than this are not neighbouring vertices of a board (the smallest
@@ -295,7 +334,8 @@ std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners
         continue;
       }
       for (int k = 0; k < 4; ++k) {
-        if (XCornerDirection(corners[i], k).dot(dir) >= kCosLinkTolerance && dist < best_dist[k]) {
+        if (XCornerDirection(corners[i], k).dot(dir) >= kCosLinkTolerance && dist < best_dist[k] &&
+            (blurred == nullptr || AlongPrintedEdge(*blurred, corners[i], corners[j]))) {
           best_dist[k] = dist;
           best[i][k] = j;
         }
