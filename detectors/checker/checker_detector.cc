@@ -26,12 +26,16 @@ struct GridCorner {
 };
 
 struct Component {
-  std::vector<GridCorner> corners;
-  bool consistent = true;  // no two corners on one grid point, no contradicting links
+  std::vector<GridCorner> corners;  // at most one on each grid point
 };
 
 // Connected components of the link graph with grid coordinates: global direction g
 // (0 = +i, 1 = +j, 2 = -i, 3 = -j) is local direction (rotation[c] + g) % 4 of corner c.
+// Coordinates spread breadth-first from each component's strongest corner (corners come
+// by decreasing contrast). A link that contradicts the coordinates already given is not
+// followed, and of two corners on one grid point the stronger stays: a stray saddle linked
+// into a board (texture in a square, clutter at its edge) then costs the grid nothing, and
+// whatever it moved is refused by the windows' verification.
 std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
                                       const std::vector<std::array<int, 4>>& links) {
   const int n = static_cast<int>(corners.size());
@@ -45,17 +49,20 @@ std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
     bool linked = false;
     for (int j : links[seed]) linked = linked || j >= 0;
     if (!linked) continue;
-    Component comp;
     rotation[seed] = 0;
     coords[seed] = {0, 0};
     std::deque<int> queue = {seed};
+    std::map<std::pair<int, int>, int> at;  // grid point -> the strongest corner there
     while (!queue.empty()) {
       const int c = queue.front();
       queue.pop_front();
-      comp.corners.push_back({c, coords[c].first, coords[c].second});
+      if (const auto [it, fresh] = at.emplace(coords[c], c); !fresh) {
+        it->second = std::min(it->second, c);
+        continue;  // the weaker of two corners on one point spreads nothing
+      }
       for (int g = 0; g < 4; ++g) {
         const int j = links[c][(rotation[c] + g) % 4];
-        if (j < 0) continue;
+        if (j < 0 || rotation[j] >= 0) continue;
         const Eigen::Vector2d v = XCornerDirection(corners[c], rotation[c] + g);
         int m_best = 0;
         for (int m = 1; m < 4; ++m) {
@@ -63,21 +70,13 @@ std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
             m_best = m;
           }
         }
-        const int rot_j = (m_best - g + 4) % 4;
-        const std::pair<int, int> cj = {coords[c].first + kDi[g], coords[c].second + kDj[g]};
-        if (rotation[j] < 0) {
-          rotation[j] = rot_j;
-          coords[j] = cj;
-          queue.push_back(j);
-        } else if (rotation[j] != rot_j || coords[j] != cj) {
-          comp.consistent = false;
-        }
+        rotation[j] = (m_best - g + 4) % 4;
+        coords[j] = {coords[c].first + kDi[g], coords[c].second + kDj[g]};
+        queue.push_back(j);
       }
     }
-    std::map<std::pair<int, int>, int> seen;
-    for (const GridCorner& gc : comp.corners) {
-      if (!seen.emplace(std::make_pair(gc.gi, gc.gj), gc.index).second) comp.consistent = false;
-    }
+    Component comp;
+    for (const auto& [point, index] : at) comp.corners.push_back({index, point.first, point.second});
     components.push_back(std::move(comp));
   }
   return components;
@@ -450,7 +449,10 @@ std::vector<Eigen::Vector2d> SortedPositions(const GridHypothesis& hyp) {
 // geometry and paint, and the colour and upright rules among its rotations.
 GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerOptions& options) {
   const ImageF blurred = GaussianBlur(view, options.blur_sigma_px);
-  const std::vector<XCorner> corners = FindXCorners(blurred, options.corners);
+  // Boards whose squares do not touch are checkers too.
+  XCornerOptions corner_options = options.corners;
+  corner_options.allow_light_centre = true;
+  const std::vector<XCorner> corners = FindXCorners(blurred, corner_options);
   GridSearch result;
   if (corners.empty()) {
     result.reason = DetectReason::kNoCandidates;
@@ -463,7 +465,7 @@ GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerO
   std::vector<GridHypothesis> found_grids;
   DetectReason best_failure = DetectReason::kTooFewFeatures;
   for (const Component& comp : GridComponents(corners, LinkXCorners(corners, &blurred))) {
-    if (!comp.consistent || static_cast<int>(comp.corners.size()) < cols * rows) continue;
+    if (static_cast<int>(comp.corners.size()) < cols * rows) continue;
     const DetectReason refusal =
         SearchComponent(blurred, corners, comp, cols, rows, options, &found_grids);
     if (refusal != DetectReason::kNone) best_failure = refusal;

@@ -98,8 +98,9 @@ RingResult TestRing(const ImageF& blurred, const Eigen::Vector2d& centre,
   }
   const double expected_centre = hi - contrast * dark_span / (2.0 * std::numbers::pi);
   constexpr double kCentreTolerance = 0.2;
-  if (std::abs(SampleBilinear(blurred, centre.x(), centre.y()) - expected_centre) >
-      kCentreTolerance * contrast) {
+  const double centre_excess = SampleBilinear(blurred, centre.x(), centre.y()) - expected_centre;
+  if (centre_excess < -kCentreTolerance * contrast ||
+      (centre_excess > kCentreTolerance * contrast && !options.allow_light_centre)) {
     return result;
   }
 

@@ -44,6 +44,11 @@ struct XCornerOptions {
   // At most this many response maxima are examined (the strongest first), bounding the
   // cost on textured images. 1..1e6.
   int max_candidates = 20000;
+  // Accept vertices whose centre is lighter than the sectors make it: two dark squares that
+  // meet across a thin light gap, as boards printed with squares that do not touch have
+  // (Kalibr's checkerboards, 2-3 px apart in its photos). Off for boards whose squares
+  // touch, where such a vertex is two corners of clutter.
+  bool allow_light_centre = false;
   SaddleFitOptions saddle;
 
   // Empty when valid, else the first field out of range, named as a member `corners` of a
