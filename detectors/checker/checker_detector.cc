@@ -447,8 +447,9 @@ std::vector<Eigen::Vector2d> SortedPositions(const GridHypothesis& hyp) {
 // Steps 1-4 of the header's method on `view` (the image or one of its halvings): the
 // corners, their grid components, the one complete cols x rows grid verified by its local
 // geometry and paint, and the colour and upright rules among its rotations.
-GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerOptions& options) {
-  const ImageF blurred = GaussianBlur(view, options.blur_sigma_px);
+GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerOptions& options,
+                      double blur_sigma_px) {
+  const ImageF blurred = GaussianBlur(view, blur_sigma_px);
   // Boards whose squares do not touch are checkers too.
   XCornerOptions corner_options = options.corners;
   corner_options.allow_light_centre = true;
@@ -536,6 +537,9 @@ std::string_view CheckerOptions::Validate() const {
   if (!(max_residual_square_fraction > 0.0 && max_residual_square_fraction <= 0.5)) {
     return "max_residual_square_fraction";
   }
+  if (!(gap_blur_sigma_px == 0.0 || (gap_blur_sigma_px >= 0.5 && gap_blur_sigma_px <= 4.0))) {
+    return "gap_blur_sigma_px";
+  }
   return {};
 }
 
@@ -559,16 +563,22 @@ Detection DetectChecker(const ImageView8& image, const Board& board,
   // second grid, a corner that does not refine) passes on to the next finer one, down to
   // the image itself, which decides as without the coarse levels. Boards too small for the
   // coarse levels pay for them on top (at most a third more).
+  // Last (level -1), when the image itself held corners but no board: the search again under
+  // the gap blur, which bridges squares that do not touch (their vertices are no saddles
+  // under the default blur once the gap is wider than about a pixel).
   const std::vector<Image8> pyramid = HalvingPyramid(image, kMinCoarseLevelSidePx);
-  for (int level = static_cast<int>(pyramid.size()); level >= 0; --level) {
+  const int last_level = options.gap_blur_sigma_px > 0.0 ? -1 : 0;
+  for (int level = static_cast<int>(pyramid.size()); level >= last_level; --level) {
+    if (level < 0 && result.reason != DetectReason::kTooFewFeatures) break;
     const GridSearch search =
-        SearchGrid(level == 0 ? image : pyramid[level - 1].view(), cols, rows, options);
+        SearchGrid(level <= 0 ? image : pyramid[level - 1].view(), cols, rows, options,
+                   level < 0 ? options.gap_blur_sigma_px : options.blur_sigma_px);
     if (search.reason != DetectReason::kNone) {
       result.reason = search.reason;
       continue;
     }
     if (std::optional<std::vector<DetectedFeature>> features =
-            RefineGrid(image, board, search.grid, level, options)) {
+            RefineGrid(image, board, search.grid, std::max(level, 0), options)) {
       result.features = *std::move(features);
       result.found = true;
       result.reason = DetectReason::kNone;

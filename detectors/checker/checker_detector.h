@@ -20,7 +20,8 @@
 // Corners are then refined by the saddle fit with a window scaled to the local square size.
 // All but that refinement run coarse to fine: on the image halved while its short side keeps
 // kMinCoarseLevelSidePx (x_corners.h) first, then on each finer level until one finds the
-// board; the refinement is always at full resolution.
+// board, and last on the image under a larger blur for squares that do not touch
+// (CheckerOptions::gap_blur_sigma_px); the refinement is always at full resolution.
 //
 // Orientation: docs/boards.md numbers corner (col c, row r) from the top-left square, which is
 // black. The colours fix the orientation unless the board is symmetric under a rotation
@@ -53,6 +54,12 @@ struct CheckerOptions {
   // a good part of a square, while a close fisheye view bends a block by up to 0.17 of a
   // side at its corners. (0, 0.5].
   double max_residual_square_fraction = 0.15;
+  // When the image holds corners but no board, it is searched once more under this blur:
+  // squares that do not touch (Kalibr's boards, 2-3 px apart) leave no saddle at their
+  // vertices under blur_sigma_px once the gap is wider than about a pixel, and do under
+  // 2 px up to gaps of about 3 px. It costs a full-resolution search on images without the
+  // board. 0 (no such pass) or [0.5, 4].
+  double gap_blur_sigma_px = 2.0;
 
   // Empty when valid, else the name of the first field out of range ("blur_sigma_px").
   std::string_view Validate() const;
