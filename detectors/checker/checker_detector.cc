@@ -76,7 +76,9 @@ std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
       }
     }
     Component comp;
-    for (const auto& [point, index] : at) comp.corners.push_back({index, point.first, point.second});
+    for (const auto& [point, index] : at) {
+      comp.corners.push_back({index, point.first, point.second});
+    }
     components.push_back(std::move(comp));
   }
   return components;
@@ -84,9 +86,9 @@ std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
 
 // A complete w x h block of one component's corners, in window coordinates: corner (i, j),
 // i right and j down as the component's grid axes (right-handed in the image), at
-// uv[j * w + i]. Positions are local: every geometric question about the window is answered
-// by homographies of 3 x 3 blocks of its corners, so that the bending of a real lens over
-// the whole board (tens of pixels under a fisheye) never enters a check.
+// uv[j * w + i]. Every geometric question about the window is answered locally, from 3 x 3
+// blocks of its corners, so that the bending of a real lens over the whole board (tens of
+// pixels under a fisheye) never enters a check.
 class Window {
  public:
   Window(int w, int h, std::vector<Eigen::Vector2d> uv) : w_(w), h_(h), uv_(std::move(uv)) {}
@@ -123,8 +125,9 @@ class Window {
   // Every corner against its prediction from the other corners of its 3 x 3 block: within
   // max(1 px, fraction x local side), the fraction half as large again for each axis along
   // which the corner lies outside the others (the window's edges and corners, predicted by
-  // extrapolation: a close fisheye view bent them by up to 0.17 of a side). A corner that is not the grid's (clutter linked in
-  // place of a missed one) is off by a good part of a square. The prediction is a quadratic
+  // extrapolation: a close fisheye view bent them by up to 0.17 of a side). A corner that is
+  // not the grid's (clutter linked in place of a missed one) is off by a good part of a
+  // square. The prediction is a quadratic
   // in (i, j) per image coordinate, not a homography: it follows perspective and the
   // bending of a real lens alike (a fisheye bends a board's edge by a fifth of a square
   // over three squares, which a homography extrapolated to a block's corner cannot follow).
@@ -213,8 +216,8 @@ std::optional<double> SquareValue(const ImageF& blurred, Window& window, double 
                                   bool spread_x, bool spread_y) {
   double sum = 0.0;
   int n = 0;
-  for (const auto& [dx, dy] : {std::pair{0.0, 0.0}, {0.25, 0.0}, {-0.25, 0.0}, {0.0, 0.25},
-                               {0.0, -0.25}}) {
+  for (const auto& [dx, dy] :
+       {std::pair{0.0, 0.0}, {0.25, 0.0}, {-0.25, 0.0}, {0.0, 0.25}, {0.0, -0.25}}) {
     if ((dx != 0.0 && !spread_x) || (dy != 0.0 && !spread_y)) continue;
     const std::optional<Eigen::Vector2d> uv = window.Map(x + dx, y + dy);
     if (!uv || uv->x() < 0.0 || uv->y() < 0.0 || uv->x() > blurred.width - 1 ||
@@ -241,8 +244,8 @@ double SquareCoordinate(int s, int n) {
 // The paint of a window: which squares are dark, how strongly, and whether the pattern goes
 // on beyond the window.
 struct Paint {
-  bool ok = false;      // every pair of neighbouring squares differs as a checker's do
-  int dark_parity = 0;  // squares (si, sj) with (si + sj) % 2 == dark_parity are the dark ones
+  bool ok = false;        // every pair of neighbouring squares differs as a checker's do
+  int dark_parity = 0;    // squares (si, sj) with (si + sj) % 2 == dark_parity are the dark ones
   double contrast = 0.0;  // mean light minus mean dark square
 };
 
@@ -333,7 +336,7 @@ bool PatternContinues(const ImageF& blurred, Window& window, const Paint& paint)
 // A hypothesis: a complete grid and the map (gi, gj) -> (c, r) of one of its rotations.
 struct GridHypothesis {
   std::vector<std::pair<int, Eigen::Vector2d>> id_uv;  // feature id, image position
-  std::vector<double> side_px;  // local square side at each, as id_uv
+  std::vector<double> side_px;                         // local square side at each, as id_uv
   bool standard_colours = true;  // the board's top-left square dark, as docs/boards.md draws it
   double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
 };

@@ -304,7 +304,8 @@ bool AlongPrintedEdge(const ImageF& blurred, const XCorner& a, const XCorner& b)
         return false;
       }
     }
-    const double step = SampleBilinear(blurred, l.x(), l.y()) - SampleBilinear(blurred, r.x(), r.y());
+    const double step =
+        SampleBilinear(blurred, l.x(), l.y()) - SampleBilinear(blurred, r.x(), r.y());
     const int s = step >= min_step ? 1 : step <= -min_step ? -1 : 0;
     if (s == 0 || (sense != 0 && s != sense)) return false;
     sense = s;

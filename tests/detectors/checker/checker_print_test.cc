@@ -25,10 +25,10 @@ namespace {
 struct Print {
   int cols = 9;
   int rows = 6;
-  double outer = 0.5;     // how far the outer squares reach beyond the outer corners (1: whole)
-  double margin = 0.0;    // white paper beyond the squares
-  bool flipped = false;   // the top-left square white instead of black
-  double gap = 0.0;       // dark squares shrunk by this on every side (0: they touch)
+  double outer = 0.5;    // how far the outer squares reach beyond the outer corners (1: whole)
+  double margin = 0.0;   // white paper beyond the squares
+  bool flipped = false;  // the top-left square white instead of black
+  double gap = 0.0;      // dark squares shrunk by this on every side (0: they touch)
 };
 
 // The camera: board (square units) -> undistorted pixel by H, then a barrel lens about the
