@@ -12,6 +12,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <string>
@@ -125,10 +126,13 @@ class StationCoreLiveTest : public ::testing::Test {
     return r;
   }
 
-  std::vector<std::string> Events(StationCore& core, int64_t id) {
+  // The cycle's events as "type:sensor"; `arrivals`, when given, gets each one's arrival time.
+  std::vector<std::string> Events(StationCore& core, int64_t id,
+                                  std::map<std::string, Clock::time_point>* arrivals = nullptr) {
     std::vector<std::string> types;
     EXPECT_TRUE(core.WatchCycle(id, [&](const StoredEvent& e) {
                       types.push_back(e.type + (e.sensor.empty() ? "" : ":" + e.sensor));
+                      if (arrivals != nullptr) arrivals->emplace(types.back(), Clock::now());
                       return true;
                     }).ok());
     return types;
@@ -235,8 +239,12 @@ TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVer
   const auto start = Clock::now();
   absl::StatusOr<int64_t> id = core->StartCycle(Request());  // nothing sends to the LiDAR's port
   ASSERT_TRUE(id.ok());
-  const std::vector<std::string> events = Events(*core, *id);
-  EXPECT_LT(std::chrono::duration<double>(Clock::now() - start).count(), 5.0);
+  std::map<std::string, Clock::time_point> arrivals;
+  const std::vector<std::string> events = Events(*core, *id, &arrivals);
+  // The silent sensor is given up at its deadline (1.5 s), not at the end of the others' work:
+  // timed to that event, so a slow (sanitized, loaded) calibration of the others does not count.
+  ASSERT_TRUE(arrivals.contains("sensor_error:roof_lidar"));
+  EXPECT_LT(std::chrono::duration<double>(arrivals["sensor_error:roof_lidar"] - start).count(), 4.0);
   EXPECT_TRUE(Has(events, "sensor_error:roof_lidar"));
   EXPECT_TRUE(Has(events, "sensor_acquired:front_camera"));
   EXPECT_TRUE(Has(events, "sensor_acquired:front_radar"));
