@@ -8,6 +8,7 @@
 #include "detectors/checker/checker_detector.h"
 #include "detectors/chessboard/chessboard_detector.h"
 #include "detectors/circle/circle_detector.h"
+#include "detectors/circle/circle_grid_detector.h"
 #include "detectors/vertical/vertical_detector.h"
 
 namespace linecal {
@@ -16,6 +17,7 @@ std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board
   switch (board.type()) {
     case BoardType::kChecker: return DetectChecker(image, board);
     case BoardType::kCircle: return DetectCircleBoard(image, board);
+    case BoardType::kCircleGrid: return DetectCircleGrid(image, board);
     case BoardType::kChessboard: return DetectChessboard(image, board);
     case BoardType::kVertical: return DetectVertical(image, board);
     case BoardType::kAruco:

@@ -47,6 +47,12 @@ class Drawing {
         BoardShape{ShapeGeometry::kRect, paint,
                    Eigen::AlignedBox2d(Pdf(x_pdf, y_pdf + h_mm), Pdf(x_pdf + w_mm, y_pdf))});
   }
+  void BoardCircle(Paint paint, double cx_mm, double cy_mm, double diameter_mm) {
+    const double r = 0.5 * diameter_mm;
+    shapes_.push_back(
+        BoardShape{ShapeGeometry::kCircle, paint,
+                   Eigen::AlignedBox2d(Board(cx_mm - r, cy_mm - r), Board(cx_mm + r, cy_mm + r))});
+  }
   void PdfCircle(Paint paint, double cx_pdf, double cy_pdf, double diameter_mm) {
     const double r = 0.5 * diameter_mm;
     shapes_.push_back(
@@ -296,6 +302,47 @@ void DrawChecker(Drawing& d, int cols, int rows, double square_mm) {
   }
 }
 
+// ---- 8. Circle grid (OpenCV's layouts) ----------------------------------------------------
+
+// The column of circle (row i, col j) in units of the spacing, OpenCV's object point x over
+// squareSize: j in the symmetric grid, 2 j + i % 2 in the asymmetric one.
+int CircleGridColumn(const BoardParams& p, int i, int j) {
+  return p.asymmetric ? 2 * j + i % 2 : j;
+}
+
+// The extent of the circle centres in units of the spacing: (last column, last row). Every
+// asymmetric grid has at least two rows, so its odd rows reach one spacing further.
+Eigen::Vector2d CircleGridExtent(const BoardParams& p) {
+  return {p.asymmetric ? 2.0 * (p.cols - 1) + 1.0 : p.cols - 1.0, p.rows - 1.0};
+}
+
+// The quiet zone around the grid, in spacings from the outer centres to the page edge: two,
+// so that even the asymmetric grid's largest circles (radius under 0.71 spacing) keep more
+// than a spacing of white (or of the black field and then white) around them, as a blob
+// detector needs to see each circle on its own background.
+constexpr double kCircleGridMarginSpacings = 2.0;
+
+// cols x rows circles of diameter_mm on the page centred on their centres' bounding box;
+// black on the white page, or white on a black field reaching one spacing beyond the outer
+// centres. Feature id = cols * i + j, row i from the top, col j from the left (OpenCV's order
+// of object points).
+void DrawCircleGrid(Drawing& d, const BoardParams& p) {
+  const double s = p.spacing_m * 1e3;
+  const Eigen::Vector2d half = 0.5 * s * CircleGridExtent(p);
+  if (p.light_circles) {
+    d.BoardRect(Paint::kBlack, -half.x() - s, -half.y() - s, half.x() + s, half.y() + s);
+  }
+  const Paint paint = p.light_circles ? Paint::kWhite : Paint::kBlack;
+  for (int i = 0; i < p.rows; ++i) {
+    for (int j = 0; j < p.cols; ++j) {
+      const double x = s * CircleGridColumn(p, i, j) - half.x();
+      const double y = half.y() - s * i;
+      d.BoardCircle(paint, x, y, p.diameter_m * 1e3);
+      d.Feature(FeatureKind::kCircleCentre, d.Board(x, y));
+    }
+  }
+}
+
 // Page sizes in millimetres (the PDFs' MediaBoxes; april_board.pdf is A0, 2383.94 x 3370.39
 // pt = 841 x 1189 mm).
 Eigen::Vector2d PageSizeMm(const BoardParams& p) {
@@ -315,6 +362,11 @@ Eigen::Vector2d PageSizeMm(const BoardParams& p) {
     case BoardType::kChecker: {
       const double square_mm = p.square_m * 1e3;
       return {(p.cols + 3) * square_mm, (p.rows + 3) * square_mm};
+    }
+    case BoardType::kCircleGrid: {
+      const Eigen::Vector2d extent =
+          CircleGridExtent(p) + Eigen::Vector2d::Constant(2.0 * kCircleGridMarginSpacings);
+      return p.spacing_m * 1e3 * extent;
     }
   }
   return {0.0, 0.0};
@@ -340,6 +392,8 @@ const char* BoardTypeName(BoardType type) {
       return "round_hole";
     case BoardType::kChecker:
       return "checker";
+    case BoardType::kCircleGrid:
+      return "circle_grid";
   }
   return "unknown";
 }
@@ -365,6 +419,10 @@ const char* BoardParamsErrorName(BoardParamsError e) {
       return "bad_square";
     case BoardParamsError::kBadBorderBits:
       return "bad_border_bits";
+    case BoardParamsError::kBadSpacing:
+      return "bad_spacing";
+    case BoardParamsError::kBadDiameter:
+      return "bad_diameter";
   }
   return "unknown";
 }
@@ -382,6 +440,14 @@ BoardParamsError ValidateBoardParams(const BoardParams& p) {
   }
   if (p.apriltag_border_bits != 1 && p.apriltag_border_bits != 2) {
     return BoardParamsError::kBadBorderBits;
+  }
+  if (!IsFiniteIn(p.spacing_m, 0.0, kMaxCircleSpacingM) || p.spacing_m == 0.0) {
+    return BoardParamsError::kBadSpacing;
+  }
+  // Nearest neighbours: along a row (symmetric) or diagonally between rows (asymmetric).
+  const double nearest_m = p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m;
+  if (!(std::isfinite(p.diameter_m) && p.diameter_m > 0.0 && p.diameter_m < nearest_m)) {
+    return BoardParamsError::kBadDiameter;
   }
   return BoardParamsError::kOk;
 }
@@ -453,6 +519,9 @@ std::optional<Board> Board::Create(const BoardParams& params, BoardParamsError* 
       break;
     case BoardType::kChecker:
       DrawChecker(d, params.cols, params.rows, params.square_m * 1e3);
+      break;
+    case BoardType::kCircleGrid:
+      DrawCircleGrid(d, params);
       break;
   }
   Board board;

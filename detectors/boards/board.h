@@ -29,14 +29,15 @@ enum class BoardType {
   kApriltag,    // april_board.pdf, a 6 x 6 tag36h11 AprilGrid
   kRoundHole,   // round_hole_board.pdf, five through holes and four ArUco markers
   kChecker,     // generic chessboard: cols x rows inner corners, square_m squares
+  kCircleGrid,  // OpenCV's circle grid, symmetric or asymmetric: cols x rows circles
 };
 
-inline constexpr std::array<BoardType, 7> kAllBoardTypes = {
+inline constexpr std::array<BoardType, 8> kAllBoardTypes = {
     BoardType::kChessboard, BoardType::kCircle,    BoardType::kVertical, BoardType::kAruco,
-    BoardType::kApriltag,   BoardType::kRoundHole, BoardType::kChecker};
+    BoardType::kApriltag,   BoardType::kRoundHole, BoardType::kChecker,  BoardType::kCircleGrid};
 
 // The board's command-line and config name: "chessboard", "circle", "vertical", "aruco",
-// "apriltag", "round_hole", "checker" (docs/interfaces.md).
+// "apriltag", "round_hole", "checker", "circle_grid" (docs/interfaces.md).
 const char* BoardTypeName(BoardType type);
 // The inverse of BoardTypeName; nullopt for any other text. Case-sensitive.
 std::optional<BoardType> BoardTypeFromName(std::string_view name);
@@ -46,11 +47,27 @@ struct BoardParams {
   // Multiplies every length of the layout (a board printed at another size is the same
   // board with another scale, docs/boards.md). For kChecker it multiplies square_m too.
   double scale = 1.0;
-  // kChecker only: inner corners along x (cols) and y (rows), and the square side.
-  // Defaults: the classic 9 x 6, 25 mm board of docs/boards.md.
+  // kChecker: inner corners along x (cols) and y (rows). kCircleGrid: circles per row (cols)
+  // and rows of circles (rows), OpenCV's patternSize (cols, rows). Defaults: the classic 9 x 6
+  // boards of docs/boards.md.
   int cols = 9;
   int rows = 6;
+  // kChecker only: the square side. Default 25 mm.
   double square_m = 0.025;
+  // kCircleGrid only (docs/boards.md §8): the centre distance, as OpenCV's squareSize: the
+  // distance between neighbours in a row and between rows of the symmetric grid; in the
+  // asymmetric grid rows are spacing_m apart and a row's circles 2 * spacing_m apart, every
+  // other row shifted by spacing_m. Default 25 mm.
+  double spacing_m = 0.025;
+  // kCircleGrid only: the printed circles' diameter, below the distance of nearest
+  // neighbours (spacing_m, or spacing_m * sqrt(2) in the asymmetric grid). Default 12.5 mm.
+  double diameter_m = 0.0125;
+  // kCircleGrid only: OpenCV's CALIB_CB_ASYMMETRIC_GRID layout (true) or the symmetric
+  // CALIB_CB_SYMMETRIC_GRID (false, default).
+  bool asymmetric = false;
+  // kCircleGrid only: white circles on a black field (true) instead of black circles on the
+  // white page (false, default; what OpenCV's blob detector looks for by default).
+  bool light_circles = false;
   // kApriltag only: black border width in bits. 2 = Kalibr's AprilGrid (the PDF); 1 = the
   // ordinary tag36h11 layout. The black square stays 88 mm either way, so the features do
   // not change; only the bit size does (88 mm / 10 or / 8).
@@ -64,21 +81,26 @@ enum class BoardParamsError {
   kBadRows,        // outside [kMinCheckerCorners, kMaxCheckerCorners]
   kBadSquare,      // not finite or outside (0, kMaxCheckerSquareM]
   kBadBorderBits,  // neither 1 nor 2
+  kBadSpacing,     // not finite or outside (0, kMaxCircleSpacingM]
+  kBadDiameter,    // not finite, not > 0, or not below the nearest neighbours' distance
 };
 
 // A board of 2.6 mm or of 260 m is a typo, not a board: scales outside this range are refused.
 inline constexpr double kMinBoardScale = 1e-3;
 inline constexpr double kMaxBoardScale = 1e2;
-// Two inner corners per side give the grid a direction; 100 is far beyond any printed target
-// and bounds the shape count (about 10^4 squares).
+// Two inner corners (or circles, for kCircleGrid) per side give the grid a direction; 100 is
+// far beyond any printed target and bounds the shape count (about 10^4 squares or circles).
 inline constexpr int kMinCheckerCorners = 2;
 inline constexpr int kMaxCheckerCorners = 100;
 // No station uses chessboard squares over 1 m.
 inline constexpr double kMaxCheckerSquareM = 1.0;
+// Nor circle grids with a centre distance over 1 m.
+inline constexpr double kMaxCircleSpacingM = 1.0;
 
 // A short, stable text per error ("bad_scale", ...), for reasons and messages.
 const char* BoardParamsErrorName(BoardParamsError e);
-// Checks every field (the checker and apriltag fields too, whatever the type). O(1).
+// Checks every field (the checker, circle grid and apriltag fields too, whatever the type).
+// O(1).
 BoardParamsError ValidateBoardParams(const BoardParams& params);
 
 enum class FeatureKind {

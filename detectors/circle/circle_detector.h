@@ -4,23 +4,23 @@
 // pair (ids 14, 15) on a white bar. Features: the 30 circle centres, id 6 * row + col.
 //
 // Method:
-//  1. Candidates: the image averaged 2 x 2 (half the pixels, half the noise), classified
-//     against its local mean (a window of about a fifth of the image) with an offset that
-//     is a fraction of the local range, so the threshold follows illumination gradients and
-//     areas without printed contrast stay unclassified; 4-connected components of the light
-//     and of the dark class whose area, bounding box and second moments are those of a
-//     filled ellipse are blob candidates of either polarity.
+//  1. Candidates (circle_blobs.h): the image averaged 2 x 2 (half the pixels, half the
+//     noise), classified against its local mean (a window of about a fifth of the image)
+//     with an offset that is a fraction of the local range, so the threshold follows
+//     illumination gradients and areas without printed contrast stay unclassified;
+//     4-connected components of the light and of the dark class whose area, bounding box and
+//     second moments are those of a filled ellipse are blob candidates of either polarity.
 //  2. Identification: each pair of dark blobs whose distance, measured in the metric of
 //     their own ellipses (which undoes the local perspective), is that of the black pair
 //     and whose midpoint is light seeds a local board-to-image affine map; the grid grows
 //     outwards from the pair, circle by circle in order of board distance, matching the
 //     blob of the expected polarity nearest to each prediction and refitting a homography
 //     as matches accumulate.
-//  3. Sub-pixel: every one of the 30 circles is measured from the image, seeded by the
-//     ellipse the homography predicts (so circles whose blobs merged with a neighbour under
-//     blur are measured too): the strongest edge of the expected polarity along rays from
-//     the predicted centre (parabolic peak of the profile's derivative), then a direct
-//     ellipse fit with outlier rejection, twice.
+//  3. Sub-pixel (circle_edge_fit.h): every one of the 30 circles is measured from the image,
+//     seeded by the ellipse the homography predicts (so circles whose blobs merged with a
+//     neighbour under blur are measured too): the strongest edge of the expected polarity
+//     along rays from the predicted centre (parabolic peak of the profile's derivative),
+//     then a direct ellipse fit with outlier rejection, twice.
 //  4. Perspective: the image of a circle's centre is not the centre of its image ellipse.
 //     The offset is predicted from the board homography and the printed radius
 //     (ImageOfCircle) and subtracted, and the homography is refitted to the corrected

@@ -60,7 +60,7 @@ Paint PaintByScan(const Board& b, const Eigen::Vector2d& p) {
 
 TEST(BoardTypes, NamesRoundTrip) {
   const std::vector<std::string> expected = {"chessboard", "circle",     "vertical", "aruco",
-                                             "apriltag",   "round_hole", "checker"};
+                                             "apriltag",   "round_hole", "checker",  "circle_grid"};
   ASSERT_EQ(kAllBoardTypes.size(), expected.size());
   for (std::size_t i = 0; i < expected.size(); ++i) {
     EXPECT_EQ(BoardTypeName(kAllBoardTypes[i]), expected[i]);
@@ -84,6 +84,8 @@ TEST(Board, FeatureCountsPageSizesAndIdOrder) {
       {BoardType::kApriltag, 144, 0.841, 1.189},  // A0
       {BoardType::kRoundHole, 21, 1.1, 1.1},
       {BoardType::kChecker, 54, 0.3, 0.225},  // 9 x 6 inner corners of 25 mm, 1-square margin
+      // 9 x 6 circles 25 mm apart: centres over 8 x 5 spacings, 2 spacings of margin a side.
+      {BoardType::kCircleGrid, 54, 0.3, 0.225},
   };
   for (const Expected& e : cases) {
     const Board b = MakeBoard(e.type);
@@ -341,6 +343,70 @@ TEST(Board, CheckerCorners) {
   EXPECT_EQ(b->PaintAt(Eigen::Vector2d(-0.1375, 0.075)), Paint::kWhite);  // the margin
 }
 
+// OpenCV's object points of a circle grid (cv::calibrateCamera's usual ones, z = 0):
+// symmetric (j s, i s), asymmetric ((2 j + i % 2) s, i s), for row i and col j, id = cols i + j.
+Eigen::Vector2d OpenCvObjectPoint(const BoardParams& p, int id) {
+  const int i = id / p.cols, j = id % p.cols;
+  const double x = p.asymmetric ? (2 * j + i % 2) * p.spacing_m : j * p.spacing_m;
+  return {x, i * p.spacing_m};
+}
+
+// The board frame is OpenCV's object frame moved to the centre of the centres' bounding box and
+// turned about x by 180 degrees (y up, not down): p_board = (x_cv - w / 2, h / 2 - y_cv).
+void ExpectOpenCvLayout(const BoardParams& p, double extent_x_spacings) {
+  const std::optional<Board> b = Board::Create(p);
+  ASSERT_TRUE(b.has_value());
+  ASSERT_EQ(b->features().size(), static_cast<std::size_t>(p.cols * p.rows));
+  const double w = extent_x_spacings * p.spacing_m, h = (p.rows - 1) * p.spacing_m;
+  // Two spacings of margin beyond the outer centres.
+  ExpectNear(b->page_size_m(), Eigen::Vector2d(w, h) + Eigen::Vector2d::Constant(4 * p.spacing_m),
+             kExactM, "page");
+  const Paint circle = p.light_circles ? Paint::kWhite : Paint::kBlack;
+  const Paint field = p.light_circles ? Paint::kBlack : Paint::kWhite;
+  for (const BoardFeature& f : b->features()) {
+    const Eigen::Vector2d cv = OpenCvObjectPoint(p, f.id);
+    ExpectNear(f.p_board, Eigen::Vector2d(cv.x() - 0.5 * w, 0.5 * h - cv.y()), kExactM,
+               "circle grid id " + std::to_string(f.id));
+    EXPECT_EQ(f.kind, FeatureKind::kCircleCentre);
+    EXPECT_EQ(f.marker, -1);
+    // The circle's paint just inside its rim, the field's just outside.
+    const double r = 0.5 * p.diameter_m;
+    EXPECT_EQ(b->PaintAt(f.p_board + Eigen::Vector2d(0.99 * r, 0.0)), circle) << f.id;
+    EXPECT_EQ(b->PaintAt(f.p_board + Eigen::Vector2d(0.0, -1.01 * r)), field) << f.id;
+  }
+  // The page's corner is white: the quiet zone around the grid.
+  EXPECT_EQ(b->PaintAt(0.499 * b->page_size_m()), Paint::kWhite);
+}
+
+TEST(Board, CircleGridSymmetricIsOpenCvsLayout) {
+  BoardParams p;
+  p.type = BoardType::kCircleGrid;
+  p.cols = 7;
+  p.rows = 5;
+  p.spacing_m = 0.03;
+  p.diameter_m = 0.02;
+  ExpectOpenCvLayout(p, p.cols - 1);
+  p.light_circles = true;
+  ExpectOpenCvLayout(p, p.cols - 1);
+}
+
+TEST(Board, CircleGridAsymmetricIsOpenCvsLayout) {
+  // OpenCV's 4 x 11 pattern: a row's circles 2 spacings apart, odd rows shifted by one, so
+  // the centres span 2 (cols - 1) + 1 spacings across.
+  BoardParams p;
+  p.type = BoardType::kCircleGrid;
+  p.cols = 4;
+  p.rows = 11;
+  p.spacing_m = 0.02;
+  p.diameter_m = 0.015;
+  p.asymmetric = true;
+  ExpectOpenCvLayout(p, 2 * (p.cols - 1) + 1);
+  // Ids 0 and 4 start rows 0 and 1: one spacing right and one down.
+  const Board b = *Board::Create(p);
+  ExpectNear(b.features()[4].p_board - b.features()[0].p_board, Eigen::Vector2d(0.02, -0.02),
+             kExactM, "row 1 shifted");
+}
+
 TEST(Board, ScaleMultipliesEverything) {
   for (BoardType type : kAllBoardTypes) {
     const Board one = MakeBoard(type);
@@ -389,6 +455,29 @@ TEST(Board, ValidationReasons) {
             BoardParamsError::kBadSquare);
   EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_border_bits = 3; }),
             BoardParamsError::kBadBorderBits);
+  EXPECT_EQ(reason([](BoardParams& p) { p.spacing_m = 0; }), BoardParamsError::kBadSpacing);
+  EXPECT_EQ(reason([](BoardParams& p) { p.spacing_m = 1.5; }), BoardParamsError::kBadSpacing);
+  EXPECT_EQ(reason([](BoardParams& p) { p.spacing_m = std::nan(""); }),
+            BoardParamsError::kBadSpacing);
+  EXPECT_EQ(reason([](BoardParams& p) { p.diameter_m = 0; }), BoardParamsError::kBadDiameter);
+  EXPECT_EQ(reason([](BoardParams& p) { p.diameter_m = -0.01; }), BoardParamsError::kBadDiameter);
+  EXPECT_EQ(reason([](BoardParams& p) { p.diameter_m = std::nan(""); }),
+            BoardParamsError::kBadDiameter);
+  // Circles that would touch: the symmetric grid's neighbours are a spacing apart, the
+  // asymmetric grid's spacing * sqrt(2).
+  EXPECT_EQ(reason([](BoardParams& p) { p.diameter_m = p.spacing_m; }),
+            BoardParamsError::kBadDiameter);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.asymmetric = true;
+              p.diameter_m = 1.4 * p.spacing_m;
+            }),
+            BoardParamsError::kOk);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.asymmetric = true;
+              p.diameter_m = 1.42 * p.spacing_m;
+            }),
+            BoardParamsError::kBadDiameter);
+  EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadDiameter), "bad_diameter");
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadSquare), "bad_square");
 }
 

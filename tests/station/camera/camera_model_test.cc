@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "detectors/core/image_view.h"
+#include "tests/support/reference_cameras.h"
 
 namespace linecal {
 namespace {
@@ -45,53 +46,10 @@ constexpr double kAutodiffJacobianRelative = 1e-10;
 // theta_d / r * x): a few ulps of coordinates up to 2000 px.
 constexpr double kTemplateValuePx = 1e-11;
 
-// Realistic cameras of the reference car (docs/acceptance.md): a front camera 1920x1080 with mild
-// and with strong (wide-angle) distortion, and a ~190 degree fisheye 1280x960.
-CameraIntrinsics MildPinhole() {
-  CameraIntrinsics c;
-  c.type = CameraModelType::kPinhole;
-  c.width = 1920;
-  c.height = 1080;
-  c.fx = 2000.0;
-  c.fy = 2001.5;
-  c.cx = 962.7;
-  c.cy = 537.4;
-  c.k1 = -0.12;
-  c.k2 = 0.08;
-  c.p1 = 2e-4;
-  c.p2 = -1e-4;
-  c.k3 = -0.02;
-  return c;
-}
-
-CameraIntrinsics StrongPinhole() {
-  CameraIntrinsics c = MildPinhole();
-  c.fx = 1000.0;
-  c.fy = 1000.8;
-  c.k1 = -0.30;
-  c.k2 = 0.10;
-  c.p1 = 1e-3;
-  c.p2 = -5e-4;
-  c.k3 = -0.01;
-  return c;
-}
-
-CameraIntrinsics Fisheye190() {
-  CameraIntrinsics c;
-  c.type = CameraModelType::kFisheye;
-  c.width = 1280;
-  c.height = 960;
-  // theta_d(95 deg) * 366.2 = 640 px: 190 degrees across the width.
-  c.fx = 366.2;
-  c.fy = 366.6;
-  c.cx = 641.2;
-  c.cy = 477.2;
-  c.k1 = 0.03;
-  c.k2 = -0.005;
-  c.k3 = 0.001;
-  c.k4 = -0.0002;
-  return c;
-}
+// Realistic cameras of the reference car (docs/acceptance.md).
+using reference_cameras::Fisheye190;
+using reference_cameras::MildPinhole;
+using reference_cameras::StrongPinhole;
 
 CameraModel MakeModel(const CameraIntrinsics& c) {
   absl::StatusOr<CameraModel> model = CameraModel::Create(c);

@@ -1,0 +1,178 @@
+#include "detectors/circle/circle_edge_fit.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <span>
+
+#include "detectors/common/image_filters.h"
+
+namespace linecal {
+namespace {
+
+// A part of the image as floats, for bilinear sampling in image coordinates.
+struct Patch {
+  ImageF image;
+  Eigen::Vector2d origin = Eigen::Vector2d::Zero();  // image coordinates of its pixel (0, 0)
+
+  float At(const Eigen::Vector2d& uv) const {
+    return SampleBilinear(image, uv.x() - origin.x(), uv.y() - origin.y());
+  }
+  // True when uv lies on the patch's pixel centres' area. The patch covers every sample the
+  // search can take, except where the image ends: a point off the patch is off the image,
+  // where At() would replicate the border pixels.
+  bool Inside(const Eigen::Vector2d& uv) const {
+    const Eigen::Vector2d p = uv - origin;
+    return p.x() >= 0.0 && p.y() >= 0.0 && p.x() <= image.width - 1 && p.y() <= image.height - 1;
+  }
+};
+
+// The pixels that the edge search around `ellipse` can reach, as floats: its bounding box,
+// widened by the first pass's window (0.35 of the radius, below half the semi-major axis)
+// and the profile's end samples (a few pixels).
+Patch MakePatch(const ImageView8& image, const Ellipse& ellipse) {
+  const double reach = 1.5 * ellipse.semi_major + 4.0;
+  // Clamped in floating point before the conversion, which a degenerate ellipse (one near
+  // the board's vanishing line) would overflow.
+  auto clamp_to = [](double v, int lo, int hi) {
+    return static_cast<int>(std::clamp(v, static_cast<double>(lo), static_cast<double>(hi)));
+  };
+  const int x0 = clamp_to(std::floor(ellipse.centre.x() - reach), 0, image.width - 1);
+  const int y0 = clamp_to(std::floor(ellipse.centre.y() - reach), 0, image.height - 1);
+  const int x1 = clamp_to(std::ceil(ellipse.centre.x() + reach), x0, image.width - 1);
+  const int y1 = clamp_to(std::ceil(ellipse.centre.y() + reach), y0, image.height - 1);
+  const ImageView8 crop{image.Row(y0) + x0, x1 - x0 + 1, y1 - y0 + 1, image.stride_bytes};
+  return Patch{GaussianBlur(crop, 0.0), Eigen::Vector2d(x0, y0)};
+}
+
+// How one pass searches for the edge along each ray.
+struct EdgeSearch {
+  double window_fraction = 0.35;  // of the seed's radius along the ray, on either side
+  double max_window_px = 0.0;     // 0: no limit
+  int samples_per_side = 0;       // profile samples per side at most; 0: every 0.5 px
+};
+
+// The finest profile step, pixels: fine enough to locate the derivative's peak of an edge
+// blurred by 0.5 px with a parabola.
+constexpr double kProfileStepPx = 0.5;
+
+// One pass of edge points along rays from seed's centre and an ellipse fit to them, with
+// the outliers (neighbouring edges, occlusion) removed.
+// *median_residual_px (when not null): the median distance of the edge points from the first
+// fit, before the outliers are removed.
+std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bool light,
+                                     std::span<const Eigen::Vector2d> directions,
+                                     const EdgeSearch& search, int min_contrast,
+                                     double* median_residual_px = nullptr) {
+  const int rays = static_cast<int>(directions.size());
+  std::vector<Eigen::Vector2d> points;
+  points.reserve(rays);
+  std::vector<float> profile;
+  const double sign = light ? 1.0 : -1.0;  // light: grey falls outwards
+  const double axis_cos = std::cos(seed.angle_rad);
+  const double axis_sin = std::sin(seed.angle_rad);
+  for (int k = 0; k < rays; ++k) {
+    const Eigen::Vector2d& u = directions[k];
+    // The ray in the seed's axes: cos and sin of (theta - angle).
+    const double c = (u.x() * axis_cos + u.y() * axis_sin) / seed.semi_major;
+    const double s = (u.y() * axis_cos - u.x() * axis_sin) / seed.semi_minor;
+    const double rho = 1.0 / std::sqrt(c * c + s * s);
+    // At least 1.5 px: the seed's error for the smallest circles.
+    double window = std::max(1.5, search.window_fraction * rho);
+    if (search.max_window_px > 0.0) window = std::min(window, search.max_window_px);
+    const double step = search.samples_per_side > 0
+                            ? std::max(kProfileStepPx, window / search.samples_per_side)
+                            : kProfileStepPx;
+    const int n = static_cast<int>(std::ceil(window / step));
+    // A profile that leaves the image would see the border pixels replicated, which moves the
+    // gradient peak of an edge near the border: such a ray gives no point (a circle cut by
+    // the border is fitted to the part of its edge in view).
+    if (!patch.Inside(seed.centre + (rho - (n + 1) * step) * u) ||
+        !patch.Inside(seed.centre + (rho + (n + 1) * step) * u)) {
+      continue;
+    }
+    profile.resize(2 * n + 3);
+    for (int j = -n - 1; j <= n + 1; ++j)
+      profile[j + n + 1] = patch.At(seed.centre + (rho + j * step) * u);
+    auto derivative = [&](int j) {
+      return sign * (profile[j + n] - profile[j + n + 2]);  // P(j - 1) - P(j + 1)
+    };
+    int best = -n;
+    for (int j = -n + 1; j <= n; ++j) {
+      if (derivative(j) > derivative(best)) best = j;
+    }
+    // The derivative peak of a printed edge (at least min_contrast over a blur of a couple
+    // of pixels) exceeds a quarter of min_contrast per pixel; weaker peaks are noise.
+    if (best == -n || best == n || derivative(best) < 0.25 * min_contrast * 2.0 * step) continue;
+    const double d0 = derivative(best - 1);
+    const double d1 = derivative(best);
+    const double d2 = derivative(best + 1);
+    const double curvature = d0 - 2.0 * d1 + d2;
+    if (!(curvature < 0.0)) continue;
+    const double delta = 0.5 * (d0 - d2) / curvature;
+    points.push_back(seed.centre + (rho + (best + delta) * step) * u);
+  }
+  // Half the rays: a circle half hidden or half on a neighbour is not measured.
+  if (static_cast<int>(points.size()) < rays / 2) return std::nullopt;
+  std::optional<Ellipse> fit = FitEllipse(points);
+  if (!fit) return std::nullopt;
+  const Eigen::Matrix3d conic = fit->Conic();
+  std::vector<double> residuals(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) residuals[i] = SampsonDistance(conic, points[i]);
+  std::vector<double> sorted = residuals;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  // 3 robust sigmas (1.4826 median absolute residual), and never below 0.2 px, the noise
+  // of a single edge point at sigma 4.
+  if (median_residual_px != nullptr) *median_residual_px = sorted[sorted.size() / 2];
+  const double limit = std::max(0.2, 3.0 * 1.4826 * sorted[sorted.size() / 2]);
+  std::vector<double> weights(points.size());
+  int kept = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    weights[i] = residuals[i] <= limit ? 1.0 : 0.0;
+    kept += residuals[i] <= limit;
+  }
+  if (kept < rays / 2) return std::nullopt;
+  if (kept < static_cast<int>(points.size())) fit = FitEllipse(points, weights);
+  return fit;
+}
+
+}  // namespace
+
+CircleEdgeFitter::CircleEdgeFitter(int rays) {
+  // Evenly spaced: the seeding pass uses every other one (it only has to bring the edge
+  // windows onto the edge).
+  for (int k = 0; k < rays; ++k) {
+    const double theta = 2.0 * std::numbers::pi * k / rays;
+    fine_.emplace_back(std::cos(theta), std::sin(theta));
+    if (k % 2 == 0) coarse_.push_back(fine_.back());
+  }
+}
+
+std::optional<Ellipse> CircleEdgeFitter::Measure(const ImageView8& image, const Ellipse& seed,
+                                                 bool light, int min_contrast,
+                                                 double* median_residual_px) const {
+  const Patch patch = MakePatch(image, seed);
+  // First pass: 0.35 of the radius covers the seed's error (a blob's threshold edge, or a
+  // prediction within half a radius) while it stays short of the nearest other edge of the
+  // boards (the circle board's white bar, 0.4 radius from the circles next to it); 8 samples
+  // a side locate the edge to a fraction of a pixel.
+  const std::optional<Ellipse> first =
+      FitCircleEdge(patch, seed, light, coarse_, {0.35, 0.0, 8}, min_contrast);
+  if (!first) return std::nullopt;
+  // Second pass: centred on the first fit, every 0.5 px over +-3 px, which holds an edge
+  // blurred by sigma 1.5 and the first pass's error.
+  std::optional<Ellipse> second =
+      FitCircleEdge(patch, *first, light, fine_, {0.35, 3.0, 0}, min_contrast, median_residual_px);
+  if (!second) return std::nullopt;
+  const double r_seed = std::sqrt(seed.semi_major * seed.semi_minor);
+  const double r_meas = std::sqrt(second->semi_major * second->semi_minor);
+  // Blur moves the edge by a fraction of its sigma; a third of the radius or more means
+  // another edge was measured.
+  if ((second->centre - seed.centre).norm() > 0.5 * r_seed ||
+      std::abs(r_meas - r_seed) > 0.33 * r_seed + 1.0) {
+    return std::nullopt;
+  }
+  return second;
+}
+
+}  // namespace linecal
