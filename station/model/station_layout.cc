@@ -15,7 +15,9 @@ constexpr const char* kFormat = "linecal.station";
 constexpr int kVersion = 1;
 
 absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
-  if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "border_bits", "pose"});
+  if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
+                                "diameter_m", "asymmetric", "light_circles", "border_bits",
+                                "pose"});
       !s.ok()) {
     return s;
   }
@@ -41,6 +43,14 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (!rows.ok()) return rows.status();
   absl::StatusOr<double> square = f.NumberOr("square_m", params.square_m);
   if (!square.ok()) return square.status();
+  absl::StatusOr<double> spacing = f.NumberOr("spacing_m", params.spacing_m);
+  if (!spacing.ok()) return spacing.status();
+  absl::StatusOr<double> diameter = f.NumberOr("diameter_m", params.diameter_m);
+  if (!diameter.ok()) return diameter.status();
+  absl::StatusOr<bool> asymmetric = f.BoolOr("asymmetric", params.asymmetric);
+  if (!asymmetric.ok()) return asymmetric.status();
+  absl::StatusOr<bool> light_circles = f.BoolOr("light_circles", params.light_circles);
+  if (!light_circles.ok()) return light_circles.status();
   absl::StatusOr<std::int64_t> border = f.IntegerOr("border_bits", params.apriltag_border_bits);
   if (!border.ok()) return border.status();
   // Out-of-int values fall to the validation below as a clearly bad value.
@@ -48,6 +58,10 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   params.cols = static_cast<int>(std::clamp<std::int64_t>(*cols, -kClamp, kClamp));
   params.rows = static_cast<int>(std::clamp<std::int64_t>(*rows, -kClamp, kClamp));
   params.square_m = *square;
+  params.spacing_m = *spacing;
+  params.diameter_m = *diameter;
+  params.asymmetric = *asymmetric;
+  params.light_circles = *light_circles;
   params.apriltag_border_bits = static_cast<int>(std::clamp<std::int64_t>(*border, -kClamp, kClamp));
   BoardParamsError error = BoardParamsError::kOk;
   std::optional<Board> board = Board::Create(params, &error);
@@ -55,8 +69,10 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
     const char* field = error == BoardParamsError::kBadScale     ? "scale"
                         : error == BoardParamsError::kBadCols    ? "cols"
                         : error == BoardParamsError::kBadRows    ? "rows"
-                        : error == BoardParamsError::kBadSquare  ? "square_m"
-                                                                 : "border_bits";
+                        : error == BoardParamsError::kBadSquare    ? "square_m"
+                        : error == BoardParamsError::kBadSpacing   ? "spacing_m"
+                        : error == BoardParamsError::kBadDiameter  ? "diameter_m"
+                                                                   : "border_bits";
     return f.Error(field, BoardParamsErrorName(error));
   }
   absl::StatusOr<Rigid3d> pose = ReadPose(f, "pose", BoardBaseRotation());
@@ -182,6 +198,14 @@ nlohmann::json StationLayoutToJson(const StationLayout& layout) {
       j["cols"] = p.cols;
       j["rows"] = p.rows;
       j["square_m"] = p.square_m;
+    }
+    if (p.type == BoardType::kCircleGrid) {
+      j["cols"] = p.cols;
+      j["rows"] = p.rows;
+      j["spacing_m"] = p.spacing_m;
+      j["diameter_m"] = p.diameter_m;
+      j["asymmetric"] = p.asymmetric;
+      j["light_circles"] = p.light_circles;
     }
     if (p.type == BoardType::kApriltag) j["border_bits"] = p.apriltag_border_bits;
     j["pose"] = PoseToJson(b.T_station_board, BoardBaseRotation());

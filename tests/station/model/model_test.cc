@@ -83,6 +83,26 @@ TEST(StationLayoutTest, JsonRoundTripKeepsPoses) {
   }
 }
 
+TEST(StationLayoutTest, CircleGridParametersRoundTrip) {
+  const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
+      {"id": "g", "type": "circle_grid", "cols": 4, "rows": 11, "spacing_m": 0.02,
+       "diameter_m": 0.015, "asymmetric": true, "light_circles": true,
+       "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}}]})";
+  absl::StatusOr<StationLayout> s = ParseStationLayout(json, "st.json");
+  ASSERT_TRUE(s.ok()) << s.status();
+  absl::StatusOr<StationLayout> again = ParseStationLayout(StationLayoutToJson(*s).dump(), "copy");
+  ASSERT_TRUE(again.ok()) << again.status();
+  const BoardParams& p = again->boards.at(0).params;
+  EXPECT_EQ(p.type, BoardType::kCircleGrid);
+  EXPECT_EQ(p.cols, 4);
+  EXPECT_EQ(p.rows, 11);
+  EXPECT_EQ(p.spacing_m, 0.02);
+  EXPECT_EQ(p.diameter_m, 0.015);
+  EXPECT_TRUE(p.asymmetric);
+  EXPECT_TRUE(p.light_circles);
+  EXPECT_EQ(again->boards.at(0).board.features().size(), 44u);
+}
+
 // Each broken document must fail with a message containing `expected`.
 struct BrokenCase {
   const char* name;
@@ -116,6 +136,8 @@ INSTANTIATE_TEST_SUITE_P(
                    "boards[0].scale: bad_scale"},
         BrokenCase{"wrong_type", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "scale": "big", )" POSE "}]}",
                    "boards[0].scale: expected a number"},
+        BrokenCase{"bad_diameter", "{" HDR R"(, "boards": [{"id": "a", "type": "circle_grid", "diameter_m": 0.03, )" POSE "}]}",
+                   "boards[0].diameter_m: bad_diameter"},
         BrokenCase{"missing_pose", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco"}]})", "boards[0].pose: missing"},
         BrokenCase{"short_xyz", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "pose": {"xyz_m": [1, 2], "ypr_deg": [0, 0, 0]}}]})",
                    "boards[0].pose.xyz_m: expected 3 numbers, got 2"},
