@@ -45,7 +45,7 @@ TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
   const nlohmann::json j = nlohmann::json::parse(run.out);
   const std::map<std::string, int> expected = {
       {"chessboard", 20}, {"circle", 30},     {"vertical", 51}, {"aruco", 16},
-      {"apriltag", 144},  {"round_hole", 21}, {"checker", 54}};
+      {"apriltag", 144},  {"round_hole", 21}, {"checker", 54},  {"circle_grid", 54}};
   ASSERT_EQ(j.at("boards").size(), expected.size());
   for (const nlohmann::json& b : j.at("boards")) {
     const std::string name = b.at("name");
@@ -59,6 +59,8 @@ TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
   EXPECT_EQ(j.at("boards")[0].at("feature_kinds").at("x_corner").get<int>(), 4);
   EXPECT_EQ(j.at("boards")[6].at("parameters").at("cols").get<int>(), 9);
   EXPECT_EQ(j.at("boards")[4].at("parameters").at("border_bits").get<int>(), 2);
+  EXPECT_EQ(j.at("boards")[7].at("parameters").at("spacing_m").get<double>(), 0.025);
+  EXPECT_FALSE(j.at("boards")[7].at("parameters").at("asymmetric").get<bool>());
 
   const auto text = RunLinecal("boards");
   EXPECT_EQ(text.exit_code, 0);
@@ -83,6 +85,19 @@ TEST_F(PatternCliTest, SvgHasTheBoardSizeInMillimetres) {
   const nlohmann::json j = nlohmann::json::parse(scaled.out);
   EXPECT_EQ(j.at("format"), "svg");
   EXPECT_DOUBLE_EQ(j.at("page_width_m").get<double>(), 0.6);
+}
+
+TEST_F(PatternCliTest, CircleGridPageHasItsMargin) {
+  // OpenCV's 4 x 11 asymmetric grid at 20 mm: centres over 7 x 10 spacings, and two spacings
+  // of margin on every side: 220 x 280 mm.
+  const auto run = RunLinecal(
+      "pattern --board circle_grid --cols 4 --rows 11 --spacing 0.02 --diameter 0.015 "
+      "--asymmetric --json --out " +
+      Path("g.svg"));
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const std::string svg = ReadText(Path("g.svg"));
+  EXPECT_NE(svg.find("width=\"220mm\" height=\"280mm\""), std::string::npos);
+  EXPECT_DOUBLE_EQ(nlohmann::json::parse(run.out).at("page_height_m").get<double>(), 0.28);
 }
 
 TEST_F(PatternCliTest, PngSizeIsDpiTimesBoardSize) {
@@ -129,7 +144,14 @@ TEST_F(PatternCliTest, BadUsageExitsWithTwoAndOneLine) {
       {"pattern --board aruco", "missing --out"},
       {"pattern --board aruco --out " + Path("x.txt"), "must end in .svg or .png"},
       {"pattern --board aruco --cols 5 --out " + Path("x.svg"),
-       "--cols applies to --board checker only"},
+       "--cols applies to --board checker or circle_grid only, not aruco"},
+      {"pattern --board checker --spacing 0.02 --out " + Path("x.svg"),
+       "--spacing applies to --board circle_grid only, not checker"},
+      {"pattern --board circle_grid --square 0.02 --out " + Path("x.svg"),
+       "--square applies to --board checker only, not circle_grid"},
+      {"pattern --board circle_grid --diameter 0.03 --out " + Path("x.svg"),
+       "--diameter: 0.03 m must be > 0 and below"},
+      {"pattern --board circle_grid --spacing 0 --out " + Path("x.svg"), "--spacing: 0 m"},
       {"pattern --board aruco --border-bits 1 --out " + Path("x.svg"), "--border-bits applies"},
       {"pattern --board apriltag --border-bits 3 --out " + Path("x.svg"), "--border-bits: 3"},
       {"pattern --board checker --cols 1 --out " + Path("x.svg"), "--cols: 1 is outside"},

@@ -1,7 +1,10 @@
 #include "tools/linecal/board_options.h"
 
+#include <cmath>
 #include <string>
+#include <vector>
 
+#include "absl/algorithm/container.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 
@@ -20,9 +23,14 @@ std::vector<cli::OptionSpec> BoardOptionSpecs(bool board_required) {
   return {
       {"board", "NAME", "board type: " + BoardNames(), board_required},
       {"scale", "S", "print scale of the board (default 1: 1 PDF unit = 1 mm)"},
-      {"cols", "N", "checker only: inner corners along x (default 9)"},
-      {"rows", "M", "checker only: inner corners along y (default 6)"},
+      {"cols", "N", "checker: inner corners along x; circle_grid: circles per row (default 9)"},
+      {"rows", "M", "checker: inner corners along y; circle_grid: rows of circles (default 6)"},
       {"square", "METRES", "checker only: square side in metres (default 0.025)"},
+      {"spacing", "METRES",
+       "circle_grid only: centre distance in metres, OpenCV's squareSize (default 0.025)"},
+      {"diameter", "METRES", "circle_grid only: circle diameter in metres (default 0.0125)"},
+      {"asymmetric", "", "circle_grid only: OpenCV's asymmetric grid (default symmetric)"},
+      {"light-circles", "", "circle_grid only: white circles on black (default black on white)"},
       {"border-bits", "B", "apriltag only: black tag border, 2 (Kalibr, default) or 1"},
   };
 }
@@ -36,17 +44,27 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
         absl::StrCat("--board: unknown board '", name, "' (one of ", BoardNames(), ")"));
   }
   p.type = *type;
-  if (p.type != BoardType::kChecker) {
-    for (const char* option : {"cols", "rows", "square"}) {
-      if (cl.Has(option)) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("--", option, " applies to --board checker only, not ", name));
-      }
-    }
-  }
-  if (p.type != BoardType::kApriltag && cl.Has("border-bits")) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--border-bits applies to --board apriltag only, not ", name));
+  // Each option and the boards it applies to.
+  struct Applies {
+    const char* option;
+    std::vector<BoardType> types;
+  };
+  const Applies applies[] = {
+      {"cols", {BoardType::kChecker, BoardType::kCircleGrid}},
+      {"rows", {BoardType::kChecker, BoardType::kCircleGrid}},
+      {"square", {BoardType::kChecker}},
+      {"spacing", {BoardType::kCircleGrid}},
+      {"diameter", {BoardType::kCircleGrid}},
+      {"asymmetric", {BoardType::kCircleGrid}},
+      {"light-circles", {BoardType::kCircleGrid}},
+      {"border-bits", {BoardType::kApriltag}},
+  };
+  for (const Applies& a : applies) {
+    if (!cl.Has(a.option) || absl::c_linear_search(a.types, p.type)) continue;
+    std::vector<std::string> names;
+    for (BoardType t : a.types) names.emplace_back(BoardTypeName(t));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--", a.option, " applies to --board ", absl::StrJoin(names, " or "), " only, not ", name));
   }
   absl::StatusOr<double> scale = cl.GetDouble("scale", p.scale);
   if (!scale.ok()) return scale.status();
@@ -56,12 +74,20 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   if (!rows.ok()) return rows.status();
   absl::StatusOr<double> square = cl.GetDouble("square", p.square_m);
   if (!square.ok()) return square.status();
+  absl::StatusOr<double> spacing = cl.GetDouble("spacing", p.spacing_m);
+  if (!spacing.ok()) return spacing.status();
+  absl::StatusOr<double> diameter = cl.GetDouble("diameter", p.diameter_m);
+  if (!diameter.ok()) return diameter.status();
   absl::StatusOr<int> border_bits = cl.GetInt("border-bits", p.apriltag_border_bits);
   if (!border_bits.ok()) return border_bits.status();
   p.scale = *scale;
   p.cols = *cols;
   p.rows = *rows;
   p.square_m = *square;
+  p.spacing_m = *spacing;
+  p.diameter_m = *diameter;
+  p.asymmetric = cl.Has("asymmetric");
+  p.light_circles = cl.Has("light-circles");
   p.apriltag_border_bits = *border_bits;
 
   switch (ValidateBoardParams(p)) {
@@ -82,6 +108,14 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
     case BoardParamsError::kBadBorderBits:
       return absl::InvalidArgumentError(
           absl::StrCat("--border-bits: ", p.apriltag_border_bits, " is neither 1 nor 2"));
+    case BoardParamsError::kBadSpacing:
+      return absl::InvalidArgumentError(
+          absl::StrCat("--spacing: ", p.spacing_m, " m is outside (0, ", kMaxCircleSpacingM, "]"));
+    case BoardParamsError::kBadDiameter:
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--diameter: ", p.diameter_m, " m must be > 0 and below the nearest circles' distance (",
+          p.asymmetric ? "spacing * sqrt(2)" : "the spacing", ", ",
+          p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m, " m)"));
   }
   return absl::InvalidArgumentError("bad board options");
 }

@@ -33,6 +33,8 @@ const char* Description(BoardType type) {
       return "five through holes (LiDAR) and four ArUco markers";
     case BoardType::kChecker:
       return "generic chessboard, cols x rows inner corners";
+    case BoardType::kCircleGrid:
+      return "OpenCV circle grid, cols x rows circles, symmetric or asymmetric";
   }
   return "";
 }
@@ -43,6 +45,14 @@ nlohmann::json Parameters(const BoardParams& p) {
     j["cols"] = p.cols;
     j["rows"] = p.rows;
     j["square_m"] = p.square_m;
+  }
+  if (p.type == BoardType::kCircleGrid) {
+    j["cols"] = p.cols;
+    j["rows"] = p.rows;
+    j["spacing_m"] = p.spacing_m;
+    j["diameter_m"] = p.diameter_m;
+    j["asymmetric"] = p.asymmetric;
+    j["light_circles"] = p.light_circles;
   }
   if (p.type == BoardType::kApriltag) j["border_bits"] = p.apriltag_border_bits;
   return j;

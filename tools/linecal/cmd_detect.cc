@@ -128,7 +128,8 @@ int RunDetect(const Args& args) {
   options.push_back({"json", "", "print the result as one JSON object"});
   options.push_back({"overlay", "OUT.png", "write the image with the features drawn"});
   cli::CommandLine cl(
-      "linecal detect --board NAME [--scale S] [--cols N --rows M --square METRES] "
+      "linecal detect --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
+      "[--spacing METRES --diameter METRES] [--asymmetric] [--light-circles] "
       "--image FILE [--json] [--overlay OUT.png]\n"
       "       linecal detect --board round_hole [--scale S] --cloud FILE [--cloud FILE ...] "
       "[--json]",
