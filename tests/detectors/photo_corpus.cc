@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
 #include "detectors/detect.h"
 #include "station/io/image_io.h"
 
@@ -39,6 +40,21 @@ PhotoSet Chessboard(std::string name, int cols, int rows, double square_m, Lens 
   s.reference_cols = cols;
   s.reference_rows = rows;
   return s;
+}
+
+// OpenCV's circle grid of `cols` circles per row and `rows` rows (its patternSize), centres
+// `spacing_m` apart (its squareSize). Detection needs neither spacing nor diameter (the
+// detector measures each ellipse); 25 mm stands in where the print is unpublished.
+BoardParams CircleGrid(int cols, int rows, bool asymmetric, double spacing_m = 0.025,
+                       double diameter_m = 0.0125) {
+  BoardParams p;
+  p.type = BoardType::kCircleGrid;
+  p.cols = cols;
+  p.rows = rows;
+  p.asymmetric = asymmetric;
+  p.spacing_m = spacing_m;
+  p.diameter_m = diameter_m;
+  return p;
 }
 
 PhotoSet Other(std::string name, Lens lens, std::string description,
@@ -103,6 +119,7 @@ std::vector<PhotoSet> BuildSets() {
   sets.push_back(Other("boofcv/circle_regular_sony_hx5v", Lens::kMild,
                        "symmetric circle grid 10x8, 15 mm circles, 25 mm pitch",
                        Reference::kSymmetricCircles, 10, 8, 0.025));
+  sets.back().board = CircleGrid(10, 8, false, 0.025, 0.015);
   sets.push_back(Other("boofcv/circle_hexagonal_sony_hx5v", Lens::kMild,
                        "hexagonal circle grid (yaml 28x24)"));
   sets.push_back(Other("boofcv/square_grid_mono_sony_hx5v", Lens::kMild,
@@ -112,11 +129,15 @@ std::vector<PhotoSet> BuildSets() {
   sets.push_back(OneFile(Other("kalibr/aslam_test/testImageCircleGrid", Lens::kWide,
                                "symmetric circle grid 7x5", Reference::kSymmetricCircles, 7, 5),
                          "kalibr/aslam_test", "testImageCircleGrid.jpg"));
+  sets.back().board = CircleGrid(7, 5, false);
+  // OpenCV's sample pattern: 15 mm circles, rows 20 mm apart.
   sets.push_back(Other("camera_calibration_api/asymmetric_circles_4x11", Lens::kMild,
                        "asymmetric circle grid 4x11 (OpenCV layout)", Reference::kAsymmetricCircles,
                        4, 11));
+  sets.back().board = CircleGrid(4, 11, true, 0.020, 0.015);
   sets.push_back(Other("camera_calibration_api/symmetric_circles_5x6", Lens::kMild,
                        "symmetric circle grid 5x6", Reference::kSymmetricCircles, 5, 6));
+  sets.back().board = CircleGrid(5, 6, false);
   sets.push_back(Other("deepcharuco/charuco_5x5_4x4_50", Lens::kMild,
                        "ChArUco 5x5 squares, DICT_4X4_50, on a tablet, small, blurred"));
   return sets;
@@ -267,27 +288,35 @@ absl::StatusOr<Detection> DetectInPhoto(const std::string& path, const Board& bo
   return *std::move(d);
 }
 
+std::string BoardLabel(const BoardParams& board) {
+  if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid) {
+    return BoardTypeName(board.type);
+  }
+  const bool asymmetric = board.type == BoardType::kCircleGrid && board.asymmetric;
+  return absl::StrCat(BoardTypeName(board.type), " ", board.cols, "x", board.rows,
+                      asymmetric ? " asymmetric" : "");
+}
+
 const std::vector<SweepBoard>& SweepBoards() {
   static const std::vector<SweepBoard>* boards = [] {
     auto* b = new std::vector<SweepBoard>;
     const auto add = [b](const BoardParams& p, std::string label) {
       for (const SweepBoard& s : *b) {
         const BoardParams& q = s.board.params();
-        if (q.type == p.type && q.cols == p.cols && q.rows == p.rows) return;
+        if (q.type == p.type && q.cols == p.cols && q.rows == p.rows &&
+            q.asymmetric == p.asymmetric) {
+          return;
+        }
       }
       b->push_back({std::move(label), *Board::Create(p)});
     };
     for (BoardType type : kAllBoardTypes) {
       BoardParams p;
       p.type = type;
-      add(p, type == BoardType::kChecker
-                 ? "checker " + std::to_string(p.cols) + "x" + std::to_string(p.rows)
-                 : std::string(BoardTypeName(type)));
+      add(p, BoardLabel(p));
     }
     for (const PhotoSet& s : Sets()) {
-      if (!s.board || s.board->type != BoardType::kChecker) continue;
-      add(*s.board,
-          "checker " + std::to_string(s.board->cols) + "x" + std::to_string(s.board->rows));
+      if (s.board) add(*s.board, BoardLabel(*s.board));
     }
     return b;
   }();
@@ -296,7 +325,10 @@ const std::vector<SweepBoard>& SweepBoards() {
 
 bool ShowsBoard(const PhotoSet& set, const BoardParams& board) {
   if (!set.board || set.board->type != board.type) return false;
-  if (board.type != BoardType::kChecker) return true;
+  if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid) return true;
+  if (board.type == BoardType::kCircleGrid && board.asymmetric != set.board->asymmetric) {
+    return false;
+  }
   const int a = set.board->cols, b = set.board->rows;
   return (board.cols == a && board.rows == b) || (board.cols == b && board.rows == a);
 }
@@ -344,7 +376,8 @@ ReferenceCheck CheckAgainstReference(const Detection& detection, const Board& bo
                                      const ReferencePoints& reference, double tol_px) {
   ReferenceCheck check;
   check.wrong = CheckFeatureList(detection, board);
-  if (!check.wrong.empty() || !reference.found || board.type() != BoardType::kChecker) {
+  const bool grid = board.type() == BoardType::kChecker || board.type() == BoardType::kCircleGrid;
+  if (!check.wrong.empty() || !reference.found || !grid) {
     return check;
   }
   check.compared = true;

@@ -92,19 +92,24 @@ bool IsPartialView(const PhotoSet& set, const std::string& path);
 // a board type without an image detector.
 absl::StatusOr<Detection> DetectInPhoto(const std::string& path, const Board& board);
 
+// A board in words: its type name, with cols x rows for checkers and circle grids
+// ("checker 6x4", "circle_grid 4x11 asymmetric", "apriltag").
+std::string BoardLabel(const BoardParams& board);
+
 // One board of the false-positive sweep.
 struct SweepBoard {
-  std::string label;  // "apriltag", "checker 6x9"
+  std::string label;  // BoardLabel: "apriltag", "checker 6x9"
   Board board;
 };
 
 // Every linecal board type with default parameters, plus the checker of each chessboard
-// set's cols x rows (the corners of one board's sub-grid must not pass for a smaller
-// board), without duplicates. Built once.
+// set's cols x rows and the circle grid of each circle set's (the corners or circles of one
+// board's sub-grid must not pass for a smaller board), without duplicates. Built once.
 const std::vector<SweepBoard>& SweepBoards();
 
-// Whether a photo of `set` shows `board`: the same type, and for checkers the same inner
-// corner count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned).
+// Whether a photo of `set` shows `board`: the same type, and for checkers and circle grids
+// the same count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned) and, for circle
+// grids, the same layout (symmetric or asymmetric).
 bool ShowsBoard(const PhotoSet& set, const BoardParams& board);
 
 // A detection that should not exist.
@@ -135,7 +140,8 @@ struct ReferencePoints {
 // photos: 3 s against 26 s), enough to check a grid. Cost: up to 0.4 s per photo accurate.
 ReferencePoints DetectReference(const ImageView8& image, const PhotoSet& set, bool accurate = true);
 
-// How a found detection of a checker compares with OpenCV's corners of the same photo.
+// How a found detection of a checker or circle grid compares with OpenCV's corners (circle
+// centres) of the same photo.
 struct ReferenceCheck {
   // Non-empty: the detection is false, and why. The feature list is not all cols * rows
   // ids 0..n-1 in order; or, where OpenCV found the board, a corner has no OpenCV corner

@@ -384,8 +384,7 @@ std::string ReasonsText(const std::map<std::string, int>& reasons) {
 
 // linecal's board of a set, "checker 6x4", or "none".
 std::string BoardName(const PhotoSet& set) {
-  if (!set.board) return "none";
-  return "checker " + std::to_string(set.board->cols) + "x" + std::to_string(set.board->rows);
+  return set.board ? photo_corpus::BoardLabel(*set.board) : "none";
 }
 
 // The table's board cell: linecal's board, or what the set shows where linecal has none.
