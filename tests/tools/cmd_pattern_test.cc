@@ -139,7 +139,7 @@ TEST_F(PatternCliTest, BadUsageExitsWithTwoAndOneLine) {
     std::string args;
     std::string message;
   } cases[] = {
-      {"pattern --out " + Path("x.svg"), "missing --board"},
+      {"pattern --out " + Path("x.svg"), "--board or --target is required"},
       {"pattern --board nope --out " + Path("x.svg"), "unknown board 'nope'"},
       {"pattern --board aruco", "missing --out"},
       {"pattern --board aruco --out " + Path("x.txt"), "must end in .svg or .png"},

@@ -7,6 +7,7 @@
 #include "absl/algorithm/container.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "tools/linecal/target_file.h"
 
 namespace linecal::tools {
 namespace {
@@ -17,11 +18,89 @@ std::string BoardNames() {
   return absl::StrJoin(names, ", ");
 }
 
+// The option of the field a BoardParamsError is about.
+const char* OptionOf(BoardParamsError e) {
+  switch (e) {
+    case BoardParamsError::kOk:
+    case BoardParamsError::kBadScale:
+      return "scale";
+    case BoardParamsError::kBadCols:
+      return "cols";
+    case BoardParamsError::kBadRows:
+      return "rows";
+    case BoardParamsError::kBadSquare:
+      return "square";
+    case BoardParamsError::kBadBorderBits:
+      return "border-bits";
+    case BoardParamsError::kBadSpacing:
+      return "spacing";
+    case BoardParamsError::kBadDiameter:
+      return "diameter";
+  }
+  return "board";
+}
+
+// --target FILE: the file gives the board; only what Kalibr's file cannot say (a circle grid's
+// diameter and polarity) may be added.
+absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
+  for (const char* option : {"board", "scale", "cols", "rows", "square", "spacing", "asymmetric",
+                             "border-bits"}) {
+    if (cl.Has(option)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
+    }
+  }
+  absl::StatusOr<BoardParams> p = ReadKalibrTarget(cl.Get("target", ""));
+  if (!p.ok()) return p.status();
+  for (const char* option : {"diameter", "light-circles"}) {
+    if (cl.Has(option) && p->type != BoardType::kCircleGrid) {
+      return absl::InvalidArgumentError(absl::StrCat("--", option, " applies to a circle grid only; ",
+                                                     cl.Get("target", ""), " describes a ",
+                                                     BoardTypeName(p->type)));
+    }
+  }
+  absl::StatusOr<double> diameter = cl.GetDouble("diameter", p->diameter_m);
+  if (!diameter.ok()) return diameter.status();
+  p->diameter_m = *diameter;
+  p->light_circles = p->light_circles || cl.Has("light-circles");
+  const BoardParamsError e = ValidateBoardParams(*p);
+  if (e == BoardParamsError::kOk) return p;
+  return absl::InvalidArgumentError(absl::StrCat("--", OptionOf(e), ": ", DescribeParamsError(e, *p)));
+}
+
 }  // namespace
 
-std::vector<cli::OptionSpec> BoardOptionSpecs(bool board_required) {
+std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
+  switch (e) {
+    case BoardParamsError::kOk:
+      return "valid";
+    case BoardParamsError::kBadScale:
+      return absl::StrCat(p.scale, " is outside [", kMinBoardScale, ", ", kMaxBoardScale, "]");
+    case BoardParamsError::kBadCols:
+      return absl::StrCat(p.cols, " is outside [", kMinCheckerCorners, ", ", kMaxCheckerCorners,
+                          "]");
+    case BoardParamsError::kBadRows:
+      return absl::StrCat(p.rows, " is outside [", kMinCheckerCorners, ", ", kMaxCheckerCorners,
+                          "]");
+    case BoardParamsError::kBadSquare:
+      return absl::StrCat(p.square_m, " m is outside (0, ", kMaxCheckerSquareM, "]");
+    case BoardParamsError::kBadBorderBits:
+      return absl::StrCat(p.apriltag_border_bits, " is neither 1 nor 2");
+    case BoardParamsError::kBadSpacing:
+      return absl::StrCat(p.spacing_m, " m is outside (0, ", kMaxCircleSpacingM, "]");
+    case BoardParamsError::kBadDiameter:
+      return absl::StrCat(p.diameter_m,
+                          " m must be > 0 and below the nearest circles' distance (",
+                          p.asymmetric ? "spacing * sqrt(2)" : "the spacing", ", ",
+                          p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m, " m)");
+  }
+  return "invalid";
+}
+
+std::vector<cli::OptionSpec> BoardOptionSpecs() {
   return {
-      {"board", "NAME", "board type: " + BoardNames(), board_required},
+      {"board", "NAME", "board type: " + BoardNames() + " (this or --target)"},
+      {"target", "FILE", "the board from a Kalibr target YAML file (this or --board)"},
       {"scale", "S", "print scale of the board (default 1: 1 PDF unit = 1 mm)"},
       {"cols", "N", "checker: inner corners along x; circle_grid: circles per row (default 9)"},
       {"rows", "M", "checker: inner corners along y; circle_grid: rows of circles (default 6)"},
@@ -36,6 +115,8 @@ std::vector<cli::OptionSpec> BoardOptionSpecs(bool board_required) {
 }
 
 absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& cl) {
+  if (cl.Has("target")) return BoardFromTargetFile(cl);
+  if (!cl.Has("board")) return absl::InvalidArgumentError("--board or --target is required");
   BoardParams p;
   const std::string name = cl.Get("board", BoardTypeName(p.type));
   const std::optional<BoardType> type = BoardTypeFromName(name);
@@ -90,34 +171,9 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   p.light_circles = cl.Has("light-circles");
   p.apriltag_border_bits = *border_bits;
 
-  switch (ValidateBoardParams(p)) {
-    case BoardParamsError::kOk:
-      return p;
-    case BoardParamsError::kBadScale:
-      return absl::InvalidArgumentError(absl::StrCat("--scale: ", p.scale, " is outside [",
-                                                     kMinBoardScale, ", ", kMaxBoardScale, "]"));
-    case BoardParamsError::kBadCols:
-      return absl::InvalidArgumentError(absl::StrCat(
-          "--cols: ", p.cols, " is outside [", kMinCheckerCorners, ", ", kMaxCheckerCorners, "]"));
-    case BoardParamsError::kBadRows:
-      return absl::InvalidArgumentError(absl::StrCat(
-          "--rows: ", p.rows, " is outside [", kMinCheckerCorners, ", ", kMaxCheckerCorners, "]"));
-    case BoardParamsError::kBadSquare:
-      return absl::InvalidArgumentError(
-          absl::StrCat("--square: ", p.square_m, " m is outside (0, ", kMaxCheckerSquareM, "]"));
-    case BoardParamsError::kBadBorderBits:
-      return absl::InvalidArgumentError(
-          absl::StrCat("--border-bits: ", p.apriltag_border_bits, " is neither 1 nor 2"));
-    case BoardParamsError::kBadSpacing:
-      return absl::InvalidArgumentError(
-          absl::StrCat("--spacing: ", p.spacing_m, " m is outside (0, ", kMaxCircleSpacingM, "]"));
-    case BoardParamsError::kBadDiameter:
-      return absl::InvalidArgumentError(absl::StrCat(
-          "--diameter: ", p.diameter_m, " m must be > 0 and below the nearest circles' distance (",
-          p.asymmetric ? "spacing * sqrt(2)" : "the spacing", ", ",
-          p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m, " m)"));
-  }
-  return absl::InvalidArgumentError("bad board options");
+  const BoardParamsError e = ValidateBoardParams(p);
+  if (e == BoardParamsError::kOk) return p;
+  return absl::InvalidArgumentError(absl::StrCat("--", OptionOf(e), ": ", DescribeParamsError(e, p)));
 }
 
 }  // namespace linecal::tools

@@ -1,8 +1,10 @@
 #pragma once
 // The command-line options that choose a board (docs/boards.md), shared by every subcommand that
 // takes --board: --board NAME [--scale S] [--cols N --rows M] [--square METRES]
-// [--spacing METRES --diameter METRES] [--asymmetric] [--light-circles] [--border-bits 1|2].
+// [--spacing METRES --diameter METRES] [--asymmetric] [--light-circles] [--border-bits 1|2],
+// or --target FILE (target_file.h).
 
+#include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -11,15 +13,22 @@
 
 namespace linecal::tools {
 
-// The option specs to append to a subcommand's own. `board_required`: --board must be given.
-std::vector<cli::OptionSpec> BoardOptionSpecs(bool board_required);
+// The option specs to append to a subcommand's own: --board NAME or --target FILE (one of
+// them is required, checked by BoardParamsFromCommandLine) and the board's parameters.
+std::vector<cli::OptionSpec> BoardOptionSpecs();
 
 // The board the parsed options describe. Errors (InvalidArgument, one line naming the option
-// and the value): an unknown board name (the message lists the names), --cols/--rows with a
-// board other than checker and circle_grid, --square with one other than checker,
-// --spacing/--diameter/--asymmetric/--light-circles with one other than circle_grid,
-// --border-bits with one other than apriltag, a value that is not a number, and values
-// ValidateBoardParams refuses.
+// and the value): neither --board nor --target; an unknown board name (the message lists the
+// names), --cols/--rows with a board other than checker and circle_grid, --square with one
+// other than checker, --spacing/--diameter/--asymmetric/--light-circles with one other than
+// circle_grid, --border-bits with one other than apriltag, a value that is not a number, and
+// values ValidateBoardParams refuses. With --target: the file's errors (target_file.h), any
+// board option but --diameter and --light-circles (which a Kalibr file cannot give), and those
+// two for a board other than a circle grid.
 absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& cl);
+
+// What is wrong with the field of `p` that `e` names, with its value and range ("1 is outside
+// [2, 100]"); for messages that name the field their own way (an option, a file's key).
+std::string DescribeParamsError(BoardParamsError e, const BoardParams& p);
 
 }  // namespace linecal::tools

@@ -119,7 +119,7 @@ int DetectInClouds(const cli::CommandLine& cl, const Board& board) {
 }  // namespace
 
 int RunDetect(const Args& args) {
-  std::vector<cli::OptionSpec> options = BoardOptionSpecs(/*board_required=*/true);
+  std::vector<cli::OptionSpec> options = BoardOptionSpecs();
   options.push_back({"image", "FILE", "PNG or JPEG, 8- or 16-bit, grey or colour"});
   options.push_back({"cloud", "FILE",
                      "PCD point cloud (ascii, binary, binary_compressed), --board round_hole; "

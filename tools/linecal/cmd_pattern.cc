@@ -30,7 +30,7 @@ constexpr int kSupersample = 16;
 }  // namespace
 
 int RunPattern(const Args& args) {
-  std::vector<cli::OptionSpec> options = BoardOptionSpecs(/*board_required=*/true);
+  std::vector<cli::OptionSpec> options = BoardOptionSpecs();
   options.push_back({"out", "FILE", "output file, .svg (true size in mm) or .png", true});
   options.push_back({"dpi", "N", "PNG only: dots per inch (default 150)"});
   options.push_back({"json", "", "print what was written as one JSON object"});
