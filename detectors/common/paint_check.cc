@@ -57,9 +57,20 @@ std::vector<int> NearestProbes(int side, int from, int reach, int count, const W
   return out;
 }
 
+BoardToImage ThroughHomography(const Eigen::Matrix3d& H_image_board) {
+  return [H_image_board](const Eigen::Vector2d& p) -> std::optional<Eigen::Vector2d> {
+    return ApplyHomography(H_image_board, p);
+  };
+}
+
 }  // namespace
 
 bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const ImageView8& image,
+                 double px_per_m, double min_agreement) {
+  return PaintAgrees(board, ThroughHomography(H_image_board), image, px_per_m, min_agreement);
+}
+
+bool PaintAgrees(const Board& board, const BoardToImage& to_image, const ImageView8& image,
                  double px_per_m, double min_agreement) {
   const Eigen::Vector2d page = board.page_size_m();
   const double clearance_m = kPaintProbeClearancePx / px_per_m;
@@ -79,7 +90,9 @@ bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const
         uniform = board.PaintAt(q) == here;
       }
       if (!uniform) continue;
-      const Eigen::Vector2d uv = ApplyHomography(H_image_board, p);
+      const std::optional<Eigen::Vector2d> mapped = to_image(p);
+      if (!mapped.has_value()) continue;
+      const Eigen::Vector2d uv = *mapped;
       if (!(uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= image.width - 1.0 && uv.y() <= image.height - 1.0)) {
         continue;
       }
@@ -118,6 +131,12 @@ bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const
 
 bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::Matrix3d& H_image_board,
                           const ImageView8& image, double px_per_m, double min_share) {
+  return PaintContrastPrefers(board, other, ThroughHomography(H_image_board), image, px_per_m,
+                              min_share);
+}
+
+bool PaintContrastPrefers(const Board& board, const Board& other, const BoardToImage& to_image,
+                          const ImageView8& image, double px_per_m, double min_share) {
   // Denser and closer to the edges than PaintAgrees: the areas where sibling boards differ
   // can be small (the round-hole board's black rings), and each vote compares two points
   // under the same blur, so 2 px of clearance are enough.
@@ -148,7 +167,9 @@ bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::M
       const bool both_white = a == Paint::kWhite && b == Paint::kWhite;
       const bool differ = (a == Paint::kBlack && b == Paint::kWhite) || (a == Paint::kWhite && b == Paint::kBlack);
       if (!both_white && !differ) continue;
-      const Eigen::Vector2d uv = ApplyHomography(H_image_board, p);
+      const std::optional<Eigen::Vector2d> mapped = to_image(p);
+      if (!mapped.has_value()) continue;
+      const Eigen::Vector2d uv = *mapped;
       if (!(uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= image.width - 1.0 && uv.y() <= image.height - 1.0)) continue;
       const double grey = image.At(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
       if (both_white) {

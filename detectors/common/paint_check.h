@@ -7,6 +7,8 @@
 // binarisation by local contrast reads large white areas under a 4:1 gradient as dark.
 
 #include <Eigen/Core>
+#include <functional>
+#include <optional>
 
 #include "detectors/boards/board.h"
 #include "detectors/core/image_view.h"
@@ -24,6 +26,15 @@ namespace linecal {
 bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const ImageView8& image,
                  double px_per_m, double min_agreement);
 
+// Where a board point (metres) lies in the image, or nullopt where the caller's model of the
+// board does not reach (a board bent by a lens and known only near its markers). Such probes
+// are left out as those off the image are.
+using BoardToImage = std::function<std::optional<Eigen::Vector2d>(const Eigen::Vector2d&)>;
+
+// PaintAgrees through any mapping of the board into the image: the same probes and test.
+bool PaintAgrees(const Board& board, const BoardToImage& to_image, const ImageView8& image,
+                 double px_per_m, double min_agreement);
+
 // Two boards that print the same features (the ArUco and round-hole boards share their four
 // markers, docs/boards.md) differ only in some of their paint, and a binarisation can be fooled
 // there (a 4:1 illumination gradient darkens plain white paper below its local threshold).
@@ -35,6 +46,9 @@ bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const
 // or when there are fewer votes (the boards cannot be told apart at this size). Cost: about
 // 40k paint look-ups, under a millisecond.
 bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::Matrix3d& H_image_board,
+                          const ImageView8& image, double px_per_m, double min_share);
+// PaintContrastPrefers through any mapping of the board into the image.
+bool PaintContrastPrefers(const Board& board, const Board& other, const BoardToImage& to_image,
                           const ImageView8& image, double px_per_m, double min_share);
 
 }  // namespace linecal

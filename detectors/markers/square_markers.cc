@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <span>
 
 #include "detectors/boards/aruco_dict_4x4_50.h"
@@ -32,14 +34,56 @@ namespace {
 // decoded, else nullptr. With it, the dark band is known per cell (the border, plus the data
 // cell behind it when that is dark) and only points with the widest band are used when
 // there are enough of them: a narrow band lets the inner edge pull the centroid.
+// `curved_sides`: each side's edge points are fitted with a parabola instead of a line, and
+// the corners put where the parabolas' tangents meet: a side seen through a strong lens bends
+// by a few tenths of a pixel, which a line turns into a corner error of that size.
 // Returns false when a side has too few edge points or a corner moves more than
 // max_move_cells cells.
+// A side's edge as a parabola in the side's frame: m(s) = c0 + c1 s + c2 s^2, s along the side
+// from its first corner, m along its outward normal.
+struct SideCurve {
+  Eigen::Vector2d a = Eigen::Vector2d::Zero();
+  Eigen::Vector2d d = Eigen::Vector2d::UnitX();
+  Eigen::Vector2d n = Eigen::Vector2d::UnitY();
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+};
+
+// The weighted least-squares parabola through the edge points of a side (frame a, d, n);
+// nullopt when it is singular. O(points).
+std::optional<SideCurve> FitSideCurve(std::span<const EdgePoint> points, const Eigen::Vector2d& a,
+                                      const Eigen::Vector2d& d, const Eigen::Vector2d& n) {
+  Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  for (const EdgePoint& e : points) {
+    const double t = (e.uv_px - a).dot(d);
+    const Eigen::Vector3d row(1.0, t, t * t);
+    normal += e.weight * row * row.transpose();
+    rhs += e.weight * row * (e.uv_px - a).dot(n);
+  }
+  const Eigen::LDLT<Eigen::Matrix3d> solve(normal);
+  if (solve.info() != Eigen::Success || !solve.isPositive()) return std::nullopt;
+  SideCurve curve{a, d, n, solve.solve(rhs)};
+  if (!curve.c.allFinite()) return std::nullopt;
+  return curve;
+}
+
+// The tangent of a side's curve at s. O(1).
+Line2d TangentAt(const SideCurve& curve, double t) {
+  const Eigen::Vector3d& c = curve.c;
+  Line2d line;
+  line.point = curve.a + t * curve.d + (c(0) + c(1) * t + c(2) * t * t) * curve.n;
+  line.dir = (curve.d + (c(1) + 2.0 * c(2) * t) * curve.n).normalized();
+  return line;
+}
+
 bool RefineQuadCorners(const ImageView8& image, const MarkerFamily& family,
                        const std::vector<std::uint8_t>* light, int samples, double max_move_cells,
-                       std::array<Eigen::Vector2d, 4>* corners) {
+                       std::array<Eigen::Vector2d, 4>* corners, bool curved_sides = false) {
   const int cells = family.cells;
   const int border = family.border_cells;
   std::array<Line2d, 4> lines;
+  std::array<SideCurve, 4> curves;
+  std::array<double, 4> lengths{};
   for (int k = 0; k < 4; ++k) {
     const Eigen::Vector2d a = (*corners)[k];
     const Eigen::Vector2d b = (*corners)[(k + 1) % 4];
@@ -111,13 +155,25 @@ bool RefineQuadCorners(const ImageView8& image, const MarkerFamily& family,
     const std::optional<Line2d> line = FitWeightedLine(pts, d);
     if (!line.has_value()) return false;
     lines[k] = *line;
+    lengths[k] = len;
+    if (curved_sides) {
+      // A parabola needs points to spare: six, else the side stays a line.
+      const std::optional<SideCurve> curve =
+          pts.size() >= 6 ? FitSideCurve(pts, a, d, n) : std::nullopt;
+      if (!curve.has_value()) return false;
+      curves[k] = *curve;
+    }
   }
   std::array<Eigen::Vector2d, 4> out;
   for (int k = 0; k < 4; ++k) {
     // Corner k starts side k and ends side k - 1.
     const int j = (k + 3) % 4;
-    // Sides within ~3 degrees of parallel do not define a corner.
-    const std::optional<Eigen::Vector2d> corner = IntersectLines(lines[j], lines[k]);
+    // Sides within ~3 degrees of parallel do not define a corner. Curved sides meet where
+    // their tangents at the corner do (the corner moves a fraction of a pixel, over which the
+    // curve is its tangent).
+    const std::optional<Eigen::Vector2d> corner =
+        curved_sides ? IntersectLines(TangentAt(curves[j], lengths[j]), TangentAt(curves[k], 0.0))
+                     : IntersectLines(lines[j], lines[k]);
     if (!corner.has_value()) return false;
     out[k] = *corner;
     const double cell_px = 0.5 *
@@ -323,6 +379,9 @@ std::vector<std::uint8_t> MarkerCells(const MarkerFamily& family, int id) {
 // identified). Small, foreshortened and blurred markers lose a few cells on their edges:
 // this is what finds them.
 constexpr double kPlacedMarkerMaxWrongFraction = 1.0 / 6.0;
+// What of the bending the pairs' prediction leaves (its third order), as a share of what it
+// took out (the second order); the fine check's bound grows by it.
+constexpr double kBentRemainderFraction = 0.5;
 // How far, in cells, the edges may move a placed marker's corner from where the board's
 // homography puts it (ReadPredictedMarker).
 constexpr double kPlacedMarkerMaxMoveCells = 0.25;
@@ -618,6 +677,379 @@ Detection Fail(DetectReason reason) {
   return d;
 }
 
+using BoardMarkers = std::map<int, std::vector<const BoardFeature*>>;
+
+// The board's model in the image, as the checks after the fit and the report need it.
+struct BoardInImage {
+  BoardToImage to_image;                  // the paint checks' mapping
+  Eigen::Matrix3d H_image_board;          // whole-board homography, for markers of other ids
+  double px_per_m = 0.0;                  // the board's scale in the image
+  // A detected corner corrected to where the printed corner is (corner_px, p_board, the
+  // corner's outward diagonal).
+  std::function<Eigen::Vector2d(const Eigen::Vector2d&, const Eigen::Vector2d&,
+                                const Eigen::Vector2d&)>
+      printed;
+};
+
+// The checks every identified board passes, then the detection: no marker of another id on
+// the board's page, the printed paint where the model puts it (and more the board's than a
+// sibling's), and the corners of `on_board` as features, sorted by id. found = true only when
+// every marker of the board is in `on_board`, else kPartial. Cost: the paint checks (under a
+// millisecond) plus O(markers).
+Detection CheckAndReport(const BoardInImage& model, const std::vector<const DecodedMarker*>& on_board,
+                         const BoardMarkers& board_markers,
+                         const std::vector<const DecodedMarker*>& others, const Board& board,
+                         const Board* sibling, const ImageView8& image,
+                         const MarkerDetectOptions& options) {
+  // A marker of another id on this board's page: another board that shares some ids. A
+  // homography of a bent board is tens of pixels off at its rim, a small part of the margin.
+  const Eigen::Matrix3d H_board_image = model.H_image_board.inverse();
+  const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
+  for (const DecodedMarker* m : others) {
+    Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+    for (const Eigen::Vector2d& c : m->corners_px) centre += 0.25 * c;
+    const Eigen::Vector2d p = ApplyHomography(H_board_image, centre);
+    if (std::abs(p.x()) < half_page.x() && std::abs(p.y()) < half_page.y()) {
+      return Fail(DetectReason::kWrongBoard);
+    }
+  }
+  // The paint compared between nearby points under the same light (PaintAgrees), not on the
+  // binarised image: that reads white paper at the dim end of a 4:1 gradient as dark and
+  // refused every marker board so lit. The binarised check had been kept for a board of 4 px
+  // cells that the grey one passed with a corner 1.7 px off; the quarter-cell residual limit
+  // (max_residual_cells) refuses such boards now.
+  if (!PaintAgrees(board, model.to_image, image, model.px_per_m, options.min_paint_agreement)) {
+    return Fail(DetectReason::kWrongBoard);
+  }
+  if (sibling != nullptr &&
+      !PaintContrastPrefers(board, *sibling, model.to_image, image, model.px_per_m,
+                            options.min_paint_agreement)) {
+    return Fail(PaintContrastPrefers(*sibling, board, model.to_image, image, model.px_per_m,
+                                     options.min_paint_agreement)
+                    ? DetectReason::kWrongBoard
+                    : DetectReason::kAmbiguous);
+  }
+  Detection detection;
+  detection.found = on_board.size() == board_markers.size();
+  detection.reason = detection.found ? DetectReason::kNone : DetectReason::kPartial;
+  for (const DecodedMarker* m : on_board) {
+    const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
+    const std::array<Eigen::Vector2d, 4> d = OutwardDiagonals(f);
+    for (int c = 0; c < 4; ++c) {
+      DetectedFeature feature;
+      feature.id = f[c]->id;
+      feature.uv_px = model.printed(m->corners_px[c], f[c]->p_board, d[c]);
+      feature.p_board = f[c]->p_board;
+      feature.marker = m->id;
+      detection.features.push_back(feature);
+    }
+  }
+  std::sort(detection.features.begin(), detection.features.end(),
+            [](const DetectedFeature& a, const DetectedFeature& b) { return a.id < b.id; });
+  return detection;
+}
+
+// ---- Boards bent by a lens ----------------------------------------------------------------
+//
+// A real lens bends a board by tens of pixels over its width (a wide-angle front camera, a
+// fisheye): its markers then fit no single homography within the residual bound, whose
+// quarter of a cell is meant for misplaced corners. Such a board is judged locally instead.
+// Each marker's own four corners give its homography: over one marker the bending is a small
+// part of a pixel. A marker is the one its id says where its board neighbours' homographies,
+// carried over one pitch, put its corners within kBentNeighbourFraction of its side: a misread
+// id puts it whole pitches away, while the lens bends a pitch's carry by about a hundredth of
+// a side (measured: under 1 px at 90-110 px sides through a k1 -0.30 pinhole and a 190-degree
+// fisheye). Everything after (markers the scan missed, the paint, the report) uses the
+// nearest marker's homography; the dilation of the dark print (BoardFit) is not taken out.
+
+// How far a neighbour's homography may put a marker's corners, in the marker's sides.
+constexpr double kBentNeighbourFraction = 0.2;
+// Board neighbours: marker centres within this many pitches (the diagonal ones at sqrt(2)).
+constexpr double kBentNeighbourPitches = 1.5;
+// The paint is probed only this many pitches around a verified marker: beyond, a marker's
+// homography carries the lens's bending (and a trimmed board's page is not there).
+constexpr double kBentPaintPitches = 0.75;
+// How far, in cells, the edges may move a placed marker's corner from where its neighbours put
+// it: twice the unbent bound, for what is left of the bending at the board's rim.
+constexpr double kBentPlacedMaxMoveCells = 0.5;
+
+// One marker of a bent board with its own homography.
+struct LocalMarker {
+  DecodedMarker marker;
+  Eigen::Vector2d centre_m;  // board frame
+  Eigen::Matrix3d H_image_board;
+  double side_px = 0.0;  // mean side in the image
+};
+
+// The homography through a marker's four corners; nullopt when they are degenerate. O(1).
+std::optional<LocalMarker> MakeLocal(const DecodedMarker& m,
+                                     const std::vector<const BoardFeature*>& f) {
+  std::array<Eigen::Vector2d, 4> board_corners;
+  LocalMarker local;
+  local.marker = m;
+  local.centre_m = Eigen::Vector2d::Zero();
+  for (int c = 0; c < 4; ++c) {
+    board_corners[c] = f[c]->p_board;
+    local.centre_m += 0.25 * f[c]->p_board;
+    local.side_px += 0.25 * (m.corners_px[(c + 1) % 4] - m.corners_px[c]).norm();
+  }
+  HomographyFitOptions exact;
+  exact.refine = false;
+  const std::optional<HomographyFit> fit =
+      FitHomography(std::span<const Eigen::Vector2d>(board_corners),
+                    std::span<const Eigen::Vector2d>(m.corners_px), exact);
+  if (!fit.has_value()) return std::nullopt;
+  local.H_image_board = fit->H;
+  return local;
+}
+
+// Where H puts the corners of the board marker `f`. O(1).
+std::array<Eigen::Vector2d, 4> CornersThrough(const Eigen::Matrix3d& H,
+                                              const std::vector<const BoardFeature*>& f) {
+  std::array<Eigen::Vector2d, 4> corners;
+  for (int c = 0; c < 4; ++c) corners[c] = ApplyHomography(H, f[c]->p_board);
+  return corners;
+}
+
+// The distance between markers' centres on the board nearest to each other. O(markers^2).
+double MarkerPitchM(const BoardMarkers& board_markers) {
+  std::vector<Eigen::Vector2d> centres;
+  for (const auto& entry : board_markers) {
+    Eigen::Vector2d c = Eigen::Vector2d::Zero();
+    for (const BoardFeature* f : entry.second) c += 0.25 * f->p_board;
+    centres.push_back(c);
+  }
+  double pitch = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < centres.size(); ++i) {
+    for (std::size_t j = i + 1; j < centres.size(); ++j) {
+      pitch = std::min(pitch, (centres[i] - centres[j]).norm());
+    }
+  }
+  return pitch;
+}
+
+// Whether `m` is where its verified neighbours put it: of the markers of `locals` within
+// kBentNeighbourPitches (other than m itself), at least half agree, and at least one. O(n).
+enum class NeighbourVote { kAgree, kDisagree, kNoNeighbours };
+NeighbourVote VoteOfNeighbours(const LocalMarker& m, const std::vector<LocalMarker>& locals,
+                               const BoardMarkers& board_markers, double pitch_m) {
+  int near = 0;
+  int agree = 0;
+  const std::vector<const BoardFeature*>& f = board_markers.at(m.marker.id);
+  for (const LocalMarker& n : locals) {
+    if (n.marker.id == m.marker.id ||
+        (n.centre_m - m.centre_m).norm() > kBentNeighbourPitches * pitch_m) {
+      continue;
+    }
+    ++near;
+    const std::array<Eigen::Vector2d, 4> predicted = CornersThrough(n.H_image_board, f);
+    double worst = 0.0;
+    for (int c = 0; c < 4; ++c) worst = std::max(worst, (predicted[c] - m.marker.corners_px[c]).norm());
+    agree += worst <= kBentNeighbourFraction * m.side_px ? 1 : 0;
+  }
+  if (near == 0) return NeighbourVote::kNoNeighbours;
+  return 2 * agree >= near && agree > 0 ? NeighbourVote::kAgree : NeighbourVote::kDisagree;
+}
+
+// The corners of `m` as pairs of its neighbours in `locals` put them, with the lens's bending
+// cancelled: a marker's homography carried k pitches is off by about a k^2 (the bending's
+// second order, which the homography lacks), so of two markers in a row on one side of m, c1
+// one pitch away and c2 two, 4/3 c1 - 1/3 c2 is free of it (Richardson's extrapolation). The
+// mean over every such pair; nullopt when there is none. A marker shifted by part of a cell
+// stands out against it, where a single carry's bending (up to a cell at a board's rim through
+// a strong lens) would hide it. O(neighbours^2).
+struct PairPredicted {
+  std::array<Eigen::Vector2d, 4> corners;
+  // The mean over the pairs of the largest corner distance between the one-pitch carry and
+  // the prediction: the bending the prediction took out, px.
+  double bending_px = 0.0;
+};
+std::optional<PairPredicted> PairPrediction(const LocalMarker& m,
+                                            const std::vector<LocalMarker>& locals,
+                                            const BoardMarkers& board_markers, double pitch_m) {
+  const std::vector<const BoardFeature*>& f = board_markers.at(m.marker.id);
+  // Offsets match within a twentieth of the pitch.
+  const double tol = 0.05 * pitch_m;
+  std::vector<const LocalMarker*> near;
+  for (const LocalMarker& n : locals) {
+    const double d = (n.centre_m - m.centre_m).norm();
+    if (n.marker.id != m.marker.id && d <= 2.0 * kBentNeighbourPitches * pitch_m) {
+      near.push_back(&n);
+    }
+  }
+  PairPredicted out;
+  out.corners.fill(Eigen::Vector2d::Zero());
+  int pairs = 0;
+  const auto add = [&](const LocalMarker& a, double wa, const LocalMarker& b, double wb) {
+    const std::array<Eigen::Vector2d, 4> pa = CornersThrough(a.H_image_board, f);
+    const std::array<Eigen::Vector2d, 4> pb = CornersThrough(b.H_image_board, f);
+    double bending = 0.0;
+    for (int c = 0; c < 4; ++c) {
+      const Eigen::Vector2d p = wa * pa[c] + wb * pb[c];
+      out.corners[c] += p;
+      bending = std::max(bending, (pa[c] - p).norm());
+    }
+    out.bending_px += bending;
+    ++pairs;
+  };
+  for (std::size_t i = 0; i < near.size(); ++i) {
+    const Eigen::Vector2d oi = near[i]->centre_m - m.centre_m;
+    if (oi.norm() > kBentNeighbourPitches * pitch_m) continue;
+    for (std::size_t j = 0; j < near.size(); ++j) {
+      const Eigen::Vector2d oj = near[j]->centre_m - m.centre_m;
+      if ((oj - 2.0 * oi).norm() <= tol) add(*near[i], 4.0 / 3.0, *near[j], -1.0 / 3.0);
+    }
+  }
+  if (pairs == 0) return std::nullopt;
+  for (Eigen::Vector2d& c : out.corners) c /= pairs;
+  out.bending_px /= pairs;
+  return out;
+}
+
+struct BentBoardInputs {
+  const std::vector<const DecodedMarker*>& on_board;  // decoded, ids of the board, each once
+  const BoardMarkers& board_markers;
+  const std::vector<const DecodedMarker*>& others;
+  const Board& board;
+  const MarkerFamily& family;
+  const MarkerDetectOptions& options;
+  const ImageView8& image;
+  const Board* sibling;
+  double px_per_m;
+};
+
+// Reads the board's markers the scan missed where their verified neighbours put them (the
+// mean of the neighbours' predictions: bending from either side cancels), each kept when it
+// reads as its id and moved at most kBentPlacedMaxMoveCells, and agrees with its neighbours.
+// Appends them to *locals. O(missing * (neighbours + side)).
+void PlaceMissingBentMarkers(const BentBoardInputs& in, double pitch_m,
+                             std::vector<LocalMarker>* locals, int min_contrast) {
+  for (const auto& entry : in.board_markers) {
+    const int id = entry.first;
+    const std::vector<const BoardFeature*>& f = entry.second;
+    if (std::any_of(locals->begin(), locals->end(),
+                    [id](const LocalMarker& m) { return m.marker.id == id; })) {
+      continue;
+    }
+    Eigen::Vector2d centre_m = Eigen::Vector2d::Zero();
+    for (const BoardFeature* x : f) centre_m += 0.25 * x->p_board;
+    std::array<Eigen::Vector2d, 4> predicted;
+    predicted.fill(Eigen::Vector2d::Zero());
+    int neighbours = 0;
+    for (const LocalMarker& n : *locals) {
+      if ((n.centre_m - centre_m).norm() > kBentNeighbourPitches * pitch_m) continue;
+      const std::array<Eigen::Vector2d, 4> p = CornersThrough(n.H_image_board, f);
+      for (int c = 0; c < 4; ++c) predicted[c] += p[c];
+      ++neighbours;
+    }
+    if (neighbours == 0) continue;
+    for (Eigen::Vector2d& p : predicted) p /= neighbours;
+    const std::optional<DecodedMarker> read =
+        ReadPredictedMarker(in.image, in.family, id, predicted, min_contrast);
+    if (!read.has_value() ||
+        !WithinCells(read->corners_px, predicted, in.family.cells, kBentPlacedMaxMoveCells)) {
+      continue;
+    }
+    const std::optional<LocalMarker> local = MakeLocal(*read, f);
+    if (local.has_value() && VoteOfNeighbours(*local, *locals, in.board_markers, pitch_m) ==
+                                 NeighbourVote::kAgree) {
+      locals->push_back(*local);
+    }
+  }
+}
+
+// VerifyMarkerBoard for a board no single homography holds (see above). kVerificationFailed
+// when a marker disagrees with its neighbours, or fewer than two markers have a neighbour;
+// markers without any decoded neighbour are left out (nothing vouches for them).
+Detection VerifyBentBoard(const BentBoardInputs& in, int min_contrast) {
+  const double pitch_m = MarkerPitchM(in.board_markers);
+  std::vector<LocalMarker> decoded;
+  for (const DecodedMarker* m : in.on_board) {
+    std::optional<LocalMarker> local = MakeLocal(*m, in.board_markers.at(m->id));
+    if (!local.has_value()) return Fail(DetectReason::kVerificationFailed);
+    decoded.push_back(*local);
+  }
+  std::vector<LocalMarker> locals;
+  for (const LocalMarker& m : decoded) {
+    switch (VoteOfNeighbours(m, decoded, in.board_markers, pitch_m)) {
+      case NeighbourVote::kDisagree:
+        return Fail(DetectReason::kVerificationFailed);
+      case NeighbourVote::kAgree:
+        locals.push_back(m);
+        break;
+      case NeighbourVote::kNoNeighbours:
+        break;
+    }
+  }
+  if (locals.size() < 2) return Fail(DetectReason::kVerificationFailed);
+  // The fine check, the unbent board's residual bound (max_residual_cells) against the pairs'
+  // prediction. Markers without a pair around them are left out.
+  std::vector<LocalMarker> fine;
+  for (const LocalMarker& m : locals) {
+    const std::optional<PairPredicted> predicted =
+        PairPrediction(m, locals, in.board_markers, pitch_m);
+    if (!predicted.has_value()) continue;
+    double worst = 0.0;
+    for (int c = 0; c < 4; ++c) {
+      worst = std::max(worst, (predicted->corners[c] - m.marker.corners_px[c]).norm());
+    }
+    const double bound = in.options.max_residual_cells * m.side_px / in.family.cells +
+                         kBentRemainderFraction * predicted->bending_px;
+    if (worst > bound) {
+      return Fail(DetectReason::kVerificationFailed);
+    }
+    fine.push_back(m);
+  }
+  locals = std::move(fine);
+  if (locals.size() < 2) return Fail(DetectReason::kVerificationFailed);
+  PlaceMissingBentMarkers(in, pitch_m, &locals, min_contrast);
+  // The corners again with curved sides (RefineQuadCorners); where that fails, the straight
+  // sides' corners stay.
+  for (LocalMarker& m : locals) {
+    const std::vector<std::uint8_t> light = MarkerCells(in.family, m.marker.id);
+    const int samples = std::clamp(static_cast<int>(m.side_px), 8, 80);
+    std::array<Eigen::Vector2d, 4> corners = m.marker.corners_px;
+    if (RefineQuadCorners(in.image, in.family, &light, samples, 0.25, &corners, true)) {
+      m.marker.corners_px = corners;
+    }
+  }
+  // The whole-board homography, for the markers of other ids on the page only.
+  std::vector<Eigen::Vector2d> p_board;
+  std::vector<Eigen::Vector2d> uv;
+  for (const LocalMarker& m : locals) {
+    const std::vector<const BoardFeature*>& f = in.board_markers.at(m.marker.id);
+    for (int c = 0; c < 4; ++c) {
+      p_board.push_back(f[c]->p_board);
+      uv.push_back(m.marker.corners_px[c]);
+    }
+  }
+  const std::optional<HomographyFit> whole = FitHomography(p_board, uv);
+  if (!whole.has_value()) return Fail(DetectReason::kVerificationFailed);
+  const double reach_m = kBentPaintPitches * pitch_m;
+  BoardInImage model;
+  model.to_image = [&locals, reach_m](const Eigen::Vector2d& p) -> std::optional<Eigen::Vector2d> {
+    const LocalMarker* nearest = nullptr;
+    double best = reach_m;
+    for (const LocalMarker& m : locals) {
+      const double d = (m.centre_m - p).lpNorm<Eigen::Infinity>();
+      if (d <= best) {
+        best = d;
+        nearest = &m;
+      }
+    }
+    if (nearest == nullptr) return std::nullopt;
+    return ApplyHomography(nearest->H_image_board, p);
+  };
+  model.H_image_board = whole->H;
+  model.px_per_m = in.px_per_m;
+  model.printed = [](const Eigen::Vector2d& corner_px, const Eigen::Vector2d&,
+                     const Eigen::Vector2d&) -> Eigen::Vector2d { return corner_px; };
+  std::vector<const DecodedMarker*> markers;
+  for (const LocalMarker& m : locals) markers.push_back(&m.marker);
+  return CheckAndReport(model, markers, in.board_markers, in.others, in.board, in.sibling,
+                        in.image, in.options);
+}
+
 }  // namespace
 
 Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
@@ -694,7 +1126,10 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
                                           options.max_residual_cells * side_px / family.cells);
   std::optional<BoardFit> board_fit = FitBoard(p_board, diagonal, uv, on_board.size());
   if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
-    return Fail(DetectReason::kVerificationFailed);
+    // No one homography holds the markers: a wrong board, or the board bent by a lens.
+    const BentBoardInputs bent{on_board, board_markers, others, board,   family,
+                               options,  image,         sibling, side_px / side_m};
+    return VerifyBentBoard(bent, scan.min_contrast);
   }
   // The markers the scan missed, where the checked board fit puts them. Again after each
   // round that placed some: the fit through more of the board extrapolates less.
@@ -744,55 +1179,24 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
     missing = std::move(still_missing);
   }
   for (const DecodedMarker& m : placed) on_board.push_back(&m);
-  const HomographyFit* fit = &board_fit->fit;
-  // A marker of another id on this board's page: another board that shares some ids.
-  const Eigen::Matrix3d H_board_image = fit->H.inverse();
-  const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
-  for (const DecodedMarker* m : others) {
-    Eigen::Vector2d centre = Eigen::Vector2d::Zero();
-    for (const Eigen::Vector2d& c : m->corners_px) centre += 0.25 * c;
-    const Eigen::Vector2d p = ApplyHomography(H_board_image, centre);
-    if (std::abs(p.x()) < half_page.x() && std::abs(p.y()) < half_page.y()) {
-      return Fail(DetectReason::kWrongBoard);
-    }
-  }
-  // The paint compared between nearby points under the same light (PaintAgrees), not on the
-  // binarised image: that reads white paper at the dim end of a 4:1 gradient as dark and
-  // refused every marker board so lit. The binarised check had been kept for a board of 4 px
-  // cells that the grey one passed with a corner 1.7 px off; the quarter-cell residual limit
-  // (max_residual_cells) refuses such boards now.
-  if (!PaintAgrees(board, fit->H, image, side_px / side_m, options.min_paint_agreement)) {
-    return Fail(DetectReason::kWrongBoard);
-  }
-  if (sibling != nullptr) {
-    const double px_per_m = side_px / side_m;
-    if (!PaintContrastPrefers(board, *sibling, fit->H, image, px_per_m, options.min_paint_agreement)) {
-      return Fail(PaintContrastPrefers(*sibling, board, fit->H, image, px_per_m, options.min_paint_agreement)
-                      ? DetectReason::kWrongBoard
-                      : DetectReason::kAmbiguous);
-    }
-  }
-  Detection detection;
-  detection.found = on_board.size() == board_markers.size();
-  detection.reason = detection.found ? DetectReason::kNone : DetectReason::kPartial;
-  for (const DecodedMarker* m : on_board) {
-    const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
-    const std::array<Eigen::Vector2d, 4> d = OutwardDiagonals(f);
-    for (int c = 0; c < 4; ++c) {
-      DetectedFeature feature;
-      feature.id = f[c]->id;
-      // The corner as printed: the dilation taken out where the fit places it.
-      feature.uv_px = m->corners_px[c] -
-                      (ApplyHomography(fit->H, f[c]->p_board + board_fit->dilation_m * d[c]) -
-                       ApplyHomography(fit->H, f[c]->p_board));
-      feature.p_board = f[c]->p_board;
-      feature.marker = m->id;
-      detection.features.push_back(feature);
-    }
-  }
-  std::sort(detection.features.begin(), detection.features.end(),
-            [](const DetectedFeature& a, const DetectedFeature& b) { return a.id < b.id; });
-  return detection;
+  const BoardFit fitted = *board_fit;
+  BoardInImage model;
+  model.to_image = [&fitted](const Eigen::Vector2d& p) -> std::optional<Eigen::Vector2d> {
+    return ApplyHomography(fitted.fit.H, p);
+  };
+  model.H_image_board = fitted.fit.H;
+  model.px_per_m = side_px / side_m;
+  // The corner as printed: the dilation taken out where the fit places it.
+  model.printed = [&fitted](const Eigen::Vector2d& corner_px, const Eigen::Vector2d& p_board,
+                            const Eigen::Vector2d& diagonal) -> Eigen::Vector2d {
+    const Eigen::Vector2d dilated_board = p_board + fitted.dilation_m * diagonal;
+    const Eigen::Vector2d dilated_px = ApplyHomography(fitted.fit.H, dilated_board);
+    const Eigen::Vector2d printed_px = ApplyHomography(fitted.fit.H, p_board);
+    Eigen::Vector2d corrected = corner_px;
+    corrected += printed_px - dilated_px;
+    return corrected;
+  };
+  return CheckAndReport(model, on_board, board_markers, others, board, sibling, image, options);
 }
 
 Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const MarkerFamily& family,
