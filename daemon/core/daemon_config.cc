@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "station/capture/capture.h"
 #include "station/io/json_reader.h"
 
 namespace linecal {
@@ -140,6 +141,40 @@ absl::StatusOr<SourceConfig> ParseSensorSource(const JsonField& f, const fs::pat
   return f.Error("type", absl::StrCat("must be aravis, v4l2, udp, socketcan or candump, got '", *type, "'"));
 }
 
+// The `input_budget` object: each key optional, an integer >= 1 (InputBudget::Validate).
+absl::StatusOr<InputBudget> ReadInputBudget(const JsonField& f) {
+  InputBudget b;
+  const std::pair<const char*, std::int64_t*> keys[] = {
+      {"max_file_bytes", &b.max_file_bytes},   {"max_image_pixels", &b.max_image_pixels},
+      {"max_scan_points", &b.max_scan_points}, {"max_can_lines", &b.max_can_lines},
+      {"max_manifest_frames", &b.max_manifest_frames}};
+  if (absl::Status s = f.AllowOnlyKeys({"max_file_bytes", "max_image_pixels", "max_scan_points",
+                                        "max_can_lines", "max_manifest_frames"});
+      !s.ok()) {
+    return s;
+  }
+  for (const auto& [key, slot] : keys) {
+    absl::StatusOr<std::int64_t> v = f.IntegerOr(key, *slot);
+    if (!v.ok()) return v.status();
+    if (*v < 1) return f.Error(key, absl::StrCat("must be >= 1, got ", *v));
+    *slot = *v;
+  }
+  return b;
+}
+
+// A replay capture may not leave data_root through a symbolic link (a capture folder that is
+// a link elsewhere). Checked only when data_root exists: otherwise there is no capture yet,
+// and StationCore::Create reports that.
+absl::Status CheckReplayInside(const JsonField& source, const std::string& data_root,
+                               const std::string& capture) {
+  std::error_code ec;
+  if (!fs::is_directory(data_root, ec)) return absl::OkStatus();
+  const absl::StatusOr<fs::path> r =
+      ResolveInside(data_root, capture, absl::StrCat("'", capture, "'"), "data_root");
+  if (!r.ok()) return source.Error("capture", std::string(r.status().message()));
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::string& data_dir) {
@@ -160,7 +195,8 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   if (!root.ok()) return root.status();
   if (absl::Status s = root->AllowOnlyKeys({"listen", "log_level", "auth_token", "station_id", "station", "car_models",
                                             "data_root", "db", "source", "vin_check_digit", "frames_per_sensor",
-                                            "busy_timeout_ms", "tls", "deadlines_ms"});
+                                            "busy_timeout_ms", "tls", "deadlines_ms",
+                                            "input_budget"});
       !s.ok()) {
     return s;
   }
@@ -224,6 +260,9 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
       c.core.source = CycleSource::kReplay;
       absl::StatusOr<std::string> capture = source->String("capture");
       if (!capture.ok()) return capture.status();
+      if (absl::Status s = CheckReplayInside(*source, c.core.data_root, *capture); !s.ok()) {
+        return s;
+      }
       c.core.replay_capture = *capture;
     } else {
       return source->Error("type", absl::StrCat("must be 'simulator', 'replay' or 'live', got '", *type, "'"));
@@ -258,6 +297,13 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
     if (!calibrate.ok()) return calibrate.status();
     c.core.acquire_deadline = *acquire;
     c.core.calibrate_deadline = *calibrate;
+  }
+  if (root->Has("input_budget")) {
+    absl::StatusOr<JsonField> budget_field = root->Object("input_budget");
+    if (!budget_field.ok()) return budget_field.status();
+    absl::StatusOr<InputBudget> budget = ReadInputBudget(*budget_field);
+    if (!budget.ok()) return budget.status();
+    c.input_budget = *budget;
   }
   return c;
 }

@@ -8,6 +8,7 @@
 
 #include "absl/status/statusor.h"
 #include "daemon/core/station_core.h"
+#include "station/io/input_budget.h"
 
 namespace linecal {
 
@@ -35,6 +36,9 @@ struct DaemonConfig {
   std::string log_level = "info";          // "debug", "info", "warning", "error"
   std::string auth_token;                  // empty: no authentication
   std::optional<TlsConfig> tls;            // absent: an insecure port
+  // What one input file of a capture may claim (station/io/input_budget.h); the `input_budget`
+  // key, each field optional with InputBudget's default.
+  InputBudget input_budget;
   StationCoreConfig core;
 };
 
@@ -47,9 +51,12 @@ DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::strin
 // {type: live, sensors: {NAME: {type: aravis|v4l2|udp|socketcan|candump, ...}}},
 // vin_check_digit, frames_per_sensor, busy_timeout_ms, deadlines_ms {acquire, calibrate},
 // tls {cert, key, client_ca, require_client_cert: cert and key required, client_ca too unless
-// require_client_cert is false}; unknown keys are errors. Whether every sensor has a source of
-// its kind is checked by StationCore::Create, which knows the car models. Cost: reads the file
-// and the tls PEM files.
+// require_client_cert is false}, input_budget {max_file_bytes, max_image_pixels,
+// max_scan_points, max_can_lines, max_manifest_frames: integers >= 1}; unknown keys are errors.
+// A replay capture (source.capture) must resolve inside data_root, symbolic links followed
+// (checked when data_root exists: "source.capture: 'cap': resolves outside data_root").
+// Whether every sensor has a source of its kind is checked by StationCore::Create, which knows
+// the car models. Cost: reads the file and the tls PEM files.
 absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path);
 
 }  // namespace linecal

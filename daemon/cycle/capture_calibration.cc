@@ -66,7 +66,7 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
   std::vector<BoardObservation> observations;
   for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
     const CaptureFile& frame = recorded.frames[frame_index];
-    const absl::StatusOr<Image8> image = ReadImage8(capture.PathOf(frame));
+    const absl::StatusOr<Image8> image = ReadCaptureImage(capture, frame);
     if (!image.ok()) {
       out.reason = "data_unreadable";
       out.message = std::string(image.status().message());
@@ -125,7 +125,7 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
   // Every recorded rotation, accumulated: the boards stand still during a cycle.
   std::vector<std::vector<RoundHoleCloudPoint>> frames;
   for (const CaptureFile& f : recorded.frames) {
-    absl::StatusOr<PcdCloud> cloud = ReadPcd(capture.PathOf(f));
+    absl::StatusOr<PcdCloud> cloud = ReadCaptureScan(capture, f);
     if (!cloud.ok()) {
       out.reason = "data_unreadable";
       out.message = std::string(cloud.status().message());
@@ -153,7 +153,8 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
     out.message = absl::StrCat(sensor.name, ": no CAN log or unknown radar model '", sensor.model, "'");
     return out;
   }
-  const absl::StatusOr<std::vector<CanFrame>> frames = ReadCandumpLog(capture.PathOf(*recorded.can_log));
+  const absl::StatusOr<std::vector<CanFrame>> frames =
+      ReadCaptureCanLog(capture, *recorded.can_log);
   if (!frames.ok()) {
     out.reason = "data_unreadable";
     out.message = std::string(frames.status().message());

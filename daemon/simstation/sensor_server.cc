@@ -121,7 +121,7 @@ absl::StatusOr<std::unique_ptr<SensorServer>> SensorServer::Start(const SensorSe
   for (const CaptureSensor& sensor : server->capture_.manifest.sensors) {
     if (sensor.kind == SensorKind::kCamera) {
       if (sensor.frames.empty()) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": no frame to serve"));
-      absl::StatusOr<Image8> image = ReadImage8(server->capture_.PathOf(sensor.frames.front()));
+      absl::StatusOr<Image8> image = ReadCaptureImage(server->capture_, sensor.frames.front());
       if (!image.ok()) return image.status();
       const std::string& address = options.camera_addresses[next_address++];
       // The serial becomes the device id "Aravis-Fake-<serial>": the sensor name makes it

@@ -21,24 +21,46 @@ bool IsContainedRelativePath(const std::string& p) {
   return true;
 }
 
-absl::StatusOr<CaptureFile> ReadFileEntry(const JsonField& f, const fs::path& dir) {
+// What the entries of a manifest are checked against: the capture directory with its symbolic
+// links resolved, the budget, and the frame entries counted so far.
+struct EntryContext {
+  fs::path dir;           // as given, for opening files
+  fs::path resolved_dir;  // fs::canonical(dir), for the containment check
+  const InputBudget* budget = nullptr;
+  std::int64_t frames = 0;
+};
+
+absl::StatusOr<CaptureFile> ReadFileEntry(const JsonField& f, const EntryContext& ctx) {
   if (auto s = f.AllowOnlyKeys({"path", "t_ns"}); !s.ok()) return s;
   absl::StatusOr<std::string> path = f.String("path");
   if (!path.ok()) return path.status();
   if (!IsContainedRelativePath(*path)) {
     return f.Error("path", absl::StrCat("'", *path, "' must be a relative path inside the capture"));
   }
+  if (absl::StatusOr<fs::path> r =
+          ResolveInside(ctx.resolved_dir, *path, absl::StrCat("'", *path, "'"), "the capture");
+      !r.ok()) {
+    return f.Error("path", std::string(r.status().message()));
+  }
   std::error_code ec;
-  const fs::path full = dir / *path;
+  const fs::path full = ctx.dir / *path;
   if (!fs::is_regular_file(full, ec)) return f.Error("path", absl::StrCat("no such file '", *path, "'"));
-  if (fs::file_size(full, ec) == 0) return f.Error("path", absl::StrCat("file '", *path, "' is empty"));
+  const std::uintmax_t size = fs::file_size(full, ec);
+  if (size == 0) return f.Error("path", absl::StrCat("file '", *path, "' is empty"));
+  if (size > static_cast<std::uintmax_t>(ctx.budget->max_file_bytes)) {
+    return f.Error("path", absl::StrCat("'", *path, "': ",
+                                        OverBudgetText(static_cast<std::int64_t>(size), "bytes",
+                                                       ctx.budget->max_file_bytes,
+                                                       "max_file_bytes")));
+  }
   absl::StatusOr<std::int64_t> t = f.Integer("t_ns");
   if (!t.ok()) return t.status();
   if (*t < 0) return f.Error("t_ns", "must be >= 0");
   return CaptureFile{*path, *t};
 }
 
-absl::StatusOr<CaptureSensor> ReadSensorEntry(const JsonField& f, const fs::path& dir, const CarModel& car) {
+absl::StatusOr<CaptureSensor> ReadSensorEntry(const JsonField& f, EntryContext& ctx,
+                                              const CarModel& car) {
   if (auto s = f.AllowOnlyKeys({"name", "kind", "frames", "packets", "can_log"}); !s.ok()) return s;
   CaptureSensor c;
   absl::StatusOr<std::string> name = f.String("name");
@@ -58,8 +80,14 @@ absl::StatusOr<CaptureSensor> ReadSensorEntry(const JsonField& f, const fs::path
   if (f.Has("frames")) {
     absl::StatusOr<std::vector<JsonField>> frames = f.Array("frames");
     if (!frames.ok()) return frames.status();
+    // Counted before any entry is looked at: a manifest of thousands of frames is refused at once.
+    ctx.frames += static_cast<std::int64_t>(frames->size());
+    if (ctx.frames > ctx.budget->max_manifest_frames) {
+      return f.Error("frames", OverBudgetText(ctx.frames, "frames", ctx.budget->max_manifest_frames,
+                                              "max_manifest_frames"));
+    }
     for (const JsonField& fr : *frames) {
-      absl::StatusOr<CaptureFile> file = ReadFileEntry(fr, dir);
+      absl::StatusOr<CaptureFile> file = ReadFileEntry(fr, ctx);
       if (!file.ok()) return file.status();
       if (!c.frames.empty() && file->t_ns < c.frames.back().t_ns) {
         return fr.Error("t_ns", "frame times must not decrease");
@@ -71,7 +99,7 @@ absl::StatusOr<CaptureSensor> ReadSensorEntry(const JsonField& f, const fs::path
     if (!f.Has(key)) continue;
     absl::StatusOr<JsonField> entry = f.Object(key);
     if (!entry.ok()) return entry.status();
-    absl::StatusOr<CaptureFile> file = ReadFileEntry(*entry, dir);
+    absl::StatusOr<CaptureFile> file = ReadFileEntry(*entry, ctx);
     if (!file.ok()) return file.status();
     *slot = *file;
   }
@@ -92,7 +120,103 @@ absl::StatusOr<CaptureSensor> ReadSensorEntry(const JsonField& f, const fs::path
   return c;
 }
 
+// The capture's own files (manifest, station.json, car.json) must resolve inside it as well.
+absl::Status CheckOwnFile(const fs::path& resolved_dir, const fs::path& dir, const char* name) {
+  const absl::StatusOr<fs::path> r =
+      ResolveInside(resolved_dir, name, (dir / name).string(), "the capture");
+  return r.status();
+}
+
+// The LiDAR angle files car.json names (ReadCarModel made them absolute) must be in the capture.
+absl::Status CheckAngleFiles(const fs::path& resolved_dir, const fs::path& dir,
+                             const CarModel& car) {
+  for (const SensorModel& s : car.sensors) {
+    if (s.angles_file.empty()) continue;
+    const absl::StatusOr<fs::path> r = ResolveInside(
+        resolved_dir, s.angles_file, absl::StrCat((dir / kCaptureCarFile).string(), ": sensor '",
+                                                  s.name, "': angles_file"),
+        "the capture");
+    if (!r.ok()) return r.status();
+  }
+  return absl::OkStatus();
+}
+
+// One data file of a check: the reader's error under "<dir>/manifest.json: sensors[i].<key>".
+absl::Status Located(const Capture& c, size_t sensor, const std::string& key,
+                     const absl::Status& s) {
+  if (s.ok()) return s;
+  return absl::InvalidArgumentError(absl::StrCat(c.dir, "/", kCaptureManifestFile, ": sensors[",
+                                                 sensor, "].", key, ": ", s.message()));
+}
+
 }  // namespace
+
+absl::StatusOr<fs::path> ResolveInside(const fs::path& root, const fs::path& rel,
+                                       const std::string& display, const std::string& what) {
+  std::error_code ec;
+  const fs::path resolved_root = fs::canonical(root, ec);
+  if (ec) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(root.string(), ": cannot resolve: ", ec.message()));
+  }
+  // Joining an absolute `rel` gives `rel` itself, which the check below then judges.
+  const fs::path resolved = fs::weakly_canonical(resolved_root / rel, ec);
+  if (ec) {
+    return absl::InvalidArgumentError(absl::StrCat(display, ": cannot resolve: ", ec.message()));
+  }
+  auto r = resolved_root.begin();
+  auto p = resolved.begin();
+  for (; r != resolved_root.end(); ++r, ++p) {
+    if (p == resolved.end() || *p != *r) {
+      return absl::InvalidArgumentError(absl::StrCat(display, ": resolves outside ", what));
+    }
+  }
+  return resolved;
+}
+
+absl::StatusOr<Image8> ReadCaptureImage(const Capture& capture, const CaptureFile& f) {
+  return ReadImage8(capture.PathOf(f), capture.budget);
+}
+
+absl::StatusOr<PcdCloud> ReadCaptureScan(const Capture& capture, const CaptureFile& f) {
+  return ReadPcd(capture.PathOf(f), capture.budget);
+}
+
+absl::StatusOr<std::vector<CanFrame>> ReadCaptureCanLog(const Capture& capture,
+                                                        const CaptureFile& f) {
+  return ReadCandumpLog(capture.PathOf(f), capture.budget);
+}
+
+absl::Status CheckCaptureData(const Capture& c) {
+  for (size_t i = 0; i < c.manifest.sensors.size(); ++i) {
+    const CaptureSensor& s = c.manifest.sensors[i];
+    const SensorModel* model = c.car.FindSensor(s.name);
+    for (size_t k = 0; k < s.frames.size(); ++k) {
+      const std::string key = absl::StrCat("frames[", k, "]");
+      if (s.kind == SensorKind::kLidar) {
+        const absl::Status e = Located(c, i, key, ReadCaptureScan(c, s.frames[k]).status());
+        if (!e.ok()) return e;
+        continue;
+      }
+      absl::StatusOr<Image8> img = ReadCaptureImage(c, s.frames[k]);
+      if (!img.ok()) return Located(c, i, key, img.status());
+      if (model == nullptr || !model->intrinsics) continue;
+      const CameraIntrinsics& in = *model->intrinsics;
+      if (img->width != in.width || img->height != in.height) {
+        return Located(c, i, key,
+                       absl::InvalidArgumentError(absl::StrCat(
+                           "image is ", img->width, "x", img->height, ", the car model says ",
+                           in.width, "x", in.height)));
+      }
+    }
+    if (s.can_log) {
+      const absl::Status e =
+          Located(c, i, "can_log", ReadCaptureCanLog(c, *s.can_log).status());
+      if (!e.ok()) return e;
+    }
+  }
+  return absl::OkStatus();
+}
 
 const CaptureSensor* CaptureManifest::FindSensor(const std::string& name) const {
   for (const CaptureSensor& s : sensors) {
@@ -103,10 +227,16 @@ const CaptureSensor* CaptureManifest::FindSensor(const std::string& name) const 
 
 std::string Capture::PathOf(const CaptureFile& f) const { return (fs::path(dir) / f.path).string(); }
 
-absl::StatusOr<Capture> ReadCapture(const std::string& dir) {
+absl::StatusOr<Capture> ReadCapture(const std::string& dir, const InputBudget& budget) {
+  if (absl::Status s = budget.Validate(); !s.ok()) return s;
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return absl::NotFoundError(absl::StrCat(dir, ": not a capture directory"));
   const fs::path root_dir(dir);
+  const fs::path resolved_dir = fs::canonical(root_dir, ec);
+  if (ec) return absl::NotFoundError(absl::StrCat(dir, ": cannot resolve: ", ec.message()));
+  for (const char* own : {kCaptureManifestFile, kCaptureStationFile, kCaptureCarFile}) {
+    if (absl::Status s = CheckOwnFile(resolved_dir, root_dir, own); !s.ok()) return s;
+  }
   const std::string manifest_path = (root_dir / kCaptureManifestFile).string();
   absl::StatusOr<JsonDocument> doc = JsonDocument::FromFile(manifest_path);
   if (!doc.ok()) return doc.status();
@@ -129,6 +259,7 @@ absl::StatusOr<Capture> ReadCapture(const std::string& dir) {
   }
   Capture c;
   c.dir = dir;
+  c.budget = budget;
   CaptureManifest& m = c.manifest;
   m.version = static_cast<int>(*version);
   absl::StatusOr<std::string> vin = root->String("vin");
@@ -160,6 +291,7 @@ absl::StatusOr<Capture> ReadCapture(const std::string& dir) {
   if (c.car.id != m.car_model) {
     return root->Error("car_model", absl::StrCat("'", m.car_model, "' but ", kCaptureCarFile, " is car model '", c.car.id, "'"));
   }
+  if (absl::Status s = CheckAngleFiles(resolved_dir, root_dir, c.car); !s.ok()) return s;
   if (absl::Status s = CheckTargetsExist(c.car, c.station); !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat((root_dir / kCaptureCarFile).string(), ": ", s.message()));
   }
@@ -167,8 +299,9 @@ absl::StatusOr<Capture> ReadCapture(const std::string& dir) {
   absl::StatusOr<std::vector<JsonField>> sensors = root->Array("sensors");
   if (!sensors.ok()) return sensors.status();
   std::set<std::string> names;
+  EntryContext ctx{root_dir, resolved_dir, &c.budget, 0};
   for (const JsonField& f : *sensors) {
-    absl::StatusOr<CaptureSensor> s = ReadSensorEntry(f, root_dir, c.car);
+    absl::StatusOr<CaptureSensor> s = ReadSensorEntry(f, ctx, c.car);
     if (!s.ok()) return s.status();
     if (!names.insert(s->name).second) return f.Error("name", absl::StrCat("sensor '", s->name, "' listed twice"));
     m.sensors.push_back(std::move(*s));

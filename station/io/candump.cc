@@ -4,10 +4,10 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
-#include <sstream>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "station/io/input_budget.h"
 
 namespace linecal {
 namespace {
@@ -27,16 +27,12 @@ int HexValue(char c) {
 
 bool IsBlank(char c) { return c == ' ' || c == '\t'; }
 
+// A token of the line in a message: short and sanitized (input_budget.h, Snippet), since a
+// "log" may be any file. 20 characters show a timestamp or an 8-digit id with its first data
+// bytes whole.
 std::string Quoted(std::string_view s) {
-  // Keep messages one line and short even for binary garbage: 40 characters show any real
-  // token of a candump line whole.
-  constexpr size_t kMaxShown = 40;
-  std::string out = "'";
-  for (char c : s.substr(0, kMaxShown)) {
-    out += (c >= 0x20 && c < 0x7F) ? std::string(1, c) : absl::StrFormat("\\x%02X", c & 0xFF);
-  }
-  if (s.size() > kMaxShown) out += "...";
-  return out + "'";
+  constexpr size_t kMaxShown = 20;
+  return Snippet(s, kMaxShown);
 }
 
 // "(seconds.fraction)" → time. The fraction has 1..9 digits and is read as a decimal fraction
@@ -246,8 +242,9 @@ absl::StatusOr<CanFrame> ParseCandumpLine(std::string_view line) {
     i = end;
   }
   if (count < 3) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("expected '(seconds.micros) interface ID#DATA', got ", Quoted(line)));
+    // The line itself is not shown: a file with fewer than 3 fields is probably no log at all.
+    return absl::InvalidArgumentError(absl::StrCat(
+        "expected '(seconds.micros) interface ID#DATA', got ", count, " field(s)"));
   }
   if (count == kMaxFields && fields[3] != "R" && fields[3] != "T") {
     return absl::InvalidArgumentError(
@@ -269,6 +266,25 @@ absl::StatusOr<CanFrame> ParseCandumpLine(std::string_view line) {
   return frame;
 }
 
+namespace {
+
+// One line of a log (line_number counts from 1) appended to `frames`; blank lines are skipped.
+absl::Status ParseLogLine(std::string_view line, std::string_view source_name,
+                          size_t line_number, std::vector<CanFrame>* frames) {
+  if (std::all_of(line.begin(), line.end(), [](char c) { return IsBlank(c) || c == '\r'; })) {
+    return absl::OkStatus();
+  }
+  absl::StatusOr<CanFrame> frame = ParseCandumpLine(line);
+  if (!frame.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(std::string(source_name), ":", line_number, ": ", frame.status().message()));
+  }
+  frames->push_back(*std::move(frame));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::StatusOr<std::vector<CanFrame>> ParseCandumpLog(std::string_view text,
                                                       std::string_view source_name) {
   std::vector<CanFrame> frames;
@@ -282,31 +298,40 @@ absl::StatusOr<std::vector<CanFrame>> ParseCandumpLog(std::string_view text,
     if (end == std::string_view::npos) end = text.size();
     const std::string_view line = text.substr(start, end - start);
     start = end + 1;
-    ++line_number;
-    if (std::all_of(line.begin(), line.end(), [](char c) { return IsBlank(c) || c == '\r'; })) {
-      continue;
+    if (absl::Status s = ParseLogLine(line, source_name, ++line_number, &frames); !s.ok()) {
+      return s;
     }
-    absl::StatusOr<CanFrame> frame = ParseCandumpLine(line);
-    if (!frame.ok()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(std::string(source_name), ":", line_number, ": ", frame.status().message()));
-    }
-    frames.push_back(*std::move(frame));
   }
   return frames;
 }
 
 absl::StatusOr<std::vector<CanFrame>> ReadCandumpLog(const std::filesystem::path& path) {
+  return ReadCandumpLog(path, InputBudget::Unlimited());
+}
+
+absl::StatusOr<std::vector<CanFrame>> ReadCandumpLog(const std::filesystem::path& path,
+                                                     const InputBudget& budget) {
+  if (absl::Status s = CheckFileBytes(path, budget); !s.ok()) return s;
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     return absl::NotFoundError(absl::StrCat(path.string(), ": cannot open CAN log"));
   }
-  std::ostringstream text;
-  text << in.rdbuf();
+  // Line by line, so that memory is one line plus the frames, never the file twice.
+  const std::string source = path.string();
+  std::vector<CanFrame> frames;
+  std::string line;
+  size_t line_number = 0;
+  while (std::getline(in, line)) {
+    if (static_cast<std::int64_t>(++line_number) > budget.max_can_lines) {
+      return OverBudget(source, static_cast<std::int64_t>(line_number), "or more lines",
+                        budget.max_can_lines, "max_can_lines");
+    }
+    if (absl::Status s = ParseLogLine(line, source, line_number, &frames); !s.ok()) return s;
+  }
   if (in.bad()) {
     return absl::InternalError(absl::StrCat(path.string(), ": read error"));
   }
-  return ParseCandumpLog(text.str(), path.string());
+  return frames;
 }
 
 absl::StatusOr<std::string> FormatCandumpLine(const CanFrame& f) {

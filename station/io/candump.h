@@ -24,6 +24,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "station/io/input_budget.h"
 
 namespace linecal {
 
@@ -78,13 +79,21 @@ absl::Status ValidateCanFrame(const CanFrame& frame);
 absl::StatusOr<CanFrame> ParseCandumpLine(std::string_view line);
 
 // Parses a whole log. Blank lines are skipped. The first bad line stops parsing with
-// InvalidArgument "<source_name>:<line number>: <problem>". Cost: O(text size).
+// InvalidArgument "<source_name>:<line number>: <problem>"; the problem quotes at most a
+// short, sanitized token of the line (Snippet), never the line. Cost: O(text size).
 absl::StatusOr<std::vector<CanFrame>> ParseCandumpLog(std::string_view text,
                                                       std::string_view source_name);
 
 // Reads and parses a log file. NotFound when it cannot be opened, otherwise as ParseCandumpLog
 // with the path as the source name. Cost: one read of the file; memory ~100 bytes a frame.
 absl::StatusOr<std::vector<CanFrame>> ReadCandumpLog(const std::filesystem::path& path);
+
+// ReadCandumpLog under a budget (station/io/input_budget.h): a file of more than
+// budget.max_file_bytes (from stat, so a sparse file is refused unread) or of more than
+// budget.max_can_lines lines is refused with OverBudget's InvalidArgument naming the file. The
+// file is read line by line: memory is the longest line plus ~100 bytes a frame.
+absl::StatusOr<std::vector<CanFrame>> ReadCandumpLog(const std::filesystem::path& path,
+                                                     const InputBudget& budget);
 
 // Formats one frame as a log line (no newline) the way `candump -l` does: 10-digit seconds,
 // 6-digit microseconds (the time is rounded down to whole microseconds), upper-case hex.

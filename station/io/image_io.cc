@@ -40,6 +40,21 @@ absl::Status TooLarge(const std::string& path, long long w, long long h) {
                                                  " pixels (max ", kMaxImageSide, " per side)"));
 }
 
+// The size checks of a header, before any pixel memory is allocated: the budget's pixels,
+// then the format's side limit.
+absl::Status CheckHeaderSize(const std::string& path, std::uint64_t w, std::uint64_t h,
+                             const InputBudget& budget) {
+  if (w * h > static_cast<std::uint64_t>(budget.max_image_pixels)) {
+    return OverBudget(path, static_cast<std::int64_t>(w * h), "pixels", budget.max_image_pixels,
+                      "max_image_pixels");
+  }
+  if (w > static_cast<std::uint64_t>(kMaxImageSide) ||
+      h > static_cast<std::uint64_t>(kMaxImageSide)) {
+    return TooLarge(path, static_cast<long long>(w), static_cast<long long>(h));
+  }
+  return absl::OkStatus();
+}
+
 // A decoded image before the conversion to grey: 1 (grey) or 3 (RGB) channels of 8 or 16
 // bits in native byte order, rows packed.
 struct Decoded {
@@ -133,7 +148,8 @@ bool PngReadRows(png_structp png, png_infop info, png_bytepp rows) {
   return true;
 }
 
-absl::StatusOr<Decoded> DecodePng(const std::string& path, std::FILE* file) {
+absl::StatusOr<Decoded> DecodePng(const std::string& path, std::FILE* file,
+                                  const InputBudget& budget) {
   PngErrorState error;
   PngReadHandles handles;
   handles.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &error, PngOnError, PngOnWarning);
@@ -147,9 +163,8 @@ absl::StatusOr<Decoded> DecodePng(const std::string& path, std::FILE* file) {
   if (!PngReadHeader(png, info, file, &header)) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": bad PNG: ", error.message));
   }
-  if (header.width > static_cast<png_uint_32>(kMaxImageSide) ||
-      header.height > static_cast<png_uint_32>(kMaxImageSide)) {
-    return TooLarge(path, header.width, header.height);
+  if (absl::Status s = CheckHeaderSize(path, header.width, header.height, budget); !s.ok()) {
+    return s;
   }
   Decoded out;
   out.width = static_cast<int>(header.width);
@@ -216,7 +231,8 @@ bool JpegReadRows(jpeg_decompress_struct* cinfo, JpegErrorState* error, std::uin
   return true;
 }
 
-absl::StatusOr<Decoded> DecodeJpeg(const std::string& path, std::FILE* file) {
+absl::StatusOr<Decoded> DecodeJpeg(const std::string& path, std::FILE* file,
+                                   const InputBudget& budget) {
   jpeg_decompress_struct cinfo{};  // zeroed: safe to destroy even if creation fails
   JpegErrorState error{};
   cinfo.err = jpeg_std_error(&error.manager);
@@ -232,9 +248,9 @@ absl::StatusOr<Decoded> DecodeJpeg(const std::string& path, std::FILE* file) {
     return absl::InvalidArgumentError(
         absl::StrCat(path, ": unsupported JPEG colour space (CMYK/YCCK)"));
   }
-  if (cinfo.image_width > static_cast<JDIMENSION>(kMaxImageSide) ||
-      cinfo.image_height > static_cast<JDIMENSION>(kMaxImageSide)) {
-    return TooLarge(path, cinfo.image_width, cinfo.image_height);
+  if (absl::Status s = CheckHeaderSize(path, cinfo.image_width, cinfo.image_height, budget);
+      !s.ok()) {
+    return s;
   }
   Decoded out;
   out.width = static_cast<int>(cinfo.image_width);
@@ -246,18 +262,19 @@ absl::StatusOr<Decoded> DecodeJpeg(const std::string& path, std::FILE* file) {
   return out;
 }
 
-absl::StatusOr<Decoded> Decode(const std::string& path) {
+absl::StatusOr<Decoded> Decode(const std::string& path, const InputBudget& budget) {
+  if (absl::Status s = CheckFileBytes(path, budget); !s.ok()) return s;
   FilePtr file(std::fopen(path.c_str(), "rb"), std::fclose);
   if (file == nullptr) return FileError(path, "cannot open", errno);
   std::uint8_t magic[8] = {};
   const std::size_t n = std::fread(magic, 1, sizeof magic, file.get());
   std::rewind(file.get());
   if (n == sizeof magic && std::memcmp(magic, kPngSignature, sizeof kPngSignature) == 0) {
-    return DecodePng(path, file.get());
+    return DecodePng(path, file.get(), budget);
   }
   if (n >= sizeof kJpegSignature &&
       std::memcmp(magic, kJpegSignature, sizeof kJpegSignature) == 0) {
-    return DecodeJpeg(path, file.get());
+    return DecodeJpeg(path, file.get(), budget);
   }
   return absl::InvalidArgumentError(absl::StrCat(path, ": not a PNG or JPEG file"));
 }
@@ -348,7 +365,11 @@ RgbImage::RgbImage(int w, int h, std::array<std::uint8_t, 3> fill) : width(w), h
 }
 
 absl::StatusOr<Image8> ReadImage8(const std::string& path) {
-  absl::StatusOr<Decoded> decoded = Decode(path);
+  return ReadImage8(path, InputBudget::Unlimited());
+}
+
+absl::StatusOr<Image8> ReadImage8(const std::string& path, const InputBudget& budget) {
+  absl::StatusOr<Decoded> decoded = Decode(path, budget);
   if (!decoded.ok()) return decoded.status();
   const Decoded& d = *decoded;
   // To 8 bits: 16-bit values scale by 255/65535 = 1/257.
@@ -363,7 +384,7 @@ absl::StatusOr<Image8> ReadImage8(const std::string& path) {
 }
 
 absl::StatusOr<Image16> ReadImage16(const std::string& path) {
-  absl::StatusOr<Decoded> decoded = Decode(path);
+  absl::StatusOr<Decoded> decoded = Decode(path, InputBudget::Unlimited());
   if (!decoded.ok()) return decoded.status();
   const Decoded& d = *decoded;
   // To 16 bits: 8-bit values scale by 65535/255 = 257.

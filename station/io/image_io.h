@@ -19,6 +19,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "detectors/core/image_view.h"
+#include "station/io/input_budget.h"
 
 namespace linecal {
 
@@ -48,6 +49,12 @@ struct PngWriteOptions {
 // Errors: NotFound (no such file), InvalidArgument (not PNG/JPEG, corrupt, unsupported
 // colour space such as CMYK JPEG, too large).
 absl::StatusOr<Image8> ReadImage8(const std::string& path);
+
+// ReadImage8 under a budget (station/io/input_budget.h): a file of more than
+// budget.max_file_bytes (from stat) or an image of more than budget.max_image_pixels (from its
+// header, before any pixel memory is allocated) is refused with OverBudget's InvalidArgument.
+// Memory: at most about 7 bytes a pixel of the budget (a 16-bit RGB decode plus the result).
+absl::StatusOr<Image8> ReadImage8(const std::string& path, const InputBudget& budget);
 
 // Reads a PNG or JPEG file as 16-bit grey. 16-bit PNG samples are kept; 8-bit samples v
 // become v * 257 (so 255 maps to 65535). Errors as ReadImage8.

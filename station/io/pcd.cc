@@ -73,10 +73,12 @@ std::uint8_t PclType(char type, std::uint64_t size) {
 // not know and then reads the file from a wrong offset (a crash the fuzzer found). Here the
 // entries must come in the order the PCD format prescribes, unknown ones are refused, and the
 // body must be able to hold what the header announces.
-absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
+absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path,
+                                       const InputBudget& budget) {
   std::error_code ec;
   const std::uint64_t file_size = std::filesystem::file_size(path, ec);
   if (ec) return absl::InvalidArgumentError(absl::StrCat(path.string(), ": ", ec.message()));
+  if (absl::Status s = CheckFileBytes(path, budget); !s.ok()) return s;
   std::ifstream in(path, std::ios::binary);
   if (!in) return absl::NotFoundError(absl::StrCat("cannot open ", path.string()));
   std::string text(std::min<std::uint64_t>(file_size, kMaxHeaderBytes), '\0');
@@ -112,7 +114,7 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
     int entry = 0;
     while (entry < static_cast<int>(std::size(kOrder)) && kOrder[entry] != key) ++entry;
     if (entry == static_cast<int>(std::size(kOrder))) {
-      return bad(absl::StrCat("unknown header entry '", key, "'"));
+      return bad(absl::StrCat("unknown header entry ", Snippet({key.data(), key.size()})));
     }
     if (entry <= last_entry) return bad(absl::StrCat("header entry ", key, " out of order"));
     last_entry = entry;
@@ -156,7 +158,7 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
   }
   if (h.data.empty()) return bad("no DATA line in the header");
   if (h.data != "ascii" && h.data != "binary" && h.data != "binary_compressed") {
-    return bad(absl::StrCat("DATA ", h.data));
+    return bad(absl::StrCat("DATA ", Snippet(h.data)));
   }
   if (names.empty() || sizes.size() != names.size() || types.size() != names.size()) {
     return bad("FIELDS, SIZE and TYPE differ in length");
@@ -173,7 +175,9 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
     f.count = counts[i];
     f.datatype = types[i].size() == 1 ? PclType(types[i][0], f.size) : 0;
     if ((f.size != 1 && f.size != 2 && f.size != 4 && f.size != 8) || f.datatype == 0) {
-      return bad(absl::StrCat("SIZE ", f.size, " TYPE ", types[i], " of field ", f.name));
+      const std::string_view type(types[i].data(), types[i].size());
+      return bad(
+          absl::StrCat("SIZE ", f.size, " TYPE ", Snippet(type), " of field ", Snippet(f.name)));
     }
     if (f.count == 0 || f.count > kMaxValuesPerPoint) return bad("COUNT");
     h.values_per_point += f.count;
@@ -185,8 +189,19 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path) {
   if (width > kMaxDataBytes || height > kMaxDataBytes || h.points != width * height) {
     return bad(absl::StrCat("POINTS ", h.points, " is not WIDTH ", width, " x HEIGHT ", height));
   }
+  // The budget before the body is looked at: the header's claims decide what is allocated.
+  if (h.points > static_cast<std::uint64_t>(budget.max_scan_points)) {
+    return OverBudget(path.string(), static_cast<std::int64_t>(std::min<std::uint64_t>(
+                                         h.points, std::numeric_limits<std::int64_t>::max())),
+                      "points", budget.max_scan_points, "max_scan_points");
+  }
   const std::uint64_t body = file_size - std::min<std::uint64_t>(file_size, pos);
   const std::uint64_t data_bytes = h.points * point_bytes;
+  if (data_bytes > static_cast<std::uint64_t>(budget.max_file_bytes)) {
+    return OverBudget(absl::StrCat(path.string(), ": decoded point data"),
+                      static_cast<std::int64_t>(data_bytes), "bytes", budget.max_file_bytes,
+                      "max_file_bytes");
+  }
   std::uint64_t limit = 0;
   if (h.data == "binary") {
     limit = body;
@@ -395,7 +410,8 @@ absl::StatusOr<PcdCloud> ReadAscii(const std::filesystem::path& path, const PcdH
       const std::optional<Number> n = ParseNumber(tok[s.at], s.datatype);
       if (!n) {
         bad_value = absl::InvalidArgumentError(
-            absl::StrCat(path.string(), ": point ", point, ": '", tok[s.at], "' is not a number"));
+            absl::StrCat(path.string(), ": point ", point, ": ",
+                         Snippet({tok[s.at].data(), tok[s.at].size()}), " is not a number"));
         return Number{};
       }
       return *n;
@@ -491,11 +507,15 @@ absl::StatusOr<PcdCloud> ReadBinary(const std::filesystem::path& path, const Pcd
 }  // namespace
 
 absl::StatusOr<PcdCloud> ReadPcd(const std::filesystem::path& path) {
+  return ReadPcd(path, InputBudget::Unlimited());
+}
+
+absl::StatusOr<PcdCloud> ReadPcd(const std::filesystem::path& path, const InputBudget& budget) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) {
     return absl::NotFoundError(absl::StrCat("cannot read ", path.string()));
   }
-  const absl::StatusOr<PcdHeader> header = ParseHeader(path);
+  const absl::StatusOr<PcdHeader> header = ParseHeader(path, budget);
   if (!header.ok()) return header.status();
   return header->data == "ascii" ? ReadAscii(path, *header) : ReadBinary(path, *header);
 }

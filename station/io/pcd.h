@@ -25,6 +25,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "station/io/input_budget.h"
 #include "station/sensors/lidar_point.h"
 
 namespace linecal {
@@ -44,6 +45,13 @@ struct PcdCloud {
 // unknown type. Never crashes on any file content. Cost: one read of the file; memory about
 // twice its decoded size.
 absl::StatusOr<PcdCloud> ReadPcd(const std::filesystem::path& path);
+
+// ReadPcd under a budget (station/io/input_budget.h), checked from the header before anything
+// is allocated: the file's bytes (stat), POINTS against budget.max_scan_points, and POINTS x
+// point size against budget.max_file_bytes; OverBudget's InvalidArgument names the file. A
+// body shorter than the header claims is refused as always ("... do not fit the file's N
+// bytes of data"). Memory: at most about twice budget.max_file_bytes plus 32 bytes a point.
+absl::StatusOr<PcdCloud> ReadPcd(const std::filesystem::path& path, const InputBudget& budget);
 
 // Writes points as a PCD file with the fields above (an unorganized cloud: HEIGHT 1),
 // replacing the file. Internal naming the path on failure. Cost: O(points); PCL's writer

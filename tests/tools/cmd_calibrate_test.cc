@@ -15,6 +15,7 @@
 
 #include "station/camera/camera_model.h"
 #include "station/capture/capture.h"
+#include "tests/support/crafted_files.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -249,6 +250,77 @@ TEST_F(CalibrateCliTest, UnreadableFrameIsThatSensorsError) {
       EXPECT_EQ(s["verdict"], "pass") << s["name"];
     }
   }
+}
+
+// Issue 21, item 4: capture check and calibrate read frames through the same readers under
+// the same budget, so a 74-byte PNG claiming 16384 x 16384 is refused by both, with the same
+// message, and neither decodes it.
+TEST_F(CalibrateCliTest, FrameOverTheBudgetIsRefusedByCheckAndCalibrateAlike) {
+  const fs::path copy =
+      fs::path(testing::TempDir()) / ("calibrate_cli_huge_" + std::to_string(::getpid()));
+  fs::remove_all(copy);
+  fs::copy(dir_, copy, fs::copy_options::recursive);
+  const fs::path frame = copy / "front_camera" / "frame-000000.png";
+  ASSERT_TRUE(fs::exists(frame));
+  std::ofstream(frame, std::ios::binary | std::ios::trunc) << testing_support::HugeClaimPng();
+  const std::string refusal = frame.string() +
+                              ": 268435456 pixels exceed the budget of 50000000 "
+                              "(input_budget.max_image_pixels)";
+  const LinecalRun check = RunLinecal("capture check " + copy.string());
+  EXPECT_EQ(check.exit_code, 2) << check.err;
+  EXPECT_EQ(check.err, "linecal capture check: " + (copy / "manifest.json").string() +
+                           ": sensors[0].frames[0]: " + refusal + "\n");
+  const LinecalRun run = RunLinecal("calibrate --json --capture " + copy.string());
+  EXPECT_EQ(run.exit_code, 1) << run.err;
+  const nlohmann::json r = nlohmann::json::parse(run.out);
+  for (const nlohmann::json& s : r["sensors"]) {
+    if (s["name"] != "front_camera") continue;
+    EXPECT_EQ(s["reason"], "data_unreadable");
+    EXPECT_EQ(s["message"], refusal);
+  }
+  fs::remove_all(copy);
+}
+
+// The budget from the command line: both commands take the same --max-* options.
+TEST_F(CalibrateCliTest, BudgetFlagsApplyToCheckAndCalibrate) {
+  const fs::path frame = dir_ / "front_camera" / "frame-000000.png";
+  const cv::Mat image = cv::imread(frame.string(), cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(image.empty());
+  const std::string refusal = frame.string() + ": " + std::to_string(image.total()) +
+                              " pixels exceed the budget of 100 (input_budget.max_image_pixels)";
+  const LinecalRun check = RunLinecal("capture check --max-image-pixels 100 " + dir_.string());
+  EXPECT_EQ(check.exit_code, 2) << check.err;
+  EXPECT_NE(check.err.find(refusal), std::string::npos) << check.err;
+  const LinecalRun run =
+      RunLinecal("calibrate --json --max-image-pixels 100 --capture " + dir_.string());
+  EXPECT_EQ(run.exit_code, 1) << run.err;
+  const nlohmann::json r = nlohmann::json::parse(run.out);
+  for (const nlohmann::json& s : r["sensors"]) {
+    if (s["name"] == "front_camera") {
+      EXPECT_EQ(s["message"], refusal);
+    }
+  }
+  const LinecalRun bad = RunLinecal("calibrate --max-can-lines 0 --capture " + dir_.string());
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(bad.err, "linecal calibrate: --max-can-lines '0': must be an integer >= 1\n");
+}
+
+// A garbage CAN log passed capture check before (it only looked at frames); now the log is
+// parsed as calibrate parses it, and the message names file and line without quoting it.
+TEST_F(CalibrateCliTest, CaptureCheckParsesTheCanLog) {
+  const fs::path copy =
+      fs::path(testing::TempDir()) / ("calibrate_cli_can_" + std::to_string(::getpid()));
+  fs::remove_all(copy);
+  fs::copy(dir_, copy, fs::copy_options::recursive);
+  const fs::path log = copy / "front_radar" / "can.log";
+  ASSERT_TRUE(fs::exists(log));
+  std::ofstream(log, std::ios::binary | std::ios::trunc) << "AWS_SECRET_KEY=abcdefghijklmnop\n";
+  const LinecalRun check = RunLinecal("capture check " + copy.string());
+  EXPECT_EQ(check.exit_code, 2) << check.err;
+  EXPECT_EQ(check.err, "linecal capture check: " + (copy / "manifest.json").string() +
+                           ": sensors[1].can_log: " + log.string() +
+                           ":1: expected '(seconds.micros) interface ID#DATA', got 1 field(s)\n");
+  fs::remove_all(copy);
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include "tools/cli/command_line.h"
 #include "tools/linecal/calibration_report.h"
 #include "tools/linecal/commands.h"
+#include "tools/linecal/input_budget_flags.h"
 
 namespace linecal::tools {
 namespace {
@@ -67,11 +68,23 @@ void PrintTable(const Capture& capture, const CycleCalibration& cycle) {
   }
 }
 
+// The options: the capture, the output, and the input budget `capture check` takes too.
+std::vector<cli::OptionSpec> CalibrateOptions() {
+  std::vector<cli::OptionSpec> options = {
+      {"capture", "DIR", "capture directory (docs/capture-format.md)", true},
+      {"json", "", "print one JSON object"},
+      {"report", "DIR",
+       "write DIR/<camera>.png per camera: its first frame with the detected features, the "
+       "reprojected boards, the horizon, a ground grid and a legend (created if missing)"}};
+  for (cli::OptionSpec& o : InputBudgetOptions()) options.push_back(std::move(o));
+  return options;
+}
+
 }  // namespace
 
 int RunCalibrate(const Args& args) {
   cli::CommandLine cl(
-      "linecal calibrate --capture DIR [--json] [--report DIR]",
+      "linecal calibrate --capture DIR [--json] [--report DIR] [--max-image-pixels N ...]",
       "Computes a calibration cycle from a capture, as the daemon would: detects every camera's "
       "boards in its frames and solves its mounting in the car frame, calibrates the radars from "
       "their corner reflectors, and judges each sensor against the car model's tolerances. "
@@ -79,12 +92,10 @@ int RunCalibrate(const Args& args) {
       "radars), or with --json the results document of docs/interfaces.md. Exit 0 when every "
       "sensor "
       "passes, 1 when any fails or could not be calibrated, 2 on bad usage or input.",
-      {{"capture", "DIR", "capture directory (docs/capture-format.md)", true},
-       {"json", "", "print one JSON object"},
-       {"report", "DIR",
-        "write DIR/<camera>.png per camera: its first frame with the detected features, the "
-        "reprojected boards, the horizon, a ground grid and a legend (created if missing)"}});
+      CalibrateOptions());
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
+  const absl::StatusOr<InputBudget> budget = InputBudgetFromFlags(cl);
+  if (!budget.ok()) return cli::BadInput(kCommand, std::string(budget.status().message()));
   std::string report_dir;
   if (cl.Has("report")) {
     report_dir = cl.Get("report");
@@ -95,7 +106,7 @@ int RunCalibrate(const Args& args) {
                                                   ec ? ec.message() : "a file is in the way", ")"));
     }
   }
-  const absl::StatusOr<Capture> capture = ReadCapture(cl.Get("capture"));
+  const absl::StatusOr<Capture> capture = ReadCapture(cl.Get("capture"), *budget);
   if (!capture.ok()) return cli::BadInput(kCommand, std::string(capture.status().message()));
   std::fprintf(stderr, "calibrate: %zu sensors of %s\n", capture->manifest.sensors.size(), capture->dir.c_str());
   CaptureCalibrationOptions options;

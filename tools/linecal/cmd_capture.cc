@@ -6,47 +6,33 @@
 
 #include "absl/strings/str_cat.h"
 #include "station/capture/capture.h"
-#include "station/io/image_io.h"
 #include "tools/cli/command_line.h"
+#include "tools/linecal/input_budget_flags.h"
 #include "tools/linecal/commands.h"
 
 namespace linecal::tools {
-namespace {
-
-// Decodes every camera frame: a frame must be a readable image of the size the car model's
-// intrinsics give. Errors name the frame's manifest path.
-absl::Status CheckCameraFrames(const Capture& c) {
-  for (size_t i = 0; i < c.manifest.sensors.size(); ++i) {
-    const CaptureSensor& s = c.manifest.sensors[i];
-    if (s.kind != SensorKind::kCamera) continue;
-    const CameraIntrinsics& in = *c.car.FindSensor(s.name)->intrinsics;
-    for (size_t k = 0; k < s.frames.size(); ++k) {
-      absl::StatusOr<Image8> img = ReadImage8(c.PathOf(s.frames[k]));
-      const std::string where = absl::StrCat(c.dir, "/", kCaptureManifestFile, ": sensors[", i, "].frames[", k, "]");
-      if (!img.ok()) return absl::InvalidArgumentError(absl::StrCat(where, ": ", img.status().message()));
-      if (img->width != in.width || img->height != in.height) {
-        return absl::InvalidArgumentError(absl::StrCat(where, ": image is ", img->width, "x", img->height,
-                                                       ", the car model says ", in.width, "x", in.height));
-      }
-    }
-  }
-  return absl::OkStatus();
-}
-
-}  // namespace
 
 int RunCaptureCheck(const Args& args) {
-  cli::CommandLine cl("linecal capture check DIR [--json]",
-                      "Validates a capture directory: manifest, station and car files, every sensor's "
-                      "data files (camera frames are decoded). Exit 0 when valid, 2 with the offending "
-                      "path and field otherwise.",
-                      {{"DIR", "", "the capture directory", /*required=*/true, /*repeated=*/false,
-                        /*positional=*/true},
-                       {"json", "", "print the summary as JSON"}});
+  std::vector<cli::OptionSpec> options = {
+      {"DIR", "", "the capture directory", /*required=*/true, /*repeated=*/false,
+       /*positional=*/true},
+      {"json", "", "print the summary as JSON"}};
+  for (cli::OptionSpec& o : InputBudgetOptions()) options.push_back(std::move(o));
+  cli::CommandLine cl("linecal capture check DIR [--json] [--max-image-pixels N ...]",
+                      "Validates a capture directory: manifest, station and car files, every "
+                      "sensor's data files (read as calibrate reads them: frames decoded, scans "
+                      "and CAN logs parsed, within the input budget). Exit 0 when valid, 2 with "
+                      "the offending path and field otherwise.",
+                      std::move(options));
   if (auto code = cli::ParseOrExit(cl, "capture check", args)) return *code;
-  absl::StatusOr<Capture> c = ReadCapture(cl.Get("DIR"));
+  const absl::StatusOr<InputBudget> budget = InputBudgetFromFlags(cl);
+  if (!budget.ok()) return cli::BadInput("capture check", std::string(budget.status().message()));
+  absl::StatusOr<Capture> c = ReadCapture(cl.Get("DIR"), *budget);
   if (!c.ok()) return cli::BadInput("capture check", std::string(c.status().message()));
-  if (absl::Status s = CheckCameraFrames(*c); !s.ok()) return cli::BadInput("capture check", std::string(s.message()));
+  // The data through the readers calibration uses, under the same budget (CheckCaptureData).
+  if (absl::Status s = CheckCaptureData(*c); !s.ok()) {
+    return cli::BadInput("capture check", std::string(s.message()));
+  }
 
   const CaptureManifest& m = c->manifest;
   if (cl.Has("json")) {

@@ -70,6 +70,57 @@ TEST_F(DaemonConfigTest, ErrorsNameTheKey) {
   }
 }
 
+// The input budget (issue 21, item 4): defaults when absent, every key read, bad values and
+// unknown keys refused naming the key.
+TEST_F(DaemonConfigTest, InputBudgetReadsBackAndDefaults) {
+  const std::string base = R"("station": "s.json", "car_models": ["c.json"], "data_root": "d")";
+  absl::StatusOr<DaemonConfig> defaults = Read("{" + base + "}");
+  ASSERT_TRUE(defaults.ok()) << defaults.status();
+  EXPECT_EQ(defaults->input_budget.max_image_pixels, 50'000'000);
+  EXPECT_EQ(defaults->input_budget.max_manifest_frames, 1000);
+  absl::StatusOr<DaemonConfig> c = Read("{" + base + R"(, "input_budget": {"max_file_bytes": 1000,
+      "max_image_pixels": 2000, "max_scan_points": 3000, "max_can_lines": 4000,
+      "max_manifest_frames": 5}})");
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->input_budget.max_file_bytes, 1000);
+  EXPECT_EQ(c->input_budget.max_image_pixels, 2000);
+  EXPECT_EQ(c->input_budget.max_scan_points, 3000);
+  EXPECT_EQ(c->input_budget.max_can_lines, 4000);
+  EXPECT_EQ(c->input_budget.max_manifest_frames, 5);
+  absl::Status zero = Read("{" + base + R"(, "input_budget": {"max_can_lines": 0}})").status();
+  EXPECT_NE(zero.message().find("input_budget.max_can_lines: must be >= 1, got 0"),
+            std::string::npos)
+      << zero;
+  absl::Status unknown = Read("{" + base + R"(, "input_budget": {"max_pixels": 9}})").status();
+  EXPECT_NE(unknown.message().find("max_pixels"), std::string::npos) << unknown;
+}
+
+// A replay capture folder that is a symbolic link out of data_root is refused (issue 21,
+// item 5); one that is a link to another folder inside data_root is followed.
+TEST_F(DaemonConfigTest, ReplayCaptureLinkedOutsideDataRootIsRefused) {
+  fs::create_directories(dir_ / "data/captures/real");
+  fs::create_directories(dir_ / "elsewhere/cap");
+  fs::create_directory_symlink(dir_ / "elsewhere/cap", dir_ / "data/captures/evil");
+  fs::create_directory_symlink(dir_ / "data/captures/real", dir_ / "data/captures/alias");
+  // A sibling whose name starts with data_root's: outside, though a string prefix says inside.
+  fs::create_directories(dir_ / "data2/cap");
+  fs::create_directory_symlink(dir_ / "data2/cap", dir_ / "data/captures/prefix");
+  const std::string base = R"("station": "s.json", "car_models": ["c.json"], "data_root": "data")";
+  for (const char* link : {"captures/evil", "captures/prefix"}) {
+    const absl::Status s =
+        Read("{" + base + R"(, "source": {"type": "replay", "capture": ")" + link + R"("}})")
+            .status();
+    EXPECT_NE(s.message().find(std::string("source.capture: '") + link +
+                               "': resolves outside data_root"),
+              std::string::npos)
+        << s;
+  }
+  absl::StatusOr<DaemonConfig> inside =
+      Read("{" + base + R"(, "source": {"type": "replay", "capture": "captures/alias"}})");
+  ASSERT_TRUE(inside.ok()) << inside.status();
+  EXPECT_EQ(inside->core.replay_capture, "captures/alias");
+}
+
 // The tls object: paths relative to the file, the files read (their PEM is checked by the
 // service, tests/daemon/service), and every missing piece refused naming key and file.
 TEST_F(DaemonConfigTest, TlsFilesReadNamingKeyAndFile) {

@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include "station/io/image_io.h"
 #include "station/model/vin.h"
 
 namespace linecal {
@@ -59,6 +60,13 @@ class CaptureTest : public ::testing::Test {
     nlohmann::json j = nlohmann::json::parse(in);
     edit(j);
     std::ofstream(dir_ / kCaptureManifestFile) << j.dump(2);
+  }
+
+  // A real, black camera frame of the size the car model gives, for the data checks.
+  void WriteRealFrame() {
+    const CameraIntrinsics& in = *car_.FindSensor("front_camera")->intrinsics;
+    const Image8 image(in.width, in.height);
+    ASSERT_TRUE(WritePng8((dir_ / "front_camera/frame-000000.png").string(), image.view()).ok());
   }
 
   void ExpectError(const std::string& expected) {
@@ -157,6 +165,153 @@ TEST_F(CaptureTest, UnknownBoardInStationIsNamed) {
 TEST_F(CaptureTest, CarModelMismatchIsNamed) {
   WriteWith([](nlohmann::json& j) { j["car_model"] = "sedan"; });
   ExpectError("car_model: 'sedan' but car.json is car model 'reference'");
+}
+
+// ---- Symbolic links (issue 21, item 5): a capture cannot point outside itself. ----------
+// Each case links a file or folder of the capture to a real file outside it holding a
+// "secret", and expects ReadCapture to name the entry and never the secret.
+
+constexpr char kSecret[] = "s3cr3t-token-of-another-service";
+
+class CaptureSymlinkTest : public CaptureTest {
+ protected:
+  void SetUp() override {
+    CaptureTest::SetUp();
+    outside_ = dir_.parent_path() / (dir_.filename().string() + "_outside");
+    fs::remove_all(outside_);
+    fs::create_directories(outside_);
+    WriteBytes(outside_ / "secret.txt", kSecret);
+  }
+  void TearDown() override { fs::remove_all(outside_); }
+
+  void ExpectRefusedWithoutSecret(const std::string& expected) {
+    absl::StatusOr<Capture> c = ReadCapture(dir_.string());
+    ASSERT_FALSE(c.ok()) << "a capture with a link outside itself was accepted";
+    const std::string message(c.status().message());
+    EXPECT_NE(message.find(expected), std::string::npos) << message;
+    EXPECT_EQ(message.find("s3cr3t"), std::string::npos) << message;
+  }
+
+  fs::path outside_;
+};
+
+TEST_F(CaptureSymlinkTest, FrameLinkedOutsideIsRefused) {
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  fs::remove(dir_ / "front_camera/frame-000000.png");
+  fs::create_symlink(outside_ / "secret.txt", dir_ / "front_camera/frame-000000.png");
+  ExpectRefusedWithoutSecret(
+      "sensors[0].frames[0].path: 'front_camera/frame-000000.png': resolves outside the capture");
+}
+
+TEST_F(CaptureSymlinkTest, FolderLinkedOutsideIsRefused) {
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  fs::rename(dir_ / "front_camera", outside_ / "front_camera");
+  fs::create_directory_symlink(outside_ / "front_camera", dir_ / "front_camera");
+  ExpectRefusedWithoutSecret(
+      "sensors[0].frames[0].path: 'front_camera/frame-000000.png': resolves outside the capture");
+}
+
+TEST_F(CaptureSymlinkTest, ManifestLinkedOutsideIsRefused) {
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  fs::rename(dir_ / kCaptureManifestFile, outside_ / kCaptureManifestFile);
+  fs::create_symlink(outside_ / kCaptureManifestFile, dir_ / kCaptureManifestFile);
+  ExpectRefusedWithoutSecret((dir_ / "manifest.json").string() + ": resolves outside the capture");
+}
+
+TEST_F(CaptureSymlinkTest, CanLogLinkedToASecretIsRefused) {
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  fs::remove(dir_ / "front_radar/can.log");
+  fs::create_symlink(outside_ / "secret.txt", dir_ / "front_radar/can.log");
+  ExpectRefusedWithoutSecret(
+      "sensors[2].can_log.path: 'front_radar/can.log': resolves outside the capture");
+}
+
+// Components are compared, not strings: /tmp/cap_outside is not inside /tmp/cap even though
+// its name starts with it.
+TEST_F(CaptureSymlinkTest, SiblingWithTheSamePrefixIsOutside) {
+  ASSERT_TRUE(dir_.string().size() < outside_.string().size() &&
+              outside_.string().rfind(dir_.string(), 0) == 0);
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  fs::remove(dir_ / "roof_lidar/packets.pcap");
+  fs::create_symlink(outside_ / "secret.txt", dir_ / "roof_lidar/packets.pcap");
+  ExpectRefusedWithoutSecret("'roof_lidar/packets.pcap': resolves outside the capture");
+}
+
+TEST_F(CaptureSymlinkTest, LinksInsideTheCaptureAreFollowed) {
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  fs::rename(dir_ / "front_camera", dir_ / "camera_data");
+  fs::create_directory_symlink("camera_data", dir_ / "front_camera");
+  absl::StatusOr<Capture> c = ReadCapture(dir_.string());
+  EXPECT_TRUE(c.ok()) << c.status();
+}
+
+// ---- The input budget (issue 21, item 4) -------------------------------------------------
+
+TEST_F(CaptureTest, ManifestWithTooManyFramesIsRefusedBeforeItsFiles) {
+  // 2000 entries of files that do not exist: the count is refused before any is looked at.
+  WriteWith([](nlohmann::json& j) {
+    nlohmann::json frames = nlohmann::json::array();
+    for (int k = 0; k < 2000; ++k) {
+      frames.push_back({{"path", "front_camera/f" + std::to_string(k) + ".png"},
+                        {"t_ns", 1763776000000000000}});
+    }
+    j["sensors"][0]["frames"] = frames;
+  });
+  ExpectError("sensors[0].frames: 2000 frames exceed the budget of 1000 "
+              "(input_budget.max_manifest_frames)");
+}
+
+TEST_F(CaptureTest, FileOverTheByteBudgetIsRefusedByReadCapture) {
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  InputBudget budget;
+  budget.max_file_bytes = 10;
+  WriteBytes(dir_ / "roof_lidar/packets.pcap", std::string(11, 'p'));
+  absl::StatusOr<Capture> c = ReadCapture(dir_.string(), budget);
+  ASSERT_FALSE(c.ok());
+  EXPECT_NE(std::string(c.status().message())
+                .find("sensors[1].packets.path: 'roof_lidar/packets.pcap': 11 bytes exceed the "
+                      "budget of 10 (input_budget.max_file_bytes)"),
+            std::string::npos)
+      << c.status();
+}
+
+TEST_F(CaptureTest, CheckCaptureDataRefusesAGarbageCanLog) {
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  WriteRealFrame();
+  WriteBytes(dir_ / "front_radar/can.log",
+             "(1600000000.000000) can0 701#00\npassword=hunter2 root\n");
+  absl::StatusOr<Capture> c = ReadCapture(dir_.string());
+  ASSERT_TRUE(c.ok()) << c.status();
+  // ReadCapture looks at names and sizes only; the data check parses the log as calibration.
+  const absl::Status s = CheckCaptureData(*c);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(std::string(s.message()).find("sensors[2].can_log: " + (dir_ / "front_radar/can.log")
+                                              .string() + ":2: expected '(seconds.micros) "
+                                              "interface ID#DATA', got 2 field(s)"),
+            std::string::npos)
+      << s;
+  EXPECT_EQ(std::string(s.message()).find("hunter2"), std::string::npos) << s;
+}
+
+TEST_F(CaptureTest, CheckCaptureDataRefusesATruncatedPcd) {
+  m_.sensors[1].frames = {{"roof_lidar/scan-000000.pcd", 1763776000000000000}};
+  ASSERT_TRUE(WriteCapture(dir_.string(), m_, station_, car_).ok());
+  WriteRealFrame();
+  // A header announcing 1000 points of 12 bytes, and 100 bytes of data.
+  WriteBytes(dir_ / "roof_lidar/scan-000000.pcd",
+             "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\n"
+             "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1000\nDATA binary\n" +
+                 std::string(100, '\0'));
+  absl::StatusOr<Capture> c = ReadCapture(dir_.string());
+  ASSERT_TRUE(c.ok()) << c.status();
+  const absl::Status s = CheckCaptureData(*c);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(std::string(s.message()).find("sensors[1].frames[0]: " +
+                                          (dir_ / "roof_lidar/scan-000000.pcd").string() +
+                                          ": not a readable PCD file (1000 points of 12 bytes do "
+                                          "not fit the file's 100 bytes of data)"),
+            std::string::npos)
+      << s;
 }
 
 TEST(VinTest, ValidatesCharactersLengthAndCheckDigit) {

@@ -198,7 +198,7 @@ TEST(Pcd, RejectsBrokenFilesWithoutTrustingTheirHeader) {
       {"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 2\nWIDTH 1\nHEIGHT 1\n"
        "POINTS 1\nDATA ascii\n1 2 3 4\n",
        "field z is not one number per point"},
-      {head + "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA jpeg\n", "DATA jpeg"},
+      {head + "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA jpeg\n", "DATA 'jpeg'"},
   };
   for (const Case& c : cases) {
     WriteText(path, c.text);
