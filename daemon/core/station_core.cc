@@ -125,6 +125,24 @@ absl::StatusOr<std::map<std::string, std::unique_ptr<SensorSource>>> BuildLiveSo
   return sources;
 }
 
+// After a kill the captures of the cycles that were acquiring are partial, and nothing
+// else removes them (RunCycle removes a capture at the cycle's end): each is removed unless
+// its request asked to record it (then it stays, its cycle stored aborted). Only a cycle's
+// own captures/<VIN>-<start ns> is touched, never a replayed capture.
+void RemoveAbortedCaptures(const std::string& data_root,
+                           const std::vector<StoredCycle>& aborted) {
+  for (const StoredCycle& c : aborted) {
+    if (c.capture_path != absl::StrCat("captures/", c.vin, "-", c.started_ns)) continue;
+    const nlohmann::json request =
+        nlohmann::json::parse(c.request_json, nullptr, /*allow_exceptions=*/false);
+    const nlohmann::json record =
+        request.is_object() ? request.value("record_capture", nlohmann::json()) : nullptr;
+    if (record.is_boolean() && record.get<bool>()) continue;
+    std::error_code ec;
+    fs::remove_all(fs::path(data_root) / c.capture_path, ec);
+  }
+}
+
 Verdict OverallVerdict(const std::vector<SensorCalibration>& sensors) {
   bool any_error = sensors.empty(), all_pass = !sensors.empty();
   for (const SensorCalibration& s : sensors) {
@@ -157,7 +175,8 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     const fs::path rel(config.replay_capture);
     if (rel.empty() || rel.is_absolute() || rel.lexically_normal().string().rfind("..", 0) == 0) {
       return absl::InvalidArgumentError(
-          absl::StrCat("replay_capture: '", config.replay_capture, "' must be a path inside data_root"));
+          absl::StrCat("source.capture: '", config.replay_capture,
+                       "' must be a path inside data_root"));
     }
     absl::StatusOr<Capture> capture = ReadCapture((fs::path(config.data_root) / rel).string());
     if (!capture.ok()) return capture.status();
@@ -178,6 +197,7 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   store_options.busy_timeout = config.busy_timeout;
   absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(config.db_path, store_options);
   if (!store.ok()) return store.status();
+  RemoveAbortedCaptures(config.data_root, (*store)->aborted_cycles_at_open());
   return std::unique_ptr<StationCore>(
       new StationCore(config, std::move(*station), std::move(cars), std::move(*store), std::move(sources)));
 }
@@ -280,8 +300,9 @@ absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector
   if (std::none_of(cars.begin(), cars.end(), has_id)) {
     std::vector<std::string> known;
     for (const CarModel& c : cars) known.push_back(c.id);
-    return absl::InvalidArgumentError(absl::StrCat("car_model_id: unknown car model '", request.car_model_id,
-                                                   "'; known: ", absl::StrJoin(known, ", ")));
+    return absl::InvalidArgumentError(absl::StrCat("car_model_id: unknown car model ",
+                                                   QuoteInput(request.car_model_id),
+                                                   "; known: ", absl::StrJoin(known, ", ")));
   }
   const AlignerMeasurement& a = request.aligner;
   const std::pair<const char*, double> offsets[] = {{"aligner.longitudinal_offset_m", a.longitudinal_offset_m},

@@ -110,7 +110,9 @@ struct StationStatusInfo {
 class StationCore {
  public:
   // Loads the station and car models, opens the store (cycles left running by a previous
-  // process become aborted). Errors name the file and field.
+  // process become aborted, and their partial captures/<VIN>-<start ns> are removed unless
+  // the request asked to record them). Errors name the file and field; FailedPrecondition
+  // when another process (or StationCore) holds the database (Store::Open).
   static absl::StatusOr<std::unique_ptr<StationCore>> Create(const StationCoreConfig& config);
   // Cancels a running cycle and waits for its thread.
   ~StationCore();

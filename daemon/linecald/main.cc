@@ -1,13 +1,23 @@
 // linecald: the station daemon (docs/interfaces.md). `linecald --config FILE` with --listen,
 // --db and --log-level overriding the file; without --config it starts on the bundled demo
 // station (simulated sensors) with its data under --data-dir (default ./linecald-data).
-// SIGTERM or SIGINT: stop taking calls, let a running cycle end as cancelled, exit 0.
+// SIGTERM, SIGINT or SIGHUP: stop taking calls, let a running cycle end as cancelled, exit 0
+// (SIGHUP too: a closed terminal or a `kill -HUP` meant as "reload" must not leave the cycle
+// running, and there is nothing to reload that a restart would not do).
+// Descriptors: the soft RLIMIT_NOFILE is raised to the hard limit at start; gRPC 1.51's
+// listener stops for good after an accept error (EMFILE), so linecald listens again on the
+// same port once descriptors free up (docs/daemon.md, "Descriptors").
 // Under systemd (Type=notify): READY=1 once calls are served, WATCHDOG=1 while the core
 // answers, STOPPING=1 on the signal (daemon/systemd/sd_notify.h).
+#include <grpc/support/log.h>
 #include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
+#include <array>
+#include <cerrno>
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
@@ -17,6 +27,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "daemon/core/daemon_config.h"
 #include "daemon/service/station_service.h"
 #include "daemon/systemd/sd_notify.h"
@@ -32,6 +43,97 @@ constexpr char kUsage[] =
 // One log line to stderr: "level=info msg=... key=value ...", for journald and people.
 void Log(const char* level, const std::string& message) {
   std::fprintf(stderr, "level=%s msg=\"%s\"\n", level, message.c_str());
+}
+
+// The values of --log-level and the file's log_level (daemon_config.h).
+constexpr std::array<const char*, 4> kLogLevels = {"debug", "info", "warning", "error"};
+
+bool IsLogLevel(const std::string& level) {
+  for (const char* l : kLogLevels) {
+    if (level == l) return true;
+  }
+  return false;
+}
+
+// Raises the soft RLIMIT_NOFILE to the hard limit and says what it did. Each gRPC connection
+// holds a descriptor; the default soft limit of 1024 let 1,100 idle clients exhaust it.
+std::string RaiseDescriptorLimit() {
+  rlimit limit{};
+  if (getrlimit(RLIMIT_NOFILE, &limit) != 0) {
+    return absl::StrCat("descriptors: getrlimit: ", std::strerror(errno));
+  }
+  const rlim_t before = limit.rlim_cur;
+  if (before == limit.rlim_max) {
+    return absl::StrCat("descriptors: limit ", before, " (soft = hard)");
+  }
+  limit.rlim_cur = limit.rlim_max;
+  if (setrlimit(RLIMIT_NOFILE, &limit) != 0) {
+    return absl::StrCat("descriptors: cannot raise the soft limit ", before, ": ",
+                        std::strerror(errno));
+  }
+  return absl::StrCat("descriptors: soft limit raised from ", before, " to the hard limit ",
+                      limit.rlim_max);
+}
+
+// Sent to this process when gRPC's listener stopped on an accept error; taken by sigwait.
+constexpr int kListenerFailedSignal = SIGUSR1;
+
+// gRPC's own log lines, in ours. gRPC 1.51 logs "Failed accept4: <error>" when accept fails
+// with anything but EAGAIN/ECONNABORTED/EINTR (EMFILE: descriptors exhausted) and then
+// never accepts on that port again (src/core/lib/iomgr/tcp_server_posix.cc; gRPC issues
+// #20418, #31080, retried upstream only since 2023): that line is the only sign of it, so
+// it makes main listen again.
+void LogGrpc(gpr_log_func_args* args) {
+  const char* level = args->severity == GPR_LOG_SEVERITY_ERROR ? "error"
+                      : args->severity == GPR_LOG_SEVERITY_INFO ? "info"
+                                                                : "debug";
+  std::fprintf(stderr, "level=%s msg=\"grpc: %s\"\n", level, args->message);
+  // Only the error: while gRPC shuts its listeners down it logs accept failures lower.
+  static constexpr char kAcceptFailed[] = "Failed accept4";
+  if (args->severity == GPR_LOG_SEVERITY_ERROR &&
+      std::strncmp(args->message, kAcceptFailed, sizeof kAcceptFailed - 1) == 0) {
+    kill(getpid(), kListenerFailedSignal);
+  }
+}
+
+// HOST:PORT of `listen` with the port the server got (the same when it was not 0).
+std::string BoundAddress(const std::string& listen, int port) {
+  return absl::StrCat(listen.substr(0, listen.rfind(':')), ":", port);
+}
+
+// After gRPC's listener died: stops the old server (calls in flight get 1 s, then are
+// cancelled: the port stays closed meanwhile, and clients reconnect) and listens again on the
+// same address, every 500 ms until it works (the descriptors it needs may still be taken; a
+// port back within half a second, without spinning). Returns the signal that stopped the
+// retries (0 when listening again).
+int Relisten(linecal::StationCore* core, const linecal::DaemonConfig& config,
+             const std::string& address, const sigset_t& signals, linecal::RunningServer* server) {
+  Log("error",
+      "the listener stopped on an accept error (descriptors exhausted?); listening again on " +
+          address + " once descriptors free up");
+  server->server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+  *server = {};
+  const timespec retry{0, 500'000'000};
+  while (true) {
+    absl::StatusOr<linecal::RunningServer> again =
+        linecal::StartServer(core, address, config.auth_token, LINECAL_VERSION, config.tls);
+    if (again.ok()) {
+      *server = *std::move(again);
+      Log("info", "listening again on " + address);
+      return 0;
+    }
+    const int signal = sigtimedwait(&signals, nullptr, &retry);
+    if (signal > 0 && signal != kListenerFailedSignal) return signal;
+  }
+}
+
+const char* SignalName(int signal) {
+  switch (signal) {
+    case SIGTERM: return "SIGTERM";
+    case SIGINT: return "SIGINT";
+    case SIGHUP: return "SIGHUP";
+  }
+  return "a signal";
 }
 
 // Sends WATCHDOG=1 at half systemd's interval for as long as the core answers a status
@@ -114,12 +216,18 @@ int main(int argc, char** argv) {
   if (!listen.empty()) config->listen = listen;
   if (!db.empty()) config->core.db_path = db;
   if (!log_level.empty()) config->log_level = log_level;
+  if (!IsLogLevel(config->log_level)) {
+    std::fprintf(stderr, "linecald: --log-level: must be debug, info, warning or error, got '%s'\n",
+                 config->log_level.c_str());
+    return 2;
+  }
+  Log("info", RaiseDescriptorLimit());
+  gpr_set_log_function(LogGrpc);
 
   // Signals are taken by a waiting thread, not by handlers: the shutdown runs in normal code.
   sigset_t signals;
   sigemptyset(&signals);
-  sigaddset(&signals, SIGTERM);
-  sigaddset(&signals, SIGINT);
+  for (int s : {SIGTERM, SIGINT, SIGHUP, kListenerFailedSignal}) sigaddset(&signals, s);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   absl::StatusOr<std::unique_ptr<linecal::StationCore>> core = linecal::StationCore::Create(config->core);
@@ -136,24 +244,33 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
+  // LogGrpc must see gRPC's errors to notice a dead listener: GRPC_VERBOSITY=NONE (read by
+  // gRPC's first init, which StartServer did) would hide them, so errors are let through.
+  if (!gpr_should_log(GPR_LOG_SEVERITY_ERROR)) gpr_set_log_verbosity(GPR_LOG_SEVERITY_ERROR);
   const std::string listening = "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
   const char* tls = !config->tls ? ", insecure" : config->tls->require_client_cert ? ", mutual TLS" : ", TLS";
   Log("info", listening + ", database " + config->core.db_path + tls +
                   (config->auth_token.empty() ? ", no token" : ", token authentication"));
   const linecal::SystemdNotifier notifier = linecal::SystemdNotifier::FromEnvironment();
   if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok()) Log("warning", std::string(s.message()));
+  const std::string address = BoundAddress(config->listen, server->port);
   int signal = 0;
   {
     const Watchdog watchdog(notifier, core->get());
-    sigwait(&signals, &signal);
+    while (signal == 0) {
+      sigwait(&signals, &signal);
+      if (signal == kListenerFailedSignal) {
+        signal = Relisten(core->get(), *config, address, signals, &*server);
+      }
+    }
   }
-  Log("info", std::string("stopping on ") + (signal == SIGTERM ? "SIGTERM" : "SIGINT"));
+  Log("info", std::string("stopping on ") + SignalName(signal));
   notifier.Notify("STOPPING=1").IgnoreError();
   if (const std::optional<int64_t> running = (*core)->Status().running_cycle) {
     // Ends as cancelled at its next step; a cycle that ended meanwhile needs nothing.
     (*core)->CancelCycle(*running).IgnoreError();
   }
-  server->server->Shutdown();
+  if (server->server) server->server->Shutdown();
   (*core)->WaitIdle();
   Log("info", "stopped");
   return 0;

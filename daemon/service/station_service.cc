@@ -1,12 +1,13 @@
 #include "daemon/service/station_service.h"
 
-#include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 
+#include <algorithm>
 #include <numbers>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "daemon/service/reflection_service.h"
 #include "daemon/service/tls_credentials.h"
 
 namespace linecal {
@@ -114,7 +115,8 @@ void Fill(const StoredCycle& c, bool with_sensors, v1::Cycle* out) {
 absl::StatusOr<int64_t> ParseCycleId(const std::string& id) {
   int64_t v = 0;
   if (!absl::SimpleAtoi(id, &v) || v <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat("cycle_id: '", id, "' is not a cycle id"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("cycle_id: ", QuoteInput(id), " is not a cycle id"));
   }
   return v;
 }
@@ -137,19 +139,30 @@ absl::StatusOr<CycleRequest> CycleRequestFromProto(const v1::StartCycleRequest& 
   return r;
 }
 
-CycleFilter CycleFilterFromProto(const v1::ListCyclesRequest& request) {
+absl::StatusOr<CycleFilter> CycleFilterFromProto(const v1::ListCyclesRequest& request) {
   CycleFilter f;
   f.vin = request.vin();
   f.since_ns = request.since_ns();
   f.until_ns = request.until_ns();
   switch (request.verdict()) {
+    case v1::VERDICT_UNSPECIFIED: break;
     case v1::VERDICT_PASS: f.verdict = Verdict::kPass; break;
     case v1::VERDICT_FAIL: f.verdict = Verdict::kFail; break;
     case v1::VERDICT_ERROR: f.verdict = Verdict::kError; break;
-    default: break;
+    default:
+      // proto3 keeps unknown enum numbers: ignoring one would list every cycle.
+      return absl::InvalidArgumentError(absl::StrCat(
+          "verdict = ", static_cast<int>(request.verdict()),
+          ": not a verdict (0 any, 1 pass, 2 fail, 3 error)"));
   }
-  // 0 means the default page; the store refuses sizes beyond 1000 naming page_size.
-  f.page_size = request.page_size() == 0 ? 50 : static_cast<int>(std::min<uint32_t>(request.page_size(), 1001));
+  // Checked here on the uint32 the client sent, so that the message names that value; the
+  // store's own check (1..1000) then holds by construction.
+  if (request.page_size() > kMaxPageSize) {
+    return absl::InvalidArgumentError(absl::StrCat("page_size = ", request.page_size(),
+                                                   ": must be in [0, ", kMaxPageSize,
+                                                   "] (0: the default 50)"));
+  }
+  f.page_size = request.page_size() == 0 ? 50 : static_cast<int>(request.page_size());
   f.page_token = request.page_token();
   return f;
 }
@@ -211,7 +224,9 @@ grpc::Status StationService::GetCycle(grpc::ServerContext* context, const v1::Ge
 grpc::Status StationService::ListCycles(grpc::ServerContext* context, const v1::ListCyclesRequest* request,
                                         v1::ListCyclesResponse* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
-  absl::StatusOr<CyclePage> page = core_->ListCycles(CycleFilterFromProto(*request));
+  absl::StatusOr<CycleFilter> filter = CycleFilterFromProto(*request);
+  if (!filter.ok()) return ToGrpc(filter.status());
+  absl::StatusOr<CyclePage> page = core_->ListCycles(*filter);
   if (!page.ok()) return ToGrpc(page.status());
   for (const StoredCycle& c : page->cycles) Fill(c, false, response->add_cycles());
   response->set_next_page_token(page->next_page_token);
@@ -251,8 +266,25 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, cons
   return grpc::Status::OK;
 }
 
+absl::Status CheckListenAddress(const std::string& address) {
+  const size_t colon = address.rfind(':');
+  const std::string port = colon == std::string::npos ? "" : address.substr(colon + 1);
+  int value = 0;
+  // gRPC takes a port beyond 65535 without complaint and listens on another one.
+  const auto is_digit = [](char c) { return c >= '0' && c <= '9'; };
+  // At most 5 digits (65535): a longer string cannot overflow SimpleAtoi into range.
+  const bool digits =
+      !port.empty() && port.size() <= 5 && std::all_of(port.begin(), port.end(), is_digit);
+  if (colon == 0 || !digits || !absl::SimpleAtoi(port, &value) || value > 65535) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "listen: ", QuoteInput(address), ": must be HOST:PORT with a port in 0..65535"));
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,
                                           const std::string& version, const std::optional<TlsConfig>& tls) {
+  if (absl::Status s = CheckListenAddress(address); !s.ok()) return s;
   std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
   if (tls) {
     absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> secure = ServerTlsCredentials(*tls);
@@ -260,15 +292,23 @@ absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& 
     credentials = *std::move(secure);
   }
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   RunningServer running;
   running.service = std::make_unique<StationService>(core, auth_token, version);
+  // Reflection asks the Station service's Authorize; the health service stays without the
+  // token: load balancers and probes have none.
+  running.reflection = std::make_unique<ReflectionService>(
+      [service = running.service.get()](const grpc::ServerContext& context) {
+        return service->Authorize(context);
+      },
+      std::vector<std::string>{v1::Station::service_full_name(), "grpc.health.v1.Health",
+                               grpc::reflection::v1alpha::ServerReflection::service_full_name()});
   grpc::ServerBuilder builder;
   // gRPC sets SO_REUSEPORT by default: a second linecald on the same port would start without
   // error and the kernel would split the station controller's calls between the two.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(address, credentials, &running.port);
   builder.RegisterService(running.service.get());
+  builder.RegisterService(running.reflection.get());
   running.server = builder.BuildAndStart();
   if (!running.server || running.port == 0) {
     return absl::UnavailableError(absl::StrCat("listen: cannot listen on '", address, "'"));

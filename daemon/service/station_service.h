@@ -16,6 +16,7 @@
 
 #include "daemon/core/daemon_config.h"
 #include "daemon/core/station_core.h"
+#include "daemon/service/reflection_service.h"
 #include "linecal/v1/station.grpc.pb.h"
 
 namespace linecal {
@@ -29,8 +30,11 @@ absl::StatusOr<int64_t> ParseCycleId(const std::string& id);
 // frames_per_sensor too large for an int; the core validates the rest.
 absl::StatusOr<CycleRequest> CycleRequestFromProto(const v1::StartCycleRequest& request);
 // ListCyclesRequest to the store's filter: verdict UNSPECIFIED means any, page size 0 the
-// default 50; sizes beyond 1000 stay invalid for the store to refuse.
-CycleFilter CycleFilterFromProto(const v1::ListCyclesRequest& request);
+// default 50. InvalidArgument naming the field and the value sent for a verdict number the
+// API does not define ("verdict = 99: ...") and a page size beyond kMaxPageSize
+// ("page_size = 4294967295: ...").
+inline constexpr uint32_t kMaxPageSize = 1000;  // the store's largest page
+absl::StatusOr<CycleFilter> CycleFilterFromProto(const v1::ListCyclesRequest& request);
 
 class StationService final : public v1::Station::Service {
  public:
@@ -50,22 +54,31 @@ class StationService final : public v1::Station::Service {
   grpc::Status GetStationStatus(grpc::ServerContext* context, const v1::GetStationStatusRequest* request,
                                 v1::StationStatus* response) override;
 
- private:
+  // OK when the call carries the token (or none is configured), else UNAUTHENTICATED; the
+  // reflection service asks it too.
   grpc::Status Authorize(const grpc::ServerContext& context) const;
 
+ private:
   StationCore* core_;
   std::string auth_token_;
   std::string version_;
 };
 
+// `address` as StartServer takes it: HOST:PORT ("[::1]:50051" too) with a decimal port in
+// 0..65535, else InvalidArgument naming `listen`. Pure.
+absl::Status CheckListenAddress(const std::string& address);
+
 // A started server: listening on `address` ("127.0.0.1:0" picks a free port), with the
-// standard health service and server reflection on the same port. Without `tls` the port is
-// insecure; with it, TLS with the credentials of ServerTlsCredentials (tls_credentials.h),
+// standard health service (no token needed) and server reflection (the token needed, as for
+// every Station call) on the same port. Without `tls` the port is insecure; with it, TLS
+// with the credentials of ServerTlsCredentials (tls_credentials.h),
 // whose errors (a bad file, a key that does not match the certificate) are returned as they
-// are; the token, when set, is required on top.
+// are; the token, when set, is required on top. An address CheckListenAddress refuses is its
+// InvalidArgument.
 struct RunningServer {
   std::unique_ptr<StationService> service;
-  std::unique_ptr<grpc::Server> server;
+  std::unique_ptr<ReflectionService> reflection;  // behind the same token
+  std::unique_ptr<grpc::Server> server;           // destroyed first: it uses the two above
   int port = 0;
 };
 absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,

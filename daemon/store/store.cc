@@ -1,7 +1,12 @@
 #include "daemon/store/store.h"
 
+#include <fcntl.h>
 #include <sqlite3.h>
+#include <sys/file.h>
+#include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
 #include <utility>
 
 #include "absl/strings/numbers.h"
@@ -202,7 +207,53 @@ StoredCycle ReadCycle(const Statement& s) {
   return c;
 }
 
+// The pid a lock file's holder wrote into it, for the message of the one refused.
+std::string LockHolder(int fd) {
+  char buffer[32] = {};  // a pid and a newline: at most 8 bytes on Linux (pid_max 4194304)
+  const ssize_t n = ::pread(fd, buffer, sizeof buffer - 1, 0);
+  int64_t pid = 0;
+  if (n <= 0 || !absl::SimpleAtoi(absl::string_view(buffer, static_cast<size_t>(n)), &pid)) {
+    return "unknown";
+  }
+  return absl::StrCat(pid);
+}
+
+// Takes the exclusive flock on `<db_path>.lock` (Store::Open's contract); returns its
+// descriptor, which holds the lock until closed.
+absl::StatusOr<int> LockDatabase(const std::string& db_path) {
+  const std::string lock_path = db_path + ".lock";
+  const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    return absl::InternalError(absl::StrCat("database ", db_path, ": cannot open the lock file ",
+                                            lock_path, ": ", std::strerror(errno)));
+  }
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int error = errno;
+    const std::string holder = LockHolder(fd);
+    ::close(fd);
+    if (error == EWOULDBLOCK) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("database ", db_path, ": in use by another linecald (pid ", holder,
+                       " holds the lock file ", lock_path, ")"));
+    }
+    return absl::InternalError(absl::StrCat("database ", db_path, ": cannot lock ", lock_path, ": ",
+                                            std::strerror(error)));
+  }
+  const std::string pid = absl::StrCat(::getpid(), "\n");
+  // The pid is for messages only: a lock file that cannot be rewritten still locks.
+  if (::ftruncate(fd, 0) == 0) (void)!::pwrite(fd, pid.data(), pid.size(), 0);
+  return fd;
+}
+
 }  // namespace
+
+std::string QuoteInput(absl::string_view value) {
+  if (value.size() <= kMaxQuotedBytes) return absl::StrCat("'", value, "'");
+  // Cut before a UTF-8 continuation byte, not inside a character.
+  size_t cut = kMaxQuotedBytes;
+  while (cut > 0 && (static_cast<unsigned char>(value[cut]) & 0xC0) == 0x80) --cut;
+  return absl::StrCat("'", value.substr(0, cut), "…' (", value.size(), " bytes)");
+}
 
 const char* CycleStateName(CycleState state) {
   switch (state) {
@@ -226,6 +277,8 @@ const char* VerdictName(Verdict verdict) {
 
 absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
                                                    const StoreOptions& options) {
+  absl::StatusOr<int> lock_fd = LockDatabase(path);
+  if (!lock_fd.ok()) return lock_fd.status();
   sqlite3* db = nullptr;
   const int rc = sqlite3_open_v2(path.c_str(), &db,
                                  SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
@@ -233,9 +286,10 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
   if (rc != SQLITE_OK) {
     absl::Status s = SqliteError(db, path, "open", rc);
     sqlite3_close(db);
+    ::close(*lock_fd);
     return s;
   }
-  std::unique_ptr<Store> store(new Store(db, path));
+  std::unique_ptr<Store> store(new Store(db, path, *lock_fd));
   sqlite3_busy_timeout(db, static_cast<int>(options.busy_timeout.count()));
   // WAL: readers never block the writer; FULL: every commit is fsynced before it returns.
   if (absl::Status s = Exec(db, path, "set journal mode", "PRAGMA journal_mode=WAL"); !s.ok()) return s;
@@ -246,7 +300,10 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
   return store;
 }
 
-Store::~Store() { sqlite3_close(db_); }
+Store::~Store() {
+  sqlite3_close(db_);
+  ::close(lock_fd_);  // after SQLite is done with the file: the next Store may open it
+}
 
 absl::Status Store::Migrate() {
   Transaction tx(db_, path_);
@@ -272,12 +329,24 @@ absl::Status Store::Migrate() {
 absl::Status Store::AbortRunning() {
   Transaction tx(db_, path_);
   if (!tx.status().ok()) return tx.status();
+  const std::string select =
+      absl::StrCat("SELECT ", kCycleColumns, " FROM cycles WHERE state = 'running' ORDER BY id");
+  Statement running(db_, select.c_str());
+  std::vector<StoredCycle> aborted;
+  int step;
+  while ((step = running.Step()) == SQLITE_ROW) aborted.push_back(ReadCycle(running));
+  if (step != SQLITE_DONE) return SqliteError(db_, path_, "find running cycles", step);
   Statement s(db_,
-              "UPDATE cycles SET state = 'aborted', verdict = 'error', reason = 'daemon_restarted' "
-              "WHERE state = 'running'");
+              "UPDATE cycles SET state = 'aborted', verdict = 'error', "
+              "reason = 'daemon_restarted', ended_ns = ?1 WHERE state = 'running'");
+  // When the interruption was found: the real end is unknown, and 0 reads as "still running".
+  s.Bind(1, static_cast<int64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                     std::chrono::system_clock::now().time_since_epoch())
+                                     .count()));
   if (const int rc = s.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "abort running cycles", rc);
-  aborted_at_open_ = sqlite3_changes(db_);
-  return tx.Commit();
+  if (absl::Status c = tx.Commit(); !c.ok()) return c;
+  aborted_at_open_ = std::move(aborted);
+  return absl::OkStatus();
 }
 
 absl::StatusOr<int64_t> Store::BeginCycle(const StoredCycle& cycle) {
@@ -441,7 +510,8 @@ absl::StatusOr<CyclePage> Store::ListCycles(const CycleFilter& filter) {
     std::vector<std::string> parts = absl::StrSplit(filter.page_token, '.');
     if (parts.size() != 2 || !absl::SimpleAtoi(parts[0], &after_started) ||
         !absl::SimpleAtoi(parts[1], &after_id)) {
-      return absl::InvalidArgumentError(absl::StrCat("page_token \"", filter.page_token, "\" is malformed"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("page_token ", QuoteInput(filter.page_token), " is malformed"));
     }
   }
   std::lock_guard<std::mutex> lock(mutex_);

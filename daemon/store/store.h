@@ -5,12 +5,14 @@
 // Durability: WAL journal with synchronous=FULL, so a call that returned OK is on disk and
 // survives a crash or power loss of the daemon; nothing committed is ever lost. A cycle found
 // still `running` when the store opens was interrupted (crash, kill -9, power) and becomes
-// `aborted` (reason "daemon_restarted"). The schema is versioned (PRAGMA user_version) and
-// migrated forward on open; a file from a newer linecald is refused, never rewritten.
+// `aborted` (reason "daemon_restarted", ended_ns the time it was found). The schema is
+// versioned (PRAGMA user_version) and migrated forward on open; a file from a newer linecald
+// is refused, never rewritten.
 //
 // Errors (absl::Status, messages name the database file):
 //   Unavailable         the database stayed locked by another process past the busy timeout
-//   FailedPrecondition  a newer schema; ending a cycle that already ended
+//   FailedPrecondition  a newer schema; ending a cycle that already ended; the database is
+//                       in use by another Store (Open)
 //   NotFound            unknown cycle id
 //   InvalidArgument     a malformed page token or filter
 //   Internal / DataLoss any other SQLite failure / a failed integrity check
@@ -26,6 +28,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 
 struct sqlite3;
 
@@ -33,6 +36,15 @@ namespace linecal {
 
 enum class CycleState { kRunning, kDone, kCancelled, kAborted };
 enum class Verdict { kNone, kPass, kFail, kError };
+
+// A value from a request as an error message quotes it: 'value' when it has at most
+// kMaxQuotedBytes bytes, else its first kMaxQuotedBytes bytes, "…" and its size
+// ('AAAA…' (10240 bytes)). A message that echoed a 3 MB field would be 3 MB, and gRPC
+// refuses a status over its metadata limit (8 kB by default), so the client would see
+// RESOURCE_EXHAUSTED instead of the refusal. Pure; O(kMaxQuotedBytes). 64 bytes: enough to
+// recognise a value (a VIN, an id, a token), under 1% of that limit.
+inline constexpr size_t kMaxQuotedBytes = 64;
+std::string QuoteInput(absl::string_view value);
 
 // "running", "done", "cancelled", "aborted" — the words stored in the database.
 const char* CycleStateName(CycleState state);
@@ -115,6 +127,12 @@ class Store {
 
   // Opens or creates the database at `path` (its directory must exist), migrates it to
   // kSchemaVersion and turns running cycles into aborted ones. Cost: a few fsyncs.
+  // One Store per database: before SQLite opens the file, Open takes an exclusive flock on
+  // `<path>.lock` (created if needed; the holder's pid written into it) and holds it until
+  // the Store is destroyed (the kernel drops it when the process dies, kill -9 too). While
+  // another Store, in this process or another, holds it, Open fails FailedPrecondition
+  // naming the lock file and the holder's pid, and has written nothing: a second daemon on
+  // the same database would otherwise abort the first one's running cycle.
   static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& path,
                                                      const StoreOptions& options = {});
   ~Store();
@@ -122,8 +140,11 @@ class Store {
   Store& operator=(const Store&) = delete;
 
   const std::string& path() const { return path_; }
-  // Cycles that Open found running and stored as aborted.
-  int aborted_at_open() const { return aborted_at_open_; }
+  // Cycles that Open found running and stored as aborted: their number, and the cycles as
+  // they were stored before (state running, ended_ns 0; without sensors), oldest first, for
+  // whoever must clean up after them (their partial captures: StationCore::Create).
+  int aborted_at_open() const { return static_cast<int>(aborted_at_open_.size()); }
+  const std::vector<StoredCycle>& aborted_cycles_at_open() const { return aborted_at_open_; }
 
   // Stores a new running cycle (`cycle.id`, state, verdict and sensors are ignored) and
   // its car; returns the cycle's id.
@@ -147,14 +168,16 @@ class Store {
   absl::Status IntegrityCheck();
 
  private:
-  Store(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
+  Store(sqlite3* db, std::string path, int lock_fd)
+      : db_(db), path_(std::move(path)), lock_fd_(lock_fd) {}
   absl::Status Migrate();
   absl::Status AbortRunning();
 
   std::mutex mutex_;
   sqlite3* db_;
   std::string path_;
-  int aborted_at_open_ = 0;
+  int lock_fd_;  // holds the flock on <path>.lock
+  std::vector<StoredCycle> aborted_at_open_;
 };
 
 }  // namespace linecal

@@ -85,7 +85,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   } else if (kind == 1) {
     linecal::v1::ListCyclesRequest request;
     if (!request.ParseFromArray(body, body_size)) return 0;
-    absl::StatusOr<linecal::CyclePage> page = TheStore().ListCycles(linecal::CycleFilterFromProto(request));
+    absl::StatusOr<linecal::CycleFilter> filter = linecal::CycleFilterFromProto(request);
+    if (!filter.ok()) {
+      ExpectRefusal(filter.status(), {"page_size", "verdict"});
+      return 0;
+    }
+    absl::StatusOr<linecal::CyclePage> page = TheStore().ListCycles(*filter);
     ExpectRefusal(page.status(), {"page_size", "page_token", "since_ns", "until_ns", "vin"});
     if (page.ok() && page->cycles.size() > 2) __builtin_trap();
   } else {

@@ -34,6 +34,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "daemon/store/store.h"
 #include "linecal/v1/station.grpc.pb.h"
@@ -222,6 +223,39 @@ absl::Status OneCycle(Client& client, std::atomic<int>* phase, const std::functi
   return absl::OkStatus();
 }
 
+// A second linecald on the same configuration while `first` runs (issue 21): it must stop
+// before it listens, naming the lock file and the first daemon's pid; what it must not do
+// (abort the first one's cycles) the Verify after it checks.
+void SecondDaemonRefused(Run& r, pid_t first) {
+  absl::StatusOr<std::unique_ptr<LinecaldProcess>> second =
+      LinecaldProcess::Spawn(r.linecald, {"--config", r.config_path}, r.log_path + ".second");
+  if (!second.ok()) return Violation(r, absl::StrCat("second daemon: ", second.status().message()));
+  const absl::StatusOr<int> port = (*second)->WaitReady(kStartTimeout);
+  if (port.ok()) return Violation(r, absl::StrCat("second daemon: listens on port ", *port));
+  const int status = (*second)->Wait();
+  const std::string holder = absl::StrCat("in use by another linecald (pid ", first,
+                                          " holds the lock file ", r.db_path, ".lock)");
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 2 ||
+      port.status().message().find(holder) == std::string::npos) {
+    Violation(r, absl::StrCat("second daemon: ", DescribeWaitStatus(status), ", ",
+                              port.status().message()));
+  }
+}
+
+// Starts a cycle; returns its id, or "" after a violation.
+std::string StartOnly(Run& r, Client& client) {
+  v1::StartCycleRequest request;
+  request.set_vin(kVin);
+  request.set_car_model_id(kCarId);
+  v1::StartCycleResponse response;
+  grpc::ClientContext context;
+  context.set_deadline(Deadline());
+  if (grpc::Status s = client.stub->StartCycle(&context, request, &response); !s.ok()) {
+    Violation(r, "final StartCycle: " + s.error_message());
+  }
+  return response.cycle_id();
+}
+
 // Runs cycles back to back until a call fails; a failure before `killed` is a violation.
 void CycleLoop(Run& r, Client& client, const std::atomic<bool>& killed, std::atomic<int>* phase) {
   while (true) {
@@ -350,8 +384,11 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
     }
   }
 
-  // The last restart: everything verified once more, then a clean stop and the file itself.
+  // The last restart: everything verified once more, also after a second daemon on the same
+  // configuration was refused; then a cycle started and SIGHUP, which must drain as SIGTERM
+  // does (exit 0, the cycle cancelled or, had it ended first, done); then the file itself.
   int final_status = -1;
+  std::string last_id;
   {
     absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
     if (!daemon.ok()) return setup_failed(daemon.status());
@@ -359,13 +396,16 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
     if (port.ok()) {
       Client client(*port);
       Verify(r, client, "final restart");
+      SecondDaemonRefused(r, (*daemon)->pid());
+      Verify(r, client, "after a second daemon");
+      last_id = StartOnly(r, client);
     } else {
       Violation(r, absl::StrCat("final restart: ", port.status().message()));
     }
-    (*daemon)->Signal(SIGTERM);
+    (*daemon)->Signal(SIGHUP);
     final_status = (*daemon)->Wait();
     if (!WIFEXITED(final_status) || WEXITSTATUS(final_status) != 0) {
-      Violation(r, "final SIGTERM: " + DescribeWaitStatus(final_status));
+      Violation(r, "final SIGHUP: " + DescribeWaitStatus(final_status));
     }
   }
   absl::Status integrity = absl::UnknownError("not opened");
@@ -373,6 +413,17 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
   if (absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(r.db_path); store.ok()) {
     integrity = (*store)->IntegrityCheck();
     aborted_at_open = (*store)->aborted_at_open();
+    int64_t id = 0;
+    if (absl::SimpleAtoi(last_id, &id)) {
+      const absl::StatusOr<StoredCycle> last = (*store)->GetCycle(id);
+      const bool ended = last.ok() && (last->state == CycleState::kCancelled ||
+                                       last->state == CycleState::kDone);
+      if (!ended) {
+        Violation(r, absl::StrCat("the cycle running at SIGHUP: ",
+                                  last.ok() ? CycleStateName(last->state)
+                                            : last.status().ToString()));
+      }
+    }
   } else {
     integrity = store.status();
   }
@@ -388,7 +439,7 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
   std::printf("  ended just before the kill, unseen by the client: %d\n", r.ended_unseen);
   std::printf("  stored by a StartCycle whose answer the kill cut off: %d\n", r.unacknowledged);
   std::printf("daemon RSS after one cycle: %.1f MB\n", r.rss_after_cycle_kb / 1024.0);
-  std::printf("integrity_check: %s; final SIGTERM: %s; running at the last open: %d\n",
+  std::printf("integrity_check: %s; final SIGHUP: %s; running at the last open: %d\n",
               integrity.ok() ? "ok" : std::string(integrity.message()).c_str(),
               DescribeWaitStatus(final_status).c_str(), aborted_at_open);
   std::printf("violations: %zu\n", r.violations.size());

@@ -13,10 +13,12 @@
 #include <string>
 #include <thread>
 
+#include <google/protobuf/descriptor.pb.h>
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "tests/daemon/scratch_dir.h"
 
 #include "station/io/json_reader.h"
@@ -211,6 +213,104 @@ TEST_F(ServiceTest, SecondServerOnTheSamePortFailsToStart) {
       << second.status();
 }
 
+// Values of 10 kB in each string field that can be refused come back quoted in at most
+// kMaxQuotedBytes bytes with their size: echoed whole, a 10 kB message exceeded the client's
+// metadata limit (RESOURCE_EXHAUSTED instead of the refusal), and a 3 MB one was 3 MB.
+TEST_F(ServiceTest, LongInputsAreQuotedShortlyInErrors) {
+  Start("");
+  const std::string long_value(10240, '7');
+  // A refusal's message: the field first, then at most 64 bytes of the value, its size, and
+  // the words around it (the car model list, ...): 200 bytes leave room for those.
+  const auto expect_short = [&](const grpc::Status& s, const std::string& field) {
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << field << ": " << s.error_message();
+    EXPECT_EQ(s.error_message().rfind(field, 0), 0u) << s.error_message();
+    EXPECT_LE(s.error_message().size(), 200u) << field;
+    EXPECT_NE(s.error_message().find("'" + long_value.substr(0, 64) + "…' (10240 bytes)"),
+              std::string::npos)
+        << s.error_message();
+  };
+  {
+    grpc::ClientContext c;
+    v1::GetCycleRequest r;
+    r.set_cycle_id(long_value);
+    v1::Cycle out;
+    expect_short(stub_->GetCycle(&c, r, &out), "cycle_id");
+  }
+  {
+    grpc::ClientContext c;
+    v1::CancelCycleRequest r;
+    r.set_cycle_id(long_value);
+    v1::CancelCycleResponse out;
+    expect_short(stub_->CancelCycle(&c, r, &out), "cycle_id");
+  }
+  {
+    grpc::ClientContext c;
+    v1::WatchCycleRequest r;
+    r.set_cycle_id(long_value);
+    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = stub_->WatchCycle(&c, r);
+    v1::CycleEvent e;
+    EXPECT_FALSE(reader->Read(&e));
+    expect_short(reader->Finish(), "cycle_id");
+  }
+  {
+    grpc::ClientContext c;
+    v1::StartCycleRequest r = Request();
+    r.set_car_model_id(long_value);
+    v1::StartCycleResponse out;
+    expect_short(stub_->StartCycle(&c, r, &out), "car_model_id");
+  }
+  {
+    grpc::ClientContext c;
+    v1::ListCyclesRequest r;
+    r.set_page_token(long_value);
+    v1::ListCyclesResponse out;
+    expect_short(stub_->ListCycles(&c, r, &out), "page_token");
+  }
+  // A value of at most 64 bytes is quoted whole, without a size.
+  grpc::ClientContext c;
+  v1::GetCycleRequest r;
+  r.set_cycle_id("x1");
+  v1::Cycle out;
+  EXPECT_EQ(stub_->GetCycle(&c, r, &out).error_message(), "cycle_id: 'x1' is not a cycle id");
+}
+
+// ListCycles' filter refusals through the server name the value the client sent.
+TEST_F(ServiceTest, ListFilterRefusalsNameTheValueSent) {
+  Start("");
+  grpc::ClientContext size_context;
+  v1::ListCyclesRequest r;
+  r.set_page_size(4'294'967'295u);
+  v1::ListCyclesResponse out;
+  const grpc::Status size = stub_->ListCycles(&size_context, r, &out);
+  EXPECT_EQ(size.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(size.error_message().rfind("page_size = 4294967295: must be in [0, 1000]", 0), 0u)
+      << size.error_message();
+  grpc::ClientContext verdict_context;
+  r.set_page_size(0);
+  r.set_verdict(static_cast<v1::Verdict>(99));
+  const grpc::Status verdict = stub_->ListCycles(&verdict_context, r, &out);
+  EXPECT_EQ(verdict.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(verdict.error_message().rfind("verdict = 99: not a verdict", 0), 0u)
+      << verdict.error_message();
+}
+
+// A port beyond 65535 is refused before gRPC sees it (gRPC listened on another port).
+TEST_F(ServiceTest, ListenPortOutOfRangeIsRefused) {
+  CreateCore();
+  absl::StatusOr<RunningServer> server = StartServer(core_.get(), "127.0.0.1:99999", "", "test");
+  ASSERT_EQ(server.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(server.status().message(),
+            "listen: '127.0.0.1:99999': must be HOST:PORT with a port in 0..65535");
+  for (const char* bad : {"127.0.0.1:65536", "127.0.0.1:-1", "127.0.0.1:", "127.0.0.1", ":50051",
+                          "127.0.0.1:5o051", "127.0.0.1:+5005"}) {
+    EXPECT_EQ(CheckListenAddress(bad).code(), absl::StatusCode::kInvalidArgument) << bad;
+  }
+  for (const char* good : {"127.0.0.1:0", "0.0.0.0:65535", "[::1]:50051", "localhost:50051"}) {
+    EXPECT_TRUE(CheckListenAddress(good).ok()) << good;
+  }
+}
+
 TEST_F(ServiceTest, TokenAuthentication) {
   Start("s3cret");
   {
@@ -231,6 +331,63 @@ TEST_F(ServiceTest, TokenAuthentication) {
     EXPECT_TRUE(stub_->GetStationStatus(&c, {}, &status).ok());
   }
   EXPECT_TRUE(core_->ListCycles({})->cycles.empty());  // the refused start stored nothing
+}
+
+// Server reflection hands out the whole API schema: it needs the token like every Station
+// call (it used to answer anyone). Health stays open (HealthServiceIsOn).
+TEST_F(ServiceTest, ReflectionNeedsTheToken) {
+  Start("s3cret");
+  using grpc::reflection::v1alpha::ServerReflection;
+  using grpc::reflection::v1alpha::ServerReflectionRequest;
+  using grpc::reflection::v1alpha::ServerReflectionResponse;
+  std::unique_ptr<ServerReflection::Stub> reflection = ServerReflection::NewStub(channel_);
+  // Sends `requests` on one stream; returns the responses and the call's status.
+  const auto ask = [&](const std::string& token,
+                       const std::vector<ServerReflectionRequest>& requests,
+                       std::vector<ServerReflectionResponse>* responses) {
+    grpc::ClientContext context;
+    if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
+    auto stream = reflection->ServerReflectionInfo(&context);
+    for (const ServerReflectionRequest& r : requests) stream->Write(r);
+    stream->WritesDone();
+    ServerReflectionResponse response;
+    while (stream->Read(&response)) responses->push_back(response);
+    return stream->Finish();
+  };
+  ServerReflectionRequest list;
+  list.set_list_services("");
+  ServerReflectionRequest file;
+  file.set_file_containing_symbol("linecal.v1.Station");
+  ServerReflectionRequest unknown;
+  unknown.set_file_containing_symbol("linecal.v1.NoSuchThing");
+
+  for (const std::string token : {"", "wrong"}) {
+    std::vector<ServerReflectionResponse> refused;
+    const grpc::Status s = ask(token, {list, file}, &refused);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::UNAUTHENTICATED) << token;
+    EXPECT_EQ(s.error_message(), "authorization: a valid bearer token is required");
+    EXPECT_TRUE(refused.empty()) << token;
+  }
+
+  std::vector<ServerReflectionResponse> answers;
+  ASSERT_TRUE(ask("s3cret", {list, file, unknown}, &answers).ok());
+  ASSERT_EQ(answers.size(), 3u);
+  std::vector<std::string> services;
+  for (const auto& service : answers[0].list_services_response().service()) {
+    services.push_back(service.name());
+  }
+  EXPECT_EQ(services, (std::vector<std::string>{"linecal.v1.Station", "grpc.health.v1.Health",
+                                                "grpc.reflection.v1alpha.ServerReflection"}));
+  // The file declaring the service, then what it imports.
+  ASSERT_GE(answers[1].file_descriptor_response().file_descriptor_proto_size(), 1);
+  google::protobuf::FileDescriptorProto station;
+  ASSERT_TRUE(
+      station.ParseFromString(answers[1].file_descriptor_response().file_descriptor_proto(0)));
+  EXPECT_EQ(station.name(), "linecal/v1/station.proto");
+  ASSERT_EQ(station.service_size(), 1);
+  EXPECT_EQ(station.service(0).name(), "Station");
+  EXPECT_EQ(answers[1].original_request().file_containing_symbol(), "linecal.v1.Station");
+  EXPECT_EQ(answers[2].error_response().error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
 TEST_F(ServiceTest, HealthServiceIsOn) {
@@ -381,12 +538,24 @@ TEST(RequestTranslation, StartCycleInCoreUnits) {
 
 TEST(RequestTranslation, ListFilterAndCycleIds) {
   v1::ListCyclesRequest request;
-  EXPECT_EQ(CycleFilterFromProto(request).page_size, 50);
-  EXPECT_FALSE(CycleFilterFromProto(request).verdict.has_value());
-  request.set_page_size(4'000'000'000u);
+  EXPECT_EQ(CycleFilterFromProto(request)->page_size, 50);
+  EXPECT_FALSE(CycleFilterFromProto(request)->verdict.has_value());
+  request.set_page_size(1000);
   request.set_verdict(v1::VERDICT_FAIL);
-  EXPECT_EQ(CycleFilterFromProto(request).page_size, 1001);  // the store refuses it
-  EXPECT_EQ(CycleFilterFromProto(request).verdict, Verdict::kFail);
+  EXPECT_EQ(CycleFilterFromProto(request)->page_size, 1000);
+  EXPECT_EQ(CycleFilterFromProto(request)->verdict, Verdict::kFail);
+  // The refusal names the value sent, not a clamped one.
+  request.set_page_size(4'294'967'295u);
+  absl::StatusOr<CycleFilter> f = CycleFilterFromProto(request);
+  ASSERT_EQ(f.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(f.status().message().rfind("page_size = 4294967295: must be in [0, 1000]", 0), 0u)
+      << f.status();
+  // A verdict number the API does not define is refused, not read as "any verdict".
+  request.set_page_size(0);
+  request.set_verdict(static_cast<v1::Verdict>(99));
+  f = CycleFilterFromProto(request);
+  ASSERT_EQ(f.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(f.status().message().rfind("verdict = 99: not a verdict", 0), 0u) << f.status();
   EXPECT_EQ(*ParseCycleId("42"), 42);
   for (const char* bad : {"", "0", "-3", "x1", "99999999999999999999"}) {
     EXPECT_EQ(ParseCycleId(bad).status().code(), absl::StatusCode::kInvalidArgument) << bad;

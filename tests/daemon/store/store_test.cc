@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -169,6 +170,7 @@ TEST_F(StoreTest, IdsIncreaseAndAreNeverReused) {
   EXPECT_EQ(b, a + 1);
   // Even when the newest row goes away, AUTOINCREMENT keeps its id retired.
   RawQuery("DELETE FROM cycles WHERE id = " + std::to_string(b));
+  store.reset();  // one Store per database at a time (its lock)
   store = OpenOk();
   EXPECT_EQ(*store->BeginCycle(Request("WVWZZZ1JZXW000001", 3)), b + 1);
   EXPECT_EQ(RawQuery("SELECT last_cycle_id FROM cars WHERE vin = 'WVWZZZ1JZXW000001'"), std::to_string(b + 1));
@@ -283,6 +285,9 @@ TEST_F(StoreTest, KillNineLosesNothingCommittedAndAbortsTheInterruptedCycle) {
     }
   }
   ::close(fds[1]);
+  const int64_t killed_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                std::chrono::system_clock::now().time_since_epoch())
+                                .count();
   std::vector<int64_t> committed;
   int64_t id = 0;
   // 40 commits: enough to be mid-stream, few enough to stay quick with fsync on every commit.
@@ -306,9 +311,29 @@ TEST_F(StoreTest, KillNineLosesNothingCommittedAndAbortsTheInterruptedCycle) {
       EXPECT_EQ(cycle->state, CycleState::kAborted) << c;
       EXPECT_EQ(cycle->reason, "daemon_restarted");
       EXPECT_EQ(cycle->verdict, Verdict::kError);
+      // Ended when the reopen found it: after the kill, not 0 ("still running").
+      EXPECT_GE(cycle->ended_ns, killed_ns) << c;
     }
   }
   EXPECT_EQ(*store->RunningCycle(), std::nullopt);
+}
+
+// One Store per database: a second Open, as a second daemon on the same configuration
+// would do, is refused before SQLite opens the file, naming the lock file and the holder's
+// pid, and the first Store's running cycle stays running (it used to come back aborted).
+TEST_F(StoreTest, SecondStoreIsRefusedNamingTheLockFileAndItsHolder) {
+  std::unique_ptr<Store> store = OpenOk();
+  const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
+  const absl::Status second = Store::Open(path_).status();
+  EXPECT_EQ(second.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(second.message(), "database " + path_ + ": in use by another linecald (pid " +
+                                  std::to_string(::getpid()) + " holds the lock file " + path_ +
+                                  ".lock)");
+  EXPECT_EQ(store->GetCycle(id)->state, CycleState::kRunning);
+  EXPECT_TRUE(store->EndCycle(id, CycleState::kDone, Verdict::kPass, "", 2).ok());
+  // Once the first is gone, the next one opens.
+  store.reset();
+  EXPECT_NE(OpenOk(), nullptr);
 }
 
 }  // namespace

@@ -126,7 +126,8 @@ TEST(InstalledDaemon, UnitConfigAndNotifications) {
   EXPECT_TRUE(fs::is_directory(prefix / "var/lib/linecal"));
   const std::string unit = ReadFile(prefix / "lib/systemd/system/linecald.service");
   const std::string data_dir = (prefix / "var/lib/linecal").string();
-  for (const std::string& key : std::vector<std::string>{"Type=notify\n", "WatchdogSec=10\n", "User=linecal\n", "NoNewPrivileges=yes\n", "ProtectSystem=strict\n",
+  for (const std::string& key : std::vector<std::string>{"Type=notify\n", "WatchdogSec=10\n",
+        "LimitNOFILE=65536\n", "User=linecal\n", "NoNewPrivileges=yes\n", "ProtectSystem=strict\n",
         "ReadWritePaths=" + data_dir + "\n",
         "ExecStart=" + (prefix / "bin/linecald").string() + " --config " + (prefix / "etc/linecal/linecald.json").string() + "\n"}) {
     EXPECT_NE(unit.find(key), std::string::npos) << key;

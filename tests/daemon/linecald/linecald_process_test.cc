@@ -1,0 +1,297 @@
+// linecald as a real process (the demo station: every sensor of the reference car simulated,
+// a scratch data directory, a free loopback port) under what a station network and its
+// operators do to it: a second daemon on the same database, SIGHUP, flags out of range, and
+// descriptors running out under a real RLIMIT_NOFILE (docs/daemon.md, docs/reliability.md).
+#include <arpa/inet.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "daemon/store/store.h"
+#include "linecal/v1/station.grpc.pb.h"
+#include "tests/daemon/reliability/reliability_support.h"
+#include "tests/daemon/scratch_dir.h"
+
+namespace linecal {
+namespace {
+
+namespace fs = std::filesystem;
+using reliability::DescribeWaitStatus;
+using reliability::LinecaldProcess;
+using std::chrono::seconds;
+
+const std::string kLinecald = std::string(LINECAL_BINARY_DIR) + "/bin/linecald";
+// Start-up, calls and drains on a loaded 2-core machine, under the sanitizers too: generous,
+// a hang still fails.
+constexpr seconds kTimeout{60};
+// Frames per sensor of the cycles that must still be running when the test acts on them:
+// 4 renders per camera of the reference car take seconds (about 1.5 s per frame for the car),
+// far longer than a second daemon takes to start and stop (0.2 s).
+constexpr uint32_t kLongCycleFrames = 4;
+
+std::string ReadFile(const fs::path& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// Waits until the file contains `text` (a log line the daemon writes when something happened).
+bool WaitForText(const fs::path& path, const std::string& text, seconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (ReadFile(path).find(text) != std::string::npos) return true;
+    // 20 ms between reads of a small log file.
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return false;
+}
+
+class LinecaldProcessTest : public ::testing::Test {
+ protected:
+  void SetUp() override { dir_ = testing_daemon::FreshTestDir("linecald_process"); }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string DataDir() const { return (dir_ / "data").string(); }
+  std::string LogPath(const std::string& name) const { return (dir_ / (name + ".log")).string(); }
+
+  // linecald on the demo station with this test's data directory, through `sh -c` when
+  // `shell_prefix` is given (e.g. "ulimit -n 64 &&"), so that the limit is the daemon's own.
+  std::unique_ptr<LinecaldProcess> Spawn(const std::string& log_name,
+                                         const std::vector<std::string>& flags,
+                                         const std::string& shell_prefix = "") {
+    std::vector<std::string> args = {"--data-dir", DataDir()};
+    args.insert(args.end(), flags.begin(), flags.end());
+    absl::StatusOr<std::unique_ptr<LinecaldProcess>> p;
+    if (shell_prefix.empty()) {
+      p = LinecaldProcess::Spawn(kLinecald, args, LogPath(log_name));
+    } else {
+      std::vector<std::string> sh = {"-c", shell_prefix + " exec \"$0\" \"$@\"", kLinecald};
+      sh.insert(sh.end(), args.begin(), args.end());
+      p = LinecaldProcess::Spawn("/bin/sh", sh, LogPath(log_name));
+    }
+    EXPECT_TRUE(p.ok()) << p.status();
+    return p.ok() ? *std::move(p) : nullptr;
+  }
+
+  static std::unique_ptr<v1::Station::Stub> Stub(int port) {
+    return v1::Station::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(port),
+                                                    grpc::InsecureChannelCredentials()));
+  }
+
+  // Starts a cycle of kLongCycleFrames frames per sensor; returns its id ("" on failure).
+  static std::string StartLongCycle(v1::Station::Stub& stub) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + kTimeout);
+    v1::StartCycleRequest request;
+    request.set_vin(reliability::kVin);
+    request.set_car_model_id("reference");
+    request.mutable_options()->set_frames_per_sensor(kLongCycleFrames);
+    v1::StartCycleResponse response;
+    const grpc::Status s = stub.StartCycle(&context, request, &response);
+    EXPECT_TRUE(s.ok()) << s.error_message();
+    return response.cycle_id();
+  }
+
+  static v1::Cycle GetCycle(v1::Station::Stub& stub, const std::string& id) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + kTimeout);
+    v1::GetCycleRequest request;
+    request.set_cycle_id(id);
+    v1::Cycle cycle;
+    const grpc::Status s = stub.GetCycle(&context, request, &cycle);
+    EXPECT_TRUE(s.ok()) << s.error_message();
+    return cycle;
+  }
+
+  // The stored cycle, read from the database once no daemon holds it.
+  StoredCycle StoredAfterExit(const std::string& id) {
+    absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(DataDir() + "/linecal.db");
+    EXPECT_TRUE(store.ok()) << store.status();
+    if (!store.ok()) return {};
+    EXPECT_EQ(*(*store)->RunningCycle(), std::nullopt);
+    absl::StatusOr<StoredCycle> cycle = (*store)->GetCycle(std::stoll(id));
+    EXPECT_TRUE(cycle.ok()) << cycle.status();
+    return cycle.ok() ? *cycle : StoredCycle{};
+  }
+
+  // Waits for a daemon that must stop before it serves: its exit status, or -1 when it
+  // listened instead (then it is killed by the destructor): a failure, not a hang.
+  static int ExitBeforeListening(LinecaldProcess& daemon) {
+    const absl::StatusOr<int> port = daemon.WaitReady(kTimeout);
+    EXPECT_EQ(port.status().code(), absl::StatusCode::kAborted)
+        << "it listens on port " << port.value_or(0);
+    return port.ok() ? -1 : daemon.Wait();
+  }
+
+  fs::path dir_;
+};
+
+// Issue 21, item 3: a second linecald on the same database used to open it, turn the first
+// one's running cycle into `aborted` and only then fail to listen. Now it stops before the
+// store opens, naming the lock file and the first daemon's pid, and the cycle goes on.
+TEST_F(LinecaldProcessTest, SecondDaemonOnTheSameDatabaseExitsNamingTheHolder) {
+  std::unique_ptr<LinecaldProcess> first = Spawn("first", {"--listen", "127.0.0.1:0"});
+  ASSERT_NE(first, nullptr);
+  const absl::StatusOr<int> port = first->WaitReady(kTimeout);
+  ASSERT_TRUE(port.ok()) << port.status();
+  std::unique_ptr<v1::Station::Stub> stub = Stub(*port);
+  const std::string id = StartLongCycle(*stub);
+  ASSERT_FALSE(id.empty());
+
+  // The same configuration: the same database and port.
+  std::unique_ptr<LinecaldProcess> second =
+      Spawn("second", {"--listen", "127.0.0.1:" + std::to_string(*port)});
+  ASSERT_NE(second, nullptr);
+  const int status = ExitBeforeListening(*second);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << DescribeWaitStatus(status);
+  const std::string lock = DataDir() + "/linecal.db.lock";
+  EXPECT_NE(ReadFile(LogPath("second"))
+                .find("in use by another linecald (pid " + std::to_string(first->pid()) +
+                      " holds the lock file " + lock + ")"),
+            std::string::npos)
+      << ReadFile(LogPath("second"));
+  // The first daemon's cycle was not touched: still running (kLongCycleFrames makes it last
+  // far longer than the second daemon's start), not aborted.
+  EXPECT_EQ(GetCycle(*stub, id).state(), v1::CYCLE_STATE_RUNNING);
+
+  first->Signal(SIGTERM);
+  const int first_status = first->Wait();
+  EXPECT_TRUE(WIFEXITED(first_status) && WEXITSTATUS(first_status) == 0)
+      << DescribeWaitStatus(first_status);
+  const StoredCycle cycle = StoredAfterExit(id);
+  EXPECT_EQ(cycle.state, CycleState::kCancelled);
+  EXPECT_EQ(cycle.reason, "cancelled");
+}
+
+// Issue 21, item 8: SIGHUP used to kill linecald (exit 129) with its cycle left `running`.
+// It now drains as SIGTERM does: the cycle ends cancelled, and the exit is 0.
+TEST_F(LinecaldProcessTest, SighupDrainsLikeSigterm) {
+  std::unique_ptr<LinecaldProcess> daemon = Spawn("daemon", {"--listen", "127.0.0.1:0"});
+  ASSERT_NE(daemon, nullptr);
+  const absl::StatusOr<int> port = daemon->WaitReady(kTimeout);
+  ASSERT_TRUE(port.ok()) << port.status();
+  std::unique_ptr<v1::Station::Stub> stub = Stub(*port);
+  const std::string id = StartLongCycle(*stub);
+  ASSERT_FALSE(id.empty());
+
+  daemon->Signal(SIGHUP);
+  const int status = daemon->Wait();
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << DescribeWaitStatus(status);
+  EXPECT_NE(ReadFile(LogPath("daemon")).find("stopping on SIGHUP"), std::string::npos)
+      << ReadFile(LogPath("daemon"));
+  const StoredCycle cycle = StoredAfterExit(id);
+  EXPECT_EQ(cycle.state, CycleState::kCancelled);
+  EXPECT_EQ(cycle.reason, "cancelled");
+  EXPECT_GT(cycle.ended_ns, cycle.started_ns);
+}
+
+// A port out of range used to listen on another one; a log level outside the list was taken.
+TEST_F(LinecaldProcessTest, FlagsOutOfRangeAreRefused) {
+  std::unique_ptr<LinecaldProcess> verbose = Spawn("verbose", {"--log-level", "verbose"});
+  ASSERT_NE(verbose, nullptr);
+  int status = ExitBeforeListening(*verbose);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << DescribeWaitStatus(status);
+  EXPECT_EQ(ReadFile(LogPath("verbose")),
+            "linecald: --log-level: must be debug, info, warning or error, got 'verbose'\n");
+
+  std::unique_ptr<LinecaldProcess> port = Spawn("port", {"--listen", "127.0.0.1:99999"});
+  ASSERT_NE(port, nullptr);
+  status = ExitBeforeListening(*port);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << DescribeWaitStatus(status);
+  EXPECT_NE(
+      ReadFile(LogPath("port"))
+          .find("linecald: listen: '127.0.0.1:99999': must be HOST:PORT with a port in 0..65535\n"),
+      std::string::npos)
+      << ReadFile(LogPath("port"));
+}
+
+// The soft descriptor limit is raised to the hard one at start, and the log says so.
+TEST_F(LinecaldProcessTest, SoftDescriptorLimitIsRaisedToTheHardOne) {
+  // 256: below any hard limit a test machine has, above what linecald needs to start.
+  std::unique_ptr<LinecaldProcess> daemon =
+      Spawn("daemon", {"--listen", "127.0.0.1:0"}, "ulimit -S -n 256 &&");
+  ASSERT_NE(daemon, nullptr);
+  ASSERT_TRUE(daemon->WaitReady(kTimeout).ok()) << ReadFile(LogPath("daemon"));
+  // /proc/PID/limits: "Max open files  <soft>  <hard>  files".
+  std::istringstream limits(ReadFile("/proc/" + std::to_string(daemon->pid()) + "/limits"));
+  std::string line, soft, hard;
+  while (std::getline(limits, line)) {
+    if (line.rfind("Max open files", 0) == 0) std::istringstream(line.substr(14)) >> soft >> hard;
+  }
+  ASSERT_FALSE(hard.empty());
+  if (hard == "256") GTEST_SKIP() << "the hard limit is 256 here: nothing to raise";
+  EXPECT_EQ(soft, hard);
+  EXPECT_NE(ReadFile(LogPath("daemon"))
+                .find("descriptors: soft limit raised from 256 to the hard limit " + hard),
+            std::string::npos)
+      << ReadFile(LogPath("daemon"));
+  daemon->Signal(SIGTERM);
+  EXPECT_EQ(daemon->Wait(), 0);
+}
+
+// Issue 21, item 2: with its descriptors exhausted by idle TCP connections, gRPC's listener
+// stops on EMFILE and never accepted again, even once they closed. The daemon runs under a
+// hard limit of 64 descriptors (which it cannot raise) and gets 100 connections; once they
+// close, a new call must be served.
+TEST_F(LinecaldProcessTest, AcceptsAgainOnceDescriptorsFreeUp) {
+  // 64: a few dozen for the daemon's own files and threads, so that 100 clients exhaust it
+  // (100 also stays below the smallest listen backlog, 128, so that every connect completes).
+  // GRPC_VERBOSITY=NONE: gRPC's error line, the only sign of its dead listener, must reach
+  // linecald however gRPC's logging is set.
+  std::unique_ptr<LinecaldProcess> daemon = Spawn("daemon", {"--listen", "127.0.0.1:0"},
+                                                  "ulimit -n 64 && export GRPC_VERBOSITY=NONE &&");
+  ASSERT_NE(daemon, nullptr);
+  const absl::StatusOr<int> port = daemon->WaitReady(kTimeout);
+  ASSERT_TRUE(port.ok()) << port.status();
+
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<uint16_t>(*port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  std::vector<int> clients;
+  for (int i = 0; i < 100; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    ASSERT_GE(fd, 0);
+    // The kernel completes the handshake into the listen backlog whether or not the daemon
+    // accepts, so every connect succeeds.
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address), 0) << i;
+    clients.push_back(fd);
+  }
+  // The accept error the connections cause (gRPC's own log line).
+  EXPECT_TRUE(WaitForText(LogPath("daemon"), "Failed accept4: Too many open files", kTimeout))
+      << ReadFile(LogPath("daemon"));
+  for (int fd : clients) ::close(fd);
+
+  std::unique_ptr<v1::Station::Stub> stub = Stub(*port);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + kTimeout);
+  context.set_wait_for_ready(true);  // retry the connection until the daemon listens again
+  v1::StationStatus status;
+  const grpc::Status s = stub->GetStationStatus(&context, {}, &status);
+  EXPECT_TRUE(s.ok()) << s.error_code() << " " << s.error_message() << "\n"
+                      << ReadFile(LogPath("daemon"));
+  EXPECT_NE(
+      ReadFile(LogPath("daemon")).find("listening again on 127.0.0.1:" + std::to_string(*port)),
+      std::string::npos);
+  daemon->Signal(SIGTERM);
+  const int exit_status = daemon->Wait();
+  EXPECT_TRUE(WIFEXITED(exit_status) && WEXITSTATUS(exit_status) == 0)
+      << DescribeWaitStatus(exit_status);
+}
+
+}  // namespace
+}  // namespace linecal
