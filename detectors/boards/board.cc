@@ -204,41 +204,65 @@ void DrawArucoMarkers(Drawing& d) {
   DrawArucoMarker(d, 19, 430, 730);  // bottom
 }
 
-// ---- 5. AprilTag grid (april_board.pdf, A0) ------------------------------------------------
+// ---- 5. AprilTag grid (april_board.pdf, A0, or any AprilGrid) -----------------------------
 
-void DrawApriltagBoard(Drawing& d, int border_bits) {
-  constexpr int kTagsPerSide = 6;
-  constexpr double kTag = 88.0;               // black square side
-  constexpr double kSpacing = 0.3 * kTag;     // 26.4 mm between tags
-  constexpr double kPitch = kTag + kSpacing;  // 114.4 mm
-  // The grid is not centred on the A0 page: its centre, in board-frame millimetres, as
+constexpr double kAprilTagMm = 88.0;  // black square side at scale 1
+// A grid other than the PDF's is printed with this many gaps of white page around its outer
+// corner squares (a quiet zone for the tags' outer edges, without a page to trim).
+constexpr double kAprilGridMarginGaps = 2.0;
+
+bool IsApriltagPdfGrid(const BoardParams& p) {
+  return p.apriltag_cols == 6 && p.apriltag_rows == 6 && p.apriltag_spacing == 0.3 &&
+         p.apriltag_start_id == 0;
+}
+
+// The page of an AprilGrid other than the PDF's, mm: the grid with its corner squares and
+// the margin.
+Eigen::Vector2d AprilGridPageMm(const BoardParams& p) {
+  const double gap = p.apriltag_spacing * kAprilTagMm;
+  const double pitch = kAprilTagMm + gap;
+  const Eigen::Vector2d tags(p.apriltag_cols, p.apriltag_rows);
+  return tags * pitch + Eigen::Vector2d::Constant(gap + 2.0 * kAprilGridMarginGaps * gap);
+}
+
+void DrawApriltagBoard(Drawing& d, const BoardParams& p) {
+  const int cols = p.apriltag_cols, rows = p.apriltag_rows;
+  const double kTag = kAprilTagMm;
+  const double kSpacing = p.apriltag_spacing * kTag;  // 26.4 mm on the PDF
+  const double kPitch = kTag + kSpacing;             // 114.4 mm on the PDF
+  // The PDF's grid is not centred on the A0 page: its centre, in board-frame millimetres, as
   // measured from april_board.pdf (tag 0's black square starts at x = 280.517 pt,
-  // y = 1176.265 pt from the page's bottom-left; all 36 tags agree to 0.0002 mm).
-  constexpr double kGridCentreX = 8.46;
-  constexpr double kGridCentreY = 150.46;
+  // y = 1176.265 pt from the page's bottom-left; all 36 tags agree to 0.0002 mm). Any other
+  // grid is centred on its own page.
+  const bool pdf = IsApriltagPdfGrid(p);
+  const double kGridCentreX = pdf ? 8.46 : 0.0;
+  const double kGridCentreY = pdf ? 150.46 : 0.0;
   // tag36h11 has width_at_border 8 (a 1-bit border around 6 x 6 data cells), so its
   // bit_x, bit_y run 1..6; here the data cells sit inside `border_bits` black cells.
   constexpr int kDataBits = 6;
+  const int border_bits = p.apriltag_border_bits;
   const double bit = kTag / (kDataBits + 2 * border_bits);
 
   const std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)> family(tag36h11_create(),
                                                                                 tag36h11_destroy);
 
-  // The small black squares at the tag corners: a 7 x 7 lattice of kSpacing squares centred
-  // between the tags (and around the outside).
-  for (int r = 0; r <= kTagsPerSide; ++r) {
-    for (int c = 0; c <= kTagsPerSide; ++c) {
-      const double cx = kGridCentreX + (c - 0.5 * kTagsPerSide) * kPitch;
-      const double cy = kGridCentreY + (r - 0.5 * kTagsPerSide) * kPitch;
+  // The small black squares at the tag corners: a (cols + 1) x (rows + 1) lattice of kSpacing
+  // squares centred between the tags (and around the outside).
+  for (int r = 0; r <= rows; ++r) {
+    for (int c = 0; c <= cols; ++c) {
+      const double cx = kGridCentreX + (c - 0.5 * cols) * kPitch;
+      const double cy = kGridCentreY + (r - 0.5 * rows) * kPitch;
       d.BoardRect(Paint::kBlack, cx - 0.5 * kSpacing, cy - 0.5 * kSpacing, cx + 0.5 * kSpacing,
                   cy + 0.5 * kSpacing);
     }
   }
-  // Tag id = 6 * row + col, row 0 at the bottom, col 0 at the left (docs/boards.md).
-  for (int id = 0; id < kTagsPerSide * kTagsPerSide; ++id) {
-    const int row = id / kTagsPerSide, col = id % kTagsPerSide;
-    const double cx = kGridCentreX + (col - 0.5 * (kTagsPerSide - 1)) * kPitch;
-    const double cy = kGridCentreY + (row - 0.5 * (kTagsPerSide - 1)) * kPitch;
+  // Tag k = cols * row + col, row 0 at the bottom, col 0 at the left (docs/boards.md), with
+  // id start_id + k.
+  for (int k = 0; k < cols * rows; ++k) {
+    const int id = p.apriltag_start_id + k;
+    const int row = k / cols, col = k % cols;
+    const double cx = kGridCentreX + (col - 0.5 * (cols - 1)) * kPitch;
+    const double cy = kGridCentreY + (row - 0.5 * (rows - 1)) * kPitch;
     const double left = cx - 0.5 * kTag, right = cx + 0.5 * kTag;
     const double bottom = cy - 0.5 * kTag, top = cy + 0.5 * kTag;
     d.BoardRect(Paint::kBlack, left, bottom, right, top);
@@ -253,7 +277,7 @@ void DrawApriltagBoard(Drawing& d, int border_bits) {
                   left + bit * (cell_x + 1), top - bit * cell_y);
     }
     // Corners: top-left, top-right, bottom-right, bottom-left of the tag's canonical
-    // orientation (the PDF prints every tag upright); feature id = 4 * tag id + corner.
+    // orientation (the PDF prints every tag upright); feature id = 4 * k + corner.
     d.Feature(FeatureKind::kMarkerCorner, d.Board(left, top), id);
     d.Feature(FeatureKind::kMarkerCorner, d.Board(right, top), id);
     d.Feature(FeatureKind::kMarkerCorner, d.Board(right, bottom), id);
@@ -356,7 +380,7 @@ Eigen::Vector2d PageSizeMm(const BoardParams& p) {
     case BoardType::kAruco:
       return {1100.0, 1100.0};
     case BoardType::kApriltag:
-      return {841.0, 1189.0};
+      return IsApriltagPdfGrid(p) ? Eigen::Vector2d(841.0, 1189.0) : AprilGridPageMm(p);
     case BoardType::kRoundHole:
       return {1100.0, 1100.0};
     case BoardType::kChecker: {
@@ -423,6 +447,12 @@ const char* BoardParamsErrorName(BoardParamsError e) {
       return "bad_spacing";
     case BoardParamsError::kBadDiameter:
       return "bad_diameter";
+    case BoardParamsError::kBadTagGrid:
+      return "bad_tag_grid";
+    case BoardParamsError::kBadTagSpacing:
+      return "bad_tag_spacing";
+    case BoardParamsError::kBadStartId:
+      return "bad_start_id";
   }
   return "unknown";
 }
@@ -448,6 +478,17 @@ BoardParamsError ValidateBoardParams(const BoardParams& p) {
   const double nearest_m = p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m;
   if (!(std::isfinite(p.diameter_m) && p.diameter_m > 0.0 && p.diameter_m < nearest_m)) {
     return BoardParamsError::kBadDiameter;
+  }
+  if (p.apriltag_cols < 1 || p.apriltag_cols > kMaxAprilGridTags || p.apriltag_rows < 1 ||
+      p.apriltag_rows > kMaxAprilGridTags || p.apriltag_cols * p.apriltag_rows < 2) {
+    return BoardParamsError::kBadTagGrid;
+  }
+  if (!IsFiniteIn(p.apriltag_spacing, kMinAprilGridSpacing, kMaxAprilGridSpacing)) {
+    return BoardParamsError::kBadTagSpacing;
+  }
+  if (p.apriltag_start_id < 0 ||
+      p.apriltag_start_id > kTag36h11Codes - p.apriltag_cols * p.apriltag_rows) {
+    return BoardParamsError::kBadStartId;
   }
   return BoardParamsError::kOk;
 }
@@ -512,7 +553,7 @@ std::optional<Board> Board::Create(const BoardParams& params, BoardParamsError* 
       DrawArucoMarkers(d);
       break;
     case BoardType::kApriltag:
-      DrawApriltagBoard(d, params.apriltag_border_bits);
+      DrawApriltagBoard(d, params);
       break;
     case BoardType::kRoundHole:
       DrawRoundHoleBoard(d);

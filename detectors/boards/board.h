@@ -72,6 +72,15 @@ struct BoardParams {
   // ordinary tag36h11 layout. The black square stays 88 mm either way, so the features do
   // not change; only the bit size does (88 mm / 10 or / 8).
   int apriltag_border_bits = 2;
+  // kApriltag only (docs/boards.md §5): the grid, as Kalibr's AprilGrid target describes it.
+  // Tags per row (apriltag_cols) and per column (apriltag_rows); the gap between tags as a
+  // fraction of the tag's black square (Kalibr's tagSpacing); the id of the tag at the bottom
+  // left (ids run left to right, then upward). The black square is 88 mm * scale. The
+  // defaults are april_board.pdf; any other grid is printed centred on a page of its own.
+  int apriltag_cols = 6;
+  int apriltag_rows = 6;
+  double apriltag_spacing = 0.3;
+  int apriltag_start_id = 0;
 };
 
 enum class BoardParamsError {
@@ -83,6 +92,9 @@ enum class BoardParamsError {
   kBadBorderBits,  // neither 1 nor 2
   kBadSpacing,     // not finite or outside (0, kMaxCircleSpacingM]
   kBadDiameter,    // not finite, not > 0, or not below the nearest neighbours' distance
+  kBadTagGrid,     // apriltag_cols or _rows outside [1, kMaxAprilGridTags], or one tag only
+  kBadTagSpacing,  // not finite or outside [kMinAprilGridSpacing, kMaxAprilGridSpacing]
+  kBadStartId,     // negative, or the grid's last id beyond tag36h11's kTag36h11Codes - 1
 };
 
 // A board of 2.6 mm or of 260 m is a typo, not a board: scales outside this range are refused.
@@ -96,6 +108,12 @@ inline constexpr int kMaxCheckerCorners = 100;
 inline constexpr double kMaxCheckerSquareM = 1.0;
 // Nor circle grids with a centre distance over 1 m.
 inline constexpr double kMaxCircleSpacingM = 1.0;
+// AprilGrids: up to 50 tags a side (far beyond a printed target; tag36h11 has 587 codes), gaps
+// of 5% to 100% of a tag (Kalibr's tagSpacing; below 5% the corner squares vanish).
+inline constexpr int kMaxAprilGridTags = 50;
+inline constexpr double kMinAprilGridSpacing = 0.05;
+inline constexpr double kMaxAprilGridSpacing = 1.0;
+inline constexpr int kTag36h11Codes = 587;
 
 // A short, stable text per error ("bad_scale", ...), for reasons and messages.
 const char* BoardParamsErrorName(BoardParamsError e);

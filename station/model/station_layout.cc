@@ -14,10 +14,62 @@ namespace {
 constexpr const char* kFormat = "linecal.station";
 constexpr int kVersion = 1;
 
+// Out-of-int values fall to the board's validation as a clearly bad value.
+int ClampToInt(std::int64_t v) {
+  constexpr std::int64_t kClamp = 1 << 20;
+  return static_cast<int>(std::clamp<std::int64_t>(v, -kClamp, kClamp));
+}
+
+// The AprilGrid's keys (docs/station-and-car.md): tag_cols, tag_rows, tag_spacing, start_id;
+// absent ones keep the PDF's grid.
+absl::Status ReadAprilGrid(const JsonField& f, BoardParams* params) {
+  absl::StatusOr<std::int64_t> cols = f.IntegerOr("tag_cols", params->apriltag_cols);
+  if (!cols.ok()) return cols.status();
+  absl::StatusOr<std::int64_t> rows = f.IntegerOr("tag_rows", params->apriltag_rows);
+  if (!rows.ok()) return rows.status();
+  absl::StatusOr<double> spacing = f.NumberOr("tag_spacing", params->apriltag_spacing);
+  if (!spacing.ok()) return spacing.status();
+  absl::StatusOr<std::int64_t> start = f.IntegerOr("start_id", params->apriltag_start_id);
+  if (!start.ok()) return start.status();
+  params->apriltag_cols = ClampToInt(*cols);
+  params->apriltag_rows = ClampToInt(*rows);
+  params->apriltag_spacing = *spacing;
+  params->apriltag_start_id = ClampToInt(*start);
+  return absl::OkStatus();
+}
+
+// The station file's key of the field a BoardParamsError is about.
+const char* KeyOfBoardError(BoardParamsError error) {
+  switch (error) {
+    case BoardParamsError::kOk:
+    case BoardParamsError::kBadScale:
+      return "scale";
+    case BoardParamsError::kBadCols:
+      return "cols";
+    case BoardParamsError::kBadRows:
+      return "rows";
+    case BoardParamsError::kBadSquare:
+      return "square_m";
+    case BoardParamsError::kBadSpacing:
+      return "spacing_m";
+    case BoardParamsError::kBadDiameter:
+      return "diameter_m";
+    case BoardParamsError::kBadBorderBits:
+      return "border_bits";
+    case BoardParamsError::kBadTagGrid:
+      return "tag_cols";
+    case BoardParamsError::kBadTagSpacing:
+      return "tag_spacing";
+    case BoardParamsError::kBadStartId:
+      return "start_id";
+  }
+  return "type";
+}
+
 absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
                                 "diameter_m", "asymmetric", "light_circles", "border_bits",
-                                "pose"});
+                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "pose"});
       !s.ok()) {
     return s;
   }
@@ -53,28 +105,18 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (!light_circles.ok()) return light_circles.status();
   absl::StatusOr<std::int64_t> border = f.IntegerOr("border_bits", params.apriltag_border_bits);
   if (!border.ok()) return border.status();
-  // Out-of-int values fall to the validation below as a clearly bad value.
-  constexpr std::int64_t kClamp = 1 << 20;
-  params.cols = static_cast<int>(std::clamp<std::int64_t>(*cols, -kClamp, kClamp));
-  params.rows = static_cast<int>(std::clamp<std::int64_t>(*rows, -kClamp, kClamp));
+  params.cols = ClampToInt(*cols);
+  params.rows = ClampToInt(*rows);
   params.square_m = *square;
   params.spacing_m = *spacing;
   params.diameter_m = *diameter;
   params.asymmetric = *asymmetric;
   params.light_circles = *light_circles;
-  params.apriltag_border_bits = static_cast<int>(std::clamp<std::int64_t>(*border, -kClamp, kClamp));
+  params.apriltag_border_bits = ClampToInt(*border);
+  if (absl::Status s = ReadAprilGrid(f, &params); !s.ok()) return s;
   BoardParamsError error = BoardParamsError::kOk;
   std::optional<Board> board = Board::Create(params, &error);
-  if (!board) {
-    const char* field = error == BoardParamsError::kBadScale     ? "scale"
-                        : error == BoardParamsError::kBadCols    ? "cols"
-                        : error == BoardParamsError::kBadRows    ? "rows"
-                        : error == BoardParamsError::kBadSquare    ? "square_m"
-                        : error == BoardParamsError::kBadSpacing   ? "spacing_m"
-                        : error == BoardParamsError::kBadDiameter  ? "diameter_m"
-                                                                   : "border_bits";
-    return f.Error(field, BoardParamsErrorName(error));
-  }
+  if (!board) return f.Error(KeyOfBoardError(error), BoardParamsErrorName(error));
   absl::StatusOr<Rigid3d> pose = ReadPose(f, "pose", BoardBaseRotation());
   if (!pose.ok()) return pose.status();
   return StationBoard{*id, params, std::move(*board), *pose};
@@ -207,7 +249,13 @@ nlohmann::json StationLayoutToJson(const StationLayout& layout) {
       j["asymmetric"] = p.asymmetric;
       j["light_circles"] = p.light_circles;
     }
-    if (p.type == BoardType::kApriltag) j["border_bits"] = p.apriltag_border_bits;
+    if (p.type == BoardType::kApriltag) {
+      j["border_bits"] = p.apriltag_border_bits;
+      j["tag_cols"] = p.apriltag_cols;
+      j["tag_rows"] = p.apriltag_rows;
+      j["tag_spacing"] = p.apriltag_spacing;
+      j["start_id"] = p.apriltag_start_id;
+    }
     j["pose"] = PoseToJson(b.T_station_board, BoardBaseRotation());
     boards.push_back(std::move(j));
   }

@@ -68,6 +68,15 @@ constexpr char kAprilGrid[] =
     "tagSize: 0.044           #size of apriltag, edge to edge [m]\n"
     "tagSpacing: 0.3          #ratio of space between tags to tagSize\n";
 
+// Another size, gap and first id, as a Kalibr user's own grid may have.
+constexpr char kAprilGrid43[] =
+    "target_type: 'aprilgrid'\n"
+    "tagCols: 4\n"
+    "tagRows: 3\n"
+    "tagSize: 0.044\n"
+    "tagSpacing: 0.25\n"
+    "tagStartId: 100\n";
+
 struct SameBoard {
   const char* name;
   const char* yaml;
@@ -81,6 +90,9 @@ TEST_F(TargetCliTest, EachKindDrawsTheBoardOfItsFlagsAndIsFoundOnIt) {
       {"circlegrid", kCircleGrid,
        "--board circle_grid --cols 4 --rows 11 --spacing 0.02 --diameter 0.01 --asymmetric", 44},
       {"aprilgrid", kAprilGrid, "--board apriltag --scale 0.5", 144},
+      {"aprilgrid43", kAprilGrid43,
+       "--board apriltag --scale 0.5 --tag-cols 4 --tag-rows 3 --tag-spacing 0.25 --start-id 100",
+       48},
   };
   for (const SameBoard& c : cases) {
     SCOPED_TRACE(c.name);
@@ -155,18 +167,22 @@ TEST_F(TargetCliTest, BadFilesExitTwoNamingTheFileAndTheKey) {
        "asymmetricGrid: maybe\n",
        "", "bool.yaml: asymmetricGrid: 'maybe' is not a boolean"},
       {"grid.yaml",
-       "target_type: aprilgrid\ntagCols: 7\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n", "",
-       "grid.yaml: tagCols: 7 x tagRows 6: linecal's AprilGrid has 6 x 6 tags"},
+       "target_type: aprilgrid\ntagCols: 0\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n", "",
+       "grid.yaml: tagCols: 0 x 6 tags: each in [1, 50], two tags at least"},
       {"gap.yaml",
-       "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.25\n", "",
-       "gap.yaml: tagSpacing: 0.25: linecal's AprilGrid has gaps of 0.3 tag"},
+       "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.01\n", "",
+       "gap.yaml: tagSpacing: 0.01 is outside [0.05, 1]"},
+      {"start.yaml",
+       "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n"
+       "tagStartId: 560\n",
+       "", "start.yaml: tagStartId: 560: ids 560..595 must lie in tag36h11's 0..586"},
       {"tiny.yaml",
        "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.00001\ntagSpacing: 0.3\n", "",
        "tiny.yaml: tagSize: 1e-05 m is outside [8.8e-05, 8.8] m"},
       {"mixed.yaml", kCheckerboard, "--cols 5",
        "--cols cannot be combined with --target (the file gives the board)"},
       {"diameter.yaml", kCheckerboard, "--diameter 0.01",
-       "--diameter applies to a circle grid only;"},
+       "--diameter applies to a circle_grid only;"},
       {"big.yaml", kCircleGrid, "--diameter 0.05",
        "--diameter: 0.05 m must be > 0 and below the nearest circles' distance"},
   };

@@ -36,15 +36,38 @@ const char* OptionOf(BoardParamsError e) {
       return "spacing";
     case BoardParamsError::kBadDiameter:
       return "diameter";
+    case BoardParamsError::kBadTagGrid:
+      return "tag-cols";
+    case BoardParamsError::kBadTagSpacing:
+      return "tag-spacing";
+    case BoardParamsError::kBadStartId:
+      return "start-id";
   }
   return "board";
+}
+
+// --tag-cols, --tag-rows, --tag-spacing, --start-id into *p (their defaults: p's).
+absl::Status AprilGridFromCommandLine(const cli::CommandLine& cl, BoardParams* p) {
+  absl::StatusOr<int> cols = cl.GetInt("tag-cols", p->apriltag_cols);
+  if (!cols.ok()) return cols.status();
+  absl::StatusOr<int> rows = cl.GetInt("tag-rows", p->apriltag_rows);
+  if (!rows.ok()) return rows.status();
+  absl::StatusOr<double> spacing = cl.GetDouble("tag-spacing", p->apriltag_spacing);
+  if (!spacing.ok()) return spacing.status();
+  absl::StatusOr<int> start = cl.GetInt("start-id", p->apriltag_start_id);
+  if (!start.ok()) return start.status();
+  p->apriltag_cols = *cols;
+  p->apriltag_rows = *rows;
+  p->apriltag_spacing = *spacing;
+  p->apriltag_start_id = *start;
+  return absl::OkStatus();
 }
 
 // --target FILE: the file gives the board; only what Kalibr's file cannot say (a circle grid's
 // diameter and polarity) may be added.
 absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
   for (const char* option : {"board", "scale", "cols", "rows", "square", "spacing", "asymmetric",
-                             "border-bits"}) {
+                             "tag-cols", "tag-rows", "tag-spacing", "start-id"}) {
     if (cl.Has(option)) {
       return absl::InvalidArgumentError(
           absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
@@ -52,13 +75,20 @@ absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
   }
   absl::StatusOr<BoardParams> p = ReadKalibrTarget(cl.Get("target", ""));
   if (!p.ok()) return p.status();
-  for (const char* option : {"diameter", "light-circles"}) {
-    if (cl.Has(option) && p->type != BoardType::kCircleGrid) {
-      return absl::InvalidArgumentError(absl::StrCat("--", option, " applies to a circle grid only; ",
+  const std::pair<const char*, BoardType> additions[] = {{"diameter", BoardType::kCircleGrid},
+                                                         {"light-circles", BoardType::kCircleGrid},
+                                                         {"border-bits", BoardType::kApriltag}};
+  for (const auto& [option, type] : additions) {
+    if (cl.Has(option) && p->type != type) {
+      return absl::InvalidArgumentError(absl::StrCat("--", option, " applies to a ",
+                                                     BoardTypeName(type), " only; ",
                                                      cl.Get("target", ""), " describes a ",
                                                      BoardTypeName(p->type)));
     }
   }
+  absl::StatusOr<int> border_bits = cl.GetInt("border-bits", p->apriltag_border_bits);
+  if (!border_bits.ok()) return border_bits.status();
+  p->apriltag_border_bits = *border_bits;
   absl::StatusOr<double> diameter = cl.GetDouble("diameter", p->diameter_m);
   if (!diameter.ok()) return diameter.status();
   p->diameter_m = *diameter;
@@ -93,6 +123,16 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
                           " m must be > 0 and below the nearest circles' distance (",
                           p.asymmetric ? "spacing * sqrt(2)" : "the spacing", ", ",
                           p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m, " m)");
+    case BoardParamsError::kBadTagGrid:
+      return absl::StrCat(p.apriltag_cols, " x ", p.apriltag_rows, " tags: each in [1, ",
+                          kMaxAprilGridTags, "], two tags at least");
+    case BoardParamsError::kBadTagSpacing:
+      return absl::StrCat(p.apriltag_spacing, " is outside [", kMinAprilGridSpacing, ", ",
+                          kMaxAprilGridSpacing, "]");
+    case BoardParamsError::kBadStartId:
+      return absl::StrCat(p.apriltag_start_id, ": ids ", p.apriltag_start_id, "..",
+                          p.apriltag_start_id + p.apriltag_cols * p.apriltag_rows - 1,
+                          " must lie in tag36h11's 0..", kTag36h11Codes - 1);
   }
   return "invalid";
 }
@@ -111,6 +151,10 @@ std::vector<cli::OptionSpec> BoardOptionSpecs() {
       {"asymmetric", "", "circle_grid only: OpenCV's asymmetric grid (default symmetric)"},
       {"light-circles", "", "circle_grid only: white circles on black (default black on white)"},
       {"border-bits", "B", "apriltag only: black tag border, 2 (Kalibr, default) or 1"},
+      {"tag-cols", "N", "apriltag only: tags per row (default 6)"},
+      {"tag-rows", "M", "apriltag only: tags per column (default 6)"},
+      {"tag-spacing", "R", "apriltag only: gap between tags / tag side (default 0.3)"},
+      {"start-id", "K", "apriltag only: tag36h11 id of the bottom-left tag (default 0)"},
   };
 }
 
@@ -139,6 +183,10 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
       {"asymmetric", {BoardType::kCircleGrid}},
       {"light-circles", {BoardType::kCircleGrid}},
       {"border-bits", {BoardType::kApriltag}},
+      {"tag-cols", {BoardType::kApriltag}},
+      {"tag-rows", {BoardType::kApriltag}},
+      {"tag-spacing", {BoardType::kApriltag}},
+      {"start-id", {BoardType::kApriltag}},
   };
   for (const Applies& a : applies) {
     if (!cl.Has(a.option) || absl::c_linear_search(a.types, p.type)) continue;
@@ -161,6 +209,7 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   if (!diameter.ok()) return diameter.status();
   absl::StatusOr<int> border_bits = cl.GetInt("border-bits", p.apriltag_border_bits);
   if (!border_bits.ok()) return border_bits.status();
+  if (absl::Status s = AprilGridFromCommandLine(cl, &p); !s.ok()) return s;
   p.scale = *scale;
   p.cols = *cols;
   p.rows = *rows;

@@ -12,10 +12,8 @@
 namespace linecal::tools {
 namespace {
 
-// linecal's AprilGrid (docs/boards.md §5): 6 x 6 tags of 88 mm, gaps of 0.3 tag.
-constexpr int kAprilGridTags = 6;
+// linecal's AprilGrid tag at scale 1 (docs/boards.md §5): other tag sizes are scales of it.
 constexpr double kAprilGridTagM = 0.088;
-constexpr double kAprilGridSpacing = 0.3;
 
 // One file's keys, each read with an error that names the file and the key.
 class TargetYaml {
@@ -101,18 +99,17 @@ absl::StatusOr<BoardParams> AprilGrid(const TargetYaml& y) {
   p.type = BoardType::kApriltag;
   BoardParams size;
   if (absl::Status s = ReadSize(y, "tagCols", "tagRows", &size); !s.ok()) return s;
-  if (size.cols != kAprilGridTags || size.rows != kAprilGridTags) {
-    return y.Error("tagCols", absl::StrCat(size.cols, " x tagRows ", size.rows,
-                                           ": linecal's AprilGrid has 6 x 6 tags"));
-  }
   absl::StatusOr<double> tag = y.Get<double>("tagSize");
   if (!tag.ok()) return tag.status();
   absl::StatusOr<double> spacing = y.Get<double>("tagSpacing");
   if (!spacing.ok()) return spacing.status();
-  if (std::abs(*spacing - kAprilGridSpacing) > 1e-6) {
-    return y.Error("tagSpacing", absl::StrCat(*spacing, ": linecal's AprilGrid has gaps of ",
-                                              kAprilGridSpacing, " tag"));
-  }
+  // Kalibr numbers the tags from 0; its newer files may say where they start.
+  absl::StatusOr<int> start = y.Get<int>("tagStartId", 0);
+  if (!start.ok()) return start.status();
+  p.apriltag_cols = size.cols;
+  p.apriltag_rows = size.rows;
+  p.apriltag_spacing = *spacing;
+  p.apriltag_start_id = *start;
   p.scale = *tag / kAprilGridTagM;
   return p;
 }
@@ -126,6 +123,12 @@ const char* KeyOf(BoardParamsError e) {
       return "targetRows";
     case BoardParamsError::kBadSquare:
       return "rowSpacingMeters";
+    case BoardParamsError::kBadTagGrid:
+      return "tagCols";
+    case BoardParamsError::kBadTagSpacing:
+      return "tagSpacing";
+    case BoardParamsError::kBadStartId:
+      return "tagStartId";
     default:
       return "spacingMeters";
   }

@@ -6,8 +6,9 @@
 //                                 rowSpacingMeters = colSpacingMeters (the square side)
 //   target_type: 'circlegrid'     targetCols, targetRows (circles), spacingMeters,
 //                                 asymmetricGrid (OpenCV's asymmetric layout)
-//   target_type: 'aprilgrid'      tagCols = tagRows = 6, tagSize (m), tagSpacing = 0.3:
-//                                 linecal's AprilGrid (docs/boards.md §5) at scale tagSize / 88 mm
+//   target_type: 'aprilgrid'      tagCols, tagRows, tagSize (m), tagSpacing (gap / tag),
+//                                 tagStartId (default 0): linecal's AprilGrid (docs/boards.md
+//                                 §5) at scale tagSize / 88 mm
 //
 // Kalibr's circle grid file gives no circle diameter: linecal takes half the spacing (the
 // detector does not need it; `linecal pattern` draws it), and `--diameter` overrides it.
@@ -22,8 +23,7 @@ namespace linecal::tools {
 // The board a Kalibr target YAML file describes. Errors (InvalidArgument, one line starting
 // with the path and naming the key): the file missing or not YAML, target_type missing or not
 // one of the three, a key missing or not a number, values linecal's board refuses (with the
-// key and the range), unequal row and column spacing, and an AprilGrid other than 6 x 6 tags
-// with tagSpacing 0.3.
+// key and the range), and unequal row and column spacing.
 absl::StatusOr<BoardParams> ReadKalibrTarget(const std::string& path);
 
 }  // namespace linecal::tools

@@ -288,6 +288,42 @@ TEST(ApriltagDetectorTest, TagOffItsPlaceByPartOfACellFailsThroughALens) {
   EXPECT_EQ(d.reason, DetectReason::kVerificationFailed) << DetectReasonName(d.reason);
 }
 
+// A Kalibr AprilGrid of another size, gap and first id (docs/boards.md §5): 4 x 3 tags of
+// 44 mm, gaps of a quarter tag, ids 100..111, clean and noisy; and the default 6 x 6 grid
+// finds nothing on it (no tag of ids 0..35 there).
+TEST(ApriltagDetectorTest, GridOfAnySizeSpacingAndStartId) {
+  BoardParams p;
+  p.type = BoardType::kApriltag;
+  p.scale = 0.5;
+  p.apriltag_cols = 4;
+  p.apriltag_rows = 3;
+  p.apriltag_spacing = 0.25;
+  p.apriltag_start_id = 100;
+  const Board board = *Board::Create(p);
+  BoardView view;
+  view.params = p;
+  view.distance_m = 0.7;
+  view.roll_deg = 10.0;
+  view.yaw_deg = 20.0;
+  for (const bool noisy : {false, true}) {
+    SCOPED_TRACE(noisy ? "noisy" : "clean");
+    const CameraFrame frame = RenderView(view, noisy ? NoisyRender() : CleanRender(), 30);
+    const Detection d = DetectApriltag(frame.image8.view(), board);
+    ASSERT_TRUE(d.found) << DetectReasonName(d.reason);
+    ASSERT_EQ(d.features.size(), 48u);
+    for (std::size_t i = 0; i < d.features.size(); ++i) {
+      EXPECT_EQ(d.features[i].id, static_cast<int>(i));
+      EXPECT_EQ(d.features[i].marker, 100 + static_cast<int>(i / 4));
+    }
+    int matched = 0;
+    int unknown = 0;
+    EXPECT_LE(FeatureRmsPx(d, frame, &matched, &unknown), noisy ? kNoisyRmsBarPx : kCleanRmsBarPx);
+    EXPECT_EQ(matched, 48);
+    EXPECT_EQ(unknown, 0);
+    EXPECT_FALSE(DetectApriltag(frame.image8.view(), Grid(2)).found);
+  }
+}
+
 TEST(ApriltagDetectorTest, PartialGridReportsOnlyCertainTags) {
   const Board board = Grid(2);
   BoardView view;

@@ -319,6 +319,46 @@ void ExpectAprilGrid(int border_bits) {
 TEST(Board, AprilGridTwoBitBorderMatchesPdf) { ExpectAprilGrid(2); }
 TEST(Board, AprilGridOneBitBorder) { ExpectAprilGrid(1); }
 
+// Kalibr's AprilGrid of any size (docs/boards.md §5): 4 x 3 tags of 44 mm (scale 0.5), gaps of
+// a quarter tag, ids from 100; centred on a page of its own with two gaps of margin.
+TEST(Board, AprilGridOfAnySizeSpacingAndStartId) {
+  BoardParams p;
+  p.type = BoardType::kApriltag;
+  p.scale = 0.5;
+  p.apriltag_cols = 4;
+  p.apriltag_rows = 3;
+  p.apriltag_spacing = 0.25;
+  p.apriltag_start_id = 100;
+  const std::optional<Board> b = Board::Create(p);
+  ASSERT_TRUE(b.has_value());
+  constexpr double kTag = 0.044, kGap = 0.011, kPitch = kTag + kGap;
+  // 4 pitches + one gap of corner squares + 2 x 2 gaps of margin, by 3 pitches + 5 gaps.
+  ExpectNear(b->page_size_m(), Eigen::Vector2d(4 * kPitch + 5 * kGap, 3 * kPitch + 5 * kGap),
+             1e-12, "page");
+  ASSERT_EQ(b->features().size(), 48u);
+  const std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)> family(tag36h11_create(),
+                                                                                tag36h11_destroy);
+  for (int k = 0; k < 12; ++k) {
+    const int row = k / 4, col = k % 4;  // bottom-left first, left to right, then up
+    const Eigen::Vector2d bottom_left(-2 * kPitch + 0.5 * kGap + col * kPitch,
+                                      -1.5 * kPitch + 0.5 * kGap + row * kPitch);
+    const BoardFeature& f = b->features()[4 * k + 3];
+    ExpectNear(f.p_board, bottom_left, 1e-12, "tag " + std::to_string(k));
+    EXPECT_EQ(f.marker, 100 + k);
+    EXPECT_EQ(f.id, 4 * k + 3);
+    // Its first code bit printed as tag36h11 code 100 + k has it (2-bit border: 8.8 mm bits
+    // at scale 1, 4.4 mm here).
+    const double bit = kTag / 10.0;
+    const bool white = (family->codes[100 + k] >> (family->nbits - 1)) & 1u;
+    const Eigen::Vector2d cell(bottom_left.x() + bit * (2 + family->bit_x[0] - 1 + 0.5),
+                               bottom_left.y() + kTag - bit * (2 + family->bit_y[0] - 1 + 0.5));
+    EXPECT_EQ(b->PaintAt(cell), white ? Paint::kWhite : Paint::kBlack) << "tag " << k;
+  }
+  // A corner square at the grid's bottom-left corner, white margin beyond it.
+  EXPECT_EQ(b->PaintAt(Eigen::Vector2d(-2 * kPitch, -1.5 * kPitch)), Paint::kBlack);
+  EXPECT_EQ(b->PaintAt(Eigen::Vector2d(-2 * kPitch - 1.5 * kGap, -1.5 * kPitch)), Paint::kWhite);
+}
+
 TEST(Board, CheckerCorners) {
   BoardParams p;
   p.type = BoardType::kChecker;
@@ -477,6 +517,23 @@ TEST(Board, ValidationReasons) {
               p.diameter_m = 1.42 * p.spacing_m;
             }),
             BoardParamsError::kBadDiameter);
+  EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_cols = 0; }), BoardParamsError::kBadTagGrid);
+  EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_rows = 51; }), BoardParamsError::kBadTagGrid);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.apriltag_cols = 1;
+              p.apriltag_rows = 1;
+            }),
+            BoardParamsError::kBadTagGrid);
+  EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_spacing = 0.01; }),
+            BoardParamsError::kBadTagSpacing);
+  EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_spacing = std::nan(""); }),
+            BoardParamsError::kBadTagSpacing);
+  EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_start_id = -1; }),
+            BoardParamsError::kBadStartId);
+  // tag36h11 has 587 codes: 36 tags from 551 end at 586, from 552 they run out.
+  EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_start_id = 551; }), BoardParamsError::kOk);
+  EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_start_id = 552; }),
+            BoardParamsError::kBadStartId);
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadDiameter), "bad_diameter");
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadSquare), "bad_square");
 }

@@ -103,6 +103,28 @@ TEST(StationLayoutTest, CircleGridParametersRoundTrip) {
   EXPECT_EQ(again->boards.at(0).board.features().size(), 44u);
 }
 
+TEST(StationLayoutTest, AprilGridParametersRoundTrip) {
+  const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
+      {"id": "a", "type": "apriltag", "scale": 0.5, "tag_cols": 4, "tag_rows": 3,
+       "tag_spacing": 0.25, "start_id": 100, "border_bits": 1,
+       "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}}]})";
+  absl::StatusOr<StationLayout> s = ParseStationLayout(json, "st.json");
+  ASSERT_TRUE(s.ok()) << s.status();
+  absl::StatusOr<StationLayout> again = ParseStationLayout(StationLayoutToJson(*s).dump(), "copy");
+  ASSERT_TRUE(again.ok()) << again.status();
+  const BoardParams& p = again->boards.at(0).params;
+  EXPECT_EQ(p.type, BoardType::kApriltag);
+  EXPECT_EQ(p.apriltag_cols, 4);
+  EXPECT_EQ(p.apriltag_rows, 3);
+  EXPECT_EQ(p.apriltag_spacing, 0.25);
+  EXPECT_EQ(p.apriltag_start_id, 100);
+  EXPECT_EQ(p.apriltag_border_bits, 1);
+  const std::vector<BoardFeature>& f = again->boards.at(0).board.features();
+  ASSERT_EQ(f.size(), 48u);
+  EXPECT_EQ(f.front().marker, 100);
+  EXPECT_EQ(f.back().marker, 111);
+}
+
 // Each broken document must fail with a message containing `expected`.
 struct BrokenCase {
   const char* name;
@@ -138,6 +160,10 @@ INSTANTIATE_TEST_SUITE_P(
                    "boards[0].scale: expected a number"},
         BrokenCase{"bad_diameter", "{" HDR R"(, "boards": [{"id": "a", "type": "circle_grid", "diameter_m": 0.03, )" POSE "}]}",
                    "boards[0].diameter_m: bad_diameter"},
+        BrokenCase{"bad_tag_grid", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "tag_cols": 0, )" POSE "}]}",
+                   "boards[0].tag_cols: bad_tag_grid"},
+        BrokenCase{"bad_start_id", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "start_id": 560, )" POSE "}]}",
+                   "boards[0].start_id: bad_start_id"},
         BrokenCase{"missing_pose", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco"}]})", "boards[0].pose: missing"},
         BrokenCase{"short_xyz", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "pose": {"xyz_m": [1, 2], "ypr_deg": [0, 0, 0]}}]})",
                    "boards[0].pose.xyz_m: expected 3 numbers, got 2"},
