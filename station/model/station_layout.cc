@@ -231,31 +231,36 @@ absl::StatusOr<StationLayout> ReadStationLayout(const std::string& path) {
   return ParseStationLayout(*text, path);
 }
 
+nlohmann::json BoardParamsToJson(const BoardParams& p) {
+  nlohmann::json j = {{"scale", p.scale}};
+  if (p.type == BoardType::kChecker) {
+    j["cols"] = p.cols;
+    j["rows"] = p.rows;
+    j["square_m"] = p.square_m;
+  }
+  if (p.type == BoardType::kCircleGrid) {
+    j["cols"] = p.cols;
+    j["rows"] = p.rows;
+    j["spacing_m"] = p.spacing_m;
+    j["diameter_m"] = p.diameter_m;
+    j["asymmetric"] = p.asymmetric;
+    j["light_circles"] = p.light_circles;
+  }
+  if (p.type == BoardType::kApriltag) {
+    j["border_bits"] = p.apriltag_border_bits;
+    j["tag_cols"] = p.apriltag_cols;
+    j["tag_rows"] = p.apriltag_rows;
+    j["tag_spacing"] = p.apriltag_spacing;
+    j["start_id"] = p.apriltag_start_id;
+  }
+  return j;
+}
+
 nlohmann::json StationLayoutToJson(const StationLayout& layout) {
   nlohmann::json boards = nlohmann::json::array();
   for (const StationBoard& b : layout.boards) {
-    const BoardParams& p = b.params;
-    nlohmann::json j = {{"id", b.id}, {"type", BoardTypeName(p.type)}, {"scale", p.scale}};
-    if (p.type == BoardType::kChecker) {
-      j["cols"] = p.cols;
-      j["rows"] = p.rows;
-      j["square_m"] = p.square_m;
-    }
-    if (p.type == BoardType::kCircleGrid) {
-      j["cols"] = p.cols;
-      j["rows"] = p.rows;
-      j["spacing_m"] = p.spacing_m;
-      j["diameter_m"] = p.diameter_m;
-      j["asymmetric"] = p.asymmetric;
-      j["light_circles"] = p.light_circles;
-    }
-    if (p.type == BoardType::kApriltag) {
-      j["border_bits"] = p.apriltag_border_bits;
-      j["tag_cols"] = p.apriltag_cols;
-      j["tag_rows"] = p.apriltag_rows;
-      j["tag_spacing"] = p.apriltag_spacing;
-      j["start_id"] = p.apriltag_start_id;
-    }
+    nlohmann::json j = {{"id", b.id}, {"type", BoardTypeName(b.params.type)}};
+    j.update(BoardParamsToJson(b.params));
     j["pose"] = PoseToJson(b.T_station_board, BoardBaseRotation());
     boards.push_back(std::move(j));
   }

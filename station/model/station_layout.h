@@ -56,4 +56,8 @@ absl::StatusOr<StationLayout> ReadStationLayout(const std::string& path);
 absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text, const std::string& source);
 nlohmann::json StationLayoutToJson(const StationLayout& layout);
 
+// A board's parameters as the station file writes them: "scale" and the keys of its type
+// (docs/station-and-car.md), e.g. {"scale": 1, "cols": 9, "rows": 6, "square_m": 0.025}.
+nlohmann::json BoardParamsToJson(const BoardParams& params);
+
 }  // namespace linecal

@@ -9,6 +9,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "detectors/boards/board.h"
+#include "station/model/station_layout.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
 
@@ -28,7 +29,7 @@ const char* Description(BoardType type) {
     case BoardType::kAruco:
       return "four DICT_4X4_50 markers, ids 4, 11, 12, 19";
     case BoardType::kApriltag:
-      return "6 x 6 tag36h11 AprilGrid, ids 0..35, on A0";
+      return "tag36h11 AprilGrid: 6 x 6 tags, ids 0..35, on A0 (or any Kalibr AprilGrid)";
     case BoardType::kRoundHole:
       return "five through holes (LiDAR) and four ArUco markers";
     case BoardType::kChecker:
@@ -37,25 +38,6 @@ const char* Description(BoardType type) {
       return "OpenCV circle grid, cols x rows circles, symmetric or asymmetric";
   }
   return "";
-}
-
-nlohmann::json Parameters(const BoardParams& p) {
-  nlohmann::json j = {{"scale", p.scale}};
-  if (p.type == BoardType::kChecker) {
-    j["cols"] = p.cols;
-    j["rows"] = p.rows;
-    j["square_m"] = p.square_m;
-  }
-  if (p.type == BoardType::kCircleGrid) {
-    j["cols"] = p.cols;
-    j["rows"] = p.rows;
-    j["spacing_m"] = p.spacing_m;
-    j["diameter_m"] = p.diameter_m;
-    j["asymmetric"] = p.asymmetric;
-    j["light_circles"] = p.light_circles;
-  }
-  if (p.type == BoardType::kApriltag) j["border_bits"] = p.apriltag_border_bits;
-  return j;
 }
 
 }  // namespace
@@ -77,7 +59,7 @@ int RunBoards(const Args& args) {
     if (!board.has_value()) return cli::BadInput(kCommand, "default parameters are invalid");
     std::map<std::string, int> kinds;
     for (const BoardFeature& f : board->features()) ++kinds[FeatureKindName(f.kind)];
-    const nlohmann::json parameters = Parameters(params);
+    const nlohmann::json parameters = BoardParamsToJson(params);
     boards.push_back({{"name", board->name()},
                       {"description", Description(type)},
                       {"page_width_m", board->page_size_m().x()},

@@ -196,7 +196,9 @@ TEST_F(LidarUdpSourceTest, AnotherModelsPacketsAreDataLossNamingTheCount) {
   }
   ASSERT_TRUE(absl::IsDataLoss(got.status())) << got.status();
   const LidarUdpCounters counters = source.last_counters();
-  EXPECT_GT(counters.receiver.datagrams, 1000);
+  // How many arrive in the second depends on the machine's load (a sanitized build on two busy
+  // cores sends fewer); what matters is that every one of them is counted as skipped.
+  EXPECT_GT(counters.receiver.datagrams, 10);
   EXPECT_EQ(counters.decoder.packets_decoded, 0);
   EXPECT_EQ(counters.decoder.skipped_total(), counters.receiver.datagrams);
   EXPECT_NE(got.status().message().find(absl::StrCat("roof_lidar: ", counters.receiver.datagrams, " packets from 127.0.0.1:")),
