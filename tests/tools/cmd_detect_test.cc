@@ -192,6 +192,47 @@ TEST_F(DetectCliTest, ColourJpegPhotoThroughADistortingLens) {
   }
 }
 
+// A board with ids partly out of view (issue 19, part 3): the tags seen come back with their
+// ids, where the whole view puts them, and "complete": false; exit 1 (the whole board is not
+// there). The AprilGrid rendered at 0.9 m with its right part beyond the image's border.
+TEST_F(DetectCliTest, PartialViewReturnsTheSeenFeaturesWithTheirIds) {
+  test_scene::BoardView view;
+  view.params.type = BoardType::kApriltag;
+  view.distance_m = 1.4;
+  view.offset_m = Eigen::Vector2d(-0.008, -0.150);  // the grid's centre (docs/boards.md)
+  const CameraFrame whole = test_scene::RenderView(view, CameraRenderOptions{}, 3);
+  view.offset_m.x() += 0.75;  // two of the six columns of tags beyond the image border
+  const CameraFrame cut = test_scene::RenderView(view, CameraRenderOptions{}, 3);
+  ASSERT_TRUE(WritePng8(Path("whole.png"), whole.image8.view()).ok());
+  ASSERT_TRUE(WritePng8(Path("cut.png"), cut.image8.view()).ok());
+
+  const auto full = RunLinecal("detect --board apriltag --json --image " + Path("whole.png"));
+  ASSERT_EQ(full.exit_code, 0) << full.err;
+  const nlohmann::json f = nlohmann::json::parse(full.out);
+  EXPECT_TRUE(f.at("complete").get<bool>());
+  EXPECT_EQ(f.at("features").size(), 144u);
+
+  const auto run = RunLinecal("detect --board apriltag --json --image " + Path("cut.png"));
+  EXPECT_EQ(run.exit_code, 1) << run.err;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  EXPECT_FALSE(j.at("found").get<bool>());
+  EXPECT_FALSE(j.at("complete").get<bool>());
+  EXPECT_EQ(j.at("reason"), "partial");
+  const nlohmann::json& seen = j.at("features");
+  ASSERT_GE(seen.size(), 48u);  // at least a third of the grid stays in view
+  ASSERT_LT(seen.size(), 144u);
+  // Every feature seen is the one its id says: the truth of the cut render has it there.
+  for (const nlohmann::json& x : seen) {
+    const int id = x.at("id");
+    const Eigen::Vector2d uv(x.at("u").get<double>(), x.at("v").get<double>());
+    const auto truth = std::find_if(cut.features.begin(), cut.features.end(),
+                                    [id](const RenderedFeature& t) { return t.feature_id == id; });
+    ASSERT_NE(truth, cut.features.end()) << "feature " << id << " is not in view";
+    EXPECT_LT((uv - truth->uv_px).norm(), 0.5) << "feature " << id;
+    EXPECT_EQ(x.at("marker").get<int>(), id / 4);
+  }
+}
+
 TEST_F(DetectCliTest, NotFoundExitsOneWithAReason) {
   const CameraFrame frame = RenderChecker(8);
   ASSERT_TRUE(WritePng8(Path("c.png"), frame.image8.view()).ok());

@@ -202,8 +202,12 @@ int RunDetect(const Args& args) {
                           {"y", f.p_board.y() / scale},
                           {"marker", f.marker}});
     }
+    // complete: every feature of the board is here (false for a partial view of a board
+    // with ids, whose seen features are listed).
+    const bool complete = detection->features.size() == board->features().size();
     const nlohmann::json report = {{"board", board->name()},
                                    {"found", detection->found},
+                                   {"complete", complete},
                                    {"reason", DetectReasonName(detection->reason)},
                                    {"features", features},
                                    {"elapsed_ms", elapsed_ms}};
