@@ -324,6 +324,58 @@ TEST(ApriltagDetectorTest, GridOfAnySizeSpacingAndStartId) {
   }
 }
 
+// A real AprilGrid is trimmed close to its outer corner squares, not the A0 page of the PDF:
+// beyond the grid the camera sees the room. Rendered here as the PDF board with everything
+// farther than a third of a gap beyond the corner squares painted over with clutter (random
+// blocks of grey, darker than the paper as a room is). The paint check compares each probe
+// with printed paint of the other kind near it, so the missing margin, far from the print,
+// does not count against the board.
+TEST(ApriltagDetectorTest, TrimmedGridInClutterIsFound) {
+  const Board board = Grid(2);
+  BoardView view;
+  view.params = board.params();
+  view.distance_m = 1.6;
+  view.offset_m = Eigen::Vector2d(-0.008, -0.150);
+  view.yaw_deg = 15.0;
+  CameraFrame frame = RenderView(view, CleanRender(), 12);
+  // The grid's outline in the image: the outer tags' outer corners moved outwards by the gap
+  // and a third (the corner squares, 26.4 mm, and 8.8 mm of white beyond).
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  for (const RenderedFeature& f : frame.features) centre += f.uv_px / frame.features.size();
+  const std::array<int, 4> outer_features = {4 * 30 + 0, 4 * 35 + 1, 4 * 5 + 2, 4 * 0 + 3};
+  std::array<Eigen::Vector2d, 4> outline;
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Vector2d corner = frame.features.at(outer_features[k]).uv_px;
+    outline[k] = centre + (corner - centre) * (1.0 + (26.4 + 8.8) / 343.2 * 1.0);
+  }
+  const auto inside = [&](double u, double v) {
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Vector2d e = outline[(k + 1) % 4] - outline[k];
+      const Eigen::Vector2d r = Eigen::Vector2d(u, v) - outline[k];
+      if (e.x() * r.y() - e.y() * r.x() < 0.0) return false;
+    }
+    return true;
+  };
+  std::uint64_t state = 12345;
+  for (int by = 0; by < frame.image8.height; by += 8) {
+    for (int bx = 0; bx < frame.image8.width; bx += 8) {
+      state = state * 6364136223846793005ull + 1442695040888963407ull;
+      const std::uint8_t grey = static_cast<std::uint8_t>(10 + (state >> 56) % 110);
+      for (int y = by; y < std::min(by + 8, frame.image8.height); ++y) {
+        for (int x = bx; x < std::min(bx + 8, frame.image8.width); ++x) {
+          if (!inside(x, y)) frame.image8.at(x, y) = grey;
+        }
+      }
+    }
+  }
+  const Detection d = DetectApriltag(frame.image8.view(), board);
+  ExpectAllTagCorners(d, board);
+  int matched = 0;
+  int unknown = 0;
+  EXPECT_LE(FeatureRmsPx(d, frame, &matched, &unknown), kCleanRmsBarPx);
+  EXPECT_EQ(matched, 144);
+}
+
 TEST(ApriltagDetectorTest, PartialGridReportsOnlyCertainTags) {
   const Board board = Grid(2);
   BoardView view;
