@@ -1,8 +1,13 @@
 #include "daemon/core/station_core.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <numbers>
 
@@ -178,7 +183,8 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
           absl::StrCat("source.capture: '", config.replay_capture,
                        "' must be a path inside data_root"));
     }
-    absl::StatusOr<Capture> capture = ReadCapture((fs::path(config.data_root) / rel).string());
+    absl::StatusOr<Capture> capture =
+        ReadCapture((fs::path(config.data_root) / rel).string(), config.input_budget);
     if (!capture.ok()) return capture.status();
   }
   std::map<std::string, std::unique_ptr<SensorSource>> sources;
@@ -198,8 +204,16 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(config.db_path, store_options);
   if (!store.ok()) return store.status();
   RemoveAbortedCaptures(config.data_root, (*store)->aborted_cycles_at_open());
-  return std::unique_ptr<StationCore>(
+  struct stat root {};
+  if (::stat(config.data_root.c_str(), &root) != 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("data_root: '", config.data_root, "': ", std::strerror(errno)));
+  }
+  std::unique_ptr<StationCore> core(
       new StationCore(config, std::move(*station), std::move(cars), std::move(*store), std::move(sources)));
+  core->data_root_dev_ = root.st_dev;
+  core->data_root_ino_ = root.st_ino;
+  return core;
 }
 
 StationCore::StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
@@ -215,10 +229,49 @@ StationCore::~StationCore() {
   cancel_ = true;
   if (worker_.joinable()) worker_.join();
   JoinAbandoned(/*all=*/true);
+  if (StoreUnstoredEnd().ok()) return;
+  Log("error", absl::StrCat("cycle ", unstored_end_->id, " ended ",
+                            CycleStateName(unstored_end_->state), " (", unstored_end_->reason,
+                            ") but its end could not be stored; the next start stores it as "
+                            "aborted (daemon_restarted)"));
+}
+
+void StationCore::Log(const std::string& level, const std::string& message) const {
+  if (config_.log) {
+    config_.log(level, message);
+  } else {
+    std::fprintf(stderr, "level=%s msg=\"%s\"\n", level.c_str(), message.c_str());
+  }
+}
+
+absl::Status StationCore::CheckStorage() const {
+  struct stat root {};
+  if (::stat(config_.data_root.c_str(), &root) != 0) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "data_root '", config_.data_root, "' was removed while linecald ran (",
+        std::strerror(errno), ")"));
+  }
+  if (root.st_dev != data_root_dev_ || root.st_ino != data_root_ino_) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "data_root '", config_.data_root, "' was removed and made again while linecald ran"));
+  }
+  return store_->CheckFile();
+}
+
+std::string StationCore::FailureReason(const std::string& what, const absl::Status& status) {
+  const bool full = absl::IsResourceExhausted(status) ||
+                    status.message().find(std::strerror(ENOSPC)) != absl::string_view::npos;
+  const std::string failure =
+      what.empty() ? std::string(status.message()) : absl::StrCat(what, ": ", status.message());
+  if (!full) return failure;
+  std::lock_guard<std::mutex> lock(mutex_);
+  disk_full_ = true;
+  return absl::StrCat("disk_full: ", failure);
 }
 
 // A calibration on its own thread; the thread owns what it reads (the capture) through this.
 struct StationCore::PendingCalibration {
+  std::stop_source stop;  // requested at the deadline or a cancel: the work ends soon after
   Capture capture;
   std::mutex mutex;
   std::condition_variable done_changed;
@@ -252,7 +305,9 @@ absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(Capture capt
   auto pending = std::make_shared<PendingCalibration>();
   pending->capture = std::move(capture);
   std::thread thread([pending] {
-    absl::StatusOr<CycleCalibration> result = CalibrateCapture(pending->capture);
+    CaptureCalibrationOptions options;
+    options.stop = pending->stop.get_token();
+    absl::StatusOr<CycleCalibration> result = CalibrateCapture(pending->capture, options);
     std::lock_guard<std::mutex> lock(pending->mutex);
     pending->result = std::move(result);
     pending->done = true;
@@ -279,6 +334,21 @@ absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(Capture capt
     thread.join();
     return std::move(pending->result);
   }
+  // Past the deadline or cancelled: the work stops at its next frame, scan or board, so that
+  // its threads and the core it kept busy are free again (they used to run on to the end).
+  pending->stop.request_stop();
+  bool done = false;
+  {
+    std::unique_lock<std::mutex> lock(pending->mutex);
+    done = pending->done_changed.wait_for(lock, kCalibrationStopGrace,
+                                          [&] { return pending->done; });
+  }
+  if (done) {
+    thread.join();
+    return stopped;
+  }
+  Log("warning", absl::StrCat("a stopped calibration still runs after ",
+                              kCalibrationStopGrace.count(), " ms; it is left to end on its own"));
   std::lock_guard<std::mutex> lock(mutex_);
   abandoned_.emplace_back(std::move(pending), std::move(thread));
   return stopped;
@@ -326,6 +396,9 @@ absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector
 absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
   if (absl::Status s = ValidateCycleRequest(request, cars_, config_.vin_check_digit); !s.ok()) return s;
   JoinAbandoned(/*all=*/false);
+  // Nothing stored now would outlive the process, and the last cycle's end comes first.
+  if (absl::Status s = CheckStorage(); !s.ok()) return s;
+  if (absl::Status s = StoreUnstoredEnd(); !s.ok()) return s;
 
   std::lock_guard<std::mutex> lock(mutex_);
   if (running_) return absl::FailedPreconditionError(absl::StrCat("cycle ", *running_, " is running"));
@@ -344,7 +417,9 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
                            ? config_.replay_capture
                            : absl::StrCat("captures/", request.vin, "-", cycle.started_ns);
   absl::StatusOr<int64_t> id = store_->BeginCycle(cycle);
+  if (absl::IsResourceExhausted(id.status())) disk_full_ = true;
   if (!id.ok()) return id.status();
+  disk_full_ = false;
   running_ = *id;
   cancel_ = false;
   ending_ = false;
@@ -390,14 +465,16 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
           station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
           [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });
       if (!sim.ok()) {
-        end_reason = absl::StrCat("acquisition_failed: ", sim.status().message());
+        end_reason = FailureReason("acquisition_failed", sim.status());
         return;
       }
     } else if (config_.source == CycleSource::kLive) {
       std::error_code ec;
       fs::create_directories(dir, ec);
       if (ec) {
-        end_reason = absl::StrCat("acquisition_failed: cannot create '", dir.string(), "': ", ec.message());
+        end_reason = FailureReason("acquisition_failed",
+                                   absl::InternalError(absl::StrCat(
+                                       "cannot create '", dir.string(), "': ", ec.message())));
         return;
       }
       CaptureManifest manifest;
@@ -413,7 +490,7 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
         return;
       }
       if (absl::Status s = WriteCapture(dir.string(), manifest, station_, car); !s.ok()) {
-        end_reason = absl::StrCat("capture_unwritable: ", s.message());
+        end_reason = FailureReason("capture_unwritable", s);
         return;
       }
     }
@@ -422,7 +499,19 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       end_reason = "cancelled";
       return;
     }
-    absl::StatusOr<Capture> capture = ReadCapture(dir.string());
+    if (config_.source == CycleSource::kReplay) {
+      // The folder may have become a link out of data_root since the start (Create checked
+      // it then): checked again before every replayed cycle reads it.
+      absl::StatusOr<fs::path> inside =
+          ResolveInside(config_.data_root, config_.replay_capture,
+                        absl::StrCat("'", config_.replay_capture, "'"), "data_root");
+      if (!inside.ok()) {
+        end_reason =
+            absl::StrCat("capture_unreadable: source.capture: ", inside.status().message());
+        return;
+      }
+    }
+    absl::StatusOr<Capture> capture = ReadCapture(dir.string(), config_.input_budget);
     if (!capture.ok()) {
       end_reason = absl::StrCat("capture_unreadable: ", capture.status().message());
       return;
@@ -466,7 +555,9 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
     std::vector<std::string> not_passed;
     for (const SensorCalibration& s : sensors) {
       if (absl::Status st = store_->PutSensorResult(id, ToStored(s)); !st.ok()) {
-        end_reason = absl::StrCat("store_unavailable: ", st.message());
+        end_reason = absl::IsResourceExhausted(st)
+                         ? FailureReason("", st)
+                         : absl::StrCat("store_unavailable: ", st.message());
         return;
       }
       Event(id, "sensor_verdict", s.name, s.reason, ToStored(s.verdict)).IgnoreError();
@@ -485,30 +576,117 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       end_reason = "cancelled";
     }
   }
+  // A data root or database removed meanwhile: whatever the cycle found, its results went to
+  // a file that no longer exists (or were written into a new data root): not a pass.
+  if (absl::Status storage = CheckStorage(); !storage.ok() && end_state == CycleState::kDone) {
+    end_verdict = Verdict::kError;
+    end_reason = absl::StrCat("data_root_removed: ", storage.message());
+  }
   // The capture of a cycle that acquired it is kept only when asked (a replayed one is never removed).
   if (!request.record_capture && config_.source != CycleSource::kReplay && !capture_rel.empty()) {
     std::error_code ec;
     fs::remove_all(fs::path(config_.data_root) / capture_rel, ec);
   }
-  const Verdict verdict = end_state == CycleState::kCancelled ? Verdict::kError : end_verdict;
+  CycleEnd end;
+  end.id = id;
+  end.state = end_state;
+  end.verdict = end_state == CycleState::kCancelled ? Verdict::kError : end_verdict;
+  end.reason = end_reason;
+  end.ended_ns = NowNs();
+  // The last event, then the end in the store, then the station idle: a watcher returns only
+  // once the station no longer runs this cycle (WatchCycle), and WaitIdle once it is stored
+  // as ended (or kept as unstored_end_), so whoever sees the end sees all of it.
+  const absl::Status stored = StoreEnd(&end);
+  if (!stored.ok()) {
+    Log("error", absl::StrCat("cycle ", id, " ended ", CycleStateName(end.state), " (", end.reason,
+                              ") but its end cannot be stored: ", stored.message(),
+                              "; it is stored once the disk has room, before the next cycle"));
+  } else if (absl::Status storage = CheckStorage(); !storage.ok()) {
+    Log("error", absl::StrCat("cycle ", id, " ended ", CycleStateName(end.state), " (", end.reason,
+                              "), stored in a database that is lost at the next start: ",
+                              storage.message()));
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!stored.ok()) unstored_end_ = end;
+  running_.reset();
+  changed_.notify_all();
+}
+
+absl::Status StationCore::StoreEnd(CycleEnd* end) {
   // A database locked past the busy timeout (another process holding it) must not leave the
   // cycle `running` while the station takes the next car: the end is retried until the lock
   // is gone (each try waits the busy timeout), and the station stays busy meanwhile. Only
-  // the destructor gives up; the cycle is then aborted at the next start.
+  // the destructor gives up; the cycle is then aborted at the next start. Any other failure
+  // (a full disk) is returned: retrying it would keep the station busy for as long.
   const auto until_stored = [&](const std::function<absl::Status()>& write) {
-    while (write().code() == absl::StatusCode::kUnavailable && !stopping_) {
+    absl::Status s = write();
+    while (absl::IsUnavailable(s) && !stopping_) {
       // 50 ms between tries: with a busy timeout of 0, not a busy loop on the lock.
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      s = write();
     }
+    return s;
   };
-  // The last event, then the end in the store, then the station idle: a watcher returns only
-  // once the station no longer runs this cycle (WatchCycle), and WaitIdle once it is stored
-  // as ended, so whoever sees the end sees all of it.
-  until_stored([&] { return Event(id, "cycle_ended", "", end_reason, verdict); });
-  until_stored([&] { return store_->EndCycle(id, end_state, verdict, end_reason, NowNs()); });
+  if (!end->event_stored) {
+    absl::Status s = until_stored([&] {
+      return Event(end->id, "cycle_ended", "", end->reason, end->verdict);
+    });
+    if (!s.ok()) return s;
+    end->event_stored = true;
+  }
+  const absl::Status s = until_stored([&] {
+    return store_->EndCycle(end->id, end->state, end->verdict, end->reason, end->ended_ns);
+  });
+  // Already ended: an earlier try committed before it reported its failure.
+  return absl::IsFailedPrecondition(s) ? absl::OkStatus() : s;
+}
+
+absl::Status StationCore::StoreUnstoredEnd() {
+  // One writer of the end at a time (Health's poll and StartCycle): its event stored once.
+  std::lock_guard<std::mutex> storing(unstored_end_mutex_);
+  std::optional<CycleEnd> end;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    end = unstored_end_;
+  }
+  if (!end) return absl::OkStatus();
+  const absl::Status s = StoreEnd(&*end);
   std::lock_guard<std::mutex> lock(mutex_);
-  running_.reset();
+  if (!s.ok()) {
+    unstored_end_ = end;  // with event_stored as far as it got
+    if (absl::IsResourceExhausted(s)) disk_full_ = true;
+    return absl::Status(s.code(), absl::StrCat("cycle ", end->id, "'s end is not stored yet: ",
+                                               s.message()));
+  }
+  unstored_end_.reset();
+  Log("warning", absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"));
   changed_.notify_all();
+  return absl::OkStatus();
+}
+
+absl::Status StationCore::Health() {
+  absl::Status health = CheckStorage();
+  if (health.ok()) health = StoreUnstoredEnd();
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (health.ok() && disk_full_) {
+    std::error_code ec;
+    const fs::space_info space = fs::space(fs::path(store_->path()).parent_path(), ec);
+    if (!ec && space.available >= kFreeBytesToServe) {
+      disk_full_ = false;
+    } else {
+      health = absl::ResourceExhaustedError(absl::StrCat(
+          "disk full: ", ec ? 0 : space.available, " bytes free below the database, ",
+          kFreeBytesToServe, " needed"));
+    }
+  }
+  const std::string now(health.message());
+  if (now != last_health_) {
+    Log(health.ok() ? "warning" : "error",
+        health.ok() ? std::string("health: serving again, the storage is back")
+                    : absl::StrCat("health: NOT_SERVING: ", now));
+    last_health_ = now;
+  }
+  return health;
 }
 
 std::vector<CaptureSensor> StationCore::AcquireLive(int64_t id, const CarModel& car, const std::string& dir,
@@ -565,13 +743,38 @@ absl::Status StationCore::CancelCycle(int64_t cycle_id) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<StoredCycle> StationCore::GetCycle(int64_t cycle_id) { return store_->GetCycle(cycle_id); }
+absl::StatusOr<StoredCycle> StationCore::GetCycle(int64_t cycle_id) {
+  absl::StatusOr<StoredCycle> cycle = store_->GetCycle(cycle_id);
+  std::lock_guard<std::mutex> lock(mutex_);
+  // An end kept in memory (disk full) is the cycle's end, stored or not yet.
+  if (cycle.ok() && cycle->state == CycleState::kRunning && unstored_end_ &&
+      unstored_end_->id == cycle_id) {
+    cycle->state = unstored_end_->state;
+    cycle->verdict = unstored_end_->verdict;
+    cycle->reason = unstored_end_->reason;
+    cycle->ended_ns = unstored_end_->ended_ns;
+  }
+  return cycle;
+}
 
-absl::StatusOr<CyclePage> StationCore::ListCycles(const CycleFilter& filter) { return store_->ListCycles(filter); }
+absl::StatusOr<CyclePage> StationCore::ListCycles(const CycleFilter& filter) {
+  absl::StatusOr<CyclePage> page = store_->ListCycles(filter);
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!page.ok() || !unstored_end_) return page;
+  for (StoredCycle& c : page->cycles) {
+    if (c.id != unstored_end_->id || c.state != CycleState::kRunning) continue;
+    c.state = unstored_end_->state;  // as GetCycle shows it
+    c.verdict = unstored_end_->verdict;
+    c.reason = unstored_end_->reason;
+    c.ended_ns = unstored_end_->ended_ns;
+  }
+  return page;
+}
 
 absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event) {
   if (absl::StatusOr<StoredCycle> c = store_->GetCycle(cycle_id); !c.ok()) return c.status();
   int64_t next = 0;
+  bool read_after_end = false;
   while (true) {
     // Whether the cycle had ended is read before the events, so the last read delivers all.
     absl::StatusOr<StoredCycle> cycle = store_->GetCycle(cycle_id);
@@ -586,6 +789,21 @@ absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(
     std::unique_lock<std::mutex> lock(mutex_);
     // Ended in the store and no longer run by the station: every event was stored before.
     if (cycle->state != CycleState::kRunning && running_ != cycle_id) return absl::OkStatus();
+    // Ended, but the end could not be stored (disk full): its last event from memory, or,
+    // when that event is stored, one more read delivers it.
+    if (unstored_end_ && unstored_end_->id == cycle_id && running_ != cycle_id) {
+      const CycleEnd end = *unstored_end_;
+      lock.unlock();
+      if (end.event_stored) {
+        if (read_after_end) return absl::OkStatus();
+        read_after_end = true;
+        continue;
+      }
+      if (!on_event({cycle_id, next, end.ended_ns, "cycle_ended", "", end.reason, end.verdict})) {
+        return absl::CancelledError("the watcher went away");
+      }
+      return absl::OkStatus();
+    }
     // 200 ms: a missed notification (between the reads and the wait) costs at most this.
     changed_.wait_for(lock, std::chrono::milliseconds(200));
   }
@@ -620,6 +838,11 @@ StationStatusInfo StationCore::Status() {
 void StationCore::WaitIdle() {
   std::unique_lock<std::mutex> lock(mutex_);
   changed_.wait(lock, [&] { return !running_.has_value(); });
+}
+
+bool StationCore::WaitIdleFor(std::chrono::milliseconds timeout) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  return changed_.wait_for(lock, timeout, [&] { return !running_.has_value(); });
 }
 
 }  // namespace linecal

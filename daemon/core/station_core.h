@@ -15,14 +15,24 @@
 //              verdict error and reason "acquisition_failed: <message>"; the others are
 //              calibrated as usual.
 // Deadlines: acquisition (live) and calibration each have one; a calibration that runs past
-// its deadline ends the cycle in error ("calibrate_deadline_exceeded") and is left to finish
-// on its own thread (it owns what it reads), which the core joins once it is done (at a
-// later StartCycle) or when it is destroyed.
+// its deadline ends the cycle in error ("calibrate_deadline_exceeded") and is stopped
+// (CaptureCalibrationOptions::stop: at its next frame, scan or board), as is one whose cycle
+// is cancelled: its threads are gone within a second. One that does not stop within
+// kCalibrationStopGrace is left to end on its own thread (it owns what it reads), joined at a
+// later StartCycle or when the core is destroyed.
+// Storage faults: a full disk (SQLITE_FULL, ENOSPC writing the capture) ends the cycle in
+// error ("disk_full: ..."); a data root or database file removed while the core runs ends it
+// in error ("data_root_removed: ..."), since what SQLite writes then goes to an unlinked file
+// and is lost. An end that cannot be stored is kept in memory (GetCycle and WatchCycle show
+// it, the log says so) and stored once space returns, before any new cycle starts; Health()
+// says NOT_SERVING meanwhile.
 //
 // Errors (absl::Status): InvalidArgument naming the request field; FailedPrecondition for a
 // second cycle while one runs, or cancelling an ended cycle; NotFound for unknown cycle ids;
-// Unavailable when the store is locked. A cycle whose writes meet a store locked past the busy
-// timeout ends in error ("store_unavailable: ..."), its end stored once the lock is gone.
+// Unavailable when the store is locked; ResourceExhausted when the disk is full (StartCycle);
+// FailedPrecondition when the data root or database file is gone (StartCycle). A cycle whose
+// writes meet a store locked past the busy timeout ends in error ("store_unavailable: ..."),
+// its end stored once the lock is gone.
 // Thread safety: every method may be called from any thread.
 
 #include <atomic>
@@ -34,6 +44,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <stop_token>
 #include <string>
 #include <thread>
 #include <vector>
@@ -42,6 +53,7 @@
 #include "daemon/cycle/capture_calibration.h"
 #include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"
+#include "station/io/input_budget.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
@@ -77,7 +89,19 @@ struct StationCoreConfig {
   bool vin_check_digit = true;             // ISO 3779 check digit (markets that use it)
   int default_frames_per_sensor = 1;       // camera frames and LiDAR rotations when the request gives 0
   std::chrono::milliseconds busy_timeout{5000};
+  // What one file of a capture may claim (the `input_budget` key), for every ReadCapture.
+  InputBudget input_budget;
+  // Where the core's warnings and errors go ("warning"/"error", a message): linecald's log.
+  // Empty: stderr.
+  std::function<void(const std::string& level, const std::string& message)> log;
 };
+
+// How long a stopped calibration (deadline, cancel) is waited for before it is left to end
+// on its own: a frame's detection takes well under a second on the reference images.
+inline constexpr std::chrono::milliseconds kCalibrationStopGrace{1000};
+// Free bytes on the database's file system at which a full disk counts as over (Health):
+// a cycle of the reference car writes about 10 MB of capture and tens of kB of results.
+inline constexpr std::uint64_t kFreeBytesToServe = 16u << 20;
 
 struct CycleRequest {
   std::string vin;
@@ -131,8 +155,17 @@ class StationCore {
   // on_event returns false (Cancelled: the watcher went away). NotFound for unknown ids.
   absl::Status WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event);
   StationStatusInfo Status();
+  // OK when the station can run and store cycles. Else why not: FailedPrecondition when the
+  // data root or the database file was removed (until a restart), ResourceExhausted while
+  // the disk is full (a cycle's end waiting to be stored, or the last write refused for want
+  // of space, until a cycle starts or kFreeBytesToServe are free again). Tries to store a
+  // waiting end first, so calling it is how the daemon recovers when space returns; the
+  // first call after a change logs it. Cost: a few stat calls, at most one store write.
+  absl::Status Health();
   // Blocks until no cycle runs (tests, shutdown).
   void WaitIdle();
+  // The same, at most `timeout`; false when a cycle still runs.
+  bool WaitIdleFor(std::chrono::milliseconds timeout);
 
   Store& store() { return *store_; }
 
@@ -140,6 +173,15 @@ class StationCore {
   StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
               std::unique_ptr<Store> store, std::map<std::string, std::unique_ptr<SensorSource>> sources);
   struct PendingCalibration;
+  // A cycle's end as RunCycle decided it.
+  struct CycleEnd {
+    int64_t id = 0;
+    CycleState state = CycleState::kDone;
+    Verdict verdict = Verdict::kError;
+    std::string reason;
+    int64_t ended_ns = 0;
+    bool event_stored = false;  // its cycle_ended event is in the store
+  };
 
   void RunCycle(int64_t id, CycleRequest request);
   // live: acquires every sensor of `car` into `dir` at once; returns the sensors acquired
@@ -149,6 +191,18 @@ class StationCore {
   // Calibrates `capture` on its own thread, waiting until it is done, the calibrate deadline
   // passed (DeadlineExceeded) or the cycle was cancelled (Cancelled).
   absl::StatusOr<CycleCalibration> CalibrateWithDeadline(Capture capture);
+  // Stores the end's event and the end, retrying while the store is locked (until the
+  // destructor runs); the first other error is returned and `end` says what got stored.
+  absl::Status StoreEnd(CycleEnd* end);
+  // Stores unstored_end_, if any; OK when there is none left.
+  absl::Status StoreUnstoredEnd();
+  // OK while the data root and the database file are the ones the core opened.
+  absl::Status CheckStorage() const;
+  // A failure as a cycle reason: "disk_full: <what>: <message>" when it is a full disk
+  // (ResourceExhausted, or ENOSPC in the message), else "<what>: <message>" (no "<what>: "
+  // when `what` is empty). Remembers a full disk for Health().
+  std::string FailureReason(const std::string& what, const absl::Status& status);
+  void Log(const std::string& level, const std::string& message) const;
   // Joins calibrations abandoned at their deadline: those done, or all when `all`.
   void JoinAbandoned(bool all);
   absl::Status Event(int64_t id, const std::string& type, const std::string& sensor, const std::string& detail,
@@ -169,6 +223,14 @@ class StationCore {
   bool ending_ = false;  // the running cycle's end is decided: cancels are refused (under mutex_)
   std::atomic<bool> stopping_{false};  // the destructor runs: stop retrying a locked store
   std::thread worker_;
+  // The end of the last cycle when the store refused it (disk full): stored before the next
+  // cycle starts and by Health(); guarded by mutex_.
+  std::optional<CycleEnd> unstored_end_;
+  std::mutex unstored_end_mutex_;  // held by StoreUnstoredEnd, before mutex_
+  bool disk_full_ = false;    // a store write was refused for want of space; under mutex_
+  std::string last_health_;   // Health()'s last answer ("" = OK), to log changes; under mutex_
+  // The data root's identity (st_dev, st_ino) when the core was created.
+  std::uint64_t data_root_dev_ = 0, data_root_ino_ = 0;
   // Calibrations abandoned at their deadline, still running or done; guarded by mutex_.
   std::vector<std::pair<std::shared_ptr<PendingCalibration>, std::thread>> abandoned_;
 };

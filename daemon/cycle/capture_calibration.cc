@@ -28,6 +28,14 @@ std::int64_t NowNs() {
       .count();
 }
 
+// A sensor whose work was stopped (CaptureCalibrationOptions::stop); CalibrateCapture
+// returns Cancelled instead of any such result.
+SensorCalibration Stopped() {
+  SensorCalibration out;
+  out.reason = "stopped";
+  return out;
+}
+
 // The fields the camera and LiDAR solvers' results share. False, with the sensor in error,
 // when the solver refused its input.
 template <typename Result>
@@ -65,6 +73,7 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
       sensor.T_car_sensor_nominal.Inverse() * capture.manifest.aligner.T_station_car().Inverse();
   std::vector<BoardObservation> observations;
   for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
+    if (capture_options.stop.stop_requested()) return Stopped();
     const CaptureFile& frame = recorded.frames[frame_index];
     const absl::StatusOr<Image8> image = ReadCaptureImage(capture, frame);
     if (!image.ok()) {
@@ -73,6 +82,7 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
       return out;
     }
     for (size_t i = 0; i < boards.size(); ++i) {
+      if (capture_options.stop.stop_requested()) return Stopped();
       std::optional<Detection> d = DetectBoard(image->view(), boards[i]->board);
       if (d && !d->found && camera) {
         // Not found in the raw image: look again in a perspective view of where the board is
@@ -102,6 +112,7 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
       }
     }
   }
+  if (capture_options.stop.stop_requested()) return Stopped();
   absl::StatusOr<CameraCalibrationResult> r =
       CalibrateCamera(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations, options);
   if (!TakeResult(r, &out)) return out;
@@ -120,11 +131,12 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
 }
 
 SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel& sensor,
-                                       const CaptureSensor& recorded) {
+                                       const CaptureSensor& recorded, std::stop_token stop) {
   SensorCalibration out;
   // Every recorded rotation, accumulated: the boards stand still during a cycle.
   std::vector<std::vector<RoundHoleCloudPoint>> frames;
   for (const CaptureFile& f : recorded.frames) {
+    if (stop.stop_requested()) return Stopped();
     absl::StatusOr<PcdCloud> cloud = ReadCaptureScan(capture, f);
     if (!cloud.ok()) {
       out.reason = "data_unreadable";
@@ -140,12 +152,13 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
     out.message = absl::StrCat(sensor.name, ": the capture has no PCD scans of this LiDAR");
     return out;
   }
+  if (stop.stop_requested()) return Stopped();
   const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
   return CalibrateLidarFrames(capture.station, capture.manifest.aligner.T_station_car(), sensor, views);
 }
 
 SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel& sensor,
-                                       const CaptureSensor& recorded) {
+                                       const CaptureSensor& recorded, std::stop_token stop) {
   SensorCalibration out;
   const std::optional<RadarModel> model = ParseRadarModel(sensor.model);
   if (!model || !recorded.can_log) {
@@ -160,6 +173,7 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
     out.message = std::string(frames.status().message());
     return out;
   }
+  if (stop.stop_requested()) return Stopped();
   const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *model, RadarConventions{});
   const absl::StatusOr<RadarCalibrationRun> run = CalibrateRadar(
       sensor, capture.station, capture.manifest.aligner.T_station_car(), decoded.cycles, RadarCalibrationOptions{});
@@ -283,15 +297,19 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
   // Each worker takes the next sensor; every result goes to its own slot.
   std::atomic<size_t> next{0};
   auto work = [&] {
-    for (size_t i = next++; i < sensors.size(); i = next++) {
+    for (size_t i = next++; i < sensors.size() && !options.stop.stop_requested(); i = next++) {
       const SensorModel& s = *sensors[i];
       const CaptureSensor& recorded = *capture.manifest.FindSensor(s.name);
       const std::int64_t t0 = NowNs();
       SensorCalibration r;
       switch (s.kind) {
         case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options); break;
-        case SensorKind::kRadar: r = CalibrateRadarSensor(capture, s, recorded); break;
-        case SensorKind::kLidar: r = CalibrateLidarSensor(capture, s, recorded); break;
+        case SensorKind::kRadar:
+          r = CalibrateRadarSensor(capture, s, recorded, options.stop);
+          break;
+        case SensorKind::kLidar:
+          r = CalibrateLidarSensor(capture, s, recorded, options.stop);
+          break;
       }
       r.name = s.name;
       r.kind = s.kind;
@@ -304,6 +322,7 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
   for (int t = 1; t < threads; ++t) pool.emplace_back(work);
   work();
   for (std::thread& t : pool) t.join();
+  if (options.stop.stop_requested()) return absl::CancelledError("calibration stopped");
 
   bool any_error = cycle.sensors.empty(), all_pass = !cycle.sensors.empty();
   for (const SensorCalibration& s : cycle.sensors) {

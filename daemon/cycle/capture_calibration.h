@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <stop_token>
 #include <string>
 #include <vector>
 
@@ -76,12 +77,19 @@ struct CaptureCalibrationOptions {
   int threads = 8;
   // Keep each camera's first-frame detections in SensorCalibration (for `calibrate --report`).
   bool keep_first_frame_features = false;
+  // Once a stop is requested (a deadline passed, the cycle was cancelled, the daemon stops),
+  // every sensor's work ends at its next frame, scan or board and CalibrateCapture returns
+  // Cancelled: the work frees its threads instead of running on unseen. A default token
+  // never stops.
+  std::stop_token stop;
 };
 
 // Computes the cycle of `capture` (already read and validated by ReadCapture). Errors:
-// InvalidArgument for invalid options. A sensor whose data cannot be read or decoded gets
-// verdict error with reason "data_unreadable" and the file in the message; it never stops
-// the other sensors. Cost: the detectors' and solvers' (about 0.1-1 s for the reference car).
+// InvalidArgument for invalid options; Cancelled once options.stop was requested (checked
+// before every frame, scan, board and solve: the call returns within one of those). A sensor
+// whose data cannot be read or decoded gets verdict error with reason "data_unreadable" and
+// the file in the message; it never stops the other sensors. Cost: the detectors' and
+// solvers' (about 0.1-1 s for the reference car).
 absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture,
                                                   const CaptureCalibrationOptions& options = {});
 

@@ -1,9 +1,10 @@
 // linecald: the station daemon (docs/interfaces.md). `linecald --config FILE` with --listen,
 // --db and --log-level overriding the file; without --config it starts on the bundled demo
 // station (simulated sensors) with its data under --data-dir (default ./linecald-data).
-// SIGTERM, SIGINT or SIGHUP: stop taking calls, let a running cycle end as cancelled, exit 0
-// (SIGHUP too: a closed terminal or a `kill -HUP` meant as "reload" must not leave the cycle
-// running, and there is nothing to reload that a restart would not do).
+// SIGTERM, SIGINT or SIGHUP: stop taking calls, let a running cycle end as cancelled (its
+// calibration stops at its next frame), exit 0 within kDrainTime (SIGHUP too: a closed
+// terminal or a `kill -HUP` meant as "reload" must not leave the cycle running, and there is
+// nothing to reload that a restart would not do).
 // Descriptors: the soft RLIMIT_NOFILE is raised to the hard limit at start; gRPC 1.51's
 // listener stops for good after an accept error (EMFILE), so linecald listens again on the
 // same port once descriptors free up (docs/daemon.md, "Descriptors").
@@ -16,8 +17,10 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
+#include <chrono>
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
@@ -44,6 +47,11 @@ constexpr char kUsage[] =
 void Log(const char* level, const std::string& message) {
   std::fprintf(stderr, "level=%s msg=\"%s\"\n", level, message.c_str());
 }
+
+// How long a stop may take from the signal: the running cycle's end stored, calibration
+// threads joined. Under the unit's TimeoutStopSec=30, so that systemd never has to kill us;
+// a cancelled calibration stops within about a second (StationCore's kCalibrationStopGrace).
+constexpr std::chrono::seconds kDrainTime{20};
 
 // The values of --log-level and the file's log_level (daemon_config.h).
 constexpr std::array<const char*, 4> kLogLevels = {"debug", "info", "warning", "error"};
@@ -216,6 +224,10 @@ int main(int argc, char** argv) {
   if (!listen.empty()) config->listen = listen;
   if (!db.empty()) config->core.db_path = db;
   if (!log_level.empty()) config->log_level = log_level;
+  config->core.input_budget = config->input_budget;
+  config->core.log = [](const std::string& level, const std::string& message) {
+    Log(level.c_str(), message);
+  };
   if (!IsLogLevel(config->log_level)) {
     std::fprintf(stderr, "linecald: --log-level: must be debug, info, warning or error, got '%s'\n",
                  config->log_level.c_str());
@@ -270,8 +282,20 @@ int main(int argc, char** argv) {
     // Ends as cancelled at its next step; a cycle that ended meanwhile needs nothing.
     (*core)->CancelCycle(*running).IgnoreError();
   }
-  if (server->server) server->server->Shutdown();
-  (*core)->WaitIdle();
+  const auto drain_deadline = std::chrono::system_clock::now() + kDrainTime;
+  if (server->server) server->server->Shutdown(drain_deadline);
+  *server = {};
+  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+      drain_deadline - std::chrono::system_clock::now());
+  if (!(*core)->WaitIdleFor(std::max(left, std::chrono::milliseconds(0)))) {
+    // A cycle that does not end within the drain time is left running; the next start
+    // stores it as aborted. Better than being killed by systemd with nothing said.
+    Log("error", "the running cycle did not end within the drain time of " +
+                     std::to_string(kDrainTime.count()) +
+                     " s; exiting, it is aborted at the next start");
+    std::_Exit(1);
+  }
+  core->reset();  // joins the calibrations stopped by the cancel
   Log("info", "stopped");
   return 0;
 }

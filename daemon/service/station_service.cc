@@ -25,6 +25,8 @@ grpc::Status ToGrpc(const absl::Status& s) {
     case absl::StatusCode::kUnavailable: code = grpc::StatusCode::UNAVAILABLE; break;
     case absl::StatusCode::kCancelled: code = grpc::StatusCode::CANCELLED; break;
     case absl::StatusCode::kDataLoss: code = grpc::StatusCode::DATA_LOSS; break;
+    // The disk is full: StartCycle works again once space returns.
+    case absl::StatusCode::kResourceExhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
     default: break;
   }
   return grpc::Status(code, std::string(s.message()));
@@ -313,7 +315,29 @@ absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& 
   if (!running.server || running.port == 0) {
     return absl::UnavailableError(absl::StrCat("listen: cannot listen on '", address, "'"));
   }
+  running.health = std::make_unique<HealthMonitor>(core, running.server->GetHealthCheckService());
   return running;
+}
+
+HealthMonitor::HealthMonitor(StationCore* core, grpc::HealthCheckServiceInterface* health) {
+  thread_ = std::thread([this, core, health] {
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!stop_) {
+      lock.unlock();
+      health->SetServingStatus(core->Health().ok());
+      lock.lock();
+      stop_changed_.wait_for(lock, kHealthPollInterval, [this] { return stop_; });
+    }
+  });
+}
+
+HealthMonitor::~HealthMonitor() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  stop_changed_.notify_all();
+  thread_.join();
 }
 
 }  // namespace linecal

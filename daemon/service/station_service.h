@@ -8,11 +8,16 @@
 // ids in decimal; a malformed one is INVALID_ARGUMENT naming cycle_id, an unknown one
 // NOT_FOUND.
 
+#include <chrono>
+#include <condition_variable>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
 
 #include "daemon/core/daemon_config.h"
 #include "daemon/core/station_core.h"
@@ -75,10 +80,45 @@ absl::Status CheckListenAddress(const std::string& address);
 // whose errors (a bad file, a key that does not match the certificate) are returned as they
 // are; the token, when set, is required on top. An address CheckListenAddress refuses is its
 // InvalidArgument.
+// The health service's answer follows StationCore::Health: SERVING while the station can run
+// and store cycles, NOT_SERVING (for every service name) while the disk is full or the data
+// root is gone. Polled every kHealthPollInterval on its own thread, which also stores a
+// cycle's end that a full disk held back as soon as space returns.
+inline constexpr std::chrono::milliseconds kHealthPollInterval{250};
+class HealthMonitor {
+ public:
+  // `core` and `health` must outlive the monitor.
+  HealthMonitor(StationCore* core, grpc::HealthCheckServiceInterface* health);
+  ~HealthMonitor();
+  HealthMonitor(const HealthMonitor&) = delete;
+  HealthMonitor& operator=(const HealthMonitor&) = delete;
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable stop_changed_;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
 struct RunningServer {
+  RunningServer() = default;
+  RunningServer(RunningServer&&) = default;
+  // The monitor goes first, then the server, then what the server uses (in assignment too).
+  RunningServer& operator=(RunningServer&& other) {
+    health.reset();
+    server = std::move(other.server);
+    service = std::move(other.service);
+    reflection = std::move(other.reflection);
+    health = std::move(other.health);
+    port = other.port;
+    return *this;
+  }
+  ~RunningServer() { health.reset(); }
+
   std::unique_ptr<StationService> service;
   std::unique_ptr<ReflectionService> reflection;  // behind the same token
-  std::unique_ptr<grpc::Server> server;           // destroyed first: it uses the two above
+  std::unique_ptr<grpc::Server> server;           // destroyed before the two above
+  std::unique_ptr<HealthMonitor> health;          // destroyed first: it sets the server's health
   int port = 0;
 };
 absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <sqlite3.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -126,6 +127,9 @@ absl::Status SqliteError(sqlite3* db, const std::string& path, const char* what,
       absl::StrCat("database ", path, ": ", what, ": ", sqlite3_errstr(rc),
                    db && sqlite3_errcode(db) == rc ? absl::StrCat(" (", sqlite3_errmsg(db), ")") : "");
   if (rc == SQLITE_BUSY || rc == SQLITE_LOCKED) return absl::UnavailableError(message);
+  // SQLITE_FULL: the file system has no room (or the file hit its size limit); the write
+  // works again once space is freed, so the caller may keep what it meant to store.
+  if (rc == SQLITE_FULL) return absl::ResourceExhaustedError(message);
   if (rc == SQLITE_CORRUPT || rc == SQLITE_NOTADB) return absl::DataLossError(message);
   return absl::InternalError(message);
 }
@@ -290,6 +294,12 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
     return s;
   }
   std::unique_ptr<Store> store(new Store(db, path, *lock_fd));
+  // The file SQLite opened, by identity: CheckFile compares the path's file with it.
+  struct stat opened {};
+  if (::stat(path.c_str(), &opened) == 0) {
+    store->file_dev_ = opened.st_dev;
+    store->file_ino_ = opened.st_ino;
+  }
   sqlite3_busy_timeout(db, static_cast<int>(options.busy_timeout.count()));
   // WAL: readers never block the writer; FULL: every commit is fsynced before it returns.
   if (absl::Status s = Exec(db, path, "set journal mode", "PRAGMA journal_mode=WAL"); !s.ok()) return s;
@@ -298,6 +308,21 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
   if (absl::Status s = store->Migrate(); !s.ok()) return s;
   if (absl::Status s = store->AbortRunning(); !s.ok()) return s;
   return store;
+}
+
+absl::Status Store::CheckFile() const {
+  struct stat now {};
+  if (::stat(path_.c_str(), &now) != 0) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "database ", path_, ": the file was removed while linecald ran (", std::strerror(errno),
+        "); what is stored from now on is lost at the next start"));
+  }
+  if (now.st_dev != file_dev_ || now.st_ino != file_ino_) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "database ", path_, ": the file was replaced while linecald ran; what is stored from now "
+        "on goes to the old, unlinked file"));
+  }
+  return absl::OkStatus();
 }
 
 Store::~Store() {

@@ -11,12 +11,16 @@
 //
 // Errors (absl::Status, messages name the database file):
 //   Unavailable         the database stayed locked by another process past the busy timeout
+//   ResourceExhausted   the disk is full (SQLITE_FULL): nothing of the call was stored; the
+//                       same call works again once space is freed
 //   FailedPrecondition  a newer schema; ending a cycle that already ended; the database is
 //                       in use by another Store (Open)
 //   NotFound            unknown cycle id
 //   InvalidArgument     a malformed page token or filter
 //   Internal / DataLoss any other SQLite failure / a failed integrity check
 // Thread safety: every method may be called from any thread (one connection, one mutex).
+
+#include <sys/types.h>
 
 #include <chrono>
 #include <cstdint>
@@ -167,6 +171,12 @@ class Store {
   // PRAGMA integrity_check: OK, or DataLoss with SQLite's first complaint.
   absl::Status IntegrityCheck();
 
+  // Whether path() still names the file that Open opened: a database file deleted (or its
+  // folder) while the Store is open is still written by SQLite through its open descriptor,
+  // every call succeeding, and all of it is lost when the process ends. FailedPrecondition
+  // naming the file when it is gone or another file took its place. Cost: one stat.
+  absl::Status CheckFile() const;
+
  private:
   Store(sqlite3* db, std::string path, int lock_fd)
       : db_(db), path_(std::move(path)), lock_fd_(lock_fd) {}
@@ -177,6 +187,9 @@ class Store {
   sqlite3* db_;
   std::string path_;
   int lock_fd_;  // holds the flock on <path>.lock
+  // The identity (st_dev, st_ino) of the database file when it was opened.
+  dev_t file_dev_ = 0;
+  ino_t file_ino_ = 0;
   std::vector<StoredCycle> aborted_at_open_;
 };
 

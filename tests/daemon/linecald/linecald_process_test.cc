@@ -293,5 +293,74 @@ TEST_F(LinecaldProcessTest, AcceptsAgainOnceDescriptorsFreeUp) {
       << DescribeWaitStatus(exit_status);
 }
 
+// A configuration file for linecald: the reference station and car, this test's data
+// directory, the replay source on data/long (reliability::WriteLongCameraCapture), and the
+// extra keys `extra` (a JSON object's members).
+std::string WriteReplayConfig(const fs::path& dir, const std::string& data_dir,
+                              const std::string& extra) {
+  const std::string deploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
+  const fs::path path = dir / "linecald.json";
+  std::ofstream(path) << "{\"station\": \"" << deploy << "/stations/reference.json\", "
+                      << "\"car_models\": [\"" << deploy << "/cars/reference.json\"], "
+                      << "\"data_root\": \"" << data_dir << "\", "
+                      << "\"listen\": \"127.0.0.1:0\", "
+                      << "\"source\": {\"type\": \"replay\", \"capture\": \"long\"}"
+                      << (extra.empty() ? "" : ", " + extra) << "}";
+  return path.string();
+}
+
+// Issue 21, item 6: after SIGTERM during a calibration the log said "stopped" and the
+// process lived on until the calibration's end (124 s in the probe), since the core's
+// destructor waited for it. Now the cancel stops the calibration at its next frame, and the
+// process exits within linecald's drain time (kDrainTime, 20 s).
+TEST_F(LinecaldProcessTest, SigtermDuringALongCalibrationExitsWithinTheDrainTime) {
+  // 600 frames: a minute of detections or more, far past the drain time.
+  ASSERT_TRUE(reliability::WriteLongCameraCapture(DataDir() + "/long", 600).ok());
+  const std::string config =
+      WriteReplayConfig(dir_, DataDir(), "\"deadlines_ms\": {\"calibrate\": 600000}");
+  absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon =
+      LinecaldProcess::Spawn(kLinecald, {"--config", config}, LogPath("daemon"));
+  ASSERT_TRUE(daemon.ok()) << daemon.status();
+  const absl::StatusOr<int> port = (*daemon)->WaitReady(kTimeout);
+  ASSERT_TRUE(port.ok()) << port.status();
+  std::unique_ptr<v1::Station::Stub> stub = Stub(*port);
+  const std::string id = StartLongCycle(*stub);
+  ASSERT_FALSE(id.empty());
+  // 2 s: the capture read and the calibration under way.
+  std::this_thread::sleep_for(seconds(2));
+  ASSERT_EQ(GetCycle(*stub, id).state(), v1::CYCLE_STATE_RUNNING);
+
+  const auto signalled = std::chrono::steady_clock::now();
+  (*daemon)->Signal(SIGTERM);
+  const int status = (*daemon)->Wait();
+  const double took_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << DescribeWaitStatus(status);
+  // linecald's drain time; the stop itself takes about a frame's detection.
+  EXPECT_LT(took_s, 20.0) << ReadFile(LogPath("daemon"));
+  EXPECT_NE(ReadFile(LogPath("daemon")).find("stopped"), std::string::npos);
+  const StoredCycle cycle = StoredAfterExit(id);
+  EXPECT_EQ(cycle.state, CycleState::kCancelled);
+  EXPECT_EQ(cycle.reason, "cancelled");
+}
+
+// The configuration's input_budget reaches the core (main.cc passes it on): a replay capture
+// over max_manifest_frames stops the start naming the key; it used to be read with the
+// default budget and accepted.
+TEST_F(LinecaldProcessTest, ConfiguredInputBudgetAppliesToTheReplayCapture) {
+  ASSERT_TRUE(reliability::WriteLongCameraCapture(DataDir() + "/long", 3).ok());
+  const std::string config =
+      WriteReplayConfig(dir_, DataDir(), "\"input_budget\": {\"max_manifest_frames\": 2}");
+  absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon =
+      LinecaldProcess::Spawn(kLinecald, {"--config", config}, LogPath("daemon"));
+  ASSERT_TRUE(daemon.ok()) << daemon.status();
+  const int status = ExitBeforeListening(**daemon);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << DescribeWaitStatus(status);
+  EXPECT_NE(ReadFile(LogPath("daemon"))
+                .find("3 frames exceed the budget of 2 (input_budget.max_manifest_frames)"),
+            std::string::npos)
+      << ReadFile(LogPath("daemon"));
+}
+
 }  // namespace
 }  // namespace linecal

@@ -154,6 +154,55 @@ absl::StatusOr<Workspace> PrepareWorkspace(const ProgramFlags& flags, const std:
   return w;
 }
 
+std::uint64_t FillFileSystem(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd < 0) return 0;
+  std::uint64_t written = 0;
+  // 64 KiB blocks while they fit, then single bytes for the last partial page.
+  const std::string block(1 << 16, 'x');
+  for (size_t size : {block.size(), size_t{1}}) {
+    while (true) {
+      const ssize_t n = ::write(fd, block.data(), size);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) break;
+      written += static_cast<std::uint64_t>(n);
+    }
+  }
+  ::close(fd);
+  return written;
+}
+
+absl::Status WriteLongCameraCapture(const std::string& dir, int frames) {
+  absl::StatusOr<StationLayout> station = ReadStationLayout(ReferenceStationPath());
+  if (!station.ok()) return station.status();
+  absl::StatusOr<CarModel> car = ReadCarModel(kDeploy + "/cars/reference.json");
+  if (!car.ok()) return car.status();
+  SimulatorOptions o;
+  o.sensors = {"front_camera"};
+  if (absl::Status s = SimulateCapture(*station, *car, o, 9, dir).status(); !s.ok()) return s;
+  const fs::path manifest_path = fs::path(dir) / "manifest.json";
+  std::ifstream in(manifest_path);
+  nlohmann::json manifest = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (manifest.is_discarded()) return absl::InternalError(manifest_path.string() + ": not JSON");
+  nlohmann::json& list = manifest["sensors"][0]["frames"];
+  const nlohmann::json first = list[0];
+  const std::string first_path = first["path"].get<std::string>();
+  for (int k = 1; k < frames; ++k) {
+    nlohmann::json frame = first;
+    frame["path"] = absl::StrCat("front_camera/frame-link-", k, ".png");
+    std::error_code ec;
+    const fs::path link = fs::path(dir) / frame["path"].get<std::string>();
+    fs::create_hard_link(fs::path(dir) / first_path, link, ec);
+    if (ec) return absl::InternalError(absl::StrCat(dir, ": hard link: ", ec.message()));
+    list.push_back(frame);
+  }
+  std::ofstream out(manifest_path);
+  out << manifest.dump(2);
+  out.close();
+  if (!out) return absl::InternalError(manifest_path.string() + ": cannot write");
+  return absl::OkStatus();
+}
+
 absl::StatusOr<std::unique_ptr<LinecaldProcess>> LinecaldProcess::Spawn(const std::string& binary,
                                                                        const std::vector<std::string>& args,
                                                                        const std::string& log_path) {

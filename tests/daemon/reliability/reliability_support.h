@@ -61,6 +61,16 @@ struct Workspace {
 absl::StatusOr<Workspace> PrepareWorkspace(const ProgramFlags& flags, const std::string& program,
                                            const std::string& car_id, const std::string& capture);
 
+// A capture of the reference car's front camera (seed 9) in `dir` whose manifest lists
+// `frames` frames, hard links of the one render: a calibration of `frames` detections, each
+// a fraction of a second, for cycles that must still be calibrating when a test acts (a
+// deadline, SIGTERM). Car model id "reference". Cost: one render and a second.
+absl::Status WriteLongCameraCapture(const std::string& dir, int frames);
+
+// Writes `path` until its file system has no byte left (ENOSPC, a block then single bytes):
+// a full disk for the disk-full faults. Returns the bytes written. Cost: writing them.
+std::uint64_t FillFileSystem(const std::string& path);
+
 // A linecald started as a child process with its stderr appended to a log file. The
 // destructor kills (SIGKILL) and reaps it if it still runs.
 class LinecaldProcess {

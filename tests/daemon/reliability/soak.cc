@@ -19,18 +19,22 @@
 #include <malloc.h>
 #include <spawn.h>
 #include <sqlite3.h>
+#include <sys/mount.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <random>
 #include <string>
 #include <thread>
@@ -57,6 +61,8 @@ constexpr std::chrono::milliseconds kBusyTimeout{500};
 // The run's state the faults work on.
 struct Soak {
   StationCore* core = nullptr;
+  StationCoreConfig config;  // the core's: the storage faults build cores of their own from it
+  fs::path dir;              // the scratch directory
   fs::path capture;   // the replayed capture (data_root/replay), restored after each fault
   fs::path pristine;  // the untouched copy
   Capture layout;     // the pristine capture as read: which files each sensor has
@@ -104,9 +110,12 @@ absl::Status Restore(Soak& s) {
 // object lives: linecal-soak itself, run as `linecal-soak --hold-lock DB` (HoldLock below). It
 // is a process, not a second connection of ours, because SQLite keeps a closed connection's
 // descriptor open while another connection of the same process holds a lock on the file.
+// The holder starts (exec, SQLite open) before it locks, which takes 0.1-0.2 s: with `take`
+// false the constructor returns once it is ready, and Take() then locks within milliseconds
+// (a cycle of the smoke's three sensors stores its first result 0.2 s after its start).
 class DatabaseLock {
  public:
-  explicit DatabaseLock(const std::string& db_path) {
+  explicit DatabaseLock(const std::string& db_path, bool take = true) {
     int to_child[2], from_child[2];
     if (::pipe2(to_child, O_CLOEXEC) != 0) return;
     if (::pipe2(from_child, O_CLOEXEC) != 0) {
@@ -126,14 +135,22 @@ class DatabaseLock {
     ::close(to_child[0]);
     ::close(from_child[1]);
     release_ = to_child[1];
+    answers_ = from_child[0];
     char answer = 0;
-    held_ = spawned && ::read(from_child[0], &answer, 1) == 1 && answer == 'L';
-    ::close(from_child[0]);
+    ready_ = spawned && ::read(answers_, &answer, 1) == 1 && answer == 'R';
     if (!spawned) pid_ = -1;
+    if (take) Take();
+  }
+  // Locks (once the holder is ready); held() says whether it did.
+  void Take() {
+    char answer = 0;
+    held_ = ready_ && ::write(release_, "G", 1) == 1 && ::read(answers_, &answer, 1) == 1 &&
+            answer == 'L';
   }
   // Closing the pipe tells the holder to commit and exit.
   ~DatabaseLock() {
     ::close(release_);
+    ::close(answers_);
     if (pid_ > 0) ::waitpid(pid_, nullptr, 0);
   }
   bool held() const { return held_; }
@@ -141,18 +158,24 @@ class DatabaseLock {
  private:
   pid_t pid_ = -1;
   int release_ = -1;
+  int answers_ = -1;
+  bool ready_ = false;
   bool held_ = false;
 };
 
-// The lock holder's side: takes the lock, says 'L' on stdout (or 'E'), holds it until stdin
-// closes, commits.
+// The lock holder's side: opens the database and says 'R' on stdout; on a byte from stdin
+// takes the lock and says 'L' (or 'E'); holds it until stdin closes, commits.
 int HoldLock(const char* db_path) {
   sqlite3* db = nullptr;
-  const bool held = sqlite3_open(db_path, &db) == SQLITE_OK && sqlite3_busy_timeout(db, 10000) == SQLITE_OK &&
-                    sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr) == SQLITE_OK;
+  const bool opened =
+      sqlite3_open(db_path, &db) == SQLITE_OK && sqlite3_busy_timeout(db, 10000) == SQLITE_OK;
+  if (::write(STDOUT_FILENO, "R", 1) != 1) return 1;
+  char byte;
+  if (::read(STDIN_FILENO, &byte, 1) != 1) return 1;
+  const bool held =
+      opened && sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr) == SQLITE_OK;
   const char answer = held ? 'L' : 'E';
   if (::write(STDOUT_FILENO, &answer, 1) != 1) return 1;
-  char byte;
   while (::read(STDIN_FILENO, &byte, 1) > 0) {
   }
   if (held) sqlite3_exec(db, "COMMIT", nullptr, nullptr, nullptr);
@@ -374,9 +397,17 @@ absl::StatusOr<std::string> DatabaseLockedAtStart(Soak& s) {
 }
 
 absl::StatusOr<std::string> DatabaseLockedMidCycle(Soak& s) {
+  // Ready before the cycle starts, locked right after: the cycle meets the lock for sure.
+  std::optional<DatabaseLock> lock;
+  lock.emplace(s.db_path, /*take=*/false);
   absl::StatusOr<StoredCycle> c = RunOneCycle(s, [&](std::int64_t id) {
-    DatabaseLock lock(s.db_path);
-    if (!lock.held()) return Violation("could not lock the database");
+    // Released when this returns, whatever it returns: the cycle's end waits for it.
+    struct Release {
+      std::optional<DatabaseLock>& lock;
+      ~Release() { lock.reset(); }
+    } release{lock};
+    lock->Take();
+    if (!lock->held()) return Violation("could not lock the database");
     // Longer than two whole cycles: the cycle meets the lock when it stores its results.
     std::this_thread::sleep_for(2 * s.clean_time + 4 * kBusyTimeout);
     if (s.core->Status().running_cycle != id) {
@@ -468,6 +499,141 @@ absl::StatusOr<std::string> InvalidRequests(Soak& s) {
   return std::string("9 refused INVALID_ARGUMENT, NOT_FOUND, busy FAILED_PRECONDITION, then done as cycle 0");
 }
 
+// A core of its own on `data_root` (the pristine capture copied in as its replay capture,
+// its database inside), for the faults that break the storage under it: the soak's core and
+// database stay whole. Its expected errors are not logged.
+absl::StatusOr<std::unique_ptr<StationCore>> ScratchCore(const Soak& s, const fs::path& data_root) {
+  std::error_code ec;
+  fs::create_directories(data_root, ec);
+  if (!ec) fs::copy(s.pristine, data_root / "replay", fs::copy_options::recursive, ec);
+  if (ec) return Violation(absl::StrCat("scratch core: ", data_root.string(), ": ", ec.message()));
+  StationCoreConfig config = s.config;
+  config.data_root = data_root.string();
+  config.db_path = (data_root / "station.db").string();
+  config.log = [](const std::string&, const std::string&) {};
+  absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
+  if (!core.ok()) return Violation(absl::StrCat("scratch core: ", core.status().ToString()));
+  return core;
+}
+
+// After a storage fault: the cycle ended (not running), either with `reason_prefix` or, when
+// the fault came after its end, as cycle 0 ended. True when it met the fault.
+absl::StatusOr<bool> ExpectEndedByFault(const Soak& s, const StoredCycle& c,
+                                        const std::string& reason_prefix) {
+  if (absl::Status st = ExpectEnded(c); !st.ok()) return st;
+  if (c.reason.rfind(reason_prefix, 0) == 0 && c.verdict == Verdict::kError) return true;
+  if (c.state == CycleState::kDone && c.verdict == s.clean.verdict && c.reason == s.clean.reason) {
+    return false;
+  }
+  return Violation(absl::StrCat("cycle ", c.id, ": ", CycleStateName(c.state), " ",
+                                VerdictName(c.verdict), " '", c.reason, "', expected error ",
+                                reason_prefix, "... or cycle 0's end"));
+}
+
+// Issue 21, item 7: the data root (database included) deleted at a random moment of a cycle.
+absl::StatusOr<std::string> DataRootDeleted(Soak& s) {
+  const fs::path root = s.dir / "deleted_root";
+  fs::remove_all(root);
+  absl::StatusOr<std::unique_ptr<StationCore>> core = ScratchCore(s, root);
+  if (!core.ok()) return core.status();
+  const absl::StatusOr<std::int64_t> id = (*core)->StartCycle(s.request);
+  if (!id.ok()) return Violation(absl::StrCat("StartCycle: ", id.status().ToString()));
+  // A random moment from the start to a clean cycle's end.
+  std::this_thread::sleep_for(
+      std::chrono::duration_cast<Clock::duration>(s.clean_time * Uniform(s, 0, 1)));
+  std::error_code ec;
+  fs::remove_all(root, ec);  // nothing writes into it during a replay cycle
+  if (ec) return Violation(absl::StrCat("remove ", root.string(), ": ", ec.message()));
+  (*core)->WaitIdle();
+  absl::StatusOr<StoredCycle> c = (*core)->GetCycle(*id);
+  if (!c.ok()) return Violation(absl::StrCat("GetCycle: ", c.status().ToString()));
+  absl::StatusOr<bool> met = ExpectEndedByFault(s, *c, "data_root_removed: ");
+  if (!met.ok()) return met.status();
+  const absl::Status health = (*core)->Health();
+  const absl::Status next = (*core)->StartCycle(s.request).status();
+  if (!absl::IsFailedPrecondition(health) || !absl::IsFailedPrecondition(next)) {
+    return Violation(absl::StrCat("data root gone: health ", health.ToString(), ", StartCycle ",
+                                  next.ToString(), ", expected FAILED_PRECONDITION for both"));
+  }
+  core->reset();
+  return std::string(*met ? "error data_root_removed, NOT_SERVING, next start refused"
+                          : "ended before the deletion; NOT_SERVING, next start refused");
+}
+
+// Issue 21, item 1: a tmpfs holding the data root and the database filled to the last byte at
+// a random moment of a cycle; then the space freed. Needs root (to mount); else skipped.
+absl::StatusOr<std::string> DiskFull(Soak& s) {
+  if (::geteuid() != 0) return std::string("skipped: mounting a tmpfs needs root");
+  const fs::path mount = s.dir / "full";
+  fs::create_directories(mount);
+  std::uintmax_t capture_bytes = 0;
+  for (const fs::directory_entry& e : fs::recursive_directory_iterator(s.pristine)) {
+    if (e.is_regular_file()) capture_bytes += e.file_size();
+  }
+  // The capture, the database and kFreeBytesToServe with room to spare once the filler goes.
+  const std::string options = absl::StrCat("size=", capture_bytes + (24u << 20));
+  if (::mount("tmpfs", mount.c_str(), "tmpfs", 0, options.c_str()) != 0) {
+    return std::string("skipped: mount -t tmpfs: ") + std::strerror(errno);
+  }
+  struct Unmount {
+    fs::path at;
+    ~Unmount() { ::umount2(at.c_str(), MNT_DETACH); }
+  } unmount{mount};
+  absl::StatusOr<std::unique_ptr<StationCore>> core = ScratchCore(s, mount / "data");
+  if (!core.ok()) return core.status();
+  StationCore& full = **core;
+  const absl::StatusOr<std::int64_t> id = full.StartCycle(s.request);
+  if (!id.ok()) return Violation(absl::StrCat("StartCycle: ", id.status().ToString()));
+  // A random moment from the start to a clean cycle's end.
+  std::this_thread::sleep_for(
+      std::chrono::duration_cast<Clock::duration>(s.clean_time * Uniform(s, 0, 1)));
+  const fs::path filler = mount / "filler";
+  FillFileSystem(filler.string());
+  full.WaitIdle();
+  absl::StatusOr<StoredCycle> c = full.GetCycle(*id);
+  if (!c.ok()) return Violation(absl::StrCat("GetCycle: ", c.status().ToString()));
+  absl::StatusOr<bool> met = ExpectEndedByFault(s, *c, "disk_full: ");
+  if (!met.ok()) return met.status();
+  // The disk is full: a new cycle is refused (or, if SQLite found room, ends like any).
+  const absl::StatusOr<std::int64_t> next = full.StartCycle(s.request);
+  if (next.ok()) {
+    full.WaitIdle();
+    absl::StatusOr<StoredCycle> n = full.GetCycle(*next);
+    if (!n.ok()) return Violation(absl::StrCat("GetCycle: ", n.status().ToString()));
+    absl::StatusOr<bool> m = ExpectEndedByFault(s, *n, "disk_full: ");
+    if (!m.ok()) return m.status();
+  } else if (!absl::IsResourceExhausted(next.status())) {
+    return Violation(absl::StrCat("StartCycle on a full disk: ", next.status().ToString(),
+                                  ", expected RESOURCE_EXHAUSTED"));
+  }
+  if ((*met || !next.ok()) && full.Health().ok()) {
+    return Violation("a full disk, yet Health() is OK");
+  }
+  fs::remove(filler);
+  if (const absl::Status h = full.Health(); !h.ok()) {
+    return Violation(absl::StrCat("space back, yet Health(): ", h.ToString()));
+  }
+  absl::StatusOr<StoredCycle> stored = full.store().GetCycle(*id);
+  if (!stored.ok() || stored->state == CycleState::kRunning || stored->reason != c->reason) {
+    return Violation(absl::StrCat("cycle ", *id, "'s end not stored once space returned"));
+  }
+  absl::StatusOr<std::int64_t> after = full.StartCycle(s.request);
+  if (!after.ok()) {
+    return Violation(absl::StrCat("StartCycle once space returned: ", after.status().ToString()));
+  }
+  full.WaitIdle();
+  absl::StatusOr<StoredCycle> a = full.GetCycle(*after);
+  if (!a.ok() || a->state != CycleState::kDone || a->verdict != s.clean.verdict) {
+    return Violation(absl::StrCat("the cycle after the space returned did not end as cycle 0"));
+  }
+  if (const absl::Status integrity = full.store().IntegrityCheck(); !integrity.ok()) {
+    return Violation(absl::StrCat("integrity_check after the full disk: ", integrity.ToString()));
+  }
+  core->reset();
+  return std::string(*met ? "error disk_full, NOT_SERVING, stored and serving once space returned"
+                          : "ended before the disk filled; refused, serving once space returned");
+}
+
 std::vector<Fault> Faults() {
   return {
       {"clean", 30, "no fault: the result must equal cycle 0's", Clean},
@@ -485,6 +651,10 @@ std::vector<Fault> Faults() {
       {"cancel", 12, "CancelCycle at a random moment from the start to 1.2 clean cycles", CancelAtRandom},
       {"invalid_requests", 7, "9 invalid requests, unknown ids, a second start while running; then a cycle",
        InvalidRequests},
+      {"disk_full", 2, "a tmpfs under the data root and database filled during a cycle, freed",
+       DiskFull},
+      {"data_root_deleted", 2, "the data root with the database deleted during a cycle",
+       DataRootDeleted},
   };
 }
 
@@ -509,6 +679,7 @@ int Run(const ProgramFlags& flags, int rss_from) {
     return 2;
   };
   Soak s;
+  s.dir = dir;
   s.rng.seed(flags.seed);
   s.pristine = dir / "pristine";
   s.capture = dir / "data" / "replay";
@@ -527,6 +698,7 @@ int Run(const ProgramFlags& flags, int rss_from) {
   config.source = CycleSource::kReplay;
   config.replay_capture = "replay";
   config.busy_timeout = kBusyTimeout;
+  s.config = config;
   absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
   if (!core.ok()) return setup_failed(core.status());
   s.core = core->get();

@@ -395,6 +395,66 @@ TEST_F(ServiceTest, HealthServiceIsOn) {
   ASSERT_NE(server_.server->GetHealthCheckService(), nullptr);
 }
 
+// grpc.health.v1.Health/Check with an empty request (service ""): the response's bytes,
+// "\x08\x01" for SERVING, "\x08\x02" for NOT_SERVING (field 1, the status enum).
+std::string HealthCheckBytes(const std::shared_ptr<grpc::Channel>& channel) {
+  grpc::GenericStub generic(channel);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  // gRPC refuses a buffer without slices; the empty message is one empty slice.
+  grpc::Slice empty_message("");
+  grpc::ByteBuffer request(&empty_message, 1);
+  grpc::ByteBuffer response;
+  std::promise<grpc::Status> done;
+  generic.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request,
+                    &response, [&](grpc::Status s) { done.set_value(s); });
+  const grpc::Status status = done.get_future().get();
+  if (!status.ok()) return "error: " + status.error_message();
+  grpc::Slice slice;
+  if (!response.DumpToSingleSlice(&slice).ok()) return "";
+  return std::string(reinterpret_cast<const char*>(slice.begin()), slice.size());
+}
+
+// Issue 21, items 1 and 7: the health check said SERVING whatever happened to the storage.
+// With the data root (and the database in it) deleted it turns NOT_SERVING within a poll
+// (kHealthPollInterval), and StartCycle says why.
+TEST_F(ServiceTest, HealthIsNotServingOnceTheDataRootIsGone) {
+  MakeDir();
+  testing_daemon::WriteTwoSensorCar((dir_ / "car.json").string());
+  StationCoreConfig config;
+  config.station_path = kDeploy + "/stations/reference.json";
+  config.car_model_paths = {(dir_ / "car.json").string()};
+  config.data_root = (dir_ / "data").string();
+  config.db_path = (dir_ / "data" / "station.db").string();
+  fs::create_directories(config.data_root);
+  config.log = [](const std::string&, const std::string&) {};
+  core_ = std::move(*StationCore::Create(config));
+  absl::StatusOr<RunningServer> server = StartServer(core_.get(), "127.0.0.1:0", "", "test");
+  ASSERT_TRUE(server.ok()) << server.status();
+  server_ = std::move(*server);
+  channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port),
+                                 grpc::InsecureChannelCredentials());
+  stub_ = v1::Station::NewStub(channel_);
+  EXPECT_EQ(HealthCheckBytes(channel_), std::string("\x08\x01", 2));
+
+  fs::remove_all(config.data_root);
+  const auto removed = std::chrono::steady_clock::now();
+  std::string health;
+  while ((health = HealthCheckBytes(channel_)) != std::string("\x08\x02", 2) &&
+         std::chrono::steady_clock::now() - removed < std::chrono::seconds(10)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(health, std::string("\x08\x02", 2));
+  // A poll and a call: 2 s is eight polls, for a loaded machine.
+  EXPECT_LT(std::chrono::steady_clock::now() - removed, std::chrono::seconds(2));
+  grpc::ClientContext context;
+  v1::StartCycleResponse started;
+  const grpc::Status refused = stub_->StartCycle(&context, Request(), &started);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(refused.error_message().find("was removed while linecald ran"), std::string::npos)
+      << refused.error_message();
+}
+
 // Mutual TLS: a server with the openssl-made certificates of testing_daemon::MakeTestPki.
 class TlsServiceTest : public ServiceTest {
  protected:

@@ -5,17 +5,22 @@
 
 #include <signal.h>
 #include <sqlite3.h>
+#include <sys/mount.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <set>
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "tests/daemon/reliability/reliability_support.h"
 
 namespace linecal {
 namespace {
@@ -32,7 +37,10 @@ class StoreTest : public ::testing::Test {
     fs::create_directories(dir_);
     path_ = (dir_ / "station.db").string();
   }
-  void TearDown() override { fs::remove_all(dir_); }
+  void TearDown() override {
+    if (!mounted_.empty()) ::umount2(mounted_.c_str(), MNT_DETACH);
+    fs::remove_all(dir_);
+  }
 
   std::unique_ptr<Store> OpenOk(const StoreOptions& options = {}) {
     absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(path_, options);
@@ -58,6 +66,7 @@ class StoreTest : public ::testing::Test {
 
   fs::path dir_;
   std::string path_;
+  std::string mounted_;  // a tmpfs this test mounted, unmounted by TearDown
 };
 
 StoredCycle Request(const std::string& vin, int64_t started_ns) {
@@ -334,6 +343,57 @@ TEST_F(StoreTest, SecondStoreIsRefusedNamingTheLockFileAndItsHolder) {
   // Once the first is gone, the next one opens.
   store.reset();
   EXPECT_NE(OpenOk(), nullptr);
+}
+
+// Issue 21, item 1: SQLITE_FULL was an Internal error like any other, which the core did not
+// retry or keep: now it is ResourceExhausted naming the database, nothing of the call is
+// stored, and the same call works once space returns. A real tmpfs filled to the last byte.
+TEST_F(StoreTest, FullDiskIsResourceExhaustedAndTheWriteWorksOnceSpaceReturns) {
+  if (::geteuid() != 0) GTEST_SKIP() << "mounting a tmpfs needs root";
+  const fs::path at = dir_ / "tmpfs";
+  fs::create_directories(at);
+  // 4 MiB: the database and its WAL with room to spare, filled by the test.
+  ASSERT_EQ(::mount("tmpfs", at.c_str(), "tmpfs", 0, "size=4194304"), 0) << std::strerror(errno);
+  mounted_ = at.string();
+  path_ = (at / "station.db").string();
+  std::unique_ptr<Store> store = OpenOk();
+  ASSERT_NE(store, nullptr);
+  const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
+  ASSERT_GT(reliability::FillFileSystem((at / "filler").string()), 0u);
+
+  const absl::StatusOr<int64_t> event = store->AppendEvent({id, 0, 2, "cycle_ended", "", "x",
+                                                            Verdict::kError});
+  EXPECT_EQ(event.status().code(), absl::StatusCode::kResourceExhausted) << event.status();
+  EXPECT_NE(event.status().message().find("database " + path_), std::string::npos);
+  EXPECT_NE(event.status().message().find("database or disk is full"), std::string::npos);
+  const absl::Status end = store->EndCycle(id, CycleState::kDone, Verdict::kError, "disk_full", 3);
+  EXPECT_EQ(end.code(), absl::StatusCode::kResourceExhausted) << end;
+  EXPECT_EQ(store->GetCycle(id)->state, CycleState::kRunning);  // nothing of it stored
+
+  fs::remove(at / "filler");
+  EXPECT_TRUE(store->AppendEvent({id, 0, 2, "cycle_ended", "", "x", Verdict::kError}).ok());
+  ASSERT_TRUE(store->EndCycle(id, CycleState::kDone, Verdict::kError, "disk_full", 3).ok());
+  EXPECT_EQ(store->GetCycle(id)->reason, "disk_full");
+  EXPECT_EQ(store->Events(id)->size(), 1u);
+  EXPECT_TRUE(store->IntegrityCheck().ok());
+}
+
+// Issue 21, item 7: a database file deleted or replaced under an open Store is still written
+// through SQLite's descriptor, every call succeeding; CheckFile says so, naming the file.
+TEST_F(StoreTest, CheckFileNamesARemovedOrReplacedDatabase) {
+  std::unique_ptr<Store> store = OpenOk();
+  ASSERT_TRUE(store->CheckFile().ok());
+  fs::copy_file(path_, path_ + ".copy");
+  fs::rename(path_ + ".copy", path_);  // another file (inode) under the same name
+  absl::Status s = store->CheckFile();
+  EXPECT_EQ(s.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(s.message().rfind("database " + path_ + ": the file was replaced", 0), 0u) << s;
+  fs::remove(path_);
+  s = store->CheckFile();
+  EXPECT_EQ(s.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(s.message().rfind("database " + path_ + ": the file was removed", 0), 0u) << s;
+  // Writes still "succeed": why the core must look.
+  EXPECT_TRUE(store->BeginCycle(Request("WVWZZZ1JZXW000001", 1)).ok());
 }
 
 }  // namespace
