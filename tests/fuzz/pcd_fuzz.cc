@@ -2,7 +2,7 @@
 // binary_compressed readers). Input byte 0 picks the file: 0 the remaining bytes as they
 // are; 1-3 a small valid ascii / binary / binary_compressed file with the remaining bytes
 // XORed in from the offset given by bytes 1-2. Invariants: no crash, no unbounded
-// allocation, finite points.
+// allocation, finite points; under a budget, no claim beyond it is believed (issue 21).
 #include <unistd.h>
 
 #include <cmath>
@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "station/io/input_budget.h"
 #include "station/io/pcd.h"
 
 namespace {
@@ -72,6 +73,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (const linecal::LidarPoint& p : cloud->points) {
       if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) __builtin_trap();
     }
+  }
+  // The same file under a budget of 1000 points: a header's claim beyond it is refused before
+  // anything is allocated for it (-malloc_limit_mb in CMakeLists), and no more points return.
+  static const linecal::InputBudget budget = [] {
+    linecal::InputBudget b;
+    b.max_scan_points = 1000;
+    b.max_file_bytes = 1 << 20;
+    return b;
+  }();
+  const absl::StatusOr<linecal::PcdCloud> budgeted = linecal::ReadPcd(path, budget);
+  if (budgeted.ok() && static_cast<std::int64_t>(budgeted->points.size()) > budget.max_scan_points) {
+    __builtin_trap();
   }
   return 0;
 }
