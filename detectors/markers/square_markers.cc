@@ -757,9 +757,10 @@ Detection CheckAndReport(const BoardInImage& model, const std::vector<const Deco
 // Each marker's own four corners give its homography: over one marker the bending is a small
 // part of a pixel. A marker is the one its id says where its board neighbours' homographies,
 // carried over one pitch, put its corners within kBentNeighbourFraction of its side: a misread
-// id puts it whole pitches away, while the lens bends a pitch's carry by about a hundredth of
-// a side (measured: under 1 px at 90-110 px sides through a k1 -0.30 pinhole and a 190-degree
-// fisheye). Everything after (markers the scan missed, the paint, the report) uses the
+// id puts it whole pitches away, while the lens bends a pitch's carry by a few pixels, and at
+// the rim of a 190-degree fisheye by up to a fifth of a side (11.5 px at 53 px sides, measured
+// on the AprilGrid): half of the neighbours must agree, and the nearer ones do. Then the finer
+// check (PairPrediction). Everything after (markers the scan missed, the paint, the report) uses the
 // nearest marker's homography; the dilation of the dark print (BoardFit) is not taken out.
 
 // How far a neighbour's homography may put a marker's corners, in the marker's sides.
