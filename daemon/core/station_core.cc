@@ -461,9 +461,15 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       // Frames per sensor: camera frames and LiDAR rotations alike.
       o.camera_frames = frames;
       o.lidar.rotations = o.camera_frames;
+      o.cancel = &cancel_;  // a cancel or a drain stops before the next sensor
       absl::StatusOr<SimulationSummary> sim = SimulateCapture(
           station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
           [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });
+      if (absl::IsCancelled(sim.status())) {
+        end_state = CycleState::kCancelled;
+        end_reason = "cancelled";
+        return;
+      }
       if (!sim.ok()) {
         end_reason = FailureReason("acquisition_failed", sim.status());
         return;

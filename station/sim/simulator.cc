@@ -226,6 +226,9 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, 
   nlohmann::json truth_sensors = nlohmann::json::array();
   int done = 0;
   for (const SensorModel* sensor : sensors) {
+    if (options.cancel != nullptr && options.cancel->load()) {
+      return absl::CancelledError(absl::StrCat("simulation cancelled before ", sensor->name));
+    }
     const size_t index = static_cast<size_t>(sensor - car.sensors.data());
     std::mt19937_64 srng(StreamSeed(seed, index + 1));
     // The true mounting: nominal mounting angles and position plus the random error.

@@ -9,6 +9,7 @@
 // radar_sim.h (candump log). Deterministic for a seed: every sensor draws from its own stream
 // (seed, sensor index), so adding a sensor does not change the others.
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <optional>
@@ -51,6 +52,9 @@ struct SimulatorOptions {
   RadarSimOptions radar;
   // Only these sensors (empty: all of the car model).
   std::vector<std::string> sensors;
+  // When set and true, the simulation stops before its next sensor with Cancelled (a daemon
+  // cycle cancelled or draining: one sensor's frames at most are still made, not the car's).
+  const std::atomic<bool>* cancel = nullptr;
   // OK or InvalidArgument naming the first bad field (nested options included). O(1).
   absl::Status Validate() const;
 };
@@ -66,7 +70,8 @@ struct SimulationSummary {
 // Simulates the car in the station and writes the capture into `out_dir` (created if
 // missing; existing files of the same names are replaced). Errors: InvalidArgument for bad
 // options or a sensor name the car does not have, or a car whose targets are not in the
-// station; Internal for files that cannot be written (naming them). Cost: dominated by the
+// station; Internal for files that cannot be written (naming them); Cancelled once
+// options.cancel is true (checked before each sensor). Cost: dominated by the
 // camera renders (about 0.2 s per 1920x1080 frame) and LiDAR rotations.
 absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, const CarModel& car,
                                                   const SimulatorOptions& options, std::uint64_t seed,
