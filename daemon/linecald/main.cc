@@ -5,9 +5,8 @@
 // calibration stops at its next frame), exit 0 within kDrainTime (SIGHUP too: a closed
 // terminal or a `kill -HUP` meant as "reload" must not leave the cycle running, and there is
 // nothing to reload that a restart would not do).
-// Descriptors: the soft RLIMIT_NOFILE is raised to the hard limit at start; gRPC 1.51's
-// listener stops for good after an accept error (EMFILE), so linecald listens again on the
-// same port once descriptors free up (docs/daemon.md, "Descriptors").
+// Descriptors: the soft RLIMIT_NOFILE is raised to the hard limit at start (docs/daemon.md,
+// "Descriptors").
 // Under systemd (Type=notify): READY=1 once calls are served, WATCHDOG=1 while the core
 // answers, STOPPING=1 on the signal (daemon/systemd/sd_notify.h).
 #include <grpc/support/log.h>
@@ -83,56 +82,13 @@ std::string RaiseDescriptorLimit() {
                       limit.rlim_max);
 }
 
-// Sent to this process when gRPC's listener stopped on an accept error; taken by sigwait.
-constexpr int kListenerFailedSignal = SIGUSR1;
-
-// gRPC's own log lines, in ours. gRPC 1.51 logs "Failed accept4: <error>" when accept fails
-// with anything but EAGAIN/ECONNABORTED/EINTR (EMFILE: descriptors exhausted) and then
-// never accepts on that port again (src/core/lib/iomgr/tcp_server_posix.cc; gRPC issues
-// #20418, #31080, retried upstream only since 2023): that line is the only sign of it, so
-// it makes main listen again.
+// gRPC's own log lines, in ours: its errors (an accept that failed, "Failed accept4: Too
+// many open files") must reach the station's log whatever GRPC_VERBOSITY says.
 void LogGrpc(gpr_log_func_args* args) {
   const char* level = args->severity == GPR_LOG_SEVERITY_ERROR ? "error"
                       : args->severity == GPR_LOG_SEVERITY_INFO ? "info"
                                                                 : "debug";
   std::fprintf(stderr, "level=%s msg=\"grpc: %s\"\n", level, args->message);
-  // Only the error: while gRPC shuts its listeners down it logs accept failures lower.
-  static constexpr char kAcceptFailed[] = "Failed accept4";
-  if (args->severity == GPR_LOG_SEVERITY_ERROR &&
-      std::strncmp(args->message, kAcceptFailed, sizeof kAcceptFailed - 1) == 0) {
-    kill(getpid(), kListenerFailedSignal);
-  }
-}
-
-// HOST:PORT of `listen` with the port the server got (the same when it was not 0).
-std::string BoundAddress(const std::string& listen, int port) {
-  return absl::StrCat(listen.substr(0, listen.rfind(':')), ":", port);
-}
-
-// After gRPC's listener died: stops the old server (calls in flight get 1 s, then are
-// cancelled: the port stays closed meanwhile, and clients reconnect) and listens again on the
-// same address, every 500 ms until it works (the descriptors it needs may still be taken; a
-// port back within half a second, without spinning). Returns the signal that stopped the
-// retries (0 when listening again).
-int Relisten(linecal::StationCore* core, const linecal::DaemonConfig& config,
-             const std::string& address, const sigset_t& signals, linecal::RunningServer* server) {
-  Log("error",
-      "the listener stopped on an accept error (descriptors exhausted?); listening again on " +
-          address + " once descriptors free up");
-  server->server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
-  *server = {};
-  const timespec retry{0, 500'000'000};
-  while (true) {
-    absl::StatusOr<linecal::RunningServer> again =
-        linecal::StartServer(core, address, config.auth_token, LINECAL_VERSION, config.tls);
-    if (again.ok()) {
-      *server = *std::move(again);
-      Log("info", "listening again on " + address);
-      return 0;
-    }
-    const int signal = sigtimedwait(&signals, nullptr, &retry);
-    if (signal > 0 && signal != kListenerFailedSignal) return signal;
-  }
 }
 
 const char* SignalName(int signal) {
@@ -239,7 +195,7 @@ int main(int argc, char** argv) {
   // Signals are taken by a waiting thread, not by handlers: the shutdown runs in normal code.
   sigset_t signals;
   sigemptyset(&signals);
-  for (int s : {SIGTERM, SIGINT, SIGHUP, kListenerFailedSignal}) sigaddset(&signals, s);
+  for (int s : {SIGTERM, SIGINT, SIGHUP}) sigaddset(&signals, s);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   absl::StatusOr<std::unique_ptr<linecal::StationCore>> core = linecal::StationCore::Create(config->core);
@@ -256,8 +212,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
-  // LogGrpc must see gRPC's errors to notice a dead listener: GRPC_VERBOSITY=NONE (read by
-  // gRPC's first init, which StartServer did) would hide them, so errors are let through.
+  // gRPC's errors belong in the log: GRPC_VERBOSITY=NONE (read by gRPC's first init, which
+  // StartServer did) would hide them, so errors are let through.
   if (!gpr_should_log(GPR_LOG_SEVERITY_ERROR)) gpr_set_log_verbosity(GPR_LOG_SEVERITY_ERROR);
   const std::string listening = "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
   const char* tls = !config->tls ? ", insecure" : config->tls->require_client_cert ? ", mutual TLS" : ", TLS";
@@ -265,16 +221,10 @@ int main(int argc, char** argv) {
                   (config->auth_token.empty() ? ", no token" : ", token authentication"));
   const linecal::SystemdNotifier notifier = linecal::SystemdNotifier::FromEnvironment();
   if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok()) Log("warning", std::string(s.message()));
-  const std::string address = BoundAddress(config->listen, server->port);
   int signal = 0;
   {
     const Watchdog watchdog(notifier, core->get());
-    while (signal == 0) {
-      sigwait(&signals, &signal);
-      if (signal == kListenerFailedSignal) {
-        signal = Relisten(core->get(), *config, address, signals, &*server);
-      }
-    }
+    sigwait(&signals, &signal);
   }
   Log("info", std::string("stopping on ") + SignalName(signal));
   notifier.Notify("STOPPING=1").IgnoreError();
