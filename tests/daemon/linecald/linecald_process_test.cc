@@ -1,7 +1,8 @@
 // linecald as a real process (the demo station: every sensor of the reference car simulated,
 // a scratch data directory, a free loopback port) under what a station network and its
-// operators do to it: a second daemon on the same database, SIGHUP, flags out of range, and
-// the descriptor limit (docs/daemon.md, docs/reliability.md).
+// operators do to it: a second daemon on the same database, SIGHUP, flags out of range, the
+// descriptor limit and descriptors running out under a real RLIMIT_NOFILE (docs/daemon.md,
+// docs/reliability.md).
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -9,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -17,10 +19,12 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "daemon/store/store.h"
 #include "linecal/v1/station.grpc.pb.h"
 #include "tests/daemon/reliability/reliability_support.h"
 #include "tests/daemon/scratch_dir.h"
+#include "tests/daemon/test_pki.h"
 
 namespace linecal {
 namespace {
@@ -133,6 +137,10 @@ class LinecaldProcessTest : public ::testing::Test {
     EXPECT_TRUE(cycle.ok()) << cycle.status();
     return cycle.ok() ? *cycle : StoredCycle{};
   }
+
+  void ExpectServedAgainAfterDescriptorsRanOut(
+      const std::vector<std::string>& args,
+      const std::shared_ptr<grpc::ChannelCredentials>& credentials);
 
   // Waits for a daemon that must stop before it serves: its exit status, or -1 when it
   // listened instead (then it is killed by the destructor): a failure, not a hang.
@@ -248,6 +256,80 @@ TEST_F(LinecaldProcessTest, SoftDescriptorLimitIsRaisedToTheHardOne) {
       << ReadFile(LogPath("daemon"));
   daemon->Signal(SIGTERM);
   EXPECT_EQ(daemon->Wait(), 0);
+}
+
+// Issue 21, item 2: with its descriptors exhausted by idle TCP connections, gRPC 1.51's
+// listener fails accept4 with EMFILE and never accepted again, even once they closed. The
+// daemon (started with `args`) runs under a limit of 256 descriptors, soft and hard (so that
+// raising the soft one changes nothing), and gets 300 connections that send nothing; once
+// accept has failed they close, and a call on a new connection (with `credentials`) must be
+// served within seconds by the same process.
+void LinecaldProcessTest::ExpectServedAgainAfterDescriptorsRanOut(
+    const std::vector<std::string>& args,
+    const std::shared_ptr<grpc::ChannelCredentials>& credentials) {
+  absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon =
+      LinecaldProcess::Spawn(kLinecald, args, LogPath("daemon"), /*descriptor_limit=*/256);
+  ASSERT_TRUE(daemon.ok()) << daemon.status();
+  const absl::StatusOr<int> port = (*daemon)->WaitReady(kTimeout);
+  ASSERT_TRUE(port.ok()) << port.status();
+
+  // 300: more than the limit, well under the listen backlog (somaxconn, 4096 by default).
+  reliability::IdleConnections idle;
+  ASSERT_TRUE(idle.Open(*port, 300).ok());
+  // gRPC's own line for the accept that failed: the fault happened.
+  const absl::Status failed = (*daemon)->WaitForLog("Failed accept4: Too many open files", kTimeout);
+  ASSERT_TRUE(failed.ok()) << failed;
+  idle.Close();
+
+  const auto t0 = std::chrono::steady_clock::now();
+  // A new connection: a channel of its own subchannel pool (channels to the same target share
+  // their connections by default).
+  grpc::ChannelArguments arguments;
+  arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  std::unique_ptr<v1::Station::Stub> stub = v1::Station::NewStub(grpc::CreateCustomChannel(
+      "127.0.0.1:" + std::to_string(*port), credentials, arguments));
+  grpc::ClientContext context;
+  // A few seconds: the watchdog's detection (2-3 s), a restart and the client's reconnection
+  // backoff; generous for the sanitizers. Without the watchdog the call waits for a listener
+  // that never accepts.
+  context.set_deadline(std::chrono::system_clock::now() + seconds(15));
+  context.set_wait_for_ready(true);  // retry the connection until the daemon accepts again
+  v1::StationStatus status;
+  const grpc::Status s = stub->GetStationStatus(&context, {}, &status);
+  const double served_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_TRUE(s.ok()) << s.error_code() << " " << s.error_message() << "\n"
+                      << ReadFile(LogPath("daemon"));
+  std::printf("served %.2f s after the idle connections closed\n", served_s);
+  const std::string log = ReadFile(LogPath("daemon"));
+  EXPECT_NE(log.find("listening again on 127.0.0.1:" + std::to_string(*port) + " (restart 1)"),
+            std::string::npos)
+      << log;
+  // The same process (no restart by systemd): it still answers SIGTERM with a clean stop.
+  (*daemon)->Signal(SIGTERM);
+  const int exit_status = (*daemon)->Wait();
+  EXPECT_TRUE(WIFEXITED(exit_status) && WEXITSTATUS(exit_status) == 0)
+      << DescribeWaitStatus(exit_status);
+}
+
+TEST_F(LinecaldProcessTest, AcceptsAgainAfterDescriptorsRanOut) {
+  ExpectServedAgainAfterDescriptorsRanOut({"--data-dir", DataDir(), "--listen", "127.0.0.1:0"},
+                                          grpc::InsecureChannelCredentials());
+}
+
+// The same on a mutual TLS port: the watchdog looks below TLS, at the kernel's accept queue.
+TEST_F(LinecaldProcessTest, AcceptsAgainAfterDescriptorsRanOutOnAMutualTlsPort) {
+  testing_daemon::TestPki pki;
+  ASSERT_TRUE(testing_daemon::MakeTestPki(dir_, &pki));
+  ASSERT_TRUE(reliability::WriteLongCameraCapture(DataDir() + "/long", 1).ok());
+  const std::string config = WriteReplayConfig(
+      dir_, DataDir(),
+      absl::StrCat("\"tls\": {\"cert\": \"", pki.server_cert, "\", \"key\": \"", pki.server_key,
+                   "\", \"client_ca\": \"", pki.ca_cert, "\"}"));
+  grpc::SslCredentialsOptions options;
+  options.pem_root_certs = ReadFile(pki.ca_cert);
+  options.pem_cert_chain = ReadFile(pki.client_cert);
+  options.pem_private_key = ReadFile(pki.client_key);
+  ExpectServedAgainAfterDescriptorsRanOut({"--config", config}, grpc::SslCredentials(options));
 }
 
 // A configuration file for linecald: the reference station and car, this test's data

@@ -11,17 +11,24 @@
 // runs cycles back to back (StartCycle, WatchCycle to the end, GetCycle) and a killer thread
 // sends SIGKILL at a moment drawn uniformly from 0 to 2.2 cycle times after the round's first
 // StartCycle; every fifth round also kills the daemon once while it starts (opening the store,
-// aborting the cycle left running), at a moment drawn up to its start-up time. Exit status 0
-// when every check held, 1 otherwise, 2 for bad flags or a failed setup.
+// aborting the cycle left running), at a moment drawn up to its start-up time. The last
+// restart also meets a second daemon on the same configuration, descriptors exhausted by idle
+// connections (gRPC's accept fails with EMFILE; the same process must serve again once they
+// close) and SIGHUP. Exit status 0 when every check held, 1 otherwise, 2 for bad flags or a
+// failed setup.
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <random>
 #include <set>
@@ -242,6 +249,64 @@ void SecondDaemonRefused(Run& r, pid_t first) {
   }
 }
 
+// Issue 21, item 2: the running daemon's descriptors exhausted by idle connections, then
+// freed. Its soft RLIMIT_NOFILE is lowered (prlimit) to what it has open plus
+// kDescriptorHeadroom, and kDescriptorHeadroom + 100 connections that send nothing are opened:
+// gRPC's accept4 fails with EMFILE (its log says so), after which gRPC 1.51 would never accept
+// again. Once they close, the same process must serve a call on a new connection within
+// kCallDeadline; the limit is then restored. Returns the seconds from the close to the call's
+// answer (-1 after a violation).
+constexpr int kDescriptorHeadroom = 64;
+double DescriptorsExhausted(Run& r, const LinecaldProcess& daemon, int port) {
+  const pid_t pid = daemon.pid();
+  rlimit before{};
+  if (::prlimit(pid, RLIMIT_NOFILE, nullptr, &before) != 0) {
+    Violation(r, absl::StrCat("descriptors: prlimit: ", std::strerror(errno)));
+    return -1;
+  }
+  const rlim_t open = static_cast<rlim_t>(std::distance(
+      fs::directory_iterator(absl::StrCat("/proc/", pid, "/fd")), fs::directory_iterator{}));
+  const rlimit lowered{open + kDescriptorHeadroom, before.rlim_max};
+  if (::prlimit(pid, RLIMIT_NOFILE, &lowered, nullptr) != 0) {
+    Violation(r, absl::StrCat("descriptors: prlimit: ", std::strerror(errno)));
+    return -1;
+  }
+  double served_s = -1;
+  {
+    IdleConnections idle;
+    if (absl::Status s = idle.Open(port, kDescriptorHeadroom + 100); !s.ok()) {
+      Violation(r, absl::StrCat("descriptors: ", s.message()));
+    } else if (absl::Status s = daemon.WaitForLog("Failed accept4: Too many open files",
+                                                  kCallDeadline);
+               !s.ok()) {
+      Violation(r, absl::StrCat("descriptors: accept never failed: ", s.message()));
+    } else {
+      idle.Close();
+      const Clock::time_point t0 = Clock::now();
+      // A new connection: a channel of its own subchannel pool (channels to the same target
+      // share their connections by default, and the client's is still open).
+      grpc::ChannelArguments arguments;
+      arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+      std::unique_ptr<v1::Station::Stub> fresh = v1::Station::NewStub(grpc::CreateCustomChannel(
+          absl::StrCat("127.0.0.1:", port), grpc::InsecureChannelCredentials(), arguments));
+      grpc::ClientContext context;
+      context.set_deadline(Deadline());
+      context.set_wait_for_ready(true);  // through the restart
+      v1::StationStatus status;
+      if (grpc::Status st = fresh->GetStationStatus(&context, {}, &status); !st.ok()) {
+        Violation(r, absl::StrCat("descriptors: no call served on a new connection after they ",
+                                  "freed up: ", st.error_message()));
+      } else {
+        served_s = std::chrono::duration<double>(Clock::now() - t0).count();
+      }
+    }
+  }
+  if (::prlimit(pid, RLIMIT_NOFILE, &before, nullptr) != 0) {
+    Violation(r, absl::StrCat("descriptors: restoring the limit: ", std::strerror(errno)));
+  }
+  return served_s;
+}
+
 // Starts a cycle; returns its id, or "" after a violation.
 std::string StartOnly(Run& r, Client& client) {
   v1::StartCycleRequest request;
@@ -385,10 +450,12 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
   }
 
   // The last restart: everything verified once more, also after a second daemon on the same
-  // configuration was refused; then a cycle started and SIGHUP, which must drain as SIGTERM
-  // does (exit 0, the cycle cancelled or, had it ended first, done); then the file itself.
+  // configuration was refused and after its descriptors ran out; then a cycle started and
+  // SIGHUP, which must drain as SIGTERM does (exit 0, the cycle cancelled or, had it ended
+  // first, done); then the file itself.
   int final_status = -1;
   std::string last_id;
+  double descriptors_served_s = -1;
   {
     absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
     if (!daemon.ok()) return setup_failed(daemon.status());
@@ -398,7 +465,11 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
       Verify(r, client, "final restart");
       SecondDaemonRefused(r, (*daemon)->pid());
       Verify(r, client, "after a second daemon");
-      last_id = StartOnly(r, client);
+      descriptors_served_s = DescriptorsExhausted(r, **daemon, *port);
+      // A new channel: the restarted gRPC server closed the old one's connection.
+      Client again(*port);
+      Verify(r, again, "after the descriptors ran out");
+      last_id = StartOnly(r, again);
     } else {
       Violation(r, absl::StrCat("final restart: ", port.status().message()));
     }
@@ -439,6 +510,13 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
   std::printf("  ended just before the kill, unseen by the client: %d\n", r.ended_unseen);
   std::printf("  stored by a StartCycle whose answer the kill cut off: %d\n", r.unacknowledged);
   std::printf("daemon RSS after one cycle: %.1f MB\n", r.rss_after_cycle_kb / 1024.0);
+  if (descriptors_served_s >= 0) {
+    std::printf("descriptors exhausted (accept4 EMFILE): a new connection served %.1f s after they "
+                "freed up, same process\n",
+                descriptors_served_s);
+  } else {
+    std::printf("descriptors exhausted: not served again (see the violations)\n");
+  }
   std::printf("integrity_check: %s; final SIGHUP: %s; running at the last open: %d\n",
               integrity.ok() ? "ok" : std::string(integrity.message()).c_str(),
               DescribeWaitStatus(final_status).c_str(), aborted_at_open);

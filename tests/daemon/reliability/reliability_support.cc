@@ -1,15 +1,21 @@
 #include "tests/daemon/reliability/reliability_support.h"
 
+#include <arpa/inet.h>
 #include <fcntl.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <regex>
 #include <sstream>
 #include <thread>
@@ -205,7 +211,8 @@ absl::Status WriteLongCameraCapture(const std::string& dir, int frames) {
 
 absl::StatusOr<std::unique_ptr<LinecaldProcess>> LinecaldProcess::Spawn(const std::string& binary,
                                                                        const std::vector<std::string>& args,
-                                                                       const std::string& log_path) {
+                                                                       const std::string& log_path,
+                                                                       std::uint64_t descriptor_limit) {
   std::error_code ec;
   const std::uintmax_t offset = fs::exists(log_path, ec) ? fs::file_size(log_path, ec) : 0;
   std::vector<std::string> argv_strings = {binary};
@@ -219,6 +226,8 @@ absl::StatusOr<std::unique_ptr<LinecaldProcess>> LinecaldProcess::Spawn(const st
     // Only async-signal-safe calls between fork and exec (the parent has threads).
     const int fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
     if (fd < 0 || ::dup2(fd, STDERR_FILENO) < 0) ::_exit(126);
+    const rlimit limit{descriptor_limit, descriptor_limit};
+    if (descriptor_limit > 0 && ::setrlimit(RLIMIT_NOFILE, &limit) != 0) ::_exit(125);
     ::execv(binary.c_str(), argv.data());
     ::_exit(127);
   }
@@ -233,6 +242,96 @@ LinecaldProcess::~LinecaldProcess() {
 }
 
 std::string LinecaldProcess::NewLog() const { return ReadAll(log_path_, log_offset_); }
+
+absl::Status LinecaldProcess::WaitForLog(const std::string& text,
+                                         std::chrono::milliseconds timeout) const {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (true) {
+    const std::string log = NewLog();
+    if (log.find(text) != std::string::npos) return absl::OkStatus();
+    if (std::chrono::steady_clock::now() > deadline) {
+      return absl::DeadlineExceededError(absl::StrCat("linecald did not log '", text, "' within ",
+                                                      timeout.count(), " ms; its log:\n", log));
+    }
+    // 20 ms between reads of a small log file.
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+LinearTrend FitLinearTrend(const std::vector<double>& x, const std::vector<double>& y) {
+  LinearTrend t;
+  const size_t n = std::min(x.size(), y.size());
+  if (n < 3) return t;
+  double mx = 0, my = 0;
+  for (size_t i = 0; i < n; ++i) {
+    mx += x[i];
+    my += y[i];
+  }
+  mx /= n;
+  my /= n;
+  double sxx = 0, sxy = 0;
+  for (size_t i = 0; i < n; ++i) {
+    sxx += (x[i] - mx) * (x[i] - mx);
+    sxy += (x[i] - mx) * (y[i] - my);
+  }
+  if (sxx == 0) return t;
+  t.samples = static_cast<int>(n);
+  t.slope = sxy / sxx;
+  t.intercept = my - t.slope * mx;
+  std::vector<double> residuals(n);
+  double squares = 0, lagged = 0;
+  for (size_t i = 0; i < n; ++i) {
+    residuals[i] = y[i] - (t.intercept + t.slope * x[i]);
+    squares += residuals[i] * residuals[i];
+    if (i > 0) lagged += residuals[i] * residuals[i - 1];
+  }
+  // n - 2: two parameters fitted.
+  t.scatter = std::sqrt(squares / static_cast<double>(n - 2));
+  // 0.95 at most: beyond it the widening (6.2x) would hide any trend in a short series.
+  t.autocorrelation = squares > 0 ? std::clamp(lagged / squares, 0.0, 0.95) : 0;
+  t.slope_error = t.scatter / std::sqrt(sxx) *
+                  std::sqrt((1 + t.autocorrelation) / (1 - t.autocorrelation));
+  return t;
+}
+
+MemoryGrowth JudgeMemoryGrowth(const std::vector<double>& cycles, const std::vector<double>& mb,
+                               double max_growth_per_1000, double min_significance) {
+  MemoryGrowth g;
+  g.trend = FitLinearTrend(cycles, mb);
+  if (g.trend.samples < 3) return g;
+  g.run_growth = g.trend.slope * (cycles[g.trend.samples - 1] - cycles[0]);
+  g.growth_per_1000 = g.trend.slope * 1000;
+  // A perfect line (no scatter) is as significant as a slope can be.
+  g.significance = g.trend.slope_error > 0 ? g.trend.slope / g.trend.slope_error
+                   : g.trend.slope > 0     ? std::numeric_limits<double>::infinity()
+                                           : 0;
+  g.leak = g.growth_per_1000 > max_growth_per_1000 && g.significance > min_significance;
+  return g;
+}
+
+absl::Status IdleConnections::Open(int port, int count) {
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  for (int i = 0; i < count; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0 || ::connect(fd, reinterpret_cast<const sockaddr*>(&address), sizeof address) != 0) {
+      const int error = errno;
+      if (fd >= 0) ::close(fd);
+      return absl::InternalError(absl::StrCat(fd < 0 ? "socket" : "connect", " to port ", port,
+                                              " with ", fds_.size(), " open: ",
+                                              std::strerror(error)));
+    }
+    fds_.push_back(fd);
+  }
+  return absl::OkStatus();
+}
+
+void IdleConnections::Close() {
+  for (int fd : fds_) ::close(fd);
+  fds_.clear();
+}
 
 absl::StatusOr<int> LinecaldProcess::WaitReady(std::chrono::milliseconds timeout) {
   // linecald's "listening on HOST:PORT (port N)" line, logged once calls are served.

@@ -30,6 +30,54 @@ absl::StatusOr<ProcessStatus> ReadProcessStatus(const std::string& pid = "self")
 // has just finished its work leaves the list a moment later.
 int SettledEntryCount(const std::string& proc_dir);
 
+// A least-squares line through samples (x, y), x ascending: y ~ intercept + slope x, with
+// the standard deviation of the residuals about it (`scatter`), their lag-1 autocorrelation
+// (consecutive samples of a process with memory lie on the same side of the line) and the
+// slope's standard error from both: scatter / sqrt(sum (x - mean x)^2), widened by
+// sqrt((1 + r) / (1 - r)) for an autocorrelation r > 0 (an AR(1) series of n samples carries
+// the information of n (1 - r) / (1 + r) independent ones). Fewer than 3 samples, or one x
+// only: all 0.
+struct LinearTrend {
+  double slope = 0;
+  double intercept = 0;
+  double scatter = 0;
+  double autocorrelation = 0;  // clamped to [0, 0.95]
+  double slope_error = 0;
+  int samples = 0;
+};
+LinearTrend FitLinearTrend(const std::vector<double>& x, const std::vector<double>& y);
+
+// The soak's memory verdict on one series (resident set or heap in use, MB, sampled against
+// the cycle number after warm-up): the line's rise over the run and projected over 1,000
+// cycles. A leak when both hold: the projection exceeds `max_growth_per_1000` (MB), and the
+// slope is more than `min_significance` standard errors above 0 (a series wandering in a
+// band without a trend fits a slope within a few standard errors of 0; a leak rises above).
+struct MemoryGrowth {
+  LinearTrend trend;
+  double run_growth = 0;       // slope x (last cycle - first cycle)
+  double growth_per_1000 = 0;  // slope x 1000
+  double significance = 0;     // slope / slope_error
+  bool leak = false;
+};
+MemoryGrowth JudgeMemoryGrowth(const std::vector<double>& cycles, const std::vector<double>& mb,
+                               double max_growth_per_1000, double min_significance);
+
+// The soak's bounds (docs/reliability.md, "The soak"). Two points of the resident set are
+// not a trend: over 1,000 cycles it wanders in a band of 51-88 MB (glibc's two arenas keep
+// and give back the peaks of frames and clouds) while the heap in use moves by tenths of a MB.
+// Resident set: docs/acceptance.md's "memory growth over 1,000 cycles < 5%", on the fitted
+// line: at most 5% of the line's level at the end of the warm-up per 1,000 cycles.
+inline constexpr double kSoakRssGrowthFractionPer1000 = 0.05;
+// Heap in use (malloc): at most 4 MB per 1,000 cycles. Twice the 2 MB that SQLite's page
+// cache (its default cache_size, -2000 KiB) grows to with the database, which is no leak; a
+// leak of 4 kB per cycle, a stored result's strings, exceeds it.
+inline constexpr double kSoakHeapGrowthMbPer1000 = 4.0;
+// And a slope 4 standard errors above 0: with the autocorrelation taken into account a band
+// without a trend stays below it (MemoryTrendTest: 20 independent and 20 wandering series of
+// the soak's band), while 40 kB per cycle in the resident set or 5 kB per cycle in the heap is
+// far above it.
+inline constexpr double kSoakMinSignificance = 4.0;
+
 // A VIN with its ISO 3779 check digit: every cycle of the programs is this car.
 inline constexpr char kVin[] = "1M8GDM9AXKP042788";
 // The reference station layout of the source tree (deploy/stations/reference.json).
@@ -75,10 +123,13 @@ std::uint64_t FillFileSystem(const std::string& path);
 // destructor kills (SIGKILL) and reaps it if it still runs.
 class LinecaldProcess {
  public:
-  // Forks and execs `binary` with `args`; returns at once. Internal when fork fails.
+  // Forks and execs `binary` with `args`; returns at once. Internal when fork fails. With a
+  // `descriptor_limit`, the child's RLIMIT_NOFILE, soft and hard, is set to it before the
+  // exec (linecald raises its soft limit to the hard one: both, so that the limit holds).
   static absl::StatusOr<std::unique_ptr<LinecaldProcess>> Spawn(const std::string& binary,
                                                                const std::vector<std::string>& args,
-                                                               const std::string& log_path);
+                                                               const std::string& log_path,
+                                                               std::uint64_t descriptor_limit = 0);
   ~LinecaldProcess();
   LinecaldProcess(const LinecaldProcess&) = delete;
   LinecaldProcess& operator=(const LinecaldProcess&) = delete;
@@ -88,6 +139,9 @@ class LinecaldProcess {
   // process exited first (it is not reaped: Wait gives its status), DeadlineExceeded after
   // `timeout`; both with the new part of the log.
   absl::StatusOr<int> WaitReady(std::chrono::milliseconds timeout);
+  // Waits until the daemon's log (written since Spawn) contains `text`: OK, or
+  // DeadlineExceeded after `timeout` with the new part of the log.
+  absl::Status WaitForLog(const std::string& text, std::chrono::milliseconds timeout) const;
   // Sends `signal`; a process already gone is not an error.
   void Signal(int signal) const;
   // Reaps the process (once) and returns its wait status (as waitpid's).
@@ -105,6 +159,27 @@ class LinecaldProcess {
   int status_ = 0;  // once reaped
   std::string log_path_;
   std::uintmax_t log_offset_;  // the log's size at Spawn: what came before is older runs'
+};
+
+// TCP connections to 127.0.0.1 that never send a byte: what exhausts a server's descriptors
+// (issue 21, item 2). The kernel completes each handshake into the listen backlog whether or
+// not the server accepts it, so each Open succeeds while the backlog has room. Closed by
+// Close() or the destructor.
+class IdleConnections {
+ public:
+  IdleConnections() = default;
+  ~IdleConnections() { Close(); }
+  IdleConnections(const IdleConnections&) = delete;
+  IdleConnections& operator=(const IdleConnections&) = delete;
+
+  // `count` more connections to `port`; Internal naming the errno and how many were open
+  // when a socket or a connect fails (those stay open).
+  absl::Status Open(int port, int count);
+  void Close();
+  int size() const { return static_cast<int>(fds_.size()); }
+
+ private:
+  std::vector<int> fds_;
 };
 
 // "exit 0", "killed by signal 9", ...: a wait status for people.
