@@ -2,6 +2,7 @@
 
 #include <filesystem>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "station/capture/capture.h"
 #include "station/io/json_reader.h"
@@ -175,6 +176,96 @@ absl::Status CheckReplayInside(const JsonField& source, const std::string& data_
   return absl::OkStatus();
 }
 
+// The `plant` object (docs/daemon.md, "Plant database"): the DSN checked and its password
+// refused by PlantConnectionString, the password file read now so that a missing one stops
+// the daemon at start-up naming the key.
+absl::StatusOr<PlantConfig> ReadPlant(const JsonField& f, const fs::path& base,
+                                      const std::string& station_id) {
+  if (absl::Status s = f.AllowOnlyKeys({"dsn", "station_id", "batch", "tls", "password_file",
+                                        "max_backlog_age_s", "max_retry_interval_s"});
+      !s.ok()) {
+    return s;
+  }
+  PlantConfig c;
+  absl::StatusOr<std::string> dsn = f.String("dsn");
+  if (!dsn.ok()) return dsn.status();
+  c.dsn = *dsn;
+  absl::StatusOr<std::string> id = f.StringOr("station_id", station_id);
+  if (!id.ok()) return id.status();
+  if (id->empty()) return f.Error("station_id", "must not be empty");
+  c.station_id = *id;
+  // 10,000 cycles: Forwarder::Start's bound.
+  absl::StatusOr<std::int64_t> batch = f.IntegerOr("batch", c.batch);
+  if (!batch.ok()) return batch.status();
+  if (*batch < 1 || *batch > 10000) {
+    return f.Error("batch", absl::StrCat("must be in [1, 10000], got ", *batch));
+  }
+  c.batch = static_cast<int>(*batch);
+  // A week: an age beyond it is a unit mistake (milliseconds for seconds).
+  absl::StatusOr<std::int64_t> age = f.IntegerOr("max_backlog_age_s", c.max_backlog_age.count());
+  if (!age.ok()) return age.status();
+  if (*age < 1 || *age > 604800) {
+    return f.Error("max_backlog_age_s", absl::StrCat("must be in [1, 604800], got ", *age));
+  }
+  c.max_backlog_age = std::chrono::seconds(*age);
+  // An hour between retries at most: a plant back from an outage is noticed within it.
+  absl::StatusOr<std::int64_t> retry =
+      f.IntegerOr("max_retry_interval_s",
+                  std::chrono::duration_cast<std::chrono::seconds>(c.max_retry_interval).count());
+  if (!retry.ok()) return retry.status();
+  if (*retry < 1 || *retry > 3600) {
+    return f.Error("max_retry_interval_s", absl::StrCat("must be in [1, 3600], got ", *retry));
+  }
+  c.max_retry_interval = std::chrono::seconds(*retry);
+  if (f.Has("password_file")) {
+    absl::StatusOr<std::string> path = f.String("password_file");
+    if (!path.ok()) return path.status();
+    absl::StatusOr<std::string> text = ReadTextFile(Resolve(base, *path));
+    if (!text.ok()) return f.Error("password_file", std::string(text.status().message()));
+    // The first line, as a password file written with `echo` ends with a newline.
+    c.password = std::string(absl::StripTrailingAsciiWhitespace(text->substr(0, text->find('\n'))));
+    if (c.password.empty()) {
+      return f.Error("password_file", absl::StrCat("'", *path, "': no password on its first line"));
+    }
+  }
+  if (f.Has("tls")) {
+    absl::StatusOr<JsonField> tls = f.Object("tls");
+    if (!tls.ok()) return tls.status();
+    if (absl::Status s = tls->AllowOnlyKeys({"mode", "ca", "cert", "key"}); !s.ok()) return s;
+    PlantTlsConfig t;
+    absl::StatusOr<std::string> mode = tls->StringOr("mode", t.mode);
+    if (!mode.ok()) return mode.status();
+    if (*mode != "disable" && *mode != "require" && *mode != "verify-ca" &&
+        *mode != "verify-full") {
+      return tls->Error(
+          "mode",
+          absl::StrCat("must be disable, require, verify-ca or verify-full, got '", *mode, "'"));
+    }
+    t.mode = *mode;
+    const std::pair<const char*, std::string*> files[] = {
+        {"ca", &t.ca_path}, {"cert", &t.cert_path}, {"key", &t.key_path}};
+    for (const auto& [key, slot] : files) {
+      absl::StatusOr<std::string> path = tls->StringOr(key, "");
+      if (!path.ok()) return path.status();
+      if (path->empty()) continue;
+      *slot = Resolve(base, *path);
+      std::error_code ec;
+      if (!fs::is_regular_file(*slot, ec)) {
+        return tls->Error(key, absl::StrCat("'", *slot, "': no such file"));
+      }
+    }
+    if (t.cert_path.empty() != t.key_path.empty()) {
+      return tls->Error(t.cert_path.empty() ? "cert" : "key",
+                        "cert and key go together (a client certificate)");
+    }
+    c.tls = t;
+  }
+  if (absl::StatusOr<std::string> conninfo = PlantConnectionString(c); !conninfo.ok()) {
+    return f.Error("dsn", std::string(conninfo.status().message()));
+  }
+  return c;
+}
+
 }  // namespace
 
 DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::string& data_dir) {
@@ -193,10 +284,10 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   if (!doc.ok()) return doc.status();
   absl::StatusOr<JsonField> root = doc->Root();
   if (!root.ok()) return root.status();
-  if (absl::Status s = root->AllowOnlyKeys({"listen", "log_level", "auth_token", "station_id", "station", "car_models",
-                                            "data_root", "db", "source", "vin_check_digit", "frames_per_sensor",
-                                            "busy_timeout_ms", "tls", "deadlines_ms",
-                                            "input_budget"});
+  if (absl::Status s = root->AllowOnlyKeys(
+          {"listen", "log_level", "auth_token", "station_id", "station", "car_models", "data_root",
+           "db", "source", "vin_check_digit", "frames_per_sensor", "busy_timeout_ms", "tls",
+           "deadlines_ms", "input_budget", "plant"});
       !s.ok()) {
     return s;
   }
@@ -304,6 +395,13 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
     absl::StatusOr<InputBudget> budget = ReadInputBudget(*budget_field);
     if (!budget.ok()) return budget.status();
     c.input_budget = *budget;
+  }
+  if (root->Has("plant")) {
+    absl::StatusOr<JsonField> plant_field = root->Object("plant");
+    if (!plant_field.ok()) return plant_field.status();
+    absl::StatusOr<PlantConfig> plant = ReadPlant(*plant_field, base, c.core.station_id);
+    if (!plant.ok()) return plant.status();
+    c.core.plant = *std::move(plant);
   }
   return c;
 }

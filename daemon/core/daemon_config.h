@@ -52,7 +52,10 @@ DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::strin
 // vin_check_digit, frames_per_sensor, busy_timeout_ms, deadlines_ms {acquire, calibrate},
 // tls {cert, key, client_ca, require_client_cert: cert and key required, client_ca too unless
 // require_client_cert is false}, input_budget {max_file_bytes, max_image_pixels,
-// max_scan_points, max_can_lines, max_manifest_frames: integers >= 1}; unknown keys are errors.
+// max_scan_points, max_can_lines, max_manifest_frames: integers >= 1}, plant {dsn,
+// station_id (default: the top-level one), batch, password_file, max_backlog_age_s,
+// max_retry_interval_s, tls {mode, ca, cert, key}} (daemon/plant/forwarder.h's PlantConfig: the
+// DSN must parse and hold no password, the files must exist); unknown keys are errors.
 // A replay capture (source.capture) must resolve inside data_root, symbolic links followed
 // (checked when data_root exists: "source.capture: 'cap': resolves outside data_root").
 // Whether every sensor has a source of its kind is checked by StationCore::Create, which knows

@@ -201,6 +201,7 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   }
   StoreOptions store_options;
   store_options.busy_timeout = config.busy_timeout;
+  store_options.outbox = config.plant.has_value();
   absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(config.db_path, store_options);
   if (!store.ok()) return store.status();
   RemoveAbortedCaptures(config.data_root, (*store)->aborted_cycles_at_open());
@@ -213,6 +214,25 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
       new StationCore(config, std::move(*station), std::move(cars), std::move(*store), std::move(sources)));
   core->data_root_dev_ = root.st_dev;
   core->data_root_ino_ = root.st_ino;
+  if (config.plant) {
+    absl::StatusOr<std::string> conninfo = PlantConnectionString(*config.plant);
+    if (!conninfo.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("plant.dsn: ", conninfo.status().message()));
+    }
+    ForwarderOptions forwarding;
+    forwarding.conninfo = *std::move(conninfo);
+    forwarding.station_id = config.plant->station_id;
+    forwarding.batch = config.plant->batch;
+    forwarding.max_retry_interval = config.plant->max_retry_interval;
+    StationCore* logger = core.get();
+    forwarding.log = [logger](const std::string& level, const std::string& message) {
+      logger->Log(level, message);
+    };
+    absl::StatusOr<std::unique_ptr<Forwarder>> forwarder =
+        Forwarder::Start(core->store_.get(), std::move(forwarding));
+    if (!forwarder.ok()) return forwarder.status();
+    core->forwarder_ = *std::move(forwarder);
+  }
   return core;
 }
 
@@ -612,6 +632,7 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
                               "), stored in a database that is lost at the next start: ",
                               storage.message()));
   }
+  if (stored.ok() && forwarder_) forwarder_->Notify();
   std::lock_guard<std::mutex> lock(mutex_);
   if (!stored.ok()) unstored_end_ = end;
   running_.reset();
@@ -665,6 +686,7 @@ absl::Status StationCore::StoreUnstoredEnd() {
                                                s.message()));
   }
   unstored_end_.reset();
+  if (forwarder_) forwarder_->Notify();
   Log("warning", absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"));
   changed_.notify_all();
   return absl::OkStatus();
@@ -673,6 +695,7 @@ absl::Status StationCore::StoreUnstoredEnd() {
 absl::Status StationCore::Health() {
   absl::Status health = CheckStorage();
   if (health.ok()) health = StoreUnstoredEnd();
+  if (health.ok()) health = CheckPlantBacklog();
   std::lock_guard<std::mutex> lock(mutex_);
   if (health.ok() && disk_full_) {
     std::error_code ec;
@@ -688,11 +711,26 @@ absl::Status StationCore::Health() {
   const std::string now(health.message());
   if (now != last_health_) {
     Log(health.ok() ? "warning" : "error",
-        health.ok() ? std::string("health: serving again, the storage is back")
+        health.ok() ? absl::StrCat("health: serving again (was: ", last_health_, ")")
                     : absl::StrCat("health: NOT_SERVING: ", now));
     last_health_ = now;
   }
   return health;
+}
+
+absl::Status StationCore::CheckPlantBacklog() {
+  if (!forwarder_) return absl::OkStatus();
+  const ForwarderStats stats = forwarder_->Stats();
+  if (stats.oldest_unshipped_age <= config_.plant->max_backlog_age) return absl::OkStatus();
+  return absl::UnavailableError(absl::StrCat(
+      "plant database: ", stats.backlog, " cycles not forwarded, the oldest ended ",
+      std::chrono::duration_cast<std::chrono::seconds>(stats.oldest_unshipped_age).count(),
+      " s ago (plant.max_backlog_age_s ", config_.plant->max_backlog_age.count(), ")",
+      stats.last_error.ok() ? "" : absl::StrCat("; last error: ", stats.last_error.message())));
+}
+
+int64_t StationCore::StopForwarding(std::chrono::steady_clock::time_point deadline) {
+  return forwarder_ ? forwarder_->Stop(deadline) : 0;
 }
 
 std::vector<CaptureSensor> StationCore::AcquireLive(int64_t id, const CarModel& car, const std::string& dir,
@@ -835,6 +873,10 @@ StationStatusInfo StationCore::Status() {
     s.running_cycle = running_;
   }
   s.database_path = store_->path();
+  if (forwarder_) {
+    s.plant = forwarder_->Stats();
+    s.plant_max_backlog_age = config_.plant->max_backlog_age;
+  }
   std::error_code ec;
   const fs::space_info space = fs::space(config_.data_root, ec);
   if (!ec) s.disk_free_bytes = space.available;

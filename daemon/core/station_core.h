@@ -51,6 +51,7 @@
 
 #include "absl/status/statusor.h"
 #include "daemon/cycle/capture_calibration.h"
+#include "daemon/plant/forwarder.h"
 #include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"
 #include "station/io/input_budget.h"
@@ -91,6 +92,9 @@ struct StationCoreConfig {
   std::chrono::milliseconds busy_timeout{5000};
   // What one file of a capture may claim (the `input_budget` key), for every ReadCapture.
   InputBudget input_budget;
+  // Forwarding of every ended cycle to the plant database (daemon/plant/forwarder.h): the
+  // store queues each end in its outbox and a Forwarder ships it. Absent: no forwarding.
+  std::optional<PlantConfig> plant;
   // Where the core's warnings and errors go ("warning"/"error", a message): linecald's log.
   // Empty: stderr.
   std::function<void(const std::string& level, const std::string& message)> log;
@@ -129,6 +133,8 @@ struct StationStatusInfo {
   std::optional<int64_t> running_cycle;
   std::string database_path;
   std::uint64_t disk_free_bytes = 0;
+  std::optional<ForwarderStats> plant;            // with a `plant` section: the forwarding's state
+  std::chrono::seconds plant_max_backlog_age{0};  // plant.max_backlog_age_s (Health)
 };
 
 class StationCore {
@@ -158,10 +164,17 @@ class StationCore {
   // OK when the station can run and store cycles. Else why not: FailedPrecondition when the
   // data root or the database file was removed (until a restart), ResourceExhausted while
   // the disk is full (a cycle's end waiting to be stored, or the last write refused for want
-  // of space, until a cycle starts or kFreeBytesToServe are free again). Tries to store a
-  // waiting end first, so calling it is how the daemon recovers when space returns; the
-  // first call after a change logs it. Cost: a few stat calls, at most one store write.
+  // of space, until a cycle starts or kFreeBytesToServe are free again), Unavailable while
+  // the oldest cycle not yet at the plant database ended more than plant.max_backlog_age ago
+  // (the backlog, that age and the forwarder's last error named; cycles still run). Tries to
+  // store a waiting end first, so calling it is how the daemon recovers when space returns;
+  // the first call after a change logs it. Cost: a few stat calls, at most one store write,
+  // one count of the outbox.
   absl::Status Health();
+  // Ships what the plant outbox holds until `deadline` while the plant answers, then stops
+  // forwarding (Forwarder::Stop: never waits on a stalled plant past the deadline). Returns
+  // the cycles left queued (sent at the next start); 0 without a `plant` section.
+  int64_t StopForwarding(std::chrono::steady_clock::time_point deadline);
   // Blocks until no cycle runs (tests, shutdown).
   void WaitIdle();
   // The same, at most `timeout`; false when a cycle still runs.
@@ -196,6 +209,9 @@ class StationCore {
   absl::Status StoreEnd(CycleEnd* end);
   // Stores unstored_end_, if any; OK when there is none left.
   absl::Status StoreUnstoredEnd();
+  // OK while the plant backlog's oldest cycle is younger than plant.max_backlog_age (or
+  // there is no forwarding); else Unavailable saying so (Health's words).
+  absl::Status CheckPlantBacklog();
   // OK while the data root and the database file are the ones the core opened.
   absl::Status CheckStorage() const;
   // A failure as a cycle reason: "disk_full: <what>: <message>" when it is a full disk
@@ -213,6 +229,8 @@ class StationCore {
   const StationLayout station_;
   const std::vector<CarModel> cars_;
   std::unique_ptr<Store> store_;
+  // With a `plant` section; declared after store_, so destroyed (stopped) before it.
+  std::unique_ptr<Forwarder> forwarder_;
   // live: by sensor name; used by one cycle at a time.
   std::map<std::string, std::unique_ptr<SensorSource>> sources_;
 

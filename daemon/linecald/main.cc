@@ -5,7 +5,9 @@
 // calibration stops at its next frame), exit 0 within kDrainTime (SIGHUP too: a closed
 // terminal or a `kill -HUP` meant as "reload" must not leave the cycle running, and there is
 // nothing to reload that a restart would not do).
-// Descriptors: the soft RLIMIT_NOFILE is raised to the hard limit at start (docs/daemon.md,
+// Descriptors: the soft RLIMIT_NOFILE is raised to the hard limit at start; gRPC 1.51's
+// listener stops for good after an accept error (EMFILE), so a ListenerWatchdog restarts the
+// gRPC server on the same address when it finds the listener dead (docs/daemon.md,
 // "Descriptors").
 // Under systemd (Type=notify): READY=1 once calls are served, WATCHDOG=1 while the core
 // answers, STOPPING=1 on the signal (daemon/systemd/sd_notify.h).
@@ -31,6 +33,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "daemon/core/daemon_config.h"
+#include "daemon/service/listener_watchdog.h"
 #include "daemon/service/station_service.h"
 #include "daemon/systemd/sd_notify.h"
 
@@ -83,12 +86,19 @@ std::string RaiseDescriptorLimit() {
 }
 
 // gRPC's own log lines, in ours: its errors (an accept that failed, "Failed accept4: Too
-// many open files") must reach the station's log whatever GRPC_VERBOSITY says.
+// many open files") must reach the station's log whatever GRPC_VERBOSITY says. Nothing
+// depends on them: the ListenerWatchdog finds a dead listener by itself.
 void LogGrpc(gpr_log_func_args* args) {
   const char* level = args->severity == GPR_LOG_SEVERITY_ERROR ? "error"
                       : args->severity == GPR_LOG_SEVERITY_INFO ? "info"
                                                                 : "debug";
   std::fprintf(stderr, "level=%s msg=\"grpc: %s\"\n", level, args->message);
+}
+
+// HOST:PORT of `listen` with the port the server got (the same when it was not 0): where a
+// restarted server listens again, so that clients find it where they found the first.
+std::string BoundAddress(const std::string& listen, int port) {
+  return absl::StrCat(listen.substr(0, listen.rfind(':')), ":", port);
 }
 
 const char* SignalName(int signal) {
@@ -206,6 +216,11 @@ int main(int argc, char** argv) {
   if ((*core)->store().aborted_at_open() > 0) {
     Log("warning", std::to_string((*core)->store().aborted_at_open()) + " cycles interrupted by the last stop are stored as aborted");
   }
+  if (config->core.plant) {
+    Log("info", absl::StrCat("forwarding cycles to the plant database as station ",
+                             config->core.plant->station_id, ", batches of ",
+                             config->core.plant->batch));
+  }
   absl::StatusOr<linecal::RunningServer> server =
       linecal::StartServer(core->get(), config->listen, config->auth_token, LINECAL_VERSION, config->tls);
   if (!server.ok()) {
@@ -224,6 +239,15 @@ int main(int argc, char** argv) {
   int signal = 0;
   {
     const Watchdog watchdog(notifier, core->get());
+    // Destroyed first: joins its thread, after which `server` is main's again.
+    const std::string address = BoundAddress(config->listen, server->port);
+    const linecal::ListenerWatchdog listener(
+        &*server, address,
+        [&] {
+          return linecal::StartServer(core->get(), address, config->auth_token, LINECAL_VERSION,
+                                      config->tls);
+        },
+        [](const std::string& level, const std::string& message) { Log(level.c_str(), message); });
     sigwait(&signals, &signal);
   }
   Log("info", std::string("stopping on ") + SignalName(signal));
@@ -244,6 +268,14 @@ int main(int argc, char** argv) {
                      std::to_string(kDrainTime.count()) +
                      " s; exiting, it is aborted at the next start");
     std::_Exit(1);
+  }
+  // Cycles not yet at the plant database are shipped while drain time is left and the plant
+  // answers; the outbox keeps the rest for the next start.
+  const auto forwarding_deadline =
+      std::chrono::steady_clock::now() + (drain_deadline - std::chrono::system_clock::now());
+  if (const int64_t queued = (*core)->StopForwarding(forwarding_deadline); queued > 0) {
+    Log("warning", absl::StrCat(queued, " cycles stay queued for the plant database; they are "
+                                        "sent after the next start"));
   }
   core->reset();  // joins the calibrations stopped by the cancel
   Log("info", "stopped");

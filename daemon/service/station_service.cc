@@ -255,6 +255,15 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, cons
   if (s.running_cycle) response->set_running_cycle_id(std::to_string(*s.running_cycle));
   response->set_database_path(s.database_path);
   response->set_disk_free_bytes(s.disk_free_bytes);
+  if (s.plant) {
+    v1::PlantForwarding* plant = response->mutable_plant();
+    plant->set_backlog(s.plant->backlog);
+    plant->set_oldest_unshipped_age_ns(s.plant->oldest_unshipped_age.count());
+    plant->set_last_error(std::string(s.plant->last_error.message()));
+    plant->set_shipped(s.plant->shipped);
+    plant->set_max_backlog_age_ns(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(s.plant_max_backlog_age).count());
+  }
   for (const auto& [name, kind] : s.sensors) {
     v1::SensorStatus* sensor = response->add_sensors();
     sensor->set_name(name);

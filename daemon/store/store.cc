@@ -75,6 +75,14 @@ CREATE TABLE events (
   PRIMARY KEY (cycle_id, sequence)
 );
 )sql",
+    // 2: the outbox of cycles to forward to the plant database, in queue order. AUTOINCREMENT:
+    // a sequence number is never reused, even once the queue was emptied.
+    R"sql(
+CREATE TABLE outbox (
+  seq INTEGER PRIMARY KEY AUTOINCREMENT,
+  cycle_id INTEGER NOT NULL UNIQUE REFERENCES cycles(id)
+);
+)sql",
 };
 constexpr int kMigrationCount = sizeof(kMigrations) / sizeof(kMigrations[0]);
 static_assert(kMigrationCount == Store::kSchemaVersion);
@@ -178,20 +186,6 @@ std::vector<double> ParseNumbers(const std::string& text) {
   return values;
 }
 
-Verdict ParseVerdict(const std::string& s) {
-  if (s == "pass") return Verdict::kPass;
-  if (s == "fail") return Verdict::kFail;
-  if (s == "error") return Verdict::kError;
-  return Verdict::kNone;
-}
-
-CycleState ParseState(const std::string& s) {
-  if (s == "done") return CycleState::kDone;
-  if (s == "cancelled") return CycleState::kCancelled;
-  if (s == "aborted") return CycleState::kAborted;
-  return CycleState::kRunning;
-}
-
 constexpr const char* kCycleColumns =
     "id, vin, car_model_id, state, verdict, reason, started_ns, ended_ns, request_json, "
     "capture_path";
@@ -201,7 +195,7 @@ StoredCycle ReadCycle(const Statement& s) {
   c.id = s.Int(0);
   c.vin = s.Text(1);
   c.car_model_id = s.Text(2);
-  c.state = ParseState(s.Text(3));
+  c.state = ParseCycleState(s.Text(3));
   c.verdict = ParseVerdict(s.Text(4));
   c.reason = s.Text(5);
   c.started_ns = s.Int(6);
@@ -279,6 +273,20 @@ const char* VerdictName(Verdict verdict) {
   return "";
 }
 
+Verdict ParseVerdict(const std::string& s) {
+  if (s == "pass") return Verdict::kPass;
+  if (s == "fail") return Verdict::kFail;
+  if (s == "error") return Verdict::kError;
+  return Verdict::kNone;
+}
+
+CycleState ParseCycleState(const std::string& s) {
+  if (s == "done") return CycleState::kDone;
+  if (s == "cancelled") return CycleState::kCancelled;
+  if (s == "aborted") return CycleState::kAborted;
+  return CycleState::kRunning;
+}
+
 absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
                                                    const StoreOptions& options) {
   absl::StatusOr<int> lock_fd = LockDatabase(path);
@@ -293,7 +301,7 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
     ::close(*lock_fd);
     return s;
   }
-  std::unique_ptr<Store> store(new Store(db, path, *lock_fd));
+  std::unique_ptr<Store> store(new Store(db, path, *lock_fd, options.outbox));
   // The file SQLite opened, by identity: CheckFile compares the path's file with it.
   struct stat opened {};
   if (::stat(path.c_str(), &opened) == 0) {
@@ -369,6 +377,9 @@ absl::Status Store::AbortRunning() {
                                      std::chrono::system_clock::now().time_since_epoch())
                                      .count()));
   if (const int rc = s.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "abort running cycles", rc);
+  for (const StoredCycle& c : aborted) {
+    if (absl::Status q = Enqueue(c.id); !q.ok()) return q;
+  }
   if (absl::Status c = tx.Commit(); !c.ok()) return c;
   aborted_at_open_ = std::move(aborted);
   return absl::OkStatus();
@@ -467,11 +478,26 @@ absl::Status Store::EndCycle(int64_t cycle_id, CycleState state, Verdict verdict
   s.Bind(1, cycle_id).Bind(2, std::string(CycleStateName(state))).Bind(3, std::string(VerdictName(verdict)))
       .Bind(4, reason).Bind(5, ended_ns);
   if (const int step = s.Step(); step != SQLITE_DONE) return SqliteError(db_, path_, "end cycle", step);
+  if (absl::Status q = Enqueue(cycle_id); !q.ok()) return q;
   return tx.Commit();
+}
+
+absl::Status Store::Enqueue(int64_t cycle_id) {
+  if (!outbox_) return absl::OkStatus();
+  Statement s(db_, "INSERT INTO outbox (cycle_id) VALUES (?1)");
+  s.Bind(1, cycle_id);
+  if (const int rc = s.Step(); rc != SQLITE_DONE) {
+    return SqliteError(db_, path_, "queue cycle for the plant", rc);
+  }
+  return absl::OkStatus();
 }
 
 absl::StatusOr<StoredCycle> Store::GetCycle(int64_t cycle_id) {
   std::lock_guard<std::mutex> lock(mutex_);
+  return ReadCycleLocked(cycle_id);
+}
+
+absl::StatusOr<StoredCycle> Store::ReadCycleLocked(int64_t cycle_id) {
   const std::string sql = absl::StrCat("SELECT ", kCycleColumns, " FROM cycles WHERE id = ?1");
   Statement s(db_, sql.c_str());
   s.Bind(1, cycle_id);
@@ -510,6 +536,10 @@ absl::StatusOr<StoredCycle> Store::GetCycle(int64_t cycle_id) {
 
 absl::StatusOr<std::vector<StoredEvent>> Store::Events(int64_t cycle_id) {
   std::lock_guard<std::mutex> lock(mutex_);
+  return ReadEventsLocked(cycle_id);
+}
+
+absl::StatusOr<std::vector<StoredEvent>> Store::ReadEventsLocked(int64_t cycle_id) {
   Statement s(db_,
               "SELECT sequence, time_ns, type, sensor, detail, verdict FROM events WHERE cycle_id = ?1 "
               "ORDER BY sequence");
@@ -571,6 +601,61 @@ absl::StatusOr<std::optional<int64_t>> Store::RunningCycle() {
   if (rc == SQLITE_DONE) return std::optional<int64_t>();
   if (rc != SQLITE_ROW) return SqliteError(db_, path_, "find running cycle", rc);
   return std::optional<int64_t>(s.Int(0));
+}
+
+absl::StatusOr<std::vector<OutboxEntry>> Store::ReadOutbox(int limit) {
+  if (limit < 1) {
+    return absl::InvalidArgumentError(absl::StrCat("ReadOutbox: limit ", limit, " < 1"));
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  // One read transaction: the cycles and their events as of one moment.
+  if (absl::Status s = Exec(db_, path_, "begin", "BEGIN"); !s.ok()) return s;
+  absl::StatusOr<std::vector<OutboxEntry>> entries = ReadOutboxLocked(limit);
+  sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr);  // a read: nothing to keep or lose
+  return entries;
+}
+
+absl::StatusOr<std::vector<OutboxEntry>> Store::ReadOutboxLocked(int limit) {
+  Statement queued(db_, "SELECT seq, cycle_id FROM outbox ORDER BY seq LIMIT ?1");
+  queued.Bind(1, static_cast<int64_t>(limit));
+  std::vector<OutboxEntry> entries;
+  int rc;
+  while ((rc = queued.Step()) == SQLITE_ROW) {
+    OutboxEntry& e = entries.emplace_back();
+    e.seq = queued.Int(0);
+    e.cycle.id = queued.Int(1);
+  }
+  if (rc != SQLITE_DONE) return SqliteError(db_, path_, "read the outbox", rc);
+  for (OutboxEntry& e : entries) {
+    absl::StatusOr<StoredCycle> cycle = ReadCycleLocked(e.cycle.id);
+    if (!cycle.ok()) return cycle.status();
+    absl::StatusOr<std::vector<StoredEvent>> events = ReadEventsLocked(e.cycle.id);
+    if (!events.ok()) return events.status();
+    e.cycle = *std::move(cycle);
+    e.events = *std::move(events);
+  }
+  return entries;
+}
+
+absl::Status Store::MarkShipped(int64_t seq) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  Statement s(db_, "DELETE FROM outbox WHERE seq <= ?1");
+  s.Bind(1, seq);
+  if (const int rc = s.Step(); rc != SQLITE_DONE) {
+    return SqliteError(db_, path_, "mark cycles shipped", rc);
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<OutboxBacklog> Store::Backlog() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  Statement s(db_,
+              "SELECT (SELECT COUNT(*) FROM outbox), COALESCE((SELECT c.ended_ns FROM outbox o "
+              "JOIN cycles c ON c.id = o.cycle_id ORDER BY o.seq LIMIT 1), 0)");
+  if (const int rc = s.Step(); rc != SQLITE_ROW) {
+    return SqliteError(db_, path_, "read the outbox backlog", rc);
+  }
+  return OutboxBacklog{s.Int(0), s.Int(1)};
 }
 
 absl::Status Store::IntegrityCheck() {

@@ -9,6 +9,14 @@
 // versioned (PRAGMA user_version) and migrated forward on open; a file from a newer linecald
 // is refused, never rewritten.
 //
+// Outbox (StoreOptions::outbox, docs/plant.md "Forwarding"): every cycle that ends — by
+// EndCycle, or aborted at Open — is queued for the plant database in the same SQLite
+// transaction that ends it, so a committed end is never missed and never queued twice. The
+// forwarder reads the queue in order (ReadOutbox), ships it, then deletes what the plant
+// acknowledged (MarkShipped): a crash between the two resends a batch, which the plant
+// applies idempotently. Version 2 of the schema added the table; migrating from 1 queues
+// nothing (cycles of a station that did not forward stay on the station).
+//
 // Errors (absl::Status, messages name the database file):
 //   Unavailable         the database stayed locked by another process past the busy timeout
 //   ResourceExhausted   the disk is full (SQLITE_FULL): nothing of the call was stored; the
@@ -54,6 +62,9 @@ std::string QuoteInput(absl::string_view value);
 const char* CycleStateName(CycleState state);
 // "", "pass", "fail", "error" — the words of docs/interfaces.md's results.
 const char* VerdictName(Verdict verdict);
+// The inverses of CycleStateName and VerdictName; an unknown word gives kRunning / kNone.
+CycleState ParseCycleState(const std::string& name);
+Verdict ParseVerdict(const std::string& name);
 
 // Yaw/pitch/roll (degrees, docs/conventions.md) and position (metres) of a sensor in the car.
 struct MountingValues {
@@ -122,12 +133,28 @@ struct StoreOptions {
   // 5 s: longer than any write of ours takes, short enough for a cycle to end in error
   // rather than hang the line.
   std::chrono::milliseconds busy_timeout{5000};
+  // Queue every ended cycle in the outbox (a `plant` section is configured). False: nothing
+  // is queued, so a station that does not forward never grows the table.
+  bool outbox = false;
+};
+
+// One queued cycle of the outbox: its place in the queue, the cycle with its sensors, and
+// its events in sequence order (the shape of daemon/plant/plant_cycle.h's PlantCycle).
+struct OutboxEntry {
+  int64_t seq = 0;  // increasing in queue order, never reused
+  StoredCycle cycle;
+  std::vector<StoredEvent> events;
+};
+
+struct OutboxBacklog {
+  int64_t cycles = 0;           // queued, not yet shipped
+  int64_t oldest_ended_ns = 0;  // the first queued cycle's end (Unix epoch); 0 when empty
 };
 
 class Store {
  public:
   // The current schema version (PRAGMA user_version after Open).
-  static constexpr int kSchemaVersion = 1;
+  static constexpr int kSchemaVersion = 2;
 
   // Opens or creates the database at `path` (its directory must exist), migrates it to
   // kSchemaVersion and turns running cycles into aborted ones. Cost: a few fsyncs.
@@ -168,6 +195,15 @@ class Store {
   // The newest running cycle's id, if any.
   absl::StatusOr<std::optional<int64_t>> RunningCycle();
 
+  // The first `limit` (>= 1) queued cycles in queue order, each with its sensors and events,
+  // read in one transaction. Cost: three queries per cycle.
+  absl::StatusOr<std::vector<OutboxEntry>> ReadOutbox(int limit);
+  // Removes the queued cycles up to and including `seq` (they reached the plant). Cost: one
+  // fsynced commit.
+  absl::Status MarkShipped(int64_t seq);
+  // How many cycles are queued and when the first of them ended. Cost: one query, O(queued).
+  absl::StatusOr<OutboxBacklog> Backlog();
+
   // PRAGMA integrity_check: OK, or DataLoss with SQLite's first complaint.
   absl::Status IntegrityCheck();
 
@@ -178,15 +214,22 @@ class Store {
   absl::Status CheckFile() const;
 
  private:
-  Store(sqlite3* db, std::string path, int lock_fd)
-      : db_(db), path_(std::move(path)), lock_fd_(lock_fd) {}
+  Store(sqlite3* db, std::string path, int lock_fd, bool outbox)
+      : db_(db), path_(std::move(path)), lock_fd_(lock_fd), outbox_(outbox) {}
   absl::Status Migrate();
   absl::Status AbortRunning();
+  // Queues `cycle_id` in the outbox when it is kept; inside the caller's transaction.
+  absl::Status Enqueue(int64_t cycle_id);
+  // GetCycle and Events without taking mutex_ (the caller holds it).
+  absl::StatusOr<StoredCycle> ReadCycleLocked(int64_t cycle_id);
+  absl::StatusOr<std::vector<StoredEvent>> ReadEventsLocked(int64_t cycle_id);
+  absl::StatusOr<std::vector<OutboxEntry>> ReadOutboxLocked(int limit);
 
   std::mutex mutex_;
   sqlite3* db_;
   std::string path_;
   int lock_fd_;  // holds the flock on <path>.lock
+  const bool outbox_;  // StoreOptions::outbox
   // The identity (st_dev, st_ino) of the database file when it was opened.
   dev_t file_dev_ = 0;
   ino_t file_ino_ = 0;

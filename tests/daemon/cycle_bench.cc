@@ -17,6 +17,8 @@
 //   GrpcCycle/replay       end to end through gRPC on loopback: StartCycle, WatchCycle to
 //                          the cycle_ended event, GetCycle (what `linecal cycle start
 //                          --wait` does): bar <= 3 s
+//   CoreCycle/replay_forwarding  the same with forwarding to a plant PostgreSQL (a throwaway
+//                          server, up): bar within 5% of CoreCycle/replay (docs/plant.md)
 //   CoreCycle/simulator    StationCore with the simulator source: rendering every sensor
 //                          included (the demo's cycle, not a station's)
 // The capture is simulated once (seed 1) into a scratch directory, removed at exit.
@@ -44,6 +46,8 @@
 #include "station/io/image_io.h"
 #include "station/io/pcd.h"
 #include "station/sim/simulator.h"
+#include "tests/daemon/bench_stats.h"
+#include "tests/support/postgres_cluster.h"
 
 namespace linecal {
 namespace {
@@ -57,27 +61,7 @@ constexpr int kComputeRepetitions = 50;
 // End to end: enough cycles for a p95 that means something, few enough for a shared machine.
 constexpr int kEndToEndRepetitions = 20;
 
-// Nearest-rank percentile of the repetitions (p95 of 50: the 48th smallest).
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t rank = static_cast<size_t>(std::ceil(p * static_cast<double>(v.size())));
-  return v[std::clamp<size_t>(rank, 1, v.size()) - 1];
-}
-double P95(const std::vector<double>& v) { return Percentile(v, 0.95); }
-double Max(const std::vector<double>& v) { return Percentile(v, 1.0); }
-
-// Every benchmark here: one cycle per repetition, wall time in ms, only the statistics
-// printed (mean, median, stddev, cv, p95 and max over the repetitions).
-benchmark::internal::Benchmark* Cycles(benchmark::internal::Benchmark* b, int repetitions) {
-  return b->Unit(benchmark::kMillisecond)
-      ->UseRealTime()
-      ->Iterations(1)
-      ->Repetitions(repetitions)
-      ->ComputeStatistics("p95", P95)
-      ->ComputeStatistics("max", Max)
-      ->ReportAggregatesOnly(true);
-}
+using bench::Cycles;
 
 // User and system CPU time of the whole process (every thread), seconds.
 double ProcessCpuSeconds() {
@@ -216,14 +200,18 @@ struct Served {
   RunningServer server;
   std::unique_ptr<v1::Station::Stub> stub;
 };
-std::unique_ptr<StationCore> g_replay_core, g_simulator_core;
+std::unique_ptr<StationCore> g_replay_core, g_simulator_core, g_forwarding_core;
 std::unique_ptr<Served> g_served;
+// The plant database of CoreCycle/replay_forwarding: a throwaway PostgreSQL 15 server.
+std::unique_ptr<testing_support::PostgresCluster> g_plant;
 
 void Teardown() {
   if (g_served) g_served->server.server->Shutdown();
   g_served.reset();
   g_replay_core.reset();
   g_simulator_core.reset();
+  g_forwarding_core.reset();  // stops its forwarder before the server goes
+  g_plant.reset();
 }
 
 void BM_CoreCycleReplay(benchmark::State& state) {
@@ -232,6 +220,38 @@ void BM_CoreCycleReplay(benchmark::State& state) {
 }
 const auto* const kCoreCycleReplay =
     Cycles(benchmark::RegisterBenchmark("CoreCycle/replay", BM_CoreCycleReplay), kEndToEndRepetitions);
+
+// The same with a `plant` section, the plant database up: each end also queues the cycle in
+// the outbox (same transaction) and the forwarder ships it while the next cycle runs.
+void BM_CoreCycleReplayForwarding(benchmark::State& state) {
+  if (!g_forwarding_core) {
+    absl::StatusOr<std::unique_ptr<testing_support::PostgresCluster>> plant =
+        testing_support::PostgresCluster::Create();
+    if (!plant.ok()) Fail(plant.status().ToString());
+    g_plant = *std::move(plant);
+    if (absl::Status s = g_plant->CreateDatabase("plant"); !s.ok()) Fail(s.ToString());
+    absl::StatusOr<std::unique_ptr<PlantDb>> db = PlantDb::Connect(g_plant->Dsn("plant"));
+    if (!db.ok()) Fail(db.status().ToString());
+    if (absl::Status s = (*db)->Migrate(); !s.ok()) Fail(s.ToString());
+    StationCoreConfig config = CoreConfig("core_forwarding", CycleSource::kReplay);
+    PlantConfig forwarding;
+    forwarding.dsn =
+        "host=127.0.0.1 port=" + std::to_string(g_plant->port()) + " dbname=plant user=postgres";
+    forwarding.password = testing_support::PostgresCluster::kSuperuserPassword;
+    forwarding.station_id = "bench";
+    config.plant = forwarding;
+    absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
+    if (!core.ok()) Fail(core.status().ToString());
+    g_forwarding_core = *std::move(core);
+  }
+  RunCoreCycles(state, *g_forwarding_core);
+  const ForwarderStats stats = *g_forwarding_core->Status().plant;
+  if (!stats.last_error.ok()) Fail("forwarding failed: " + stats.last_error.ToString());
+  state.counters["shipped"] = static_cast<double>(stats.shipped);
+}
+const auto* const kCoreCycleReplayForwarding = Cycles(
+    benchmark::RegisterBenchmark("CoreCycle/replay_forwarding", BM_CoreCycleReplayForwarding),
+    kEndToEndRepetitions);
 
 void BM_GrpcCycleReplay(benchmark::State& state) {
   if (!g_served) {

@@ -292,6 +292,15 @@ int RunStatus(const Args& args) {
   std::printf("linecald %s, station %s, database %s (%.1f GB free)\n", status.version().c_str(),
               status.station_id().c_str(), status.database_path().c_str(), status.disk_free_bytes() / 1e9);
   std::printf("running cycle: %s\n", status.running_cycle_id().empty() ? "none" : status.running_cycle_id().c_str());
+  if (status.has_plant()) {
+    const v1::PlantForwarding& plant = status.plant();
+    std::printf(
+        "plant database: %lld cycles queued, oldest %.0f s (NOT_SERVING past %.0f s), %lld "
+        "shipped since start%s%s\n",
+        static_cast<long long>(plant.backlog()), plant.oldest_unshipped_age_ns() / 1e9,
+        plant.max_backlog_age_ns() / 1e9, static_cast<long long>(plant.shipped()),
+        plant.last_error().empty() ? "" : ", last error: ", plant.last_error().c_str());
+  }
   for (const v1::SensorStatus& s : status.sensors()) {
     std::printf("  %-20s %-7s %s%s\n", s.name().c_str(), v1::SensorKind_Name(s.kind()).c_str() + 12,
                 s.source().c_str(), s.connected() ? "" : "  (not connected)");

@@ -32,5 +32,9 @@ int RunEvalAftersale(const Args& args);  // cmd_eval_aftersale.cc
 int RunPlan(const Args& args);  // cmd_plan.cc
 int RunPlanCheck(const Args& args);  // cmd_plan.cc
 int RunServeSensors(const Args& args);  // cmd_serve_sensors.cc
+int RunPlantMigrate(const Args& args);  // cmd_plant.cc
+int RunPlantCycles(const Args& args);  // cmd_plant.cc
+int RunPlantYield(const Args& args);  // cmd_plant.cc
+int RunPlantExport(const Args& args);  // cmd_plant.cc
 
 }  // namespace linecal::tools

@@ -40,6 +40,10 @@ const std::vector<Subcommand>& Subcommands() {
       {{"aftersale"}, "camera calibration from lane lines in one image (--json, --out, --export)", RunAftersale},
       {{"plan"}, "plan board and reflector placement for a car model in a station", RunPlan},
       {{"plan", "check"}, "can every sensor be calibrated with this layout? (reasons when not)", RunPlanCheck},
+      {{"plant", "migrate"}, "create or upgrade the plant PostgreSQL schema and roles", RunPlantMigrate},
+      {{"plant", "cycles"}, "every attempt on a VIN at every station (plant database)", RunPlantCycles},
+      {{"plant", "yield"}, "first-pass yield and top failure reasons (plant database)", RunPlantYield},
+      {{"plant", "export"}, "cycles since a date as CSV or JSON (plant database)", RunPlantExport},
       {{"serve-sensors"}, "serve a capture as live sensors (fake GigE cameras, UDP LiDAR, candump radar)", RunServeSensors},
   };
   return kTable;

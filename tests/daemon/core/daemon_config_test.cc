@@ -257,5 +257,75 @@ TEST_F(DaemonConfigTest, DeadlinesDefaultAndLiveErrorsNameTheKey) {
   }
 }
 
+// The `plant` section (docs/daemon.md, "Plant database"): defaults, the password file's first
+// line, tls files resolved against the file, and errors that name the key and never quote a
+// password.
+TEST_F(DaemonConfigTest, PlantSectionReadsBackAndDefaults) {
+  const std::string base = R"("station": "s.json", "car_models": ["c.json"], "data_root": "d",
+    "station_id": "line-3")";
+  absl::StatusOr<DaemonConfig> none = Read("{" + base + "}");
+  ASSERT_TRUE(none.ok()) << none.status();
+  EXPECT_FALSE(none->core.plant.has_value());
+
+  std::ofstream(dir_ / "plant.pass") << "s3cret'pw\nsecond line\n";
+  std::ofstream(dir_ / "ca.pem") << "-----BEGIN CERTIFICATE-----\n";
+  absl::StatusOr<DaemonConfig> c = Read("{" + base + R"(, "plant": {
+    "dsn": "host=plant port=5433 dbname=linecal user=station", "batch": 250,
+    "password_file": "plant.pass", "max_backlog_age_s": 600, "max_retry_interval_s": 5,
+    "tls": {"mode": "verify-ca", "ca": "ca.pem"}}})");
+  ASSERT_TRUE(c.ok()) << c.status();
+  ASSERT_TRUE(c->core.plant.has_value());
+  const PlantConfig& p = *c->core.plant;
+  EXPECT_EQ(p.dsn, "host=plant port=5433 dbname=linecal user=station");
+  EXPECT_EQ(p.station_id, "line-3");  // the top-level station_id
+  EXPECT_EQ(p.batch, 250);
+  EXPECT_EQ(p.password, "s3cret'pw");
+  EXPECT_EQ(p.max_backlog_age, std::chrono::seconds(600));
+  EXPECT_EQ(p.max_retry_interval, std::chrono::seconds(5));
+  ASSERT_TRUE(p.tls.has_value());
+  EXPECT_EQ(p.tls->mode, "verify-ca");
+  EXPECT_EQ(p.tls->ca_path, (dir_ / "ca.pem").string());
+  EXPECT_TRUE(p.tls->cert_path.empty());
+
+  absl::StatusOr<DaemonConfig> d = Read("{" + base + R"(, "plant": {"dsn": "host=plant",
+    "station_id": "eol-7"}})");
+  ASSERT_TRUE(d.ok()) << d.status();
+  EXPECT_EQ(d->core.plant->station_id, "eol-7");
+  EXPECT_EQ(d->core.plant->batch, 100);
+  EXPECT_EQ(d->core.plant->max_backlog_age, std::chrono::seconds(3600));
+  EXPECT_FALSE(d->core.plant->tls.has_value());
+  EXPECT_TRUE(d->core.plant->password.empty());
+}
+
+TEST_F(DaemonConfigTest, PlantErrorsNameTheKeyAndNeverThePassword) {
+  const std::string base = R"("station": "s.json", "car_models": ["c.json"], "data_root": "d")";
+  std::ofstream(dir_ / "empty.pass") << "\n";
+  const std::pair<std::string, std::string> cases[] = {
+      {R"({"batch": 5})", "plant.dsn"},
+      {R"({"dsn": "host=h password=hunter2"})", "plant.dsn"},
+      {R"({"dsn": "postgresql://u:hunter2@h/db"})", "plant.dsn"},
+      {R"({"dsn": "host=h bogus"})", "plant.dsn"},
+      {R"({"dsn": "host=h", "batch": 0})", "plant.batch"},
+      {R"({"dsn": "host=h", "batch": 10001})", "plant.batch"},
+      {R"({"dsn": "host=h", "max_backlog_age_s": 0})", "plant.max_backlog_age_s"},
+      {R"({"dsn": "host=h", "max_retry_interval_s": 3601})", "plant.max_retry_interval_s"},
+      {R"({"dsn": "host=h", "station_id": ""})", "plant.station_id"},
+      {R"({"dsn": "host=h", "password_file": "missing.pass"})", "plant.password_file"},
+      {R"({"dsn": "host=h", "password_file": "empty.pass"})", "plant.password_file"},
+      {R"({"dsn": "host=h", "tls": {"mode": "prefer"}})", "plant.tls.mode"},
+      {R"({"dsn": "host=h", "tls": {"ca": "nope.pem"}})", "plant.tls.ca"},
+      {R"({"dsn": "host=h", "tls": {"cert": "nope.pem"}})", "plant.tls.cert"},
+      {R"({"dsn": "host=h", "colour": 1})", "colour"},
+  };
+  for (const auto& [plant, key] : cases) {
+    const absl::StatusOr<DaemonConfig> c = Read("{" + base + R"(, "plant": )" + plant + "}");
+    ASSERT_FALSE(c.ok()) << plant;
+    EXPECT_EQ(c.status().code(), absl::StatusCode::kInvalidArgument) << plant;
+    const std::string message(c.status().message());
+    EXPECT_NE(message.find(key), std::string::npos) << plant << " -> " << message;
+    EXPECT_EQ(message.find("hunter2"), std::string::npos) << message;
+  }
+}
+
 }  // namespace
 }  // namespace linecal

@@ -1,6 +1,6 @@
 // The station store on real SQLite files in a scratch directory: schema and durability
 // settings, round trips, error codes, paging, a locked database, and crashes of a writer
-// process (kill -9) that must lose nothing it committed.
+// process (kill -9) that must lose nothing it committed; the outbox for the plant database.
 #include "daemon/store/store.h"
 
 #include <signal.h>
@@ -15,11 +15,13 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <set>
 #include <string>
 
 #include <gtest/gtest.h>
 
+#include "tests/daemon/ended_cycle.h"
 #include "tests/daemon/reliability/reliability_support.h"
 
 namespace linecal {
@@ -394,6 +396,174 @@ TEST_F(StoreTest, CheckFileNamesARemovedOrReplacedDatabase) {
   EXPECT_EQ(s.message().rfind("database " + path_ + ": the file was removed", 0), 0u) << s;
   // Writes still "succeed": why the core must look.
   EXPECT_TRUE(store->BeginCycle(Request("WVWZZZ1JZXW000001", 1)).ok());
+}
+
+// The outbox of cycles for the plant database (docs/plant.md, "Forwarding"): queued in the
+// transaction that ends a cycle, read back in order with the cycle's sensors and events,
+// removed once shipped, migrated from schema 1, consistent after a writer's SIGKILL.
+StoreOptions WithOutbox() {
+  StoreOptions options;
+  options.outbox = true;
+  return options;
+}
+
+// A cycle with one sensor result and two events, ended `done` at `ended_ns`.
+int64_t OutboxCycle(Store& store, int64_t started_ns, int64_t ended_ns) {
+  const int64_t id = testing_daemon::EndCycleInStore(store, started_ns, ended_ns);
+  EXPECT_NE(id, 0) << "the store refused the cycle";
+  return id;
+}
+
+TEST_F(StoreTest, OutboxWithoutTheOptionNothingIsQueued) {
+  std::unique_ptr<Store> store = OpenOk();
+  OutboxCycle(*store, 1, 2);
+  EXPECT_EQ(RawQuery("SELECT COUNT(*) FROM outbox"), "0");
+  const absl::StatusOr<OutboxBacklog> backlog = store->Backlog();
+  ASSERT_TRUE(backlog.ok()) << backlog.status();
+  EXPECT_EQ(backlog->cycles, 0);
+  EXPECT_EQ(backlog->oldest_ended_ns, 0);
+  EXPECT_TRUE(store->ReadOutbox(10)->empty());
+}
+
+TEST_F(StoreTest, OutboxEndedCyclesAreReadInOrderWithSensorsAndEventsAndRemovedOnceShipped) {
+  std::unique_ptr<Store> store = OpenOk(WithOutbox());
+  std::vector<int64_t> ids;
+  for (int i = 0; i < 3; ++i) ids.push_back(OutboxCycle(*store, 100 * i, 100 * i + 50));
+  // A running cycle is not queued until it ends.
+  StoredCycle running;
+  running.vin = "WVWZZZ1JZXW000001";
+  running.car_model_id = "reference";
+  running.request_json = "{}";
+  ASSERT_TRUE(store->BeginCycle(running).ok());
+
+  absl::StatusOr<OutboxBacklog> backlog = store->Backlog();
+  ASSERT_TRUE(backlog.ok()) << backlog.status();
+  EXPECT_EQ(backlog->cycles, 3);
+  EXPECT_EQ(backlog->oldest_ended_ns, 50);
+
+  absl::StatusOr<std::vector<OutboxEntry>> first = store->ReadOutbox(2);
+  ASSERT_TRUE(first.ok()) << first.status();
+  ASSERT_EQ(first->size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    const OutboxEntry& e = (*first)[i];
+    EXPECT_EQ(e.cycle.id, ids[i]);
+    EXPECT_EQ(e.cycle.state, CycleState::kDone);
+    EXPECT_EQ(e.cycle.ended_ns, 100 * static_cast<int64_t>(i) + 50);
+    // Exactly what GetCycle and Events answer.
+    const StoredCycle stored = *store->GetCycle(ids[i]);
+    EXPECT_EQ(e.cycle.sensors, stored.sensors);
+    ASSERT_EQ(e.cycle.sensors.size(), 1u);
+    ASSERT_EQ(e.events.size(), 2u);
+    EXPECT_EQ(e.events[0].type, "started");
+    EXPECT_EQ(e.events[1].type, "cycle_ended");
+    EXPECT_EQ(e.events[1].sequence, 1);
+  }
+  EXPECT_LT((*first)[0].seq, (*first)[1].seq);
+
+  ASSERT_TRUE(store->MarkShipped((*first)[1].seq).ok());
+  backlog = store->Backlog();
+  EXPECT_EQ(backlog->cycles, 1);
+  EXPECT_EQ(backlog->oldest_ended_ns, 250);
+  absl::StatusOr<std::vector<OutboxEntry>> rest = store->ReadOutbox(100);
+  ASSERT_TRUE(rest.ok()) << rest.status();
+  ASSERT_EQ(rest->size(), 1u);
+  EXPECT_EQ((*rest)[0].cycle.id, ids[2]);
+  EXPECT_GT((*rest)[0].seq, (*first)[1].seq);
+
+  ASSERT_TRUE(store->MarkShipped((*rest)[0].seq).ok());
+  EXPECT_EQ(store->Backlog()->cycles, 0);
+  // Sequence numbers are never reused, even after the queue was emptied.
+  const int64_t next = OutboxCycle(*store, 1000, 1050);
+  const std::vector<OutboxEntry> again = *store->ReadOutbox(10);
+  ASSERT_EQ(again.size(), 1u);
+  EXPECT_EQ(again[0].cycle.id, next);
+  EXPECT_GT(again[0].seq, (*rest)[0].seq);
+  EXPECT_EQ(store->ReadOutbox(0).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST_F(StoreTest, OutboxCyclesAbortedAtOpenAreQueued) {
+  int64_t interrupted = 0;
+  {
+    std::unique_ptr<Store> store = OpenOk(WithOutbox());
+    OutboxCycle(*store, 1, 2);
+    StoredCycle c;
+    c.vin = "WVWZZZ1JZXW000001";
+    c.car_model_id = "reference";
+    c.request_json = "{}";
+    interrupted = *store->BeginCycle(c);
+  }
+  std::unique_ptr<Store> store = OpenOk(WithOutbox());
+  ASSERT_EQ(store->aborted_at_open(), 1);
+  const std::vector<OutboxEntry> queued = *store->ReadOutbox(10);
+  ASSERT_EQ(queued.size(), 2u);
+  EXPECT_EQ(queued[1].cycle.id, interrupted);
+  EXPECT_EQ(queued[1].cycle.state, CycleState::kAborted);
+  EXPECT_EQ(queued[1].cycle.reason, "daemon_restarted");
+}
+
+// A version-1 file (made by turning a new file back into one: the same tables, no outbox)
+// migrates to 2 and queues none of its old cycles; the ones that end afterwards are queued.
+TEST_F(StoreTest, OutboxSchemaOneMigratesWithoutQueueingOldCycles) {
+  {
+    std::unique_ptr<Store> store = OpenOk();
+    OutboxCycle(*store, 1, 2);
+  }
+  RawQuery("DROP TABLE outbox; PRAGMA user_version = 1");
+  ASSERT_EQ(RawQuery("SELECT COUNT(*) FROM sqlite_master WHERE name = 'outbox'"), "0");
+  std::unique_ptr<Store> store = OpenOk(WithOutbox());
+  EXPECT_EQ(RawQuery("PRAGMA user_version"), "2");
+  EXPECT_EQ(store->Backlog()->cycles, 0);
+  const int64_t id = OutboxCycle(*store, 10, 20);
+  const std::vector<OutboxEntry> queued = *store->ReadOutbox(10);
+  ASSERT_EQ(queued.size(), 1u);
+  EXPECT_EQ(queued[0].cycle.id, id);
+  EXPECT_TRUE(store->IntegrityCheck().ok());
+}
+
+// A writer killed with SIGKILL while it ends cycles: every cycle stored as ended is queued
+// exactly once and nothing else is (the end and the queue entry are one transaction).
+TEST_F(StoreTest, OutboxKillNineLeavesTheQueueExactlyTheEndedCycles) {
+  OpenOk(WithOutbox());  // the schema, before forking
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::close(fds[0]);
+    absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(path_, WithOutbox());
+    if (!store.ok()) ::_exit(3);
+    for (int64_t i = 0;; ++i) {
+      const int64_t id = testing_daemon::EndCycleInStore(**store, i, i + 1);
+      if (id == 0) ::_exit(4);
+      if (::write(fds[1], &id, sizeof(id)) != sizeof(id)) ::_exit(6);
+    }
+  }
+  ::close(fds[1]);
+  int64_t id = 0;
+  int reported = 0;
+  // 30 cycles: mid-stream, and quick with five fsynced commits per cycle.
+  while (reported < 30 && ::read(fds[0], &id, sizeof(id)) == sizeof(id)) ++reported;
+  ::kill(child, SIGKILL);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ::close(fds[0]);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "writer exited early with " << WEXITSTATUS(status);
+  ASSERT_EQ(reported, 30);
+
+  std::unique_ptr<Store> store = OpenOk(WithOutbox());
+  const std::vector<OutboxEntry> queued = *store->ReadOutbox(1000);
+  std::map<int64_t, int> times_queued;
+  int64_t previous = 0;
+  for (const OutboxEntry& e : queued) {
+    ++times_queued[e.cycle.id];
+    EXPECT_GT(e.cycle.id, previous) << "queue order is not end order";
+    previous = e.cycle.id;
+    EXPECT_NE(e.cycle.state, CycleState::kRunning) << e.cycle.id;
+  }
+  const int64_t cycles = std::stoll(RawQuery("SELECT COUNT(*) FROM cycles"));
+  EXPECT_GE(cycles, 30);
+  EXPECT_EQ(static_cast<int64_t>(times_queued.size()), cycles);  // every one, ended or aborted
+  for (const auto& [cycle, n] : times_queued) EXPECT_EQ(n, 1) << cycle;
 }
 
 }  // namespace
