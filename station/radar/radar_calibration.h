@@ -5,22 +5,28 @@
 // The ARS408 and the ESR report range and azimuth but no elevation, so only the rotation
 // about the radar's vertical is observable from reflector azimuths: pitch and roll are taken
 // as nominal (they move a reflector's azimuth only to second order, or through its height
-// difference, which the station keeps small) and so is the position (a lateral offset δ moves
-// every azimuth by about δ / range and cannot be told from yaw with reflectors at one range).
+// difference, which the station keeps small), and so is the height. The horizontal position
+// is estimated with the yaw, as far as the reflectors tell it: an offset δ across a
+// reflector's line of sight moves its azimuth by δ / range, which differs from the yaw's
+// effect only between reflectors at different ranges or bearings; the rest of the position
+// tolerance stays in the σ.
 //
 // Model: R_car_radar(yaw) = Rz(yaw) · Ry(pitch_nominal) · Rx(roll_nominal) · R_base (R_base =
-// identity for radars); a reflector at p_car is expected at azimuth
-// atan2(y, x) of p_radar = R_car_radarᵀ · (p_car − t_car_radar_nominal). The yaw minimises
-// Σ ((azimuth_measured − azimuth_expected(yaw)) / se)² over the found reflectors (Gauss-Newton
-// in one unknown). Its 1-σ combines, in quadrature, the
-// measurement part (the inverse square root of the summed information Σ (∂azimuth/∂yaw / se)²),
-// the part that pitch and roll errors within their tolerance alias into yaw (Ry(pitch)·Rx(roll)
+// identity for radars), t_car_radar = t_nominal + (dx, dy, 0); a reflector at p_car is
+// expected at azimuth atan2(y, x) of p_radar = R_car_radarᵀ · (p_car − t_car_radar). (yaw, dx,
+// dy) minimise Σ ((azimuth_measured − azimuth_expected) / se)² + dx² / v_x + dy² / v_y over
+// the found reflectors, v the variance of an offset uniform within ±the position tolerance
+// (Gauss-Newton in three unknowns; with reflectors at one range the prior decides the offset
+// and the yaw is the yaw-only fit). The yaw's 1-σ combines, in quadrature, the
+// measurement part (each reflector's standard error through the fit's yaw gain), the part of
+// the true offset that the prior's pull towards nominal leaves in the yaw (offset uniform within
+// ±tolerance), the part that pitch and roll errors within their tolerance alias into yaw (Ry(pitch)·Rx(roll)
 // turns the boresight about the vertical by about pitch·roll/2, and pitch moves off-axis
 // azimuths to second order: the RMS over pitch and roll uniform in ±tolerance of the yaw shift
 // they cause, 3x3-point Gauss-Legendre quadrature), and, for radars that report Cartesian
 // positions in a grid (ARS408), the part the grid's rounding leaves: the reflectors' rounding
 // errors are modelled jointly, as the RMS over every lateral place of the reflector set in the
-// grid of the yaw error they cause together. It does not cover the position, taken as nominal.
+// grid of the yaw error they cause together.
 
 #include <span>
 #include <string>
@@ -67,15 +73,19 @@ struct RadarCalibrationResult {
   // Mounting angles (docs/conventions.md), radians. Pitch and roll are the nominal ones: not
   // observable without elevation.
   double yaw_rad = 0;
-  double yaw_sigma_rad = 0;              // total 1-σ: the three parts below in quadrature
+  double yaw_sigma_rad = 0;              // total 1-σ: the four parts below in quadrature
   double yaw_sigma_measurement_rad = 0;  // from the reflectors' standard errors
   double yaw_sigma_pitch_roll_rad = 0;   // pitch and roll unknown within their tolerance
   // The radar's position grid (ARS408), whose rounding errors all reflectors share; 0 for
   // radars that report polar values (ESR), whose steps are in the standard errors.
   double yaw_sigma_position_steps_rad = 0;
+  // The radar's horizontal offset from nominal, uniform within ±tolerance, as far as the fit
+  // leaves it in the yaw (all of it with reflectors at one range).
+  double yaw_sigma_position_rad = 0;
   // Half-width of the 95% interval around yaw_rad. 1.96 yaw_sigma_rad when the error is
   // Gaussian; a position grid's error is not (a sum of a few sawtooths is closer to uniform),
-  // so then the mixture over its lateral shifts of the Gaussian parts around the grid's error.
+  // nor is a uniform position offset's, so it is the mixture over the grid's lateral shifts
+  // and the offsets of the Gaussian parts around the error they leave.
   double yaw_ci95_rad = 0;
   double nominal_yaw_rad = 0;
   double yaw_deviation_rad = 0;  // yaw − nominal yaw
@@ -83,7 +93,11 @@ struct RadarCalibrationResult {
   double pitch_rad = 0;
   double roll_rad = 0;
   bool pitch_observable = false;  // always false for these radars; reported so nobody assumes
-  // Nominal position, estimated yaw, nominal pitch and roll.
+  // Estimated (x, y) offset from the nominal position, car frame, metres, and its 1-σ (prior
+  // included: about tolerance / √3 where the reflectors do not tell it).
+  Eigen::Vector2d position_offset_m = Eigen::Vector2d::Zero();
+  Eigen::Vector2d position_offset_sigma_m = Eigen::Vector2d::Zero();
+  // Estimated yaw and horizontal position, nominal pitch, roll and height.
   Rigid3d T_car_radar;
   // Normalised residuals: Σ (residual / se)² and its degrees of freedom (reflectors − 1).
   double chi2 = 0;
@@ -126,6 +140,11 @@ absl::StatusOr<RadarCalibrationRun> CalibrateRadar(const SensorModel& sensor,
 // (R_base = identity) sees the point p_car. Exposed for the derivative test. O(1).
 double PredictedAzimuth(const YawPitchRoll& angles, const Eigen::Vector3d& t_car_radar,
                         const Eigen::Vector3d& p_car);
+
+// ∂PredictedAzimuth/∂t_car_radar (per metre along x, y, z of the car frame), analytic. O(1).
+Eigen::Vector3d PredictedAzimuthPositionDerivative(const YawPitchRoll& angles,
+                                                   const Eigen::Vector3d& t_car_radar,
+                                                   const Eigen::Vector3d& p_car);
 
 // ∂PredictedAzimuth/∂yaw, analytic. O(1).
 double PredictedAzimuthYawDerivative(const YawPitchRoll& angles, const Eigen::Vector3d& t_car_radar,

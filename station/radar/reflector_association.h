@@ -77,8 +77,9 @@ struct ReflectorAssociationOptions {
   // the noise and the resolution) from the median azimuth or range is an outlier. 3.5 is the
   // usual modified-z-score cut (Iglewicz and Hoaglin); Gaussian noise loses < 0.1%.
   double outlier_z = 3.5;
-  // Per-detection noise of the sensor (docs/acceptance.md: 0.1° azimuth); floors the robust scale
-  // and tells whether the resolution steps are dithered.
+  // Nominal per-detection noise of the sensor (docs/acceptance.md: 0.1° azimuth): sizes the
+  // gates and floors the robust scale of the outlier test. The standard errors use the noise
+  // estimated from the capture itself (EstimateDetectionNoise), not these.
   double detection_azimuth_sigma_rad = 0.1 * std::numbers::pi / 180;
   double detection_range_sigma_m = 0.05;
   RadarResolution resolution;
@@ -115,8 +116,9 @@ struct ReflectorObservation {
   int outliers = 0;  // rejected by the median/MAD test
   int n_used = 0;    // detections averaged
   // Means of the used detections and their standard errors: the scatter (not below the
-  // sensor's nominal noise: quantised values may not vary at all) over √n, plus (in
-  // quadrature) the bias of resolution steps that the noise does not dither. Valid when found.
+  // capture's estimated noise, itself not below a polar step / √12: quantised values may not
+  // vary at all) over √n, plus (in quadrature) the bias of resolution steps that the estimated
+  // noise does not dither. Valid when found.
   double range_m = 0;
   double range_se_m = 0;
   double azimuth_rad = 0;
@@ -128,14 +130,48 @@ struct ReflectorObservation {
   double azimuth_se_without_position_steps_rad = 0;
 };
 
+// The per-detection noise of one radar in one capture, estimated from the data.
+struct DetectionNoise {
+  // Range and azimuth noise 1-σ before the radar's rounding to its resolution steps. 0 (1 mm
+  // of range on the ARS408's grid) when nothing varied, 0 when no reflector was found: then
+  // every resolution step is taken as undithered, the largest bias it can leave.
+  double range_sigma_m = 0;
+  double azimuth_sigma_rad = 0;
+  int dof = 0;  // Σ (detections − 1) over the reflectors pooled
+};
+
+// One reflector's detections of a capture, after outlier rejection.
+struct ReflectorDetections {
+  std::vector<double> range_m;
+  std::vector<double> azimuth_rad;  // same length
+};
+
+// The noise of a capture from the scatter of each reflector's repeated detections about its own
+// mean (the reflectors stand still, so that scatter is the noise), undoing the rounding to the
+// resolution steps.
+// - Polar steps (ESR), per quantity, by the method of moments: for noise r (in steps) and a true
+//   value anywhere in its cell, the expected within-reflector variance of the rounded readings
+//   is W(r) = r² + 1/12 − Σₖ exp(−4π²k²r²) / (2π²k²) steps² (the rounding's variance less that
+//   of its mean, which stays fixed within a reflector); the pooled variance is solved for r.
+// - The ARS408's Cartesian grid: the range noise that maximises the likelihood of every
+//   reflector's cell counts in x and y (noise hypot(σr·cos, σa·R·sin) in x, the converse in y),
+//   each reflector's place in its cells integrated out. Moments fail there: with noise below the
+//   step the within-reflector variance is decided by where a reflector sits in its cell. The
+//   azimuth noise is `grid_azimuth_sigma_rad` (reported as such): 0.1° is 0.05–0.12 of a 0.2 m
+//   cell across the line of sight at 6–14 m, which no capture separates from the range noise.
+// Reflectors with fewer than two detections are skipped. Cost: O(detections + reflectors · 10³)
+// polar; O(reflectors · 10⁵) on the grid (≈ 10 ms for 6 reflectors).
+DetectionNoise EstimateDetectionNoise(
+    std::span<const ReflectorDetections> reflectors, const RadarResolution& resolution,
+    double grid_azimuth_sigma_rad = 0.1 * std::numbers::pi / 180);
+
 struct ReflectorAssociation {
   int cycles = 0;                                // cycles examined
   std::vector<ReflectorObservation> reflectors;  // in the order of `expected`
-  // The measurement model the standard errors assume (from the options): how the radar
-  // quantises positions and how much the per-detection noise dithers that.
+  // The measurement model the standard errors assume: how the radar quantises positions and
+  // how much the per-detection noise of this capture (estimated from it) dithers that.
   RadarResolution resolution;
-  double detection_azimuth_sigma_rad = 0;
-  double detection_range_sigma_m = 0;
+  DetectionNoise noise;
 };
 
 // Associates detections with reflectors over `cycles` (one radar; cycles of one list kind,

@@ -136,7 +136,8 @@ TEST(EvalRadarCliTest, ReportsOneRowPerRadarModel) {
   EXPECT_EQ(j["meets_bars"], run.exit_code == 0);
 
   EXPECT_EQ(RunLinecal("eval radar" + kRef + " --cars 0").exit_code, 2);
-  EXPECT_EQ(RunLinecal("eval radar" + kRef + " --offset-m 2").exit_code, 2);
+  EXPECT_EQ(RunLinecal("eval radar" + kRef + " --position-error-m 2").exit_code, 2);
+  EXPECT_EQ(RunLinecal("eval radar" + kRef + " --range-noise-m -0.01").exit_code, 2);
 }
 
 }  // namespace

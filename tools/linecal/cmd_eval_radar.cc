@@ -3,9 +3,9 @@
 //
 // Per car and radar: a random mounting yaw error within ±2x the yaw tolerance (so about half
 // the cars are out of tolerance), pitch and roll errors within ±their tolerance, a position
-// error within ±--offset-m (default 0: the calibration takes the position as nominal), a
-// random aligner pose; SimulateRadar writes the CAN frames (σ 0.1° azimuth, clutter,
-// multipath), the decoder reads them back, and the calibration's yaw is compared with truth.
+// error within ±--position-error-m per axis (default 0), a random aligner pose; SimulateRadar
+// writes the CAN frames (σ 0.1° azimuth, --range-noise-m of range, clutter, multipath), the
+// decoder reads them back, and the calibration's yaw is compared with truth.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -47,12 +47,19 @@ constexpr double kAlignerThrustDeg = 0.2;
 // docs/acceptance.md: σ 0.1° per detection, 50 cycles.
 constexpr double kAzimuthSigmaDeg = 0.1;
 constexpr int kCycles = 50;
+// The simulator's default range noise (radar_sim.h); acceptance.md asks for 2–10 cm.
+constexpr double kDefaultRangeNoiseM = 0.05;
+// acceptance.md ("Uncertainty on the full-physics evaluation"): a wrong verdict is allowed
+// only with the truth within this many σ of a tolerance edge.
+constexpr double kWrongVerdictEdgeSigmas = 1.0;
 
 struct Sample {
   double error_deg = 0;  // estimated − true yaw
   double sigma_deg = 0;  // reported 1-σ
   double ci95_deg = 0;   // reported half-width of the 95% interval
   bool verdict_agrees = false;
+  // |true deviation| − tolerance over the reported σ: how far the truth is from the edge.
+  double edge_distance_sigmas = 0;
 };
 
 struct Group {
@@ -71,6 +78,10 @@ struct Summary {
   double sigma_ratio = 0;  // RMS error / RMS reported σ (1 when σ is right)
   double coverage95 = 0;   // share of |error| within the reported 95% interval
   double verdict_agreement = 0;
+  // Wrong verdicts with the truth more than kWrongVerdictEdgeSigmas from the tolerance edge,
+  // and the farthest from the edge of any wrong verdict (σ; 0 when none is wrong).
+  int wrong_verdicts_off_edge = 0;
+  double max_wrong_edge_sigmas = 0;
   bool meets_bars = false;
   std::map<std::string, int> reasons;
 };
@@ -90,6 +101,10 @@ Summary Summarise(const Group& g) {
     sum_s2 += x.sigma_deg * x.sigma_deg;
     covered += std::abs(x.error_deg) <= x.ci95_deg;
     agree += x.verdict_agrees;
+    if (x.verdict_agrees) continue;
+    const double off_edge = std::abs(x.edge_distance_sigmas);
+    s.wrong_verdicts_off_edge += off_edge > kWrongVerdictEdgeSigmas;
+    s.max_wrong_edge_sigmas = std::max(s.max_wrong_edge_sigmas, off_edge);
   }
   const double n = static_cast<double>(g.samples.size());
   s.p95_abs_error_deg = Percentile(abs_errors, 0.95);
@@ -100,7 +115,7 @@ Summary Summarise(const Group& g) {
   s.verdict_agreement = agree / n;
   s.meets_bars = s.p95_abs_error_deg <= kYawP95BarDeg && s.sigma_ratio >= kSigmaRatioLow &&
                  s.sigma_ratio <= kSigmaRatioHigh && s.coverage95 >= kCoverageLow &&
-                 s.coverage95 <= kCoverageHigh;
+                 s.coverage95 <= kCoverageHigh && s.wrong_verdicts_off_edge == 0;
   return s;
 }
 
@@ -114,6 +129,8 @@ nlohmann::json SummaryJson(const std::string& name, const Summary& s) {
           {"error_over_sigma", s.sigma_ratio},
           {"coverage95", s.coverage95},
           {"verdict_agreement", s.verdict_agreement},
+          {"wrong_verdicts_beyond_1sigma_of_edge", s.wrong_verdicts_off_edge},
+          {"max_wrong_verdict_edge_distance_sigma", s.max_wrong_edge_sigmas},
           {"meets_bars", s.meets_bars},
           {"reasons", s.reasons}};
 }
@@ -122,19 +139,23 @@ nlohmann::json SummaryJson(const std::string& name, const Summary& s) {
 
 int RunEvalRadar(const Args& args) {
   cli::CommandLine cl(
-      "linecal eval radar --station FILE --car FILE [--cars N] [--seed S] [--offset-m M] [--json]",
+      "linecal eval radar --station FILE --car FILE [--cars N] [--seed S] [--range-noise-m M] "
+      "[--position-error-m M] [--json]",
       "Monte Carlo evaluation of radar yaw calibration: simulates N cars (mounting yaw errors "
-      "within ±2x the tolerance, pitch/roll within tolerance, random aligner pose, 0.1 deg "
-      "azimuth noise, 50 cycles with clutter and multipath) for every radar of the car model, "
-      "decodes the simulated CAN frames, calibrates, and prints per radar model the "
-      "95th-percentile yaw error, RMS error over RMS reported 1-sigma, the coverage of the 95% "
-      "intervals and the verdict agreement with truth. Exit 0 when every group meets the "
+      "within ±2x the tolerance, pitch/roll within tolerance, position within "
+      "±--position-error-m, random aligner pose, 0.1 deg azimuth and --range-noise-m range noise, "
+      "50 cycles with clutter and multipath) for every radar of the car model, decodes the "
+      "simulated CAN frames, calibrates, and prints per radar model the 95th-percentile yaw "
+      "error, RMS error over RMS reported 1-sigma, the coverage of the 95% intervals, the "
+      "verdict agreement with truth and the wrong verdicts with the truth more than 1-sigma "
+      "from the tolerance edge. Exit 0 when every group meets the "
       "acceptance bars, 1 otherwise, 2 on bad input.",
       {{"station", "FILE", "station layout (e.g. deploy/stations/reference.json)", true},
        {"car", "FILE", "car model (e.g. deploy/cars/reference.json)", true},
        {"cars", "N", "simulated cars (default 200)"},
        {"seed", "S", "random seed (default 1)"},
-       {"offset-m", "M", "mounting position error bound per axis, metres (default 0)"},
+       {"range-noise-m", "M", "per-detection range noise 1-sigma, metres (default 0.05)"},
+       {"position-error-m", "M", "mounting position error bound per axis, metres (default 0)"},
        {"json", "", "print one JSON object"}});
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
   // 200 cars put the 95th percentile and the coverage within about ±1.5 percentage points.
@@ -145,12 +166,21 @@ int RunEvalRadar(const Args& args) {
   }
   const absl::StatusOr<int> seed = cl.GetInt("seed", 1);
   if (!seed.ok()) return cli::BadInput(kCommand, std::string(seed.status().message()));
-  const absl::StatusOr<double> offset_m = cl.GetDouble("offset-m", 0.0);
+  const absl::StatusOr<double> offset_m = cl.GetDouble("position-error-m", 0.0);
   if (!offset_m.ok()) return cli::BadInput(kCommand, std::string(offset_m.status().message()));
   // Beyond 0.5 m it is another car, as the simulator says (simulator.cc).
   if (!(*offset_m >= 0 && *offset_m <= 0.5)) {
     return cli::BadInput(kCommand,
-                         absl::StrCat("--offset-m: ", *offset_m, ": must be in [0, 0.5]"));
+                         absl::StrCat("--position-error-m: ", *offset_m, ": must be in [0, 0.5]"));
+  }
+  const absl::StatusOr<double> range_noise_m = cl.GetDouble("range-noise-m", kDefaultRangeNoiseM);
+  if (!range_noise_m.ok()) {
+    return cli::BadInput(kCommand, std::string(range_noise_m.status().message()));
+  }
+  // The simulator's own bound (RadarSimOptions::Validate).
+  if (!(*range_noise_m >= 0 && *range_noise_m <= 5)) {
+    return cli::BadInput(
+        kCommand, absl::StrCat("--range-noise-m: ", *range_noise_m, ": must be in [0, 5]"));
   }
   const absl::StatusOr<StationLayout> station = ReadStationLayout(cl.Get("station"));
   if (!station.ok()) return cli::BadInput(kCommand, std::string(station.status().message()));
@@ -163,6 +193,7 @@ int RunEvalRadar(const Args& args) {
   RadarSimOptions sim;
   sim.cycles = kCycles;
   sim.azimuth_sigma_deg = kAzimuthSigmaDeg;
+  sim.range_sigma_m = *range_noise_m;
   std::mt19937_64 rng(static_cast<std::uint64_t>(*seed));
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::map<std::string, Group> groups;  // by radar model
@@ -208,9 +239,10 @@ int RunEvalRadar(const Args& args) {
       ++g.calibrated;
       const double true_deviation = truth.yaw - nominal.yaw;
       const bool truly_in = std::abs(true_deviation) <= sensor.tolerance.yaw_rad;
-      g.samples.push_back({(r.yaw_rad - truth.yaw) * kRadToDeg, r.yaw_sigma_rad * kRadToDeg,
-                           r.yaw_ci95_rad * kRadToDeg,
-                           truly_in == (r.verdict == RadarVerdict::kPass)});
+      g.samples.push_back(
+          {(r.yaw_rad - truth.yaw) * kRadToDeg, r.yaw_sigma_rad * kRadToDeg,
+           r.yaw_ci95_rad * kRadToDeg, truly_in == (r.verdict == RadarVerdict::kPass),
+           (std::abs(true_deviation) - sensor.tolerance.yaw_rad) / r.yaw_sigma_rad});
     }
     if ((c + 1) % 50 == 0) {
       std::fprintf(stderr, "linecal %s: %d / %d cars\n", kCommand, c + 1, *cars);
@@ -226,21 +258,26 @@ int RunEvalRadar(const Args& args) {
   }
   if (cl.Has("json")) {
     for (const auto& [name, s] : summaries) rows.push_back(SummaryJson(name, s));
-    const nlohmann::json out = {{"cars", *cars},         {"seed", *seed},
-                                {"offset_m", *offset_m}, {"azimuth_sigma_deg", kAzimuthSigmaDeg},
-                                {"cycles", kCycles},     {"groups", rows},
+    const nlohmann::json out = {{"cars", *cars},
+                                {"seed", *seed},
+                                {"position_error_m", *offset_m},
+                                {"range_noise_m", *range_noise_m},
+                                {"azimuth_sigma_deg", kAzimuthSigmaDeg},
+                                {"cycles", kCycles},
+                                {"groups", rows},
                                 {"meets_bars", all_meet}};
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     std::printf(
         "| radar model | runs | calibrated | p95 abs yaw error (deg) | RMS error (deg) | "
         "RMS reported 1-sigma (deg) | error / sigma | 95%% coverage | verdict agreement | "
-        "meets bars |\n");
-    std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+        "wrong verdicts > 1 sigma from the edge | meets bars |\n");
+    std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     for (const auto& [name, s] : summaries) {
-      std::printf("| %s | %d | %d | %.4f | %.4f | %.4f | %.2f | %.3f | %.3f | %s |\n", name.c_str(),
-                  s.cars, s.calibrated, s.p95_abs_error_deg, s.rms_error_deg, s.rms_sigma_deg,
-                  s.sigma_ratio, s.coverage95, s.verdict_agreement, s.meets_bars ? "yes" : "no");
+      std::printf("| %s | %d | %d | %.4f | %.4f | %.4f | %.2f | %.3f | %.3f | %d (max %.1f) | %s |\n",
+                  name.c_str(), s.cars, s.calibrated, s.p95_abs_error_deg, s.rms_error_deg,
+                  s.rms_sigma_deg, s.sigma_ratio, s.coverage95, s.verdict_agreement,
+                  s.wrong_verdicts_off_edge, s.max_wrong_edge_sigmas, s.meets_bars ? "yes" : "no");
     }
   }
   return all_meet ? cli::kExitOk : cli::kExitNegative;

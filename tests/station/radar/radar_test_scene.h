@@ -44,13 +44,38 @@ inline SensorModel TestRadar(const std::string& model, double yaw_rad = 0.0) {
   return s;
 }
 
-// The sensor's true pose: nominal with its mounting angles moved by `error`.
-inline Rigid3d TrueMounting(const SensorModel& s, const YawPitchRoll& error) {
+// The sensor's true pose: nominal with its mounting angles moved by `error` and its position
+// by `offset` (car frame, metres).
+inline Rigid3d TrueMounting(const SensorModel& s, const YawPitchRoll& error,
+                            const Eigen::Vector3d& offset = Eigen::Vector3d::Zero()) {
   const YawPitchRoll nominal =
       MountingAngles(s.T_car_sensor_nominal.RotationMatrix(), Eigen::Matrix3d::Identity());
   return Rigid3d(RotationFromYawPitchRoll({nominal.yaw + error.yaw, nominal.pitch + error.pitch,
                                            nominal.roll + error.roll}),
-                 s.T_car_sensor_nominal.translation());
+                 s.T_car_sensor_nominal.translation() + offset);
+}
+
+// A corner radar's station: two reflectors about 5.5 m away as on the reference station and
+// one 2.2 m away, 10° off the boresight of a radar at (3.6, 0.85) yawed 40° (TestCornerRadar):
+// reflectors at clearly different ranges, so that the radar's offset across the line of sight
+// can be told from its yaw.
+inline StationLayout CornerLayout() {
+  StationLayout layout;
+  layout.name = "radar_corner_test";
+  layout.reflectors = {{"near", Eigen::Vector3d(6.0, 5.5, 0.5), 15.0},
+                       {"far", Eigen::Vector3d(7.5, 5.0, 0.5), 15.0},
+                       {"close", Eigen::Vector3d(5.014, 2.535, 0.5), 15.0}};
+  return layout;
+}
+
+// The reference car's left ESR corner radar, with the tolerances of TestRadar.
+inline SensorModel TestCornerRadar() {
+  SensorModel s = TestRadar("esr", 40 * kDeg);
+  s.name = "corner_radar_left";
+  s.T_car_sensor_nominal = Rigid3d(s.T_car_sensor_nominal.RotationMatrix(),
+                                   Eigen::Vector3d(3.6, 0.85, 0.5));
+  s.targets = {"near", "far", "close"};
+  return s;
 }
 
 // Simulated CAN traffic of the radar at T_station_car * T_car_radar, decoded back to cycles.
