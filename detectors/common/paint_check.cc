@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <utility>
 #include <vector>
@@ -35,6 +36,10 @@ constexpr double kBlackToWhiteMax = 0.6;
 // neighbourhood has the printed contrast.
 constexpr int kPaintComparisons = 4;
 
+// VisiblePaintAgrees: disagreeing probes this many grid steps apart (Chebyshev) are one hidden
+// area; a gap of one probe between them is an occluder's white next to the page's.
+constexpr int kHiddenGapProbes = 2;
+
 // Up to `count` probes of a side x side grid nearest to probe `from` (Euclidean distance in
 // probe steps, at most `reach`) for which `wanted(index)` holds, nearest first; ties in the
 // grid's order. O(reach^2 + count log count).
@@ -63,24 +68,32 @@ BoardToImage ThroughHomography(const Eigen::Matrix3d& H_image_board) {
   };
 }
 
-}  // namespace
-
-bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const ImageView8& image,
-                 double px_per_m, double min_agreement) {
-  return PaintAgrees(board, ThroughHomography(H_image_board), image, px_per_m, min_agreement);
+// The board point of PaintAgrees's grid probe (ix, iy): the centres of a grid over the page.
+Eigen::Vector2d ProbeOnPage(const Eigen::Vector2d& page, int ix, int iy) {
+  return Eigen::Vector2d(page.x() * ((ix + 0.5) / kPaintProbesPerSide - 0.5),
+                         page.y() * ((iy + 0.5) / kPaintProbesPerSide - 0.5));
 }
 
-bool PaintAgrees(const Board& board, const BoardToImage& to_image, const ImageView8& image,
-                 double px_per_m, double min_agreement) {
+// PaintAgrees's vote of one grid probe.
+enum class ProbeVote : std::uint8_t { kNone, kAgree, kDisagree };
+
+struct PaintVotes {
+  std::vector<Paint> paint;  // per grid probe; kOffBoard where it is not used
+  std::vector<ProbeVote> vote;
+};
+
+// Every probe of PaintAgrees's grid compared with its nearest probes of the opposite paint.
+PaintVotes VotePaint(const Board& board, const BoardToImage& to_image, const ImageView8& image,
+                     double px_per_m) {
   const Eigen::Vector2d page = board.page_size_m();
   const double clearance_m = kPaintProbeClearancePx / px_per_m;
-  // Per grid probe: its grey and paint (kOffBoard where it is not used).
-  std::vector<double> grey(kPaintProbesPerSide * kPaintProbesPerSide, 0.0);
-  std::vector<Paint> paint(kPaintProbesPerSide * kPaintProbesPerSide, Paint::kOffBoard);
+  constexpr int kCount = kPaintProbesPerSide * kPaintProbesPerSide;
+  PaintVotes votes{std::vector<Paint>(kCount, Paint::kOffBoard),
+                   std::vector<ProbeVote>(kCount, ProbeVote::kNone)};
+  std::vector<double> grey(kCount, 0.0);
   for (int iy = 0; iy < kPaintProbesPerSide; ++iy) {
     for (int ix = 0; ix < kPaintProbesPerSide; ++ix) {
-      const Eigen::Vector2d p(page.x() * ((ix + 0.5) / kPaintProbesPerSide - 0.5),
-                              page.y() * ((iy + 0.5) / kPaintProbesPerSide - 0.5));
+      const Eigen::Vector2d p = ProbeOnPage(page, ix, iy);
       const Paint here = board.PaintAt(p);
       if (here != Paint::kWhite && here != Paint::kBlack) continue;
       bool uniform = true;
@@ -97,36 +110,95 @@ bool PaintAgrees(const Board& board, const BoardToImage& to_image, const ImageVi
         continue;
       }
       const int i = iy * kPaintProbesPerSide + ix;
-      paint[i] = here;
+      votes.paint[i] = here;
       grey[i] = image.At(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
     }
   }
   const int reach = static_cast<int>(std::ceil(kPaintNeighbourReach * kPaintProbesPerSide));
-  std::array<int, 2> total = {0, 0};  // white probes, black probes with neighbours to compare
-  std::array<int, 2> agree = {0, 0};
-  for (int i = 0; i < kPaintProbesPerSide * kPaintProbesPerSide; ++i) {
-    if (paint[i] == Paint::kOffBoard) continue;
-    const Paint opposite = paint[i] == Paint::kBlack ? Paint::kWhite : Paint::kBlack;
+  for (int i = 0; i < kCount; ++i) {
+    if (votes.paint[i] == Paint::kOffBoard) continue;
+    const Paint opposite = votes.paint[i] == Paint::kBlack ? Paint::kWhite : Paint::kBlack;
     const std::vector<int> near = NearestProbes(kPaintProbesPerSide, i, reach, kPaintComparisons,
-                                                [&](int k) { return paint[k] == opposite; });
+                                                [&](int k) { return votes.paint[k] == opposite; });
     if (near.empty()) continue;
-    const int kind = paint[i] == Paint::kBlack ? 1 : 0;
-    ++total[kind];
+    const bool black_here = votes.paint[i] == Paint::kBlack;
     // Against every neighbour: one black-printed neighbour that is as bright as a white probe
     // (or one white-printed neighbour as dark as a black probe) is paint the board does not
     // have there.
-    if (std::all_of(near.begin(), near.end(), [&](int j) {
-          const double black = kind == 1 ? grey[i] : grey[j];
-          const double white = kind == 1 ? grey[j] : grey[i];
-          return black < kBlackToWhiteMax * white;
-        })) {
-      ++agree[kind];
-    }
+    const bool agrees = std::all_of(near.begin(), near.end(), [&](int j) {
+      const double black = black_here ? grey[i] : grey[j];
+      const double white = black_here ? grey[j] : grey[i];
+      return black < kBlackToWhiteMax * white;
+    });
+    votes.vote[i] = agrees ? ProbeVote::kAgree : ProbeVote::kDisagree;
+  }
+  return votes;
+}
+
+// PaintAgrees's test over the votes.
+bool VotesAgree(const PaintVotes& votes, double min_agreement) {
+  std::array<int, 2> total = {0, 0};  // white probes, black probes with neighbours to compare
+  std::array<int, 2> agree = {0, 0};
+  for (std::size_t i = 0; i < votes.vote.size(); ++i) {
+    if (votes.vote[i] == ProbeVote::kNone) continue;
+    const int kind = votes.paint[i] == Paint::kBlack ? 1 : 0;
+    ++total[kind];
+    agree[kind] += votes.vote[i] == ProbeVote::kAgree;
   }
   for (int k = 0; k < 2; ++k) {
     if (total[k] >= kMinPaintProbes && agree[k] < min_agreement * total[k]) return false;
   }
   return total[0] + total[1] >= kMinPaintProbes;
+}
+
+}  // namespace
+
+bool PaintAgrees(const Board& board, const Eigen::Matrix3d& H_image_board, const ImageView8& image,
+                 double px_per_m, double min_agreement) {
+  return PaintAgrees(board, ThroughHomography(H_image_board), image, px_per_m, min_agreement);
+}
+
+bool PaintAgrees(const Board& board, const BoardToImage& to_image, const ImageView8& image,
+                 double px_per_m, double min_agreement) {
+  return VotesAgree(VotePaint(board, to_image, image, px_per_m), min_agreement);
+}
+
+bool VisiblePaintAgrees(const Board& board, const BoardToImage& to_image, const ImageView8& image,
+                        double px_per_m, double min_agreement, const BoardRegion& seen) {
+  PaintVotes votes = VotePaint(board, to_image, image, px_per_m);
+  if (VotesAgree(votes, min_agreement)) return true;
+  const Eigen::Vector2d page = board.page_size_m();
+  constexpr int n = kPaintProbesPerSide;
+  // Groups of disagreeing probes, joined across gaps (an occluder's own white agrees with the
+  // page's here and there).
+  std::vector<bool> grouped(votes.vote.size(), false);
+  for (int start = 0; start < n * n; ++start) {
+    if (votes.vote[start] != ProbeVote::kDisagree || grouped[start]) continue;
+    std::vector<int> members = {start};
+    grouped[start] = true;
+    bool rim = false;
+    bool holds_seen = false;
+    for (std::size_t m = 0; m < members.size(); ++m) {
+      const int ix = members[m] % n, iy = members[m] / n;
+      rim = rim || ix == 0 || iy == 0 || ix == n - 1 || iy == n - 1;
+      holds_seen = holds_seen || seen(ProbeOnPage(page, ix, iy));
+      for (int dy = -kHiddenGapProbes; dy <= kHiddenGapProbes; ++dy) {
+        for (int dx = -kHiddenGapProbes; dx <= kHiddenGapProbes; ++dx) {
+          const int x = ix + dx, y = iy + dy;
+          if (x < 0 || y < 0 || x >= n || y >= n) continue;
+          const int k = y * n + x;
+          if (votes.vote[k] != ProbeVote::kDisagree || grouped[k]) continue;
+          grouped[k] = true;
+          members.push_back(k);
+        }
+      }
+    }
+    // Reaching in from the rim and clear of everything the detector read: hidden, no vote.
+    if (rim && !holds_seen) {
+      for (int k : members) votes.vote[k] = ProbeVote::kNone;
+    }
+  }
+  return VotesAgree(votes, min_agreement);
 }
 
 bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::Matrix3d& H_image_board,

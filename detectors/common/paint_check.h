@@ -35,6 +35,20 @@ using BoardToImage = std::function<std::optional<Eigen::Vector2d>(const Eigen::V
 bool PaintAgrees(const Board& board, const BoardToImage& to_image, const ImageView8& image,
                  double px_per_m, double min_agreement);
 
+// A set of board points (metres, board frame).
+using BoardRegion = std::function<bool(const Eigen::Vector2d&)>;
+
+// PaintAgrees for a board that something in front of it may partly hide (another board, a
+// post): a hidden area shows the occluder's paint, not the board's. When the whole page fails,
+// the disagreeing probes are grouped (probes up to 2 grid steps apart are one group), and a
+// group that reaches the page's rim and holds no point of `seen` (the areas the detector read
+// its features from: what was read is not hidden) is left out of the vote; the rest must then
+// pass as in PaintAgrees. A board identified on the wrong pattern disagrees where the print
+// differs, inside the page and around what was read, and still fails. Cost: PaintAgrees's, plus
+// a grouping of the 1024 probes and one `seen` call per disagreeing probe when the page fails.
+bool VisiblePaintAgrees(const Board& board, const BoardToImage& to_image, const ImageView8& image,
+                        double px_per_m, double min_agreement, const BoardRegion& seen);
+
 // Two boards that print the same features (the ArUco and round-hole boards share their four
 // markers, docs/boards.md) differ only in some of their paint, and a binarisation can be fooled
 // there (a 4:1 illumination gradient darkens plain white paper below its local threshold).

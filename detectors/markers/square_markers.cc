@@ -703,22 +703,41 @@ Detection CheckAndReport(const BoardInImage& model, const std::vector<const Deco
                          const MarkerDetectOptions& options) {
   // A marker of another id on this board's page: another board that shares some ids. A
   // homography of a bent board is tens of pixels off at its rim, a small part of the margin.
+  // Not one centred on a through hole: that is the board's own black square around the hole
+  // with whatever is behind the board in it (the round-hole board's centre square, with a wall
+  // above the floor's edge behind it, read as DICT_4X4_50 id 37 with one corrected bit), or
+  // something seen through the hole; neither is print of another board.
   const Eigen::Matrix3d H_board_image = model.H_image_board.inverse();
   const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
   for (const DecodedMarker* m : others) {
     Eigen::Vector2d centre = Eigen::Vector2d::Zero();
     for (const Eigen::Vector2d& c : m->corners_px) centre += 0.25 * c;
     const Eigen::Vector2d p = ApplyHomography(H_board_image, centre);
-    if (std::abs(p.x()) < half_page.x() && std::abs(p.y()) < half_page.y()) {
+    if (std::abs(p.x()) < half_page.x() && std::abs(p.y()) < half_page.y() &&
+        board.PaintAt(p) != Paint::kHole) {
       return Fail(DetectReason::kWrongBoard);
     }
   }
+  // The markers read, as squares of the board frame: what the paint check may not take for
+  // hidden.
+  std::vector<Eigen::AlignedBox2d> read_squares;
+  for (const DecodedMarker* m : on_board) {
+    Eigen::AlignedBox2d square;
+    for (const BoardFeature* f : board_markers.at(m->id)) square.extend(f->p_board);
+    read_squares.push_back(square);
+  }
+  const BoardRegion read = [&read_squares](const Eigen::Vector2d& p) {
+    return std::any_of(read_squares.begin(), read_squares.end(),
+                       [&p](const Eigen::AlignedBox2d& b) { return b.contains(p); });
+  };
   // The paint compared between nearby points under the same light (PaintAgrees), not on the
   // binarised image: that reads white paper at the dim end of a 4:1 gradient as dark and
   // refused every marker board so lit. The binarised check had been kept for a board of 4 px
   // cells that the grey one passed with a corner 1.7 px off; the quarter-cell residual limit
-  // (max_residual_cells) refuses such boards now.
-  if (!PaintAgrees(board, model.to_image, image, model.px_per_m, options.min_paint_agreement)) {
+  // (max_residual_cells) refuses such boards now. Parts of the page hidden behind another
+  // board or a post are left out (VisiblePaintAgrees): the board is found from what shows.
+  if (!VisiblePaintAgrees(board, model.to_image, image, model.px_per_m, options.min_paint_agreement,
+                          read)) {
     return Fail(DetectReason::kWrongBoard);
   }
   if (sibling != nullptr &&

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -57,13 +58,82 @@ std::array<Eigen::Vector3d, 4> PageCorners(const StationBoard& b) {
           FeaturePoint(b, {-h.x(), h.y()})};
 }
 
-// The first board other than `self` between the sensor and p, or null.
-const StationBoard* Occluder(const Eigen::Vector3d& sensor, const Eigen::Vector3d& p, const StationLayout& layout,
-                             const std::string& self) {
+// True when the segment a-b passes through the rectangle of size `size` centred in the x-y
+// plane of `T_station_rect`. Endpoints on the rectangle do not count.
+bool SegmentHitsRectangle(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                          const Rigid3d& T_station_rect, const Eigen::Vector2d& size) {
+  const Rigid3d T_rect_station = T_station_rect.Inverse();
+  const Eigen::Vector3d pa = T_rect_station * a, pb = T_rect_station * b;
+  if ((pa.z() > 0) == (pb.z() > 0) || pa.z() == pb.z()) return false;
+  const double s = pa.z() / (pa.z() - pb.z());
+  // The end points themselves (a feature on this very page) do not count.
+  if (s < 1e-6 || s > 1 - 1e-6) return false;
+  const Eigen::Vector3d hit = pa + s * (pb - pa);
+  return std::abs(hit.x()) < 0.5 * size.x() && std::abs(hit.y()) < 0.5 * size.y();
+}
+
+// What hides a point from a sensor: a board's page or a surface (a wall, a screen) of the layout.
+struct Occluding {
+  std::string id;
+  bool surface = false;
+};
+
+// The first board other than `self`, then the first surface, between the sensor and p.
+std::optional<Occluding> Occluder(const Eigen::Vector3d& sensor, const Eigen::Vector3d& p,
+                                  const StationLayout& layout, const std::string& self) {
   for (const StationBoard& other : layout.boards) {
-    if (other.id != self && SegmentHitsBoard(sensor, p, other)) return &other;
+    if (other.id != self && SegmentHitsBoard(sensor, p, other)) return Occluding{other.id, false};
   }
-  return nullptr;
+  for (const StationSurface& surface : layout.surfaces) {
+    if (SegmentHitsRectangle(sensor, p, surface.T_station_surface, surface.size_m))
+      return Occluding{surface.id, true};
+  }
+  return std::nullopt;
+}
+
+// Page samples per side for the hidden share of a board (HiddenPage): a 24 x 24 grid puts a
+// sample every 4% of the page, finer than the narrowest strip an occluding board's edge cuts off
+// that matters to the detectors (a marker is a fifth of the round-hole board's side).
+constexpr int kHiddenPageSamples = 24;
+
+// How much of a board's page a sensor at `eye` cannot see behind other boards and surfaces: of
+// the page samples `in_view` accepts, the share hidden, and the occluder hiding most of them.
+struct HiddenPage {
+  double share = 0;
+  std::optional<Occluding> by;
+};
+template <typename InView>
+HiddenPage HiddenPageOf(const Eigen::Vector3d& eye, const StationBoard& b,
+                        const StationLayout& layout, const InView& in_view) {
+  const Eigen::Vector2d page = b.board.page_size_m();
+  std::map<std::string, std::pair<int, Occluding>> hidden_by;  // id -> samples, occluder
+  int seen = 0;
+  int hidden = 0;
+  for (int iy = 0; iy < kHiddenPageSamples; ++iy) {
+    for (int ix = 0; ix < kHiddenPageSamples; ++ix) {
+      const Eigen::Vector2d q(page.x() * ((ix + 0.5) / kHiddenPageSamples - 0.5),
+                              page.y() * ((iy + 0.5) / kHiddenPageSamples - 0.5));
+      const Eigen::Vector3d p = FeaturePoint(b, q);
+      if (!in_view(p)) continue;
+      ++seen;
+      const std::optional<Occluding> o = Occluder(eye, p, layout, b.id);
+      if (!o) continue;
+      ++hidden;
+      auto [it, inserted] = hidden_by.try_emplace(o->id, 0, *o);
+      ++it->second.first;
+    }
+  }
+  HiddenPage out;
+  if (seen == 0 || hidden == 0) return out;
+  out.share = static_cast<double>(hidden) / seen;
+  int most = 0;
+  for (const auto& [id, entry] : hidden_by) {
+    if (entry.first > most) {
+      most = entry.first;
+      out.by = entry.second;
+    }
+  }
+  return out;
 }
 
 // Floor checks of a footprint (or a point, as a one-vertex footprint) spanning heights
@@ -146,11 +216,23 @@ absl::StatusOr<std::vector<double>> BeamElevations(const SensorModel& sensor) {
   return e;
 }
 
-// The occlusion reason of a target hidden behind `occluder` (none when null).
-void NoteOccluder(const StationBoard* occluder, TargetAssessment* t) {
-  if (occluder == nullptr) return;
-  AddReason(&t->reasons, "occluded_by_board");
+// The occlusion reason of a target feature hidden behind `occluder` (none when empty).
+void NoteOccluder(const std::optional<Occluding>& occluder, TargetAssessment* t) {
+  if (!occluder) return;
+  AddReason(&t->reasons, occluder->surface ? "occluded_by_surface" : "occluded_by_board");
   t->detail += absl::StrCat(" hidden behind '", occluder->id, "';");
+}
+
+// The share of a board's page hidden (HiddenPageOf), kept in the assessment and told in its
+// detail: with a feature hidden as well (NoteOccluder) it is why the target fails; without,
+// a part of the page the detectors leave out (the board is found from what shows).
+void NoteHiddenPage(const HiddenPage& hidden, bool feature_hidden, TargetAssessment* t) {
+  if (!hidden.by) return;
+  t->hidden_share = hidden.share;
+  t->hidden_by = hidden.by->id;
+  t->detail +=
+      absl::StrFormat(" %.0f%% of the page hidden, most behind '%s'%s;", 100 * hidden.share,
+                      hidden.by->id, feature_hidden ? "" : ", no feature");
 }
 
 // A sensor's reasons: its targets', each once, in order.
@@ -194,7 +276,7 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
     bool inside = BoardFacesCamera(T_camera_board);
     BoardObservation obs;
     obs.board_id = id;
-    const StationBoard* occluder = nullptr;
+    std::optional<Occluding> occluder;
     for (const BoardFeature& f : b->board.features()) {
       if (f.kind == FeatureKind::kHoleCentre) continue;  // LiDAR features, no image
       Eigen::Vector2d uv;
@@ -204,7 +286,7 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
         inside = false;
         continue;
       }
-      if (occluder == nullptr) occluder = Occluder(eye, p, layout, id);
+      if (!occluder) occluder = Occluder(eye, p, layout, id);
       obs.features.push_back({f.id, uv, f.p_board, f.marker});
     }
     t.features = static_cast<int>(obs.features.size());
@@ -215,6 +297,14 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
       t.detail += absl::StrFormat(" smallest cell %.1f px < %.1f px;", t.smallest_feature_px, o.min_feature_px);
     }
     NoteOccluder(occluder, &t);
+    NoteHiddenPage(HiddenPageOf(eye, *b, layout,
+                                [&](const Eigen::Vector3d& p) {
+                                  Eigen::Vector2d uv;
+                                  return camera->Project(T_camera_station * p, &uv) &&
+                                         uv.x() >= 0 && uv.y() >= 0 && uv.x() <= w - 1 &&
+                                         uv.y() <= h - 1;
+                                }),
+                   occluder.has_value(), &t);
     CheckBoardFloor(floor, *b, &t);
     if (t.reasons.empty()) {
       for (int k = 0; k < o.camera_frames; ++k) observations.push_back(obs);
@@ -276,14 +366,14 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
     const double radius = HoleRadiusM(b->board);
     const Eigen::Vector3d normal_lidar = T_lidar_station.RotationMatrix() * normal;
     t.fewest_rings = std::numeric_limits<int>::max();
-    const StationBoard* occluder = nullptr;
+    std::optional<Occluding> occluder;
     for (const BoardFeature& f : b->board.features()) {
       if (f.kind != FeatureKind::kHoleCentre) continue;
       ++t.features;
       const Eigen::Vector3d c = FeaturePoint(*b, f.p_board);
       t.fewest_rings = std::min(t.fewest_rings, RingsThroughHole(*elevations, T_lidar_station * c, normal_lidar, radius));
       // The hole's rim, where the rings' edges are measured, must be in sight.
-      for (int k = 0; k < 8 && occluder == nullptr; ++k) {
+      for (int k = 0; k < 8 && !occluder; ++k) {
         const double phi = 2 * kPi * k / 8;
         const Eigen::Vector2d rim = f.p_board + radius * Eigen::Vector2d(std::cos(phi), std::sin(phi));
         occluder = Occluder(eye, FeaturePoint(*b, rim), layout, id);
@@ -295,6 +385,8 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
       t.detail += absl::StrFormat(" %d ring(s) through the worst hole < %d;", t.fewest_rings, o.min_rings_per_hole);
     }
     NoteOccluder(occluder, &t);
+    NoteHiddenPage(HiddenPageOf(eye, *b, layout, [](const Eigen::Vector3d&) { return true; }),
+                   occluder.has_value(), &t);
     CheckBoardFloor(floor, *b, &t);
     if (t.reasons.empty()) usable.push_back(b);
   }
@@ -983,15 +1075,7 @@ double SmallestCellPx(const CameraModel& camera, const Rigid3d& T_camera_board, 
 }
 
 bool SegmentHitsBoard(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const StationBoard& board) {
-  const Rigid3d T_board_station = board.T_station_board.Inverse();
-  const Eigen::Vector3d pa = T_board_station * a, pb = T_board_station * b;
-  if ((pa.z() > 0) == (pb.z() > 0) || pa.z() == pb.z()) return false;
-  const double s = pa.z() / (pa.z() - pb.z());
-  // The end points themselves (a feature on this very page) do not count.
-  if (s < 1e-6 || s > 1 - 1e-6) return false;
-  const Eigen::Vector3d hit = pa + s * (pb - pa);
-  const Eigen::Vector2d half = 0.5 * board.board.page_size_m();
-  return std::abs(hit.x()) < half.x() && std::abs(hit.y()) < half.y();
+  return SegmentHitsRectangle(a, b, board.T_station_board, board.board.page_size_m());
 }
 
 FloorPolygon BoardFootprint(const StationBoard& board) {

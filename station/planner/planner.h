@@ -31,6 +31,7 @@
 //                          than min_feature_px
 //   too_few_rings          fewer than min_rings_per_hole LiDAR rings through some hole
 //   occluded_by_board      another board blocks the line of sight to a target feature
+//   occluded_by_surface    a surface of the layout (a wall, a screen) blocks it
 //   in_keep_out            the target's footprint overlaps a keep-out zone
 //   outside_usable_area    the footprint leaves the usable area or crosses a wall
 //   outside_height_limits  the target reaches below or above the height limits
@@ -83,6 +84,12 @@ struct TargetAssessment {
   int features = 0;                  // features in view (cameras), holes (LiDARs)
   double smallest_feature_px = 0;    // cameras
   int fewest_rings = 0;              // LiDARs: rings through the worst hole
+  // Boards: the share of the page (of what lies in the sensor's view) hidden behind other
+  // boards and the layout's surfaces, and the board or surface hiding most of it ("" when
+  // none). Without a hidden feature (occluded_by_board) the target stays usable: the
+  // detectors find it from what shows.
+  double hidden_share = 0;
+  std::string hidden_by;
 };
 
 struct SensorAssessment {

@@ -279,6 +279,88 @@ TEST(PlanCli, ValidRegionsContainThePlannedPose) {
   fs::remove_all(dir);
 }
 
+// `plan check` on the reference layout names every partly hidden page (none hides a feature,
+// and the detectors find those boards from what shows: tools_cmd_calibrate_targets_test);
+// with front_vertical moved 0.2 m towards the car's axis it hides bumper_lidar_right's markers
+// and holes from the three sensors that use that board, naming the board, the sensor, the
+// occluder and the share hidden. (--min-feature-px 1: the reference's camera boards are
+// below the 15 px design rule, docs/planner.md; that is not what is tested here.)
+TEST(PlanCli, CheckNamesBoardsHiddenBehindOthers) {
+  const fs::path dir = fs::path(testing::TempDir()) / ("plan_hidden_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path reference = fs::path(LINECAL_SOURCE_DIR) / "deploy/stations/reference.json";
+  // sensor/target -> (reasons, hidden_share, hidden_by) of every target with something hidden.
+  struct Hidden {
+    std::vector<std::string> reasons;
+    double share = 0;
+    std::string by;
+  };
+  const auto check = [&](const fs::path& station, int expected_exit) {
+    const LinecalRun run = RunLinecal("plan check --json --min-feature-px 1 --station " +
+                                      station.string() + " --car " + kCar);
+    EXPECT_EQ(run.exit_code, expected_exit) << run.out << run.err;
+    std::map<std::string, Hidden> out;
+    const nlohmann::json result = nlohmann::json::parse(run.out);
+    for (const nlohmann::json& s : result.at("sensors")) {
+      if (s.at("kind") == "radar") continue;  // reflectors, no page
+      for (const nlohmann::json& t : s.at("targets")) {
+        if (t.at("hidden_by").is_null() && t.at("reasons").empty()) continue;
+        out[s.at("name").get<std::string>() + "/" + t.at("id").get<std::string>()] = {
+            t.at("reasons").get<std::vector<std::string>>(), t.at("hidden_share").get<double>(),
+            t.at("hidden_by").get<std::string>()};
+      }
+    }
+    return out;
+  };
+  // Shares in 24 x 24 page samples (station/planner/planner.cc, HiddenPageOf), of the samples
+  // in the camera image (all for the LiDAR).
+  const std::map<std::string, Hidden> as_built = check(reference, 0);
+  ASSERT_EQ(as_built.size(), 3u);
+  const Hidden& right = as_built.at("front_camera/bumper_lidar_right");
+  EXPECT_EQ(right.reasons, std::vector<std::string>{});
+  EXPECT_NEAR(right.share, 65.0 / 576, 1e-12);
+  EXPECT_EQ(right.by, "front_vertical");
+  const Hidden& far_left = as_built.at("front_camera/front_round_hole_left");
+  EXPECT_EQ(far_left.reasons, std::vector<std::string>{});
+  EXPECT_NEAR(far_left.share, 21.0 / 576, 1e-12);
+  EXPECT_EQ(far_left.by, "front_circle");
+  const Hidden& roof = as_built.at("roof_lidar/roof_lidar_left");
+  EXPECT_EQ(roof.reasons, std::vector<std::string>{});
+  EXPECT_NEAR(roof.share, 10.0 / 576, 1e-12);
+  EXPECT_EQ(roof.by, "bumper_lidar_left");
+
+  nlohmann::json station = ReadJson(reference);
+  for (nlohmann::json& b : station.at("boards")) {
+    if (b.at("id") == "front_vertical") b.at("pose").at("xyz_m") = {6.0, -2.0, 0.9};
+  }
+  const fs::path moved = dir / "front_vertical_moved.json";
+  WriteJson(moved, station);
+  const std::map<std::string, Hidden> hidden = check(moved, 1);
+  ASSERT_EQ(hidden.size(), 5u);
+  const std::vector<std::string> occluded = {"occluded_by_board"};
+  for (const auto& [key, share] :
+       std::map<std::string, double>{{"front_camera/bumper_lidar_right", 154.0 / 576},
+                                     {"surround_front/bumper_lidar_right", 63.0 / 576},
+                                     {"bumper_lidar/bumper_lidar_right", 60.0 / 576}}) {
+    SCOPED_TRACE(key);
+    ASSERT_EQ(hidden.count(key), 1u);
+    EXPECT_EQ(hidden.at(key).reasons, occluded);
+    EXPECT_NEAR(hidden.at(key).share, share, 1e-12);
+    EXPECT_EQ(hidden.at(key).by, "front_vertical");
+  }
+  // The text names them too.
+  const LinecalRun text =
+      RunLinecal("plan check --min-feature-px 1 --station " + moved.string() + " --car " + kCar);
+  EXPECT_NE(
+      text.out.find(
+          "bumper_lidar_right: occluded_by_board hidden behind 'front_vertical'; 27% of the page "
+          "hidden, most behind 'front_vertical';"),
+      std::string::npos)
+      << text.out;
+  fs::remove_all(dir);
+}
+
 TEST(PlanCli, BadInputExitsTwoNamingTheProblem) {
   const fs::path dir = fs::path(testing::TempDir()) / ("plan_bad_" + std::to_string(::getpid()));
   fs::create_directories(dir);

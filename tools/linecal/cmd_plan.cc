@@ -35,6 +35,10 @@ nlohmann::json AssessmentJson(const SensorAssessment& a) {
   nlohmann::json targets = nlohmann::json::array();
   for (const TargetAssessment& t : a.targets) {
     nlohmann::json j = {{"id", t.target}, {"reasons", t.reasons}, {"detail", t.detail}, {"features", t.features}};
+    if (a.kind != SensorKind::kRadar) {
+      j["hidden_share"] = t.hidden_share;
+      j["hidden_by"] = t.hidden_by.empty() ? nlohmann::json(nullptr) : nlohmann::json(t.hidden_by);
+    }
     if (a.kind == SensorKind::kCamera) j["smallest_feature_px"] = t.smallest_feature_px;
     if (a.kind == SensorKind::kLidar) j["fewest_rings_through_a_hole"] = t.fewest_rings;
     targets.push_back(j);
@@ -73,8 +77,11 @@ void PrintAssessments(const std::vector<SensorAssessment>& sensors) {
     std::printf("  %-20s %-7s %-13s%s  %s\n", a.sensor.c_str(), SensorKindName(a.kind), a.calibratable ? "yes" : "no",
                 numbers.c_str(), a.reasons.empty() ? "-" : absl::StrJoin(a.reasons, ",").c_str());
     for (const TargetAssessment& t : a.targets) {
-      if (!t.reasons.empty()) {
-        std::printf("      %s: %s%s\n", t.target.c_str(), absl::StrJoin(t.reasons, ",").c_str(), t.detail.c_str());
+      // Failed targets, and partly hidden ones (usable: the detectors find them from what shows).
+      if (!t.reasons.empty() || !t.hidden_by.empty()) {
+        std::printf("      %s: %s%s\n", t.target.c_str(),
+                    t.reasons.empty() ? "usable;" : absl::StrJoin(t.reasons, ",").c_str(),
+                    t.detail.c_str());
       }
     }
   }

@@ -165,6 +165,57 @@ TEST(AssessCamera, OccludedByAnotherBoardNamesIt) {
   EXPECT_EQ(AssessOrDie(s, Layout(target + ", " + BoardJson("stray", "aruco", 10, 0.5, 1.2, 0))).reasons, Reasons{});
 }
 
+// The hidden share of a page counts its 24 x 24 samples behind other boards and surfaces. The
+// round-hole board (1.1 m, markers within 420 mm of its centre) at 8 m, an ArUco board (1.1 m)
+// halfway: its edge 229 mm off the line of sight casts a shadow edge 458 mm off the target's
+// centre, hiding the two outer sample columns (481 and 527 mm) of the margin and no feature;
+// 150 mm off, 300 mm on the target, it hides the outer five columns and the side marker.
+TEST(AssessCamera, HiddenShareOfThePageNamesTheOccluder) {
+  const SensorModel s = Sensor(SensorKind::kCamera, "pinhole", {0, 0, 1.2}, {"b"});
+  const std::string target = BoardJson("b", "round_hole", 8, 0, 1.2, 0);
+  PlannerOptions o;
+  o.min_feature_px = 1;  // the 40 mm marker bits are 5 px at 8 m: not what is tested here
+  const auto assess = [&](const StationLayout& layout) {
+    return AssessOrDie(s, layout, nullptr, false, o);
+  };
+  const SensorAssessment margin =
+      assess(Layout(target + ", " + BoardJson("front", "aruco", 4, -(0.229 + 0.55), 1.2, 0)));
+  EXPECT_EQ(margin.reasons, Reasons{});
+  ASSERT_EQ(margin.targets.size(), 1u);
+  EXPECT_DOUBLE_EQ(margin.targets[0].hidden_share, 2.0 / 24.0);
+  EXPECT_EQ(margin.targets[0].hidden_by, "front");
+  EXPECT_NE(
+      margin.targets[0].detail.find("8% of the page hidden, most behind 'front', no feature;"),
+      std::string::npos)
+      << margin.targets[0].detail;
+
+  const SensorAssessment marker =
+      assess(Layout(target + ", " + BoardJson("front", "aruco", 4, 0.15 + 0.55, 1.2, 0)));
+  EXPECT_EQ(marker.reasons, Reasons{"occluded_by_board"});
+  EXPECT_DOUBLE_EQ(marker.targets[0].hidden_share, 5.0 / 24.0);
+  EXPECT_EQ(marker.targets[0].hidden_by, "front");
+  EXPECT_NE(marker.targets[0].detail.find(
+                "hidden behind 'front'; 21% of the page hidden, most behind 'front';"),
+            std::string::npos)
+      << marker.targets[0].detail;
+
+  // A surface of the layout (a screen) in the same place hides the same.
+  const absl::StatusOr<StationLayout> screened = ParseStationLayout(
+      R"({"format": "linecal.station", "version": 1, "name": "t", "boards": [)" + target +
+          R"(], "surfaces": [{"id": "screen", "size_m": [1.1, 1.1],
+                              "pose": {"xyz_m": [4, 0.7, 1.2], "ypr_deg": [0, 0, 0]}}]})",
+      "test");
+  ASSERT_TRUE(screened.ok()) << screened.status();
+  const SensorAssessment behind_screen = assess(*screened);
+  EXPECT_EQ(behind_screen.reasons, Reasons{"occluded_by_surface"});
+  EXPECT_DOUBLE_EQ(behind_screen.targets[0].hidden_share, 5.0 / 24.0);
+  EXPECT_EQ(behind_screen.targets[0].hidden_by, "screen");
+  // Nothing in front: nothing hidden.
+  const SensorAssessment clear = assess(Layout(target));
+  EXPECT_EQ(clear.targets[0].hidden_share, 0.0);
+  EXPECT_EQ(clear.targets[0].hidden_by, "");
+}
+
 TEST(RingsThroughHole, CountsTheElevationsInsideTheHole) {
   std::vector<double> beams;
   for (int e = -15; e <= 15; ++e) beams.push_back(e * kDeg);
