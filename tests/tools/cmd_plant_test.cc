@@ -114,12 +114,7 @@ TEST_F(CmdPlantTest, YieldCountsFirstAttemptsPerStationModelAndSensor) {
                                 r["first_attempts"].get<int>()));
   }
   // 2026-11-02 00:00 is before the data set's kPlantT0Ns, and eol-1 #1 is from the day before.
-  EXPECT_EQ(rows, (std::vector<std::string>{
-                      "eol-1 model-a  1/3", "eol-1 model-a front_camera 1/3",
-                      "eol-1 model-a roof_lidar 2/3", "eol-2 model-a  1/1",
-                      "eol-2 model-a front_camera 1/1", "eol-2 model-a roof_lidar 1/1",
-                      "eol-2 model-b  0/1", "eol-2 model-b front_camera 0/1",
-                      "eol-2 model-b roof_lidar 1/1"}));
+  EXPECT_EQ(rows, testing_support::PlantDataSetYieldRows());
   EXPECT_NEAR(j["yield"][2]["yield_percent"].get<double>(), 200.0 / 3.0, 1e-9);
   ASSERT_EQ(j["failure_reasons"].size(), 3u);
   EXPECT_EQ(j["failure_reasons"][0]["reason"], "yaw_out_of_tolerance");

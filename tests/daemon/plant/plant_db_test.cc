@@ -248,12 +248,7 @@ TEST_F(PlantDbTest, ReportsYieldAndAttemptsOfTheDataSet) {
     rows.push_back(absl::StrCat(r.station_id, " ", r.car_model_id, " ", r.sensor, " ", r.passed,
                                 "/", r.first_attempts));
   }
-  EXPECT_EQ(rows, (std::vector<std::string>{
-                      "eol-1 model-a  1/3", "eol-1 model-a front_camera 1/3",
-                      "eol-1 model-a roof_lidar 2/3", "eol-2 model-a  1/1",
-                      "eol-2 model-a front_camera 1/1", "eol-2 model-a roof_lidar 1/1",
-                      "eol-2 model-b  0/1", "eol-2 model-b front_camera 0/1",
-                      "eol-2 model-b roof_lidar 1/1"}));
+  EXPECT_EQ(rows, testing_support::PlantDataSetYieldRows());
   std::vector<std::string> reasons;
   for (const FailureReason& f : report->reasons) {
     reasons.push_back(absl::StrCat(f.sensor, " ", f.reason, " ", f.count));
