@@ -267,6 +267,14 @@ TEST_F(LinecaldProcessTest, SoftDescriptorLimitIsRaisedToTheHardOne) {
 void LinecaldProcessTest::ExpectServedAgainAfterDescriptorsRanOut(
     const std::vector<std::string>& args,
     const std::shared_ptr<grpc::ChannelCredentials>& credentials) {
+#if defined(__SANITIZE_ADDRESS__)
+  // UBSan's vptr check probes an object's memory through a pipe (sanitizer_common's
+  // IsAccessibleMemoryRange); in a process out of descriptors the pipe fails and every
+  // virtual call that misses its type cache is reported as "invalid vptr" and aborts (a
+  // ten-line program with a valid object and an exhausted table shows the same). The Release
+  // build runs this test; suppressions do not reach this path.
+  GTEST_SKIP() << "needs a process out of descriptors, where UBSan's vptr check cannot run";
+#endif
   absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon =
       LinecaldProcess::Spawn(kLinecald, args, LogPath("daemon"), /*descriptor_limit=*/256);
   ASSERT_TRUE(daemon.ok()) << daemon.status();
