@@ -13,6 +13,13 @@
 namespace linecal {
 namespace {
 
+// Root mean square of `values`; 0 for none. O(n).
+double Rms(const std::vector<double>& values) {
+  double sum_sq = 0;
+  for (double v : values) sum_sq += v * v;
+  return values.empty() ? 0.0 : std::sqrt(sum_sq / static_cast<double>(values.size()));
+}
+
 // All features of the observed board of `type` with the most of them, frames pooled, and
 // that board's id; empty when none was seen.
 std::pair<std::string, std::vector<DetectedFeature>> MostSeenBoard(const StationLayout& station,
@@ -110,7 +117,10 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
 
   CameraCalibrationResult result;
   const Rigid3d T_car_station = T_station_car.Inverse();
-  std::vector<PnpCorrespondence> points;
+  std::vector<PnpCorrespondence> points;  // every detection of every frame
+  // Per board feature, the sum of its detections over the frames and their count: frames of a
+  // still scene repeat each feature (FeatureMeans).
+  std::map<std::pair<std::string, int>, std::pair<PnpCorrespondence, int>> sums;
   std::vector<std::pair<std::string, Rigid3d>> boards_seen;  // id, T_car_board
   for (const BoardObservation& o : observations) {
     const StationBoard* board = station.FindBoard(o.board_id);
@@ -125,7 +135,15 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
     if (!listed) boards_seen.emplace_back(o.board_id, T_car_board);
     for (const DetectedFeature& f : o.features) {
       points.push_back({T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
+      auto& [sum, n] = sums[{o.board_id, f.id}];
+      sum.p_object = points.back().p_object;
+      sum.uv_px += f.uv_px;
+      ++n;
     }
+  }
+  std::vector<PnpCorrespondence> means;
+  for (const auto& [key, sum_n] : sums) {
+    means.push_back({sum_n.first.p_object, sum_n.first.uv_px / sum_n.second});
   }
   result.features_used = static_cast<int>(points.size());
   result.boards_used = static_cast<int>(boards_seen.size());
@@ -134,15 +152,26 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
     result.message = absl::StrCat(sensor.name, ": none of its boards was found in any frame");
     return result;
   }
-  if (result.features_used < options.min_features) {
+  if (static_cast<int>(means.size()) < options.min_features) {
     result.reason = "too_few_features";
-    result.message = absl::StrCat(sensor.name, ": ", result.features_used, " features, at least ",
+    result.message = absl::StrCat(sensor.name, ": ", means.size(), " distinct features (",
+                                  result.features_used, " detections), at least ",
                                   options.min_features, " needed");
     return result;
   }
-  absl::StatusOr<PnpResult> pnp = SolvePnp(*camera, points, options.pnp);
+  // Frames of a still scene share the detector's systematic error (blur, lens, print): a
+  // feature's detections in N frames are not N independent measurements, and a covariance over
+  // all of them would shrink as 1/N while the error stays. With the noise estimated from the
+  // residuals, the pose is solved on each feature's mean over the frames, whose residuals hold
+  // the shared error in full and the independent part divided by N: the sigma then shrinks
+  // with frames only as far as the data's own scatter does. A known feature noise
+  // (options.pnp.feature_sigma_px, the planner's prediction) is per detection and independent.
+  const bool on_means = options.pnp.feature_sigma_px == 0 && means.size() < points.size();
+  absl::StatusOr<PnpResult> pnp = SolvePnp(*camera, on_means ? means : points, options.pnp);
   if (!pnp.ok()) return pnp.status();
-  result.residual_rms_px = pnp->residual_rms_px;
+  result.residual_rms_px = on_means && pnp->outcome == PnpOutcome::kOk
+                               ? Rms(ReprojectionErrors(*camera, pnp->T_camera_object, points))
+                               : pnp->residual_rms_px;
   if (pnp->outcome != PnpOutcome::kOk) {
     result.reason = PnpOutcomeName(pnp->outcome);
     result.message = absl::StrCat(sensor.name, ": no pose (", result.reason, ")");

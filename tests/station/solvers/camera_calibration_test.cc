@@ -158,6 +158,79 @@ TEST_F(CameraCalibrationTest, MountingSigmaMatchesTheMonteCarloSpread) {
   }
 }
 
+// Issue 20, item 1: frames of a still scene share the detector's systematic error. Each
+// feature gets one offset of `systematic_px` per axis for the whole capture and fresh noise of
+// `independent_px` in each of `frames` frames; the noise is estimated from the residuals, as
+// at the station. Returns the RMS over `trials` captures of error/sigma per component and the
+// mean sigma per component.
+struct SigmaCheck {
+  Eigen::Matrix<double, 6, 1> rms_error_over_sigma = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 1> mean_sigma = Eigen::Matrix<double, 6, 1>::Zero();
+};
+
+class CameraFramesSigmaTest : public CameraCalibrationTest {
+ protected:
+  SigmaCheck Run(int frames, double systematic_px, double independent_px, int trials) const {
+    const SensorModel& s = *car_.FindSensor("front_camera");
+    const YawPitchRoll error{0.3 * kDeg, -0.4 * kDeg, 0.2 * kDeg};
+    const Eigen::Vector3d offset(0.008, -0.006, 0.004);
+    const Rigid3d truth = TrueMounting(s, error, offset);
+    const double dev_true[6] = {error.yaw, error.pitch, error.roll, offset.x(), offset.y(), offset.z()};
+    std::mt19937_64 rng(2020 + frames);
+    SigmaCheck out;
+    for (int t = 0; t < trials; ++t) {
+      const std::vector<BoardObservation> exact = Observe(s, truth, 0.0, rng);
+      const std::vector<BoardObservation> shared = Observe(s, truth, systematic_px, rng);
+      std::vector<BoardObservation> obs;
+      for (int f = 0; f < frames; ++f) {
+        std::vector<BoardObservation> frame = Observe(s, truth, independent_px, rng);
+        for (size_t b = 0; b < frame.size(); ++b) {
+          for (size_t i = 0; i < frame[b].features.size(); ++i) {
+            // This frame's noise on top of the capture's shared error.
+            frame[b].features[i].uv_px += shared[b].features[i].uv_px - exact[b].features[i].uv_px;
+          }
+        }
+        for (BoardObservation& o : frame) obs.push_back(std::move(o));
+      }
+      absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), obs);
+      EXPECT_TRUE(r.ok() && r->solved);
+      if (!r.ok() || !r->solved) return out;
+      const Eigen::Matrix<double, 6, 1> dev = r->mounting.Deviation();
+      for (int i = 0; i < 6; ++i) {
+        const double z = (dev[i] - dev_true[i]) / r->mounting.sigma[i];
+        out.rms_error_over_sigma[i] += z * z / trials;
+        out.mean_sigma[i] += r->mounting.sigma[i] / trials;
+      }
+    }
+    out.rms_error_over_sigma = out.rms_error_over_sigma.cwiseSqrt();
+    return out;
+  }
+};
+
+// The shared error dominates: sigma stays at one frame's, and error/sigma near 1 for 1 and 3
+// frames (pooled, 3 frames gave error/sigma about sqrt(3) = 1.7).
+TEST_F(CameraFramesSigmaTest, SharedErrorKeepsSigmaHonestOverFrames) {
+  const SigmaCheck one = Run(1, 0.15, 0.03, 150);
+  const SigmaCheck three = Run(3, 0.15, 0.03, 150);
+  for (int i = 0; i < 6; ++i) {
+    // 150 trials measure an RMS ratio to about +-6%.
+    EXPECT_NEAR(one.rms_error_over_sigma[i], 1.0, 0.2) << "1 frame, component " << i;
+    EXPECT_NEAR(three.rms_error_over_sigma[i], 1.0, 0.2) << "3 frames, component " << i;
+    EXPECT_NEAR(three.mean_sigma[i] / one.mean_sigma[i], 1.0, 0.1) << "component " << i;
+  }
+}
+
+// Independent noise only: the frames are independent measurements, and sigma shrinks as
+// 1/sqrt(frames), error/sigma staying near 1.
+TEST_F(CameraFramesSigmaTest, IndependentNoiseStillAveragesOverFrames) {
+  const SigmaCheck one = Run(1, 0.0, 0.2, 150);
+  const SigmaCheck three = Run(3, 0.0, 0.2, 150);
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_NEAR(three.rms_error_over_sigma[i], 1.0, 0.2) << "component " << i;
+    EXPECT_NEAR(three.mean_sigma[i] / one.mean_sigma[i], 1.0 / std::sqrt(3.0), 0.08) << "component " << i;
+  }
+}
+
 TEST_F(CameraCalibrationTest, YawBeyondToleranceFailsWithTheReason) {
   const SensorModel& s = *car_.FindSensor("front_camera");
   const Rigid3d truth = TrueMounting(s, {1.6 * kDeg, 0, 0}, Eigen::Vector3d::Zero());  // tolerance 1 deg
