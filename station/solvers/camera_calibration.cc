@@ -119,7 +119,7 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
   const Rigid3d T_car_station = T_station_car.Inverse();
   std::vector<PnpCorrespondence> points;  // every detection of every frame
   // Per board feature, the sum of its detections over the frames and their count: frames of a
-  // still scene repeat each feature (FeatureMeans).
+  // still scene repeat each feature (see `on_means` below).
   std::map<std::pair<std::string, int>, std::pair<PnpCorrespondence, int>> sums;
   std::vector<std::pair<std::string, Rigid3d>> boards_seen;  // id, T_car_board
   for (const BoardObservation& o : observations) {
