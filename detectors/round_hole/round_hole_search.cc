@@ -7,6 +7,7 @@
 #include <deque>
 #include <map>
 #include <numbers>
+#include <numeric>
 #include <set>
 #include <unordered_map>
 
@@ -159,12 +160,124 @@ struct Candidate {
   double width_error = 0.0;  // |median crossing width / page width - 1|, for ordering
 };
 
+// The board's holes, for the empty-holes test of step 4.
+class HoleGeometry {
+ public:
+  // `page`: the board's page size, metres.
+  HoleGeometry(const Board& board, const Eigen::Vector2d& page) : page_(page) {
+    double hole_area = 0.0;
+    for (const BoardShape& s : board.shapes()) {
+      if (s.paint != Paint::kHole) continue;
+      centres_.push_back(s.centre_board());
+      radii_.push_back(s.radius_m());
+      hole_area += std::numbers::pi * std::pow(std::max(s.radius_m() - kHoleInsetM, 0.0), 2);
+    }
+    hole_area_ = hole_area;
+    paper_area_ = page.x() * page.y() - hole_area;
+  }
+
+  // Points of the fitted plane of `d` (found) inside the holes shrunk by kHoleInsetM, as a
+  // density over that of the paper away from the holes: about 0 for a board whose holes let
+  // the rays through, about 1 for a plain panel. 1 when no point lies on the paper. Cost: a
+  // transform per point near the board.
+  double Fill(std::span<const std::span<const RoundHoleCloudPoint>> frames,
+              const RoundHoleCloudDetection& d) const {
+    const Rigid3d T_board_lidar = d.T_lidar_board.Inverse();
+    const double depth = std::max(3.0 * d.plane_rms_m, kMinGateM);
+    const Eigen::Vector3d centre = d.T_lidar_board.translation();
+    const double reach2 = 0.25 * page_.squaredNorm() + depth * depth;
+    int in_holes = 0, on_paper = 0;
+    for (const auto& frame : frames) {
+      for (const RoundHoleCloudPoint& p : frame) {
+        const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
+        if (!((p_lidar - centre).squaredNorm() <= reach2)) continue;
+        const Eigen::Vector3d q = T_board_lidar * p_lidar;
+        if (!q.allFinite() || std::abs(q.z()) > depth || std::abs(q.x()) > 0.5 * page_.x() ||
+            std::abs(q.y()) > 0.5 * page_.y()) {
+          continue;
+        }
+        bool in_hole = false, near_hole = false;
+        for (std::size_t h = 0; h < centres_.size(); ++h) {
+          const double r = (q.head<2>() - centres_[h]).norm();
+          in_hole = in_hole || r < radii_[h] - kHoleInsetM;
+          near_hole = near_hole || r < radii_[h] + kHoleInsetM;
+        }
+        in_holes += in_hole ? 1 : 0;
+        on_paper += near_hole ? 0 : 1;
+      }
+    }
+    return on_paper > 0 ? (in_holes / hole_area_) / (on_paper / paper_area_) : 1.0;
+  }
+
+ private:
+  Eigen::Vector2d page_;
+  std::vector<Eigen::Vector2d> centres_;
+  std::vector<double> radii_;
+  double hole_area_ = 0.0;
+  double paper_area_ = 0.0;
+};
+
+// Step 5: the evidence of every board kept (`boards` non-empty, found; `fills` their hole
+// fills), ranked: the best fit first (smallest angular edge RMS), then the other boards
+// that tie with it, then those that lost, each with its verdict (header, kClearlyWorseFit).
+// fits[0].verdict is kChosen exactly when the search found a board.
+// `order` receives the index in `boards` of each fit. O(n log n) in the boards.
+std::vector<RoundHoleBoardFit> RankFits(const std::vector<RoundHoleCloudDetection>& boards,
+                                        const std::vector<double>& fills,
+                                        std::vector<std::size_t>* order) {
+  std::vector<RoundHoleBoardFit> fits(boards.size());
+  for (std::size_t k = 0; k < boards.size(); ++k) {
+    const RoundHoleCloudDetection& d = boards[k];
+    RoundHoleBoardFit& f = fits[k];
+    f.centre_lidar = d.T_lidar_board.translation();
+    f.edges = d.edges;
+    f.edge_rms_m = d.edge_rms_m;
+    f.edge_rms_rad = d.edge_rms_m / std::max(f.centre_lidar.norm(), 1e-3);
+    f.hole_fill = fills[k];
+    f.rings_through_holes = d.rings_through_holes;
+  }
+  order->resize(fits.size());
+  std::iota(order->begin(), order->end(), std::size_t{0});
+  std::sort(order->begin(), order->end(), [&](std::size_t a, std::size_t b) {
+    return fits[a].edge_rms_rad < fits[b].edge_rms_rad;
+  });
+  const double best_rms = std::max(fits[order->front()].edge_rms_rad, 1e-12);
+  bool tie = false;
+  for (std::size_t k = 1; k < order->size(); ++k) {
+    RoundHoleBoardFit& f = fits[(*order)[k]];
+    f.rms_ratio = f.edge_rms_rad / best_rms;
+    f.verdict = f.rms_ratio >= kClearlyWorseFit ? RoundHoleFitVerdict::kWorseFit
+                                                : RoundHoleFitVerdict::kTies;
+    tie = tie || f.verdict == RoundHoleFitVerdict::kTies;
+  }
+  fits[order->front()].verdict = tie ? RoundHoleFitVerdict::kTies : RoundHoleFitVerdict::kChosen;
+  // Ties before losers, each group by fit (the sort above is kept within a group).
+  std::stable_partition(order->begin() + 1, order->end(), [&](std::size_t k) {
+    return fits[k].verdict == RoundHoleFitVerdict::kTies;
+  });
+  std::vector<RoundHoleBoardFit> ranked;
+  for (std::size_t k : *order) ranked.push_back(fits[k]);
+  return ranked;
+}
+
 }  // namespace
 
 bool RoundHoleSearchOptions::Valid() const {
   return std::isfinite(min_range_m) && min_range_m >= 0.0 && std::isfinite(max_range_m) &&
          max_range_m > min_range_m && std::isfinite(cell_m) && cell_m > 0.0 &&
          max_candidates >= 1 && fit.Valid();
+}
+
+const char* RoundHoleFitVerdictName(RoundHoleFitVerdict verdict) {
+  switch (verdict) {
+    case RoundHoleFitVerdict::kChosen:
+      return "chosen";
+    case RoundHoleFitVerdict::kTies:
+      return "ties";
+    case RoundHoleFitVerdict::kWorseFit:
+      return "worse_fit";
+  }
+  return "unknown";
 }
 
 const char* RoundHoleSearchReasonName(RoundHoleSearchReason reason) {
@@ -209,8 +322,8 @@ int AssignRingsByElevation(std::span<std::vector<RoundHoleCloudPoint>> frames, d
       p.ring = 0;
       if (!usable(p)) continue;
       const auto it = std::upper_bound(starts.begin(), starts.end(), elevation(p));
-      p.ring = static_cast<std::uint16_t>(
-          std::clamp<std::ptrdiff_t>(it - starts.begin() - 1, 0, 65535));
+      p.ring =
+          static_cast<std::uint16_t>(std::clamp<std::ptrdiff_t>(it - starts.begin() - 1, 0, 65535));
     }
   }
   return static_cast<int>(starts.size());
@@ -373,9 +486,10 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
       for (std::size_t k = 1; k < on_plane.x.size(); ++k)
         spacing[k - 1] = on_plane.x[k] - on_plane.x[k - 1];
       const double min_gap = std::max(2.5 * Median(spacing), kMinHoleChordM);
-      rings_with_gap += std::any_of(spacing.begin(), spacing.end(), [&](double g) {
-        return g > min_gap && g < max_hole_chord;
-      }) ? 1 : 0;
+      rings_with_gap += std::any_of(spacing.begin(), spacing.end(),
+                                    [&](double g) { return g > min_gap && g < max_hole_chord; })
+                            ? 1
+                            : 0;
     }
     if (widths.size() < 2) continue;
     const double width = Median(widths);
@@ -389,15 +503,14 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
     // The centre: the crossing rings' mid-points across, the middle of the outermost crossing
     // rings up; the page's true top and bottom lie up to a ring spacing beyond them, which is
     // what the vertical shift range must cover.
-    const Eigen::Vector3d centre =
-        plane.centroid + Median(mids) * ex + 0.5 * (*y_lo + *y_hi) * ey;
+    const Eigen::Vector3d centre = plane.centroid + Median(mids) * ex + 0.5 * (*y_lo + *y_hi) * ey;
     Eigen::Matrix3d R;
     R << ex, ey, n;
     Candidate c;
     c.T_lidar_board = Rigid3d(R, centre);
-    c.shift_range_m = std::max(
-        options.fit.max_in_plane_shift_m,
-        std::min(0.5 * std::max(page.y() - height, 0.0) + 0.04, kMaxShiftRangeM));
+    c.shift_range_m =
+        std::max(options.fit.max_in_plane_shift_m,
+                 std::min(0.5 * std::max(page.y() - height, 0.0) + 0.04, kMaxShiftRangeM));
     c.width_error = std::abs(width / page.x() - 1.0);
     candidates.push_back(c);
   }
@@ -411,17 +524,9 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
   out.candidates = static_cast<int>(candidates.size());
 
   // 4. The whole-board fit from each candidate, and the empty-holes test.
-  std::vector<Eigen::Vector2d> hole_centres;
-  std::vector<double> hole_radii;
-  for (const BoardShape& s : board.shapes()) {
-    if (s.paint != Paint::kHole) continue;
-    hole_centres.push_back(s.centre_board());
-    hole_radii.push_back(s.radius_m());
-  }
-  double hole_area = 0.0;
-  for (double r : hole_radii) hole_area += std::numbers::pi * std::pow(std::max(r - kHoleInsetM, 0.0), 2);
-  const double paper_area = page.x() * page.y() - hole_area;
+  const HoleGeometry holes(board, page);
   std::vector<RoundHoleCloudDetection> boards;
+  std::vector<double> fills;
   RoundHoleCloudDetection best_failure;
   bool have_failure = false;
   for (const Candidate& c : candidates) {
@@ -429,32 +534,7 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
     fit.max_in_plane_shift_m = c.shift_range_m;
     RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(board, frames, c.T_lidar_board, fit);
     if (d.found) {
-      // Points of the fitted plane in the holes and on the paper.
-      const Rigid3d T_board_lidar = d.T_lidar_board.Inverse();
-      const double depth = std::max(3.0 * d.plane_rms_m, kMinGateM);
-      int in_holes = 0, on_paper = 0;
-      const Eigen::Vector3d centre = d.T_lidar_board.translation();
-      const double reach2 = 0.25 * page.squaredNorm() + depth * depth;
-      for (const auto& frame : frames) {
-        for (const RoundHoleCloudPoint& p : frame) {
-          const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
-          if (!((p_lidar - centre).squaredNorm() <= reach2)) continue;
-          const Eigen::Vector3d q = T_board_lidar * p_lidar;
-          if (!q.allFinite() || std::abs(q.z()) > depth || std::abs(q.x()) > 0.5 * page.x() ||
-              std::abs(q.y()) > 0.5 * page.y()) {
-            continue;
-          }
-          bool in_hole = false, near_hole = false;
-          for (std::size_t h = 0; h < hole_centres.size(); ++h) {
-            const double r = (q.head<2>() - hole_centres[h]).norm();
-            in_hole = in_hole || r < hole_radii[h] - kHoleInsetM;
-            near_hole = near_hole || r < hole_radii[h] + kHoleInsetM;
-          }
-          in_holes += in_hole ? 1 : 0;
-          on_paper += near_hole ? 0 : 1;
-        }
-      }
-      const double fill = on_paper > 0 ? (in_holes / hole_area) / (on_paper / paper_area) : 1.0;
+      const double fill = holes.Fill(frames, d);
       if (fill <= kMaxHoleFill) {
         const auto same = std::find_if(boards.begin(), boards.end(), [&](const auto& b) {
           return (b.T_lidar_board.translation() - d.T_lidar_board.translation()).norm() <
@@ -462,8 +542,10 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
         });
         if (same == boards.end()) {
           boards.push_back(std::move(d));
+          fills.push_back(fill);
         } else if (d.edge_rms_m < same->edge_rms_m) {
           *same = std::move(d);
+          fills[same - boards.begin()] = fill;
         }
         continue;
       }
@@ -477,21 +559,23 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
     }
   }
   out.boards_fitted = static_cast<int>(boards.size());
-  if (boards.size() == 1) {
-    out.found = true;
-    out.reason = RoundHoleSearchReason::kNone;
-    out.detection = std::move(boards.front());
+  if (boards.empty()) {
+    out.reason = RoundHoleSearchReason::kBoardNotFound;
+    out.detection = std::move(best_failure);
     return out;
   }
-  if (boards.size() > 1) {
-    out.reason = RoundHoleSearchReason::kAmbiguous;
-    out.detection = std::move(boards.front());
+
+  // 5. Ranking.
+  std::vector<std::size_t> order;
+  out.fits = RankFits(boards, fills, &order);
+  const std::size_t best = order.front();
+  out.found = out.fits.front().verdict == RoundHoleFitVerdict::kChosen;
+  out.reason = out.found ? RoundHoleSearchReason::kNone : RoundHoleSearchReason::kAmbiguous;
+  out.detection = std::move(boards[best]);
+  if (!out.found) {
     out.detection.found = false;
     out.detection.holes.clear();
-    return out;
   }
-  out.reason = RoundHoleSearchReason::kBoardNotFound;
-  out.detection = std::move(best_failure);
   return out;
 }
 

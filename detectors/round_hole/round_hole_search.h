@@ -18,10 +18,16 @@
 //     crossing rings), which fits the whole board over every frame. A fit is kept when its
 //     holes are empty: hardly any point of the fitted plane lies inside the hole circles
 //     (a plain panel the size of the board fills them).
-//  5. One board kept: found. Two boards apart: ambiguous. None: a reason.
+//  5. The boards kept are ranked by how well the board's outline and holes explain their
+//     ring edges, as an angle (the edges' RMS residual over the range: a genuine board keeps it
+//     near the LiDAR's azimuth step at any range). One board: found. Several: the best is
+//     found when every other fits at least kClearlyWorseFit times worse; otherwise ambiguous.
+//     Either way every board kept is listed with its evidence and why it lost, so that a
+//     technician can tell what to move or cover. None: a reason.
 //
 // Pure functions over plain point arrays (no PCL). Frames and units as in round_hole_cloud.h.
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -50,13 +56,42 @@ struct RoundHoleSearchOptions {
   bool Valid() const;
 };
 
+// How a board kept by the search fared in the ranking of step 5.
+enum class RoundHoleFitVerdict : std::uint8_t {
+  kChosen,    // the board found
+  kTies,      // fits about as well as the best: together they make the search ambiguous
+  kWorseFit,  // its edges fit kClearlyWorseFit times worse than the best's, or more
+};
+
+// "chosen", "ties", "worse_fit".
+const char* RoundHoleFitVerdictName(RoundHoleFitVerdict verdict);
+
+// Ranking thresholds of step 5. Between two genuine boards the angular edge RMS differs by
+// the spread of a few hundred edges' quantisation and the incidence (measured in the
+// closed-loop tests: ratios up to 1.3); a look-alike (a board of another size, a shelf with
+// gaps) fits its edges two to several times worse.
+inline constexpr double kClearlyWorseFit = 2.0;
+
+// One board that passed the whole-board fit and the empty-holes test: its evidence.
+struct RoundHoleBoardFit {
+  Eigen::Vector3d centre_lidar = Eigen::Vector3d::Zero();  // the fitted board's centre, m
+  int edges = 0;                                           // ring edges the in-plane fit kept
+  double edge_rms_m = 0.0;                                 // their RMS residual
+  double edge_rms_rad = 0.0;    // edge_rms_m over the range of the centre
+  double hole_fill = 0.0;       // density in the holes over that on the paper (0: empty)
+  int rings_through_holes = 0;  // distinct rings crossing a hole
+  RoundHoleFitVerdict verdict = RoundHoleFitVerdict::kTies;
+  // edge_rms_rad over the best board's (1 for the best itself).
+  double rms_ratio = 1.0;
+};
+
 enum class RoundHoleSearchReason : std::uint8_t {
-  kNone = 0,        // found
-  kBadInput,        // not a round-hole board, or invalid options
-  kNoPoints,        // no finite point within the search range
-  kNoPlane,         // no planar patch of the board's size
-  kBoardNotFound,   // board-sized patches, but none fits the board with empty holes
-  kAmbiguous,       // two or more boards fit, apart from each other
+  kNone = 0,       // found
+  kBadInput,       // not a round-hole board, or invalid options
+  kNoPoints,       // no finite point within the search range
+  kNoPlane,        // no planar patch of the board's size
+  kBoardNotFound,  // board-sized patches, but none fits the board with empty holes
+  kAmbiguous,      // two or more boards apart fit alike (step 5; see `fits`)
 };
 
 // "", "bad_input", "no_points", "no_plane", "board_not_found", "ambiguous".
@@ -68,10 +103,12 @@ struct RoundHoleSearchResult {
   // The board's detection when found; otherwise that of the best-fitting candidate (so its
   // fit quality and reason say how far it got), empty when there was none.
   RoundHoleCloudDetection detection;
-  int planar_cells = 0;   // cubes of step 1 with a flat neighbourhood
+  int planar_cells = 0;         // cubes of step 1 with a flat neighbourhood
   int board_sized_patches = 0;  // patches of step 3 of the board's size
-  int candidates = 0;     // those with a ring crossing a hole, tried by the whole-board fit
-  int boards_fitted = 0;  // distinct boards that passed the whole-board fit
+  int candidates = 0;           // those with a ring crossing a hole, tried by the whole-board fit
+  int boards_fitted = 0;        // distinct boards that passed the whole-board fit
+  // Those boards, ranked (step 5): the chosen or tying ones first, best fit first.
+  std::vector<RoundHoleBoardFit> fits;
 };
 
 // Searches `frames` (one or more rotations of one LiDAR, the board still) for `board` (must be

@@ -45,9 +45,9 @@ void AddBox(StationLayout& layout, double distance_m, double bearing_deg) {
   const Eigen::Vector2d side(1.1, 1.1);
   for (int k = 0; k < 4; ++k) {
     const double facing = b + k * 0.5 * std::numbers::pi;
-    layout.surfaces.push_back(Panel("box_side" + std::to_string(k),
-                                    c + 0.55 * Eigen::Vector3d(std::cos(facing), std::sin(facing), 0),
-                                    facing, side));
+    layout.surfaces.push_back(
+        Panel("box_side" + std::to_string(k),
+              c + 0.55 * Eigen::Vector3d(std::cos(facing), std::sin(facing), 0), facing, side));
   }
   StationSurface top;
   top.id = "box_top";
@@ -55,6 +55,9 @@ void AddBox(StationLayout& layout, double distance_m, double bearing_deg) {
   top.size_m = side;
   layout.surfaces.push_back(top);
 }
+
+// How much larger the look-alike of TheBoardBeatsALookAlike is printed.
+constexpr double kLookAlikeScale = 1.08;
 
 RoundHoleSearchResult Search(const Scene& scene, double* ms_per_frame = nullptr) {
   return TimedPerFrame(scene, ms_per_frame,
@@ -64,9 +67,12 @@ RoundHoleSearchResult Search(const Scene& scene, double* ms_per_frame = nullptr)
 TEST(RoundHoleSearchTest, FindsTheBoardAmongFloorWallAndABox) {
   constexpr double kNormalBarRad = 0.1 * kDegToRad;
   const Case cases[] = {
-      {"roof_lidar", 3.0, 0.0, 0.0, 0.02, 0.01},    {"roof_lidar", 5.0, 120.0, 30.0, 0.03, 0.01},
-      {"roof_lidar", 8.0, -70.0, -35.0, 0.02, 0.01}, {"bumper_lidar", 3.0, 200.0, 25.0, 0.02, 0.02},
-      {"bumper_lidar", 5.0, -30.0, -20.0, 0.02, 0.02}, {"bumper_lidar", 8.0, 60.0, 10.0, 0.02, 0.02},
+      {"roof_lidar", 3.0, 0.0, 0.0, 0.02, 0.01},
+      {"roof_lidar", 5.0, 120.0, 30.0, 0.03, 0.01},
+      {"roof_lidar", 8.0, -70.0, -35.0, 0.02, 0.01},
+      {"bumper_lidar", 3.0, 200.0, 25.0, 0.02, 0.02},
+      {"bumper_lidar", 5.0, -30.0, -20.0, 0.02, 0.02},
+      {"bumper_lidar", 8.0, 60.0, 10.0, 0.02, 0.02},
   };
   for (const Case& c : cases) {
     StationLayout layout;
@@ -74,9 +80,10 @@ TEST(RoundHoleSearchTest, FindsTheBoardAmongFloorWallAndABox) {
     layout.boards.push_back(RoundHoleAt(FacingPose(c.distance_m, c.bearing_deg, c.heading_deg)));
     // A wall 2 m behind the board, facing the LiDAR, and the box 90 degrees around.
     const double b = c.bearing_deg * kDegToRad;
-    layout.surfaces.push_back(
-        Panel("wall", Eigen::Vector3d((c.distance_m + 2) * std::cos(b), (c.distance_m + 2) * std::sin(b), 1.5),
-              b + std::numbers::pi, Eigen::Vector2d(8.0, 3.0)));
+    layout.surfaces.push_back(Panel(
+        "wall",
+        Eigen::Vector3d((c.distance_m + 2) * std::cos(b), (c.distance_m + 2) * std::sin(b), 1.5),
+        b + std::numbers::pi, Eigen::Vector2d(8.0, 3.0)));
     AddBox(layout, c.distance_m, c.bearing_deg + 90.0);
     const Scene scene = SimulateLayout(Beams(c.sensor), layout, c.sigma_m, 10);
     double ms = 0.0;
@@ -84,19 +91,21 @@ TEST(RoundHoleSearchTest, FindsTheBoardAmongFloorWallAndABox) {
     const std::string what = std::string(c.sensor) + " at " + std::to_string(c.distance_m) +
                              " m, bearing " + std::to_string(c.bearing_deg);
     ASSERT_TRUE(r.found) << what << ": " << RoundHoleSearchReasonName(r.reason) << " ("
-                         << RoundHoleCloudReasonName(r.detection.reason) << ", "
-                         << r.candidates << " candidates)";
+                         << RoundHoleCloudReasonName(r.detection.reason) << ", " << r.candidates
+                         << " candidates)";
     EXPECT_EQ(r.boards_fitted, 1) << what;
     ASSERT_EQ(r.detection.holes.size(), 5u);
     const double worst = WorstHoleError(scene, r.detection);
-    const double normal_error = std::acos(std::clamp(r.detection.T_lidar_board.RotationMatrix().col(2).dot(
-                                                         scene.T_lidar_board.RotationMatrix().col(2)),
-                                                     -1.0, 1.0));
+    const double normal_error =
+        std::acos(std::clamp(r.detection.T_lidar_board.RotationMatrix().col(2).dot(
+                                 scene.T_lidar_board.RotationMatrix().col(2)),
+                             -1.0, 1.0));
     const bool bar_reachable = 3.0 * r.detection.normal_sigma_rad <= kNormalBarRad;
-    std::printf("%-12s %3.0f m bearing %4.0f heading %4.0f: %d candidates, worst hole %4.1f mm, "
-                "normal %.3f deg (1-sigma %.3f), %5.2f ms/frame\n",
-                c.sensor, c.distance_m, c.bearing_deg, c.heading_deg, r.candidates, 1e3 * worst,
-                normal_error / kDegToRad, r.detection.normal_sigma_rad / kDegToRad, ms);
+    std::printf(
+        "%-12s %3.0f m bearing %4.0f heading %4.0f: %d candidates, worst hole %4.1f mm, "
+        "normal %.3f deg (1-sigma %.3f), %5.2f ms/frame\n",
+        c.sensor, c.distance_m, c.bearing_deg, c.heading_deg, r.candidates, 1e3 * worst,
+        normal_error / kDegToRad, r.detection.normal_sigma_rad / kDegToRad, ms);
     EXPECT_LT(worst, c.bar_m) << what;
     EXPECT_LT(normal_error, bar_reachable ? kNormalBarRad : 4.0 * r.detection.normal_sigma_rad)
         << what;
@@ -136,6 +145,44 @@ TEST(RoundHoleSearchTest, TwoBoardsAreAmbiguous) {
   EXPECT_EQ(r.reason, RoundHoleSearchReason::kAmbiguous) << RoundHoleSearchReasonName(r.reason);
   EXPECT_EQ(r.boards_fitted, 2);
   EXPECT_TRUE(r.detection.holes.empty());
+  // Both genuine boards fit their edges alike: listed, best first, both tying.
+  ASSERT_EQ(r.fits.size(), 2u);
+  for (const RoundHoleBoardFit& f : r.fits) {
+    std::printf("board at %.2f m: %d edges, %.2f mrad (x%.2f), fill %.2f: %s\n",
+                f.centre_lidar.norm(), f.edges, 1e3 * f.edge_rms_rad, f.rms_ratio, f.hole_fill,
+                RoundHoleFitVerdictName(f.verdict));
+    EXPECT_EQ(f.verdict, RoundHoleFitVerdict::kTies);
+    EXPECT_LE(f.hole_fill, 0.15);
+  }
+  EXPECT_LE(r.fits[0].edge_rms_rad, r.fits[1].edge_rms_rad);
+  EXPECT_LT(r.fits[1].rms_ratio, kClearlyWorseFit);
+}
+
+// A look-alike beside the board: a round-hole board printed 8% larger (its holes and outline
+// off the true board's by 2-4 cm) passes the whole-board fit and the empty-holes test, but
+// fits its edges far worse; the search finds the true board and says why the other lost.
+TEST(RoundHoleSearchTest, TheBoardBeatsALookAlike) {
+  for (const char* sensor : {"roof_lidar", "bumper_lidar"}) {
+    StationLayout layout;
+    layout.name = "board_and_look_alike";
+    layout.boards.push_back(RoundHoleAt(FacingPose(4.5, 0.0, 0.0), 1.0, "board"));
+    layout.boards.push_back(RoundHoleAt(FacingPose(4.5, 50.0, 0.0), kLookAlikeScale, "other"));
+    const Scene scene = SimulateLayout(Beams(sensor), layout, 0.02, 5);
+    const RoundHoleSearchResult r = Search(scene);
+    for (const RoundHoleBoardFit& f : r.fits) {
+      std::printf("%s: board at %.2f m: %d edges, %.2f mrad (x%.2f), fill %.2f: %s\n", sensor,
+                  f.centre_lidar.norm(), f.edges, 1e3 * f.edge_rms_rad, f.rms_ratio, f.hole_fill,
+                  RoundHoleFitVerdictName(f.verdict));
+    }
+    ASSERT_TRUE(r.found) << sensor << ": " << RoundHoleSearchReasonName(r.reason);
+    EXPECT_LT(WorstHoleError(scene, r.detection), 0.03) << sensor;
+    ASSERT_EQ(r.fits.size(), 2u) << sensor;
+    EXPECT_EQ(r.fits[0].verdict, RoundHoleFitVerdict::kChosen) << sensor;
+    EXPECT_EQ(r.fits[1].verdict, RoundHoleFitVerdict::kWorseFit) << sensor;
+    EXPECT_GE(r.fits[1].rms_ratio, kClearlyWorseFit) << sensor;
+    // The chosen board is the true one, the look-alike the other.
+    EXPECT_LT((r.fits[0].centre_lidar - scene.T_lidar_board.translation()).norm(), 0.05) << sensor;
+  }
 }
 
 TEST(RoundHoleSearchTest, EmptyAndBoardlessClouds) {
