@@ -2,13 +2,13 @@
 // point clouds, and prints its features (docs/interfaces.md, "linecal detect"; fixed, the
 // acceptance tests call it).
 #include <chrono>
-#include <numbers>
-#include <span>
-#include <vector>
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <optional>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -39,6 +39,41 @@ bool Holds8BitSamples(const Image16& image) {
   return true;
 }
 
+// The boards the cloud search kept, with their evidence and verdict (docs/interfaces.md).
+nlohmann::json FitsJson(const std::vector<RoundHoleBoardFit>& fits) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const RoundHoleBoardFit& f : fits) {
+    out.push_back({{"centre", {f.centre_lidar.x(), f.centre_lidar.y(), f.centre_lidar.z()}},
+                   {"range_m", f.centre_lidar.norm()},
+                   {"edges", f.edges},
+                   {"edge_rms_m", f.edge_rms_m},
+                   {"edge_rms_mrad", 1e3 * f.edge_rms_rad},
+                   {"rms_ratio", f.rms_ratio},
+                   {"hole_fill", f.hole_fill},
+                   {"rings_through_holes", f.rings_through_holes},
+                   {"verdict", RoundHoleFitVerdictName(f.verdict)}});
+  }
+  return out;
+}
+
+// The same as text, one line per board, and what to do when several tie.
+void PrintFits(const RoundHoleSearchResult& result) {
+  if (result.fits.size() < 2) return;
+  for (const RoundHoleBoardFit& f : result.fits) {
+    std::printf(
+        "board at %7.3f %7.3f %7.3f (%.2f m): %4d edges, edge rms %.1f mm (%.2f mrad, "
+        "x%.2f), hole fill %.2f, %d rings through holes: %s\n",
+        f.centre_lidar.x(), f.centre_lidar.y(), f.centre_lidar.z(), f.centre_lidar.norm(), f.edges,
+        1e3 * f.edge_rms_m, 1e3 * f.edge_rms_rad, f.rms_ratio, f.hole_fill, f.rings_through_holes,
+        RoundHoleFitVerdictName(f.verdict));
+  }
+  if (!result.found) {
+    std::printf(
+        "several boards fit alike: cover or move all but the one to use, or scan from "
+        "where it is nearer than the others\n");
+  }
+}
+
 // --cloud: reads every PCD (rings from the elevations when a file has none), searches them
 // accumulated for the round-hole board and prints the hole centres.
 int DetectInClouds(const cli::CommandLine& cl, const Board& board) {
@@ -47,7 +82,8 @@ int DetectInClouds(const cli::CommandLine& cl, const Board& board) {
   for (const std::string& path : cl.GetAll("cloud")) {
     const absl::StatusOr<PcdCloud> cloud = ReadPcd(path);
     if (!cloud.ok()) {
-      return cli::BadInput(kCommand, absl::StrCat("--cloud ", path, ": ", cloud.status().message()));
+      return cli::BadInput(kCommand,
+                           absl::StrCat("--cloud ", path, ": ", cloud.status().message()));
     }
     std::vector<RoundHoleCloudPoint>& frame = frames.emplace_back();
     frame.reserve(cloud->points.size());
@@ -90,28 +126,31 @@ int DetectInClouds(const cli::CommandLine& cl, const Board& board) {
         {"clouds", frames.size()},
         {"rings_from_elevation", rings_from_elevation},
         {"candidates", result.candidates},
-        {"fit", {{"reason", fit_reason},
-                 {"plane_inliers", d.plane_inliers},
-                 {"plane_rms_m", d.plane_rms_m},
-                 {"normal_sigma_deg", d.normal_sigma_rad * 180.0 / std::numbers::pi},
-                 {"edges", d.edges},
-                 {"edge_rms_m", d.edge_rms_m},
-                 {"rings_through_holes", d.rings_through_holes}}}};
+        {"boards", FitsJson(result.fits)},
+        {"fit",
+         {{"reason", fit_reason},
+          {"plane_inliers", d.plane_inliers},
+          {"plane_rms_m", d.plane_rms_m},
+          {"normal_sigma_deg", d.normal_sigma_rad * 180.0 / std::numbers::pi},
+          {"edges", d.edges},
+          {"edge_rms_m", d.edge_rms_m},
+          {"rings_through_holes", d.rings_through_holes}}}};
     std::printf("%s\n", report.dump().c_str());
   } else {
-    std::printf("%s: %s%s, %zu clouds%s, %d candidates, %.2f ms\n", board.name(),
-                result.found ? "found" : "not found",
-                result.found ? ""
-                             : absl::StrCat(" (", reason, fit_reason.empty() ? "" : ": ",
-                                            fit_reason, ")")
-                                   .c_str(),
-                frames.size(), rings_from_elevation ? " (rings from elevation)" : "",
-                result.candidates, elapsed_ms);
+    std::printf(
+        "%s: %s%s, %zu clouds%s, %d candidates, %.2f ms\n", board.name(),
+        result.found ? "found" : "not found",
+        result.found
+            ? ""
+            : absl::StrCat(" (", reason, fit_reason.empty() ? "" : ": ", fit_reason, ")").c_str(),
+        frames.size(), rings_from_elevation ? " (rings from elevation)" : "", result.candidates,
+        elapsed_ms);
     for (const RoundHoleHole& h : d.holes) {
       const Eigen::Vector2d& p_board = board.features()[h.id].p_board;
       std::printf("%4d  p %9.4f %9.4f %9.4f  x %8.4f  y %8.4f  rings %d\n", h.id, h.p_lidar.x(),
                   h.p_lidar.y(), h.p_lidar.z(), p_board.x() / scale, p_board.y() / scale, h.rings);
     }
+    PrintFits(result);
   }
   return result.found ? cli::kExitOk : cli::kExitNegative;
 }
@@ -185,8 +224,7 @@ int RunDetect(const Args& args) {
 
   if (cl.Has("overlay")) {
     const std::string out = cl.Get("overlay");
-    const absl::Status written =
-        WritePngRgb(out, DrawDetectionOverlay(image8.view(), *detection));
+    const absl::Status written = WritePngRgb(out, DrawDetectionOverlay(image8.view(), *detection));
     if (!written.ok()) return cli::BadInput(kCommand, std::string(written.message()));
   }
 
@@ -205,17 +243,17 @@ int RunDetect(const Args& args) {
     // complete: every feature of the board is here (false for a partial view of a board
     // with ids, whose seen features are listed).
     const bool complete = detection->features.size() == board->features().size();
-    const nlohmann::json report = {{"board", board->name()},
-                                   {"found", detection->found},
-                                   {"complete", complete},
-                                   {"reason", DetectReasonName(detection->reason)},
-                                   {"features", features},
-                                   {"elapsed_ms", elapsed_ms}};
+    const nlohmann::json report = {
+        {"board", board->name()}, {"found", detection->found},
+        {"complete", complete},   {"reason", DetectReasonName(detection->reason)},
+        {"features", features},   {"elapsed_ms", elapsed_ms}};
     std::printf("%s\n", report.dump().c_str());
   } else {
     std::printf("%s: %s%s, %zu features, %.2f ms\n", board->name(),
                 detection->found ? "found" : "not found",
-                detection->found ? "" : absl::StrCat(" (", DetectReasonName(detection->reason), ")").c_str(),
+                detection->found
+                    ? ""
+                    : absl::StrCat(" (", DetectReasonName(detection->reason), ")").c_str(),
                 detection->features.size(), elapsed_ms);
     for (const DetectedFeature& f : detection->features) {
       std::printf("%4d  u %9.3f  v %9.3f  x %8.4f  y %8.4f%s\n", f.id, f.uv_px.x(), f.uv_px.y(),
