@@ -73,6 +73,16 @@ class DetectCloudCliTest : public ::testing::Test {
     }
     EXPECT_EQ(T[12], 0.0);
     EXPECT_EQ(T[15], 1.0);
+    // One board passed: ranked alone, chosen, its centre the board's.
+    const nlohmann::json& boards = j.at("boards");
+    ASSERT_EQ(boards.size(), 1u);
+    EXPECT_EQ(boards[0].at("verdict"), "chosen");
+    EXPECT_EQ(boards[0].at("rms_ratio"), 1.0);
+    EXPECT_GT(boards[0].at("edges").get<int>(), 0);
+    EXPECT_LE(boards[0].at("hole_fill").get<double>(), 0.15);
+    for (int r = 0; r < 3; ++r) {
+      EXPECT_NEAR(boards[0].at("centre")[r].get<double>(), truth(r, 3), bar_m) << "centre " << r;
+    }
   }
 
   std::filesystem::path dir_;
