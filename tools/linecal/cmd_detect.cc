@@ -2,7 +2,9 @@
 // point clouds, and prints its features (docs/interfaces.md, "linecal detect"; fixed, the
 // acceptance tests call it).
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
@@ -17,9 +19,12 @@
 #include "detectors/detect.h"
 #include "detectors/detection.h"
 #include "detectors/round_hole/round_hole_search.h"
+#include "station/camera/camera_model.h"
+#include "station/io/camera_intrinsics_file.h"
 #include "station/io/image_io.h"
 #include "station/io/pcd.h"
 #include "station/model/pose_json.h"
+#include "station/solvers/undistorted_board.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/board_options.h"
 #include "tools/linecal/commands.h"
@@ -155,6 +160,82 @@ int DetectInClouds(const cli::CommandLine& cl, const Board& board) {
   return result.found ? cli::kExitOk : cli::kExitNegative;
 }
 
+// --intrinsics: the camera of the file, which must have the image's size.
+absl::StatusOr<CameraModel> ReadCamera(const cli::CommandLine& cl, int width, int height) {
+  const std::string path = cl.Get("intrinsics");
+  const absl::StatusOr<CameraIntrinsics> intrinsics =
+      ReadCameraIntrinsicsFile(path, cl.Has("camera") ? cl.Get("camera") : "");
+  if (!intrinsics.ok()) return intrinsics.status();
+  if (intrinsics->width != width || intrinsics->height != height) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--intrinsics ", path, ": the camera is ", intrinsics->width, " x ",
+                     intrinsics->height, " px, the image ", width, " x ", height, " px"));
+  }
+  return CameraModel::Create(*intrinsics);
+}
+
+// With --intrinsics, a board's features must lie on one plane through the camera model: a
+// detection (found, or partial with the 4 features a homography needs) that fails the check
+// becomes not found, verification_failed, without features, since none of them is certain.
+void ApplyCheck(const UndistortedBoard& check, Detection* detection) {
+  const bool checked = detection->found || (detection->reason == DetectReason::kPartial &&
+                                            check.points >= 4);
+  if (!checked || check.verified) return;
+  detection->found = false;
+  detection->reason = DetectReason::kVerificationFailed;
+  detection->features.clear();
+}
+
+// A finite number, or null for JSON (a check that could not fit gives +infinity).
+nlohmann::json FiniteOrNull(double v) { return std::isfinite(v) ? nlohmann::json(v) : nullptr; }
+
+bool HasPose(const UndistortedBoard& check) {
+  return check.verified && check.pose.outcome == PnpOutcome::kOk;
+}
+
+nlohmann::json CheckToJson(const cli::CommandLine& cl, const CameraModel& camera,
+                           const UndistortedBoard& check) {
+  const bool pose = HasPose(check);
+  return {{"file", cl.Get("intrinsics")},
+          {"camera", cl.Has("camera") ? cl.Get("camera") : ""},
+          {"model", CameraModelTypeName(camera.type())},
+          {"residual_rms_px", FiniteOrNull(check.homography_rms_px)},
+          {"residual_max_px", FiniteOrNull(check.homography_max_px)},
+          {"pose_reason", check.verified ? PnpOutcomeName(check.pose.outcome) : ""},
+          {"T_camera_board", pose ? MatrixToJson(check.pose.T_camera_object.Matrix())
+                                  : nlohmann::json()},
+          {"pose_rms_px", pose ? nlohmann::json(check.pose.residual_rms_px) : nlohmann::json()}};
+}
+
+void PrintCheck(const cli::CommandLine& cl, const CameraModel& camera,
+                const UndistortedBoard& check) {
+  std::printf("intrinsics %s (%s): ", cl.Get("intrinsics").c_str(),
+              CameraModelTypeName(camera.type()));
+  if (check.points < 4) {
+    std::printf("not checked: %d features, a homography needs 4\n", check.points);
+    return;
+  }
+  if (!std::isfinite(check.homography_rms_px)) {
+    std::printf("no board homography in undistorted coordinates\n");
+    return;
+  }
+  std::printf("board homography residual %.3f px RMS, %.3f px max (undistorted coordinates)\n",
+              check.homography_rms_px, check.homography_max_px);
+  if (!check.verified) return;
+  if (!HasPose(check)) {
+    std::printf("pose: %s\n", PnpOutcomeName(check.pose.outcome));
+    return;
+  }
+  const Rigid3d& T = check.pose.T_camera_object;
+  const Eigen::AngleAxisd r(T.rotation());
+  const Eigen::Vector3d r_deg = r.axis() * r.angle() * 180.0 / std::numbers::pi;
+  const Eigen::Vector3d t_mm = 1e3 * T.translation();
+  std::printf("T_camera_board: t %.3f %.3f %.3f mm, rotation vector %.4f %.4f %.4f deg, "
+              "residual %.3f px RMS\n",
+              t_mm.x(), t_mm.y(), t_mm.z(), r_deg.x(), r_deg.y(), r_deg.z(),
+              check.pose.residual_rms_px);
+}
+
 }  // namespace
 
 int RunDetect(const Args& args) {
@@ -166,10 +247,17 @@ int RunDetect(const Args& args) {
                      false, true});
   options.push_back({"json", "", "print the result as one JSON object"});
   options.push_back({"overlay", "OUT.png", "write the image with the features drawn"});
+  options.push_back({"intrinsics", "FILE",
+                     "the camera's model (linecal car model, OpenCV FileStorage YAML or JSON, "
+                     "ROS camera_info or Kalibr camchain YAML): the board is verified through "
+                     "it and its pose printed"});
+  options.push_back({"camera", "NAME",
+                     "the camera of --intrinsics when the file holds several (car model, "
+                     "Kalibr camchain)"});
   cli::CommandLine cl(
       "linecal detect --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
       "[--spacing METRES --diameter METRES] [--asymmetric] [--light-circles] "
-      "--image FILE [--json] [--overlay OUT.png]\n"
+      "--image FILE [--intrinsics FILE [--camera NAME]] [--json] [--overlay OUT.png]\n"
       "       linecal detect --board round_hole [--scale S] --cloud FILE [--cloud FILE ...] "
       "[--json]",
       "Finds the board in the image and prints every feature found: its id, sub-pixel image "
@@ -177,7 +265,10 @@ int RunDetect(const Args& args) {
       "default scale). 16-bit images are stretched from their darkest to their brightest "
       "pixel. With --cloud, searches the LiDAR scans for the round-hole board (no expected "
       "pose needed) and prints its hole centres p in the LiDAR frame and T_lidar_board; "
-      "clouds without a ring field get rings from their elevation angles. Exit 0 when the "
+      "clouds without a ring field get rings from their elevation angles. With --intrinsics, "
+      "the features must fit one board plane through the camera model (homography residual "
+      "at most 1 px RMS, else verification_failed) and the board's pose T_camera_board is "
+      "printed; features stay in raw pixels. Exit 0 when the "
       "whole board was found, 1 when not (the reason is printed), 2 on bad usage or input.",
       std::move(options));
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
@@ -187,7 +278,13 @@ int RunDetect(const Args& args) {
   const std::optional<Board> board = Board::Create(*params);
   if (!board.has_value()) return cli::BadInput(kCommand, "invalid board parameters");
 
+  if (cl.Has("camera") && !cl.Has("intrinsics")) {
+    return cli::BadInput(kCommand, "--camera: names a camera of --intrinsics FILE");
+  }
   if (cl.Has("cloud")) {
+    if (cl.Has("intrinsics")) {
+      return cli::BadInput(kCommand, "--intrinsics: images only, not --cloud");
+    }
     if (cl.Has("image")) return cli::BadInput(kCommand, "--image and --cloud: give one of them");
     if (cl.Has("overlay")) return cli::BadInput(kCommand, "--overlay: images only, not --cloud");
     if (board->type() != BoardType::kRoundHole) {
@@ -202,6 +299,12 @@ int RunDetect(const Args& args) {
   const std::string path = cl.Get("image");
   absl::StatusOr<Image16> image16 = ReadImage16(path);
   if (!image16.ok()) return cli::BadInput(kCommand, std::string(image16.status().message()));
+  std::optional<CameraModel> camera;
+  if (cl.Has("intrinsics")) {
+    absl::StatusOr<CameraModel> read = ReadCamera(cl, image16->width, image16->height);
+    if (!read.ok()) return cli::BadInput(kCommand, std::string(read.status().message()));
+    camera = *std::move(read);
+  }
   // The 8-bit image the detector sees: the file's own samples, or the 16-bit range stretched.
   Image8 image8;
   if (Holds8BitSamples(*image16)) {
@@ -214,7 +317,14 @@ int RunDetect(const Args& args) {
   }
 
   const auto start = std::chrono::steady_clock::now();
-  const std::optional<Detection> detection = DetectBoard(image8.view(), *board);
+  std::optional<Detection> detection = DetectBoard(image8.view(), *board);
+  std::optional<UndistortedBoard> check;
+  if (camera.has_value() && detection.has_value()) {
+    absl::StatusOr<UndistortedBoard> checked = CheckBoardUndistorted(*camera, detection->features);
+    if (!checked.ok()) return cli::BadInput(kCommand, std::string(checked.status().message()));
+    ApplyCheck(*checked, &*detection);
+    check = *std::move(checked);
+  }
   const double elapsed_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   if (!detection.has_value()) {
@@ -243,10 +353,11 @@ int RunDetect(const Args& args) {
     // complete: every feature of the board is here (false for a partial view of a board
     // with ids, whose seen features are listed).
     const bool complete = detection->features.size() == board->features().size();
-    const nlohmann::json report = {
+    nlohmann::json report = {
         {"board", board->name()}, {"found", detection->found},
         {"complete", complete},   {"reason", DetectReasonName(detection->reason)},
         {"features", features},   {"elapsed_ms", elapsed_ms}};
+    if (check.has_value()) report["intrinsics"] = CheckToJson(cl, *camera, *check);
     std::printf("%s\n", report.dump().c_str());
   } else {
     std::printf("%s: %s%s, %zu features, %.2f ms\n", board->name(),
@@ -260,6 +371,7 @@ int RunDetect(const Args& args) {
                   f.p_board.x() / scale, f.p_board.y() / scale,
                   f.marker >= 0 ? absl::StrFormat("  marker %d", f.marker).c_str() : "");
     }
+    if (check.has_value()) PrintCheck(cl, *camera, *check);
   }
   return detection->found ? cli::kExitOk : cli::kExitNegative;
 }
