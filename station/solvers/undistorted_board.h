@@ -27,7 +27,7 @@ namespace linecal {
 struct UndistortedBoardOptions {
   // Largest RMS of the homography's residuals, raw pixels, for a board to be taken. A right
   // camera model leaves the detector's noise, a tenth of a pixel on renders and a few tenths
-  // on real photos; a wrong one (the wrong sign of k1 -0.3 measures 2.4 px on a board filling
+  // on real photos; a wrong one (the wrong sign of k1 -0.3 measures 3.5 px on a board filling
   // half the image, tests/tools/cmd_detect_test.cc) or a shifted correspondence (a whole
   // square) leaves pixels. (0, 100].
   double max_homography_rms_px = 1.0;
