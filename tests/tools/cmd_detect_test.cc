@@ -312,22 +312,23 @@ class DetectIntrinsicsTest : public DetectCliTest {
             .p2 = -0.0003};
   }
 
-  // Renders the checker of 9 x 6 corners, 40 mm squares, through Lens() (its corners span
-  // 320 x 200 mm, about 550 x 350 px); sets the true T_camera_board.
+  // Renders the checker of 9 x 6 corners, 40 mm squares, through lens_ at distance_m_ (at
+  // 0.55 m through Lens() its corners, 320 x 200 mm, span about 550 x 350 px); sets the true
+  // T_camera_board.
   CameraFrame Render(Rigid3d* T_camera_board) {
     test_scene::BoardView view;
     view.params.type = BoardType::kChecker;
     view.params.cols = 9;
     view.params.rows = 6;
     view.params.square_m = 0.04;
-    view.distance_m = 0.55;
+    view.distance_m = distance_m_;
     view.yaw_deg = 15.0;
     view.pitch_deg = -10.0;
     view.roll_deg = 5.0;
     view.offset_m = Eigen::Vector2d(0.02, -0.01);
     const StationLayout scene = test_scene::SceneOf(view);
     *T_camera_board = test_scene::TestCameraPose().Inverse() * scene.boards[0].T_station_board;
-    const absl::StatusOr<CameraModel> camera = CameraModel::Create(Lens());
+    const absl::StatusOr<CameraModel> camera = CameraModel::Create(lens_);
     EXPECT_TRUE(camera.ok()) << camera.status();
     const absl::StatusOr<CameraFrame> frame = RenderCameraFrame(
         *camera, test_scene::TestCameraPose(), scene, test_scene::NoisyRender(), 5);
@@ -335,16 +336,23 @@ class DetectIntrinsicsTest : public DetectCliTest {
     return frame.ok() ? *frame : CameraFrame();
   }
 
-  // `lens` as OpenCV's calibration sample writes it (cv::FileStorage YAML).
+  // `lens` as OpenCV's calibration sample writes it (cv::FileStorage YAML); a fisheye says so
+  // by distortion_model, with cv::fisheye's four coefficients.
   std::string WriteOpenCvYaml(const CameraIntrinsics& lens) {
+    const bool fisheye = lens.type == CameraModelType::kFisheye;
     std::ostringstream f;
     f << std::setprecision(17) << "%YAML:1.0\n---\nimage_width: " << lens.width
       << "\nimage_height: " << lens.height << "\ncamera_matrix: !!opencv-matrix\n   rows: 3\n"
       << "   cols: 3\n   dt: d\n   data: [ " << lens.fx << ", 0., " << lens.cx << ", 0., "
       << lens.fy << ", " << lens.cy << ", 0., 0., 1. ]\n"
-      << "distortion_coefficients: !!opencv-matrix\n   rows: 5\n   cols: 1\n   dt: d\n"
-      << "   data: [ " << lens.k1 << ", " << lens.k2 << ", " << lens.p1 << ", " << lens.p2
-      << ", " << lens.k3 << " ]\n";
+      << (fisheye ? "distortion_model: fisheye\n" : "")
+      << "distortion_coefficients: !!opencv-matrix\n   rows: " << (fisheye ? 4 : 5)
+      << "\n   cols: 1\n   dt: d\n   data: [ " << lens.k1 << ", " << lens.k2 << ", ";
+    if (fisheye) {
+      f << lens.k3 << ", " << lens.k4 << " ]\n";
+    } else {
+      f << lens.p1 << ", " << lens.p2 << ", " << lens.k3 << " ]\n";
+    }
     return Write("opencv.yaml", f.str());
   }
 
@@ -404,7 +412,7 @@ class DetectIntrinsicsTest : public DetectCliTest {
     EXPECT_EQ(matched, 54);
     EXPECT_LT(std::sqrt(sum_sq / std::max(matched, 1)), kRawRmsPx);
     const nlohmann::json& check = j.at("intrinsics");
-    EXPECT_EQ(check.at("model"), "pinhole");
+    EXPECT_EQ(check.at("model"), CameraModelTypeName(lens_.type));
     EXPECT_EQ(check.at("pose_reason"), "");
     const double rms = check.at("residual_rms_px").get<double>();
     EXPECT_LT(rms, kResidualPx);
@@ -430,9 +438,13 @@ class DetectIntrinsicsTest : public DetectCliTest {
   static constexpr double kResidualPx = 0.1;
   // Corner noise σ ≈ 0.03 px over corners spanning about 550 px at 0.55 m: the board's depth
   // is known to about 0.55 m × 0.03 / 550 ≈ 0.03 mm and its rotation to 0.03 / 550 rad ≈
-  // 0.003° (measured 0.013 mm, 0.0009°); the bounds are three times that.
+  // 0.003° (measured 0.013 mm, 0.0009°); the bounds are three times that, and twice what the
+  // fisheye's 350 px at 0.45 m give (0.04 mm, 0.005°; measured 0.023 mm, 0.0027°).
   static constexpr double kTranslationMm = 0.1;
   static constexpr double kRotationDeg = 0.01;
+
+  CameraIntrinsics lens_ = Lens();
+  double distance_m_ = 0.55;
 };
 
 TEST_F(DetectIntrinsicsTest, OpenCvFileVerifiesAndLocatesTheBoard) {
@@ -455,6 +467,24 @@ TEST_F(DetectIntrinsicsTest, RosFileWorksEndToEnd) {
 
 TEST_F(DetectIntrinsicsTest, KalibrCamchainWorksEndToEnd) {
   DetectAndCheck("--intrinsics " + WriteKalibrYaml(Lens()) + " --camera cam1");
+}
+
+// A fisheye (Kannala-Brandt, f 500 px, about 140 degrees across the image's width) given as
+// an OpenCV file for cv::fisheye; the board at 0.45 m spans about 350 px.
+TEST_F(DetectIntrinsicsTest, OpenCvFisheyeFileWorksEndToEnd) {
+  lens_ = {.type = CameraModelType::kFisheye,
+           .width = 1280,
+           .height = 720,
+           .fx = 500.0,
+           .fy = 500.0,
+           .cx = 639.5,
+           .cy = 359.5,
+           .k1 = 0.05,
+           .k2 = -0.01,
+           .k3 = 0.002,
+           .k4 = -0.0003};
+  distance_m_ = 0.45;
+  DetectAndCheck("--intrinsics " + WriteOpenCvYaml(lens_));
 }
 
 // The lens with k1 of the wrong sign bends the board the other way: refused.
