@@ -245,6 +245,20 @@ absl::StatusOr<CameraIntrinsics> FromCameraMatrixFile(const YamlField& root,
     }
     in.type = *type;
   }
+  // OpenCV's camera calibration tutorial (camera_calibration.cpp) writes fisheye_model 0 or 1
+  // for cv::calibrateCamera or cv::fisheye::calibrate.
+  if (root.Has("fisheye_model")) {
+    const YamlField flag = root.At("fisheye_model");
+    absl::StatusOr<std::int64_t> v = flag.Integer();
+    if (!v.ok()) return v.status();
+    if (*v != 0 && *v != 1) return flag.Error(absl::StrCat("must be 0 or 1, got ", *v));
+    const CameraModelType type = *v == 1 ? CameraModelType::kFisheye : CameraModelType::kPinhole;
+    if (root.Has("distortion_model") && type != in.type) {
+      return flag.Error(
+          absl::StrCat(*v, " contradicts distortion_model, a ", CameraModelTypeName(in.type)));
+    }
+    in.type = type;
+  }
   absl::StatusOr<int> width = ImageSide(root, "image_width");
   if (!width.ok()) return width.status();
   absl::StatusOr<int> height = ImageSide(root, "image_height");

@@ -15,12 +15,13 @@
 // Kalibr camchain, `camera_matrix` an OpenCV or ROS file. The projection model is told by
 // distortion_model (OpenCV and ROS: absent, plumb_bob, rational_polynomial or radtan for the
 // pinhole; equidistant, fisheye or kannala_brandt for the fisheye; Kalibr: radtan, none or
-// equidistant on camera_model pinhole). The pinhole takes OpenCV's coefficient vectors of 0,
-// 4, 5, 8, 12 or 14 values (k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4 τx τy) as long as everything
-// after k3 is 0, since linecal's pinhole has no rational, thin-prism or tilt terms; the
-// fisheye takes exactly 4 (k1..k4). A camera matrix must be 3 x 3 without skew. All these
-// formats put the centre of the top-left pixel at (0, 0), as linecal does, so the numbers are
-// taken as they are.
+// equidistant on camera_model pinhole) or, in OpenCV files, by fisheye_model (0 or 1, as
+// OpenCV's camera calibration tutorial writes it); neither key means the pinhole. The pinhole takes
+// OpenCV's coefficient vectors of 0, 4, 5, 8, 12 or 14 values (k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4
+// τx τy) as long as everything after k3 is 0, since linecal's pinhole has no rational, thin-prism
+// or tilt terms; the fisheye takes exactly 4 (k1..k4). A camera matrix must be 3 x 3 without skew.
+// All these formats put the centre of the top-left pixel at (0, 0), as linecal does, so the numbers
+// are taken as they are.
 //
 // Errors (InvalidArgument) name the file and the key, and the value when it is wrong:
 //   "cal.yaml: camera_matrix.data: 8 numbers for a 3 x 3 matrix"

@@ -137,6 +137,29 @@ TEST(CameraIntrinsicsFileTest, OpenCvYamlFisheyeByItsDistortionModel) {
   EXPECT_EQ(in->p2, 0.0);
 }
 
+// What OpenCV's camera calibration tutorial writes for cv::fisheye: fisheye_model 1.
+TEST(CameraIntrinsicsFileTest, OpenCvTutorialFisheyeModelFlag) {
+  std::string text = Replace(kOpenCvYaml, "flags: 0", "flags: 0\nfisheye_model: 1");
+  text = Replace(text, "rows: 5", "rows: 4");
+  text = Replace(text, "-3.0000000000000000e-01, 1.2e-01, 1.0e-04, -2.0e-04,\n       -2.5e-02",
+                 "0.05, -0.01, 0.002, -0.0003");
+  const absl::StatusOr<CameraIntrinsics> in = ParseCameraIntrinsics(text, "cal.yaml", "");
+  ASSERT_TRUE(in.ok()) << in.status();
+  EXPECT_EQ(in->type, CameraModelType::kFisheye);
+  EXPECT_EQ(in->k4, -0.0003);
+  // fisheye_model 0 is the pinhole, as without the key.
+  const absl::StatusOr<CameraIntrinsics> pinhole =
+      ParseCameraIntrinsics(Replace(kOpenCvYaml, "flags: 0", "fisheye_model: 0"), "cal.yaml", "");
+  ASSERT_TRUE(pinhole.ok()) << pinhole.status();
+  ExpectFrontCamera(*pinhole, true);
+  EXPECT_EQ(ErrorOf(Replace(text, "fisheye_model: 1", "fisheye_model: 2")),
+            "cal.yaml: fisheye_model: must be 0 or 1, got 2");
+  EXPECT_EQ(ErrorOf(Replace(text, "fisheye_model: 1",
+                            "fisheye_model: 1\ndistortion_model: "
+                            "plumb_bob")),
+            "cal.yaml: fisheye_model: 1 contradicts distortion_model, a pinhole");
+}
+
 // cv::FileStorage's JSON form, with OpenCV's four-coefficient vector (no k3).
 TEST(CameraIntrinsicsFileTest, OpenCvJson) {
   constexpr char kJson[] = R"({
