@@ -560,7 +560,7 @@ std::vector<Placement> UprightPlacements(const GridModel& m, std::vector<Placeme
 // ---- 4. Local verification ----------------------------------------------------------------
 
 // A hexagonal block fits the quadratic (six terms) with this many other circles at least,
-// two more than it needs; the smallest boards (below ten circles) fit an affine map, which
+// two more than it needs; the smallest boards (below nine circles) fit an affine map, which
 // needs three and leaves one to check.
 constexpr int kHexQuadraticBlock = 8;
 constexpr int kHexAffineBlock = 4;
