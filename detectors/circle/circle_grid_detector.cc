@@ -561,9 +561,8 @@ std::vector<Placement> UprightPlacements(const GridModel& m, std::vector<Placeme
 
 // A hexagonal block fits the quadratic (six terms) with this many other circles at least,
 // two more than it needs; the smallest boards (below nine circles) fit an affine map, which
-// needs three and leaves one to check.
+// needs three, and the smallest of all (3 x 3, five circles) leaves one to check.
 constexpr int kHexQuadraticBlock = 8;
-constexpr int kHexAffineBlock = 4;
 
 // Circle `id`'s image position predicted by least squares from the other circles of its
 // block: each image coordinate as a + b x + c y + d xy (+ e x^2 and f y^2 along a side of
@@ -576,7 +575,6 @@ std::optional<Eigen::Vector2d> PredictFromBlock(const GridModel& m,
   const bool xy_term = !m.hexagonal || hex_quadratic;
   const bool quad_x = m.hexagonal ? hex_quadratic : std::min(3, m.cols) == 3;
   const bool quad_y = m.hexagonal ? hex_quadratic : std::min(3, m.rows) == 3;
-  if (m.hexagonal && others < kHexAffineBlock) return std::nullopt;
   Eigen::Matrix<double, 6, 6> AtA = Eigen::Matrix<double, 6, 6>::Zero();
   Eigen::Matrix<double, 6, 2> Atb = Eigen::Matrix<double, 6, 2>::Zero();
   for (const int other : m.block[id]) {
