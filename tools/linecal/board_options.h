@@ -23,9 +23,9 @@ std::vector<cli::OptionSpec> BoardOptionSpecs();
 // names), --cols/--rows with a board other than checker and circle_grid, --square with one
 // other than checker, --spacing/--diameter/--asymmetric/--hexagonal/--light-circles with one
 // other than circle_grid, --border-bits with one other than apriltag, a value that is not a
-// number, and values ValidateBoardParams refuses. With --target: the file's errors (target_file.h), any
-// board option but --diameter and --light-circles (which a Kalibr file cannot give), and those
-// two for a board other than a circle grid.
+// number, and values ValidateBoardParams refuses. With --target: the file's errors
+// (target_file.h), any board option but --diameter and --light-circles (which a Kalibr file
+// cannot give), and those two for a board other than a circle grid.
 absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& cl);
 
 // What is wrong with the field of `p` that `e` names, with its value and range ("1 is outside
