@@ -339,6 +339,10 @@ bool ShowsBoard(const PhotoSet& set, const BoardParams& board) {
     return false;
   }
   const int a = set.board->cols, b = set.board->rows;
+  // A hexagonal grid turned by a quarter is no hexagonal grid (its rows would run across).
+  if (board.type == BoardType::kCircleGrid && board.hexagonal) {
+    return board.cols == a && board.rows == b;
+  }
   return (board.cols == a && board.rows == b) || (board.cols == b && board.rows == a);
 }
 
