@@ -334,9 +334,25 @@ int CircleGridColumn(const BoardParams& p, int i, int j) {
   return p.asymmetric ? 2 * j + i % 2 : j;
 }
 
+// The hexagonal grid's rows and zig-zag columns in spacings: columns half a spacing apart,
+// rows sqrt(3) / 2 of one, so that neighbours in a row and in adjacent rows are a spacing
+// apart.
+constexpr double kHexColumnSpacings = 0.5;
+constexpr double kHexRowSpacings = 0.86602540378443865;  // sqrt(3) / 2
+
+// The zig-zag column of the hexagonal grid's first circle in row i (from the top): BoofCV
+// numbers its rows from the bottom and starts its row 0 on column 0, each row above on the
+// other parity (docs/boards.md §8).
+int HexRowOffset(const BoardParams& p, int i) { return (p.rows - 1 - i) % 2; }
+
 // The extent of the circle centres in units of the spacing: (last column, last row). Every
-// asymmetric grid has at least two rows, so its odd rows reach one spacing further.
+// asymmetric grid has at least two rows, so its odd rows reach one spacing further; every
+// hexagonal one (three rows or more) has rows on both parities, so its columns span
+// cols - 1 half spacings.
 Eigen::Vector2d CircleGridExtent(const BoardParams& p) {
+  if (p.hexagonal) {
+    return {kHexColumnSpacings * (p.cols - 1), kHexRowSpacings * (p.rows - 1)};
+  }
   return {p.asymmetric ? 2.0 * (p.cols - 1) + 1.0 : p.cols - 1.0, p.rows - 1.0};
 }
 
@@ -349,7 +365,7 @@ constexpr double kCircleGridMarginSpacings = 2.0;
 // cols x rows circles of diameter_mm on the page centred on their centres' bounding box;
 // black on the white page, or white on a black field reaching one spacing beyond the outer
 // centres. Feature id = cols * i + j, row i from the top, col j from the left (OpenCV's order
-// of object points).
+// of object points); hexagonal: row by row from the top, left to right in a row.
 void DrawCircleGrid(Drawing& d, const BoardParams& p) {
   const double s = p.spacing_m * 1e3;
   const Eigen::Vector2d half = 0.5 * s * CircleGridExtent(p);
@@ -357,6 +373,17 @@ void DrawCircleGrid(Drawing& d, const BoardParams& p) {
     d.BoardRect(Paint::kBlack, -half.x() - s, -half.y() - s, half.x() + s, half.y() + s);
   }
   const Paint paint = p.light_circles ? Paint::kWhite : Paint::kBlack;
+  if (p.hexagonal) {
+    for (int i = 0; i < p.rows; ++i) {
+      for (int c = HexRowOffset(p, i); c < p.cols; c += 2) {
+        const double x = s * kHexColumnSpacings * c - half.x();
+        const double y = half.y() - s * kHexRowSpacings * i;
+        d.BoardCircle(paint, x, y, p.diameter_m * 1e3);
+        d.Feature(FeatureKind::kCircleCentre, d.Board(x, y));
+      }
+    }
+    return;
+  }
   for (int i = 0; i < p.rows; ++i) {
     for (int j = 0; j < p.cols; ++j) {
       const double x = s * CircleGridColumn(p, i, j) - half.x();
@@ -453,16 +480,19 @@ const char* BoardParamsErrorName(BoardParamsError e) {
       return "bad_tag_spacing";
     case BoardParamsError::kBadStartId:
       return "bad_start_id";
+    case BoardParamsError::kBadLayout:
+      return "bad_layout";
   }
   return "unknown";
 }
 
 BoardParamsError ValidateBoardParams(const BoardParams& p) {
   if (!IsFiniteIn(p.scale, kMinBoardScale, kMaxBoardScale)) return BoardParamsError::kBadScale;
-  if (p.cols < kMinCheckerCorners || p.cols > kMaxCheckerCorners) {
+  const int min_side = p.hexagonal ? kMinHexagonalSide : kMinCheckerCorners;
+  if (p.cols < min_side || p.cols > kMaxCheckerCorners) {
     return BoardParamsError::kBadCols;
   }
-  if (p.rows < kMinCheckerCorners || p.rows > kMaxCheckerCorners) {
+  if (p.rows < min_side || p.rows > kMaxCheckerCorners) {
     return BoardParamsError::kBadRows;
   }
   if (!IsFiniteIn(p.square_m, 0.0, kMaxCheckerSquareM) || p.square_m == 0.0) {
@@ -474,7 +504,9 @@ BoardParamsError ValidateBoardParams(const BoardParams& p) {
   if (!IsFiniteIn(p.spacing_m, 0.0, kMaxCircleSpacingM) || p.spacing_m == 0.0) {
     return BoardParamsError::kBadSpacing;
   }
-  // Nearest neighbours: along a row (symmetric) or diagonally between rows (asymmetric).
+  if (p.hexagonal && p.asymmetric) return BoardParamsError::kBadLayout;
+  // Nearest neighbours: along a row (symmetric), diagonally between rows (asymmetric), or all
+  // six around (hexagonal).
   const double nearest_m = p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m;
   if (!(std::isfinite(p.diameter_m) && p.diameter_m > 0.0 && p.diameter_m < nearest_m)) {
     return BoardParamsError::kBadDiameter;

@@ -29,7 +29,8 @@ enum class BoardType {
   kApriltag,    // april_board.pdf, a 6 x 6 tag36h11 AprilGrid
   kRoundHole,   // round_hole_board.pdf, five through holes and four ArUco markers
   kChecker,     // generic chessboard: cols x rows inner corners, square_m squares
-  kCircleGrid,  // OpenCV's circle grid, symmetric or asymmetric: cols x rows circles
+  kCircleGrid,  // OpenCV's circle grid, symmetric or asymmetric: cols x rows circles;
+                // or BoofCV's hexagonal grid (hexagonal)
 };
 
 inline constexpr std::array<BoardType, 8> kAllBoardTypes = {
@@ -57,7 +58,8 @@ struct BoardParams {
   // kCircleGrid only (docs/boards.md §8): the centre distance, as OpenCV's squareSize: the
   // distance between neighbours in a row and between rows of the symmetric grid; in the
   // asymmetric grid rows are spacing_m apart and a row's circles 2 * spacing_m apart, every
-  // other row shifted by spacing_m. Default 25 mm.
+  // other row shifted by spacing_m; in the hexagonal grid (below) the distance of every pair
+  // of neighbours. Default 25 mm.
   double spacing_m = 0.025;
   // kCircleGrid only: the printed circles' diameter, below the distance of nearest
   // neighbours (spacing_m, or spacing_m * sqrt(2) in the asymmetric grid). Default 12.5 mm.
@@ -68,6 +70,13 @@ struct BoardParams {
   // kCircleGrid only: white circles on a black field (true) instead of black circles on the
   // white page (false, default; what OpenCV's blob detector looks for by default).
   bool light_circles = false;
+  // kCircleGrid only (docs/boards.md §8, "Hexagonal"): BoofCV's hexagonal grid
+  // (CIRCLE_HEXAGONAL) instead of OpenCV's layouts. cols and rows are then BoofCV's numCols and
+  // numRows: rows of circles, spacing_m * sqrt(3) / 2 apart, on cols zig-zag columns spacing_m
+  // / 2 apart, every circle on every other column (row i from the top on the columns
+  // (rows - 1 - i) % 2, + 2, ...), so that every circle's six nearest neighbours are
+  // spacing_m (BoofCV's shapeDistance) away at 60 degrees to each other. Excludes asymmetric.
+  bool hexagonal = false;
   // kApriltag only: black border width in bits. 2 = Kalibr's AprilGrid (the PDF); 1 = the
   // ordinary tag36h11 layout. The black square stays 88 mm either way, so the features do
   // not change; only the bit size does (88 mm / 10 or / 8).
@@ -86,8 +95,8 @@ struct BoardParams {
 enum class BoardParamsError {
   kOk = 0,
   kBadScale,       // not finite or outside [kMinBoardScale, kMaxBoardScale]
-  kBadCols,        // outside [kMinCheckerCorners, kMaxCheckerCorners]
-  kBadRows,        // outside [kMinCheckerCorners, kMaxCheckerCorners]
+  kBadCols,        // outside [kMinCheckerCorners (kMinHexagonalSide), kMaxCheckerCorners]
+  kBadRows,        // outside [kMinCheckerCorners (kMinHexagonalSide), kMaxCheckerCorners]
   kBadSquare,      // not finite or outside (0, kMaxCheckerSquareM]
   kBadBorderBits,  // neither 1 nor 2
   kBadSpacing,     // not finite or outside (0, kMaxCircleSpacingM]
@@ -95,6 +104,7 @@ enum class BoardParamsError {
   kBadTagGrid,     // apriltag_cols or _rows outside [1, kMaxAprilGridTags], or one tag only
   kBadTagSpacing,  // not finite or outside [kMinAprilGridSpacing, kMaxAprilGridSpacing]
   kBadStartId,     // negative, or the grid's last id beyond tag36h11's kTag36h11Codes - 1
+  kBadLayout,      // hexagonal and asymmetric both set: two layouts at once
 };
 
 // A board of 2.6 mm or of 260 m is a typo, not a board: scales outside this range are refused.
@@ -104,6 +114,10 @@ inline constexpr double kMaxBoardScale = 1e2;
 // far beyond any printed target and bounds the shape count (about 10^4 squares or circles).
 inline constexpr int kMinCheckerCorners = 2;
 inline constexpr int kMaxCheckerCorners = 100;
+// A hexagonal grid of two rows or columns has no circle with neighbours on three sides (two
+// rows or columns hold a zig-zag line): three a side, five circles, give a detector a lattice.
+// Checked when hexagonal is set, whatever the type (as every field).
+inline constexpr int kMinHexagonalSide = 3;
 // No station uses chessboard squares over 1 m.
 inline constexpr double kMaxCheckerSquareM = 1.0;
 // Nor circle grids with a centre distance over 1 m.

@@ -22,26 +22,43 @@ namespace {
 // ---- The board ----------------------------------------------------------------------------
 
 int Mod2(int i) { return ((i % 2) + 2) % 2; }
+int FloorDiv2(int i) { return (i - Mod2(i)) / 2; }
 
 // What the detector needs of the board: its size and layout, and per feature id its position
 // in spacings (OpenCV's object point over squareSize: X along a row, Y down the rows) and its
-// lattice coordinates. Both layouts are square lattices: the symmetric grid's steps are
+// lattice coordinates. OpenCV's layouts are square lattices: the symmetric grid's steps are
 // (1, 0) and (0, 1); the asymmetric grid's are its diagonals (1, 1) and (-1, 1), so its
-// lattice coordinates are ((X + Y) / 2, (Y - X) / 2) (X + Y is always even). Either basis
-// keeps the handedness of (X, Y).
+// lattice coordinates are ((X + Y) / 2, (Y - X) / 2) (X + Y is always even). The hexagonal
+// grid's is a lattice of triangles: its steps are a = (1, 0) along a row and b = (1/2,
+// sqrt(3)/2), to the next row's circle down and right, 60 degrees from a; circle (zig-zag
+// column c, row i) is lattice point (floor((c - i) / 2), i) (c - i has one parity over the
+// board). Every basis keeps the handedness of (X, Y).
 struct GridModel {
   int cols = 0;
   int rows = 0;
   bool asymmetric = false;
+  bool hexagonal = false;
   bool light = false;                    // light circles on a dark field
   std::vector<Eigen::Vector2d> xy;       // per id, spacings
   std::vector<Eigen::Vector2i> lattice;  // per id
   // Per id, the ids one lattice step along a and along b (-1 off the board).
   std::vector<std::array<int, 2>> next;
   // Lattice neighbours on the board (pairs of ids one step apart) and lattice cells (the ids
-  // at p, p + a, p + b, p + a + b): the print between them is the page.
+  // at p, p + a, p + b, p + a + b; hexagonal: triangles of three mutual neighbours): the print
+  // between them is the page.
   std::vector<std::array<int, 2>> pairs;
   std::vector<std::array<int, 4>> cells;
+  std::vector<std::array<int, 3>> triangles;
+  // Per id, the circles that predict it (itself included): the 3 x 3 block of rows and
+  // columns around it (BlockIds); hexagonal: its kHexBlock nearest on the board.
+  std::vector<std::vector<int>> block;
+  // Per id, how many of the board's edges it lies on (a first or last row; a first or last
+  // column, or circle of its row), 0 to 2: along each its block extrapolates.
+  std::vector<int> edges;
+  // The lattice points just beyond the board's top, bottom, left and right sides.
+  std::array<std::vector<Eigen::Vector2i>, 4> beyond;
+  // Two neighbours along the middle row, for the board's x axis (XAxisU).
+  std::array<int, 2> middle = {0, 0};
 
   int Id(int i, int j) const { return cols * i + j; }
   // Row i, col j (any integers, beyond the board too) in spacings.
@@ -50,20 +67,133 @@ struct GridModel {
     if (!asymmetric) return xy_spacings;
     return {(xy_spacings.x() + xy_spacings.y()) / 2, (xy_spacings.y() - xy_spacings.x()) / 2};
   }
+  // The hexagonal grid's lattice point of zig-zag column c, row i.
+  static Eigen::Vector2i HexLattice(int c, int i) { return {FloorDiv2(c - i), i}; }
+  // The turns that map the lattice onto itself: quarter turns, or sixth turns of the
+  // triangles.
+  int Rotations() const { return hexagonal ? 6 : 4; }
+  // Lattice point p turned by `rotation` of those turns (right-handed, as the lattice's axes).
+  Eigen::Vector2i Rotate(const Eigen::Vector2i& p, int rotation) const;
 };
+
+Eigen::Vector2i GridModel::Rotate(const Eigen::Vector2i& p, int rotation) const {
+  if (hexagonal) {
+    // A sixth turn takes a to b and b to b - a.
+    Eigen::Vector2i q = p;
+    for (int k = 0; k < rotation; ++k) q = Eigen::Vector2i(-q.y(), q.x() + q.y());
+    return q;
+  }
+  switch (rotation) {
+    case 0:
+      return p;
+    case 1:
+      return {-p.y(), p.x()};
+    case 2:
+      return -p;
+    default:
+      return {p.y(), -p.x()};
+  }
+}
+
+// The ids of the 3 x 3 block of rows and columns around (i, j), moved inside the board at its
+// edges (2 along a side of two), in row-major order.
+std::vector<int> BlockIds(const GridModel& m, int i, int j) {
+  const int r0 = std::clamp(i - 1, 0, std::max(0, m.rows - 3));
+  const int c0 = std::clamp(j - 1, 0, std::max(0, m.cols - 3));
+  std::vector<int> ids;
+  for (int r = r0; r < std::min(m.rows, r0 + 3); ++r) {
+    for (int c = c0; c < std::min(m.cols, c0 + 3); ++c) ids.push_back(m.Id(r, c));
+  }
+  return ids;
+}
+
+// OpenCV's layouts: cols x rows circles, id = cols * i + j.
+void AddSquareLayout(GridModel* m) {
+  for (int i = 0; i < m->rows; ++i) {
+    for (int j = 0; j < m->cols; ++j) {
+      const Eigen::Vector2i xy = m->XY(i, j);
+      m->xy.push_back(xy.cast<double>());
+      m->lattice.push_back(m->LatticeOf(xy));
+      m->block.push_back(BlockIds(*m, i, j));
+      m->edges.push_back((i == 0 || i == m->rows - 1) + (j == 0 || j == m->cols - 1));
+    }
+  }
+  const auto beyond = [&](int side, int i, int j) {
+    m->beyond[side].push_back(m->LatticeOf(m->XY(i, j)));
+  };
+  for (int j = 0; j < m->cols; ++j) {
+    beyond(0, -1, j);
+    beyond(1, m->rows, j);
+  }
+  for (int i = 0; i < m->rows; ++i) {
+    beyond(2, i, -1);
+    beyond(3, i, m->cols);
+  }
+  const int i = m->rows / 2;
+  const int j = std::min((m->cols - 1) / 2, m->cols - 2);
+  m->middle = {m->Id(i, j), m->Id(i, j + 1)};
+}
+
+// The hexagonal grid's block: a circle and its six neighbours and the six next beyond them
+// (sqrt(3) spacings away), or as near to that as the board's edge allows.
+constexpr int kHexBlock = 13;
+
+// BoofCV's hexagonal layout (docs/boards.md §8): row i from the top on the zig-zag columns
+// (rows - 1 - i) % 2, + 2, ... below cols; ids row by row, left to right.
+void AddHexagonalLayout(GridModel* m) {
+  constexpr double kRowSpacings = 0.86602540378443865;  // sqrt(3) / 2
+  const auto first = [&](int i) { return Mod2(m->rows - 1 - i); };
+  const auto last = [&](int i) { return m->cols - 1 - Mod2(m->cols - 1 - first(i)); };
+  std::vector<int> row_start;
+  for (int i = 0; i < m->rows; ++i) {
+    row_start.push_back(static_cast<int>(m->xy.size()));
+    for (int c = first(i); c < m->cols; c += 2) {
+      m->xy.emplace_back(0.5 * c, kRowSpacings * i);
+      m->lattice.push_back(GridModel::HexLattice(c, i));
+      m->edges.push_back((i == 0 || i == m->rows - 1) + (c == first(i) || c == last(i)));
+    }
+  }
+  // The middle row's middle circle and the next; a row of one circle (three columns) has
+  // rows of two next to it.
+  int middle_row = m->rows / 2;
+  if (first(middle_row) == last(middle_row)) --middle_row;
+  const int middle = row_start[middle_row] + (last(middle_row) - first(middle_row)) / 4;
+  m->middle = {middle, middle + 1};
+  for (int c = Mod2(m->rows); c < m->cols; c += 2) {
+    m->beyond[0].push_back(GridModel::HexLattice(c, -1));
+  }
+  for (int c = 1; c < m->cols; c += 2) m->beyond[1].push_back(GridModel::HexLattice(c, m->rows));
+  for (int i = 0; i < m->rows; ++i) {
+    m->beyond[2].push_back(GridModel::HexLattice(first(i) - 2, i));
+    m->beyond[3].push_back(GridModel::HexLattice(last(i) + 2, i));
+  }
+  // Each circle's nearest, ties broken by id so that the block is the same on every call.
+  const int n = static_cast<int>(m->xy.size());
+  for (int id = 0; id < n; ++id) {
+    std::vector<std::pair<double, int>> by_distance;
+    for (int other = 0; other < n; ++other) {
+      by_distance.emplace_back((m->xy[other] - m->xy[id]).squaredNorm(), other);
+    }
+    const int k = std::min(n, kHexBlock);
+    std::partial_sort(by_distance.begin(), by_distance.begin() + k, by_distance.end());
+    std::vector<int> ids;
+    for (int q = 0; q < k; ++q) ids.push_back(by_distance[q].second);
+    std::sort(ids.begin(), ids.end());
+    m->block.push_back(std::move(ids));
+  }
+}
 
 GridModel MakeModel(const BoardParams& p) {
   GridModel m;
   m.cols = p.cols;
   m.rows = p.rows;
   m.asymmetric = p.asymmetric;
+  m.hexagonal = p.hexagonal;
   m.light = p.light_circles;
-  for (int i = 0; i < m.rows; ++i) {
-    for (int j = 0; j < m.cols; ++j) {
-      const Eigen::Vector2i xy = m.XY(i, j);
-      m.xy.push_back(xy.cast<double>());
-      m.lattice.push_back(m.LatticeOf(xy));
-    }
+  if (m.hexagonal) {
+    AddHexagonalLayout(&m);
+  } else {
+    AddSquareLayout(&m);
   }
   std::map<std::pair<int, int>, int> id_at;
   for (int id = 0; id < static_cast<int>(m.lattice.size()); ++id) {
@@ -81,21 +211,17 @@ GridModel MakeModel(const BoardParams& p) {
     m.next.push_back({a, b});
     if (a >= 0) m.pairs.push_back({id, a});
     if (b >= 0) m.pairs.push_back({id, b});
-    if (a >= 0 && b >= 0 && ab >= 0) m.cells.push_back({id, a, b, ab});
+    if (!m.hexagonal) {
+      if (a >= 0 && b >= 0 && ab >= 0) m.cells.push_back({id, a, b, ab});
+      continue;
+    }
+    // The triangles' third neighbour direction, b - a; the two triangles of the lattice
+    // cell: (p, p + a, p + b) and (p + a, p + b, p + a + b).
+    if (const int ba = at(p + Eigen::Vector2i(-1, 1)); ba >= 0) m.pairs.push_back({id, ba});
+    if (a >= 0 && b >= 0) m.triangles.push_back({id, a, b});
+    if (a >= 0 && b >= 0 && ab >= 0) m.triangles.push_back({a, b, ab});
   }
   return m;
-}
-
-// The ids of the 3 x 3 block of rows and columns around (i, j), moved inside the board at its
-// edges (2 along a side of two), in row-major order.
-std::vector<int> BlockIds(const GridModel& m, int i, int j) {
-  const int r0 = std::clamp(i - 1, 0, std::max(0, m.rows - 3));
-  const int c0 = std::clamp(j - 1, 0, std::max(0, m.cols - 3));
-  std::vector<int> ids;
-  for (int r = r0; r < std::min(m.rows, r0 + 3); ++r) {
-    for (int c = c0; c < std::min(m.cols, c0 + 3); ++c) ids.push_back(m.Id(r, c));
-  }
-  return ids;
 }
 
 // ---- Blobs --------------------------------------------------------------------------------
@@ -186,10 +312,13 @@ constexpr double kLatticeFit = 0.2;
 // to the threshold's edge shift, which turns a steep view of a small circle's lattice by a
 // dozen degrees: far from the 30 degrees at which another basis of the same square lattice
 // would be the reduced one. The second step is turned so that the two are right-handed in the
-// image, as the board's X and Y are for a camera facing the print. nullopt when no pair fits
-// kMinFittedNeighbours.
+// image, as the board's X and Y are for a camera facing the print. A lattice of triangles
+// (hexagonal) has two reduced bases, 60 and 120 degrees apart: the second step becomes the
+// sum of the two where they are over 90 degrees apart, so that it lies 60 degrees from the
+// first as the board's b does from a. nullopt when no pair fits kMinFittedNeighbours.
 std::optional<std::array<Eigen::Vector2d, 2>> SeedSteps(const std::vector<CircleBlob>& blobs,
-                                                        const BlobIndex& index, int seed) {
+                                                        const BlobIndex& index, int seed,
+                                                        bool hexagonal) {
   const CircleBlob& a = blobs[seed];
   // Eight neighbours hold an inner point's four nearest and four diagonal ones; the search
   // reaches 20 radii, beyond any printed grid's pitch (OpenCV's asymmetric grids: 3-4 radii).
@@ -242,6 +371,7 @@ std::optional<std::array<Eigen::Vector2d, 2>> SeedSteps(const std::vector<Circle
   if (!((rectify * steps[0]).norm() > 2.0)) return std::nullopt;
   // u right, v down: the steps are right-handed when s0.u s1.v - s0.v s1.u > 0.
   if (steps[0].x() * steps[1].y() - steps[0].y() * steps[1].x() < 0.0) steps[1] = -steps[1];
+  if (hexagonal && (rectify * steps[0]).dot(rectify * steps[1]) < 0.0) steps[1] += steps[0];
   return steps;
 }
 
@@ -303,20 +433,6 @@ Lattice GrowLattice(const std::vector<CircleBlob>& blobs, const BlobIndex& index
 
 // ---- 3. Placements ------------------------------------------------------------------------
 
-// Lattice point p turned by `rotation` quarter turns (right-handed, as the lattice's axes).
-Eigen::Vector2i Rotate(const Eigen::Vector2i& p, int rotation) {
-  switch (rotation) {
-    case 0:
-      return p;
-    case 1:
-      return {-p.y(), p.x()};
-    case 2:
-      return -p;
-    default:
-      return {p.y(), -p.x()};
-  }
-}
-
 // The board on a grown lattice: lattice point = Rotate(board lattice point) + offset. A
 // circle without a blob (cut by the image border, or its blob lost to the threshold) is
 // measured from a seed predicted by a neighbour's step: its neighbour's ellipse moved there.
@@ -360,16 +476,16 @@ std::vector<Placement> Placements(const GridModel& m, const std::vector<CircleBl
   std::vector<Placement> out;
   const std::size_t n = m.lattice.size();
   const int max_filled = MaxFilledCircles(n);
-  for (int rotation = 0; rotation < 4; ++rotation) {
+  for (int rotation = 0; rotation < m.Rotations(); ++rotation) {
     for (int anchor = 0; anchor <= max_filled; ++anchor) {
       for (const auto& [point, unused] : lattice) {
         Placement pl;
         pl.rotation = rotation;
         pl.offset =
-            Eigen::Vector2i(point.first, point.second) - Rotate(m.lattice[anchor], rotation);
+            Eigen::Vector2i(point.first, point.second) - m.Rotate(m.lattice[anchor], rotation);
         int filled = 0;
         for (std::size_t id = 0; id < n && filled <= max_filled; ++id) {
-          const Eigen::Vector2i p = Rotate(m.lattice[id], rotation) + pl.offset;
+          const Eigen::Vector2i p = m.Rotate(m.lattice[id], rotation) + pl.offset;
           const LatticePoint* lp = Find(lattice, p);
           // Anchored on the board's first circle with a blob: each placement comes once.
           if (lp != nullptr && static_cast<int>(id) < anchor) break;
@@ -396,26 +512,13 @@ std::vector<Placement> Placements(const GridModel& m, const std::vector<CircleBl
 // one or two) hold blobs of the lattice. The board is then part of a larger grid. A page's
 // margin, its edge or the room behind it hold no such row.
 bool LatticeContinues(const GridModel& m, const Lattice& lattice, const Placement& pl) {
-  // Per side (top, bottom, left, right): the rows or columns just beyond the board.
-  std::array<int, 4> judged = {0, 0, 0, 0};
-  std::array<int, 4> taken = {0, 0, 0, 0};
-  const auto count = [&](int side, int i, int j) {
-    const Eigen::Vector2i p = Rotate(m.LatticeOf(m.XY(i, j)), pl.rotation) + pl.offset;
-    ++judged[side];
-    taken[side] += Find(lattice, p) != nullptr;
-  };
-  for (int j = 0; j < m.cols; ++j) {
-    count(0, -1, j);
-    count(1, m.rows, j);
-  }
-  for (int i = 0; i < m.rows; ++i) {
-    count(2, i, -1);
-    count(3, i, m.cols);
-  }
-  for (int side = 0; side < 4; ++side) {
-    if (taken[side] >= std::max(std::min(judged[side], 2), (3 * judged[side] + 3) / 4)) {
-      return true;
+  for (const std::vector<Eigen::Vector2i>& side : m.beyond) {
+    int taken = 0;
+    for (const Eigen::Vector2i& p : side) {
+      taken += Find(lattice, m.Rotate(p, pl.rotation) + pl.offset) != nullptr;
     }
+    const int judged = static_cast<int>(side.size());
+    if (taken >= std::max(std::min(judged, 2), (3 * judged + 3) / 4)) return true;
   }
   return false;
 }
@@ -423,9 +526,7 @@ bool LatticeContinues(const GridModel& m, const Lattice& lattice, const Placemen
 // The u component of the image direction of the board's x axis (along a row, towards higher
 // col) at the middle of the board: 1 when the board stands upright.
 double XAxisU(const GridModel& m, const std::vector<Eigen::Vector2d>& uv) {
-  const int i = m.rows / 2;
-  const int j = std::min((m.cols - 1) / 2, m.cols - 2);
-  return (uv[m.Id(i, j + 1)] - uv[m.Id(i, j)]).normalized().x();
+  return (uv[m.middle[1]] - uv[m.middle[0]]).normalized().x();
 }
 
 // Of the placements that cover the same lattice points (the rotations of one grid that the
@@ -438,7 +539,7 @@ std::vector<Placement> UprightPlacements(const GridModel& m, std::vector<Placeme
     std::vector<std::pair<int, int>> covered;
     std::vector<Eigen::Vector2d> uv;
     for (std::size_t id = 0; id < all[k].blob.size(); ++id) {
-      const Eigen::Vector2i p = Rotate(m.lattice[id], all[k].rotation) + all[k].offset;
+      const Eigen::Vector2i p = m.Rotate(m.lattice[id], all[k].rotation) + all[k].offset;
       covered.emplace_back(p.x(), p.y());
       uv.push_back(all[k].seed[id].centre);
     }
@@ -458,28 +559,36 @@ std::vector<Placement> UprightPlacements(const GridModel& m, std::vector<Placeme
 
 // ---- 4. Local verification ----------------------------------------------------------------
 
+// A hexagonal block fits the quadratic (six terms) with this many other circles at least,
+// two more than it needs; the smallest boards (below nine circles) fit an affine map, which
+// needs three, and the smallest of all (3 x 3, five circles) leaves one to check.
+constexpr int kHexQuadraticBlock = 8;
+
 // Circle `id`'s image position predicted by least squares from the other circles of its
 // block: each image coordinate as a + b x + c y + d xy (+ e x^2 and f y^2 along a side of
-// three), in spacings relative to the circle. nullopt when the block does not determine it.
+// three; hexagonal: all six terms with kHexQuadraticBlock others, else a + b x + c y), in
+// spacings relative to the circle. nullopt when the block does not determine it.
 std::optional<Eigen::Vector2d> PredictFromBlock(const GridModel& m,
-                                                const std::vector<Eigen::Vector2d>& uv, int i,
-                                                int j) {
-  const int id = m.Id(i, j);
-  const bool quad_x = std::min(3, m.cols) == 3;
-  const bool quad_y = std::min(3, m.rows) == 3;
+                                                const std::vector<Eigen::Vector2d>& uv, int id) {
+  const int others = static_cast<int>(m.block[id].size()) - 1;
+  const bool hex_quadratic = others >= kHexQuadraticBlock;
+  const bool xy_term = !m.hexagonal || hex_quadratic;
+  const bool quad_x = m.hexagonal ? hex_quadratic : std::min(3, m.cols) == 3;
+  const bool quad_y = m.hexagonal ? hex_quadratic : std::min(3, m.rows) == 3;
   Eigen::Matrix<double, 6, 6> AtA = Eigen::Matrix<double, 6, 6>::Zero();
   Eigen::Matrix<double, 6, 2> Atb = Eigen::Matrix<double, 6, 2>::Zero();
-  for (const int other : BlockIds(m, i, j)) {
+  for (const int other : m.block[id]) {
     if (other == id) continue;
     const Eigen::Vector2d d = m.xy[other] - m.xy[id];  // centred: the prediction is the constant
     Eigen::Matrix<double, 6, 1> b;
-    b << 1.0, d.x(), d.y(), d.x() * d.y(), quad_x ? d.x() * d.x() : 0.0,
+    b << 1.0, d.x(), d.y(), xy_term ? d.x() * d.y() : 0.0, quad_x ? d.x() * d.x() : 0.0,
         quad_y ? d.y() * d.y() : 0.0;
     AtA += b * b.transpose();
     Atb += b * uv[other].transpose();
   }
-  // Unused terms (a side of two) have zero rows: pin them so the system stays regular.
-  for (int k = 4; k < 6; ++k) {
+  // Unused terms (a side of two, a small hexagonal board) have zero rows: pin them so the
+  // system stays regular.
+  for (int k = 3; k < 6; ++k) {
     if (AtA(k, k) == 0.0) AtA(k, k) = 1.0;
   }
   const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(AtA);
@@ -490,30 +599,25 @@ std::optional<Eigen::Vector2d> PredictFromBlock(const GridModel& m,
 }
 
 // The local pitch at circle `id`: the image distance to its nearest neighbour in its block.
-double LocalPitch(const GridModel& m, const std::vector<Eigen::Vector2d>& uv, int i, int j) {
-  const int id = m.Id(i, j);
+double LocalPitch(const GridModel& m, const std::vector<Eigen::Vector2d>& uv, int id) {
   double pitch = std::numeric_limits<double>::infinity();
-  for (const int other : BlockIds(m, i, j)) {
+  for (const int other : m.block[id]) {
     if (other != id) pitch = std::min(pitch, (uv[other] - uv[id]).norm());
   }
   return pitch;
 }
 
 // Every circle against its prediction from the others of its block, within max(1 px,
-// fraction x local pitch), the fraction half as large again per axis along which the circle
-// lies at the board's edge (predicted by extrapolation). A board of 2 x 2 has nothing to
-// predict from: true.
+// fraction x local pitch), the fraction half as large again per edge of the board the circle
+// lies on (predicted by extrapolation along it). A board of 2 x 2 has nothing to predict
+// from: true.
 bool LocallyConsistent(const GridModel& m, const std::vector<Eigen::Vector2d>& uv,
                        double fraction) {
-  if (m.cols < 3 && m.rows < 3) return true;
-  for (int i = 0; i < m.rows; ++i) {
-    for (int j = 0; j < m.cols; ++j) {
-      const std::optional<Eigen::Vector2d> p = PredictFromBlock(m, uv, i, j);
-      const int extrapolated = (i == 0 || i == m.rows - 1) + (j == 0 || j == m.cols - 1);
-      const double tol =
-          std::max(1.0, fraction * (1.0 + 0.5 * extrapolated) * LocalPitch(m, uv, i, j));
-      if (!p || !((*p - uv[m.Id(i, j)]).norm() <= tol)) return false;
-    }
+  if (!m.hexagonal && m.cols < 3 && m.rows < 3) return true;
+  for (int id = 0; id < static_cast<int>(uv.size()); ++id) {
+    const std::optional<Eigen::Vector2d> p = PredictFromBlock(m, uv, id);
+    const double tol = std::max(1.0, fraction * (1.0 + 0.5 * m.edges[id]) * LocalPitch(m, uv, id));
+    if (!p || !((*p - uv[id]).norm() <= tol)) return false;
   }
   return true;
 }
@@ -540,9 +644,12 @@ double BoxGrey(const ImageView8& image, const Eigen::Vector2d& uv) {
 //     (circles 12 px across, 5 px apart, blur 1.5: 11%);
 //   - the centre of a lattice cell must be at least kCellDepth of the way from its circles'
 //     grey to that of the midpoints of its sides: every other square of a checker, or dots
-//     printed inside squares, have a square of the circles' own colour there.
+//     printed inside squares, have a square of the circles' own colour there. A hexagonal
+//     grid's cells are triangles of three neighbours, their centroids the points furthest
+//     from every circle, and are judged the same way.
 // Both samples lie outside every circle (the nearest centre is over half a pitch away, a
-// circle's radius under half). Also each circle must stand min_contrast / 2 from its page.
+// circle's radius under half; a triangle's centroid is 0.58 pitch from its corners). Also
+// each circle must stand min_contrast / 2 from its page.
 constexpr double kGapDepth = 0.75;
 constexpr double kCellDepth = 0.5;
 
@@ -577,6 +684,15 @@ bool PageBetweenCircles(const ImageView8& image, const GridModel& m,
     for (const int id : c) circles = std::max(circles, circle[id]);
     if (!deep(grey(centre), reference, circles, kCellDepth)) return false;
   }
+  for (const auto& t : m.triangles) {
+    double reference = std::numeric_limits<double>::infinity();
+    for (const auto& [i, j] : {std::pair{0, 1}, {0, 2}, {1, 2}}) {
+      reference = std::min(reference, grey(0.5 * (uv[t[i]] + uv[t[j]])));
+    }
+    const Eigen::Vector2d centroid = (uv[t[0]] + uv[t[1]] + uv[t[2]]) / 3.0;
+    const double circles = std::max({circle[t[0]], circle[t[1]], circle[t[2]]});
+    if (!deep(grey(centroid), reference, circles, kCellDepth)) return false;
+  }
   return true;
 }
 
@@ -608,19 +724,16 @@ std::vector<Eigen::Vector2d> CorrectPerspective(const GridModel& m,
   const HomographyFitOptions dlt{.refine = false};
   for (int round = 0; round < 3; ++round) {
     std::vector<Eigen::Vector2d> next = centres;
-    for (int i = 0; i < m.rows; ++i) {
-      for (int j = 0; j < m.cols; ++j) {
-        std::vector<Eigen::Vector2d> src, dst;
-        for (const int other : BlockIds(m, i, j)) {
-          src.push_back(m.xy[other]);
-          dst.push_back(centres[other]);
-        }
-        const int id = m.Id(i, j);
-        const std::optional<HomographyFit> fit = FitHomography(src, dst, dlt);
-        if (!fit) continue;
-        if (const std::optional<Eigen::Vector2d> c = ImageOfCentre(fit->H, ellipses[id])) {
-          next[id] = *c;
-        }
+    for (std::size_t id = 0; id < n; ++id) {
+      std::vector<Eigen::Vector2d> src, dst;
+      for (const int other : m.block[id]) {
+        src.push_back(m.xy[other]);
+        dst.push_back(centres[other]);
+      }
+      const std::optional<HomographyFit> fit = FitHomography(src, dst, dlt);
+      if (!fit) continue;
+      if (const std::optional<Eigen::Vector2d> c = ImageOfCentre(fit->H, ellipses[id])) {
+        next[id] = *c;
       }
     }
     centres = std::move(next);
@@ -653,11 +766,14 @@ bool EllipticEdge(const Ellipse& e, double median_residual_px) {
 // kMaxSquareCos (78 degrees), the ratio of the lengths within kMaxSquareRatio. Measured on
 // printed grids: at most 0.07 and 1.10 (the evaluation's steepest views of 12 px circles),
 // 0.01 and 1.01 in the real photos; a hexagonal grid gives 0.5, the circle board 1.43.
+// The hexagonal grid's steps are 60 degrees apart instead: cos within kMaxSquareCos of 0.5
+// (47 to 73 degrees), where a square grid gives 0.
 constexpr double kMaxSquareCos = 0.2;
 constexpr double kMaxSquareRatio = 1.25;
+constexpr double kHexagonalCos = 0.5;
 
-bool SquareLattice(const GridModel& m, const std::vector<Eigen::Vector2d>& uv,
-                   const std::vector<Ellipse>& ellipses) {
+bool LatticeAsPrinted(const GridModel& m, const std::vector<Eigen::Vector2d>& uv,
+                      const std::vector<Ellipse>& ellipses) {
   std::vector<double> cosines, ratios;
   for (int id = 0; id < static_cast<int>(m.lattice.size()); ++id) {
     const int a = m.next[id][0], b = m.next[id][1];
@@ -672,7 +788,8 @@ bool SquareLattice(const GridModel& m, const std::vector<Eigen::Vector2d>& uv,
     const Eigen::Matrix2d rectify = eig.operatorInverseSqrt();
     const Eigen::Vector2d qa = rectify * (uv[a] - uv[id]);
     const Eigen::Vector2d qb = rectify * (uv[b] - uv[id]);
-    cosines.push_back(std::abs(qa.dot(qb)) / (qa.norm() * qb.norm()));
+    const double cosine = qa.dot(qb) / (qa.norm() * qb.norm());
+    cosines.push_back(m.hexagonal ? std::abs(cosine - kHexagonalCos) : std::abs(cosine));
     const double ratio = qa.norm() / qb.norm();
     ratios.push_back(std::max(ratio, 1.0 / ratio));
   }
@@ -741,7 +858,8 @@ class Search {
     const std::size_t n = m_.lattice.size();
     for (int seed = 0; seed < static_cast<int>(blobs_.size()); ++seed) {
       if (claimed[seed] || placed[seed]) continue;
-      const std::optional<std::array<Eigen::Vector2d, 2>> steps = SeedSteps(blobs_, index_, seed);
+      const std::optional<std::array<Eigen::Vector2d, 2>> steps =
+          SeedSteps(blobs_, index_, seed, m_.hexagonal);
       if (!steps) continue;
       const Lattice lattice = GrowLattice(blobs_, index_, seed, *steps, claimed, seed, &member);
       if (lattice.size() + MaxFilledCircles(n) < n) continue;
@@ -812,7 +930,7 @@ class Search {
       for (const Ellipse& e : ellipses) h.uv.push_back(e.centre);
     }
     if (!LocallyConsistent(m_, h.uv, options_.max_residual_pitch_fraction)) return std::nullopt;
-    if (!SquareLattice(m_, h.uv, ellipses)) return std::nullopt;
+    if (!LatticeAsPrinted(m_, h.uv, ellipses)) return std::nullopt;
     h.x_axis_u = XAxisU(m_, h.uv);
     return h;
   }

@@ -1,47 +1,54 @@
 #pragma once
 // Detector of OpenCV's circle grids (`circle_grid`, docs/boards.md §8): cols x rows circles,
 // symmetric or asymmetric (cv::findCirclesGrid's CALIB_CB_SYMMETRIC_GRID and
-// CALIB_CB_ASYMMETRIC_GRID), dark circles on a light page or, when the board says so, light on
-// dark. Features: the circle centres, id = cols * row + col, row 0 at the top of the print
-// and col 0 at its left (OpenCV's order of object points).
+// CALIB_CB_ASYMMETRIC_GRID), and of BoofCV's hexagonal grid (`hexagonal`), dark circles on a
+// light page or, when the board says so, light on dark. Features: the circle centres, id =
+// cols * row + col, row 0 at the top of the print and col 0 at its left (OpenCV's order of
+// object points); hexagonal: row by row from the top, left to right in a row (board.h).
 //
 // Method (docs/circle-detector.md, "Circle grids"):
 //  1. Candidates: blobs of the board's polarity (circle_blobs.h), coarse to fine like the
 //     circle board's detector.
-//  2. Lattice: both layouts are square lattices, the asymmetric one turned by 45 degrees (its
-//     nearest neighbours are diagonal, spacing * sqrt(2) apart). A blob seeds a lattice with
-//     the pair of its similar neighbours of which most neighbours are integer combinations,
-//     reduced to the shortest, most nearly orthogonal basis in the metric of the blob's own
-//     ellipse (which shows the print as seen face-on, an ellipse being the image of a
-//     circle). The lattice grows breadth-first, each step predicted from the steps last
-//     measured next to it, taking the similar blob nearest the prediction within 0.3 of a
-//     step. Clutter that fits no prediction stays out; the predictions follow perspective and
-//     real lens distortion alike.
+//  2. Lattice: OpenCV's layouts are square lattices, the asymmetric one turned by 45 degrees
+//     (its nearest neighbours are diagonal, spacing * sqrt(2) apart); the hexagonal grid is a
+//     lattice of triangles, its basis a step along a row and one 60 degrees from it to the
+//     next row (of the two reduced bases, 60 and 120 degrees apart, the first). A blob seeds
+//     a lattice with the pair of its similar neighbours of which most neighbours are integer
+//     combinations, reduced to the shortest, most nearly orthogonal basis in the metric of
+//     the blob's own ellipse (which shows the print as seen face-on, an ellipse being the
+//     image of a circle). The lattice grows breadth-first, each step predicted from the steps
+//     last measured next to it, taking the similar blob nearest the prediction within 0.3 of
+//     a step. Clutter that fits no prediction stays out; the predictions follow perspective
+//     and real lens distortion alike.
 //  3. Placements: every way the board's lattice points fit onto a grown lattice (four
-//     rotations, every offset) is a candidate, with at most one circle in ten lacking its
-//     blob (cut by the image border, or lost to the threshold: measured from a neighbour's
-//     ellipse moved by the lattice step). One whose lattice goes on beyond one of its sides
-//     (three quarters of the positions there taken) belongs to a larger grid and is refused
-//     (kWrongBoard).
+//     rotations, six for the hexagonal grid; every offset) is a candidate, with at most one
+//     circle in ten lacking its blob (cut by the image border, or lost to the threshold:
+//     measured from a neighbour's ellipse moved by the lattice step). One whose lattice goes
+//     on beyond one of its sides (three quarters of the positions there taken) belongs to a
+//     larger grid and is refused (kWrongBoard).
 //  4. Verification, local only (never one homography of the whole board, which a real lens
 //     bends by tens of pixels): each centre against a quadratic through the other circles of
-//     its 3 x 3 block of rows and columns, first the blobs' centroids (within a quarter of the
+//     its 3 x 3 block of rows and columns (hexagonal: its 13 nearest circles, a circle, its
+//     six neighbours and the six beyond), first the blobs' centroids (within a quarter of the
 //     local pitch), then the sub-pixel centres (within max_residual_pitch_fraction of it,
 //     half as much again per axis along which the circle lies at the board's edge); the page
 //     between the circles (the midpoints of neighbours and the centres of lattice cells as
-//     light as the page beside them: a checkerboard's squares touch at their corners); every
-//     edge an ellipse's (a square grid's squares are not); and the lattice square in each
-//     circle's own metric (not a hexagonal or rectangular grid).
+//     light as the page beside them: a checkerboard's squares touch at their corners;
+//     hexagonal: the centroids of the lattice's triangles); every edge an ellipse's (a square
+//     grid's squares are not); and the lattice square in each circle's own metric (not a
+//     hexagonal or rectangular grid; hexagonal: its steps 60 degrees apart, not a square grid).
 //  5. Sub-pixel: each circle's ellipse from its edge (circle_edge_fit.h), seeded by its blob;
 //     the image of the circle's centre is not the ellipse's centre under perspective, so the
-//     ellipse is taken back to the board through the homography of its 3 x 3 block, and
+//     ellipse is taken back to the board through the homography of its block, and
 //     the centre of that circle mapped forward (three rounds, each block's homography
 //     refitted to the corrected centres). This needs no printed diameter.
 //
 // Orientation: the board's symmetries leave ids ambiguous: the symmetric grid is the same
 // board turned by 180 degrees (and by 90 when cols == rows); the asymmetric grid is when rows
 // is even (its first and last rows then start on opposite sides), and never when rows is odd
-// (OpenCV's 4 x 11: its ids are fixed by the print). Among the rotations the board allows, the
+// (OpenCV's 4 x 11: its ids are fixed by the print); the hexagonal grid is the same turned by
+// 180 degrees when cols and rows are both even or both odd (BoofCV's 28 x 24), never by 60
+// or 120 (a rectangle turned so is none). Among the rotations the board allows, the
 // detector chooses the one whose board x axis (along a row, towards higher col) points most
 // nearly along the image's +u, as the checker detector does (the board as upright as
 // possible). Use an asymmetric grid with an odd number of rows when the orientation matters.

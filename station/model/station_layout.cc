@@ -62,6 +62,8 @@ const char* KeyOfBoardError(BoardParamsError error) {
       return "tag_spacing";
     case BoardParamsError::kBadStartId:
       return "start_id";
+    case BoardParamsError::kBadLayout:
+      return "hexagonal";
   }
   return "type";
 }
@@ -69,7 +71,8 @@ const char* KeyOfBoardError(BoardParamsError error) {
 absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
                                 "diameter_m", "asymmetric", "light_circles", "border_bits",
-                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "pose"});
+                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "pose",
+                                "hexagonal"});
       !s.ok()) {
     return s;
   }
@@ -103,6 +106,8 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (!asymmetric.ok()) return asymmetric.status();
   absl::StatusOr<bool> light_circles = f.BoolOr("light_circles", params.light_circles);
   if (!light_circles.ok()) return light_circles.status();
+  absl::StatusOr<bool> hexagonal = f.BoolOr("hexagonal", params.hexagonal);
+  if (!hexagonal.ok()) return hexagonal.status();
   absl::StatusOr<std::int64_t> border = f.IntegerOr("border_bits", params.apriltag_border_bits);
   if (!border.ok()) return border.status();
   params.cols = ClampToInt(*cols);
@@ -112,6 +117,7 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   params.diameter_m = *diameter;
   params.asymmetric = *asymmetric;
   params.light_circles = *light_circles;
+  params.hexagonal = *hexagonal;
   params.apriltag_border_bits = ClampToInt(*border);
   if (absl::Status s = ReadAprilGrid(f, &params); !s.ok()) return s;
   BoardParamsError error = BoardParamsError::kOk;
@@ -245,6 +251,7 @@ nlohmann::json BoardParamsToJson(const BoardParams& p) {
     j["diameter_m"] = p.diameter_m;
     j["asymmetric"] = p.asymmetric;
     j["light_circles"] = p.light_circles;
+    j["hexagonal"] = p.hexagonal;
   }
   if (p.type == BoardType::kApriltag) {
     j["border_bits"] = p.apriltag_border_bits;

@@ -120,8 +120,13 @@ std::vector<PhotoSet> BuildSets() {
                        "symmetric circle grid 10x8, 15 mm circles, 25 mm pitch",
                        Reference::kSymmetricCircles, 10, 8, 0.025));
   sets.back().board = CircleGrid(10, 8, false, 0.025, 0.015);
+  // BoofCV's yaml: CIRCLE_HEXAGONAL, numRows 24, numCols 28 (zig-zag columns: 14 circles a
+  // row, 336 in all), shapeDistance 1.2 and shapeSize 1.0 in unpublished units; 24 and 20 mm
+  // keep their ratio. OpenCV has no hexagonal grid to compare with.
   sets.push_back(Other("boofcv/circle_hexagonal_sony_hx5v", Lens::kMild,
                        "hexagonal circle grid (yaml 28x24)"));
+  sets.back().board = CircleGrid(28, 24, false, 0.024, 0.020);
+  sets.back().board->hexagonal = true;
   sets.push_back(Other("boofcv/square_grid_mono_sony_hx5v", Lens::kMild,
                        "square grid 3x4 squares, 30 mm squares and gaps"));
   sets.push_back(Other("boofcv/square_grid_fisheye", Lens::kFisheye, "square grid 3x4 squares"));
@@ -293,8 +298,9 @@ std::string BoardLabel(const BoardParams& board) {
     return BoardTypeName(board.type);
   }
   const bool asymmetric = board.type == BoardType::kCircleGrid && board.asymmetric;
+  const bool hexagonal = board.type == BoardType::kCircleGrid && board.hexagonal;
   return absl::StrCat(BoardTypeName(board.type), " ", board.cols, "x", board.rows,
-                      asymmetric ? " asymmetric" : "");
+                      asymmetric ? " asymmetric" : "", hexagonal ? " hexagonal" : "");
 }
 
 const std::vector<SweepBoard>& SweepBoards() {
@@ -304,7 +310,7 @@ const std::vector<SweepBoard>& SweepBoards() {
       for (const SweepBoard& s : *b) {
         const BoardParams& q = s.board.params();
         if (q.type == p.type && q.cols == p.cols && q.rows == p.rows &&
-            q.asymmetric == p.asymmetric) {
+            q.asymmetric == p.asymmetric && q.hexagonal == p.hexagonal) {
           return;
         }
       }
@@ -329,7 +335,14 @@ bool ShowsBoard(const PhotoSet& set, const BoardParams& board) {
   if (board.type == BoardType::kCircleGrid && board.asymmetric != set.board->asymmetric) {
     return false;
   }
+  if (board.type == BoardType::kCircleGrid && board.hexagonal != set.board->hexagonal) {
+    return false;
+  }
   const int a = set.board->cols, b = set.board->rows;
+  // A hexagonal grid turned by a quarter is no hexagonal grid (its rows would run across).
+  if (board.type == BoardType::kCircleGrid && board.hexagonal) {
+    return board.cols == a && board.rows == b;
+  }
   return (board.cols == a && board.rows == b) || (board.cols == b && board.rows == a);
 }
 

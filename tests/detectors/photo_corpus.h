@@ -93,7 +93,7 @@ bool IsPartialView(const PhotoSet& set, const std::string& path);
 absl::StatusOr<Detection> DetectInPhoto(const std::string& path, const Board& board);
 
 // A board in words: its type name, with cols x rows for checkers and circle grids
-// ("checker 6x4", "circle_grid 4x11 asymmetric", "apriltag").
+// ("checker 6x4", "circle_grid 4x11 asymmetric", "circle_grid 28x24 hexagonal", "apriltag").
 std::string BoardLabel(const BoardParams& board);
 
 // One board of the false-positive sweep.
@@ -108,8 +108,9 @@ struct SweepBoard {
 const std::vector<SweepBoard>& SweepBoards();
 
 // Whether a photo of `set` shows `board`: the same type, and for checkers and circle grids
-// the same count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned) and, for circle
-// grids, the same layout (symmetric or asymmetric).
+// the same count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned; not for a
+// hexagonal grid) and, for circle grids, the same layout (symmetric, asymmetric or
+// hexagonal).
 bool ShowsBoard(const PhotoSet& set, const BoardParams& board);
 
 // A detection that should not exist.

@@ -171,5 +171,54 @@ TEST_F(PatternCliTest, BadUsageExitsWithTwoAndOneLine) {
   EXPECT_FALSE(std::filesystem::exists(Path("x.png")));
 }
 
+// BoofCV's hexagonal grid drawn by `linecal pattern` and found in the drawing by `linecal
+// detect`: 12 zig-zag columns, 9 rows (54 circles of 20 mm, neighbours 24 mm apart), at 100
+// dpi. The centres span 5.5 x 4 sqrt(3) spacings, the page two more on every side.
+TEST_F(PatternCliTest, HexagonalCircleGridIsDrawnAndFound) {
+  const std::string board =
+      "--board circle_grid --cols 12 --rows 9 --spacing 0.024 --diameter 0.02 --hexagonal";
+  const auto drawn = RunLinecal("pattern " + board + " --dpi 100 --json --out " + Path("h.png"));
+  ASSERT_EQ(drawn.exit_code, 0) << drawn.err;
+  const nlohmann::json page = nlohmann::json::parse(drawn.out);
+  EXPECT_NEAR(page.at("page_width_m").get<double>(), 0.024 * 9.5, 1e-12);
+  EXPECT_NEAR(page.at("page_height_m").get<double>(), 0.024 * (4.0 * std::sqrt(3.0) + 4.0), 1e-12);
+
+  const auto found = RunLinecal("detect " + board + " --image " + Path("h.png") + " --json");
+  ASSERT_EQ(found.exit_code, 0) << found.err << found.out;
+  const nlohmann::json j = nlohmann::json::parse(found.out);
+  EXPECT_EQ(j.at("found"), true);
+  ASSERT_EQ(j.at("features").size(), 54u);
+  // Circle id k of row i (6 a row, from the top) on zig-zag column 2 k' + (8 - i) % 2: its
+  // centre two spacings plus c / 2 spacings from the page's left and two plus i sqrt(3) / 2
+  // from its top, at 100 / 25.4 px per mm (pixel centres at integers).
+  constexpr double kPxPerM = 100.0 / 0.0254;
+  for (const nlohmann::json& f : j.at("features")) {
+    const int id = f.at("id").get<int>();
+    const int i = id / 6, c = 2 * (id % 6) + (8 - i) % 2;
+    const double u = (2.0 + 0.5 * c) * 0.024 * kPxPerM - 0.5;
+    const double v = (2.0 + 0.5 * std::sqrt(3.0) * i) * 0.024 * kPxPerM - 0.5;
+    EXPECT_NEAR(f.at("u").get<double>(), u, 0.1) << id;
+    EXPECT_NEAR(f.at("v").get<double>(), v, 0.1) << id;
+  }
+
+  // The layouts exclude each other, the flag is the circle grid's, and a hexagonal grid has
+  // three rows and columns at least.
+  const struct {
+    std::string args;
+    std::string message;
+  } bad[] = {
+      {"--board circle_grid --hexagonal --asymmetric",
+       "--hexagonal: a grid is hexagonal or asymmetric, not both"},
+      {"--board checker --hexagonal", "--hexagonal applies to --board circle_grid only"},
+      {"--board circle_grid --hexagonal --cols 2", "--cols: 2 is outside [3, 100]"},
+      {"--board circle_grid --hexagonal --rows 2", "--rows: 2 is outside [3, 100]"},
+  };
+  for (const auto& c : bad) {
+    const auto run = RunLinecal("pattern " + c.args + " --out " + Path("x.svg"));
+    EXPECT_EQ(run.exit_code, 2) << c.args;
+    EXPECT_NE(run.err.find(c.message), std::string::npos) << c.args << "\n" << run.err;
+  }
+}
+
 }  // namespace
 }  // namespace linecal

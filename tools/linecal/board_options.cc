@@ -42,9 +42,14 @@ const char* OptionOf(BoardParamsError e) {
       return "tag-spacing";
     case BoardParamsError::kBadStartId:
       return "start-id";
+    case BoardParamsError::kBadLayout:
+      return "hexagonal";
   }
   return "board";
 }
+
+// The fewest columns and rows of p's layout.
+int MinSide(const BoardParams& p) { return p.hexagonal ? kMinHexagonalSide : kMinCheckerCorners; }
 
 // --tag-cols, --tag-rows, --tag-spacing, --start-id into *p (their defaults: p's).
 absl::Status AprilGridFromCommandLine(const cli::CommandLine& cl, BoardParams* p) {
@@ -67,7 +72,7 @@ absl::Status AprilGridFromCommandLine(const cli::CommandLine& cl, BoardParams* p
 // diameter and polarity) may be added.
 absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
   for (const char* option : {"board", "scale", "cols", "rows", "square", "spacing", "asymmetric",
-                             "tag-cols", "tag-rows", "tag-spacing", "start-id"}) {
+                             "tag-cols", "tag-rows", "tag-spacing", "start-id", "hexagonal"}) {
     if (cl.Has(option)) {
       return absl::InvalidArgumentError(
           absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
@@ -107,11 +112,9 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
     case BoardParamsError::kBadScale:
       return absl::StrCat(p.scale, " is outside [", kMinBoardScale, ", ", kMaxBoardScale, "]");
     case BoardParamsError::kBadCols:
-      return absl::StrCat(p.cols, " is outside [", kMinCheckerCorners, ", ", kMaxCheckerCorners,
-                          "]");
+      return absl::StrCat(p.cols, " is outside [", MinSide(p), ", ", kMaxCheckerCorners, "]");
     case BoardParamsError::kBadRows:
-      return absl::StrCat(p.rows, " is outside [", kMinCheckerCorners, ", ", kMaxCheckerCorners,
-                          "]");
+      return absl::StrCat(p.rows, " is outside [", MinSide(p), ", ", kMaxCheckerCorners, "]");
     case BoardParamsError::kBadSquare:
       return absl::StrCat(p.square_m, " m is outside (0, ", kMaxCheckerSquareM, "]");
     case BoardParamsError::kBadBorderBits:
@@ -133,6 +136,8 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
       return absl::StrCat(p.apriltag_start_id, ": ids ", p.apriltag_start_id, "..",
                           p.apriltag_start_id + p.apriltag_cols * p.apriltag_rows - 1,
                           " must lie in tag36h11's 0..", kTag36h11Codes - 1);
+    case BoardParamsError::kBadLayout:
+      return "a grid is hexagonal or asymmetric, not both";
   }
   return "invalid";
 }
@@ -155,6 +160,9 @@ std::vector<cli::OptionSpec> BoardOptionSpecs() {
       {"tag-rows", "M", "apriltag only: tags per column (default 6)"},
       {"tag-spacing", "R", "apriltag only: gap between tags / tag side (default 0.3)"},
       {"start-id", "K", "apriltag only: tag36h11 id of the bottom-left tag (default 0)"},
+      {"hexagonal", "",
+       "circle_grid only: BoofCV's hexagonal grid; --cols/--rows are its zig-zag columns and "
+       "rows, --spacing the distance of neighbours"},
   };
 }
 
@@ -187,6 +195,7 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
       {"tag-rows", {BoardType::kApriltag}},
       {"tag-spacing", {BoardType::kApriltag}},
       {"start-id", {BoardType::kApriltag}},
+      {"hexagonal", {BoardType::kCircleGrid}},
   };
   for (const Applies& a : applies) {
     if (!cl.Has(a.option) || absl::c_linear_search(a.types, p.type)) continue;
@@ -218,6 +227,7 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   p.diameter_m = *diameter;
   p.asymmetric = cl.Has("asymmetric");
   p.light_circles = cl.Has("light-circles");
+  p.hexagonal = cl.Has("hexagonal");
   p.apriltag_border_bits = *border_bits;
 
   const BoardParamsError e = ValidateBoardParams(p);

@@ -35,7 +35,7 @@ const char* Description(BoardType type) {
     case BoardType::kChecker:
       return "generic chessboard, cols x rows inner corners";
     case BoardType::kCircleGrid:
-      return "OpenCV circle grid, cols x rows circles, symmetric or asymmetric";
+      return "circle grid: OpenCV's symmetric or asymmetric (cols x rows), BoofCV's hexagonal";
   }
   return "";
 }

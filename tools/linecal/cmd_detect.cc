@@ -256,7 +256,7 @@ int RunDetect(const Args& args) {
                      "Kalibr camchain)"});
   cli::CommandLine cl(
       "linecal detect --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
-      "[--spacing METRES --diameter METRES] [--asymmetric] [--light-circles] "
+      "[--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] [--light-circles] "
       "--image FILE [--intrinsics FILE [--camera NAME]] [--json] [--overlay OUT.png]\n"
       "       linecal detect --board round_hole [--scale S] --cloud FILE [--cloud FILE ...] "
       "[--json]",

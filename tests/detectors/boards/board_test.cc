@@ -447,6 +447,80 @@ TEST(Board, CircleGridAsymmetricIsOpenCvsLayout) {
              kExactM, "row 1 shifted");
 }
 
+// BoofCV's createLayout of its hexagonal grid (CalibrationDetectorCircleHexagonalGrid, y up,
+// centred): its row r from the bottom at y = r s sqrt(3)/2 - h/2, on the columns r % 2, r % 2
+// + 2, ... below cols at x = col s / 2 - w / 2, w = (cols - 1) s / 2, h = (rows - 1) s sqrt(3)/2.
+std::vector<Eigen::Vector2d> BoofCvHexagonalLayout(int rows, int cols, double s) {
+  const double space_x = 0.5 * s, space_y = s * std::sin(std::numbers::pi / 3.0);
+  const double w = (cols - 1) * space_x, h = (rows - 1) * space_y;
+  std::vector<Eigen::Vector2d> points;
+  for (int r = 0; r < rows; ++r) {
+    for (int col = r % 2; col < cols; col += 2) {
+      points.emplace_back(col * space_x - 0.5 * w, r * space_y - 0.5 * h);
+    }
+  }
+  return points;
+}
+
+TEST(Board, CircleGridHexagonalIsBoofCvsLayout) {
+  for (const auto& [cols, rows] : {std::pair{28, 24}, std::pair{5, 4}, std::pair{6, 5}}) {
+    SCOPED_TRACE(testing::Message() << cols << " x " << rows);
+    BoardParams p;
+    p.type = BoardType::kCircleGrid;
+    p.cols = cols;
+    p.rows = rows;
+    p.spacing_m = 0.024;
+    p.diameter_m = 0.02;
+    p.hexagonal = true;
+    const std::optional<Board> b = Board::Create(p);
+    ASSERT_TRUE(b.has_value());
+    // BoofCV's rows from the bottom are linecal's from the top, read backwards: linecal's row
+    // i is BoofCV's row rows - 1 - i, each left to right.
+    const std::vector<Eigen::Vector2d> boofcv = BoofCvHexagonalLayout(rows, cols, p.spacing_m);
+    ASSERT_EQ(b->features().size(), boofcv.size());
+    std::vector<int> row_start;  // index into boofcv of each BoofCV row
+    for (int r = 0, k = 0; r < rows; k += (cols - r % 2 + 1) / 2, ++r) row_start.push_back(k);
+    int id = 0;
+    for (int i = 0; i < rows; ++i) {
+      const int r = rows - 1 - i;
+      const int count = (cols - r % 2 + 1) / 2;
+      for (int k = 0; k < count; ++k, ++id) {
+        const BoardFeature& f = b->features()[id];
+        ExpectNear(f.p_board, boofcv[row_start[r] + k], kExactM,
+                   "hexagonal id " + std::to_string(id));
+        EXPECT_EQ(f.kind, FeatureKind::kCircleCentre);
+        const double radius = 0.5 * p.diameter_m;
+        EXPECT_EQ(b->PaintAt(f.p_board + Eigen::Vector2d(0.0, 0.99 * radius)), Paint::kBlack);
+        EXPECT_EQ(b->PaintAt(f.p_board + Eigen::Vector2d(-1.01 * radius, 0.0)), Paint::kWhite);
+      }
+    }
+    // Every circle's nearest neighbours are a spacing away, in a row and between rows alike.
+    for (const BoardFeature& f : b->features()) {
+      double nearest = std::numeric_limits<double>::infinity();
+      for (const BoardFeature& g : b->features()) {
+        if (g.id != f.id) nearest = std::min(nearest, (g.p_board - f.p_board).norm());
+      }
+      EXPECT_NEAR(nearest, p.spacing_m, kExactM) << f.id;
+    }
+    // Two spacings of page beyond the outer centres.
+    const Eigen::Vector2d extent(0.5 * (cols - 1), 0.5 * std::sqrt(3.0) * (rows - 1));
+    ExpectNear(b->page_size_m(), p.spacing_m * (extent + Eigen::Vector2d::Constant(4.0)), kExactM,
+               "page");
+  }
+  // The corpus's board: 24 rows of 14, 336 circles; the top row starts half a spacing right of
+  // the bottom one (BoofCV's row 23, odd).
+  BoardParams p;
+  p.type = BoardType::kCircleGrid;
+  p.cols = 28;
+  p.rows = 24;
+  p.spacing_m = 0.024;
+  p.diameter_m = 0.02;
+  p.hexagonal = true;
+  const Board b = *Board::Create(p);
+  ASSERT_EQ(b.features().size(), 336u);
+  EXPECT_NEAR(b.features()[0].p_board.x() - b.features()[322].p_board.x(), 0.012, kExactM);
+}
+
 TEST(Board, ScaleMultipliesEverything) {
   for (BoardType type : kAllBoardTypes) {
     const Board one = MakeBoard(type);
@@ -534,6 +608,40 @@ TEST(Board, ValidationReasons) {
   EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_start_id = 551; }), BoardParamsError::kOk);
   EXPECT_EQ(reason([](BoardParams& p) { p.apriltag_start_id = 552; }),
             BoardParamsError::kBadStartId);
+  // The hexagonal grid: not asymmetric at once, three rows and columns at least, circles
+  // narrower than the spacing (every neighbour's distance).
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.hexagonal = true;
+              p.asymmetric = true;
+            }),
+            BoardParamsError::kBadLayout);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.hexagonal = true;
+              p.cols = 3;
+              p.rows = 3;
+            }),
+            BoardParamsError::kOk);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.hexagonal = true;
+              p.cols = 2;
+            }),
+            BoardParamsError::kBadCols);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.hexagonal = true;
+              p.rows = 2;
+            }),
+            BoardParamsError::kBadRows);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.hexagonal = true;
+              p.diameter_m = 0.99 * p.spacing_m;
+            }),
+            BoardParamsError::kOk);
+  EXPECT_EQ(reason([](BoardParams& p) {
+              p.hexagonal = true;
+              p.diameter_m = p.spacing_m;
+            }),
+            BoardParamsError::kBadDiameter);
+  EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadLayout), "bad_layout");
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadDiameter), "bad_diameter");
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadSquare), "bad_square");
 }

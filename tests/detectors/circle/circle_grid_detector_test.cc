@@ -54,6 +54,20 @@ BoardParams Asymmetric(int cols = 4, int rows = 11) {
   return p;
 }
 
+// BoofCV's hexagonal grid (docs/boards.md §8) with its corpus print's proportions: circles
+// 20 mm across, every neighbour 24 mm away, `rows` rows on `cols` zig-zag columns. 12 x 9: 54
+// circles, 132 x 166 mm of centres; cols - rows odd, so the print fixes every id.
+BoardParams Hexagonal(int cols = 12, int rows = 9) {
+  BoardParams p;
+  p.type = BoardType::kCircleGrid;
+  p.cols = cols;
+  p.rows = rows;
+  p.spacing_m = 0.024;
+  p.diameter_m = 0.02;
+  p.hexagonal = true;
+  return p;
+}
+
 // Renders `view` through `camera` (the camera 1.5 m above the floor looking along +x).
 CameraFrame RenderThrough(const CameraModel& camera, const BoardView& view,
                           const CameraRenderOptions& options, std::uint64_t seed) {
@@ -114,8 +128,10 @@ void PoseGrid(const BoardParams& params, double near_m, double far_m, std::uint6
   const double rms_clean = std::sqrt(sum_sq[0] / n[0]);
   const double rms_noisy = std::sqrt(sum_sq[1] / n[1]);
   std::printf("%s %d x %d pose grid: RMS clean %.4f px, noisy %.4f px\n",
-              params.asymmetric ? "asymmetric" : "symmetric", params.cols, params.rows, rms_clean,
-              rms_noisy);
+              params.hexagonal    ? "hexagonal"
+              : params.asymmetric ? "asymmetric"
+                                  : "symmetric",
+              params.cols, params.rows, rms_clean, rms_noisy);
   EXPECT_LT(rms_clean, kCleanRmsBarPx);
   EXPECT_LT(rms_noisy, kNoisyRmsBarPx);
 }
@@ -145,6 +161,31 @@ TEST(CircleGridDetectorTest, SymmetricPoseGridWithNoiseBlurAndLighting) {
 TEST(CircleGridDetectorTest, AsymmetricPoseGridWithNoiseBlurAndLighting) {
   // Circles of 25 and 14 px face-on.
   PoseGrid(Asymmetric(), 0.6, 1.05, 200);
+}
+
+TEST(CircleGridDetectorTest, HexagonalPoseGridWithNoiseBlurAndLighting) {
+  // Circles of 36 and 21 px face-on, 43 and 25 px apart.
+  PoseGrid(Hexagonal(), 0.55, 0.95, 400);
+}
+
+TEST(CircleGridDetectorTest, FrontalHexagonalGridHasExactIdsAndSubPixelCentres) {
+  BoardView view;
+  view.params = Hexagonal();
+  view.distance_m = 0.7;
+  const CameraFrame frame = RenderView(view, CleanRender(), 2);
+  double rms = 0.0;
+  ExpectFound(frame, view.params, &rms);
+  EXPECT_LT(rms, kCleanRmsBarPx);
+  // 9 rows of 6 circles; row 0 (from the top) starts on column 0 as BoofCV's row 8 does, row
+  // 1 on column 1: id 6 lies half a spacing right of id 0 and sqrt(3)/2 of one below.
+  const Detection d = DetectCircleGrid(frame.image8.view(), *Board::Create(view.params));
+  ASSERT_TRUE(d.found);
+  ASSERT_EQ(d.features.size(), 54u);
+  const Eigen::Vector2d row = d.features[1].uv_px - d.features[0].uv_px;
+  const Eigen::Vector2d down = d.features[6].uv_px - d.features[0].uv_px;
+  EXPECT_NEAR(row.dot(down) / (row.norm() * down.norm()), 0.5, 0.02);
+  EXPECT_NEAR(down.norm() / row.norm(), 1.0, 0.02);
+  EXPECT_GT(down.y(), 0.0);
 }
 
 TEST(CircleGridDetectorTest, LightCirclesOnBlack) {
@@ -255,6 +296,7 @@ TEST(CircleGridDetectorTest, StrongDistortionAndFisheye) {
   v.yaw_deg = -30.0;
   cases.push_back({"fisheye, symmetric", Fisheye190(), Symmetric(), v});
   cases.push_back({"fisheye, asymmetric", Fisheye190(), Asymmetric(), v});
+  cases.push_back({"fisheye, hexagonal", Fisheye190(), Hexagonal(), v});
   std::uint64_t seed = 50;
   for (Case& c : cases) {
     SCOPED_TRACE(c.name);
@@ -318,6 +360,35 @@ TEST(CircleGridDetectorTest, AsymmetricGridWithEvenRowsIsReportedUpright) {
   EXPECT_LT(At(d, 0).y(), At(d, 23).y());
 }
 
+TEST(CircleGridDetectorTest, HexagonalGridIsReportedUprightOrKeepsItsIds) {
+  // 12 x 8: cols - rows even, the same board turned by 180 degrees: id 0 stays at the image's
+  // top-left. 12 x 9 (odd): the print fixes the ids at every turn (checked by the truth).
+  const BoardParams even = Hexagonal(12, 8);
+  for (const double roll : {180.0, 160.0}) {
+    SCOPED_TRACE(roll);
+    BoardView view;
+    view.params = even;
+    view.distance_m = 0.6;
+    view.roll_deg = roll;
+    const CameraFrame frame = RenderView(view, CleanRender(), 19);
+    const Detection d = DetectCircleGrid(frame.image8.view(), *Board::Create(even));
+    ASSERT_TRUE(d.found);
+    ASSERT_EQ(d.features.size(), 48u);
+    EXPECT_LT(At(d, 0).x(), At(d, 5).x());
+    EXPECT_LT(At(d, 0).y(), At(d, 47).y());
+  }
+  for (const double roll : {60.0, 120.0, 180.0, -90.0}) {
+    SCOPED_TRACE(roll);
+    BoardView view;
+    view.params = Hexagonal();
+    view.distance_m = 0.6;
+    view.roll_deg = roll;
+    double rms = 0.0;
+    ExpectFound(RenderView(view, CleanRender(), 20), view.params, &rms);
+    EXPECT_LT(rms, kCleanRmsBarPx);
+  }
+}
+
 // ---- Nothing found where the board is not -------------------------------------------------
 
 TEST(CircleGridDetectorTest, LargerGridIsTheWrongBoard) {
@@ -336,6 +407,29 @@ TEST(CircleGridDetectorTest, LargerGridIsTheWrongBoard) {
   view.params = Symmetric();
   const CameraFrame symmetric = RenderView(view, CleanRender(), 15);
   EXPECT_FALSE(DetectCircleGrid(symmetric.image8.view(), *Board::Create(Asymmetric(9, 6))).found);
+}
+
+TEST(CircleGridDetectorTest, HexagonalAndSquareGridsAreNotEachOther) {
+  // The hexagonal lattice is an affine image of a square one: the steps' angle in each
+  // circle's own metric (60 or 90 degrees) tells them apart.
+  BoardView view;
+  view.params = Hexagonal(12, 9);
+  view.distance_m = 0.6;
+  const CameraFrame hexagonal = RenderView(view, CleanRender(), 21);
+  for (const BoardParams& square : {Symmetric(6, 9), Symmetric(4, 3), Asymmetric(4, 5)}) {
+    const Detection d = DetectCircleGrid(hexagonal.image8.view(), *Board::Create(square));
+    EXPECT_FALSE(d.found) << square.cols << " x " << square.rows;
+  }
+  view.params = Symmetric(10, 8);
+  const CameraFrame grid = RenderView(view, CleanRender(), 22);
+  for (const BoardParams& hex : {Hexagonal(12, 9), Hexagonal(6, 4), Hexagonal(3, 3)}) {
+    const Detection d = DetectCircleGrid(grid.image8.view(), *Board::Create(hex));
+    EXPECT_FALSE(d.found) << hex.cols << " x " << hex.rows;
+  }
+  // A smaller hexagonal board is part of the larger grid: the wrong board.
+  const Detection part = DetectCircleGrid(hexagonal.image8.view(), *Board::Create(Hexagonal(8, 5)));
+  EXPECT_FALSE(part.found);
+  EXPECT_EQ(part.reason, DetectReason::kWrongBoard);
 }
 
 // The circle board's white circles stand in rows 70 mm apart and columns 100 mm apart: its top

@@ -103,6 +103,26 @@ TEST(StationLayoutTest, CircleGridParametersRoundTrip) {
   EXPECT_EQ(again->boards.at(0).board.features().size(), 44u);
 }
 
+TEST(StationLayoutTest, HexagonalCircleGridRoundTrip) {
+  // BoofCV's hexagonal grid of the corpus: 24 rows on 28 zig-zag columns, 14 circles a row.
+  const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
+      {"id": "h", "type": "circle_grid", "cols": 28, "rows": 24, "spacing_m": 0.012,
+       "diameter_m": 0.01, "hexagonal": true,
+       "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}}]})";
+  absl::StatusOr<StationLayout> s = ParseStationLayout(json, "st.json");
+  ASSERT_TRUE(s.ok()) << s.status();
+  const nlohmann::json written = StationLayoutToJson(*s);
+  EXPECT_TRUE(written.at("boards").at(0).at("hexagonal").get<bool>());
+  absl::StatusOr<StationLayout> again = ParseStationLayout(written.dump(), "copy");
+  ASSERT_TRUE(again.ok()) << again.status();
+  const BoardParams& p = again->boards.at(0).params;
+  EXPECT_TRUE(p.hexagonal);
+  EXPECT_FALSE(p.asymmetric);
+  EXPECT_EQ(p.cols, 28);
+  EXPECT_EQ(p.rows, 24);
+  EXPECT_EQ(again->boards.at(0).board.features().size(), 336u);
+}
+
 TEST(StationLayoutTest, AprilGridParametersRoundTrip) {
   const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
       {"id": "a", "type": "apriltag", "scale": 0.5, "tag_cols": 4, "tag_rows": 3,
@@ -160,6 +180,9 @@ INSTANTIATE_TEST_SUITE_P(
                    "boards[0].scale: expected a number"},
         BrokenCase{"bad_diameter", "{" HDR R"(, "boards": [{"id": "a", "type": "circle_grid", "diameter_m": 0.03, )" POSE "}]}",
                    "boards[0].diameter_m: bad_diameter"},
+        BrokenCase{"bad_layout", "{" HDR R"(, "boards": [{"id": "a", "type": "circle_grid", )"
+                   R"("hexagonal": true, "asymmetric": true, )" POSE "}]}",
+                   "boards[0].hexagonal: bad_layout"},
         BrokenCase{"bad_tag_grid", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "tag_cols": 0, )" POSE "}]}",
                    "boards[0].tag_cols: bad_tag_grid"},
         BrokenCase{"bad_start_id", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "start_id": 560, )" POSE "}]}",
