@@ -62,6 +62,8 @@ const char* KeyOfBoardError(BoardParamsError error) {
       return "tag_spacing";
     case BoardParamsError::kBadStartId:
       return "start_id";
+    case BoardParamsError::kBadGap:
+      return "gap_m";
   }
   return "type";
 }
@@ -69,7 +71,8 @@ const char* KeyOfBoardError(BoardParamsError error) {
 absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
                                 "diameter_m", "asymmetric", "light_circles", "border_bits",
-                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "pose"});
+                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "gap_m",
+                                "pose"});
       !s.ok()) {
     return s;
   }
@@ -95,6 +98,8 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (!rows.ok()) return rows.status();
   absl::StatusOr<double> square = f.NumberOr("square_m", params.square_m);
   if (!square.ok()) return square.status();
+  absl::StatusOr<double> gap = f.NumberOr("gap_m", params.gap_m);
+  if (!gap.ok()) return gap.status();
   absl::StatusOr<double> spacing = f.NumberOr("spacing_m", params.spacing_m);
   if (!spacing.ok()) return spacing.status();
   absl::StatusOr<double> diameter = f.NumberOr("diameter_m", params.diameter_m);
@@ -108,6 +113,7 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   params.cols = ClampToInt(*cols);
   params.rows = ClampToInt(*rows);
   params.square_m = *square;
+  params.gap_m = *gap;
   params.spacing_m = *spacing;
   params.diameter_m = *diameter;
   params.asymmetric = *asymmetric;
@@ -245,6 +251,12 @@ nlohmann::json BoardParamsToJson(const BoardParams& p) {
     j["diameter_m"] = p.diameter_m;
     j["asymmetric"] = p.asymmetric;
     j["light_circles"] = p.light_circles;
+  }
+  if (p.type == BoardType::kSquareGrid) {
+    j["cols"] = p.cols;
+    j["rows"] = p.rows;
+    j["square_m"] = p.square_m;
+    j["gap_m"] = p.gap_m;
   }
   if (p.type == BoardType::kApriltag) {
     j["border_bits"] = p.apriltag_border_bits;

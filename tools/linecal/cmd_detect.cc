@@ -129,7 +129,7 @@ int RunDetect(const Args& args) {
   options.push_back({"overlay", "OUT.png", "write the image with the features drawn"});
   cli::CommandLine cl(
       "linecal detect --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
-      "[--spacing METRES --diameter METRES] [--asymmetric] [--light-circles] "
+      "[--gap METRES] [--spacing METRES --diameter METRES] [--asymmetric] [--light-circles] "
       "--image FILE [--json] [--overlay OUT.png]\n"
       "       linecal detect --board round_hole [--scale S] --cloud FILE [--cloud FILE ...] "
       "[--json]",
