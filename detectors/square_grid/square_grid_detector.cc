@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <deque>
+#include <limits>
 #include <map>
 #include <optional>
 #include <utility>
@@ -123,26 +124,39 @@ struct Link {
   int side = 0;     // its side that faces back
 };
 
-// Per square and side, the mutual neighbour across that side (method, step 2).
-std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares, double pitch_ratio,
-                                             double max_pitch_fraction) {
+// Per square and side, the mutual neighbour across that side (method, step 2): the side of
+// another square whose gap centre, each square's homography carried half a gap beyond its
+// side, is nearest, within max_fraction of the two squares' mean side, both ways. Half a gap
+// from each side keeps the bending of a lens out: a fisheye near the rim shrinks the pitch
+// by a third from one square to the next, which a whole pitch carried by one square's
+// homography misses by more than a quarter of it.
+std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares, double gap_ratio,
+                                             double max_fraction) {
   const int n = static_cast<int>(squares.size());
-  std::vector<std::array<int, 4>> candidate(n, {-1, -1, -1, -1});
+  std::vector<std::array<Eigen::Vector2d, 4>> gap_centre(n);
   for (int a = 0; a < n; ++a) {
     for (int k = 0; k < 4; ++k) {
-      const Eigen::Vector2d p =
-          ApplyHomography(squares[a].H, Eigen::Vector2d(0.5 + pitch_ratio * kSideDirection[k][0],
-                                                        0.5 + pitch_ratio * kSideDirection[k][1]));
-      if (!p.allFinite()) continue;
-      const double tol = max_pitch_fraction * (p - squares[a].centre).norm();
-      double best = tol;
+      const double reach = 0.5 + 0.5 * gap_ratio;  // from the square's centre, in sides
+      gap_centre[a][k] = ApplyHomography(
+          squares[a].H,
+          Eigen::Vector2d(0.5 + reach * kSideDirection[k][0], 0.5 + reach * kSideDirection[k][1]));
+    }
+  }
+  std::vector<std::array<Link, 4>> best(n);
+  for (int a = 0; a < n; ++a) {
+    for (int k = 0; k < 4; ++k) {
+      if (!gap_centre[a][k].allFinite()) continue;
+      double nearest = std::numeric_limits<double>::infinity();
       for (int b = 0; b < n; ++b) {
         const double ratio = squares[b].side_px / squares[a].side_px;
         if (b == a || ratio > kMaxSideRatio || ratio < 1.0 / kMaxSideRatio) continue;
-        const double dist = (squares[b].centre - p).norm();
-        if (dist < best) {
-          best = dist;
-          candidate[a][k] = b;
+        const double tol = max_fraction * 0.5 * (squares[a].side_px + squares[b].side_px);
+        for (int m = 0; m < 4; ++m) {
+          const double dist = (gap_centre[b][m] - gap_centre[a][k]).norm();
+          if (dist <= tol && dist < nearest) {
+            nearest = dist;
+            best[a][k] = Link{b, m};
+          }
         }
       }
     }
@@ -150,10 +164,9 @@ std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares,
   std::vector<std::array<Link, 4>> links(n);
   for (int a = 0; a < n; ++a) {
     for (int k = 0; k < 4; ++k) {
-      const int b = candidate[a][k];
-      if (b < 0) continue;
-      for (int m = 0; m < 4; ++m) {
-        if (candidate[b][m] == a) links[a][k] = Link{b, m};
+      const Link& l = best[a][k];
+      if (l.square >= 0 && best[l.square][l.side].square == a && best[l.square][l.side].side == k) {
+        links[a][k] = l;
       }
     }
   }
@@ -493,8 +506,8 @@ std::string_view SquareGridOptions::Validate() const {
     return "noise_contrast_factor";
   }
   if (!(min_square_side_px >= 6 && min_square_side_px <= 1000)) return "min_square_side_px";
-  if (!(max_link_pitch_fraction > 0.0 && max_link_pitch_fraction <= 0.5)) {
-    return "max_link_pitch_fraction";
+  if (!(max_link_side_fraction > 0.0 && max_link_side_fraction <= 0.5)) {
+    return "max_link_side_fraction";
   }
   if (!(max_residual_side_fraction > 0.0 && max_residual_side_fraction <= 0.5)) {
     return "max_residual_side_fraction";
@@ -528,7 +541,7 @@ Detection DetectSquareGrid(const ImageView8& image, const Board& board,
   }
   Search search;
   const std::vector<std::array<Link, 4>> links =
-      LinkSquares(squares, 1.0 + gap_ratio, options.max_link_pitch_fraction);
+      LinkSquares(squares, gap_ratio, options.max_link_side_fraction);
   for (const auto& group : GridGroups(links)) {
     SearchGroup(image, squares, group, board, options, min_contrast, &search);
   }

@@ -6,16 +6,16 @@
 //   1. Dark squares: the local-contrast binarisation and the quads of its dark components
 //      (binarise.h, contours.h), each quad's corners refined to where lines fitted to the
 //      edges of its four sides meet (edge_lines.h).
-//   2. Links: each quad's homography (its corners onto a unit square) predicts the centre of
-//      the neighbour across each of its sides one pitch away (square + gap, known from the
-//      board); the nearest quad of a similar size within max_link_pitch_fraction of a pitch of
-//      that prediction is linked when the link is mutual. Integer grid coordinates spread
-//      over each connected group by breadth-first search.
+//   2. Links: each quad's homography (its corners onto a unit square) puts the centre of the
+//      gap beyond each of its sides (half a gap out, the gap known from the board); two
+//      quads of a similar size whose sides put it at the same point, within
+//      max_link_side_fraction of a side, are neighbours when each is the other's nearest.
+//      Integer grid coordinates spread over each connected group by breadth-first search.
 //   3. Windows: every complete cols x rows (or rows x cols) placement of squares in a group is
 //      verified locally, never by one homography of the whole board, which a real lens bends
 //      by tens of pixels:
-//        - every corner agrees with the quadratic through the corners of the neighbouring
-//          squares of its 3 x 3 block of squares (local_fit.h);
+//        - along every row and column of corners, each gap agrees with the two squares beside
+//          it (exact for any quadratic image of the line: the lens's bending drops out);
 //        - the paint: each square dark inside; each gap between neighbouring squares and each
 //          crossing of gaps light (a chessboard's black squares, an AprilGrid's tags and
 //          corner squares print black there);
@@ -46,11 +46,11 @@ struct SquareGridOptions {
   // Smallest square side in pixels: below it a square's edges hold too few points for the line
   // fits. [6, 1000].
   int min_square_side_px = 8;
-  // A neighbour's centre must lie within this fraction of the pitch (the predicted distance
-  // between the two centres) of where the square's homography puts it. Perspective is in the
-  // prediction; a lens bends a one-pitch step by a few percent of it; a square of another
-  // grid or of clutter is off by a good part of a pitch. (0, 0.5].
-  double max_link_pitch_fraction = 0.25;
+  // Two neighbours' homographies, each carried half a gap beyond its side, must put the
+  // gap's centre within this fraction of their mean side of each other. Perspective is in
+  // the homographies; a lens bends half a gap by a few percent of a side; a square of another
+  // grid or of clutter is off by a good part of a side. (0, 0.5].
+  double max_link_side_fraction = 0.25;
   // Each corner must agree with its prediction from the neighbouring squares' corners within
   // this fraction of the local square side (or 1 px, whichever is larger), half as large again
   // per axis along which the square lies at the window's edge (predicted by extrapolation). A

@@ -259,8 +259,8 @@ TEST(SquareGridDetectorTest, ReasonsForBadInput) {
   const Image8 flat(640, 480, 128);
   EXPECT_EQ(DetectSquareGrid(flat.view(), board).reason, DetectReason::kLowContrast);
   SquareGridOptions bad;
-  bad.max_link_pitch_fraction = 0.0;
-  EXPECT_EQ(bad.Validate(), "max_link_pitch_fraction");
+  bad.max_link_side_fraction = 0.0;
+  EXPECT_EQ(bad.Validate(), "max_link_side_fraction");
   EXPECT_EQ(DetectSquareGrid(flat.view(), board, bad).reason, DetectReason::kBadImage);
   BoardParams checker;
   checker.type = BoardType::kChecker;
