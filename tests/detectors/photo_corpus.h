@@ -108,8 +108,8 @@ struct SweepBoard {
 const std::vector<SweepBoard>& SweepBoards();
 
 // Whether a photo of `set` shows `board`: the same type, and for checkers, circle grids and
-// square grids the same count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned) and, for circle
-// grids, the same layout (symmetric or asymmetric).
+// square grids the same count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned)
+// and, for circle grids, the same layout (symmetric or asymmetric).
 bool ShowsBoard(const PhotoSet& set, const BoardParams& board);
 
 // A detection that should not exist.
