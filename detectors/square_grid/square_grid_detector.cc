@@ -77,6 +77,7 @@ std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
   return out;
 }
 
+// The square of four refined corners; nullopt when they give no homography.
 std::optional<Square> MakeSquare(const std::array<Eigen::Vector2d, 4>& corners) {
   static constexpr HomographyFitOptions kDltOnly{.refine = false};  // four points: exact
   const std::array<Eigen::Vector2d, 4> unit = {Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 0),

@@ -16,9 +16,9 @@
 //      by tens of pixels:
 //        - along every row and column of corners, each gap agrees with the two squares beside
 //          it (exact for any quadratic image of the line: the lens's bending drops out);
-//        - the paint: each square dark inside; each gap between neighbouring squares and each
-//          crossing of gaps light (a chessboard's black squares, an AprilGrid's tags and
-//          corner squares print black there);
+//        - the paint: each gap between neighbouring squares and each crossing of gaps lighter
+//          than the squares around it by half the board's contrast (a chessboard prints a
+//          black square at every crossing, an AprilGrid a corner square);
 //        - the grid does not go on: no square linked beyond the window (a larger grid:
 //          kWrongBoard).
 //
