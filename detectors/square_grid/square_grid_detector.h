@@ -67,8 +67,9 @@ struct SquareGridOptions {
 // options), kLowContrast, kNoCandidates (no dark quads), kTooFewFeatures (no complete
 // cols x rows group of linked squares), kVerificationFailed (complete groups failed the local
 // geometry or paint checks), kWrongBoard (every complete group is part of a larger grid),
-// kAmbiguous (two different grids). Pure function; cost: a binarisation and labelling, O(W * H)
-// (a few ms at 1280 x 720), plus O(perimeter) per dark component.
+// kAmbiguous (two different grids). Pure function; cost: a binarisation and labelling, O(W * H),
+// O(perimeter) per dark component, and O(quads^2) for the links: 4-6 ms on the corpus's
+// 640 x 480 photos, about 12 ms for 54 squares at 1280 x 720 (wall clock, shared machine).
 Detection DetectSquareGrid(const ImageView8& image, const Board& board,
                            const SquareGridOptions& options = {});
 
