@@ -9,6 +9,7 @@
 #include "detectors/chessboard/chessboard_detector.h"
 #include "detectors/circle/circle_detector.h"
 #include "detectors/circle/circle_grid_detector.h"
+#include "detectors/square_grid/square_grid_detector.h"
 #include "detectors/vertical/vertical_detector.h"
 
 namespace linecal {
@@ -23,6 +24,7 @@ std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board
     case BoardType::kAruco:
     case BoardType::kRoundHole: return DetectAruco(image, board);
     case BoardType::kApriltag: return DetectApriltag(image, board);
+    case BoardType::kSquareGrid: return DetectSquareGrid(image, board);
   }
   return std::nullopt;
 }

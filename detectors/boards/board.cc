@@ -394,6 +394,35 @@ void DrawCircleGrid(Drawing& d, const BoardParams& p) {
   }
 }
 
+// ---- 9. Square grid (BoofCV's layout) -----------------------------------------------------
+
+// The extent of the squares, mm: cols squares and cols - 1 gaps across, rows and rows - 1 down.
+Eigen::Vector2d SquareGridExtentMm(const BoardParams& p) {
+  const double s = p.square_m * 1e3, g = p.gap_m * 1e3;
+  return {p.cols * s + (p.cols - 1) * g, p.rows * s + (p.rows - 1) * g};
+}
+
+// cols x rows black squares, pitch square + gap, centred on the page. Features: the four
+// corners of every square, on the (2 cols) x (2 rows) lattice of corner columns C and rows R,
+// both from 0 at the top-left: id = 2 cols * R + C (docs/boards.md §9).
+void DrawSquareGrid(Drawing& d, const BoardParams& p) {
+  const double s = p.square_m * 1e3, pitch = s + p.gap_m * 1e3;
+  const Eigen::Vector2d half = 0.5 * SquareGridExtentMm(p);
+  for (int r = 0; r < p.rows; ++r) {
+    for (int c = 0; c < p.cols; ++c) {
+      const double left = -half.x() + c * pitch, top = half.y() - r * pitch;
+      d.BoardRect(Paint::kBlack, left, top - s, left + s, top);
+    }
+  }
+  for (int R = 0; R < 2 * p.rows; ++R) {
+    for (int C = 0; C < 2 * p.cols; ++C) {
+      const double x = -half.x() + (C / 2) * pitch + (C % 2) * s;
+      const double y = half.y() - (R / 2) * pitch - (R % 2) * s;
+      d.Feature(FeatureKind::kLCorner, d.Board(x, y));
+    }
+  }
+}
+
 // Page sizes in millimetres (the PDFs' MediaBoxes; april_board.pdf is A0, 2383.94 x 3370.39
 // pt = 841 x 1189 mm).
 Eigen::Vector2d PageSizeMm(const BoardParams& p) {
@@ -419,6 +448,10 @@ Eigen::Vector2d PageSizeMm(const BoardParams& p) {
           CircleGridExtent(p) + Eigen::Vector2d::Constant(2.0 * kCircleGridMarginSpacings);
       return p.spacing_m * 1e3 * extent;
     }
+    case BoardType::kSquareGrid:
+      // A white margin of one square around the squares (the quiet zone that keeps the outer
+      // squares apart from whatever is behind the board).
+      return SquareGridExtentMm(p) + Eigen::Vector2d::Constant(2e3 * p.square_m);
   }
   return {0.0, 0.0};
 }
@@ -445,6 +478,8 @@ const char* BoardTypeName(BoardType type) {
       return "checker";
     case BoardType::kCircleGrid:
       return "circle_grid";
+    case BoardType::kSquareGrid:
+      return "square_grid";
   }
   return "unknown";
 }
@@ -482,6 +517,8 @@ const char* BoardParamsErrorName(BoardParamsError e) {
       return "bad_start_id";
     case BoardParamsError::kBadLayout:
       return "bad_layout";
+    case BoardParamsError::kBadGap:
+      return "bad_gap";
   }
   return "unknown";
 }
@@ -521,6 +558,9 @@ BoardParamsError ValidateBoardParams(const BoardParams& p) {
   if (p.apriltag_start_id < 0 ||
       p.apriltag_start_id > kTag36h11Codes - p.apriltag_cols * p.apriltag_rows) {
     return BoardParamsError::kBadStartId;
+  }
+  if (!IsFiniteIn(p.gap_m, 0.0, kMaxSquareGridGapM) || p.gap_m == 0.0) {
+    return BoardParamsError::kBadGap;
   }
   return BoardParamsError::kOk;
 }
@@ -595,6 +635,9 @@ std::optional<Board> Board::Create(const BoardParams& params, BoardParamsError* 
       break;
     case BoardType::kCircleGrid:
       DrawCircleGrid(d, params);
+      break;
+    case BoardType::kSquareGrid:
+      DrawSquareGrid(d, params);
       break;
   }
   Board board;

@@ -31,14 +31,16 @@ enum class BoardType {
   kChecker,     // generic chessboard: cols x rows inner corners, square_m squares
   kCircleGrid,  // OpenCV's circle grid, symmetric or asymmetric: cols x rows circles;
                 // or BoofCV's hexagonal grid (hexagonal)
+  kSquareGrid,  // BoofCV's square grid: cols x rows black squares apart by white gaps
 };
 
-inline constexpr std::array<BoardType, 8> kAllBoardTypes = {
+inline constexpr std::array<BoardType, 9> kAllBoardTypes = {
     BoardType::kChessboard, BoardType::kCircle,    BoardType::kVertical, BoardType::kAruco,
-    BoardType::kApriltag,   BoardType::kRoundHole, BoardType::kChecker,  BoardType::kCircleGrid};
+    BoardType::kApriltag,   BoardType::kRoundHole, BoardType::kChecker,  BoardType::kCircleGrid,
+    BoardType::kSquareGrid};
 
 // The board's command-line and config name: "chessboard", "circle", "vertical", "aruco",
-// "apriltag", "round_hole", "checker", "circle_grid" (docs/interfaces.md).
+// "apriltag", "round_hole", "checker", "circle_grid", "square_grid" (docs/interfaces.md).
 const char* BoardTypeName(BoardType type);
 // The inverse of BoardTypeName; nullopt for any other text. Case-sensitive.
 std::optional<BoardType> BoardTypeFromName(std::string_view name);
@@ -46,15 +48,19 @@ std::optional<BoardType> BoardTypeFromName(std::string_view name);
 struct BoardParams {
   BoardType type = BoardType::kChessboard;
   // Multiplies every length of the layout (a board printed at another size is the same
-  // board with another scale, docs/boards.md). For kChecker it multiplies square_m too.
+  // board with another scale, docs/boards.md). For kChecker it multiplies square_m too, for
+  // kSquareGrid square_m and gap_m.
   double scale = 1.0;
   // kChecker: inner corners along x (cols) and y (rows). kCircleGrid: circles per row (cols)
-  // and rows of circles (rows), OpenCV's patternSize (cols, rows). Defaults: the classic 9 x 6
-  // boards of docs/boards.md.
+  // and rows of circles (rows), OpenCV's patternSize (cols, rows). kSquareGrid: squares per row
+  // (cols) and rows of squares (rows). Defaults: the classic 9 x 6 boards of docs/boards.md.
   int cols = 9;
   int rows = 6;
-  // kChecker only: the square side. Default 25 mm.
+  // kChecker and kSquareGrid: the square side. Default 25 mm.
   double square_m = 0.025;
+  // kSquareGrid only (docs/boards.md §9): the white space between neighbouring squares, along
+  // a row and along a column (BoofCV's spaceWidth). Default 25 mm.
+  double gap_m = 0.025;
   // kCircleGrid only (docs/boards.md §8): the centre distance, as OpenCV's squareSize: the
   // distance between neighbours in a row and between rows of the symmetric grid; in the
   // asymmetric grid rows are spacing_m apart and a row's circles 2 * spacing_m apart, every
@@ -105,6 +111,7 @@ enum class BoardParamsError {
   kBadTagSpacing,  // not finite or outside [kMinAprilGridSpacing, kMaxAprilGridSpacing]
   kBadStartId,     // negative, or the grid's last id beyond tag36h11's kTag36h11Codes - 1
   kBadLayout,      // hexagonal and asymmetric both set: two layouts at once
+  kBadGap,         // not finite or outside (0, kMaxSquareGridGapM]
 };
 
 // A board of 2.6 mm or of 260 m is a typo, not a board: scales outside this range are refused.
@@ -122,6 +129,8 @@ inline constexpr int kMinHexagonalSide = 3;
 inline constexpr double kMaxCheckerSquareM = 1.0;
 // Nor circle grids with a centre distance over 1 m.
 inline constexpr double kMaxCircleSpacingM = 1.0;
+// Nor square grids with gaps over 1 m.
+inline constexpr double kMaxSquareGridGapM = 1.0;
 // AprilGrids: up to 50 tags a side (far beyond a printed target; tag36h11 has 587 codes), gaps
 // of 5% to 100% of a tag (Kalibr's tagSpacing; below 5% the corner squares vanish).
 inline constexpr int kMaxAprilGridTags = 50;
@@ -131,7 +140,8 @@ inline constexpr int kTag36h11Codes = 587;
 
 // A short, stable text per error ("bad_scale", ...), for reasons and messages.
 const char* BoardParamsErrorName(BoardParamsError e);
-// Checks every field (the checker, circle grid and apriltag fields too, whatever the type).
+// Checks every field (the checker, circle grid, square grid and apriltag fields too, whatever
+// the type).
 // O(1).
 BoardParamsError ValidateBoardParams(const BoardParams& params);
 

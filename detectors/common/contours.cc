@@ -234,10 +234,33 @@ std::vector<int> ApproximateClosedPolygon(const std::vector<Eigen::Vector2i>& co
   return kept;
 }
 
+namespace {
+
+// Merges the closest pair of neighbouring vertices of the closed polygon into their midpoint
+// while they are closer than min_distance_px (in place; order kept). O(n^2).
+void MergeCloseVertices(double min_distance_px, std::vector<Eigen::Vector2d>* polygon) {
+  while (polygon->size() > 3) {
+    const std::size_t n = polygon->size();
+    std::size_t closest = 0;
+    for (std::size_t k = 1; k < n; ++k) {
+      if (((*polygon)[(k + 1) % n] - (*polygon)[k]).norm() <
+          ((*polygon)[(closest + 1) % n] - (*polygon)[closest]).norm()) {
+        closest = k;
+      }
+    }
+    const std::size_t next = (closest + 1) % n;
+    if (!(((*polygon)[next] - (*polygon)[closest]).norm() < min_distance_px)) return;
+    (*polygon)[closest] = 0.5 * ((*polygon)[closest] + (*polygon)[next]);
+    polygon->erase(polygon->begin() + static_cast<std::ptrdiff_t>(next));
+  }
+}
+
+}  // namespace
+
 std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& options) {
   std::vector<Quad> quads;
-  const int max_side = static_cast<int>(options.max_side_fraction *
-                                        std::max(labels.width, labels.height));
+  const int max_side =
+      static_cast<int>(options.max_side_fraction * std::max(labels.width, labels.height));
   for (int i = 0; i < static_cast<int>(labels.components.size()); ++i) {
     const Component& c = labels.components[i];
     const int w = c.max_x - c.min_x + 1;
@@ -253,12 +276,15 @@ std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& op
     for (std::size_t k = 0; k < contour.size(); ++k) {
       length += (contour[(k + 1) % contour.size()] - contour[k]).cast<double>().norm();
     }
-    const std::vector<int> vertices =
-        ApproximateClosedPolygon(contour, options.polygon_epsilon_fraction * length);
-    if (vertices.size() != 4) continue;
+    std::vector<Eigen::Vector2d> polygon;
+    for (int v : ApproximateClosedPolygon(contour, options.polygon_epsilon_fraction * length)) {
+      polygon.push_back(contour[v].cast<double>());
+    }
+    MergeCloseVertices(options.merge_vertices_fraction * length, &polygon);
+    if (polygon.size() != 4) continue;
     Quad quad;
     quad.component = i;
-    for (int k = 0; k < 4; ++k) quad.corners_px[k] = contour[vertices[k]].cast<double>();
+    for (int k = 0; k < 4; ++k) quad.corners_px[k] = polygon[k];
     // Convex, and clockwise in the image (the trace direction): every turn has a positive
     // cross product in y-down coordinates.
     bool ok = true;

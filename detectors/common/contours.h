@@ -73,6 +73,12 @@ struct QuadOptions {
   // Quads with a corner closer than this to the image border are dropped: their outline may
   // be cut by the border.
   int min_border_distance_px = 2;
+  // Neighbouring polygon vertices closer together than this fraction of the contour's length
+  // are merged into their midpoint before the vertices are counted (0: never, as the marker
+  // detectors use it). Blur and noise cut the acute corner of a small dark square by a
+  // chamfer of a few pixels that the polygon keeps as two vertices; a square's true corners
+  // are a quarter of the length apart. [0, 0.1].
+  double merge_vertices_fraction = 0.0;
 };
 
 // A quad: corners as contour pixel centres, clockwise in the image (y down).

@@ -64,6 +64,8 @@ const char* KeyOfBoardError(BoardParamsError error) {
       return "start_id";
     case BoardParamsError::kBadLayout:
       return "hexagonal";
+    case BoardParamsError::kBadGap:
+      return "gap_m";
   }
   return "type";
 }
@@ -71,8 +73,8 @@ const char* KeyOfBoardError(BoardParamsError error) {
 absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
                                 "diameter_m", "asymmetric", "light_circles", "border_bits",
-                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "pose",
-                                "hexagonal"});
+                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "gap_m",
+                                "pose", "hexagonal"});
       !s.ok()) {
     return s;
   }
@@ -98,6 +100,8 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (!rows.ok()) return rows.status();
   absl::StatusOr<double> square = f.NumberOr("square_m", params.square_m);
   if (!square.ok()) return square.status();
+  absl::StatusOr<double> gap = f.NumberOr("gap_m", params.gap_m);
+  if (!gap.ok()) return gap.status();
   absl::StatusOr<double> spacing = f.NumberOr("spacing_m", params.spacing_m);
   if (!spacing.ok()) return spacing.status();
   absl::StatusOr<double> diameter = f.NumberOr("diameter_m", params.diameter_m);
@@ -113,6 +117,7 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   params.cols = ClampToInt(*cols);
   params.rows = ClampToInt(*rows);
   params.square_m = *square;
+  params.gap_m = *gap;
   params.spacing_m = *spacing;
   params.diameter_m = *diameter;
   params.asymmetric = *asymmetric;
@@ -252,6 +257,12 @@ nlohmann::json BoardParamsToJson(const BoardParams& p) {
     j["asymmetric"] = p.asymmetric;
     j["light_circles"] = p.light_circles;
     j["hexagonal"] = p.hexagonal;
+  }
+  if (p.type == BoardType::kSquareGrid) {
+    j["cols"] = p.cols;
+    j["rows"] = p.rows;
+    j["square_m"] = p.square_m;
+    j["gap_m"] = p.gap_m;
   }
   if (p.type == BoardType::kApriltag) {
     j["border_bits"] = p.apriltag_border_bits;

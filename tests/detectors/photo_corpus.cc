@@ -57,6 +57,18 @@ BoardParams CircleGrid(int cols, int rows, bool asymmetric, double spacing_m = 0
   return p;
 }
 
+// BoofCV's square grid of cols x rows squares with gaps of gap_m between them (its yaml's
+// numCols, numRows, shapeSize and shapeDistance).
+BoardParams SquareGrid(int cols, int rows, double square_m, double gap_m) {
+  BoardParams p;
+  p.type = BoardType::kSquareGrid;
+  p.cols = cols;
+  p.rows = rows;
+  p.square_m = square_m;
+  p.gap_m = gap_m;
+  return p;
+}
+
 PhotoSet Other(std::string name, Lens lens, std::string description,
                Reference reference = Reference::kNone, int ref_cols = 0, int ref_rows = 0,
                double pitch_m = 0.0) {
@@ -129,7 +141,11 @@ std::vector<PhotoSet> BuildSets() {
   sets.back().board->hexagonal = true;
   sets.push_back(Other("boofcv/square_grid_mono_sony_hx5v", Lens::kMild,
                        "square grid 3x4 squares, 30 mm squares and gaps"));
+  sets.back().board = SquareGrid(3, 4, 0.030, 0.030);
+  sets.back().pitch_m = 0.030;
+  // The yaml gives the gap equal to the square in unspecified units (1 and 1): 30 mm stands in.
   sets.push_back(Other("boofcv/square_grid_fisheye", Lens::kFisheye, "square grid 3x4 squares"));
+  sets.back().board = SquareGrid(3, 4, 0.030, 0.030);
   sets.push_back(Other("boofcv/tag25h7_fiducials", Lens::kMild, "single tag25h7 markers"));
   sets.push_back(OneFile(Other("kalibr/aslam_test/testImageCircleGrid", Lens::kWide,
                                "symmetric circle grid 7x5", Reference::kSymmetricCircles, 7, 5),
@@ -294,7 +310,8 @@ absl::StatusOr<Detection> DetectInPhoto(const std::string& path, const Board& bo
 }
 
 std::string BoardLabel(const BoardParams& board) {
-  if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid) {
+  if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid &&
+      board.type != BoardType::kSquareGrid) {
     return BoardTypeName(board.type);
   }
   const bool asymmetric = board.type == BoardType::kCircleGrid && board.asymmetric;
@@ -331,7 +348,10 @@ const std::vector<SweepBoard>& SweepBoards() {
 
 bool ShowsBoard(const PhotoSet& set, const BoardParams& board) {
   if (!set.board || set.board->type != board.type) return false;
-  if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid) return true;
+  if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid &&
+      board.type != BoardType::kSquareGrid) {
+    return true;
+  }
   if (board.type == BoardType::kCircleGrid && board.asymmetric != set.board->asymmetric) {
     return false;
   }

@@ -92,8 +92,9 @@ bool IsPartialView(const PhotoSet& set, const std::string& path);
 // a board type without an image detector.
 absl::StatusOr<Detection> DetectInPhoto(const std::string& path, const Board& board);
 
-// A board in words: its type name, with cols x rows for checkers and circle grids
-// ("checker 6x4", "circle_grid 4x11 asymmetric", "circle_grid 28x24 hexagonal", "apriltag").
+// A board in words: its type name, with cols x rows for checkers, circle grids and square
+// grids ("checker 6x4", "circle_grid 4x11 asymmetric", "circle_grid 28x24 hexagonal",
+// "square_grid 3x4", "apriltag").
 std::string BoardLabel(const BoardParams& board);
 
 // One board of the false-positive sweep.
@@ -107,9 +108,9 @@ struct SweepBoard {
 // board's sub-grid must not pass for a smaller board), without duplicates. Built once.
 const std::vector<SweepBoard>& SweepBoards();
 
-// Whether a photo of `set` shows `board`: the same type, and for checkers and circle grids
-// the same count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned; not for a
-// hexagonal grid) and, for circle grids, the same layout (symmetric, asymmetric or
+// Whether a photo of `set` shows `board`: the same type, and for checkers, circle grids and
+// square grids the same count up to a quarter turn (a 6 x 9 board is a 9 x 6 board turned;
+// not for a hexagonal grid) and, for circle grids, the same layout (symmetric, asymmetric or
 // hexagonal).
 bool ShowsBoard(const PhotoSet& set, const BoardParams& board);
 

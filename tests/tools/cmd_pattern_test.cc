@@ -45,7 +45,8 @@ TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
   const nlohmann::json j = nlohmann::json::parse(run.out);
   const std::map<std::string, int> expected = {
       {"chessboard", 20}, {"circle", 30},     {"vertical", 51}, {"aruco", 16},
-      {"apriltag", 144},  {"round_hole", 21}, {"checker", 54},  {"circle_grid", 54}};
+      {"apriltag", 144},  {"round_hole", 21}, {"checker", 54},  {"circle_grid", 54},
+      {"square_grid", 216}};
   ASSERT_EQ(j.at("boards").size(), expected.size());
   for (const nlohmann::json& b : j.at("boards")) {
     const std::string name = b.at("name");
@@ -61,6 +62,7 @@ TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
   EXPECT_EQ(j.at("boards")[4].at("parameters").at("border_bits").get<int>(), 2);
   EXPECT_EQ(j.at("boards")[7].at("parameters").at("spacing_m").get<double>(), 0.025);
   EXPECT_FALSE(j.at("boards")[7].at("parameters").at("asymmetric").get<bool>());
+  EXPECT_EQ(j.at("boards")[8].at("parameters").at("gap_m").get<double>(), 0.025);
 
   const auto text = RunLinecal("boards");
   EXPECT_EQ(text.exit_code, 0);
@@ -98,6 +100,35 @@ TEST_F(PatternCliTest, CircleGridPageHasItsMargin) {
   const std::string svg = ReadText(Path("g.svg"));
   EXPECT_NE(svg.find("width=\"220mm\" height=\"280mm\""), std::string::npos);
   EXPECT_DOUBLE_EQ(nlohmann::json::parse(run.out).at("page_height_m").get<double>(), 0.28);
+}
+
+// BoofCV's 3 x 4 square grid drawn by `linecal pattern` and found by `linecal detect` on the
+// drawing: all 48 corners with their ids where the drawing put them.
+TEST_F(PatternCliTest, SquareGridPatternIsFoundByDetect) {
+  const std::string board = "--board square_grid --cols 3 --rows 4 --square 0.03 --gap 0.03";
+  const auto pattern = RunLinecal("pattern " + board + " --dpi 100 --json --out " + Path("g.png"));
+  ASSERT_EQ(pattern.exit_code, 0) << pattern.err;
+  // Squares over 150 x 210 mm, a 30 mm margin a side: 210 x 270 mm.
+  const nlohmann::json page = nlohmann::json::parse(pattern.out);
+  EXPECT_DOUBLE_EQ(page.at("page_width_m").get<double>(), 0.21);
+  EXPECT_DOUBLE_EQ(page.at("page_height_m").get<double>(), 0.27);
+  const auto detect = RunLinecal("detect " + board + " --json --image " + Path("g.png"));
+  ASSERT_EQ(detect.exit_code, 0) << detect.err << detect.out;
+  const nlohmann::json j = nlohmann::json::parse(detect.out);
+  EXPECT_EQ(j.at("board"), "square_grid");
+  EXPECT_EQ(j.at("found"), true);
+  ASSERT_EQ(j.at("features").size(), 48u);
+  // Corner (C, R) lies (30 + (C / 2) 60 + (C % 2) 30) mm from the page's left edge, likewise
+  // from its top: at 100 dpi, 100 / 25.4 px per mm, less half a pixel (pixel centres).
+  constexpr double kPxPerMm = 100.0 / 25.4;
+  for (const nlohmann::json& f : j.at("features")) {
+    const int id = f.at("id").get<int>();
+    const int c = id % 6, r = id / 6;
+    const double u = (30.0 + (c / 2) * 60.0 + (c % 2) * 30.0) * kPxPerMm - 0.5;
+    const double v = (30.0 + (r / 2) * 60.0 + (r % 2) * 30.0) * kPxPerMm - 0.5;
+    EXPECT_NEAR(f.at("u").get<double>(), u, 0.5) << id;
+    EXPECT_NEAR(f.at("v").get<double>(), v, 0.5) << id;
+  }
 }
 
 TEST_F(PatternCliTest, PngSizeIsDpiTimesBoardSize) {
@@ -144,11 +175,15 @@ TEST_F(PatternCliTest, BadUsageExitsWithTwoAndOneLine) {
       {"pattern --board aruco", "missing --out"},
       {"pattern --board aruco --out " + Path("x.txt"), "must end in .svg or .png"},
       {"pattern --board aruco --cols 5 --out " + Path("x.svg"),
-       "--cols applies to --board checker or circle_grid only, not aruco"},
+       "--cols applies to --board checker or circle_grid or square_grid only, not aruco"},
       {"pattern --board checker --spacing 0.02 --out " + Path("x.svg"),
        "--spacing applies to --board circle_grid only, not checker"},
       {"pattern --board circle_grid --square 0.02 --out " + Path("x.svg"),
-       "--square applies to --board checker only, not circle_grid"},
+       "--square applies to --board checker or square_grid only, not circle_grid"},
+      {"pattern --board checker --gap 0.02 --out " + Path("x.svg"),
+       "--gap applies to --board square_grid only, not checker"},
+      {"pattern --board square_grid --gap 0 --out " + Path("x.svg"),
+       "--gap: 0 m is outside (0, 1]"},
       {"pattern --board circle_grid --diameter 0.03 --out " + Path("x.svg"),
        "--diameter: 0.03 m must be > 0 and below"},
       {"pattern --board circle_grid --spacing 0 --out " + Path("x.svg"), "--spacing: 0 m"},

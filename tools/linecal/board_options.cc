@@ -44,6 +44,8 @@ const char* OptionOf(BoardParamsError e) {
       return "start-id";
     case BoardParamsError::kBadLayout:
       return "hexagonal";
+    case BoardParamsError::kBadGap:
+      return "gap";
   }
   return "board";
 }
@@ -71,8 +73,9 @@ absl::Status AprilGridFromCommandLine(const cli::CommandLine& cl, BoardParams* p
 // --target FILE: the file gives the board; only what Kalibr's file cannot say (a circle grid's
 // diameter and polarity) may be added.
 absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
-  for (const char* option : {"board", "scale", "cols", "rows", "square", "spacing", "asymmetric",
-                             "tag-cols", "tag-rows", "tag-spacing", "start-id", "hexagonal"}) {
+  for (const char* option : {"board", "scale", "cols", "rows", "square", "gap", "spacing",
+                             "asymmetric", "tag-cols", "tag-rows", "tag-spacing", "start-id",
+                             "hexagonal"}) {
     if (cl.Has(option)) {
       return absl::InvalidArgumentError(
           absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
@@ -138,6 +141,8 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
                           " must lie in tag36h11's 0..", kTag36h11Codes - 1);
     case BoardParamsError::kBadLayout:
       return "a grid is hexagonal or asymmetric, not both";
+    case BoardParamsError::kBadGap:
+      return absl::StrCat(p.gap_m, " m is outside (0, ", kMaxSquareGridGapM, "]");
   }
   return "invalid";
 }
@@ -147,9 +152,14 @@ std::vector<cli::OptionSpec> BoardOptionSpecs() {
       {"board", "NAME", "board type: " + BoardNames() + " (this or --target)"},
       {"target", "FILE", "the board from a Kalibr target YAML file (this or --board)"},
       {"scale", "S", "print scale of the board (default 1: 1 PDF unit = 1 mm)"},
-      {"cols", "N", "checker: inner corners along x; circle_grid: circles per row (default 9)"},
-      {"rows", "M", "checker: inner corners along y; circle_grid: rows of circles (default 6)"},
-      {"square", "METRES", "checker only: square side in metres (default 0.025)"},
+      {"cols", "N",
+       "checker: inner corners along x; circle_grid: circles per row; square_grid: squares per "
+       "row (default 9)"},
+      {"rows", "M",
+       "checker: inner corners along y; circle_grid: rows of circles; square_grid: rows of "
+       "squares (default 6)"},
+      {"square", "METRES", "checker, square_grid: square side in metres (default 0.025)"},
+      {"gap", "METRES", "square_grid only: white gap between squares in metres (default 0.025)"},
       {"spacing", "METRES",
        "circle_grid only: centre distance in metres, OpenCV's squareSize (default 0.025)"},
       {"diameter", "METRES", "circle_grid only: circle diameter in metres (default 0.0125)"},
@@ -183,9 +193,10 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
     std::vector<BoardType> types;
   };
   const Applies applies[] = {
-      {"cols", {BoardType::kChecker, BoardType::kCircleGrid}},
-      {"rows", {BoardType::kChecker, BoardType::kCircleGrid}},
-      {"square", {BoardType::kChecker}},
+      {"cols", {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kSquareGrid}},
+      {"rows", {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kSquareGrid}},
+      {"square", {BoardType::kChecker, BoardType::kSquareGrid}},
+      {"gap", {BoardType::kSquareGrid}},
       {"spacing", {BoardType::kCircleGrid}},
       {"diameter", {BoardType::kCircleGrid}},
       {"asymmetric", {BoardType::kCircleGrid}},
@@ -212,6 +223,8 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   if (!rows.ok()) return rows.status();
   absl::StatusOr<double> square = cl.GetDouble("square", p.square_m);
   if (!square.ok()) return square.status();
+  absl::StatusOr<double> gap = cl.GetDouble("gap", p.gap_m);
+  if (!gap.ok()) return gap.status();
   absl::StatusOr<double> spacing = cl.GetDouble("spacing", p.spacing_m);
   if (!spacing.ok()) return spacing.status();
   absl::StatusOr<double> diameter = cl.GetDouble("diameter", p.diameter_m);
@@ -223,6 +236,7 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   p.cols = *cols;
   p.rows = *rows;
   p.square_m = *square;
+  p.gap_m = *gap;
   p.spacing_m = *spacing;
   p.diameter_m = *diameter;
   p.asymmetric = cl.Has("asymmetric");

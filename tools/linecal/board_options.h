@@ -1,6 +1,6 @@
 #pragma once
 // The command-line options that choose a board (docs/boards.md), shared by every subcommand that
-// takes --board: --board NAME [--scale S] [--cols N --rows M] [--square METRES]
+// takes --board: --board NAME [--scale S] [--cols N --rows M] [--square METRES] [--gap METRES]
 // [--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] [--light-circles]
 // [--border-bits 1|2],
 // or --target FILE (target_file.h).
@@ -20,12 +20,13 @@ std::vector<cli::OptionSpec> BoardOptionSpecs();
 
 // The board the parsed options describe. Errors (InvalidArgument, one line naming the option
 // and the value): neither --board nor --target; an unknown board name (the message lists the
-// names), --cols/--rows with a board other than checker and circle_grid, --square with one
-// other than checker, --spacing/--diameter/--asymmetric/--hexagonal/--light-circles with one
-// other than circle_grid, --border-bits with one other than apriltag, a value that is not a
-// number, and values ValidateBoardParams refuses. With --target: the file's errors
-// (target_file.h), any board option but --diameter and --light-circles (which a Kalibr file
-// cannot give), and those two for a board other than a circle grid.
+// names), --cols/--rows with a board other than checker, circle_grid and square_grid, --square
+// with one other than checker and square_grid, --gap with one other than square_grid,
+// --spacing/--diameter/--asymmetric/--hexagonal/--light-circles with one other than
+// circle_grid, --border-bits with one other than apriltag, a value that is not a number, and
+// values ValidateBoardParams refuses. With --target: the file's errors (target_file.h), any
+// board option but --diameter and --light-circles (which a Kalibr file cannot give), and those
+// two for a board other than a circle grid.
 absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& cl);
 
 // What is wrong with the field of `p` that `e` names, with its value and range ("1 is outside

@@ -36,6 +36,8 @@ const char* Description(BoardType type) {
       return "generic chessboard, cols x rows inner corners";
     case BoardType::kCircleGrid:
       return "circle grid: OpenCV's symmetric or asymmetric (cols x rows), BoofCV's hexagonal";
+    case BoardType::kSquareGrid:
+      return "BoofCV square grid, cols x rows black squares apart by white gaps";
   }
   return "";
 }

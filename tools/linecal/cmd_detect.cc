@@ -256,8 +256,9 @@ int RunDetect(const Args& args) {
                      "Kalibr camchain)"});
   cli::CommandLine cl(
       "linecal detect --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
-      "[--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] [--light-circles] "
-      "--image FILE [--intrinsics FILE [--camera NAME]] [--json] [--overlay OUT.png]\n"
+      "[--gap METRES] [--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] "
+      "[--light-circles] --image FILE [--intrinsics FILE [--camera NAME]] [--json] "
+      "[--overlay OUT.png]\n"
       "       linecal detect --board round_hole [--scale S] --cloud FILE [--cloud FILE ...] "
       "[--json]",
       "Finds the board in the image and prints every feature found: its id, sub-pixel image "

@@ -36,7 +36,8 @@ int RunPattern(const Args& args) {
   options.push_back({"json", "", "print what was written as one JSON object"});
   cli::CommandLine cl(
       "linecal pattern --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
-      "[--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] [--light-circles] "
+      "[--gap METRES] [--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] "
+      "[--light-circles] "
       "[--border-bits 1|2] --out FILE.svg|FILE.png [--dpi N] [--json]",
       "Writes a printable drawing of a board at true size: SVG with its size in millimetres, "
       "or PNG at --dpi with the physical resolution recorded in the file. Print at 100% "

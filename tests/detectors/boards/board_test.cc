@@ -59,8 +59,9 @@ Paint PaintByScan(const Board& b, const Eigen::Vector2d& p) {
 }
 
 TEST(BoardTypes, NamesRoundTrip) {
-  const std::vector<std::string> expected = {"chessboard", "circle",     "vertical", "aruco",
-                                             "apriltag",   "round_hole", "checker",  "circle_grid"};
+  const std::vector<std::string> expected = {"chessboard", "circle",     "vertical",
+                                             "aruco",      "apriltag",   "round_hole",
+                                             "checker",    "circle_grid", "square_grid"};
   ASSERT_EQ(kAllBoardTypes.size(), expected.size());
   for (std::size_t i = 0; i < expected.size(); ++i) {
     EXPECT_EQ(BoardTypeName(kAllBoardTypes[i]), expected[i]);
@@ -86,6 +87,8 @@ TEST(Board, FeatureCountsPageSizesAndIdOrder) {
       {BoardType::kChecker, 54, 0.3, 0.225},  // 9 x 6 inner corners of 25 mm, 1-square margin
       // 9 x 6 circles 25 mm apart: centres over 8 x 5 spacings, 2 spacings of margin a side.
       {BoardType::kCircleGrid, 54, 0.3, 0.225},
+      // 9 x 6 squares of 25 mm, 25 mm apart: 425 x 275 mm of squares, a square of margin a side.
+      {BoardType::kSquareGrid, 216, 0.475, 0.325},
   };
   for (const Expected& e : cases) {
     const Board b = MakeBoard(e.type);
@@ -521,6 +524,45 @@ TEST(Board, CircleGridHexagonalIsBoofCvsLayout) {
   EXPECT_NEAR(b.features()[0].p_board.x() - b.features()[322].p_board.x(), 0.012, kExactM);
 }
 
+// docs/boards.md §9: BoofCV's 3 x 4 grid of 30 mm squares 30 mm apart (the corpus's board).
+TEST(Board, SquareGridCornersIdsAndPaint) {
+  BoardParams p;
+  p.type = BoardType::kSquareGrid;
+  p.cols = 3;
+  p.rows = 4;
+  p.square_m = 0.03;
+  p.gap_m = 0.02;
+  const Board b = *Board::Create(p);
+  // Squares over 3 * 30 + 2 * 20 = 130 by 4 * 30 + 3 * 20 = 180 mm, 30 mm of margin a side.
+  ExpectNear(b.page_size_m(), Eigen::Vector2d(0.19, 0.24), kExactM, "page");
+  ASSERT_EQ(b.features().size(), 48u);
+  // Id = 2 cols * R + C on the 6 x 8 lattice of corners, from the top-left.
+  ExpectNear(b.features()[0].p_board, Eigen::Vector2d(-0.065, 0.09), kExactM, "id 0");
+  ExpectNear(b.features()[1].p_board, Eigen::Vector2d(-0.035, 0.09), kExactM, "id 1");
+  ExpectNear(b.features()[2].p_board, Eigen::Vector2d(-0.015, 0.09), kExactM, "id 2");
+  ExpectNear(b.features()[5].p_board, Eigen::Vector2d(0.065, 0.09), kExactM, "id 5");
+  ExpectNear(b.features()[6].p_board, Eigen::Vector2d(-0.065, 0.06), kExactM, "id 6");
+  ExpectNear(b.features()[12].p_board, Eigen::Vector2d(-0.065, 0.04), kExactM, "id 12");
+  ExpectNear(b.features()[47].p_board, Eigen::Vector2d(0.065, -0.09), kExactM, "id 47");
+  for (const BoardFeature& f : b.features()) {
+    EXPECT_EQ(f.kind, FeatureKind::kLCorner);
+    EXPECT_EQ(f.marker, -1);
+    // Exactly one of the four quadrants around a corner is black: its square's.
+    int black = 0;
+    for (const double sx : {-1.0, 1.0}) {
+      for (const double sy : {-1.0, 1.0}) {
+        black += b.PaintAt(f.p_board + 1e-4 * Eigen::Vector2d(sx, sy)) == Paint::kBlack;
+      }
+    }
+    EXPECT_EQ(black, 1) << f.id;
+  }
+  // The gaps, their crossings and the margin are white; square centres black.
+  EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.05, 0.075)), Paint::kBlack);  // square (0, 0)
+  EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.025, 0.075)), Paint::kWhite);  // gap right of it
+  EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.025, 0.05)), Paint::kWhite);   // crossing
+  EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.08, 0.075)), Paint::kWhite);   // margin
+}
+
 TEST(Board, ScaleMultipliesEverything) {
   for (BoardType type : kAllBoardTypes) {
     const Board one = MakeBoard(type);
@@ -642,6 +684,12 @@ TEST(Board, ValidationReasons) {
             }),
             BoardParamsError::kBadDiameter);
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadLayout), "bad_layout");
+  EXPECT_EQ(reason([](BoardParams& p) { p.gap_m = 0; }), BoardParamsError::kBadGap);
+  EXPECT_EQ(reason([](BoardParams& p) { p.gap_m = -0.01; }), BoardParamsError::kBadGap);
+  EXPECT_EQ(reason([](BoardParams& p) { p.gap_m = 1.01; }), BoardParamsError::kBadGap);
+  EXPECT_EQ(reason([](BoardParams& p) { p.gap_m = std::nan(""); }), BoardParamsError::kBadGap);
+  EXPECT_EQ(reason([](BoardParams& p) { p.gap_m = 1.0; }), BoardParamsError::kOk);
+  EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadGap), "bad_gap");
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadDiameter), "bad_diameter");
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadSquare), "bad_square");
 }

@@ -1,0 +1,576 @@
+#include "detectors/square_grid/square_grid_detector.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <deque>
+#include <limits>
+#include <map>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "detectors/common/binarise.h"
+#include "detectors/common/contours.h"
+#include "detectors/common/edge_lines.h"
+#include "detectors/common/homography.h"
+
+namespace linecal {
+namespace {
+
+// ---- 1. Dark squares ------------------------------------------------------------------------
+
+// Edge points per side for the line fits, spread over the side's middle 70% (the corners
+// are rounded by blur and touch the gaps' crossings): enough for a fit that averages noise,
+// few enough for squares of min_square_side_px.
+constexpr int kEdgeSamples = 12;
+constexpr double kEdgeSpan = 0.7;
+
+// A dark quad: corners clockwise in the image (y down), its homography from the unit square
+// ((0, 0) corner 0, (1, 0) corner 1, (1, 1) corner 2, (0, 1) corner 3), centre and mean side.
+struct Square {
+  std::array<Eigen::Vector2d, 4> corners;
+  Eigen::Matrix3d H = Eigen::Matrix3d::Identity();
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  double side_px = 0.0;
+};
+
+// The quad's corners where lines fitted to its four edges meet (edge points from dark inside
+// to light outside, edge_lines.h); the window across an edge stays clear of the opposite side
+// and of the next square beyond the gap (gap_ratio sides away). nullopt when a side has too
+// few edge points, two sides are near parallel, or a corner moves by more than a third of a
+// side (not a square's corner: the contour's vertices of a blurred, noisy square of 12-16 px
+// lie up to a quarter of a side off its corners).
+std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
+    const ImageView8& image, const std::array<Eigen::Vector2d, 4>& corners, double gap_ratio) {
+  std::array<Line2d, 4> lines;
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Vector2d a = corners[k], b = corners[(k + 1) % 4];
+    const double len = (b - a).norm();
+    const Eigen::Vector2d d = (b - a) / len;
+    const Eigen::Vector2d n(d.y(), -d.x());  // outward for a clockwise quad, y down
+    // 4 px: beyond it only the tail of the blur is seen.
+    const double half_window = std::clamp(0.4 * std::min(1.0, gap_ratio) * len, 1.0, 4.0);
+    std::vector<EdgePoint> points;
+    for (int i = 0; i < kEdgeSamples; ++i) {
+      const double t = 0.5 * (1.0 - kEdgeSpan) + kEdgeSpan * (i + 0.5) / kEdgeSamples;
+      if (const std::optional<EdgePoint> e =
+              MeasureEdgePoint(image, a + t * (b - a), n, half_window)) {
+        points.push_back(*e);
+      }
+    }
+    // Half the samples: a side mostly without an edge is not a printed square's.
+    if (static_cast<int>(points.size()) < kEdgeSamples / 2) return std::nullopt;
+    const std::optional<Line2d> line = FitWeightedLine(points, d);
+    if (!line) return std::nullopt;
+    lines[k] = *line;
+  }
+  std::array<Eigen::Vector2d, 4> out;
+  for (int k = 0; k < 4; ++k) {
+    const int j = (k + 3) % 4;  // corner k ends side k - 1 and starts side k
+    const std::optional<Eigen::Vector2d> p = IntersectLines(lines[j], lines[k]);
+    const double side =
+        std::min((corners[(k + 1) % 4] - corners[k]).norm(), (corners[k] - corners[j]).norm());
+    if (!p || (*p - corners[k]).norm() > side / 3.0) return std::nullopt;
+    out[k] = *p;
+  }
+  return out;
+}
+
+// The square of four refined corners; nullopt when they give no homography.
+std::optional<Square> MakeSquare(const std::array<Eigen::Vector2d, 4>& corners) {
+  static constexpr HomographyFitOptions kDltOnly{.refine = false};  // four points: exact
+  const std::array<Eigen::Vector2d, 4> unit = {Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 0),
+                                               Eigen::Vector2d(1, 1), Eigen::Vector2d(0, 1)};
+  const std::optional<HomographyFit> fit = FitHomography(unit, corners, kDltOnly);
+  if (!fit) return std::nullopt;
+  Square s;
+  s.corners = corners;
+  s.H = fit->H;
+  s.centre = ApplyHomography(s.H, Eigen::Vector2d(0.5, 0.5));
+  for (int k = 0; k < 4; ++k) s.side_px += 0.25 * (corners[(k + 1) % 4] - corners[k]).norm();
+  if (!s.centre.allFinite()) return std::nullopt;
+  return s;
+}
+
+// The dark squares of the image: quads of the dark components, refined twice (the second fit
+// starts from edges measured along the right normals).
+std::vector<Square> FindSquares(const ImageView8& image, const Image8& dark, double gap_ratio,
+                                int min_side_px) {
+  QuadOptions quad_options;
+  quad_options.min_side_px = min_side_px;
+  // A quarter of a side: the chamfer blur and noise leave at a small square's acute corner
+  // (4 px of a 22 px side, seen on renders at yaw 30, pitch 30), never two of its corners.
+  quad_options.merge_vertices_fraction = 0.06;
+  std::vector<Square> squares;
+  for (const Quad& quad : FindQuads(LabelComponents(dark.view()), quad_options)) {
+    std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
+    for (int pass = 0; pass < 2 && corners; ++pass) {
+      corners = RefineCorners(image, *corners, gap_ratio);
+    }
+    if (!corners) continue;
+    if (std::optional<Square> s = MakeSquare(*corners)) squares.push_back(*s);
+  }
+  return squares;
+}
+
+// ---- 2. Links and grid coordinates --------------------------------------------------------
+
+// Side k's outward direction in the unit square: up, right, down, left (clockwise, y down).
+constexpr std::array<std::array<double, 2>, 4> kSideDirection = {
+    {{0.0, -1.0}, {1.0, 0.0}, {0.0, 1.0}, {-1.0, 0.0}}};
+
+// Two squares of one grid differ in size by perspective only: under 2:1 for any view the
+// link test accepts, while dark shapes of the room come in every size.
+constexpr double kMaxSideRatio = 2.0;
+
+struct Link {
+  int square = -1;  // the neighbour, -1 for none
+  int side = 0;     // its side that faces back
+};
+
+// Per square and side, the mutual neighbour across that side (method, step 2): the side of
+// another square whose gap centre, each square's homography carried half a gap beyond its
+// side, is nearest, within max_fraction of the two squares' mean side, both ways. Half a gap
+// from each side keeps the bending of a lens out: a fisheye near the rim shrinks the pitch
+// by a third from one square to the next, which a whole pitch carried by one square's
+// homography misses by more than a quarter of it.
+std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares, double gap_ratio,
+                                             double max_fraction) {
+  const int n = static_cast<int>(squares.size());
+  std::vector<std::array<Eigen::Vector2d, 4>> gap_centre(n);
+  for (int a = 0; a < n; ++a) {
+    for (int k = 0; k < 4; ++k) {
+      const double reach = 0.5 + 0.5 * gap_ratio;  // from the square's centre, in sides
+      gap_centre[a][k] = ApplyHomography(
+          squares[a].H,
+          Eigen::Vector2d(0.5 + reach * kSideDirection[k][0], 0.5 + reach * kSideDirection[k][1]));
+    }
+  }
+  std::vector<std::array<Link, 4>> best(n);
+  for (int a = 0; a < n; ++a) {
+    for (int k = 0; k < 4; ++k) {
+      if (!gap_centre[a][k].allFinite()) continue;
+      double nearest = std::numeric_limits<double>::infinity();
+      for (int b = 0; b < n; ++b) {
+        const double ratio = squares[b].side_px / squares[a].side_px;
+        if (b == a || ratio > kMaxSideRatio || ratio < 1.0 / kMaxSideRatio) continue;
+        const double tol = max_fraction * 0.5 * (squares[a].side_px + squares[b].side_px);
+        for (int m = 0; m < 4; ++m) {
+          const double dist = (gap_centre[b][m] - gap_centre[a][k]).norm();
+          if (dist <= tol && dist < nearest) {
+            nearest = dist;
+            best[a][k] = Link{b, m};
+          }
+        }
+      }
+    }
+  }
+  std::vector<std::array<Link, 4>> links(n);
+  for (int a = 0; a < n; ++a) {
+    for (int k = 0; k < 4; ++k) {
+      const Link& l = best[a][k];
+      if (l.square >= 0 && best[l.square][l.side].square == a && best[l.square][l.side].side == k) {
+        links[a][k] = l;
+      }
+    }
+  }
+  return links;
+}
+
+struct GridSquare {
+  int square = 0;
+  int rotation = 0;  // global direction g (0 +i, 1 +j, 2 -i, 3 -j) is side (rotation + g) % 4
+};
+
+// Connected groups of linked squares with integer grid coordinates (i right, j down,
+// right-handed in the image), spread breadth-first; a link that would put a second square on
+// a grid point is not followed.
+std::vector<std::map<std::pair<int, int>, GridSquare>> GridGroups(
+    const std::vector<std::array<Link, 4>>& links) {
+  constexpr std::array<int, 4> kDi = {1, 0, -1, 0};
+  constexpr std::array<int, 4> kDj = {0, 1, 0, -1};
+  const int n = static_cast<int>(links.size());
+  std::vector<bool> placed(n, false);
+  std::vector<std::map<std::pair<int, int>, GridSquare>> groups;
+  for (int seed = 0; seed < n; ++seed) {
+    if (placed[seed]) continue;
+    placed[seed] = true;
+    std::map<std::pair<int, int>, GridSquare> at = {{{0, 0}, GridSquare{seed, 0}}};
+    std::deque<std::pair<int, int>> queue = {{0, 0}};
+    while (!queue.empty()) {
+      const std::pair<int, int> point = queue.front();
+      queue.pop_front();
+      const GridSquare here = at.at(point);
+      for (int g = 0; g < 4; ++g) {
+        const Link& link = links[here.square][(here.rotation + g) % 4];
+        if (link.square < 0 || placed[link.square]) continue;
+        const std::pair<int, int> next = {point.first + kDi[g], point.second + kDj[g]};
+        if (at.count(next) != 0) continue;
+        placed[link.square] = true;
+        // Its side facing back points along global direction g + 2.
+        at[next] = GridSquare{link.square, (link.side - g - 2 + 8) % 4};
+        queue.push_back(next);
+      }
+    }
+    groups.push_back(std::move(at));
+  }
+  return groups;
+}
+
+// ---- 3. Windows ---------------------------------------------------------------------------
+
+// A complete w x h placement of squares: square (i, j) at squares[j * w + i]. Its corner
+// lattice is 2w x 2h points; point (x, y) is corner (x % 2, y % 2) of square (x / 2, y / 2).
+struct Window {
+  int w = 0, h = 0;
+  std::vector<GridSquare> squares;
+  std::vector<const Square*> geometry;
+
+  const Square& At(int i, int j) const { return *geometry[j * w + i]; }
+  // Lattice point (x, y): the square's top-left, top-right, bottom-right, bottom-left corner
+  // in grid directions are its corners rotation + 3, + 0, + 1, + 2.
+  const Eigen::Vector2d& Corner(int x, int y) const {
+    static constexpr int kCornerOf[2][2] = {{3, 2}, {0, 1}};  // [x % 2][y % 2]
+    const int i = x / 2, j = y / 2;
+    return At(i, j).corners[(squares[j * w + i].rotation + kCornerOf[x % 2][y % 2]) % 4];
+  }
+};
+
+// Calls fn(p0, p1, p2, p3) for the corners of every two neighbouring squares along each row
+// and column of the corner lattice, in order along the line; stops at the first false.
+template <typename Fn>
+bool ForEachGapLine(const Window& win, Fn&& fn) {
+  for (int y = 0; y < 2 * win.h; ++y) {
+    for (int x = 1; x + 2 < 2 * win.w; x += 2) {
+      if (!fn(win.Corner(x - 1, y), win.Corner(x, y), win.Corner(x + 1, y), win.Corner(x + 2, y))) {
+        return false;
+      }
+    }
+  }
+  for (int x = 0; x < 2 * win.w; ++x) {
+    for (int y = 1; y + 2 < 2 * win.h; y += 2) {
+      if (!fn(win.Corner(x, y - 1), win.Corner(x, y), win.Corner(x, y + 1), win.Corner(x, y + 2))) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+// Along every row and column of the corner lattice, each gap against the squares on either
+// side of it: the corners of two neighbouring squares lie at 0, 1, 1 + r and 2 + r sides
+// along the line (r the gap over the side), so the gap's image vector is r times the mean of
+// the two squares' side vectors there. That holds exactly for any quadratic image of the
+// line: perspective and a lens's bending over one pitch drop out (a fisheye bends the board's
+// corner squares by over half a side against a quadratic through 3 x 3 squares), while a
+// square that is not the grid's is off by a good part of a side. Each within max(1 px,
+// fraction x the two squares' mean side). The squares' dilation (below) changes r; it is
+// left in: a few percent of a side.
+bool LocallyConsistent(const Window& win, double gap_ratio, double fraction) {
+  return ForEachGapLine(win, [&](const Eigen::Vector2d& p0, const Eigen::Vector2d& p1,
+                                 const Eigen::Vector2d& p2, const Eigen::Vector2d& p3) {
+    const double side = 0.5 * ((p1 - p0).norm() + (p3 - p2).norm());
+    const double residual = ((p2 - p1) - 0.5 * gap_ratio * ((p1 - p0) + (p3 - p2))).norm();
+    return residual <= std::max(1.0, fraction * side);
+  });
+}
+
+// Corners located on edges carry one bias that the geometry cannot show square by square: a
+// gamma applied after the optics' blur (and ink spread) moves every dark-to-light edge out or
+// in by the same amount, so every square grows or shrinks about its centre while the pitch
+// stays (measured on renders with gamma 1.4 and blur 1: 0.3 px RMS). The print's gap over
+// its side, r, measures it: seen as q (the gaps' length over the squares' along every line
+// of the lattice), the squares have grown by d sides at each edge with q = (r - 2d) / (1 + 2d).
+// Returns d / (1 + 2d): the fraction of a seen side by which each corner lies outwards along
+// both sides of its square.
+double DilationFraction(const Window& win, double gap_ratio) {
+  double gaps = 0.0, sides = 0.0;
+  ForEachGapLine(win, [&](const Eigen::Vector2d& p0, const Eigen::Vector2d& p1,
+                          const Eigen::Vector2d& p2, const Eigen::Vector2d& p3) {
+    gaps += (p2 - p1).norm();
+    sides += 0.5 * ((p1 - p0).norm() + (p3 - p2).norm());
+    return true;
+  });
+  const double q = gaps / sides;
+  const double d = (gap_ratio - q) / (2.0 * (1.0 + q));
+  return d / (1.0 + 2.0 * d);
+}
+
+// Lattice point (x, y) with its square's dilation taken out: moved inwards along both sides
+// of its square by `fraction` of the square's mean side vectors.
+Eigen::Vector2d UndilatedCorner(const Window& win, int x, int y, double fraction) {
+  const int i0 = x - x % 2, j0 = y - y % 2;
+  const Eigen::Vector2d across = 0.5 * (win.Corner(i0 + 1, j0) - win.Corner(i0, j0) +
+                                        win.Corner(i0 + 1, j0 + 1) - win.Corner(i0, j0 + 1));
+  const Eigen::Vector2d down = 0.5 * (win.Corner(i0, j0 + 1) - win.Corner(i0, j0) +
+                                      win.Corner(i0 + 1, j0 + 1) - win.Corner(i0 + 1, j0));
+  const double su = x % 2 == 0 ? 1.0 : -1.0, sv = y % 2 == 0 ? 1.0 : -1.0;
+  return win.Corner(x, y) + fraction * (su * across + sv * down);
+}
+
+// The mean grey at uv and at four points spread_px away along the image axes (noise
+// averaged, inside a gap or square of twice spread_px); nullopt when a point leaves the image.
+std::optional<double> MeanGrey(const ImageView8& image, const Eigen::Vector2d& uv,
+                               double spread_px) {
+  double sum = 0.0;
+  for (const auto& [dx, dy] :
+       {std::pair{0.0, 0.0}, {1.0, 0.0}, {-1.0, 0.0}, {0.0, 1.0}, {0.0, -1.0}}) {
+    const Eigen::Vector2d p = uv + spread_px * Eigen::Vector2d(dx, dy);
+    if (!InsideForBilinearGrey(image, p)) return std::nullopt;
+    sum += BilinearGrey(image, p.x(), p.y());
+  }
+  return sum / 5.0;
+}
+
+// The paint of the window: every gap between neighbouring squares and every crossing of gaps
+// lighter than the mean of the squares around it by at least half the board's contrast (the
+// median light sample minus the median square) and by min_contrast. A chessboard prints a
+// black square at every crossing; an AprilGrid, a corner square.
+bool PaintAgrees(const ImageView8& image, const Window& win, int min_contrast) {
+  std::vector<double> dark(win.w * win.h);
+  for (int j = 0; j < win.h; ++j) {
+    for (int i = 0; i < win.w; ++i) {
+      const Square& s = win.At(i, j);
+      const std::optional<double> v = MeanGrey(image, s.centre, 0.2 * s.side_px);
+      if (!v) return false;
+      dark[j * win.w + i] = *v;
+    }
+  }
+  // Light points: the centre of the inner corners between the squares (i, j) .. (i + di,
+  // j + dj), with the squares around it.
+  struct Light {
+    double value;
+    double around;
+  };
+  std::vector<Light> light;
+  for (int j = 0; j < win.h; ++j) {
+    for (int i = 0; i < win.w; ++i) {
+      for (const auto& [di, dj] : {std::pair{1, 0}, {0, 1}, {1, 1}}) {
+        if (i + di >= win.w || j + dj >= win.h) continue;
+        Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+        double around = 0.0, side = 0.0;
+        int n = 0;
+        for (int y = 2 * j + dj; y <= 2 * j + 1 + dj; ++y) {
+          for (int x = 2 * i + di; x <= 2 * i + 1 + di; ++x) {
+            centre += win.Corner(x, y);
+            ++n;
+          }
+        }
+        centre /= n;
+        for (int jj = j; jj <= j + dj; ++jj) {
+          for (int ii = i; ii <= i + di; ++ii) {
+            around += dark[jj * win.w + ii];
+            side += win.At(ii, jj).side_px;
+          }
+        }
+        const int squares_around = (di + 1) * (dj + 1);
+        const std::optional<double> v = MeanGrey(image, centre, 0.1 * side / squares_around);
+        if (!v) return false;
+        light.push_back({*v, around / squares_around});
+      }
+    }
+  }
+  std::vector<double> light_values;
+  for (const Light& l : light) light_values.push_back(l.value);
+  const auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  const double contrast = median(light_values) - median(dark);
+  if (!(contrast >= min_contrast)) return false;
+  const double min_step = std::max<double>(min_contrast, 0.5 * contrast);
+  return std::all_of(light.begin(), light.end(),
+                     [&](const Light& l) { return l.value - l.around >= min_step; });
+}
+
+// A verified window in one of its orientations: feature id and image position.
+struct Hypothesis {
+  std::vector<std::pair<int, Eigen::Vector2d>> id_uv;
+  double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
+};
+
+// The rotations of a verified window onto the board's corner lattice (C, R), the most upright
+// (header), its corners with the squares' dilation taken out; nullopt when none fits cols x rows.
+// Rotation k of the lattice point (x, y) of a 2w x 2h lattice: 0: (x, y); 1: (y, 2w-1-x); 2:
+// (2w-1-x, 2h-1-y); 3: (2h-1-y, x).
+std::optional<Hypothesis> Orient(const Window& win, int cols, int rows, double gap_ratio) {
+  const double dilation = DilationFraction(win, gap_ratio);
+  const int ci = std::min((win.w - 1) / 2, win.w - 2), cj = std::min((win.h - 1) / 2, win.h - 2);
+  const Eigen::Vector2d step_i = win.At(ci + 1, cj).centre - win.At(ci, cj).centre;
+  const Eigen::Vector2d step_j = win.At(ci, cj + 1).centre - win.At(ci, cj).centre;
+  const std::array<Eigen::Vector2d, 4> x_axis = {step_i, step_j, -step_i, -step_j};
+  std::optional<Hypothesis> best;
+  for (int k = 0; k < 4; ++k) {
+    const bool swapped = k % 2 == 1;
+    if ((swapped ? win.h : win.w) != cols || (swapped ? win.w : win.h) != rows) continue;
+    const double u = x_axis[k].normalized().x();
+    if (best && u <= best->x_axis_u) continue;
+    Hypothesis hyp;
+    hyp.x_axis_u = u;
+    const int lw = 2 * win.w, lh = 2 * win.h;
+    for (int y = 0; y < lh; ++y) {
+      for (int x = 0; x < lw; ++x) {
+        int c = 0, r = 0;
+        switch (k) {
+          case 0:
+            c = x;
+            r = y;
+            break;
+          case 1:
+            c = y;
+            r = lw - 1 - x;
+            break;
+          case 2:
+            c = lw - 1 - x;
+            r = lh - 1 - y;
+            break;
+          default:
+            c = lh - 1 - y;
+            r = x;
+            break;
+        }
+        hyp.id_uv.emplace_back(2 * cols * r + c, UndilatedCorner(win, x, y, dilation));
+      }
+    }
+    best = std::move(hyp);
+  }
+  return best;
+}
+
+// What the search of the groups gave: the verified windows' hypotheses, and the reason of the
+// last refusal (kTooFewFeatures when no group held a complete window).
+struct Search {
+  std::vector<Hypothesis> found;
+  std::vector<std::vector<int>> found_squares;  // each hypothesis's squares, sorted
+  DetectReason refusal = DetectReason::kTooFewFeatures;
+};
+
+void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
+                 const std::map<std::pair<int, int>, GridSquare>& group, const Board& board,
+                 const SquareGridOptions& options, int min_contrast, Search* search) {
+  const int cols = board.params().cols, rows = board.params().rows;
+  if (static_cast<int>(group.size()) < cols * rows) return;
+  const double pitch_ratio = 1.0 + board.params().gap_m / board.params().square_m;
+  std::vector<std::pair<int, int>> sizes = {{cols, rows}};
+  if (cols != rows) sizes.emplace_back(rows, cols);
+  int i_lo = 1 << 30, i_hi = -(1 << 30), j_lo = 1 << 30, j_hi = -(1 << 30);
+  for (const auto& [point, gs] : group) {
+    i_lo = std::min(i_lo, point.first);
+    i_hi = std::max(i_hi, point.first);
+    j_lo = std::min(j_lo, point.second);
+    j_hi = std::max(j_hi, point.second);
+  }
+  for (const auto& [w, h] : sizes) {
+    for (int wj = j_lo; wj + h - 1 <= j_hi; ++wj) {
+      for (int wi = i_lo; wi + w - 1 <= i_hi; ++wi) {
+        Window win;
+        win.w = w;
+        win.h = h;
+        for (int j = wj; j < wj + h; ++j) {
+          for (int i = wi; i < wi + w; ++i) {
+            const auto it = group.find({i, j});
+            if (it == group.end()) break;
+            win.squares.push_back(it->second);
+            win.geometry.push_back(&squares[it->second.square]);
+          }
+        }
+        if (static_cast<int>(win.squares.size()) != w * h) continue;
+        if (!LocallyConsistent(win, pitch_ratio - 1.0, options.max_residual_side_fraction) ||
+            !PaintAgrees(image, win, min_contrast)) {
+          search->refusal = DetectReason::kVerificationFailed;
+          continue;
+        }
+        // The grid goes on: a square linked next to the window along one of its sides.
+        const bool continues = std::any_of(group.begin(), group.end(), [&](const auto& entry) {
+          const auto [i, j] = entry.first;
+          const bool in_i = i >= wi && i < wi + w, in_j = j >= wj && j < wj + h;
+          return (in_i && (j == wj - 1 || j == wj + h)) || (in_j && (i == wi - 1 || i == wi + w));
+        });
+        if (continues) {
+          search->refusal = DetectReason::kWrongBoard;
+          continue;
+        }
+        std::optional<Hypothesis> hyp = Orient(win, cols, rows, pitch_ratio - 1.0);
+        if (!hyp) continue;
+        std::vector<int> ids;
+        for (const GridSquare& gs : win.squares) ids.push_back(gs.square);
+        std::sort(ids.begin(), ids.end());
+        search->found.push_back(*std::move(hyp));
+        search->found_squares.push_back(std::move(ids));
+      }
+    }
+  }
+}
+
+}  // namespace
+
+std::string_view SquareGridOptions::Validate() const {
+  if (!(min_contrast >= 4 && min_contrast <= 200)) return "min_contrast";
+  if (!(noise_contrast_factor >= 0.0 && noise_contrast_factor <= 10.0)) {
+    return "noise_contrast_factor";
+  }
+  if (!(min_square_side_px >= 6 && min_square_side_px <= 1000)) return "min_square_side_px";
+  if (!(max_link_side_fraction > 0.0 && max_link_side_fraction <= 0.5)) {
+    return "max_link_side_fraction";
+  }
+  if (!(max_residual_side_fraction > 0.0 && max_residual_side_fraction <= 0.5)) {
+    return "max_residual_side_fraction";
+  }
+  return {};
+}
+
+Detection DetectSquareGrid(const ImageView8& image, const Board& board,
+                           const SquareGridOptions& options) {
+  Detection result;
+  result.reason =
+      CheckDetectorInput(image, board, BoardType::kSquareGrid, options.Validate().empty());
+  if (result.reason != DetectReason::kNone) return result;
+  const BoardParams& params = board.params();
+  const double gap_ratio = params.gap_m / params.square_m;
+
+  const int min_contrast = std::max(
+      options.min_contrast,
+      static_cast<int>(std::ceil(options.noise_contrast_factor * EstimateNoiseSigma(image))));
+  int max_contrast = 0;
+  const Image8 dark = BinariseDark(image, min_contrast, &max_contrast);
+  if (max_contrast < min_contrast) {
+    result.reason = DetectReason::kLowContrast;
+    return result;
+  }
+  const std::vector<Square> squares =
+      FindSquares(image, dark, gap_ratio, options.min_square_side_px);
+  if (squares.empty()) {
+    result.reason = DetectReason::kNoCandidates;
+    return result;
+  }
+  Search search;
+  const std::vector<std::array<Link, 4>> links =
+      LinkSquares(squares, gap_ratio, options.max_link_side_fraction);
+  for (const auto& group : GridGroups(links)) {
+    SearchGroup(image, squares, group, board, options, min_contrast, &search);
+  }
+  if (search.found.empty()) {
+    result.reason = search.refusal;
+    return result;
+  }
+  for (const std::vector<int>& other : search.found_squares) {
+    if (other != search.found_squares.front()) {
+      result.reason = DetectReason::kAmbiguous;
+      return result;
+    }
+  }
+  result.features.resize(search.found.front().id_uv.size());
+  for (const auto& [id, uv] : search.found.front().id_uv) {
+    DetectedFeature& f = result.features[id];
+    f.id = id;
+    f.uv_px = uv;
+    f.p_board = board.features()[id].p_board;
+    f.marker = board.features()[id].marker;
+  }
+  result.found = true;
+  result.reason = DetectReason::kNone;
+  return result;
+}
+
+}  // namespace linecal

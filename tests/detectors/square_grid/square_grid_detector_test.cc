@@ -1,0 +1,275 @@
+// The square grid detector on golden renders (station/sim/camera_render.h, exact ground
+// truth): BoofCV's grid of black squares found with exact ids and sub-pixel corners over
+// poses, noise, blur and lighting and through strongly distorting and fisheye lenses; the
+// upright rule; nothing found on other boards, on a larger grid or without a board; and the
+// reasons for bad input.
+#include "detectors/square_grid/square_grid_detector.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <vector>
+
+#include "detectors/detect.h"
+#include "tests/detectors/board_scene.h"
+#include "tests/support/reference_cameras.h"
+
+namespace linecal {
+namespace {
+
+using test_scene::BoardView;
+using test_scene::CleanRender;
+using test_scene::ExpectComplete;
+using test_scene::FeatureRmsPx;
+using test_scene::kCleanRmsBarPx;
+using test_scene::kNoisyRmsBarPx;
+using test_scene::NoisyRender;
+using test_scene::RenderView;
+
+// cols x rows squares of 30 mm, gap_m apart (BoofCV's corpus board: 3 x 4, gaps of 30 mm).
+BoardParams Grid(int cols = 5, int rows = 4, double gap_m = 0.02) {
+  BoardParams p;
+  p.type = BoardType::kSquareGrid;
+  p.cols = cols;
+  p.rows = rows;
+  p.square_m = 0.03;
+  p.gap_m = gap_m;
+  return p;
+}
+
+CameraFrame RenderThrough(const CameraModel& camera, const BoardView& view,
+                          const CameraRenderOptions& options, std::uint64_t seed) {
+  absl::StatusOr<CameraFrame> frame = RenderCameraFrame(camera, test_scene::TestCameraPose(),
+                                                        test_scene::SceneOf(view), options, seed);
+  EXPECT_TRUE(frame.ok()) << frame.status();
+  return frame.ok() ? *std::move(frame) : CameraFrame();
+}
+
+// The whole board with exact ids (a wrong id is off by a side, tens of pixels), its RMS error
+// against the truth in *rms_px.
+void ExpectFound(const CameraFrame& frame, const BoardParams& params, double* rms_px) {
+  const Board board = *Board::Create(params);
+  const Detection d = DetectSquareGrid(frame.image8.view(), board);
+  ExpectComplete(d, board);
+  int matched = 0, unknown = 0;
+  *rms_px = FeatureRmsPx(d, frame, &matched, &unknown);
+  EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+  EXPECT_EQ(unknown, 0);
+  EXPECT_LT(test_scene::MaxErrorPx(d, frame), 1.0);
+}
+
+// ---- Found, with sub-pixel corners ------------------------------------------------------
+
+TEST(SquareGridDetectorTest, FrontalGridHasExactIdsAndSubPixelCorners) {
+  BoardView view;
+  view.params = Grid();
+  view.distance_m = 0.7;  // squares of 43 px
+  const CameraFrame frame = RenderView(view, CleanRender(), 1);
+  double rms = 0.0;
+  ExpectFound(frame, view.params, &rms);
+  EXPECT_LT(rms, kCleanRmsBarPx);
+  // Id 0 is the top-left corner of the top-left square, id 9 ends the top row of corners,
+  // id 79 is the bottom-right corner of the bottom-right square.
+  const Detection d = DetectSquareGrid(frame.image8.view(), *Board::Create(view.params));
+  ASSERT_TRUE(d.found);
+  EXPECT_LT(d.features[0].uv_px.x(), d.features[9].uv_px.x());
+  EXPECT_LT(d.features[0].uv_px.y(), d.features[79].uv_px.y());
+  EXPECT_EQ(d.features[1].p_board.x() - d.features[0].p_board.x(), 0.03);
+}
+
+// A grid of views (roll, yaw and pitch at the extremes of docs/acceptance.md, two sizes), each
+// rendered clean and noisy (sigma 4, blur 1.0, a 3:1 lighting gradient, gamma 1.4), as the
+// checker and circle grid tests: every one found, RMS within the bars.
+TEST(SquareGridDetectorTest, PoseGridWithNoiseBlurAndLighting) {
+  const BoardParams params = Grid();
+  double sum_sq[2] = {0.0, 0.0};
+  int n[2] = {0, 0};
+  int index = 0;
+  std::uint64_t seed = 100;
+  for (double roll : {-30.0, 30.0}) {
+    for (double yaw : {-50.0, 0.0, 50.0}) {
+      for (double pitch : {-40.0, 40.0}) {
+        // Squares of 50 and 30 px face-on.
+        const double distance = index++ % 2 == 0 ? 0.6 : 1.0;
+        for (const int noisy : {0, 1}) {
+          BoardView view;
+          view.params = params;
+          view.distance_m = distance;
+          view.roll_deg = roll;
+          view.yaw_deg = yaw;
+          view.pitch_deg = pitch;
+          CameraRenderOptions options = noisy ? NoisyRender() : CleanRender();
+          if (noisy) {
+            options.illumination_gradient_ratio = 3.0;
+            options.illumination_gradient_direction_deg = roll * 3.0;
+            options.gamma = 1.4;
+          }
+          SCOPED_TRACE(testing::Message()
+                       << "roll " << roll << " yaw " << yaw << " pitch " << view.pitch_deg
+                       << " distance " << distance << " noisy " << noisy);
+          double rms = 0.0;
+          ExpectFound(RenderView(view, options, ++seed), params, &rms);
+          sum_sq[noisy] += rms * rms;
+          ++n[noisy];
+        }
+      }
+    }
+  }
+  const double rms_clean = std::sqrt(sum_sq[0] / n[0]);
+  const double rms_noisy = std::sqrt(sum_sq[1] / n[1]);
+  std::printf("square grid pose grid: RMS clean %.4f px, noisy %.4f px\n", rms_clean, rms_noisy);
+  EXPECT_LT(rms_clean, kCleanRmsBarPx);
+  EXPECT_LT(rms_noisy, kNoisyRmsBarPx);
+}
+
+// Through the strong wide-angle pinhole (k1 -0.30) near the image corner and the 190-degree
+// fisheye 40 degrees off its axis, BoofCV's 3 x 4 board with equal squares and gaps.
+TEST(SquareGridDetectorTest, StrongDistortionAndFisheye) {
+  // A side's edge bends a little over a square; the corners, where lines fitted to the
+  // edges meet, carry that bend's fraction of a pixel.
+  constexpr double kLensRmsBarPx = 0.15;
+  struct Case {
+    const char* name;
+    CameraModel camera;
+    BoardView view;
+  };
+  std::vector<Case> cases;
+  BoardView v;
+  v.params = Grid(3, 4, 0.03);
+  v.distance_m = 0.5;
+  v.offset_m = Eigen::Vector2d(0.32, 0.12);  // towards the image's top-right corner
+  v.yaw_deg = -25.0;
+  cases.push_back({"strong pinhole", *CameraModel::Create(reference_cameras::StrongPinhole()), v});
+  v.distance_m = 0.3;
+  v.offset_m = Eigen::Vector2d(0.25, 0.0);  // 40 degrees off the axis
+  v.yaw_deg = -30.0;
+  cases.push_back({"fisheye", *CameraModel::Create(reference_cameras::Fisheye190()), v});
+  std::uint64_t seed = 50;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const CameraFrame frame = RenderThrough(c.camera, c.view, CleanRender(), ++seed);
+    double rms = 0.0;
+    ExpectFound(frame, c.view.params, &rms);
+    std::printf("%s: RMS %.4f px\n", c.name, rms);
+    EXPECT_LT(rms, kLensRmsBarPx);
+  }
+}
+
+// ---- Orientation ------------------------------------------------------------------------
+
+TEST(SquareGridDetectorTest, GridIsReportedUpright) {
+  // Turned upside down the grid is the same board: id 0 stays at the image's top-left.
+  // Square, turned by a quarter, likewise.
+  for (const auto& [params, roll] :
+       {std::pair{Grid(), 180.0}, std::pair{Grid(), 170.0}, std::pair{Grid(4, 4), 90.0}}) {
+    SCOPED_TRACE(roll);
+    BoardView view;
+    view.params = params;
+    view.distance_m = 0.7;
+    view.roll_deg = roll;
+    const CameraFrame frame = RenderView(view, CleanRender(), 9);
+    const Detection d = DetectSquareGrid(frame.image8.view(), *Board::Create(params));
+    ASSERT_TRUE(d.found) << DetectReasonName(d.reason);
+    const int last = 4 * params.cols * params.rows - 1;
+    EXPECT_LT(d.features[0].uv_px.x(), d.features[2 * params.cols - 1].uv_px.x());
+    EXPECT_LT(d.features[0].uv_px.y(), d.features[last].uv_px.y());
+  }
+}
+
+// ---- Nothing found where the board is not -------------------------------------------------
+
+TEST(SquareGridDetectorTest, LargerGridIsTheWrongBoard) {
+  BoardView view;
+  view.params = Grid(7, 5);
+  view.distance_m = 0.8;
+  const CameraFrame frame = RenderView(view, CleanRender(), 13);
+  const Detection d = DetectSquareGrid(frame.image8.view(), *Board::Create(Grid()));
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kWrongBoard);
+  // Nor is a grid of other gaps the board: its neighbours are not where the gaps put them.
+  const Detection other_gap = DetectSquareGrid(RenderView(view, CleanRender(), 14).image8.view(),
+                                               *Board::Create(Grid(7, 5, 0.045)));
+  EXPECT_FALSE(other_gap.found);
+}
+
+TEST(SquareGridDetectorTest, NothingOnOtherBoardsOrEmptyScenes) {
+  // The checker's black squares form a square grid with gaps of one square, but for the
+  // black squares at its crossings.
+  const Board board = *Board::Create(Grid(3, 3, 0.03));
+  const Board default_board = *Board::Create(Grid(5, 4));
+  std::vector<BoardView> views;
+  BoardView v;
+  for (BoardType type :
+       {BoardType::kChessboard, BoardType::kCircle, BoardType::kVertical, BoardType::kAruco,
+        BoardType::kApriltag, BoardType::kRoundHole, BoardType::kChecker, BoardType::kCircleGrid}) {
+    v.params = BoardParams();
+    v.params.type = type;
+    v.distance_m = type == BoardType::kChecker || type == BoardType::kCircleGrid ? 0.8
+                   : type == BoardType::kChessboard                              ? 4.0
+                                                                                 : 3.0;
+    views.push_back(v);
+  }
+  v.params = Grid();
+  v.distance_m = 0.6;
+  v.yaw_deg = 180.0;  // the board's unprinted back
+  views.push_back(v);
+  std::uint64_t seed = 300;
+  for (const BoardView& view : views) {
+    CameraRenderOptions options = NoisyRender();
+    options.clutter = true;
+    const CameraFrame frame = RenderView(view, options, ++seed);
+    for (const Board* b : {&board, &default_board}) {
+      const Detection d = DetectSquareGrid(frame.image8.view(), *b);
+      EXPECT_FALSE(d.found) << BoardTypeName(view.params.type);
+      EXPECT_TRUE(d.features.empty());
+      EXPECT_NE(d.reason, DetectReason::kNone);
+    }
+  }
+}
+
+TEST(SquareGridDetectorTest, TwoGridsAreAmbiguous) {
+  StationLayout layout;
+  for (const double right : {-0.15, 0.15}) {
+    BoardView view;
+    view.params = Grid(3, 2);
+    view.distance_m = 0.8;
+    view.offset_m = Eigen::Vector2d(right, 0.0);
+    StationBoard b = test_scene::SceneOf(view).boards.at(0);
+    b.id = right < 0 ? "left" : "right";
+    layout.boards.push_back(b);
+  }
+  const absl::StatusOr<CameraFrame> frame = RenderCameraFrame(
+      test_scene::TestCamera(), test_scene::TestCameraPose(), layout, CleanRender(), 16);
+  ASSERT_TRUE(frame.ok());
+  const Detection d = DetectSquareGrid(frame->image8.view(), *Board::Create(Grid(3, 2)));
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kAmbiguous);
+}
+
+TEST(SquareGridDetectorTest, ReasonsForBadInput) {
+  const Board board = *Board::Create(Grid());
+  EXPECT_EQ(DetectSquareGrid(ImageView8{}, board).reason, DetectReason::kBadImage);
+  const Image8 flat(640, 480, 128);
+  EXPECT_EQ(DetectSquareGrid(flat.view(), board).reason, DetectReason::kLowContrast);
+  SquareGridOptions bad;
+  bad.max_link_side_fraction = 0.0;
+  EXPECT_EQ(bad.Validate(), "max_link_side_fraction");
+  EXPECT_EQ(DetectSquareGrid(flat.view(), board, bad).reason, DetectReason::kBadImage);
+  BoardParams checker;
+  checker.type = BoardType::kChecker;
+  EXPECT_EQ(DetectSquareGrid(flat.view(), *Board::Create(checker)).reason,
+            DetectReason::kWrongBoard);
+  // The dispatcher picks this detector for the board type.
+  BoardView view;
+  view.params = Grid();
+  view.distance_m = 0.7;
+  const CameraFrame frame = RenderView(view, CleanRender(), 3);
+  const std::optional<Detection> d = DetectBoard(frame.image8.view(), board);
+  ASSERT_TRUE(d.has_value());
+  EXPECT_TRUE(d->found);
+}
+
+}  // namespace
+}  // namespace linecal
