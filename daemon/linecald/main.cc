@@ -9,6 +9,8 @@
 // listener stops for good after an accept error (EMFILE), so a ListenerWatchdog restarts the
 // gRPC server on the same address when it finds the listener dead (docs/daemon.md,
 // "Descriptors").
+// With a `web` section, the station console's HTTP server (daemon/web) runs beside the gRPC
+// server, behind the same auth_token; it stops after a running cycle was cancelled.
 // Under systemd (Type=notify): READY=1 once calls are served, WATCHDOG=1 while the core
 // answers, STOPPING=1 on the signal (daemon/systemd/sd_notify.h).
 #include <grpc/support/log.h>
@@ -36,6 +38,7 @@
 #include "daemon/service/listener_watchdog.h"
 #include "daemon/service/station_service.h"
 #include "daemon/systemd/sd_notify.h"
+#include "daemon/web/web_server.h"
 
 namespace {
 
@@ -227,6 +230,21 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
+  std::unique_ptr<linecal::WebServer> web;
+  if (config->web) {
+    absl::StatusOr<std::unique_ptr<linecal::WebServer>> started = linecal::WebServer::Start(
+        core->get(), {config->web->listen, config->web->tls,
+                      linecal::FindStaticDir(config->web->static_dir, LINECAL_WEB_STATIC_DIR),
+                      config->auth_token, LINECAL_VERSION});
+    if (!started.ok()) {
+      std::fprintf(stderr, "linecald: %s\n", std::string(started.status().message()).c_str());
+      return 1;
+    }
+    web = *std::move(started);
+    Log("info", absl::StrCat("console on ", config->web->tls ? "https://" : "http://",
+                             BoundAddress(config->web->listen, web->port()), "/",
+                             config->auth_token.empty() ? " (no login)" : " (login with the token)"));
+  }
   // gRPC's errors belong in the log: GRPC_VERBOSITY=NONE (read by gRPC's first init, which
   // StartServer did) would hide them, so errors are let through.
   if (!gpr_should_log(GPR_LOG_SEVERITY_ERROR)) gpr_set_log_verbosity(GPR_LOG_SEVERITY_ERROR);
@@ -259,6 +277,7 @@ int main(int argc, char** argv) {
   const auto drain_deadline = std::chrono::system_clock::now() + kDrainTime;
   if (server->server) server->server->Shutdown(drain_deadline);
   *server = {};
+  web.reset();  // its event streams end with the cancelled cycle
   const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
       drain_deadline - std::chrono::system_clock::now());
   if (!(*core)->WaitIdleFor(std::max(left, std::chrono::milliseconds(0)))) {
