@@ -3,6 +3,7 @@
 #include <httplib.h>
 #include <openssl/pem.h>
 #include <openssl/ssl.h>
+#include <sys/socket.h>
 
 #include <cctype>
 #include <filesystem>
@@ -120,10 +121,11 @@ std::string SetUpTls(const TlsConfig& tls, SSL_CTX& ctx) {
   BIO* bio = BIO_new_mem_buf(tls.key_pem.data(), static_cast<int>(tls.key_pem.size()));
   EVP_PKEY* key = bio ? PEM_read_bio_PrivateKey(bio, nullptr, nullptr, nullptr) : nullptr;
   BIO_free(bio);
-  const bool key_used = key != nullptr && SSL_CTX_use_PrivateKey(&ctx, key) == 1;
+  if (key == nullptr) return absl::StrCat("web.tls.key: '", tls.key_path, "': no PEM private key");
+  // OpenSSL refuses a key of another certificate already here (for EC and RSA keys).
+  const bool key_used = SSL_CTX_use_PrivateKey(&ctx, key) == 1;
   EVP_PKEY_free(key);
-  if (!key_used) return absl::StrCat("web.tls.key: '", tls.key_path, "': no usable PEM key");
-  if (SSL_CTX_check_private_key(&ctx) != 1) {
+  if (!key_used || SSL_CTX_check_private_key(&ctx) != 1) {
     return absl::StrCat("web.tls.key: '", tls.key_path, "': does not match web.tls.cert");
   }
   if (tls.client_ca_pem.empty()) return "";
@@ -176,6 +178,13 @@ absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core, W
     web->server_ = std::make_unique<httplib::Server>();
   }
   web->server_->new_task_queue = [] { return new httplib::ThreadPool(kWebThreads); };
+  // httplib's default sets SO_REUSEPORT: a second linecald would bind the same port and the
+  // kernel would split the browsers between the two. SO_REUSEADDR alone lets a restarted
+  // daemon bind while the old connections linger in TIME_WAIT.
+  web->server_->set_socket_options([](int socket) {
+    const int yes = 1;
+    setsockopt(socket, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
   web->Route();
   const std::string& listen = web->options_.listen;
   std::string host = listen.substr(0, listen.rfind(':'));

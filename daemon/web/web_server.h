@@ -6,7 +6,7 @@
 // Routes (docs/console.md, "API"):
 //   POST /api/login   {"token": "..."}: 200 and a session cookie (HttpOnly, SameSite=Strict,
 //                     Secure under TLS) when it is the daemon's auth_token; 401 JSON else;
-//                     400 when the daemon has no auth_token (nothing to log in to)
+//                     409 when the daemon has no auth_token (nothing to log in to)
 //   POST /api/logout  ends the cookie's session
 //   GET  /api/session {login_required, role}: whether the pages need a login
 //   GET  /api/status  the station (console_json.h StatusJson), as gRPC GetStationStatus
