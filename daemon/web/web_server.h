@@ -20,7 +20,7 @@
 //                     before its `event: cycle_event`s); ?cycle=ID: that cycle's events
 //                     only, then `event: end`. The events are StationCore::WatchCycle's.
 //   GET  /, /NAME.html, /NAME.js, /NAME.css  files of the static folder; /vendor/chart.js
-//                     Debian's Chart.js.
+//                     Debian's Chart.js; /favicon.ico 204 (no icon).
 // Every /api/ call but login and session needs a live session when the daemon has an
 // auth_token: 401 JSON without one; a page without one is redirected (303) to
 // /login.html?next=PATH. Errors are JSON {"error": message, "code": word} with the HTTP

@@ -159,6 +159,9 @@ class LivePage {
       const verdict = e.verdict || "error";
       tr.dataset.verdict = verdict;
       tr.dataset.reason = e.detail;
+      // How long after the daemon stored the verdict it was shown (docs/console.md, "Bars";
+      // the browser test reads it): same machine, same clock, in milliseconds.
+      tr.dataset.shownAfterMs = String(Date.now() - e.time_ns / 1e6);
       const cell = tr.querySelector(".verdict");
       cell.textContent = verdict.toUpperCase();
       cell.className = "verdict " + verdict;
