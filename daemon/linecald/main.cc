@@ -44,9 +44,11 @@ namespace {
 
 constexpr char kUsage[] =
     "usage: linecald [--config FILE] [--listen HOST:PORT] [--db PATH] [--log-level LEVEL] [--data-dir DIR]\n"
+    "                [--web-listen HOST:PORT]\n"
     "  Serves the linecal.v1.Station gRPC API (proto/linecal/v1/station.proto), the gRPC health\n"
     "  service and server reflection. Without --config: the demo station of deploy/ with\n"
-    "  simulated sensors, data and database in --data-dir (default ./linecald-data).\n";
+    "  simulated sensors, data and database in --data-dir (default ./linecald-data).\n"
+    "  --web-listen serves the station console there (docs/console.md), as the file's web.listen.\n";
 
 // One log line to stderr: "level=info msg=... key=value ...", for journald and people.
 void Log(const char* level, const std::string& message) {
@@ -155,7 +157,7 @@ int main(int argc, char** argv) {
   // clouds after the cycle, so the resident set climbed to 170 MB over the soak's cycles
   // with under 9 MB in use; with two it stays near 60-110 MB, no slower (docs/reliability.md).
   mallopt(M_ARENA_MAX, 2);
-  std::string config_path, listen, db, log_level, data_dir = "linecald-data";
+  std::string config_path, listen, db, log_level, web_listen, data_dir = "linecald-data";
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&](std::string* out) {
@@ -178,6 +180,8 @@ int main(int argc, char** argv) {
       value(&log_level);
     } else if (arg == "--data-dir") {
       value(&data_dir);
+    } else if (arg == "--web-listen") {
+      value(&web_listen);
     } else {
       std::fprintf(stderr, "linecald: unknown option '%s'\n%s", arg.c_str(), kUsage);
       return 2;
@@ -193,6 +197,10 @@ int main(int argc, char** argv) {
   if (!listen.empty()) config->listen = listen;
   if (!db.empty()) config->core.db_path = db;
   if (!log_level.empty()) config->log_level = log_level;
+  if (!web_listen.empty()) {
+    if (!config->web) config->web.emplace();
+    config->web->listen = web_listen;
+  }
   config->core.input_budget = config->input_budget;
   config->core.log = [](const std::string& level, const std::string& message) {
     Log(level.c_str(), message);
