@@ -189,6 +189,8 @@ class StationCore {
   bool WaitIdleFor(std::chrono::milliseconds timeout);
 
   Store& store() { return *store_; }
+  // The car models as loaded at Create (never changed after it, so safe from any thread).
+  const std::vector<CarModel>& car_models() const { return cars_; }
 
  private:
   StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,

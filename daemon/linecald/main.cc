@@ -48,7 +48,7 @@ constexpr char kUsage[] =
     "  Serves the linecal.v1.Station gRPC API (proto/linecal/v1/station.proto), the gRPC health\n"
     "  service and server reflection. Without --config: the demo station of deploy/ with\n"
     "  simulated sensors, data and database in --data-dir (default ./linecald-data).\n"
-    "  --web-listen serves the station console there (docs/console.md), as the file's web.listen.\n";
+    "  --web-listen: the station console there (docs/console.md), as the file's web.listen.\n";
 
 // One log line to stderr: "level=info msg=... key=value ...", for journald and people.
 void Log(const char* level, const std::string& message) {
@@ -249,9 +249,9 @@ int main(int argc, char** argv) {
       return 1;
     }
     web = *std::move(started);
+    const char* login = config->auth_token.empty() ? " (no login)" : " (login with the token)";
     Log("info", absl::StrCat("console on ", config->web->tls ? "https://" : "http://",
-                             BoundAddress(config->web->listen, web->port()), "/",
-                             config->auth_token.empty() ? " (no login)" : " (login with the token)"));
+                             BoundAddress(config->web->listen, web->port()), "/", login));
   }
   // gRPC's errors belong in the log: GRPC_VERBOSITY=NONE (read by gRPC's first init, which
   // StartServer did) would hide them, so errors are let through.

@@ -10,8 +10,9 @@ namespace {
 constexpr double kDegPerRad = 180.0 / std::numbers::pi;
 
 nlohmann::json MountingJson(const MountingValues& m) {
-  return {{"yaw_deg", m.yaw_deg}, {"pitch_deg", m.pitch_deg}, {"roll_deg", m.roll_deg},
-          {"x_m", m.x_m},         {"y_m", m.y_m},             {"z_m", m.z_m}};
+  return {{"yaw_deg", m.yaw_deg},   {"pitch_deg", m.pitch_deg},
+          {"roll_deg", m.roll_deg}, {"x_m", m.x_m},
+          {"y_m", m.y_m},           {"z_m", m.z_m}};
 }
 
 nlohmann::json SensorJson(const StoredSensorResult& s) {
@@ -38,14 +39,10 @@ nlohmann::json SensorJson(const StoredSensorResult& s) {
 }  // namespace
 
 nlohmann::json CycleJson(const StoredCycle& c, bool with_sensors) {
-  nlohmann::json j = {{"cycle_id", std::to_string(c.id)},
-                      {"vin", c.vin},
-                      {"car_model_id", c.car_model_id},
-                      {"state", CycleStateName(c.state)},
-                      {"verdict", VerdictName(c.verdict)},
-                      {"reason", c.reason},
-                      {"started_ns", c.started_ns},
-                      {"ended_ns", c.ended_ns},
+  nlohmann::json j = {{"cycle_id", std::to_string(c.id)},  {"vin", c.vin},
+                      {"car_model_id", c.car_model_id},    {"state", CycleStateName(c.state)},
+                      {"verdict", VerdictName(c.verdict)}, {"reason", c.reason},
+                      {"started_ns", c.started_ns},        {"ended_ns", c.ended_ns},
                       {"capture_path", c.capture_path}};
   if (!with_sensors) return j;
   nlohmann::json sensors = nlohmann::json::array();
@@ -67,7 +64,8 @@ nlohmann::json EventJson(const StoredEvent& e) {
 nlohmann::json StatusJson(const StationStatusInfo& s, const std::string& version) {
   nlohmann::json sensors = nlohmann::json::array();
   for (const auto& [name, kind] : s.sensors) {
-    sensors.push_back({{"name", name}, {"kind", SensorKindName(kind)}, {"source", s.SourceOf(name)}});
+    sensors.push_back(
+        {{"name", name}, {"kind", SensorKindName(kind)}, {"source", s.SourceOf(name)}});
   }
   return {{"version", version},
           {"station_id", s.station_id},
@@ -92,8 +90,9 @@ nlohmann::json CarModelJson(const CarModel& car) {
          {"nominal", MountingJson({a.yaw * kDegPerRad, a.pitch * kDegPerRad, a.roll * kDegPerRad,
                                    nominal.translation().x(), nominal.translation().y(),
                                    nominal.translation().z()})},
-         {"tolerance", MountingJson({t.yaw_rad * kDegPerRad, t.pitch_rad * kDegPerRad,
-                                     t.roll_rad * kDegPerRad, t.xyz_m.x(), t.xyz_m.y(), t.xyz_m.z()})}});
+         {"tolerance",
+          MountingJson({t.yaw_rad * kDegPerRad, t.pitch_rad * kDegPerRad, t.roll_rad * kDegPerRad,
+                        t.xyz_m.x(), t.xyz_m.y(), t.xyz_m.z()})}});
   }
   return {{"id", car.id}, {"description", car.description}, {"sensors", std::move(sensors)}};
 }

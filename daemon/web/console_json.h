@@ -5,9 +5,8 @@
 // APIs; enums are the store's words ("pass", "done", "sensor_verdict"), cycle ids decimal
 // strings as in gRPC. Pure functions; cost linear in the record.
 
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "daemon/core/station_core.h"
 #include "daemon/store/store.h"

@@ -13,7 +13,8 @@ namespace linecal {
 Sessions::Sessions(std::string token) : token_(std::move(token)) {}
 
 absl::StatusOr<std::string> Sessions::Login(const std::string& token, Clock::time_point now) {
-  if (!login_required()) return absl::FailedPreconditionError("no login: the daemon has no auth_token");
+  if (!login_required())
+    return absl::FailedPreconditionError("no login: the daemon has no auth_token");
   // Constant time over the token's length: the time of a refusal says nothing about how
   // many leading characters were right.
   const bool match = token.size() == token_.size() &&
@@ -27,8 +28,9 @@ absl::StatusOr<std::string> Sessions::Login(const std::string& token, Clock::tim
       absl::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
   std::lock_guard<std::mutex> lock(mutex_);
   if (last_used_.size() >= kMaxSessions) {
-    const auto oldest = std::min_element(last_used_.begin(), last_used_.end(),
-                                         [](const auto& a, const auto& b) { return a.second < b.second; });
+    const auto oldest =
+        std::min_element(last_used_.begin(), last_used_.end(),
+                         [](const auto& a, const auto& b) { return a.second < b.second; });
     last_used_.erase(oldest);
   }
   last_used_[id] = now;

@@ -8,9 +8,8 @@
 #include <cctype>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -29,14 +28,22 @@ constexpr char kJson[] = "application/json";
 // The HTTP status of a core error (docs/console.md, "API").
 int HttpStatus(absl::StatusCode code) {
   switch (code) {
-    case absl::StatusCode::kInvalidArgument: return 400;
-    case absl::StatusCode::kUnauthenticated: return 401;
-    case absl::StatusCode::kPermissionDenied: return 401;
-    case absl::StatusCode::kNotFound: return 404;
-    case absl::StatusCode::kFailedPrecondition: return 409;
-    case absl::StatusCode::kUnavailable: return 503;
-    case absl::StatusCode::kResourceExhausted: return 503;
-    default: return 500;
+    case absl::StatusCode::kInvalidArgument:
+      return 400;
+    case absl::StatusCode::kUnauthenticated:
+      return 401;
+    case absl::StatusCode::kPermissionDenied:
+      return 401;
+    case absl::StatusCode::kNotFound:
+      return 404;
+    case absl::StatusCode::kFailedPrecondition:
+      return 409;
+    case absl::StatusCode::kUnavailable:
+      return 503;
+    case absl::StatusCode::kResourceExhausted:
+      return 503;
+    default:
+      return 500;
   }
 }
 
@@ -65,7 +72,8 @@ const char* ContentType(const std::string& extension) {
 std::string CookieValue(const std::string& header, const std::string& name) {
   for (absl::string_view part : absl::StrSplit(header, ';')) {
     part = absl::StripAsciiWhitespace(part);
-    if (absl::ConsumePrefix(&part, name) && absl::ConsumePrefix(&part, "=")) return std::string(part);
+    if (absl::ConsumePrefix(&part, name) && absl::ConsumePrefix(&part, "="))
+      return std::string(part);
   }
   return "";
 }
@@ -83,11 +91,13 @@ std::string PercentEncoded(const std::string& text) {
   return out;
 }
 
-std::string SseMessage(const std::string& event, const nlohmann::json& data, const std::string& id = "") {
+std::string SseMessage(const std::string& event, const nlohmann::json& data,
+                       const std::string& id = "") {
   std::string m = id.empty() ? "" : absl::StrCat("id: ", id, "\n");
   // One line of JSON: dump without indentation never holds a newline.
-  absl::StrAppend(&m, "event: ", event, "\ndata: ",
-                  data.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace), "\n\n");
+  absl::StrAppend(&m, "event: ", event,
+                  "\ndata: ", data.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
+                  "\n\n");
   return m;
 }
 
@@ -130,15 +140,17 @@ std::string SetUpTls(const TlsConfig& tls, SSL_CTX& ctx) {
   }
   if (tls.client_ca_pem.empty()) return "";
   std::vector<X509*> cas = ReadCertificates(tls.client_ca_pem);
-  if (cas.empty()) return absl::StrCat("web.tls.client_ca: '", tls.client_ca_path, "': no PEM certificate");
+  if (cas.empty())
+    return absl::StrCat("web.tls.client_ca: '", tls.client_ca_path, "': no PEM certificate");
   X509_STORE* store = SSL_CTX_get_cert_store(&ctx);
   for (X509* ca : cas) {
     X509_STORE_add_cert(store, ca);
     SSL_CTX_add_client_CA(&ctx, ca);
     X509_free(ca);
   }
-  SSL_CTX_set_verify(&ctx, SSL_VERIFY_PEER | (tls.require_client_cert ? SSL_VERIFY_FAIL_IF_NO_PEER_CERT : 0),
-                     nullptr);
+  SSL_CTX_set_verify(
+      &ctx, SSL_VERIFY_PEER | (tls.require_client_cert ? SSL_VERIFY_FAIL_IF_NO_PEER_CERT : 0),
+      nullptr);
   return "";
 }
 
@@ -149,7 +161,8 @@ std::string FindStaticDir(const std::string& configured, const std::string& sour
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
   if (!ec) {
-    const fs::path installed = (exe.parent_path() / ".." / "share" / "linecal" / "web").lexically_normal();
+    const fs::path installed =
+        (exe.parent_path() / ".." / "share" / "linecal" / "web").lexically_normal();
     if (fs::is_regular_file(installed / "index.html", ec)) return installed.string();
   }
   return source_dir;
@@ -158,12 +171,13 @@ std::string FindStaticDir(const std::string& configured, const std::string& sour
 WebServer::WebServer(StationCore* core, WebServerOptions options)
     : core_(core), options_(std::move(options)), sessions_(options_.auth_token) {}
 
-absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core, WebServerOptions options) {
+absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core,
+                                                            WebServerOptions options) {
   if (absl::Status s = CheckListenAddress(options.listen, "web.listen"); !s.ok()) return s;
   std::error_code ec;
   if (!fs::is_regular_file(fs::path(options.static_dir) / "index.html", ec)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("web.static_dir: '", options.static_dir, "': no index.html (the console's pages)"));
+    return absl::InvalidArgumentError(absl::StrCat("web.static_dir: '", options.static_dir,
+                                                   "': no index.html (the console's pages)"));
   }
   std::unique_ptr<WebServer> web(new WebServer(core, std::move(options)));
   if (web->options_.tls) {
@@ -171,7 +185,8 @@ absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core, W
     auto server = std::make_unique<httplib::SSLServer>(
         [&](SSL_CTX& ctx) { return (problem = SetUpTls(*web->options_.tls, ctx)).empty(); });
     if (!server->is_valid()) {
-      return absl::InvalidArgumentError(problem.empty() ? "web.tls: OpenSSL refused the context" : problem);
+      return absl::InvalidArgumentError(problem.empty() ? "web.tls: OpenSSL refused the context"
+                                                        : problem);
     }
     web->server_ = std::move(server);
   } else {
@@ -188,12 +203,16 @@ absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core, W
   web->Route();
   const std::string& listen = web->options_.listen;
   std::string host = listen.substr(0, listen.rfind(':'));
-  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']')
+    host = host.substr(1, host.size() - 2);
   int port = 0;
   // CheckListenAddress held: the port is digits in 0..65535.
   (void)absl::SimpleAtoi(listen.substr(listen.rfind(':') + 1), &port);
-  web->port_ = port == 0 ? web->server_->bind_to_any_port(host) : web->server_->bind_to_port(host, port) ? port : -1;
-  if (web->port_ <= 0) return absl::UnavailableError(absl::StrCat("web.listen: cannot listen on '", listen, "'"));
+  web->port_ = port == 0                                ? web->server_->bind_to_any_port(host)
+               : web->server_->bind_to_port(host, port) ? port
+                                                        : -1;
+  if (web->port_ <= 0)
+    return absl::UnavailableError(absl::StrCat("web.listen: cannot listen on '", listen, "'"));
   web->thread_ = std::thread([server = web->server_.get()] { server->listen_after_bind(); });
   return web;
 }
@@ -211,23 +230,27 @@ bool WebServer::Authorized(const httplib::Request& req) {
 void WebServer::Route() {
   httplib::Server& s = *server_;
   // Every answer: no sniffing of types, no framing by other sites, scripts only from here.
-  s.set_default_headers({{"X-Content-Type-Options", "nosniff"},
-                         {"X-Frame-Options", "DENY"},
-                         {"Content-Security-Policy", "default-src 'self'; frame-ancestors 'none'"}});
+  s.set_default_headers(
+      {{"X-Content-Type-Options", "nosniff"},
+       {"X-Frame-Options", "DENY"},
+       {"Content-Security-Policy", "default-src 'self'; frame-ancestors 'none'"}});
   s.Post("/api/login", [this](const httplib::Request& req, httplib::Response& res) {
     const nlohmann::json body = nlohmann::json::parse(req.body, nullptr, false);
     if (!body.is_object() || !body.contains("token") || !body["token"].is_string()) {
-      return SendError(res, absl::InvalidArgumentError("token: a JSON body {\"token\": \"...\"} is required"));
+      return SendError(
+          res, absl::InvalidArgumentError("token: a JSON body {\"token\": \"...\"} is required"));
     }
     absl::StatusOr<std::string> id = sessions_.Login(body["token"].get<std::string>());
     if (!id.ok()) return SendError(res, id.status());
-    res.set_header("Set-Cookie", absl::StrCat(kCookie, "=", *id, "; Path=/; HttpOnly; SameSite=Strict",
-                                              options_.tls ? "; Secure" : ""));
+    res.set_header("Set-Cookie",
+                   absl::StrCat(kCookie, "=", *id, "; Path=/; HttpOnly; SameSite=Strict",
+                                options_.tls ? "; Secure" : ""));
     SendJson(res, {{"role", "read-only"}});
   });
   s.Post("/api/logout", [this](const httplib::Request& req, httplib::Response& res) {
     sessions_.Logout(CookieValue(req.get_header_value("Cookie"), kCookie));
-    res.set_header("Set-Cookie", absl::StrCat(kCookie, "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0"));
+    res.set_header("Set-Cookie",
+                   absl::StrCat(kCookie, "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0"));
     SendJson(res, nlohmann::json::object());
   });
   s.Get("/api/session", [this](const httplib::Request& req, httplib::Response& res) {
@@ -237,10 +260,12 @@ void WebServer::Route() {
   });
   // The API below needs a session: checked before routing.
   s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
-    const bool open = req.path == "/api/login" || req.path == "/api/logout" || req.path == "/api/session";
+    const bool open =
+        req.path == "/api/login" || req.path == "/api/logout" || req.path == "/api/session";
     if (open || Authorized(req)) return httplib::Server::HandlerResponse::Unhandled;
     if (req.path.rfind("/api/", 0) == 0) {
-      SendError(res, absl::UnauthenticatedError("login required: POST /api/login with the daemon's auth_token"));
+      SendError(res, absl::UnauthenticatedError(
+                         "login required: POST /api/login with the daemon's auth_token"));
       return httplib::Server::HandlerResponse::Handled;
     }
     const bool page = req.path == "/" || (req.path.size() > 5 && req.path.ends_with(".html") &&
@@ -252,7 +277,8 @@ void WebServer::Route() {
   s.Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
     SendJson(res, StatusJson(core_->Status(), options_.version));
   });
-  s.Get("/api/cycles", [this](const httplib::Request& req, httplib::Response& res) { ListCycles(req, res); });
+  s.Get("/api/cycles",
+        [this](const httplib::Request& req, httplib::Response& res) { ListCycles(req, res); });
   s.Get(R"(/api/cycles/([^/]+))", [this](const httplib::Request& req, httplib::Response& res) {
     absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
     if (!id.ok()) return SendError(res, id.status());
@@ -265,10 +291,11 @@ void WebServer::Route() {
     for (const CarModel& car : core_->car_models()) {
       if (car.id == id) return SendJson(res, CarModelJson(car));
     }
-    SendError(res, absl::NotFoundError(
-                       absl::StrCat("car_model_id: ", QuoteInput(id), " is not a car model of the station")));
+    SendError(res, absl::NotFoundError(absl::StrCat("car_model_id: ", QuoteInput(id),
+                                                    " is not a car model of the station")));
   });
-  s.Get("/api/events", [this](const httplib::Request& req, httplib::Response& res) { Events(req, res); });
+  s.Get("/api/events",
+        [this](const httplib::Request& req, httplib::Response& res) { Events(req, res); });
   s.Get("/vendor/chart.js", [this](const httplib::Request& req, httplib::Response& res) {
     ServeFile(options_.chart_js_path, req, res);
   });
@@ -278,12 +305,14 @@ void WebServer::Route() {
     ServeFile((fs::path(options_.static_dir) / "index.html").string(), req, res);
   });
   // Files of the static folder by plain names only: no '/' and no "..", so nothing outside it.
-  s.Get(R"(/([a-z0-9_-]+\.(html|js|css)))", [this](const httplib::Request& req, httplib::Response& res) {
+  s.Get(R"(/([a-z0-9_-]+\.(html|js|css)))", [this](const httplib::Request& req,
+                                                   httplib::Response& res) {
     ServeFile((fs::path(options_.static_dir) / std::string(req.matches[1])).string(), req, res);
   });
 }
 
-void WebServer::ServeFile(const std::string& path, const httplib::Request&, httplib::Response& res) {
+void WebServer::ServeFile(const std::string& path, const httplib::Request&,
+                          httplib::Response& res) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     res.status = 404;
@@ -302,9 +331,10 @@ void WebServer::ListCycles(const httplib::Request& req, httplib::Response& res) 
   if (req.has_param("limit")) {
     const std::string limit = req.get_param_value("limit");
     // 1000: the store's largest page, as gRPC's kMaxPageSize.
-    if (!absl::SimpleAtoi(limit, &filter.page_size) || filter.page_size < 1 || filter.page_size > 1000) {
-      return SendError(res, absl::InvalidArgumentError(
-                                absl::StrCat("limit = ", QuoteInput(limit), ": must be in [1, 1000]")));
+    if (!absl::SimpleAtoi(limit, &filter.page_size) || filter.page_size < 1 ||
+        filter.page_size > 1000) {
+      return SendError(res, absl::InvalidArgumentError(absl::StrCat("limit = ", QuoteInput(limit),
+                                                                    ": must be in [1, 1000]")));
     }
   }
   filter.vin = req.get_param_value("vin");
@@ -312,15 +342,17 @@ void WebServer::ListCycles(const httplib::Request& req, httplib::Response& res) 
     const std::string word = req.get_param_value("verdict");
     const Verdict v = ParseVerdict(word);
     if (v == Verdict::kNone) {
-      return SendError(res, absl::InvalidArgumentError(
-                                absl::StrCat("verdict = ", QuoteInput(word), ": must be pass, fail or error")));
+      return SendError(res, absl::InvalidArgumentError(absl::StrCat(
+                                "verdict = ", QuoteInput(word), ": must be pass, fail or error")));
     }
     filter.verdict = v;
   }
   if (req.has_param("before")) {
     // The store pages by (start, id) of the last cycle listed: the cycle's own.
     absl::StatusOr<int64_t> id = ParseCycleId(req.get_param_value("before"));
-    if (!id.ok()) return SendError(res, absl::InvalidArgumentError(absl::StrCat("before: ", id.status().message())));
+    if (!id.ok())
+      return SendError(res,
+                       absl::InvalidArgumentError(absl::StrCat("before: ", id.status().message())));
     absl::StatusOr<StoredCycle> before = core_->GetCycle(*id);
     if (!before.ok()) return SendError(res, before.status());
     filter.page_token = absl::StrCat(before->started_ns, ".", before->id);
@@ -330,7 +362,8 @@ void WebServer::ListCycles(const httplib::Request& req, httplib::Response& res) 
   nlohmann::json cycles = nlohmann::json::array();
   for (const StoredCycle& c : page->cycles) cycles.push_back(CycleJson(c, false));
   SendJson(res, {{"cycles", std::move(cycles)},
-                 {"next_before", page->next_page_token.empty() ? "" : std::to_string(page->cycles.back().id)}});
+                 {"next_before",
+                  page->next_page_token.empty() ? "" : std::to_string(page->cycles.back().id)}});
 }
 
 void WebServer::Events(const httplib::Request& req, httplib::Response& res) {
@@ -338,13 +371,14 @@ void WebServer::Events(const httplib::Request& req, httplib::Response& res) {
   if (req.has_param("cycle")) {
     absl::StatusOr<int64_t> id = ParseCycleId(req.get_param_value("cycle"));
     if (!id.ok()) return SendError(res, id.status());
-    if (absl::StatusOr<StoredCycle> c = core_->GetCycle(*id); !c.ok()) return SendError(res, c.status());
+    if (absl::StatusOr<StoredCycle> c = core_->GetCycle(*id); !c.ok())
+      return SendError(res, c.status());
     cycle = *id;
   }
   if (++streams_ > kMaxEventStreams) {
     --streams_;
-    return SendError(res, absl::UnavailableError(
-                              absl::StrCat("events: ", kMaxEventStreams, " streams are open already")));
+    return SendError(res, absl::UnavailableError(absl::StrCat("events: ", kMaxEventStreams,
+                                                              " streams are open already")));
   }
   res.set_header("Cache-Control", "no-store");
   res.set_chunked_content_provider(
@@ -367,7 +401,8 @@ void WebServer::Events(const httplib::Request& req, httplib::Response& res) {
 
 void WebServer::FollowCycle(int64_t cycle_id, httplib::DataSink& sink) {
   const absl::Status s = core_->WatchCycle(cycle_id, [&](const StoredEvent& e) {
-    const std::string m = SseMessage("cycle_event", EventJson(e), absl::StrCat(e.cycle_id, ".", e.sequence));
+    const std::string m =
+        SseMessage("cycle_event", EventJson(e), absl::StrCat(e.cycle_id, ".", e.sequence));
     return !stopping_ && sink.write(m.data(), m.size());
   });
   if (!s.ok()) return;  // the client went away, or the store failed: the page reconnects
@@ -398,7 +433,8 @@ void WebServer::FollowStation(httplib::DataSink& sink) {
       const std::string m = SseMessage("cycle", CycleJson(*next, false));
       if (!sink.write(m.data(), m.size())) return;
       const absl::Status s = core_->WatchCycle(next->id, [&](const StoredEvent& e) {
-        const std::string em = SseMessage("cycle_event", EventJson(e), absl::StrCat(e.cycle_id, ".", e.sequence));
+        const std::string em =
+            SseMessage("cycle_event", EventJson(e), absl::StrCat(e.cycle_id, ".", e.sequence));
         return !stopping_ && sink.write(em.data(), em.size());
       });
       if (!s.ok()) return;

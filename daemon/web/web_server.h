@@ -81,7 +81,8 @@ class WebServer {
   // malformed address, web.static_dir when the folder has no index.html, web.tls.* when the
   // PEM text does not load or the key does not match the certificate; Unavailable when the
   // address cannot be bound. `core` must outlive the server.
-  static absl::StatusOr<std::unique_ptr<WebServer>> Start(StationCore* core, WebServerOptions options);
+  static absl::StatusOr<std::unique_ptr<WebServer>> Start(StationCore* core,
+                                                          WebServerOptions options);
   // Stops listening and waits for the requests in flight; an event stream ends at its next
   // event or poll (kNewCyclePoll), so stop a running cycle first for a quick stop.
   ~WebServer();

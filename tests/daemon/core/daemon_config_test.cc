@@ -338,7 +338,8 @@ namespace {
 TEST_F(DaemonConfigTest, WebKeyReadsBackAndIsChecked) {
   const std::string head = R"({"station": "s.json", "car_models": [], "data_root": "data", )";
   fs::create_directories(dir_ / "pages");
-  absl::StatusOr<DaemonConfig> c = Read(head + R"("web": {"listen": "127.0.0.1:8080", "static_dir": "pages"}})");
+  absl::StatusOr<DaemonConfig> c =
+      Read(head + R"("web": {"listen": "127.0.0.1:8080", "static_dir": "pages"}})");
   ASSERT_TRUE(c.ok()) << c.status();
   ASSERT_TRUE(c->web.has_value());
   EXPECT_EQ(c->web->listen, "127.0.0.1:8080");
@@ -350,7 +351,8 @@ TEST_F(DaemonConfigTest, WebKeyReadsBackAndIsChecked) {
 
   const std::pair<std::string, std::string> bad[] = {
       {R"("web": {})", "web.listen: missing"},
-      {R"("web": {"listen": "8080"})", "web.listen: '8080': must be HOST:PORT with a port in 0..65535"},
+      {R"("web": {"listen": "8080"})",
+       "web.listen: '8080': must be HOST:PORT with a port in 0..65535"},
       {R"("web": {"listen": "h:70000"})", "web.listen: 'h:70000': must be HOST:PORT"},
       {R"("web": {"listen": "h:1", "port": 2})", "web.port"},
       {R"("web": {"listen": "h:1", "static_dir": "nowhere"})", "web.static_dir: '"},

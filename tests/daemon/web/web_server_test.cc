@@ -4,19 +4,18 @@
 // their delay, static files and their types, and HTTPS with the test PKI's certificates.
 #include "daemon/web/web_server.h"
 
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
 #include <httplib.h>
 
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <grpcpp/grpcpp.h>
-#include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/str_split.h"
 #include "daemon/service/station_service.h"
@@ -75,7 +74,8 @@ class WebServerTest : public ::testing::Test {
     absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
     ASSERT_TRUE(core.ok()) << core.status();
     core_ = *std::move(core);
-    absl::StatusOr<RunningServer> grpc_server = StartServer(core_.get(), "127.0.0.1:0", token, "test");
+    absl::StatusOr<RunningServer> grpc_server =
+        StartServer(core_.get(), "127.0.0.1:0", token, "test");
     ASSERT_TRUE(grpc_server.ok()) << grpc_server.status();
     grpc_ = std::move(*grpc_server);
     stub_ = v1::Station::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(grpc_.port),
@@ -96,7 +96,8 @@ class WebServerTest : public ::testing::Test {
   httplib::Client Client() const { return httplib::Client("127.0.0.1", web_->port()); }
   // POST /api/login with `token`; the session cookie ("linecal_session=...") or "".
   std::string Login(const std::string& token, int* status = nullptr) const {
-    httplib::Result r = Client().Post("/api/login", json{{"token", token}}.dump(), "application/json");
+    httplib::Result r =
+        Client().Post("/api/login", json{{"token", token}}.dump(), "application/json");
     EXPECT_TRUE(r) << httplib::to_string(r.error());
     if (!r) return "";
     if (status) *status = r->status;
@@ -164,13 +165,15 @@ TEST_F(WebServerTest, LoginWithTheTokenGivesASessionCookie) {
   EXPECT_EQ(status, 401);
   EXPECT_EQ(Login("", &status), "");
   EXPECT_EQ(status, 401);
-  httplib::Result no_token = Client().Post("/api/login", "token=x", "application/x-www-form-urlencoded");
+  httplib::Result no_token =
+      Client().Post("/api/login", "token=x", "application/x-www-form-urlencoded");
   ASSERT_TRUE(no_token);
   EXPECT_EQ(no_token->status, 400);
 
   // The right token: a cookie with a random session id (not the token), HttpOnly and
   // SameSite=Strict, no Secure on plain HTTP.
-  httplib::Result ok = Client().Post("/api/login", json{{"token", kToken}}.dump(), "application/json");
+  httplib::Result ok =
+      Client().Post("/api/login", json{{"token", kToken}}.dump(), "application/json");
   ASSERT_TRUE(ok);
   EXPECT_EQ(ok->status, 200);
   const std::string set_cookie = ok->get_header_value("Set-Cookie");
@@ -185,13 +188,15 @@ TEST_F(WebServerTest, LoginWithTheTokenGivesASessionCookie) {
   EXPECT_EQ(status_json["version"], "test");
   EXPECT_EQ(status_json["running_cycle_id"], "");
   ASSERT_EQ(status_json["sensors"].size(), 2u);
-  EXPECT_EQ(status_json["sensors"][0], (json{{"name", "front_camera"}, {"kind", "camera"}, {"source", "simulator"}}));
+  EXPECT_EQ(status_json["sensors"][0],
+            (json{{"name", "front_camera"}, {"kind", "camera"}, {"source", "simulator"}}));
   EXPECT_EQ(GetJson("/api/session", cookie).second,
             (json{{"login_required", true}, {"logged_in", true}, {"role", "read-only"}}));
 
   // A made-up session id is refused; a logged-out one too.
   EXPECT_EQ(GetJson("/api/status", "linecal_session=" + std::string(64, 'a')).first, 401);
-  httplib::Result out = Client().Post("/api/logout", httplib::Headers{{"Cookie", cookie}}, "", "text/plain");
+  httplib::Result out =
+      Client().Post("/api/logout", httplib::Headers{{"Cookie", cookie}}, "", "text/plain");
   ASSERT_TRUE(out);
   EXPECT_EQ(out->status, 200);
   EXPECT_EQ(GetJson("/api/status", cookie).first, 401);
@@ -227,7 +232,9 @@ TEST_F(WebServerTest, CycleNumbersEqualGrpcGetCycle) {
     EXPECT_EQ(c["car_model_id"], g.car_model_id());
     EXPECT_EQ(c["state"], "done");
     EXPECT_EQ(g.state(), v1::CYCLE_STATE_DONE);
-    EXPECT_EQ(c["verdict"], g.verdict() == v1::VERDICT_PASS ? "pass" : g.verdict() == v1::VERDICT_FAIL ? "fail" : "error");
+    EXPECT_EQ(c["verdict"], g.verdict() == v1::VERDICT_PASS   ? "pass"
+                            : g.verdict() == v1::VERDICT_FAIL ? "fail"
+                                                              : "error");
     EXPECT_EQ(c["reason"], g.reason());
     EXPECT_EQ(c["started_ns"].get<int64_t>(), g.started_ns());
     EXPECT_EQ(c["ended_ns"].get<int64_t>(), g.ended_ns());
@@ -247,7 +254,9 @@ TEST_F(WebServerTest, CycleNumbersEqualGrpcGetCycle) {
         EXPECT_EQ(s["t_car_sensor"][k].get<double>(), gs.t_car_sensor().m(k)) << k;
       }
       const std::pair<const char*, const v1::MountingAngles*> groups[] = {
-          {"mounting", &gs.mounting()}, {"deviation", &gs.deviation()}, {"uncertainty", &gs.uncertainty()}};
+          {"mounting", &gs.mounting()},
+          {"deviation", &gs.deviation()},
+          {"uncertainty", &gs.uncertainty()}};
       for (const auto& [key, m] : groups) {
         EXPECT_EQ(s[key]["yaw_deg"].get<double>(), m->yaw_deg()) << key;
         EXPECT_EQ(s[key]["pitch_deg"].get<double>(), m->pitch_deg()) << key;
@@ -277,7 +286,8 @@ TEST_F(WebServerTest, CycleNumbersEqualGrpcGetCycle) {
   EXPECT_EQ(first["cycles"][1]["cycle_id"], std::to_string(ids[1]));
   EXPECT_FALSE(first["cycles"][0].contains("sensors"));
   EXPECT_EQ(first["next_before"], std::to_string(ids[1]));
-  const auto [second_status, second] = GetJson("/api/cycles?limit=2&before=" + std::to_string(ids[1]), cookie);
+  const auto [second_status, second] =
+      GetJson("/api/cycles?limit=2&before=" + std::to_string(ids[1]), cookie);
   ASSERT_EQ(second_status, 200) << second;
   ASSERT_EQ(second["cycles"].size(), 1u);
   EXPECT_EQ(second["cycles"][0]["cycle_id"], std::to_string(ids[0]));
@@ -289,7 +299,8 @@ TEST_F(WebServerTest, CycleNumbersEqualGrpcGetCycle) {
   ASSERT_TRUE(stub_->ListCycles(&list_context, list, &listed).ok());
   const auto [all_status, all] = GetJson("/api/cycles", cookie);
   ASSERT_EQ(all["cycles"].size(), static_cast<size_t>(listed.cycles_size()));
-  for (int i = 0; i < listed.cycles_size(); ++i) EXPECT_EQ(all["cycles"][i]["cycle_id"], listed.cycles(i).cycle_id());
+  for (int i = 0; i < listed.cycles_size(); ++i)
+    EXPECT_EQ(all["cycles"][i]["cycle_id"], listed.cycles(i).cycle_id());
 
   // Refusals name the parameter, with the HTTP status of the core's code.
   const std::pair<std::string, std::pair<int, std::string>> bad[] = {
@@ -305,7 +316,8 @@ TEST_F(WebServerTest, CycleNumbersEqualGrpcGetCycle) {
   for (const auto& [path, expected] : bad) {
     const auto [code, error] = GetJson(path, cookie);
     EXPECT_EQ(code, expected.first) << path;
-    EXPECT_EQ(error["error"].get<std::string>().rfind(expected.second, 0), 0u) << path << ": " << error;
+    EXPECT_EQ(error["error"].get<std::string>().rfind(expected.second, 0), 0u)
+        << path << ": " << error;
   }
 
   // The car model's nominal mounting is what the deviation is measured from, and its
@@ -333,20 +345,23 @@ TEST_F(WebServerTest, EventStreamsDeliverACycleInOrder) {
   // event, in order, as the events are stored.
   std::mutex mutex;
   std::string text;
-  std::vector<std::pair<size_t, std::chrono::system_clock::time_point>> arrivals;  // text size, time
+  std::vector<std::pair<size_t, std::chrono::system_clock::time_point>>
+      arrivals;  // text size, time
   std::atomic<bool> stop{false};
   int ended = 0;
   std::thread follower([&] {
     httplib::Client client = Client();
     client.set_read_timeout(std::chrono::seconds(30));
-    client.Get("/api/events", httplib::Headers{{"Cookie", cookie}}, [&](const char* data, size_t size) {
-      std::lock_guard<std::mutex> lock(mutex);
-      text.append(data, size);
-      arrivals.emplace_back(text.size(), std::chrono::system_clock::now());
-      ended = 0;
-      for (const SseMessage& m : ParseSse(text)) ended += m.data.value("type", "") == "cycle_ended";
-      return !stop && ended < 2;
-    });
+    client.Get("/api/events", httplib::Headers{{"Cookie", cookie}},
+               [&](const char* data, size_t size) {
+                 std::lock_guard<std::mutex> lock(mutex);
+                 text.append(data, size);
+                 arrivals.emplace_back(text.size(), std::chrono::system_clock::now());
+                 ended = 0;
+                 for (const SseMessage& m : ParseSse(text))
+                   ended += m.data.value("type", "") == "cycle_ended";
+                 return !stop && ended < 2;
+               });
   });
   // Two cycles one after the other, the first started when the stream is surely open.
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
@@ -399,7 +414,8 @@ TEST_F(WebServerTest, EventStreamsDeliverACycleInOrder) {
                                       [&](const auto& a) { return a.first >= offset - 2; });
     ASSERT_NE(arrival, arrivals.end());
     const std::chrono::nanoseconds delay =
-        arrival->second.time_since_epoch() - std::chrono::nanoseconds(m.data["time_ns"].get<int64_t>());
+        arrival->second.time_since_epoch() -
+        std::chrono::nanoseconds(m.data["time_ns"].get<int64_t>());
     worst = std::max(worst, delay);
   }
   std::printf("worst event delay (stored -> received over SSE): %.1f ms over %zu messages\n",
@@ -416,7 +432,8 @@ TEST_F(WebServerTest, EventStreamsDeliverACycleInOrder) {
   absl::StatusOr<std::vector<StoredEvent>> stored = core_->store().Events(first);
   ASSERT_TRUE(stored.ok());
   ASSERT_EQ(single.size(), stored->size() + 1);
-  for (size_t i = 0; i < stored->size(); ++i) EXPECT_EQ(single[i].data, EventJson((*stored)[i])) << i;
+  for (size_t i = 0; i < stored->size(); ++i)
+    EXPECT_EQ(single[i].data, EventJson((*stored)[i])) << i;
   EXPECT_EQ(single.back().event, "end");
   EXPECT_EQ(GetJson("/api/events?cycle=999", cookie).first, 404);
   EXPECT_EQ(GetJson("/api/events").first, 401);
@@ -426,9 +443,12 @@ TEST_F(WebServerTest, StaticFilesWithTheirTypes) {
   Start(kToken);
   const std::string cookie = Login(kToken);
   const std::pair<std::string, std::string> files[] = {
-      {"/", "text/html; charset=utf-8"},          {"/index.html", "text/html; charset=utf-8"},
-      {"/cycle.html", "text/html; charset=utf-8"}, {"/login.html", "text/html; charset=utf-8"},
-      {"/app.js", "text/javascript; charset=utf-8"}, {"/app.css", "text/css; charset=utf-8"},
+      {"/", "text/html; charset=utf-8"},
+      {"/index.html", "text/html; charset=utf-8"},
+      {"/cycle.html", "text/html; charset=utf-8"},
+      {"/login.html", "text/html; charset=utf-8"},
+      {"/app.js", "text/javascript; charset=utf-8"},
+      {"/app.css", "text/css; charset=utf-8"},
   };
   for (const auto& [path, type] : files) {
     httplib::Result r = Client().Get(path.c_str(), httplib::Headers{{"Cookie", cookie}});
@@ -446,7 +466,8 @@ TEST_F(WebServerTest, StaticFilesWithTheirTypes) {
   EXPECT_EQ(chart->get_header_value("Content-Type"), "text/javascript; charset=utf-8");
   EXPECT_EQ(chart->body, *ReadTextFile(kChartJsPath));
   // Nothing outside the folder, nothing it does not hold.
-  for (const std::string path : {"/../CMakeLists.txt", "/%2e%2e/CMakeLists.txt", "/nothing.html", "/static/app.js"}) {
+  for (const std::string path :
+       {"/../CMakeLists.txt", "/%2e%2e/CMakeLists.txt", "/nothing.html", "/static/app.js"}) {
     httplib::Result r = Client().Get(path.c_str(), httplib::Headers{{"Cookie", cookie}});
     ASSERT_TRUE(r) << path;
     EXPECT_EQ(r->status, 404) << path;
@@ -461,16 +482,21 @@ TEST_F(WebServerTest, StartRefusesBadOptions) {
   config.db_path = (dir_ / "station.db").string();
   config.data_root = (dir_ / "data").string();
   core_ = *StationCore::Create(config);
-  absl::StatusOr<std::unique_ptr<WebServer>> bad_listen = WebServer::Start(core_.get(), {"8080", {}, kStatic, "", "t"});
-  EXPECT_EQ(bad_listen.status().message(), "web.listen: '8080': must be HOST:PORT with a port in 0..65535");
+  absl::StatusOr<std::unique_ptr<WebServer>> bad_listen =
+      WebServer::Start(core_.get(), {"8080", {}, kStatic, "", "t"});
+  EXPECT_EQ(bad_listen.status().message(),
+            "web.listen: '8080': must be HOST:PORT with a port in 0..65535");
   absl::StatusOr<std::unique_ptr<WebServer>> no_pages =
       WebServer::Start(core_.get(), {"127.0.0.1:0", {}, dir_.string(), "", "t"});
   EXPECT_EQ(no_pages.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(std::string(no_pages.status().message()).rfind("web.static_dir: '", 0), 0u) << no_pages.status();
-  absl::StatusOr<std::unique_ptr<WebServer>> first = WebServer::Start(core_.get(), {"127.0.0.1:0", {}, kStatic, "", "t"});
+  EXPECT_EQ(std::string(no_pages.status().message()).rfind("web.static_dir: '", 0), 0u)
+      << no_pages.status();
+  absl::StatusOr<std::unique_ptr<WebServer>> first =
+      WebServer::Start(core_.get(), {"127.0.0.1:0", {}, kStatic, "", "t"});
   ASSERT_TRUE(first.ok()) << first.status();
   const std::string taken = "127.0.0.1:" + std::to_string((*first)->port());
-  absl::StatusOr<std::unique_ptr<WebServer>> second = WebServer::Start(core_.get(), {taken, {}, kStatic, "", "t"});
+  absl::StatusOr<std::unique_ptr<WebServer>> second =
+      WebServer::Start(core_.get(), {taken, {}, kStatic, "", "t"});
   EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable);
   EXPECT_EQ(second.status().message(), "web.listen: cannot listen on '" + taken + "'");
 }
@@ -497,9 +523,11 @@ class WebTlsTest : public WebServerTest {
     return tls;
   }
   // A client trusting the test CA, with a client certificate when `cert` is set.
-  std::unique_ptr<httplib::SSLClient> Https(const std::string& cert = "", const std::string& key = "") const {
-    auto client = cert.empty() ? std::make_unique<httplib::SSLClient>("127.0.0.1", web_->port())
-                               : std::make_unique<httplib::SSLClient>("127.0.0.1", web_->port(), cert, key);
+  std::unique_ptr<httplib::SSLClient> Https(const std::string& cert = "",
+                                            const std::string& key = "") const {
+    auto client = cert.empty()
+                      ? std::make_unique<httplib::SSLClient>("127.0.0.1", web_->port())
+                      : std::make_unique<httplib::SSLClient>("127.0.0.1", web_->port(), cert, key);
     client->set_ca_cert_path(pki_.ca_cert.c_str());
     client->enable_server_certificate_verification(true);
     return client;
@@ -510,12 +538,15 @@ class WebTlsTest : public WebServerTest {
 TEST_F(WebTlsTest, HttpsWithASecureCookie) {
   Start(kToken, ServerTls(false));
   std::unique_ptr<httplib::SSLClient> client = Https();
-  httplib::Result login = client->Post("/api/login", json{{"token", kToken}}.dump(), "application/json");
+  httplib::Result login =
+      client->Post("/api/login", json{{"token", kToken}}.dump(), "application/json");
   ASSERT_TRUE(login) << httplib::to_string(login.error());
   EXPECT_EQ(login->status, 200);
   const std::string set_cookie = login->get_header_value("Set-Cookie");
-  EXPECT_NE(set_cookie.find("; HttpOnly; SameSite=Strict; Secure"), std::string::npos) << set_cookie;
-  httplib::Result status = client->Get("/api/status", httplib::Headers{{"Cookie", set_cookie.substr(0, set_cookie.find(';'))}});
+  EXPECT_NE(set_cookie.find("; HttpOnly; SameSite=Strict; Secure"), std::string::npos)
+      << set_cookie;
+  httplib::Result status = client->Get(
+      "/api/status", httplib::Headers{{"Cookie", set_cookie.substr(0, set_cookie.find(';'))}});
   ASSERT_TRUE(status);
   EXPECT_EQ(status->status, 200);
   // Plain HTTP on the TLS port gets no answer.
@@ -543,9 +574,11 @@ TEST_F(WebTlsTest, KeyOfAnotherCertificateIsRefused) {
   TlsConfig tls = ServerTls(false);
   tls.key_pem = *ReadTextFile(pki_.client_key);
   tls.key_path = pki_.client_key;
-  absl::StatusOr<std::unique_ptr<WebServer>> web = WebServer::Start(core_.get(), {"127.0.0.1:0", tls, kStatic, "", "t"});
+  absl::StatusOr<std::unique_ptr<WebServer>> web =
+      WebServer::Start(core_.get(), {"127.0.0.1:0", tls, kStatic, "", "t"});
   EXPECT_EQ(web.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(web.status().message(), "web.tls.key: '" + pki_.client_key + "': does not match web.tls.cert");
+  EXPECT_EQ(web.status().message(),
+            "web.tls.key: '" + pki_.client_key + "': does not match web.tls.cert");
 }
 
 }  // namespace
