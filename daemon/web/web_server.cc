@@ -214,6 +214,17 @@ absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core,
   if (web->port_ <= 0)
     return absl::UnavailableError(absl::StrCat("web.listen: cannot listen on '", listen, "'"));
   web->thread_ = std::thread([server = web->server_.get()] { server->listen_after_bind(); });
+  // httplib's stop() does nothing until the loop runs, and the loop would then run forever:
+  // a server destroyed right after Start would hang in the destructor. The loop starts at
+  // once; 5 s is beyond any scheduling delay.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (!web->server_->is_running() && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  if (!web->server_->is_running()) {
+    return absl::InternalError(
+        absl::StrCat("web.listen: the server on '", listen, "' did not start"));
+  }
   return web;
 }
 
