@@ -240,10 +240,11 @@ int main(int argc, char** argv) {
   }
   std::unique_ptr<linecal::WebServer> web;
   if (config->web) {
+    const std::string pages =
+        linecal::FindStaticDir(config->web->static_dir, LINECAL_WEB_STATIC_DIR);
     absl::StatusOr<std::unique_ptr<linecal::WebServer>> started = linecal::WebServer::Start(
-        core->get(), {config->web->listen, config->web->tls,
-                      linecal::FindStaticDir(config->web->static_dir, LINECAL_WEB_STATIC_DIR),
-                      config->auth_token, LINECAL_VERSION});
+        core->get(),
+        {config->web->listen, config->web->tls, pages, config->auth_token, LINECAL_VERSION});
     if (!started.ok()) {
       std::fprintf(stderr, "linecald: %s\n", std::string(started.status().message()).c_str());
       return 1;
@@ -251,7 +252,8 @@ int main(int argc, char** argv) {
     web = *std::move(started);
     const char* login = config->auth_token.empty() ? " (no login)" : " (login with the token)";
     Log("info", absl::StrCat("console on ", config->web->tls ? "https://" : "http://",
-                             BoundAddress(config->web->listen, web->port()), "/", login));
+                             BoundAddress(config->web->listen, web->port()), "/", login,
+                             ", pages from ", pages));
   }
   // gRPC's errors belong in the log: GRPC_VERBOSITY=NONE (read by gRPC's first init, which
   // StartServer did) would hide them, so errors are let through.
