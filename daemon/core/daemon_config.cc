@@ -1,8 +1,10 @@
 #include "daemon/core/daemon_config.h"
 
+#include <algorithm>
 #include <filesystem>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "station/capture/capture.h"
 #include "station/io/json_reader.h"
@@ -266,6 +268,49 @@ absl::StatusOr<PlantConfig> ReadPlant(const JsonField& f, const fs::path& base,
   return c;
 }
 
+constexpr char kListenForm[] = ": must be HOST:PORT with a port in 0..65535";
+
+// HOST:PORT with a decimal port in 0..65535 (CheckListenAddress).
+bool IsListenAddress(const std::string& address) {
+  const size_t colon = address.rfind(':');
+  const std::string port = colon == std::string::npos ? "" : address.substr(colon + 1);
+  int value = 0;
+  // gRPC takes a port beyond 65535 without complaint and listens on another one.
+  const auto is_digit = [](char c) { return c >= '0' && c <= '9'; };
+  // At most 5 digits (65535): a longer string cannot overflow SimpleAtoi into range.
+  const bool digits =
+      !port.empty() && port.size() <= 5 && std::all_of(port.begin(), port.end(), is_digit);
+  return colon != 0 && digits && absl::SimpleAtoi(port, &value) && value <= 65535;
+}
+
+// The `web` object (docs/daemon.md, "Console"): where the console listens, its TLS (the
+// shape of the top-level tls) and its pages' folder.
+absl::StatusOr<WebConfig> ReadWeb(const JsonField& f, const fs::path& base) {
+  if (absl::Status s = f.AllowOnlyKeys({"listen", "tls", "static_dir"}); !s.ok()) return s;
+  WebConfig c;
+  absl::StatusOr<std::string> listen = f.String("listen");
+  if (!listen.ok()) return listen.status();
+  if (!IsListenAddress(*listen)) return f.Error("listen", QuoteInput(*listen) + kListenForm);
+  c.listen = *listen;
+  absl::StatusOr<std::string> dir = f.StringOr("static_dir", "");
+  if (!dir.ok()) return dir.status();
+  if (!dir->empty()) {
+    c.static_dir = Resolve(base, *dir);
+    std::error_code ec;
+    if (!fs::is_directory(c.static_dir, ec)) {
+      return f.Error("static_dir", absl::StrCat("'", c.static_dir, "': no such folder"));
+    }
+  }
+  if (f.Has("tls")) {
+    absl::StatusOr<JsonField> tls_field = f.Object("tls");
+    if (!tls_field.ok()) return tls_field.status();
+    absl::StatusOr<TlsConfig> tls = ReadTls(*tls_field, base);
+    if (!tls.ok()) return tls.status();
+    c.tls = *std::move(tls);
+  }
+  return c;
+}
+
 }  // namespace
 
 DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::string& data_dir) {
@@ -279,6 +324,11 @@ DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::strin
   return c;
 }
 
+absl::Status CheckListenAddress(const std::string& address, const std::string& key) {
+  if (IsListenAddress(address)) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(key, ": ", QuoteInput(address), kListenForm));
+}
+
 absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   absl::StatusOr<JsonDocument> doc = JsonDocument::FromFile(path);
   if (!doc.ok()) return doc.status();
@@ -287,7 +337,7 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   if (absl::Status s = root->AllowOnlyKeys(
           {"listen", "log_level", "auth_token", "station_id", "station", "car_models", "data_root",
            "db", "source", "vin_check_digit", "frames_per_sensor", "busy_timeout_ms", "tls",
-           "deadlines_ms", "input_budget", "plant"});
+           "deadlines_ms", "input_budget", "plant", "web"});
       !s.ok()) {
     return s;
   }
@@ -402,6 +452,13 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
     absl::StatusOr<PlantConfig> plant = ReadPlant(*plant_field, base, c.core.station_id);
     if (!plant.ok()) return plant.status();
     c.core.plant = *std::move(plant);
+  }
+  if (root->Has("web")) {
+    absl::StatusOr<JsonField> web_field = root->Object("web");
+    if (!web_field.ok()) return web_field.status();
+    absl::StatusOr<WebConfig> web = ReadWeb(*web_field, base);
+    if (!web.ok()) return web.status();
+    c.web = *std::move(web);
   }
   return c;
 }

@@ -31,11 +31,20 @@ struct TlsConfig {
   bool require_client_cert = true;
 };
 
+// The `web` key (docs/daemon.md, "Console"): the station console's HTTP server (daemon/web).
+struct WebConfig {
+  std::string listen;            // HOST:PORT, checked by CheckListenAddress
+  std::optional<TlsConfig> tls;  // absent: plain HTTP
+  // The pages' folder; empty: found from the binary's place (daemon/web/web_server.h).
+  std::string static_dir;
+};
+
 struct DaemonConfig {
   std::string listen = "127.0.0.1:50051";  // HOST:PORT
   std::string log_level = "info";          // "debug", "info", "warning", "error"
   std::string auth_token;                  // empty: no authentication
   std::optional<TlsConfig> tls;            // absent: an insecure port
+  std::optional<WebConfig> web;            // absent: no console (no HTTP port)
   // What one input file of a capture may claim (station/io/input_budget.h); the `input_budget`
   // key, each field optional with InputBudget's default.
   InputBudget input_budget;
@@ -46,6 +55,11 @@ struct DaemonConfig {
 // simulator source, data and database under `data_dir`.
 DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::string& data_dir);
 
+// `address` as the servers take it: HOST:PORT ("[::1]:50051" too) with a decimal port in
+// 0..65535, else InvalidArgument naming `key` ("web.listen: '...': must be HOST:PORT ...").
+// Pure.
+absl::Status CheckListenAddress(const std::string& address, const std::string& key = "listen");
+
 // Reads a configuration file. Keys: listen, log_level, auth_token, station_id, station,
 // car_models (array), data_root, db, source {type: simulator|replay, capture} or
 // {type: live, sensors: {NAME: {type: aravis|v4l2|udp|socketcan|candump, ...}}},
@@ -55,7 +69,9 @@ DaemonConfig DefaultDaemonConfig(const std::string& deploy_dir, const std::strin
 // max_scan_points, max_can_lines, max_manifest_frames: integers >= 1}, plant {dsn,
 // station_id (default: the top-level one), batch, password_file, max_backlog_age_s,
 // max_retry_interval_s, tls {mode, ca, cert, key}} (daemon/plant/forwarder.h's PlantConfig: the
-// DSN must parse and hold no password, the files must exist); unknown keys are errors.
+// DSN must parse and hold no password, the files must exist), web {listen (required, checked by
+// CheckListenAddress), tls (as the top-level tls), static_dir (relative to the file)};
+// unknown keys are errors.
 // A replay capture (source.capture) must resolve inside data_root, symbolic links followed
 // (checked when data_root exists: "source.capture: 'cap': resolves outside data_root").
 // Whether every sensor has a source of its kind is checked by StationCore::Create, which knows

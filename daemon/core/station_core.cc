@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "daemon/cycle/capture_calibration.h"
@@ -379,6 +380,15 @@ const CarModel* StationCore::FindCar(const std::string& id) const {
     if (c.id == id) return &c;
   }
   return nullptr;
+}
+
+absl::StatusOr<int64_t> ParseCycleId(const std::string& id) {
+  int64_t v = 0;
+  if (!absl::SimpleAtoi(id, &v) || v <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("cycle_id: ", QuoteInput(id), " is not a cycle id"));
+  }
+  return v;
 }
 
 absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector<CarModel>& cars,
@@ -851,6 +861,11 @@ absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(
     // 200 ms: a missed notification (between the reads and the wait) costs at most this.
     changed_.wait_for(lock, std::chrono::milliseconds(200));
   }
+}
+
+std::string StationStatusInfo::SourceOf(const std::string& sensor) const {
+  const auto live = sensor_sources.find(sensor);
+  return live != sensor_sources.end() ? live->second : source;
 }
 
 StationStatusInfo StationCore::Status() {

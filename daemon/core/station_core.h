@@ -122,6 +122,10 @@ struct CycleRequest {
 absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector<CarModel>& cars,
                                   bool vin_check_digit);
 
+// A cycle id as the APIs (gRPC, the console's JSON) spell it: a positive decimal integer,
+// else InvalidArgument naming cycle_id. Pure.
+absl::StatusOr<int64_t> ParseCycleId(const std::string& id);
+
 struct StationStatusInfo {
   std::string station_id;
   std::vector<std::string> car_models;
@@ -135,6 +139,10 @@ struct StationStatusInfo {
   std::uint64_t disk_free_bytes = 0;
   std::optional<ForwarderStats> plant;            // with a `plant` section: the forwarding's state
   std::chrono::seconds plant_max_backlog_age{0};  // plant.max_backlog_age_s (Health)
+
+  // What serves `sensor`: its live source's description, else `source` (the simulator and a
+  // recorded capture serve every sensor).
+  std::string SourceOf(const std::string& sensor) const;
 };
 
 class StationCore {
@@ -181,6 +189,8 @@ class StationCore {
   bool WaitIdleFor(std::chrono::milliseconds timeout);
 
   Store& store() { return *store_; }
+  // The car models as loaded at Create (never changed after it, so safe from any thread).
+  const std::vector<CarModel>& car_models() const { return cars_; }
 
  private:
   StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,

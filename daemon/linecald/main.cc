@@ -9,6 +9,8 @@
 // listener stops for good after an accept error (EMFILE), so a ListenerWatchdog restarts the
 // gRPC server on the same address when it finds the listener dead (docs/daemon.md,
 // "Descriptors").
+// With a `web` section, the station console's HTTP server (daemon/web) runs beside the gRPC
+// server, behind the same auth_token; it stops after a running cycle was cancelled.
 // Under systemd (Type=notify): READY=1 once calls are served, WATCHDOG=1 while the core
 // answers, STOPPING=1 on the signal (daemon/systemd/sd_notify.h).
 #include <grpc/support/log.h>
@@ -36,14 +38,17 @@
 #include "daemon/service/listener_watchdog.h"
 #include "daemon/service/station_service.h"
 #include "daemon/systemd/sd_notify.h"
+#include "daemon/web/web_server.h"
 
 namespace {
 
 constexpr char kUsage[] =
     "usage: linecald [--config FILE] [--listen HOST:PORT] [--db PATH] [--log-level LEVEL] [--data-dir DIR]\n"
+    "                [--web-listen HOST:PORT]\n"
     "  Serves the linecal.v1.Station gRPC API (proto/linecal/v1/station.proto), the gRPC health\n"
     "  service and server reflection. Without --config: the demo station of deploy/ with\n"
-    "  simulated sensors, data and database in --data-dir (default ./linecald-data).\n";
+    "  simulated sensors, data and database in --data-dir (default ./linecald-data).\n"
+    "  --web-listen: the station console there (docs/console.md), as the file's web.listen.\n";
 
 // One log line to stderr: "level=info msg=... key=value ...", for journald and people.
 void Log(const char* level, const std::string& message) {
@@ -152,7 +157,7 @@ int main(int argc, char** argv) {
   // clouds after the cycle, so the resident set climbed to 170 MB over the soak's cycles
   // with under 9 MB in use; with two it stays near 60-110 MB, no slower (docs/reliability.md).
   mallopt(M_ARENA_MAX, 2);
-  std::string config_path, listen, db, log_level, data_dir = "linecald-data";
+  std::string config_path, listen, db, log_level, web_listen, data_dir = "linecald-data";
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&](std::string* out) {
@@ -175,6 +180,8 @@ int main(int argc, char** argv) {
       value(&log_level);
     } else if (arg == "--data-dir") {
       value(&data_dir);
+    } else if (arg == "--web-listen") {
+      value(&web_listen);
     } else {
       std::fprintf(stderr, "linecald: unknown option '%s'\n%s", arg.c_str(), kUsage);
       return 2;
@@ -190,6 +197,10 @@ int main(int argc, char** argv) {
   if (!listen.empty()) config->listen = listen;
   if (!db.empty()) config->core.db_path = db;
   if (!log_level.empty()) config->log_level = log_level;
+  if (!web_listen.empty()) {
+    if (!config->web) config->web.emplace();
+    config->web->listen = web_listen;
+  }
   config->core.input_budget = config->input_budget;
   config->core.log = [](const std::string& level, const std::string& message) {
     Log(level.c_str(), message);
@@ -227,6 +238,23 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
     return 1;
   }
+  std::unique_ptr<linecal::WebServer> web;
+  if (config->web) {
+    const std::string pages =
+        linecal::FindStaticDir(config->web->static_dir, LINECAL_WEB_STATIC_DIR);
+    absl::StatusOr<std::unique_ptr<linecal::WebServer>> started = linecal::WebServer::Start(
+        core->get(),
+        {config->web->listen, config->web->tls, pages, config->auth_token, LINECAL_VERSION});
+    if (!started.ok()) {
+      std::fprintf(stderr, "linecald: %s\n", std::string(started.status().message()).c_str());
+      return 1;
+    }
+    web = *std::move(started);
+    const char* login = config->auth_token.empty() ? " (no login)" : " (login with the token)";
+    Log("info", absl::StrCat("console on ", config->web->tls ? "https://" : "http://",
+                             BoundAddress(config->web->listen, web->port()), "/", login,
+                             ", pages from ", pages));
+  }
   // gRPC's errors belong in the log: GRPC_VERBOSITY=NONE (read by gRPC's first init, which
   // StartServer did) would hide them, so errors are let through.
   if (!gpr_should_log(GPR_LOG_SEVERITY_ERROR)) gpr_set_log_verbosity(GPR_LOG_SEVERITY_ERROR);
@@ -259,6 +287,7 @@ int main(int argc, char** argv) {
   const auto drain_deadline = std::chrono::system_clock::now() + kDrainTime;
   if (server->server) server->server->Shutdown(drain_deadline);
   *server = {};
+  web.reset();  // its event streams end with the cancelled cycle
   const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
       drain_deadline - std::chrono::system_clock::now());
   if (!(*core)->WaitIdleFor(std::max(left, std::chrono::milliseconds(0)))) {

@@ -2,10 +2,8 @@
 
 #include <grpcpp/health_check_service_interface.h>
 
-#include <algorithm>
 #include <numbers>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "daemon/service/reflection_service.h"
 #include "daemon/service/tls_credentials.h"
@@ -113,15 +111,6 @@ void Fill(const StoredCycle& c, bool with_sensors, v1::Cycle* out) {
 }
 
 }  // namespace
-
-absl::StatusOr<int64_t> ParseCycleId(const std::string& id) {
-  int64_t v = 0;
-  if (!absl::SimpleAtoi(id, &v) || v <= 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("cycle_id: ", QuoteInput(id), " is not a cycle id"));
-  }
-  return v;
-}
 
 absl::StatusOr<CycleRequest> CycleRequestFromProto(const v1::StartCycleRequest& request) {
   CycleRequest r;
@@ -268,29 +257,12 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, cons
     v1::SensorStatus* sensor = response->add_sensors();
     sensor->set_name(name);
     sensor->set_kind(KindToProto(SensorKindName(kind)));
-    const auto live = s.sensor_sources.find(name);
-    sensor->set_source(live != s.sensor_sources.end() ? live->second : s.source);
+    sensor->set_source(s.SourceOf(name));
     // The simulator and a recorded capture are always there; live devices are not probed
     // here (they are opened at each cycle, where a missing one is that sensor's error).
     sensor->set_connected(true);
   }
   return grpc::Status::OK;
-}
-
-absl::Status CheckListenAddress(const std::string& address) {
-  const size_t colon = address.rfind(':');
-  const std::string port = colon == std::string::npos ? "" : address.substr(colon + 1);
-  int value = 0;
-  // gRPC takes a port beyond 65535 without complaint and listens on another one.
-  const auto is_digit = [](char c) { return c >= '0' && c <= '9'; };
-  // At most 5 digits (65535): a longer string cannot overflow SimpleAtoi into range.
-  const bool digits =
-      !port.empty() && port.size() <= 5 && std::all_of(port.begin(), port.end(), is_digit);
-  if (colon == 0 || !digits || !absl::SimpleAtoi(port, &value) || value > 65535) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "listen: ", QuoteInput(address), ": must be HOST:PORT with a port in 0..65535"));
-  }
-  return absl::OkStatus();
 }
 
 absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,

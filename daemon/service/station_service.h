@@ -28,9 +28,6 @@ namespace linecal {
 
 // The handlers' translations, pure functions (the request fuzzer drives them with the core's
 // ValidateCycleRequest and the store's filter checks).
-// A cycle id as the API spells it: a positive decimal integer, else InvalidArgument naming
-// cycle_id.
-absl::StatusOr<int64_t> ParseCycleId(const std::string& id);
 // StartCycleRequest to the core's request (degrees to radians); InvalidArgument only for a
 // frames_per_sensor too large for an int; the core validates the rest.
 absl::StatusOr<CycleRequest> CycleRequestFromProto(const v1::StartCycleRequest& request);
@@ -69,16 +66,12 @@ class StationService final : public v1::Station::Service {
   std::string version_;
 };
 
-// `address` as StartServer takes it: HOST:PORT ("[::1]:50051" too) with a decimal port in
-// 0..65535, else InvalidArgument naming `listen`. Pure.
-absl::Status CheckListenAddress(const std::string& address);
-
 // A started server: listening on `address` ("127.0.0.1:0" picks a free port), with the
 // standard health service (no token needed) and server reflection (the token needed, as for
 // every Station call) on the same port. Without `tls` the port is insecure; with it, TLS
 // with the credentials of ServerTlsCredentials (tls_credentials.h),
 // whose errors (a bad file, a key that does not match the certificate) are returned as they
-// are; the token, when set, is required on top. An address CheckListenAddress refuses is its
+// are; the token, when set, is required on top. An address CheckListenAddress (daemon_config.h) refuses is its
 // InvalidArgument.
 // The health service's answer follows StationCore::Health: SERVING while the station can run
 // and store cycles, NOT_SERVING (for every service name) while the disk is full or the data

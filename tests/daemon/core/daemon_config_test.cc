@@ -329,3 +329,44 @@ TEST_F(DaemonConfigTest, PlantErrorsNameTheKeyAndNeverThePassword) {
 
 }  // namespace
 }  // namespace linecal
+
+namespace linecal {
+namespace {
+
+// The `web` key (the station console): read back with the folder resolved, and each bad value
+// refused naming web.<key>.
+TEST_F(DaemonConfigTest, WebKeyReadsBackAndIsChecked) {
+  const std::string head = R"({"station": "s.json", "car_models": [], "data_root": "data", )";
+  fs::create_directories(dir_ / "pages");
+  absl::StatusOr<DaemonConfig> c =
+      Read(head + R"("web": {"listen": "127.0.0.1:8080", "static_dir": "pages"}})");
+  ASSERT_TRUE(c.ok()) << c.status();
+  ASSERT_TRUE(c->web.has_value());
+  EXPECT_EQ(c->web->listen, "127.0.0.1:8080");
+  EXPECT_EQ(c->web->static_dir, (dir_ / "pages").string());
+  EXPECT_FALSE(c->web->tls.has_value());
+  absl::StatusOr<DaemonConfig> none = Read(head + R"("listen": "127.0.0.1:1"})");
+  ASSERT_TRUE(none.ok()) << none.status();
+  EXPECT_FALSE(none->web.has_value());
+
+  const std::pair<std::string, std::string> bad[] = {
+      {R"("web": {})", "web.listen: missing"},
+      {R"("web": {"listen": "8080"})",
+       "web.listen: '8080': must be HOST:PORT with a port in 0..65535"},
+      {R"("web": {"listen": "h:70000"})", "web.listen: 'h:70000': must be HOST:PORT"},
+      {R"("web": {"listen": "h:1", "port": 2})", "web.port"},
+      {R"("web": {"listen": "h:1", "static_dir": "nowhere"})", "web.static_dir: '"},
+      {R"("web": {"listen": "h:1", "tls": {"cert": "c.pem"}})", "web.tls.cert"},
+      {R"("web": "127.0.0.1:8080")", "web: expected an object"},
+  };
+  for (const auto& [text, expected] : bad) {
+    absl::StatusOr<DaemonConfig> r = Read(head + text + "}");
+    ASSERT_FALSE(r.ok()) << text;
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << text;
+    EXPECT_NE(std::string(r.status().message()).find(expected), std::string::npos)
+        << text << " -> " << r.status().message();
+  }
+}
+
+}  // namespace
+}  // namespace linecal

@@ -1,0 +1,464 @@
+#include "daemon/web/web_server.h"
+
+#include <httplib.h>
+#include <openssl/pem.h>
+#include <openssl/ssl.h>
+#include <sys/socket.h>
+
+#include <cctype>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/strip.h"
+#include "daemon/web/console_json.h"
+
+namespace linecal {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr char kCookie[] = "linecal_session";
+constexpr char kJson[] = "application/json";
+
+// The HTTP status of a core error (docs/console.md, "API").
+int HttpStatus(absl::StatusCode code) {
+  switch (code) {
+    case absl::StatusCode::kInvalidArgument:
+      return 400;
+    case absl::StatusCode::kUnauthenticated:
+      return 401;
+    case absl::StatusCode::kPermissionDenied:
+      return 401;
+    case absl::StatusCode::kNotFound:
+      return 404;
+    case absl::StatusCode::kFailedPrecondition:
+      return 409;
+    case absl::StatusCode::kUnavailable:
+      return 503;
+    case absl::StatusCode::kResourceExhausted:
+      return 503;
+    default:
+      return 500;
+  }
+}
+
+void SendJson(httplib::Response& res, const nlohmann::json& body, int status = 200) {
+  res.status = status;
+  res.set_header("Cache-Control", "no-store");
+  // dump's error handler `replace`: a VIN or a reason with invalid UTF-8 (they are request
+  // data) must not throw.
+  res.set_content(body.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace), kJson);
+}
+
+void SendError(httplib::Response& res, const absl::Status& s) {
+  std::string code = absl::StatusCodeToString(s.code());
+  for (char& c : code) c = c == ' ' ? '_' : static_cast<char>(std::tolower(c));
+  SendJson(res, {{"error", std::string(s.message())}, {"code", code}}, HttpStatus(s.code()));
+}
+
+const char* ContentType(const std::string& extension) {
+  if (extension == ".html") return "text/html; charset=utf-8";
+  if (extension == ".js") return "text/javascript; charset=utf-8";
+  if (extension == ".css") return "text/css; charset=utf-8";
+  return "application/octet-stream";
+}
+
+// The value of cookie `name` in a Cookie header ("a=1; linecal_session=abc"), or "".
+std::string CookieValue(const std::string& header, const std::string& name) {
+  for (absl::string_view part : absl::StrSplit(header, ';')) {
+    part = absl::StripAsciiWhitespace(part);
+    if (absl::ConsumePrefix(&part, name) && absl::ConsumePrefix(&part, "="))
+      return std::string(part);
+  }
+  return "";
+}
+
+// `text` with every byte but RFC 3986's unreserved ones as %XX: a query parameter's value.
+std::string PercentEncoded(const std::string& text) {
+  std::string out;
+  for (const unsigned char c : text) {
+    if (std::isalnum(c) || c == '-' || c == '.' || c == '_' || c == '~') {
+      out += static_cast<char>(c);
+    } else {
+      absl::StrAppend(&out, "%", absl::Hex(c, absl::kZeroPad2));
+    }
+  }
+  return out;
+}
+
+std::string SseMessage(const std::string& event, const nlohmann::json& data,
+                       const std::string& id = "") {
+  std::string m = id.empty() ? "" : absl::StrCat("id: ", id, "\n");
+  // One line of JSON: dump without indentation never holds a newline.
+  absl::StrAppend(&m, "event: ", event,
+                  "\ndata: ", data.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
+                  "\n\n");
+  return m;
+}
+
+// A PEM text's certificates in order; empty when it holds none.
+std::vector<X509*> ReadCertificates(const std::string& pem) {
+  std::vector<X509*> certs;
+  BIO* bio = BIO_new_mem_buf(pem.data(), static_cast<int>(pem.size()));
+  if (bio == nullptr) return certs;
+  while (X509* cert = PEM_read_bio_X509(bio, nullptr, nullptr, nullptr)) certs.push_back(cert);
+  BIO_free(bio);
+  return certs;
+}
+
+// Loads the `web.tls` files into httplib's SSL context: the certificate chain and key, and
+// the clients' CA with verification as the gRPC port does it (daemon_config.h TlsConfig).
+// Returns "" or what is wrong, naming the key.
+std::string SetUpTls(const TlsConfig& tls, SSL_CTX& ctx) {
+  std::vector<X509*> chain = ReadCertificates(tls.cert_pem);
+  if (chain.empty()) return absl::StrCat("web.tls.cert: '", tls.cert_path, "': no PEM certificate");
+  const bool used = SSL_CTX_use_certificate(&ctx, chain[0]) == 1;
+  X509_free(chain[0]);
+  bool chained = true;
+  // SSL_CTX_add_extra_chain_cert takes ownership of the intermediates it accepts.
+  for (size_t i = 1; i < chain.size(); ++i) {
+    if (SSL_CTX_add_extra_chain_cert(&ctx, chain[i]) != 1) {
+      X509_free(chain[i]);
+      chained = false;
+    }
+  }
+  if (!used || !chained) return absl::StrCat("web.tls.cert: '", tls.cert_path, "': not usable");
+  BIO* bio = BIO_new_mem_buf(tls.key_pem.data(), static_cast<int>(tls.key_pem.size()));
+  EVP_PKEY* key = bio ? PEM_read_bio_PrivateKey(bio, nullptr, nullptr, nullptr) : nullptr;
+  BIO_free(bio);
+  if (key == nullptr) return absl::StrCat("web.tls.key: '", tls.key_path, "': no PEM private key");
+  // OpenSSL refuses a key of another certificate already here (for EC and RSA keys).
+  const bool key_used = SSL_CTX_use_PrivateKey(&ctx, key) == 1;
+  EVP_PKEY_free(key);
+  if (!key_used || SSL_CTX_check_private_key(&ctx) != 1) {
+    return absl::StrCat("web.tls.key: '", tls.key_path, "': does not match web.tls.cert");
+  }
+  if (tls.client_ca_pem.empty()) return "";
+  std::vector<X509*> cas = ReadCertificates(tls.client_ca_pem);
+  if (cas.empty())
+    return absl::StrCat("web.tls.client_ca: '", tls.client_ca_path, "': no PEM certificate");
+  X509_STORE* store = SSL_CTX_get_cert_store(&ctx);
+  for (X509* ca : cas) {
+    X509_STORE_add_cert(store, ca);
+    SSL_CTX_add_client_CA(&ctx, ca);
+    X509_free(ca);
+  }
+  SSL_CTX_set_verify(
+      &ctx, SSL_VERIFY_PEER | (tls.require_client_cert ? SSL_VERIFY_FAIL_IF_NO_PEER_CERT : 0),
+      nullptr);
+  return "";
+}
+
+}  // namespace
+
+std::string FindStaticDir(const std::string& configured, const std::string& source_dir) {
+  if (!configured.empty()) return configured;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const fs::path installed =
+        (exe.parent_path() / ".." / "share" / "linecal" / "web").lexically_normal();
+    if (fs::is_regular_file(installed / "index.html", ec)) return installed.string();
+  }
+  return source_dir;
+}
+
+WebServer::WebServer(StationCore* core, WebServerOptions options)
+    : core_(core), options_(std::move(options)), sessions_(options_.auth_token) {}
+
+absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core,
+                                                            WebServerOptions options) {
+  if (absl::Status s = CheckListenAddress(options.listen, "web.listen"); !s.ok()) return s;
+  std::error_code ec;
+  if (!fs::is_regular_file(fs::path(options.static_dir) / "index.html", ec)) {
+    return absl::InvalidArgumentError(absl::StrCat("web.static_dir: '", options.static_dir,
+                                                   "': no index.html (the console's pages)"));
+  }
+  std::unique_ptr<WebServer> web(new WebServer(core, std::move(options)));
+  if (web->options_.tls) {
+    std::string problem;
+    auto server = std::make_unique<httplib::SSLServer>(
+        [&](SSL_CTX& ctx) { return (problem = SetUpTls(*web->options_.tls, ctx)).empty(); });
+    if (!server->is_valid()) {
+      return absl::InvalidArgumentError(problem.empty() ? "web.tls: OpenSSL refused the context"
+                                                        : problem);
+    }
+    web->server_ = std::move(server);
+  } else {
+    web->server_ = std::make_unique<httplib::Server>();
+  }
+  web->server_->new_task_queue = [] { return new httplib::ThreadPool(kWebThreads); };
+  // httplib's default sets SO_REUSEPORT: a second linecald would bind the same port and the
+  // kernel would split the browsers between the two. SO_REUSEADDR alone lets a restarted
+  // daemon bind while the old connections linger in TIME_WAIT.
+  web->server_->set_socket_options([](int socket) {
+    const int yes = 1;
+    setsockopt(socket, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
+  web->Route();
+  const std::string& listen = web->options_.listen;
+  std::string host = listen.substr(0, listen.rfind(':'));
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']')
+    host = host.substr(1, host.size() - 2);
+  int port = 0;
+  // CheckListenAddress held: the port is digits in 0..65535.
+  (void)absl::SimpleAtoi(listen.substr(listen.rfind(':') + 1), &port);
+  web->port_ = port == 0                                ? web->server_->bind_to_any_port(host)
+               : web->server_->bind_to_port(host, port) ? port
+                                                        : -1;
+  if (web->port_ <= 0)
+    return absl::UnavailableError(absl::StrCat("web.listen: cannot listen on '", listen, "'"));
+  web->thread_ = std::thread([server = web->server_.get()] { server->listen_after_bind(); });
+  // httplib's stop() does nothing until the loop runs, and the loop would then run forever:
+  // a server destroyed right after Start would hang in the destructor. The loop starts at
+  // once; 5 s is beyond any scheduling delay.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (!web->server_->is_running() && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  if (!web->server_->is_running()) {
+    return absl::InternalError(
+        absl::StrCat("web.listen: the server on '", listen, "' did not start"));
+  }
+  return web;
+}
+
+WebServer::~WebServer() {
+  stopping_ = true;
+  if (server_) server_->stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+bool WebServer::Authorized(const httplib::Request& req) {
+  return sessions_.Check(CookieValue(req.get_header_value("Cookie"), kCookie));
+}
+
+void WebServer::Route() {
+  httplib::Server& s = *server_;
+  // Every answer: no sniffing of types, no framing by other sites, scripts only from here.
+  s.set_default_headers(
+      {{"X-Content-Type-Options", "nosniff"},
+       {"X-Frame-Options", "DENY"},
+       {"Content-Security-Policy", "default-src 'self'; frame-ancestors 'none'"}});
+  s.Post("/api/login", [this](const httplib::Request& req, httplib::Response& res) {
+    const nlohmann::json body = nlohmann::json::parse(req.body, nullptr, false);
+    if (!body.is_object() || !body.contains("token") || !body["token"].is_string()) {
+      return SendError(
+          res, absl::InvalidArgumentError("token: a JSON body {\"token\": \"...\"} is required"));
+    }
+    absl::StatusOr<std::string> id = sessions_.Login(body["token"].get<std::string>());
+    if (!id.ok()) return SendError(res, id.status());
+    res.set_header("Set-Cookie",
+                   absl::StrCat(kCookie, "=", *id, "; Path=/; HttpOnly; SameSite=Strict",
+                                options_.tls ? "; Secure" : ""));
+    SendJson(res, {{"role", "read-only"}});
+  });
+  s.Post("/api/logout", [this](const httplib::Request& req, httplib::Response& res) {
+    sessions_.Logout(CookieValue(req.get_header_value("Cookie"), kCookie));
+    res.set_header("Set-Cookie",
+                   absl::StrCat(kCookie, "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0"));
+    SendJson(res, nlohmann::json::object());
+  });
+  s.Get("/api/session", [this](const httplib::Request& req, httplib::Response& res) {
+    SendJson(res, {{"login_required", sessions_.login_required()},
+                   {"logged_in", Authorized(req)},
+                   {"role", "read-only"}});
+  });
+  // The API below needs a session: checked before routing.
+  s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+    const bool open =
+        req.path == "/api/login" || req.path == "/api/logout" || req.path == "/api/session";
+    if (open || Authorized(req)) return httplib::Server::HandlerResponse::Unhandled;
+    if (req.path.rfind("/api/", 0) == 0) {
+      SendError(res, absl::UnauthenticatedError(
+                         "login required: POST /api/login with the daemon's auth_token"));
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    const bool page = req.path == "/" || (req.path.size() > 5 && req.path.ends_with(".html") &&
+                                          req.path != "/login.html");
+    if (!page) return httplib::Server::HandlerResponse::Unhandled;
+    res.set_redirect(absl::StrCat("/login.html?next=", PercentEncoded(req.target)), 303);
+    return httplib::Server::HandlerResponse::Handled;
+  });
+  s.Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
+    SendJson(res, StatusJson(core_->Status(), options_.version));
+  });
+  s.Get("/api/cycles",
+        [this](const httplib::Request& req, httplib::Response& res) { ListCycles(req, res); });
+  s.Get(R"(/api/cycles/([^/]+))", [this](const httplib::Request& req, httplib::Response& res) {
+    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+    if (!id.ok()) return SendError(res, id.status());
+    absl::StatusOr<StoredCycle> cycle = core_->GetCycle(*id);
+    if (!cycle.ok()) return SendError(res, cycle.status());
+    SendJson(res, CycleJson(*cycle, true));
+  });
+  s.Get(R"(/api/cars/([^/]+))", [this](const httplib::Request& req, httplib::Response& res) {
+    const std::string id = req.matches[1];
+    for (const CarModel& car : core_->car_models()) {
+      if (car.id == id) return SendJson(res, CarModelJson(car));
+    }
+    SendError(res, absl::NotFoundError(absl::StrCat("car_model_id: ", QuoteInput(id),
+                                                    " is not a car model of the station")));
+  });
+  s.Get("/api/events",
+        [this](const httplib::Request& req, httplib::Response& res) { Events(req, res); });
+  s.Get("/vendor/chart.js", [this](const httplib::Request& req, httplib::Response& res) {
+    ServeFile(options_.chart_js_path, req, res);
+  });
+  // Browsers ask for it unprompted; no icon, and no 404 in the page's console.
+  s.Get("/favicon.ico", [](const httplib::Request&, httplib::Response& res) { res.status = 204; });
+  s.Get("/", [this](const httplib::Request& req, httplib::Response& res) {
+    ServeFile((fs::path(options_.static_dir) / "index.html").string(), req, res);
+  });
+  // Files of the static folder by plain names only: no '/' and no "..", so nothing outside it.
+  s.Get(R"(/([a-z0-9_-]+\.(html|js|css)))", [this](const httplib::Request& req,
+                                                   httplib::Response& res) {
+    ServeFile((fs::path(options_.static_dir) / std::string(req.matches[1])).string(), req, res);
+  });
+}
+
+void WebServer::ServeFile(const std::string& path, const httplib::Request&,
+                          httplib::Response& res) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    res.status = 404;
+    res.set_content("not found\n", "text/plain; charset=utf-8");
+    return;
+  }
+  std::ostringstream text;
+  text << in.rdbuf();
+  // Pages change with the daemon: revalidated at every load, which costs one small read here.
+  res.set_header("Cache-Control", "no-cache");
+  res.set_content(text.str(), ContentType(fs::path(path).extension().string()));
+}
+
+void WebServer::ListCycles(const httplib::Request& req, httplib::Response& res) {
+  CycleFilter filter;
+  if (req.has_param("limit")) {
+    const std::string limit = req.get_param_value("limit");
+    // 1000: the store's largest page, as gRPC's kMaxPageSize.
+    if (!absl::SimpleAtoi(limit, &filter.page_size) || filter.page_size < 1 ||
+        filter.page_size > 1000) {
+      return SendError(res, absl::InvalidArgumentError(absl::StrCat("limit = ", QuoteInput(limit),
+                                                                    ": must be in [1, 1000]")));
+    }
+  }
+  filter.vin = req.get_param_value("vin");
+  if (req.has_param("verdict")) {
+    const std::string word = req.get_param_value("verdict");
+    const Verdict v = ParseVerdict(word);
+    if (v == Verdict::kNone) {
+      return SendError(res, absl::InvalidArgumentError(absl::StrCat(
+                                "verdict = ", QuoteInput(word), ": must be pass, fail or error")));
+    }
+    filter.verdict = v;
+  }
+  if (req.has_param("before")) {
+    // The store pages by (start, id) of the last cycle listed: the cycle's own.
+    absl::StatusOr<int64_t> id = ParseCycleId(req.get_param_value("before"));
+    if (!id.ok())
+      return SendError(res,
+                       absl::InvalidArgumentError(absl::StrCat("before: ", id.status().message())));
+    absl::StatusOr<StoredCycle> before = core_->GetCycle(*id);
+    if (!before.ok()) return SendError(res, before.status());
+    filter.page_token = absl::StrCat(before->started_ns, ".", before->id);
+  }
+  absl::StatusOr<CyclePage> page = core_->ListCycles(filter);
+  if (!page.ok()) return SendError(res, page.status());
+  nlohmann::json cycles = nlohmann::json::array();
+  for (const StoredCycle& c : page->cycles) cycles.push_back(CycleJson(c, false));
+  SendJson(res, {{"cycles", std::move(cycles)},
+                 {"next_before",
+                  page->next_page_token.empty() ? "" : std::to_string(page->cycles.back().id)}});
+}
+
+void WebServer::Events(const httplib::Request& req, httplib::Response& res) {
+  std::optional<int64_t> cycle;
+  if (req.has_param("cycle")) {
+    absl::StatusOr<int64_t> id = ParseCycleId(req.get_param_value("cycle"));
+    if (!id.ok()) return SendError(res, id.status());
+    if (absl::StatusOr<StoredCycle> c = core_->GetCycle(*id); !c.ok())
+      return SendError(res, c.status());
+    cycle = *id;
+  }
+  if (++streams_ > kMaxEventStreams) {
+    --streams_;
+    return SendError(res, absl::UnavailableError(absl::StrCat("events: ", kMaxEventStreams,
+                                                              " streams are open already")));
+  }
+  res.set_header("Cache-Control", "no-store");
+  res.set_chunked_content_provider(
+      "text/event-stream",
+      [this, cycle](size_t, httplib::DataSink& sink) {
+        // The browser reconnects this long after a stream ends or breaks.
+        const std::string retry = "retry: 1000\n\n";
+        if (sink.write(retry.data(), retry.size())) {
+          if (cycle) {
+            FollowCycle(*cycle, sink);
+          } else {
+            FollowStation(sink);
+          }
+        }
+        sink.done();
+        return true;
+      },
+      [this](bool) { --streams_; });
+}
+
+void WebServer::FollowCycle(int64_t cycle_id, httplib::DataSink& sink) {
+  const absl::Status s = core_->WatchCycle(cycle_id, [&](const StoredEvent& e) {
+    const std::string m =
+        SseMessage("cycle_event", EventJson(e), absl::StrCat(e.cycle_id, ".", e.sequence));
+    return !stopping_ && sink.write(m.data(), m.size());
+  });
+  if (!s.ok()) return;  // the client went away, or the store failed: the page reconnects
+  const std::string end = SseMessage("end", {{"cycle_id", std::to_string(cycle_id)}});
+  sink.write(end.data(), end.size());
+}
+
+void WebServer::FollowStation(httplib::DataSink& sink) {
+  // The newest cycle is shown from its first event, so a page opened mid-cycle or after it
+  // sees the car in the station; then each newer cycle in id order.
+  int64_t last = 0;
+  bool first = true;
+  auto idle_since = std::chrono::steady_clock::now();
+  while (!stopping_) {
+    CycleFilter filter;
+    // 10 newest: more cycles than this between two polls (100 ms) cannot happen on a line,
+    // and the page shows the newest anyway.
+    filter.page_size = 10;
+    absl::StatusOr<CyclePage> page = core_->ListCycles(filter);
+    if (!page.ok()) return;
+    std::optional<StoredCycle> next;
+    for (const StoredCycle& c : page->cycles) {
+      if (first ? !next || c.id > next->id : c.id > last && (!next || c.id < next->id)) next = c;
+    }
+    first = false;
+    if (next) {
+      last = next->id;
+      const std::string m = SseMessage("cycle", CycleJson(*next, false));
+      if (!sink.write(m.data(), m.size())) return;
+      const absl::Status s = core_->WatchCycle(next->id, [&](const StoredEvent& e) {
+        const std::string em =
+            SseMessage("cycle_event", EventJson(e), absl::StrCat(e.cycle_id, ".", e.sequence));
+        return !stopping_ && sink.write(em.data(), em.size());
+      });
+      if (!s.ok()) return;
+      idle_since = std::chrono::steady_clock::now();
+      continue;
+    }
+    if (std::chrono::steady_clock::now() - idle_since > kEventKeepAlive) {
+      const std::string ping = ": keep-alive\n\n";
+      if (!sink.write(ping.data(), ping.size())) return;
+      idle_since = std::chrono::steady_clock::now();
+    }
+    std::this_thread::sleep_for(kNewCyclePoll);
+  }
+}
+
+}  // namespace linecal

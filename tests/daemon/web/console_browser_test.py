@@ -1,0 +1,268 @@
+#!/usr/bin/python3
+"""The station console in a real headless Chromium (Debian's chromium, chromium-driver and
+python3-selenium) against a real linecald with the simulator source (docs/console.md,
+"Tests"): the login page refuses a wrong token and lets the right one in; a cycle started
+over gRPC (the linecal CLI) is watched live on the station page to its end, every sensor's
+verdict shown as GetCycle has it and within the 200 ms bar of its event; the cycle page shows
+GetCycle's numbers; the browser logs no errors. Screenshots of each page go to --screenshots.
+
+Exit 0 passed, 1 failed, 77 skipped (ctest's SKIP_RETURN_CODE) when Chromium, its driver or
+Selenium is missing, saying which.
+"""
+import argparse
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMEDRIVER = "/usr/bin/chromedriver"
+VIN = "1M8GDM9AXKP042788"
+TOKEN = "line-3-browser-token"
+# docs/console.md "Bars": a sensor's verdict on the live page within 200 ms of its event.
+VERDICT_BAR_MS = 200.0
+# Every wait's bound: a full reference-car cycle takes about 4 s in Release; 60 s is a hung
+# page, not a slow one.
+WAIT_S = 60
+
+
+def skip(why):
+    print(f"SKIP: {why}")
+    sys.exit(77)
+
+
+try:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+except ImportError as e:
+    skip(f"python3-selenium is not installed ({e}); tools/setup installs it")
+
+
+class Failure(Exception):
+    pass
+
+
+def check(condition, message):
+    if not condition:
+        raise Failure(message)
+
+
+def start_daemon(linecald, source_dir, work):
+    config = {
+        "listen": "127.0.0.1:0",
+        "auth_token": TOKEN,
+        "station": os.path.join(source_dir, "deploy/stations/reference.json"),
+        "car_models": [os.path.join(source_dir, "deploy/cars/reference.json")],
+        "data_root": "data",
+        "web": {"listen": "127.0.0.1:0"},
+    }
+    os.makedirs(os.path.join(work, "data"))
+    path = os.path.join(work, "linecald.json")
+    with open(path, "w") as f:
+        json.dump(config, f)
+    log = open(os.path.join(work, "linecald.log"), "w+")
+    daemon = subprocess.Popen([linecald, "--config", path], stderr=log, stdout=log)
+    deadline = time.time() + WAIT_S
+    grpc_port = web_url = None
+    while time.time() < deadline and (grpc_port is None or web_url is None):
+        check(daemon.poll() is None, f"linecald exited: {open(log.name).read()}")
+        text = open(log.name).read()
+        m = re.search(r"\(port (\d+)\)", text)
+        grpc_port = m.group(1) if m else None
+        m = re.search(r"console on (http://127\.0\.0\.1:\d+/)", text)
+        web_url = m.group(1) if m else None
+        time.sleep(0.05)
+    check(grpc_port and web_url, f"linecald did not say where it listens: {open(log.name).read()}")
+    return daemon, f"127.0.0.1:{grpc_port}", web_url
+
+
+def linecal(cli, address, *args):
+    out = subprocess.run([cli, *args, "--address", address, "--token", TOKEN, "--json"],
+                         capture_output=True, text=True, timeout=WAIT_S)
+    check(out.returncode in (0, 1), f"linecal {' '.join(args)}: {out.returncode} {out.stderr}")
+    return json.loads(out.stdout)
+
+
+def browser():
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    options.add_argument("--headless=new")
+    # Root in containers and CI: Chromium's sandbox needs user namespaces it may not have.
+    options.add_argument("--no-sandbox")
+    options.add_argument("--disable-dev-shm-usage")
+    options.add_argument("--window-size=1600,1000")
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+
+
+def errors(driver):
+    """The browser's console entries of level SEVERE since the last call (reading clears)."""
+    return [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+
+
+def wait(driver, what, condition):
+    try:
+        return WebDriverWait(driver, WAIT_S, poll_frequency=0.02).until(lambda d: condition(d))
+    except Exception as e:
+        raise Failure(f"timed out waiting for {what}: {e}")
+
+
+def verdict_word(proto_verdict):
+    return {"VERDICT_PASS": "pass", "VERDICT_FAIL": "fail", "VERDICT_ERROR": "error"}.get(proto_verdict, "")
+
+
+def test(args, work):
+    daemon, address, url = start_daemon(args.linecald, args.source_dir, work)
+    driver = browser()
+    try:
+        shots = args.screenshots
+        os.makedirs(shots, exist_ok=True)
+        # Not logged in: the live page sends the browser to the login page.
+        driver.get(url)
+        wait(driver, "the login page", lambda d: "/login.html" in d.current_url)
+        check(driver.current_url.endswith("/login.html?next=%2f"), driver.current_url)
+        driver.find_element(By.ID, "token").send_keys("not-the-token")
+        driver.find_element(By.ID, "login").click()
+        wait(driver, "the refusal", lambda d: d.find_element(By.ID, "login-message").text == "Wrong token.")
+        check("/login.html" in driver.current_url, "a wrong token left the login page")
+        driver.save_screenshot(os.path.join(shots, "login.png"))
+        # The refused POST is the one error Chromium logs here ("Failed to load resource ... 401").
+        refused = errors(driver)
+        check(len(refused) == 1 and "/api/login" in refused[0]["message"] and "401" in refused[0]["message"],
+              f"console errors at the refusal: {refused}")
+        token = driver.find_element(By.ID, "token")
+        token.clear()
+        token.send_keys(TOKEN)
+        driver.find_element(By.ID, "login").click()
+        wait(driver, "the live page", lambda d: d.current_url == url)
+        wait(driver, "the event stream", lambda d: d.find_element(By.ID, "connection").text == "live")
+        cookies = driver.get_cookies()
+        check(len(cookies) == 1 and cookies[0]["name"] == "linecal_session" and cookies[0]["httpOnly"]
+              and cookies[0]["sameSite"] == "Strict" and TOKEN not in cookies[0]["value"],
+              f"session cookie: {cookies}")
+
+        # A cycle over gRPC, watched live: the page must show it running, then each verdict.
+        started = linecal(args.linecal, address, "cycle", "start", "--vin", VIN, "--car", "reference")
+        cycle_id = str(started["cycle_id"]) if isinstance(started, dict) else str(started)
+        seen_running = False
+        verdicts_seen_while_running = 0
+        deadline = time.time() + WAIT_S
+        while time.time() < deadline:
+            body = driver.find_element(By.TAG_NAME, "body")
+            if body.get_attribute("data-ended") == cycle_id:
+                break
+            if body.get_attribute("data-cycle") == cycle_id:
+                badge = driver.find_element(By.ID, "cycle-verdict").text
+                if badge == "running":
+                    seen_running = True
+                    rows = driver.find_elements(By.CSS_SELECTOR, "#sensors tr[data-verdict]")
+                    verdicts_seen_while_running = max(verdicts_seen_while_running, len(rows))
+            time.sleep(0.02)
+        check(driver.find_element(By.TAG_NAME, "body").get_attribute("data-ended") == cycle_id,
+              "the live page did not show the cycle's end")
+        check(seen_running, "the live page never showed the cycle running")
+        driver.save_screenshot(os.path.join(shots, "live.png"))
+
+        cycle = linecal(args.linecal, address, "cycle", "show", cycle_id)
+        check(driver.find_element(By.ID, "vin").text == VIN, "VIN")
+        check(driver.find_element(By.ID, "model").text == "reference", "model")
+        check(driver.find_element(By.ID, "cycle-verdict").text == verdict_word(cycle["verdict"]),
+              f"cycle verdict {driver.find_element(By.ID, 'cycle-verdict').text} vs {cycle['verdict']}")
+        rows = {r.get_attribute("data-sensor"): r for r in driver.find_elements(By.CSS_SELECTOR, "#sensors tr")}
+        check(sorted(rows) == sorted(s["name"] for s in cycle["sensors"]),
+              f"rows {sorted(rows)} vs sensors {[s['name'] for s in cycle['sensors']]}")
+        delays = {}
+        for s in cycle["sensors"]:
+            row = rows[s["name"]]
+            word = verdict_word(s["verdict"])
+            check(row.get_attribute("data-verdict") == word, f"{s['name']}: {row.get_attribute('data-verdict')} vs {word}")
+            check(row.find_element(By.CLASS_NAME, "verdict").text == word.upper(), f"{s['name']}: verdict text")
+            check(row.find_element(By.CLASS_NAME, "step").text == "done", f"{s['name']}: step")
+            reason = row.find_element(By.CLASS_NAME, "reason").text
+            check(reason == ("" if word == "pass" else s.get("reason", "")), f"{s['name']}: reason '{reason}'")
+            delays[s["name"]] = float(row.get_attribute("data-shown-after-ms"))
+        worst = max(delays.values())
+        print(f"verdicts on the live page after their events: worst {worst:.1f} ms, "
+              f"mean {sum(delays.values()) / len(delays):.1f} ms over {len(delays)} sensors; "
+              f"{verdicts_seen_while_running} verdicts seen before the cycle's end")
+        check(worst <= VERDICT_BAR_MS, f"a verdict took {worst:.1f} ms to show (bar {VERDICT_BAR_MS} ms): {delays}")
+
+        # The cycle page: GetCycle's numbers, exactly, and the car file's tolerances.
+        driver.find_element(By.ID, "cycle-link").click()
+        wait(driver, "the cycle page", lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-loaded") == cycle_id)
+        driver.save_screenshot(os.path.join(shots, "cycle.png"))
+        with open(os.path.join(args.source_dir, "deploy/cars/reference.json")) as f:
+            car = {s["name"]: s for s in json.load(f)["sensors"]}
+        axes = [("yaw_deg", 3, 0), ("pitch_deg", 3, 1), ("roll_deg", 3, 2), ("x_m", 4, 0), ("y_m", 4, 1), ("z_m", 4, 2)]
+        compared = 0
+        for s in cycle["sensors"]:
+            section = driver.find_element(By.CSS_SELECTOR, f"section.sensor[data-sensor='{s['name']}']")
+            for axis, digits, index in axes:
+                row = section.find_element(By.CSS_SELECTOR, f"tr[data-axis='{axis}']")
+                cells = {c: row.find_element(By.CSS_SELECTOR, f"td.{c.split()[0]}") for c in
+                         ("found", "nominal", "deviation", "tolerance", "sigma")}
+                for cls, group in (("found", "mounting"), ("deviation", "deviation"), ("sigma", "uncertainty")):
+                    expected = s.get(group, {}).get(axis, 0.0)  # proto JSON leaves zeros out
+                    shown = float(cells[cls].get_attribute("data-value"))
+                    check(shown == expected, f"{s['name']} {axis} {cls}: {shown} vs GetCycle {expected}")
+                    text = float(cells[cls].text)
+                    check(abs(text - expected) <= 0.5 * 10 ** -digits + 1e-12,
+                          f"{s['name']} {axis} {cls}: shown '{cells[cls].text}' vs {expected}")
+                    compared += 1
+                key = "ypr_deg" if axis.endswith("_deg") else "xyz_m"
+                tolerance = float(cells["tolerance"].get_attribute("data-value"))
+                # The car file's degrees went to radians and back: equal to 1e-12.
+                check(abs(tolerance - car[s["name"]]["tolerance"][key][index]) < 1e-12,
+                      f"{s['name']} {axis} tolerance {tolerance}")
+                nominal = float(cells["nominal"].get_attribute("data-value"))
+                found = s.get("mounting", {}).get(axis, 0.0)
+                deviation = s.get("deviation", {}).get(axis, 0.0)
+                # The nominal the deviation was measured from, to rounding (1e-9).
+                check(abs(nominal - (found - deviation)) < 1e-9, f"{s['name']} {axis} nominal {nominal}")
+            residual = float(section.find_element(By.CLASS_NAME, "residual").get_attribute("data-value"))
+            check(residual == s.get("residual_rms", 0.0), f"{s['name']} residual {residual}")
+        print(f"cycle page: {compared} numbers equal to GetCycle's over {len(cycle['sensors'])} sensors")
+
+        left = errors(driver)
+        check(not left, f"console errors: {left}")
+    finally:
+        driver.quit()
+        daemon.send_signal(signal.SIGTERM)
+        try:
+            daemon.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            daemon.kill()
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--linecald", required=True)
+    parser.add_argument("--linecal", required=True)
+    parser.add_argument("--source-dir", required=True)
+    parser.add_argument("--screenshots", required=True, help="folder for login.png, live.png, cycle.png")
+    args = parser.parse_args()
+    for path, package in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")):
+        if not os.access(path, os.X_OK):
+            skip(f"{path} is missing: install Debian's {package} (tools/setup does)")
+    work = tempfile.mkdtemp(prefix="console_browser_")
+    try:
+        test(args, work)
+    except Failure as e:
+        print(f"FAILED: {e}")
+        print(open(os.path.join(work, "linecald.log")).read() if os.path.exists(os.path.join(work, "linecald.log")) else "")
+        return 1
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    print("PASSED")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
