@@ -5,6 +5,7 @@
 
 #include "detectors/apriltag/apriltag_detector.h"
 #include "detectors/aruco/aruco_detector.h"
+#include "detectors/charuco/charuco_detector.h"
 #include "detectors/checker/checker_detector.h"
 #include "detectors/chessboard/chessboard_detector.h"
 #include "detectors/circle/circle_detector.h"
@@ -23,6 +24,7 @@ std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board
     case BoardType::kAruco:
     case BoardType::kRoundHole: return DetectAruco(image, board);
     case BoardType::kApriltag: return DetectApriltag(image, board);
+    case BoardType::kCharuco: return DetectCharuco(image, board);
   }
   return std::nullopt;
 }

@@ -1,0 +1,229 @@
+#include "detectors/charuco/charuco_detector.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <optional>
+#include <vector>
+
+#include "detectors/boards/aruco_dict_4x4_50.h"
+#include "detectors/common/corner_refine.h"
+#include "detectors/common/edge_lines.h"
+#include "detectors/common/homography.h"
+
+namespace linecal {
+namespace {
+
+// Where each of the board's markers is printed: its square and its corners in the board frame
+// (metres; top-left, top-right, bottom-right, bottom-left as seen facing the print, the order
+// of DecodedMarker::corners_px).
+struct PrintedMarker {
+  int row = 0;
+  int col = 0;
+  std::array<Eigen::Vector2d, 4> corners_board;
+};
+
+struct CharucoGeometry {
+  double square_m = 0.0;
+  Eigen::Vector2d top_left_board;  // the top-left corner of the top-left square
+  std::vector<PrintedMarker> markers;        // by id
+  std::vector<int> marker_of_square;         // row-major over the squares, -1: black
+};
+
+CharucoGeometry GeometryOf(const Board& board) {
+  const BoardParams& p = board.params();
+  CharucoGeometry g;
+  g.square_m = p.square_m * p.scale;
+  const double half_marker = 0.5 * p.marker_m * p.scale;
+  g.top_left_board = Eigen::Vector2d(-0.5 * p.cols * g.square_m, 0.5 * p.rows * g.square_m);
+  g.marker_of_square.assign(p.cols * p.rows, -1);
+  for (int r = 0; r < p.rows; ++r) {
+    for (int c = 0; c < p.cols; ++c) {
+      if (!CharucoSquareHasMarker(p, r, c)) continue;
+      const Eigen::Vector2d centre =
+          g.top_left_board + g.square_m * Eigen::Vector2d(c + 0.5, -(r + 0.5));
+      g.marker_of_square[r * p.cols + c] = static_cast<int>(g.markers.size());
+      g.markers.push_back(PrintedMarker{
+          r, c,
+          {centre + Eigen::Vector2d(-half_marker, half_marker),
+           centre + Eigen::Vector2d(half_marker, half_marker),
+           centre + Eigen::Vector2d(half_marker, -half_marker),
+           centre + Eigen::Vector2d(-half_marker, -half_marker)}});
+    }
+  }
+  return g;
+}
+
+Eigen::Vector2d Centre(const std::array<Eigen::Vector2d, 4>& corners) {
+  return 0.25 * (corners[0] + corners[1] + corners[2] + corners[3]);
+}
+
+// The board's markers read once each, by id (nullopt: not read, or read more than once).
+std::vector<std::optional<DecodedMarker>> BoardMarkers(const MarkerScan& scan, int count) {
+  std::vector<std::optional<DecodedMarker>> by_id(count);
+  std::vector<int> reads(count, 0);
+  for (const DecodedMarker& m : scan.markers) {
+    if (m.id >= count) continue;
+    if (++reads[m.id] == 1) by_id[m.id] = m;
+  }
+  for (int id = 0; id < count; ++id) {
+    if (reads[id] > 1) by_id[id].reset();
+  }
+  return by_id;
+}
+
+// The homography of the markers `ids` (board metres to image pixels), through their corners.
+std::optional<Eigen::Matrix3d> MarkersHomography(
+    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& read,
+    const std::vector<int>& ids) {
+  std::vector<Eigen::Vector2d> src;
+  std::vector<Eigen::Vector2d> dst;
+  for (int id : ids) {
+    for (int k = 0; k < 4; ++k) {
+      src.push_back(g.markers[id].corners_board[k]);
+      dst.push_back(read[id]->corners_px[k]);
+    }
+  }
+  // Four or eight exact correspondences: the DLT is the fit; refinement adds nothing worth it.
+  const std::optional<HomographyFit> fit = FitHomography(src, dst, {.refine = false});
+  if (!fit) return std::nullopt;
+  return fit->H;
+}
+
+// Drops every marker that no neighbour (a marker within two squares) confirms.
+void KeepConfirmedMarkers(const CharucoGeometry& g, const CharucoOptions& options,
+                          std::vector<std::optional<DecodedMarker>>* read) {
+  const int count = static_cast<int>(read->size());
+  std::vector<bool> confirmed(count, false);
+  for (int i = 0; i < count; ++i) {
+    if (!(*read)[i]) continue;
+    const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, *read, {i});
+    if (!H) continue;
+    const Eigen::Vector2d centre_board = Centre(g.markers[i].corners_board);
+    const double side_px = LocalSquareSide(*H, centre_board, g.square_m);
+    if (!std::isfinite(side_px)) continue;
+    for (int j = 0; j < count && !confirmed[i]; ++j) {
+      if (j == i || !(*read)[j]) continue;
+      if (std::abs(g.markers[j].row - g.markers[i].row) > 2 ||
+          std::abs(g.markers[j].col - g.markers[i].col) > 2) {
+        continue;
+      }
+      const Eigen::Vector2d predicted = ApplyHomography(*H, Centre(g.markers[j].corners_board));
+      const double error = (predicted - Centre((*read)[j]->corners_px)).norm();
+      confirmed[i] = error <= options.max_neighbour_error * side_px;
+    }
+  }
+  for (int i = 0; i < count; ++i) {
+    if (!confirmed[i]) (*read)[i].reset();
+  }
+}
+
+// True when both black squares at the corner look darker than both white ones: probes in the
+// middle of the black squares' quarter next to the corner, and in the white squares' margin
+// between the corner and the marker (half way along its diagonal). `dark_first`: the squares up
+// left and down right of the corner are the black ones.
+bool CornerPaintAgrees(const ImageView8& image, const Eigen::Matrix3d& H,
+                       const Eigen::Vector2d& corner_board, double square_m, double margin_m,
+                       bool dark_first, int min_contrast) {
+  // Quarter-square into a black square: clear of its edges by far more than the blur.
+  const double black_offset = 0.25 * square_m;
+  const double white_offset = 0.5 * margin_m;
+  const std::array<Eigen::Vector2d, 4> diagonals = {
+      Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, -1),  // up left, down right
+      Eigen::Vector2d(1, 1), Eigen::Vector2d(-1, -1)};  // up right, down left
+  double darkest_white = 255.0;
+  double lightest_black = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    const bool black = (k < 2) == dark_first;
+    const Eigen::Vector2d p_board =
+        corner_board + (black ? black_offset : white_offset) * diagonals[k];
+    const Eigen::Vector2d uv = ApplyHomography(H, p_board);
+    if (!InsideForBilinearGrey(image, uv)) return false;
+    const double grey = BilinearGrey(image, uv.x(), uv.y());
+    if (black) {
+      lightest_black = std::max(lightest_black, grey);
+    } else {
+      darkest_white = std::min(darkest_white, grey);
+    }
+  }
+  // Half the marker scan's contrast: the white probes sit in a margin a few pixels wide, which
+  // the blur darkens.
+  return darkest_white - lightest_black >= 0.5 * min_contrast;
+}
+
+}  // namespace
+
+std::string_view CharucoOptions::Validate() const {
+  if (const std::string_view bad = markers.Validate(); !bad.empty()) return bad;
+  if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
+  if (!(max_neighbour_error > 0.0 && max_neighbour_error <= 0.5)) return "max_neighbour_error";
+  return {};
+}
+
+Detection DetectCharuco(const ImageView8& image, const Board& board,
+                        const CharucoOptions& options) {
+  Detection detection;
+  detection.reason =
+      CheckDetectorInput(image, board, BoardType::kCharuco, options.Validate().empty());
+  if (detection.reason != DetectReason::kNone) return detection;
+
+  const BoardParams& p = board.params();
+  const CharucoGeometry g = GeometryOf(board);
+  const int marker_count = static_cast<int>(g.markers.size());
+  const MarkerScan scan = ScanMarkers(image, Aruco4x4_50Family(), options.markers, marker_count);
+  if (scan.markers.empty()) {
+    detection.reason = scan.reason == DetectReason::kNone ? DetectReason::kNoCandidates
+                                                          : scan.reason;
+    return detection;
+  }
+  std::vector<std::optional<DecodedMarker>> read = BoardMarkers(scan, marker_count);
+  if (std::none_of(read.begin(), read.end(), [](const auto& m) { return m.has_value(); })) {
+    detection.reason = DetectReason::kWrongBoard;
+    return detection;
+  }
+  KeepConfirmedMarkers(g, options, &read);
+
+  // The window of the saddle fit (a third of the side it is given) must stay inside the part
+  // around the corner that is point-symmetric: the white margin and the markers' black border,
+  // not their data cells.
+  const double margin_m = 0.5 * (p.square_m - p.marker_m) * p.scale;
+  const double symmetric_m = margin_m + p.marker_m * p.scale / kAruco4x4MarkerCells;
+  for (int r = 1; r < p.rows; ++r) {
+    for (int c = 1; c < p.cols; ++c) {
+      std::vector<int> ids;
+      for (int sr = r - 1; sr <= r; ++sr) {
+        for (int sc = c - 1; sc <= c; ++sc) {
+          const int id = g.marker_of_square[sr * p.cols + sc];
+          if (id >= 0 && read[id]) ids.push_back(id);
+        }
+      }
+      if (ids.empty()) continue;
+      const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, read, ids);
+      if (!H) continue;
+      const int id = (p.cols - 1) * (r - 1) + (c - 1);
+      const BoardFeature& feature = board.features()[id];
+      const Eigen::Vector2d predicted = ApplyHomography(*H, feature.p_board);
+      const double symmetric_px = LocalSquareSide(*H, feature.p_board, symmetric_m);
+      if (!std::isfinite(symmetric_px)) continue;
+      const std::optional<Eigen::Vector2d> refined =
+          RefineXCornerOnPatch(image, predicted, 3.0 * symmetric_px, options.blur_sigma_px);
+      if (!refined) continue;
+      // The square up left of the corner is black when it holds no marker.
+      const bool dark_first = !CharucoSquareHasMarker(p, r - 1, c - 1);
+      if (!CornerPaintAgrees(image, *H, feature.p_board, g.square_m, margin_m, dark_first,
+                             scan.min_contrast)) {
+        continue;
+      }
+      detection.features.push_back({id, *refined, feature.p_board, feature.marker});
+    }
+  }
+  if (detection.features.empty()) {
+    detection.reason = DetectReason::kTooFewFeatures;
+    return detection;
+  }
+  detection.found = detection.features.size() == board.features().size();
+  detection.reason = detection.found ? DetectReason::kNone : DetectReason::kPartial;
+  return detection;
+}
+
+}  // namespace linecal
