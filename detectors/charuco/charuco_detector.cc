@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <vector>
 
-#include "detectors/boards/aruco_dict_4x4_50.h"
 #include "detectors/common/corner_refine.h"
 #include "detectors/common/edge_lines.h"
 #include "detectors/common/homography.h"
@@ -118,6 +118,27 @@ void KeepConfirmedMarkers(const CharucoGeometry& g, const CharucoOptions& option
   }
 }
 
+// The radius of the largest disc about the image of p_board inside the image of the square of
+// half side half_m about it: how far from the corner a window may reach, in pixels, whatever
+// the direction (under perspective the square's image is narrowest across its acute angles).
+// NaN when a corner maps to infinity.
+double InscribedRadiusPx(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_board,
+                         double half_m) {
+  const Eigen::Vector2d centre = ApplyHomography(H, p_board);
+  std::array<Eigen::Vector2d, 4> corners;
+  const std::array<Eigen::Vector2d, 4> steps = {Eigen::Vector2d(-1, -1), Eigen::Vector2d(1, -1),
+                                                Eigen::Vector2d(1, 1), Eigen::Vector2d(-1, 1)};
+  for (int k = 0; k < 4; ++k) corners[k] = ApplyHomography(H, p_board + half_m * steps[k]);
+  double radius = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Vector2d edge = corners[(k + 1) % 4] - corners[k];
+    const Eigen::Vector2d to_centre = centre - corners[k];
+    radius = std::min(radius, std::abs(edge.x() * to_centre.y() - edge.y() * to_centre.x()) /
+                                  edge.norm());
+  }
+  return radius;
+}
+
 // True when both black squares at the corner look darker than both white ones: probes in the
 // middle of the black squares' quarter next to the corner, and in the white squares' margin
 // between the corner and the marker (half way along its diagonal). `dark_first`: the squares up
@@ -183,11 +204,12 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
   }
   KeepConfirmedMarkers(g, options, &read);
 
-  // The window of the saddle fit (a third of the side it is given) must stay inside the part
-  // around the corner that is point-symmetric: the white margin and the markers' black border,
-  // not their data cells.
+  // The white squares are white only in their margin around the marker: the saddle fit's
+  // window stays inside it, where the corner looks like a chessboard's. (What lies beyond,
+  // the markers' black borders, is point-symmetric about the corner too, so its blurred edge
+  // does not move the fixed point; but it turns the fit away from a saddle where it fills
+  // much of the window.)
   const double margin_m = 0.5 * (p.square_m - p.marker_m) * p.scale;
-  const double symmetric_m = margin_m + p.marker_m * p.scale / kAruco4x4MarkerCells;
   for (int r = 1; r < p.rows; ++r) {
     for (int c = 1; c < p.cols; ++c) {
       std::vector<int> ids;
@@ -203,10 +225,10 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
       const int id = (p.cols - 1) * (r - 1) + (c - 1);
       const BoardFeature& feature = board.features()[id];
       const Eigen::Vector2d predicted = ApplyHomography(*H, feature.p_board);
-      const double symmetric_px = LocalSquareSide(*H, feature.p_board, symmetric_m);
-      if (!std::isfinite(symmetric_px)) continue;
+      const double reach_px = InscribedRadiusPx(*H, feature.p_board, margin_m);
+      if (!std::isfinite(reach_px)) continue;
       const std::optional<Eigen::Vector2d> refined =
-          RefineXCornerOnPatch(image, predicted, 3.0 * symmetric_px, options.blur_sigma_px);
+          RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
       if (!refined) continue;
       // The square up left of the corner is black when it holds no marker.
       const bool dark_first = !CharucoSquareHasMarker(p, r - 1, c - 1);

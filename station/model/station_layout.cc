@@ -62,6 +62,10 @@ const char* KeyOfBoardError(BoardParamsError error) {
       return "tag_spacing";
     case BoardParamsError::kBadStartId:
       return "start_id";
+    case BoardParamsError::kBadMarker:
+      return "marker_m";
+    case BoardParamsError::kBadMarkerCount:
+      return "cols";
   }
   return "type";
 }
@@ -69,7 +73,8 @@ const char* KeyOfBoardError(BoardParamsError error) {
 absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
                                 "diameter_m", "asymmetric", "light_circles", "border_bits",
-                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "pose"});
+                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "marker_m",
+                                "legacy_pattern", "pose"});
       !s.ok()) {
     return s;
   }
@@ -113,6 +118,12 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   params.asymmetric = *asymmetric;
   params.light_circles = *light_circles;
   params.apriltag_border_bits = ClampToInt(*border);
+  absl::StatusOr<double> marker = f.NumberOr("marker_m", params.marker_m);
+  if (!marker.ok()) return marker.status();
+  params.marker_m = *marker;
+  absl::StatusOr<bool> legacy = f.BoolOr("legacy_pattern", params.charuco_legacy);
+  if (!legacy.ok()) return legacy.status();
+  params.charuco_legacy = *legacy;
   if (absl::Status s = ReadAprilGrid(f, &params); !s.ok()) return s;
   BoardParamsError error = BoardParamsError::kOk;
   std::optional<Board> board = Board::Create(params, &error);
@@ -252,6 +263,13 @@ nlohmann::json BoardParamsToJson(const BoardParams& p) {
     j["tag_rows"] = p.apriltag_rows;
     j["tag_spacing"] = p.apriltag_spacing;
     j["start_id"] = p.apriltag_start_id;
+  }
+  if (p.type == BoardType::kCharuco) {
+    j["cols"] = p.cols;
+    j["rows"] = p.rows;
+    j["square_m"] = p.square_m;
+    j["marker_m"] = p.marker_m;
+    j["legacy_pattern"] = p.charuco_legacy;
   }
   return j;
 }
