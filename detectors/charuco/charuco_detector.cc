@@ -1,5 +1,6 @@
 #include "detectors/charuco/charuco_detector.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -25,9 +26,9 @@ struct PrintedMarker {
 
 struct CharucoGeometry {
   double square_m = 0.0;
-  Eigen::Vector2d top_left_board;  // the top-left corner of the top-left square
-  std::vector<PrintedMarker> markers;        // by id
-  std::vector<int> marker_of_square;         // row-major over the squares, -1: black
+  Eigen::Vector2d top_left_board;      // the top-left corner of the top-left square
+  std::vector<PrintedMarker> markers;  // by id
+  std::vector<int> marker_of_square;   // row-major over the squares, -1: black
 };
 
 CharucoGeometry GeometryOf(const Board& board) {
@@ -43,12 +44,12 @@ CharucoGeometry GeometryOf(const Board& board) {
       const Eigen::Vector2d centre =
           g.top_left_board + g.square_m * Eigen::Vector2d(c + 0.5, -(r + 0.5));
       g.marker_of_square[r * p.cols + c] = static_cast<int>(g.markers.size());
-      g.markers.push_back(PrintedMarker{
-          r, c,
-          {centre + Eigen::Vector2d(-half_marker, half_marker),
-           centre + Eigen::Vector2d(half_marker, half_marker),
-           centre + Eigen::Vector2d(half_marker, -half_marker),
-           centre + Eigen::Vector2d(-half_marker, -half_marker)}});
+      g.markers.push_back(PrintedMarker{r,
+                                        c,
+                                        {centre + Eigen::Vector2d(-half_marker, half_marker),
+                                         centre + Eigen::Vector2d(half_marker, half_marker),
+                                         centre + Eigen::Vector2d(half_marker, -half_marker),
+                                         centre + Eigen::Vector2d(-half_marker, -half_marker)}});
     }
   }
   return g;
@@ -90,40 +91,105 @@ std::optional<Eigen::Matrix3d> MarkersHomography(
   return fit->H;
 }
 
-// Drops every marker that no neighbour (a marker within two squares) confirms.
-void KeepConfirmedMarkers(const CharucoGeometry& g, const CharucoOptions& options,
-                          std::vector<std::optional<DecodedMarker>>* read) {
-  const int count = static_cast<int>(read->size());
-  std::vector<bool> confirmed(count, false);
+// How far marker j's centre is from where marker i's own homography puts it, in local square
+// sides (infinity when i's homography fails).
+double PredictionError(const CharucoGeometry& g,
+                       const std::vector<std::optional<DecodedMarker>>& read, int i, int j,
+                       const Eigen::Vector2d& centre_j_px) {
+  const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, read, {i});
+  if (!H) return std::numeric_limits<double>::infinity();
+  const double side_px = LocalSquareSide(*H, Centre(g.markers[i].corners_board), g.square_m);
+  const Eigen::Vector2d predicted = ApplyHomography(*H, Centre(g.markers[j].corners_board));
+  const double error = (predicted - centre_j_px).norm() / side_px;
+  return std::isfinite(error) ? error : std::numeric_limits<double>::infinity();
+}
+
+// The markers that agree on one placement of the board. Two markers within two squares of each
+// other on the board agree when either's homography puts the other within max_neighbour_error
+// square sides of where it is read; the largest connected group of at least two is the board.
+// Every other marker of the scan is then judged from the marker of that group nearest to it in
+// the image (local, as a lens bends the board): one of the board's ids, read once, where that
+// marker puts it joins the board (the far side of an occluder); any other whose centre that
+// marker places on the board's page is a marker the board does not print there. A board seen
+// shifted by whole squares (the legacy and current layouts of an even row count are such a shift
+// of each other, with mostly the same ids) shows such markers; so does a board of another size.
+// Markers off the page (another board beside this one) do not count. kept: by id, nullopt where
+// not kept. Returns kNone, kTooFewFeatures (no group of two), kAmbiguous (two largest groups of
+// one size) or kWrongBoard (a marker on the page that the board does not print there).
+// O(markers^2).
+DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, const MarkerScan& scan,
+                              const CharucoOptions& options,
+                              std::vector<std::optional<DecodedMarker>>* kept) {
+  const std::vector<std::optional<DecodedMarker>> read = *kept;
+  const int count = static_cast<int>(read.size());
+  std::vector<int> group(count);
+  for (int i = 0; i < count; ++i) group[i] = i;
+  const auto root = [&group](int i) {
+    while (group[i] != i) i = group[i] = group[group[i]];
+    return i;
+  };
   for (int i = 0; i < count; ++i) {
-    if (!(*read)[i]) continue;
-    const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, *read, {i});
-    if (!H) continue;
-    const Eigen::Vector2d centre_board = Centre(g.markers[i].corners_board);
-    const double side_px = LocalSquareSide(*H, centre_board, g.square_m);
-    if (!std::isfinite(side_px)) continue;
-    for (int j = 0; j < count && !confirmed[i]; ++j) {
-      if (j == i || !(*read)[j]) continue;
-      if (std::abs(g.markers[j].row - g.markers[i].row) > 2 ||
+    for (int j = i + 1; j < count && read[i]; ++j) {
+      if (!read[j] || std::abs(g.markers[j].row - g.markers[i].row) > 2 ||
           std::abs(g.markers[j].col - g.markers[i].col) > 2) {
         continue;
       }
-      const Eigen::Vector2d predicted = ApplyHomography(*H, Centre(g.markers[j].corners_board));
-      const double error = (predicted - Centre((*read)[j]->corners_px)).norm();
-      confirmed[i] = error <= options.max_neighbour_error * side_px;
+      if (PredictionError(g, read, i, j, Centre(read[j]->corners_px)) <=
+              options.max_neighbour_error ||
+          PredictionError(g, read, j, i, Centre(read[i]->corners_px)) <=
+              options.max_neighbour_error) {
+        group[root(i)] = root(j);
+      }
     }
   }
+  std::vector<int> size(count, 0);
   for (int i = 0; i < count; ++i) {
-    if (!confirmed[i]) (*read)[i].reset();
+    if (read[i]) ++size[root(i)];
   }
+  const auto largest = std::max_element(size.begin(), size.end());
+  if (*largest < 2) return DetectReason::kTooFewFeatures;
+  if (std::count(size.begin(), size.end(), *largest) > 1) return DetectReason::kAmbiguous;
+  const int board_group = static_cast<int>(largest - size.begin());
+  for (int i = 0; i < count; ++i) {
+    if (read[i] && root(i) != board_group) (*kept)[i].reset();
+  }
+
+  const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
+  std::vector<std::optional<DecodedMarker>> joined = *kept;
+  for (const DecodedMarker& m : scan.markers) {
+    if (m.id < count && (*kept)[m.id] && (*kept)[m.id]->corners_px[0] == m.corners_px[0]) continue;
+    const Eigen::Vector2d centre_px = Centre(m.corners_px);
+    int nearest = -1;
+    double nearest_px = std::numeric_limits<double>::infinity();
+    for (int id = 0; id < count; ++id) {
+      if (!(*kept)[id]) continue;
+      const double d = (Centre((*kept)[id]->corners_px) - centre_px).norm();
+      if (d < nearest_px) {
+        nearest_px = d;
+        nearest = id;
+      }
+    }
+    if (m.id < count && read[m.id] && read[m.id]->corners_px[0] == m.corners_px[0] &&
+        PredictionError(g, *kept, nearest, m.id, centre_px) <= options.max_neighbour_error) {
+      joined[m.id] = m;
+      continue;
+    }
+    const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, *kept, {nearest});
+    if (!H) continue;
+    const Eigen::Vector2d p_board = ApplyHomography(H->inverse(), centre_px);
+    if (std::abs(p_board.x()) < half_page.x() && std::abs(p_board.y()) < half_page.y()) {
+      return DetectReason::kWrongBoard;
+    }
+  }
+  *kept = std::move(joined);
+  return DetectReason::kNone;
 }
 
 // The radius of the largest disc about the image of p_board inside the image of the square of
 // half side half_m about it: how far from the corner a window may reach, in pixels, whatever
 // the direction (under perspective the square's image is narrowest across its acute angles).
 // NaN when a corner maps to infinity.
-double InscribedRadiusPx(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_board,
-                         double half_m) {
+double InscribedRadiusPx(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_board, double half_m) {
   const Eigen::Vector2d centre = ApplyHomography(H, p_board);
   std::array<Eigen::Vector2d, 4> corners;
   const std::array<Eigen::Vector2d, 4> steps = {Eigen::Vector2d(-1, -1), Eigen::Vector2d(1, -1),
@@ -133,8 +199,8 @@ double InscribedRadiusPx(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_boar
   for (int k = 0; k < 4; ++k) {
     const Eigen::Vector2d edge = corners[(k + 1) % 4] - corners[k];
     const Eigen::Vector2d to_centre = centre - corners[k];
-    radius = std::min(radius, std::abs(edge.x() * to_centre.y() - edge.y() * to_centre.x()) /
-                                  edge.norm());
+    radius = std::min(radius,
+                      std::abs(edge.x() * to_centre.y() - edge.y() * to_centre.x()) / edge.norm());
   }
   return radius;
 }
@@ -150,7 +216,7 @@ bool CornerPaintAgrees(const ImageView8& image, const Eigen::Matrix3d& H,
   const double black_offset = 0.25 * square_m;
   const double white_offset = 0.5 * margin_m;
   const std::array<Eigen::Vector2d, 4> diagonals = {
-      Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, -1),  // up left, down right
+      Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, -1),   // up left, down right
       Eigen::Vector2d(1, 1), Eigen::Vector2d(-1, -1)};  // up right, down left
   double darkest_white = 255.0;
   double lightest_black = 0.0;
@@ -193,8 +259,8 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
   const int marker_count = static_cast<int>(g.markers.size());
   const MarkerScan scan = ScanMarkers(image, Aruco4x4_50Family(), options.markers, marker_count);
   if (scan.markers.empty()) {
-    detection.reason = scan.reason == DetectReason::kNone ? DetectReason::kNoCandidates
-                                                          : scan.reason;
+    detection.reason =
+        scan.reason == DetectReason::kNone ? DetectReason::kNoCandidates : scan.reason;
     return detection;
   }
   std::vector<std::optional<DecodedMarker>> read = BoardMarkers(scan, marker_count);
@@ -202,7 +268,8 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
     detection.reason = DetectReason::kWrongBoard;
     return detection;
   }
-  KeepConfirmedMarkers(g, options, &read);
+  detection.reason = KeepBoardMarkers(board, g, scan, options, &read);
+  if (detection.reason != DetectReason::kNone) return detection;
 
   // The white squares are white only in their margin around the marker: the saddle fit's
   // window stays inside it, where the corner looks like a chessboard's. (What lies beyond,

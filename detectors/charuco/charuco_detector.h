@@ -7,7 +7,8 @@
 // (detectors/markers/square_markers.h, ScanMarkers). A marker is kept only when its id belongs
 // to the board, is read once, and a neighbouring marker (within two squares) lies where the
 // marker's own homography puts it: a marker of another board, or a misread id, has no such
-// neighbour. Each inner corner is then predicted from the homography of the (one or two) kept
+// neighbour; and the board is refused when a marker lies on its page where it prints no such
+// marker. Each inner corner is then predicted from the homography of the (one or two) kept
 // markers in the squares that touch it — local, so that a lens that bends the board moves the
 // prediction little — refined by the saddle fit (detectors/common/corner_refine.h) and kept
 // only when the fit is a saddle within a pixel of the prediction and the image shows the
@@ -45,7 +46,9 @@ struct CharucoOptions {
 // found = false, kPartial with the corners that pass, ordered by id, when some do not (part of
 // the board out of view or hidden); otherwise found = false, no features, and the reason:
 // kBadImage (invalid view or options), kLowContrast or kNoCandidates (the marker scan's),
-// kWrongBoard (markers, but none of the board's ids), kTooFewFeatures (the board's markers,
+// kWrongBoard (markers, but none of the board's ids; or a marker on the board's page that the
+// board does not print there: another id, an id read twice, or the board seen shifted by whole
+// squares, as the other layout of the legacy flag is), kTooFewFeatures (the board's markers,
 // but none confirmed by a neighbour, or no corner passes). Pure function. Cost: the marker scan
 // (about 3 ms at 1280 x 720) plus a small blur and fit per corner.
 Detection DetectCharuco(const ImageView8& image, const Board& board,

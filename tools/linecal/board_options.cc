@@ -42,6 +42,10 @@ const char* OptionOf(BoardParamsError e) {
       return "tag-spacing";
     case BoardParamsError::kBadStartId:
       return "start-id";
+    case BoardParamsError::kBadMarker:
+      return "marker";
+    case BoardParamsError::kBadMarkerCount:
+      return "cols";
   }
   return "board";
 }
@@ -67,7 +71,8 @@ absl::Status AprilGridFromCommandLine(const cli::CommandLine& cl, BoardParams* p
 // diameter and polarity) may be added.
 absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
   for (const char* option : {"board", "scale", "cols", "rows", "square", "spacing", "asymmetric",
-                             "tag-cols", "tag-rows", "tag-spacing", "start-id"}) {
+                             "tag-cols", "tag-rows", "tag-spacing", "start-id", "marker",
+                             "legacy-pattern"}) {
     if (cl.Has(option)) {
       return absl::InvalidArgumentError(
           absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
@@ -133,6 +138,12 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
       return absl::StrCat(p.apriltag_start_id, ": ids ", p.apriltag_start_id, "..",
                           p.apriltag_start_id + p.apriltag_cols * p.apriltag_rows - 1,
                           " must lie in tag36h11's 0..", kTag36h11Codes - 1);
+    case BoardParamsError::kBadMarker:
+      return absl::StrCat(p.marker_m, " m must be > 0 and below the square (", p.square_m,
+                          " m)");
+    case BoardParamsError::kBadMarkerCount:
+      return absl::StrCat(p.cols, " x ", p.rows, " squares hold ", CharucoMarkerCount(p),
+                          " markers; DICT_4X4_50 has ", kCharucoMaxMarkers);
   }
   return "invalid";
 }
@@ -142,9 +153,19 @@ std::vector<cli::OptionSpec> BoardOptionSpecs() {
       {"board", "NAME", "board type: " + BoardNames() + " (this or --target)"},
       {"target", "FILE", "the board from a Kalibr target YAML file (this or --board)"},
       {"scale", "S", "print scale of the board (default 1: 1 PDF unit = 1 mm)"},
-      {"cols", "N", "checker: inner corners along x; circle_grid: circles per row (default 9)"},
-      {"rows", "M", "checker: inner corners along y; circle_grid: rows of circles (default 6)"},
-      {"square", "METRES", "checker only: square side in metres (default 0.025)"},
+      {"cols", "N",
+       "checker: inner corners along x; circle_grid: circles per row; charuco: squares along x "
+       "(default 9)"},
+      {"rows", "M",
+       "checker: inner corners along y; circle_grid: rows of circles; charuco: squares along y "
+       "(default 6)"},
+      {"square", "METRES", "checker and charuco: square side in metres (default 0.025)"},
+      {"marker", "METRES",
+       "charuco only: DICT_4X4_50 marker side in metres, OpenCV's markerLength (default "
+       "0.01875)"},
+      {"legacy-pattern", "",
+       "charuco only: OpenCV's legacy pattern (boards made before 4.6: with an even row count "
+       "the top-left square is white)"},
       {"spacing", "METRES",
        "circle_grid only: centre distance in metres, OpenCV's squareSize (default 0.025)"},
       {"diameter", "METRES", "circle_grid only: circle diameter in metres (default 0.0125)"},
@@ -175,9 +196,11 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
     std::vector<BoardType> types;
   };
   const Applies applies[] = {
-      {"cols", {BoardType::kChecker, BoardType::kCircleGrid}},
-      {"rows", {BoardType::kChecker, BoardType::kCircleGrid}},
-      {"square", {BoardType::kChecker}},
+      {"cols", {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kCharuco}},
+      {"rows", {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kCharuco}},
+      {"square", {BoardType::kChecker, BoardType::kCharuco}},
+      {"marker", {BoardType::kCharuco}},
+      {"legacy-pattern", {BoardType::kCharuco}},
       {"spacing", {BoardType::kCircleGrid}},
       {"diameter", {BoardType::kCircleGrid}},
       {"asymmetric", {BoardType::kCircleGrid}},
@@ -209,6 +232,8 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   if (!diameter.ok()) return diameter.status();
   absl::StatusOr<int> border_bits = cl.GetInt("border-bits", p.apriltag_border_bits);
   if (!border_bits.ok()) return border_bits.status();
+  absl::StatusOr<double> marker = cl.GetDouble("marker", p.marker_m);
+  if (!marker.ok()) return marker.status();
   if (absl::Status s = AprilGridFromCommandLine(cl, &p); !s.ok()) return s;
   p.scale = *scale;
   p.cols = *cols;
@@ -219,6 +244,8 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   p.asymmetric = cl.Has("asymmetric");
   p.light_circles = cl.Has("light-circles");
   p.apriltag_border_bits = *border_bits;
+  p.marker_m = *marker;
+  p.charuco_legacy = cl.Has("legacy-pattern");
 
   const BoardParamsError e = ValidateBoardParams(p);
   if (e == BoardParamsError::kOk) return p;

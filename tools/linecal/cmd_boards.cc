@@ -36,6 +36,8 @@ const char* Description(BoardType type) {
       return "generic chessboard, cols x rows inner corners";
     case BoardType::kCircleGrid:
       return "OpenCV circle grid, cols x rows circles, symmetric or asymmetric";
+    case BoardType::kCharuco:
+      return "OpenCV ChArUco, cols x rows squares, DICT_4X4_50 markers in the white ones";
   }
   return "";
 }

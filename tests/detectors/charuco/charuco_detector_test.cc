@@ -71,8 +71,8 @@ Eigen::Vector2d SquareCentre(const BoardParams& p, int row, int col) {
 }
 Eigen::Vector2d MarginPoint(const BoardParams& p, int row, int col) {
   const double inset = 0.25 * (p.square_m - p.marker_m);
-  return SquareCentre(p, row, col) + Eigen::Vector2d(-0.5 * p.square_m + inset,
-                                                     0.5 * p.square_m - inset);
+  return SquareCentre(p, row, col) +
+         Eigen::Vector2d(-0.5 * p.square_m + inset, 0.5 * p.square_m - inset);
 }
 
 TEST(CharucoBoardTest, TopLeftSquareIsBlackUnlessTheLegacyPatternHasEvenRows) {
@@ -102,9 +102,8 @@ TEST(CharucoBoardTest, MarkersCarryTheirIdsInRowMajorOrder) {
   const Board board = *Board::Create(p);
   const double cell = p.marker_m / 6.0;
   const auto data_cell = [&](int row, int col, int dr, int dc) -> Eigen::Vector2d {
-    return SquareCentre(p, row, col) +
-           Eigen::Vector2d(-0.5 * p.marker_m + (1.5 + dc) * cell,
-                           0.5 * p.marker_m - (1.5 + dr) * cell);
+    return SquareCentre(p, row, col) + Eigen::Vector2d(-0.5 * p.marker_m + (1.5 + dc) * cell,
+                                                       0.5 * p.marker_m - (1.5 + dr) * cell);
   };
   // id 0 in square (0, 1): 0xB532 = 1011 0101 0011 0010.
   EXPECT_EQ(board.PaintAt(data_cell(0, 1, 0, 0)), Paint::kWhite);
@@ -158,9 +157,8 @@ TEST(CharucoDetectorTest, FindsEveryCornerOverAPoseGrid) {
             v.yaw_deg = yaw;
             v.pitch_deg = pitch;
             v.roll_deg = roll;
-            SCOPED_TRACE(testing::Message() << "legacy " << legacy << " d " << distance
-                                            << " yaw " << yaw << " pitch " << pitch << " roll "
-                                            << roll);
+            SCOPED_TRACE(testing::Message() << "legacy " << legacy << " d " << distance << " yaw "
+                                            << yaw << " pitch " << pitch << " roll " << roll);
             const Board board = *Board::Create(v.params);
             for (const bool noisy : {false, true}) {
               const CameraFrame frame =
@@ -173,8 +171,8 @@ TEST(CharucoDetectorTest, FindsEveryCornerOverAPoseGrid) {
               EXPECT_EQ(unknown, 0);
               EXPECT_EQ(matched, static_cast<int>(board.features().size()));
               EXPECT_LT(rms, noisy ? kNoisyRmsBarPx : kCleanRmsBarPx);
-              (noisy ? worst_noisy : worst_clean) = std::max(noisy ? worst_noisy : worst_clean,
-                                                             rms);
+              (noisy ? worst_noisy : worst_clean) =
+                  std::max(noisy ? worst_noisy : worst_clean, rms);
             }
           }
         }
@@ -269,8 +267,8 @@ TEST(CharucoDetectorTest, PartialViewReportsTheSeenCornersWithTheirIds) {
 TEST(CharucoDetectorTest, FindsNothingOnOtherBoards) {
   const Board board = *Board::Create(Charuco());
   std::uint64_t seed = 300;
-  for (BoardType type : {BoardType::kAruco, BoardType::kRoundHole, BoardType::kChecker,
-                         BoardType::kApriltag}) {
+  for (BoardType type :
+       {BoardType::kAruco, BoardType::kRoundHole, BoardType::kChecker, BoardType::kApriltag}) {
     SCOPED_TRACE(BoardTypeName(type));
     BoardView v;
     v.params.type = type;
@@ -291,6 +289,28 @@ TEST(CharucoDetectorTest, FindsNothingOnOtherBoards) {
   int unknown = 0;
   FeatureRmsPx(d, frame, &matched, &unknown);
   EXPECT_EQ(unknown, 0);
+}
+
+// With an even row count the legacy layout is the current one shifted by a square, with mostly
+// the same ids in the same places: each board must refuse the other's print (its markers in the
+// margin, where the shifted board prints none), never report corners a square off.
+TEST(CharucoDetectorTest, LegacyAndCurrentLayoutsAreToldApart) {
+  std::uint64_t seed = 350;
+  for (const bool drawn_legacy : {false, true}) {
+    SCOPED_TRACE(drawn_legacy ? "legacy print" : "current print");
+    BoardView v;
+    v.params = Charuco(7, 4, drawn_legacy);
+    v.distance_m = 1.0;
+    v.yaw_deg = 20.0;
+    const CameraFrame frame = RenderView(v, NoisyRender(), ++seed);
+    ExpectComplete(DetectCharuco(frame.image8.view(), *Board::Create(v.params)),
+                   *Board::Create(v.params));
+    const Detection d =
+        DetectCharuco(frame.image8.view(), *Board::Create(Charuco(7, 4, !drawn_legacy)));
+    EXPECT_FALSE(d.found);
+    EXPECT_EQ(d.reason, DetectReason::kWrongBoard);
+    EXPECT_TRUE(d.features.empty());
+  }
 }
 
 TEST(CharucoDetectorTest, BoardFreeImagesGiveNoFeatures) {
@@ -318,8 +338,7 @@ TEST(CharucoDetectorTest, BadInputGivesAReason) {
   EXPECT_EQ(bad.Validate(), "max_neighbour_error");
   BoardParams checker;
   checker.type = BoardType::kChecker;
-  EXPECT_EQ(DetectCharuco(image.view(), *Board::Create(checker)).reason,
-            DetectReason::kWrongBoard);
+  EXPECT_EQ(DetectCharuco(image.view(), *Board::Create(checker)).reason, DetectReason::kWrongBoard);
 }
 
 TEST(CharucoDetectorTest, DetectBoardDispatchesAndIsFast) {
@@ -331,8 +350,8 @@ TEST(CharucoDetectorTest, DetectBoardDispatchesAndIsFast) {
   const std::optional<Detection> d = DetectBoard(frame.image8.view(), board);
   ASSERT_TRUE(d.has_value());
   ExpectComplete(*d, board);
-  const double ms = test_scene::BestThreadCpuMs(
-      5, [&] { DetectCharuco(frame.image8.view(), board); });
+  const double ms =
+      test_scene::BestThreadCpuMs(5, [&] { DetectCharuco(frame.image8.view(), board); });
   std::printf("1280 x 720: %.2f ms\n", ms);
   // The marker scan's budget (about 3 ms) plus the corners; 4x for a shared machine.
   EXPECT_LT(ms, 20.0);
