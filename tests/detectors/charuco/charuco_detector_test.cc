@@ -182,14 +182,6 @@ TEST(CharucoDetectorTest, FindsEveryCornerOverAPoseGrid) {
   std::printf("pose grid: worst RMS clean %.4f px, noisy %.4f px\n", worst_clean, worst_noisy);
 }
 
-CameraFrame RenderThrough(const CameraModel& camera, const BoardView& view,
-                          const CameraRenderOptions& options, std::uint64_t seed) {
-  absl::StatusOr<CameraFrame> frame = RenderCameraFrame(camera, test_scene::TestCameraPose(),
-                                                        test_scene::SceneOf(view), options, seed);
-  EXPECT_TRUE(frame.ok()) << frame.status();
-  return frame.ok() ? *std::move(frame) : CameraFrame();
-}
-
 // docs/conventions.md's strongly distorting pinhole (k1 -0.30) and its 190-degree fisheye, the
 // board off the axis where the lens bends its rows: each corner is predicted from its own
 // markers, so the bending does not matter. The saddle of a bent corner is not exactly
@@ -216,7 +208,10 @@ TEST(CharucoDetectorTest, StrongDistortionAndFisheye) {
   std::uint64_t seed = 100;
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
-    const CameraFrame frame = RenderThrough(c.camera, c.view, CleanRender(), ++seed);
+    const absl::StatusOr<CameraFrame> rendered = RenderCameraFrame(
+        c.camera, test_scene::TestCameraPose(), test_scene::SceneOf(c.view), CleanRender(), ++seed);
+    ASSERT_TRUE(rendered.ok()) << rendered.status();
+    const CameraFrame& frame = *rendered;
     const Board board = *Board::Create(c.view.params);
     const Detection d = DetectCharuco(frame.image8.view(), board);
     ExpectComplete(d, board);
