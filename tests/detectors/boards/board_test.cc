@@ -60,7 +60,8 @@ Paint PaintByScan(const Board& b, const Eigen::Vector2d& p) {
 
 TEST(BoardTypes, NamesRoundTrip) {
   const std::vector<std::string> expected = {"chessboard", "circle",     "vertical", "aruco",
-                                             "apriltag",   "round_hole", "checker",  "circle_grid"};
+                                             "apriltag",   "round_hole", "checker",  "circle_grid",
+                                             "charuco"};
   ASSERT_EQ(kAllBoardTypes.size(), expected.size());
   for (std::size_t i = 0; i < expected.size(); ++i) {
     EXPECT_EQ(BoardTypeName(kAllBoardTypes[i]), expected[i]);
