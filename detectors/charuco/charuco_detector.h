@@ -48,9 +48,11 @@ struct CharucoOptions {
 // kBadImage (invalid view or options), kLowContrast or kNoCandidates (the marker scan's),
 // kWrongBoard (markers, but none of the board's ids; or a marker on the board's page that the
 // board does not print there: another id, an id read twice, or the board seen shifted by whole
-// squares, as the other layout of the legacy flag is), kTooFewFeatures (the board's markers,
-// but none confirmed by a neighbour, or no corner passes). Pure function. Cost: the marker scan
-// (about 3 ms at 1280 x 720) plus a small blur and fit per corner.
+// squares, as the other layout of the legacy flag is), kAmbiguous (two groups of agreeing
+// markers of the same size: two placements of the board), kTooFewFeatures (no two of the
+// board's markers agree, or no corner passes). Pure function. Cost: the marker scan (about
+// 3 ms at 1280 x 720) plus a small blur and fit per corner: about 5 ms for a 7 x 5 board at
+// 1280 x 720 (tests/detectors/charuco).
 Detection DetectCharuco(const ImageView8& image, const Board& board,
                         const CharucoOptions& options = {});
 
