@@ -114,8 +114,9 @@ double PredictionError(const CharucoGeometry& g,
 // shifted by whole squares (the legacy and current layouts of an even row count are such a shift
 // of each other, with mostly the same ids) shows such markers; so does a board of another size.
 // Markers off the page (another board beside this one) do not count. kept: by id, nullopt where
-// not kept. Returns kNone, kTooFewFeatures (no group of two), kAmbiguous (two largest groups of
-// one size) or kWrongBoard (a marker on the page that the board does not print there).
+// not kept. Returns kNone, kTooFewFeatures (no group of two), kAmbiguous (another group as large
+// that does not join: two placements) or kWrongBoard (a marker on the page that the board does
+// not print there).
 // O(markers^2).
 DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, const MarkerScan& scan,
                               const CharucoOptions& options,
@@ -148,8 +149,13 @@ DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, cons
   }
   const auto largest = std::max_element(size.begin(), size.end());
   if (*largest < 2) return DetectReason::kTooFewFeatures;
-  if (std::count(size.begin(), size.end(), *largest) > 1) return DetectReason::kAmbiguous;
   const int board_group = static_cast<int>(largest - size.begin());
+  // Another group as large: it must join this one (the board's two sides of an occluder), or
+  // there are two placements of the board.
+  int rival_group = -1;
+  for (int i = 0; i < count; ++i) {
+    if (i != board_group && size[i] == *largest) rival_group = i;
+  }
   for (int i = 0; i < count; ++i) {
     if (read[i] && root(i) != board_group) (*kept)[i].reset();
   }
@@ -180,6 +186,9 @@ DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, cons
     if (std::abs(p_board.x()) < half_page.x() && std::abs(p_board.y()) < half_page.y()) {
       return DetectReason::kWrongBoard;
     }
+  }
+  for (int i = 0; i < count && rival_group >= 0; ++i) {
+    if (read[i] && root(i) == rival_group && !joined[i]) return DetectReason::kAmbiguous;
   }
   *kept = std::move(joined);
   return DetectReason::kNone;

@@ -257,6 +257,40 @@ TEST(CharucoDetectorTest, PartialViewReportsTheSeenCornersWithTheirIds) {
   }
 }
 
+// Part of the board hidden by something in front of it (a grey post over its right side, and a
+// dark one across its middle rows): the corners in view with their ids, none where it is hidden.
+TEST(CharucoDetectorTest, HiddenPartLeavesTheSeenCornersWithTheirIds) {
+  BoardView v;
+  v.params = Charuco();
+  v.distance_m = 1.0;
+  v.yaw_deg = 15.0;
+  const Board board = *Board::Create(v.params);
+  std::uint64_t seed = 250;
+  for (const auto& [x0, y0, x1, y1, grey] :
+       {std::tuple{700, 0, 1280, 720, 150}, std::tuple{0, 330, 1280, 390, 30}}) {
+    SCOPED_TRACE(testing::Message() << x0 << " " << y0 << " " << x1 << " " << y1);
+    CameraFrame frame = RenderView(v, NoisyRender(), ++seed);
+    for (int y = y0; y < y1; ++y) {
+      for (int x = x0; x < x1; ++x) frame.image8.at(x, y) = static_cast<std::uint8_t>(grey);
+    }
+    const Detection d = DetectCharuco(frame.image8.view(), board);
+    EXPECT_FALSE(d.found);
+    EXPECT_EQ(d.reason, DetectReason::kPartial);
+    ASSERT_GE(d.features.size(), 4u);
+    EXPECT_LT(d.features.size(), board.features().size());
+    int matched = 0;
+    int unknown = 0;
+    FeatureRmsPx(d, frame, &matched, &unknown);
+    EXPECT_EQ(unknown, 0);
+    EXPECT_LT(MaxErrorPx(d, frame), 0.5);
+    for (const DetectedFeature& f : d.features) {
+      const bool hidden = f.uv_px.x() >= x0 - 1 && f.uv_px.x() < x1 + 1 && f.uv_px.y() >= y0 - 1 &&
+                          f.uv_px.y() < y1 + 1;
+      EXPECT_FALSE(hidden) << f.id;
+    }
+  }
+}
+
 // ---- Nothing where there is no such board ---------------------------------------------------
 
 TEST(CharucoDetectorTest, FindsNothingOnOtherBoards) {
