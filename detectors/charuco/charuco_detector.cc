@@ -194,6 +194,23 @@ DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, cons
   return DetectReason::kNone;
 }
 
+// The homography of the kept markers in the squares rows r - 1 - ring .. r + ring and cols
+// c - 1 - ring .. c + ring (those touching inner corner (r, c) and `ring` squares beyond);
+// nullopt when none is kept there.
+std::optional<Eigen::Matrix3d> CornerHomography(
+    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& kept,
+    const BoardParams& p, int r, int c, int ring) {
+  std::vector<int> ids;
+  for (int sr = std::max(0, r - 1 - ring); sr <= std::min(p.rows - 1, r + ring); ++sr) {
+    for (int sc = std::max(0, c - 1 - ring); sc <= std::min(p.cols - 1, c + ring); ++sc) {
+      const int id = g.marker_of_square[sr * p.cols + sc];
+      if (id >= 0 && kept[id]) ids.push_back(id);
+    }
+  }
+  if (ids.empty()) return std::nullopt;
+  return MarkersHomography(g, kept, ids);
+}
+
 // The radius of the largest disc about the image of p_board inside the image of the square of
 // half side half_m about it: how far from the corner a window may reach, in pixels, whatever
 // the direction (under perspective the square's image is narrowest across its acute angles).
@@ -288,23 +305,23 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
   const double margin_m = 0.5 * (p.square_m - p.marker_m) * p.scale;
   for (int r = 1; r < p.rows; ++r) {
     for (int c = 1; c < p.cols; ++c) {
-      std::vector<int> ids;
-      for (int sr = r - 1; sr <= r; ++sr) {
-        for (int sc = c - 1; sc <= c; ++sc) {
-          const int id = g.marker_of_square[sr * p.cols + sc];
-          if (id >= 0 && read[id]) ids.push_back(id);
-        }
-      }
-      if (ids.empty()) continue;
-      const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, read, ids);
-      if (!H) continue;
       const int id = (p.cols - 1) * (r - 1) + (c - 1);
       const BoardFeature& feature = board.features()[id];
-      const Eigen::Vector2d predicted = ApplyHomography(*H, feature.p_board);
-      const double reach_px = InscribedRadiusPx(*H, feature.p_board, margin_m);
-      if (!std::isfinite(reach_px)) continue;
-      const std::optional<Eigen::Vector2d> refined =
-          RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
+      // First from the markers in the two squares that touch the corner (the most local: a
+      // lens bends them least), then, where they were not read or the fit fails from there,
+      // from the kept markers of the 4 x 4 squares around it (more markers average their
+      // corners' errors under hard light and blur; still local).
+      std::optional<Eigen::Vector2d> refined;
+      std::optional<Eigen::Matrix3d> H;
+      for (const int ring : {0, 1}) {
+        H = CornerHomography(g, read, p, r, c, ring);
+        if (!H) continue;
+        const Eigen::Vector2d predicted = ApplyHomography(*H, feature.p_board);
+        const double reach_px = InscribedRadiusPx(*H, feature.p_board, margin_m);
+        if (!std::isfinite(reach_px)) continue;
+        refined = RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
+        if (refined) break;
+      }
       if (!refined) continue;
       // The square up left of the corner is black when it holds no marker.
       const bool dark_first = !CharucoSquareHasMarker(p, r - 1, c - 1);

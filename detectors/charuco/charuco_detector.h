@@ -10,9 +10,11 @@
 // neighbour; and the board is refused when a marker lies on its page where it prints no such
 // marker. Each inner corner is then predicted from the homography of the (one or two) kept
 // markers in the squares that touch it — local, so that a lens that bends the board moves the
-// prediction little — refined by the saddle fit (detectors/common/corner_refine.h) and kept
-// only when the fit is a saddle within a pixel of the prediction and the image shows the
-// board's paint around it: both black squares darker than both white ones.
+// prediction little — or, where they were not read or the fit fails from there, of the kept
+// markers of the 4 x 4 squares around it; refined by the saddle fit
+// (detectors/common/corner_refine.h) and kept only when the fit is a saddle within a pixel of
+// the prediction and the image shows the board's paint around it: both black squares darker
+// than both white ones.
 
 #include <string_view>
 
