@@ -211,6 +211,16 @@ std::optional<Eigen::Matrix3d> CornerHomography(
   return MarkersHomography(g, kept, ids);
 }
 
+// The largest saddle-fit window (half side, pixels) whose patch around uv_px stays inside the
+// image: RefineXCornerOnPatch's patch reaches the window, a pixel of movement, the blur's 3 sigma
+// and 2 pixels beyond it (one more for the pixel the start falls in). Near the image border a
+// smaller window still fits a corner there.
+double BorderRoomPx(const ImageView8& image, const Eigen::Vector2d& uv_px, double blur_sigma_px) {
+  const double room = std::min({uv_px.x(), uv_px.y(), image.width - 1.0 - uv_px.x(),
+                                image.height - 1.0 - uv_px.y()});
+  return room - std::ceil(3.0 * blur_sigma_px) - 4.0;
+}
+
 // The radius of the largest disc about the image of p_board inside the image of the square of
 // half side half_m about it: how far from the corner a window may reach, in pixels, whatever
 // the direction (under perspective the square's image is narrowest across its acute angles).
@@ -233,7 +243,9 @@ double InscribedRadiusPx(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_boar
 
 // True when both black squares at the corner look darker than both white ones: probes in the
 // middle of the black squares' quarter next to the corner, and in the white squares' margin
-// between the corner and the marker (half way along its diagonal). `dark_first`: the squares up
+// between the corner and the marker (half way along its diagonal). A probe off the image (a
+// corner at the image's border) is left out; at least one of each paint must be in it (a board
+// shifted by a square shows the opposite paints there). `dark_first`: the squares up
 // left and down right of the corner are the black ones.
 bool CornerPaintAgrees(const ImageView8& image, const Eigen::Matrix3d& H,
                        const Eigen::Vector2d& corner_board, double square_m, double margin_m,
@@ -246,19 +258,24 @@ bool CornerPaintAgrees(const ImageView8& image, const Eigen::Matrix3d& H,
       Eigen::Vector2d(1, 1), Eigen::Vector2d(-1, -1)};  // up right, down left
   double darkest_white = 255.0;
   double lightest_black = 0.0;
+  int blacks = 0;
+  int whites = 0;
   for (int k = 0; k < 4; ++k) {
     const bool black = (k < 2) == dark_first;
     const Eigen::Vector2d p_board =
         corner_board + (black ? black_offset : white_offset) * diagonals[k];
     const Eigen::Vector2d uv = ApplyHomography(H, p_board);
-    if (!InsideForBilinearGrey(image, uv)) return false;
+    if (!InsideForBilinearGrey(image, uv)) continue;
     const double grey = BilinearGrey(image, uv.x(), uv.y());
     if (black) {
       lightest_black = std::max(lightest_black, grey);
+      ++blacks;
     } else {
       darkest_white = std::min(darkest_white, grey);
+      ++whites;
     }
   }
+  if (blacks == 0 || whites == 0) return false;
   // Half the marker scan's contrast: the white probes sit in a margin a few pixels wide, which
   // the blur darkens.
   return darkest_white - lightest_black >= 0.5 * min_contrast;
@@ -317,7 +334,8 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
         H = CornerHomography(g, read, p, r, c, ring);
         if (!H) continue;
         const Eigen::Vector2d predicted = ApplyHomography(*H, feature.p_board);
-        const double reach_px = InscribedRadiusPx(*H, feature.p_board, margin_m);
+        const double reach_px = std::min(InscribedRadiusPx(*H, feature.p_board, margin_m),
+                                         BorderRoomPx(image, predicted, options.blur_sigma_px));
         if (!std::isfinite(reach_px)) continue;
         refined = RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
         if (refined) break;
