@@ -5,6 +5,7 @@
 
 #include "detectors/apriltag/apriltag_detector.h"
 #include "detectors/aruco/aruco_detector.h"
+#include "detectors/charuco/charuco_detector.h"
 #include "detectors/checker/checker_detector.h"
 #include "detectors/chessboard/chessboard_detector.h"
 #include "detectors/circle/circle_detector.h"
@@ -25,6 +26,7 @@ std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board
     case BoardType::kRoundHole: return DetectAruco(image, board);
     case BoardType::kApriltag: return DetectApriltag(image, board);
     case BoardType::kSquareGrid: return DetectSquareGrid(image, board);
+    case BoardType::kCharuco: return DetectCharuco(image, board);
   }
   return std::nullopt;
 }

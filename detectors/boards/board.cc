@@ -175,19 +175,27 @@ void DrawVerticalBoard(Drawing& d) {
 // Draws DICT_4X4_50 marker `id` with its top-left corner at PDF (x, y) in its canonical
 // orientation (as the PDFs print all four), and adds its corners as features: top-left,
 // top-right, bottom-right, bottom-left as seen facing the print.
-void DrawArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf) {
-  constexpr double kCell = 40.0;
-  constexpr double kSide = kCell * kAruco4x4MarkerCells;
-  d.PdfRect(Paint::kBlack, x_pdf, y_pdf, kSide, kSide);
+// Paints DICT_4X4_50 marker `id` of cells `cell_mm` wide with its top-left corner at PDF (x, y),
+// in its canonical orientation.
+void PaintArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf, double cell_mm) {
+  d.PdfRect(Paint::kBlack, x_pdf, y_pdf, cell_mm * kAruco4x4MarkerCells,
+            cell_mm * kAruco4x4MarkerCells);
   const std::uint16_t code = kAruco4x4_50Codes[id];
   for (int r = 0; r < kAruco4x4DataBits; ++r) {
     for (int c = 0; c < kAruco4x4DataBits; ++c) {
       if (Aruco4x4CellIsWhite(code, r, c)) {
         // +1: the one-cell black border.
-        d.PdfRect(Paint::kWhite, x_pdf + kCell * (c + 1), y_pdf + kCell * (r + 1), kCell, kCell);
+        d.PdfRect(Paint::kWhite, x_pdf + cell_mm * (c + 1), y_pdf + cell_mm * (r + 1), cell_mm,
+                  cell_mm);
       }
     }
   }
+}
+
+void DrawArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf) {
+  constexpr double kCell = 40.0;
+  constexpr double kSide = kCell * kAruco4x4MarkerCells;
+  PaintArucoMarker(d, id, x_pdf, y_pdf, kCell);
   d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf, y_pdf), id);
   d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf + kSide, y_pdf), id);
   d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf + kSide, y_pdf + kSide), id);
@@ -423,6 +431,40 @@ void DrawSquareGrid(Drawing& d, const BoardParams& p) {
   }
 }
 
+// ---- ChArUco (OpenCV's CharucoBoard) ------------------------------------------------------
+
+// The quiet zone around a ChArUco board's squares, in squares (OpenCV's generateImage leaves
+// its margin to the caller; one square keeps the outer squares' edges clear of the page edge).
+constexpr int kCharucoMarginSquares = 1;
+
+// cols x rows squares of square_m, in PDF coordinates from the top-left square (OpenCV's board
+// frame: x right, y down). The squares OpenCV leaves white hold the markers, ids 0, 1, ... in
+// row-major order from the top-left; the others are black. Features: the inner corners,
+// id = (cols - 1) * row + col from the top-left (OpenCV's charuco ids).
+void DrawCharuco(Drawing& d, const BoardParams& p) {
+  const double sq = p.square_m * 1e3;
+  const double m = p.marker_m * 1e3;
+  const double origin = kCharucoMarginSquares * sq;
+  int next_id = 0;
+  for (int r = 0; r < p.rows; ++r) {
+    for (int c = 0; c < p.cols; ++c) {
+      const double x = origin + c * sq;
+      const double y = origin + r * sq;
+      if (!CharucoSquareHasMarker(p, r, c)) {
+        d.PdfRect(Paint::kBlack, x, y, sq, sq);
+        continue;
+      }
+      const double inset = 0.5 * (sq - m);
+      PaintArucoMarker(d, next_id++, x + inset, y + inset, m / kAruco4x4MarkerCells);
+    }
+  }
+  for (int r = 1; r < p.rows; ++r) {
+    for (int c = 1; c < p.cols; ++c) {
+      d.Feature(FeatureKind::kXCorner, d.Pdf(origin + c * sq, origin + r * sq));
+    }
+  }
+}
+
 // Page sizes in millimetres (the PDFs' MediaBoxes; april_board.pdf is A0, 2383.94 x 3370.39
 // pt = 841 x 1189 mm).
 Eigen::Vector2d PageSizeMm(const BoardParams& p) {
@@ -452,6 +494,10 @@ Eigen::Vector2d PageSizeMm(const BoardParams& p) {
       // A white margin of one square around the squares (the quiet zone that keeps the outer
       // squares apart from whatever is behind the board).
       return SquareGridExtentMm(p) + Eigen::Vector2d::Constant(2e3 * p.square_m);
+    case BoardType::kCharuco: {
+      const double margins = 2.0 * kCharucoMarginSquares;
+      return p.square_m * 1e3 * Eigen::Vector2d(p.cols + margins, p.rows + margins);
+    }
   }
   return {0.0, 0.0};
 }
@@ -459,6 +505,19 @@ Eigen::Vector2d PageSizeMm(const BoardParams& p) {
 bool IsFiniteIn(double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; }
 
 }  // namespace
+
+bool CharucoSquareHasMarker(const BoardParams& p, int row, int col) {
+  // OpenCV: the top-left square is black, markers where row + col is odd; the legacy pattern
+  // of an even number of rows starts with a white square instead.
+  const bool legacy_white_first = p.charuco_legacy && p.rows % 2 == 0;
+  return (row + col) % 2 == (legacy_white_first ? 0 : 1);
+}
+
+int CharucoMarkerCount(const BoardParams& p) {
+  // Either pattern: half the squares, rounded down (an odd count only with odd rows, where
+  // both patterns start black).
+  return p.cols * p.rows / 2;
+}
 
 const char* BoardTypeName(BoardType type) {
   switch (type) {
@@ -480,6 +539,8 @@ const char* BoardTypeName(BoardType type) {
       return "circle_grid";
     case BoardType::kSquareGrid:
       return "square_grid";
+    case BoardType::kCharuco:
+      return "charuco";
   }
   return "unknown";
 }
@@ -519,6 +580,10 @@ const char* BoardParamsErrorName(BoardParamsError e) {
       return "bad_layout";
     case BoardParamsError::kBadGap:
       return "bad_gap";
+    case BoardParamsError::kBadMarker:
+      return "bad_marker";
+    case BoardParamsError::kBadMarkerCount:
+      return "bad_marker_count";
   }
   return "unknown";
 }
@@ -561,6 +626,12 @@ BoardParamsError ValidateBoardParams(const BoardParams& p) {
   }
   if (!IsFiniteIn(p.gap_m, 0.0, kMaxSquareGridGapM) || p.gap_m == 0.0) {
     return BoardParamsError::kBadGap;
+  }
+  if (p.type == BoardType::kCharuco) {
+    if (!(std::isfinite(p.marker_m) && p.marker_m > 0.0 && p.marker_m < p.square_m)) {
+      return BoardParamsError::kBadMarker;
+    }
+    if (CharucoMarkerCount(p) > kCharucoMaxMarkers) return BoardParamsError::kBadMarkerCount;
   }
   return BoardParamsError::kOk;
 }
@@ -638,6 +709,9 @@ std::optional<Board> Board::Create(const BoardParams& params, BoardParamsError* 
       break;
     case BoardType::kSquareGrid:
       DrawSquareGrid(d, params);
+      break;
+    case BoardType::kCharuco:
+      DrawCharuco(d, params);
       break;
   }
   Board board;

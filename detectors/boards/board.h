@@ -32,15 +32,17 @@ enum class BoardType {
   kCircleGrid,  // OpenCV's circle grid, symmetric or asymmetric: cols x rows circles;
                 // or BoofCV's hexagonal grid (hexagonal)
   kSquareGrid,  // BoofCV's square grid: cols x rows black squares apart by white gaps
+  kCharuco,     // OpenCV's ChArUco: cols x rows squares, DICT_4X4_50 markers in the white ones
 };
 
-inline constexpr std::array<BoardType, 9> kAllBoardTypes = {
+inline constexpr std::array<BoardType, 10> kAllBoardTypes = {
     BoardType::kChessboard, BoardType::kCircle,    BoardType::kVertical, BoardType::kAruco,
     BoardType::kApriltag,   BoardType::kRoundHole, BoardType::kChecker,  BoardType::kCircleGrid,
-    BoardType::kSquareGrid};
+    BoardType::kSquareGrid, BoardType::kCharuco};
 
 // The board's command-line and config name: "chessboard", "circle", "vertical", "aruco",
-// "apriltag", "round_hole", "checker", "circle_grid", "square_grid" (docs/interfaces.md).
+// "apriltag", "round_hole", "checker", "circle_grid", "square_grid", "charuco"
+// (docs/interfaces.md).
 const char* BoardTypeName(BoardType type);
 // The inverse of BoardTypeName; nullopt for any other text. Case-sensitive.
 std::optional<BoardType> BoardTypeFromName(std::string_view name);
@@ -53,10 +55,11 @@ struct BoardParams {
   double scale = 1.0;
   // kChecker: inner corners along x (cols) and y (rows). kCircleGrid: circles per row (cols)
   // and rows of circles (rows), OpenCV's patternSize (cols, rows). kSquareGrid: squares per row
-  // (cols) and rows of squares (rows). Defaults: the classic 9 x 6 boards of docs/boards.md.
+  // (cols) and rows of squares (rows). kCharuco: squares along x and y, OpenCV's CharucoBoard
+  // size (cols, rows). Defaults: the classic 9 x 6 boards of docs/boards.md.
   int cols = 9;
   int rows = 6;
-  // kChecker and kSquareGrid: the square side. Default 25 mm.
+  // kChecker, kSquareGrid and kCharuco: the square side. Default 25 mm.
   double square_m = 0.025;
   // kSquareGrid only (docs/boards.md §9): the white space between neighbouring squares, along
   // a row and along a column (BoofCV's spaceWidth). Default 25 mm.
@@ -96,6 +99,13 @@ struct BoardParams {
   int apriltag_rows = 6;
   double apriltag_spacing = 0.3;
   int apriltag_start_id = 0;
+  // kCharuco only (docs/boards.md, ChArUco): the side of the DICT_4X4_50 markers centred in the
+  // white squares, OpenCV's markerLength; below square_m. Default 18.75 mm (3/4 of the square).
+  double marker_m = 0.01875;
+  // kCharuco only: OpenCV's legacy pattern (CharucoBoard::setLegacyPattern, boards made before
+  // OpenCV 4.6): with an even number of rows the top-left square is white and holds marker 0;
+  // otherwise (and always when false, the default) the top-left square is black.
+  bool charuco_legacy = false;
 };
 
 enum class BoardParamsError {
@@ -112,6 +122,8 @@ enum class BoardParamsError {
   kBadStartId,     // negative, or the grid's last id beyond tag36h11's kTag36h11Codes - 1
   kBadLayout,      // hexagonal and asymmetric both set: two layouts at once
   kBadGap,         // not finite or outside (0, kMaxSquareGridGapM]
+  kBadMarker,       // kCharuco: marker_m not finite, not > 0, or not below square_m
+  kBadMarkerCount,  // kCharuco: more white squares than DICT_4X4_50 has markers (50)
 };
 
 // A board of 2.6 mm or of 260 m is a typo, not a board: scales outside this range are refused.
@@ -137,12 +149,20 @@ inline constexpr int kMaxAprilGridTags = 50;
 inline constexpr double kMinAprilGridSpacing = 0.05;
 inline constexpr double kMaxAprilGridSpacing = 1.0;
 inline constexpr int kTag36h11Codes = 587;
+// Markers in OpenCV's DICT_4X4_50, the ChArUco boards' dictionary: a kCharuco board holds one
+// marker per white square, so at most this many white squares.
+inline constexpr int kCharucoMaxMarkers = 50;
+
+// kCharuco: whether square (row, col), 0-based from the top-left, is white and holds a marker
+// (OpenCV's layout, p.charuco_legacy included), and how many markers the board holds
+// (ids 0..count-1, row-major over those squares). O(1).
+bool CharucoSquareHasMarker(const BoardParams& p, int row, int col);
+int CharucoMarkerCount(const BoardParams& p);
 
 // A short, stable text per error ("bad_scale", ...), for reasons and messages.
 const char* BoardParamsErrorName(BoardParamsError e);
 // Checks every field (the checker, circle grid, square grid and apriltag fields too, whatever
-// the type).
-// O(1).
+// the type; marker_m and the marker count only for kCharuco). O(1).
 BoardParamsError ValidateBoardParams(const BoardParams& params);
 
 enum class FeatureKind {

@@ -79,12 +79,17 @@ std::optional<Eigen::Vector2d> RefineXCornerOnPatch(const ImageView8& image,
                                                     const Eigen::Vector2d& start_px,
                                                     double side_px, double blur_sigma_px) {
   SaddleFitOptions saddle;
-  saddle.half_window = std::clamp(static_cast<int>(side_px / 3.0), 2, 7);
+  // Clamped as a double: a huge side would overflow the cast.
+  saddle.half_window = static_cast<int>(std::clamp(side_px / 3.0, 2.0, 7.0));
   // The patch holds the window, a pixel of movement and the blur kernel (3 sigma) clear of
   // its clamped border, plus two pixels for the saddle fit's own border rule.
   const int radius =
       saddle.half_window + 1 + static_cast<int>(std::ceil(3.0 * blur_sigma_px)) + 2;
-  if (!start_px.allFinite()) return std::nullopt;
+  // Also keeps the casts below defined: a start far off the image would overflow them.
+  if (!start_px.allFinite() || start_px.x() < 0.0 || start_px.y() < 0.0 ||
+      start_px.x() >= image.width || start_px.y() >= image.height) {
+    return std::nullopt;
+  }
   const int x0 = static_cast<int>(std::floor(start_px.x())) - radius;
   const int y0 = static_cast<int>(std::floor(start_px.y())) - radius;
   const int size = 2 * radius + 2;

@@ -66,6 +66,10 @@ const char* KeyOfBoardError(BoardParamsError error) {
       return "hexagonal";
     case BoardParamsError::kBadGap:
       return "gap_m";
+    case BoardParamsError::kBadMarker:
+      return "marker_m";
+    case BoardParamsError::kBadMarkerCount:
+      return "cols";
   }
   return "type";
 }
@@ -74,7 +78,7 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
                                 "diameter_m", "asymmetric", "light_circles", "border_bits",
                                 "tag_cols", "tag_rows", "tag_spacing", "start_id", "gap_m",
-                                "pose", "hexagonal"});
+                                "marker_m", "legacy_pattern", "pose", "hexagonal"});
       !s.ok()) {
     return s;
   }
@@ -124,6 +128,12 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   params.light_circles = *light_circles;
   params.hexagonal = *hexagonal;
   params.apriltag_border_bits = ClampToInt(*border);
+  absl::StatusOr<double> marker = f.NumberOr("marker_m", params.marker_m);
+  if (!marker.ok()) return marker.status();
+  params.marker_m = *marker;
+  absl::StatusOr<bool> legacy = f.BoolOr("legacy_pattern", params.charuco_legacy);
+  if (!legacy.ok()) return legacy.status();
+  params.charuco_legacy = *legacy;
   if (absl::Status s = ReadAprilGrid(f, &params); !s.ok()) return s;
   BoardParamsError error = BoardParamsError::kOk;
   std::optional<Board> board = Board::Create(params, &error);
@@ -270,6 +280,13 @@ nlohmann::json BoardParamsToJson(const BoardParams& p) {
     j["tag_rows"] = p.apriltag_rows;
     j["tag_spacing"] = p.apriltag_spacing;
     j["start_id"] = p.apriltag_start_id;
+  }
+  if (p.type == BoardType::kCharuco) {
+    j["cols"] = p.cols;
+    j["rows"] = p.rows;
+    j["square_m"] = p.square_m;
+    j["marker_m"] = p.marker_m;
+    j["legacy_pattern"] = p.charuco_legacy;
   }
   return j;
 }

@@ -69,6 +69,17 @@ BoardParams SquareGrid(int cols, int rows, double square_m, double gap_m) {
   return p;
 }
 
+// OpenCV's ChArUco board of cols x rows squares, DICT_4X4_50 (docs/boards.md).
+BoardParams Charuco(int cols, int rows, double square_m, double marker_m) {
+  BoardParams p;
+  p.type = BoardType::kCharuco;
+  p.cols = cols;
+  p.rows = rows;
+  p.square_m = square_m;
+  p.marker_m = marker_m;
+  return p;
+}
+
 PhotoSet Other(std::string name, Lens lens, std::string description,
                Reference reference = Reference::kNone, int ref_cols = 0, int ref_rows = 0,
                double pitch_m = 0.0) {
@@ -161,6 +172,7 @@ std::vector<PhotoSet> BuildSets() {
   sets.back().board = CircleGrid(5, 6, false);
   sets.push_back(Other("deepcharuco/charuco_5x5_4x4_50", Lens::kMild,
                        "ChArUco 5x5 squares, DICT_4X4_50, on a tablet, small, blurred"));
+  sets.back().board = Charuco(5, 5, 0.01, 0.0075);  // the set's demo_config.yaml
   return sets;
 }
 
@@ -311,7 +323,7 @@ absl::StatusOr<Detection> DetectInPhoto(const std::string& path, const Board& bo
 
 std::string BoardLabel(const BoardParams& board) {
   if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid &&
-      board.type != BoardType::kSquareGrid) {
+      board.type != BoardType::kSquareGrid && board.type != BoardType::kCharuco) {
     return BoardTypeName(board.type);
   }
   const bool asymmetric = board.type == BoardType::kCircleGrid && board.asymmetric;
@@ -349,7 +361,7 @@ const std::vector<SweepBoard>& SweepBoards() {
 bool ShowsBoard(const PhotoSet& set, const BoardParams& board) {
   if (!set.board || set.board->type != board.type) return false;
   if (board.type != BoardType::kChecker && board.type != BoardType::kCircleGrid &&
-      board.type != BoardType::kSquareGrid) {
+      board.type != BoardType::kSquareGrid && board.type != BoardType::kCharuco) {
     return true;
   }
   if (board.type == BoardType::kCircleGrid && board.asymmetric != set.board->asymmetric) {

@@ -46,7 +46,8 @@ TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
   const std::map<std::string, int> expected = {
       {"chessboard", 20}, {"circle", 30},     {"vertical", 51}, {"aruco", 16},
       {"apriltag", 144},  {"round_hole", 21}, {"checker", 54},  {"circle_grid", 54},
-      {"square_grid", 216}};
+      {"square_grid", 216},
+      {"charuco", 40}};
   ASSERT_EQ(j.at("boards").size(), expected.size());
   for (const nlohmann::json& b : j.at("boards")) {
     const std::string name = b.at("name");
@@ -63,6 +64,7 @@ TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
   EXPECT_EQ(j.at("boards")[7].at("parameters").at("spacing_m").get<double>(), 0.025);
   EXPECT_FALSE(j.at("boards")[7].at("parameters").at("asymmetric").get<bool>());
   EXPECT_EQ(j.at("boards")[8].at("parameters").at("gap_m").get<double>(), 0.025);
+  EXPECT_EQ(j.at("boards")[9].at("parameters").at("marker_m").get<double>(), 0.01875);
 
   const auto text = RunLinecal("boards");
   EXPECT_EQ(text.exit_code, 0);
@@ -175,11 +177,11 @@ TEST_F(PatternCliTest, BadUsageExitsWithTwoAndOneLine) {
       {"pattern --board aruco", "missing --out"},
       {"pattern --board aruco --out " + Path("x.txt"), "must end in .svg or .png"},
       {"pattern --board aruco --cols 5 --out " + Path("x.svg"),
-       "--cols applies to --board checker or circle_grid or square_grid only, not aruco"},
+       "--cols applies to --board checker or circle_grid or square_grid or charuco only, not aruco"},
       {"pattern --board checker --spacing 0.02 --out " + Path("x.svg"),
        "--spacing applies to --board circle_grid only, not checker"},
       {"pattern --board circle_grid --square 0.02 --out " + Path("x.svg"),
-       "--square applies to --board checker or square_grid only, not circle_grid"},
+       "--square applies to --board checker or square_grid or charuco only, not circle_grid"},
       {"pattern --board checker --gap 0.02 --out " + Path("x.svg"),
        "--gap applies to --board square_grid only, not checker"},
       {"pattern --board square_grid --gap 0 --out " + Path("x.svg"),
@@ -253,6 +255,51 @@ TEST_F(PatternCliTest, HexagonalCircleGridIsDrawnAndFound) {
     EXPECT_EQ(run.exit_code, 2) << c.args;
     EXPECT_NE(run.err.find(c.message), std::string::npos) << c.args << "\n" << run.err;
   }
+}
+
+// A ChArUco board drawn by `linecal pattern` is found by `linecal detect` with every corner
+// where the drawing puts it: OpenCV's ids, row-major from the top-left.
+TEST_F(PatternCliTest, CharucoPatternIsDetectedWithItsCornerIds) {
+  const std::string board = "--board charuco --cols 5 --rows 4 --square 0.03 --marker 0.022";
+  for (const bool legacy : {false, true}) {
+    SCOPED_TRACE(legacy ? "legacy" : "current");
+    const std::string flags = board + (legacy ? " --legacy-pattern" : "");
+    const auto drawn = RunLinecal("pattern " + flags + " --dpi 100 --out " + Path("c.png"));
+    ASSERT_EQ(drawn.exit_code, 0) << drawn.err;
+    const auto run = RunLinecal("detect " + flags + " --json --image " + Path("c.png"));
+    ASSERT_EQ(run.exit_code, 0) << run.err;
+    const nlohmann::json j = nlohmann::json::parse(run.out);
+    EXPECT_TRUE(j.at("found").get<bool>());
+    EXPECT_TRUE(j.at("complete").get<bool>());
+    const nlohmann::json& features = j.at("features");
+    ASSERT_EQ(features.size(), 12u);  // (5 - 1) x (4 - 1)
+    // 30 mm squares at 100 dpi, one square of margin: inner corner (row r, col c) of the
+    // drawing at ((c + 2) * 30, (r + 2) * 30) mm from the page's top-left, pixel centres at
+    // half a pixel.
+    const double px_per_mm = 100.0 / 25.4;
+    for (int id = 0; id < 12; ++id) {
+      const nlohmann::json& f = features[id];
+      EXPECT_EQ(f.at("id").get<int>(), id);
+      const int r = id / 4;
+      const int c = id % 4;
+      EXPECT_NEAR(f.at("u").get<double>(), (c + 2) * 30.0 * px_per_mm - 0.5, 0.05) << id;
+      EXPECT_NEAR(f.at("v").get<double>(), (r + 2) * 30.0 * px_per_mm - 0.5, 0.05) << id;
+    }
+  }
+  // The legacy pattern of an even row count is another board: the current one is not found
+  // in its drawing (the markers sit in the other squares).
+  const auto drawn = RunLinecal("pattern " + board + " --legacy-pattern --out " + Path("l.png"));
+  ASSERT_EQ(drawn.exit_code, 0) << drawn.err;
+  const auto other = RunLinecal("detect " + board + " --json --image " + Path("l.png"));
+  EXPECT_EQ(other.exit_code, 1) << other.err;
+  EXPECT_TRUE(nlohmann::json::parse(other.out).at("features").empty());
+
+  const auto bad = RunLinecal("pattern " + board.substr(0, board.find(" --marker")) +
+                              " --marker 0.03 --out " + Path("b.png"));
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("--marker"), std::string::npos) << bad.err;
+  EXPECT_EQ(RunLinecal("pattern --board checker --marker 0.01 --out " + Path("b.png")).exit_code,
+            2);
 }
 
 }  // namespace

@@ -46,6 +46,10 @@ const char* OptionOf(BoardParamsError e) {
       return "hexagonal";
     case BoardParamsError::kBadGap:
       return "gap";
+    case BoardParamsError::kBadMarker:
+      return "marker";
+    case BoardParamsError::kBadMarkerCount:
+      return "cols";
   }
   return "board";
 }
@@ -75,7 +79,7 @@ absl::Status AprilGridFromCommandLine(const cli::CommandLine& cl, BoardParams* p
 absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
   for (const char* option : {"board", "scale", "cols", "rows", "square", "gap", "spacing",
                              "asymmetric", "tag-cols", "tag-rows", "tag-spacing", "start-id",
-                             "hexagonal"}) {
+                             "hexagonal", "marker", "legacy-pattern"}) {
     if (cl.Has(option)) {
       return absl::InvalidArgumentError(
           absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
@@ -143,6 +147,12 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
       return "a grid is hexagonal or asymmetric, not both";
     case BoardParamsError::kBadGap:
       return absl::StrCat(p.gap_m, " m is outside (0, ", kMaxSquareGridGapM, "]");
+    case BoardParamsError::kBadMarker:
+      return absl::StrCat(p.marker_m, " m must be > 0 and below the square (", p.square_m,
+                          " m)");
+    case BoardParamsError::kBadMarkerCount:
+      return absl::StrCat(p.cols, " x ", p.rows, " squares hold ", CharucoMarkerCount(p),
+                          " markers; DICT_4X4_50 has ", kCharucoMaxMarkers);
   }
   return "invalid";
 }
@@ -154,12 +164,19 @@ std::vector<cli::OptionSpec> BoardOptionSpecs() {
       {"scale", "S", "print scale of the board (default 1: 1 PDF unit = 1 mm)"},
       {"cols", "N",
        "checker: inner corners along x; circle_grid: circles per row; square_grid: squares per "
-       "row (default 9)"},
+       "row; charuco: squares along x (default 9)"},
       {"rows", "M",
        "checker: inner corners along y; circle_grid: rows of circles; square_grid: rows of "
-       "squares (default 6)"},
-      {"square", "METRES", "checker, square_grid: square side in metres (default 0.025)"},
+       "squares; charuco: squares along y (default 6)"},
+      {"square", "METRES",
+       "checker, square_grid and charuco: square side in metres (default 0.025)"},
       {"gap", "METRES", "square_grid only: white gap between squares in metres (default 0.025)"},
+      {"marker", "METRES",
+       "charuco only: DICT_4X4_50 marker side in metres, OpenCV's markerLength (default "
+       "0.01875)"},
+      {"legacy-pattern", "",
+       "charuco only: OpenCV's legacy pattern (boards made before 4.6: with an even row count "
+       "the top-left square is white)"},
       {"spacing", "METRES",
        "circle_grid only: centre distance in metres, OpenCV's squareSize (default 0.025)"},
       {"diameter", "METRES", "circle_grid only: circle diameter in metres (default 0.0125)"},
@@ -193,10 +210,14 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
     std::vector<BoardType> types;
   };
   const Applies applies[] = {
-      {"cols", {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kSquareGrid}},
-      {"rows", {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kSquareGrid}},
-      {"square", {BoardType::kChecker, BoardType::kSquareGrid}},
+      {"cols",
+       {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kSquareGrid, BoardType::kCharuco}},
+      {"rows",
+       {BoardType::kChecker, BoardType::kCircleGrid, BoardType::kSquareGrid, BoardType::kCharuco}},
+      {"square", {BoardType::kChecker, BoardType::kSquareGrid, BoardType::kCharuco}},
       {"gap", {BoardType::kSquareGrid}},
+      {"marker", {BoardType::kCharuco}},
+      {"legacy-pattern", {BoardType::kCharuco}},
       {"spacing", {BoardType::kCircleGrid}},
       {"diameter", {BoardType::kCircleGrid}},
       {"asymmetric", {BoardType::kCircleGrid}},
@@ -231,6 +252,8 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   if (!diameter.ok()) return diameter.status();
   absl::StatusOr<int> border_bits = cl.GetInt("border-bits", p.apriltag_border_bits);
   if (!border_bits.ok()) return border_bits.status();
+  absl::StatusOr<double> marker = cl.GetDouble("marker", p.marker_m);
+  if (!marker.ok()) return marker.status();
   if (absl::Status s = AprilGridFromCommandLine(cl, &p); !s.ok()) return s;
   p.scale = *scale;
   p.cols = *cols;
@@ -243,6 +266,8 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   p.light_circles = cl.Has("light-circles");
   p.hexagonal = cl.Has("hexagonal");
   p.apriltag_border_bits = *border_bits;
+  p.marker_m = *marker;
+  p.charuco_legacy = cl.Has("legacy-pattern");
 
   const BoardParamsError e = ValidateBoardParams(p);
   if (e == BoardParamsError::kOk) return p;

@@ -38,6 +38,8 @@ const char* Description(BoardType type) {
       return "circle grid: OpenCV's symmetric or asymmetric (cols x rows), BoofCV's hexagonal";
     case BoardType::kSquareGrid:
       return "BoofCV square grid, cols x rows black squares apart by white gaps";
+    case BoardType::kCharuco:
+      return "OpenCV ChArUco, cols x rows squares, DICT_4X4_50 markers in the white ones";
   }
   return "";
 }

@@ -59,9 +59,9 @@ Paint PaintByScan(const Board& b, const Eigen::Vector2d& p) {
 }
 
 TEST(BoardTypes, NamesRoundTrip) {
-  const std::vector<std::string> expected = {"chessboard", "circle",     "vertical",
-                                             "aruco",      "apriltag",   "round_hole",
-                                             "checker",    "circle_grid", "square_grid"};
+  const std::vector<std::string> expected = {"chessboard",  "circle",     "vertical", "aruco",
+                                             "apriltag",    "round_hole", "checker",  "circle_grid",
+                                             "square_grid", "charuco"};
   ASSERT_EQ(kAllBoardTypes.size(), expected.size());
   for (std::size_t i = 0; i < expected.size(); ++i) {
     EXPECT_EQ(BoardTypeName(kAllBoardTypes[i]), expected[i]);

@@ -152,7 +152,8 @@ inline const Board& CircleBoard() {
 
 // The boards docs/acceptance.md sizes by a marker's data cell (4 px) rather than a square (12 px).
 inline bool IsMarkerBoard(BoardType t) {
-  return t == BoardType::kAruco || t == BoardType::kApriltag || t == BoardType::kRoundHole;
+  return t == BoardType::kAruco || t == BoardType::kApriltag || t == BoardType::kRoundHole ||
+         t == BoardType::kCharuco;
 }
 
 // The evaluation's render distances (tests/detectors/detectors_eval.cc) for a board turned

@@ -140,6 +140,24 @@ TEST(StationLayoutTest, SquareGridParametersRoundTrip) {
   EXPECT_EQ(again->boards.at(0).board.features().size(), 48u);
 }
 
+TEST(StationLayoutTest, CharucoParametersRoundTrip) {
+  const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
+      {"id": "c", "type": "charuco", "cols": 5, "rows": 4, "square_m": 0.03, "marker_m": 0.022,
+       "legacy_pattern": true, "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}}]})";
+  absl::StatusOr<StationLayout> s = ParseStationLayout(json, "st.json");
+  ASSERT_TRUE(s.ok()) << s.status();
+  absl::StatusOr<StationLayout> again = ParseStationLayout(StationLayoutToJson(*s).dump(), "copy");
+  ASSERT_TRUE(again.ok()) << again.status();
+  const BoardParams& p = again->boards.at(0).params;
+  EXPECT_EQ(p.type, BoardType::kCharuco);
+  EXPECT_EQ(p.cols, 5);
+  EXPECT_EQ(p.rows, 4);
+  EXPECT_EQ(p.square_m, 0.03);
+  EXPECT_EQ(p.marker_m, 0.022);
+  EXPECT_TRUE(p.charuco_legacy);
+  EXPECT_EQ(again->boards.at(0).board.features().size(), 12u);
+}
+
 TEST(StationLayoutTest, AprilGridParametersRoundTrip) {
   const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
       {"id": "a", "type": "apriltag", "scale": 0.5, "tag_cols": 4, "tag_rows": 3,
@@ -202,6 +220,8 @@ INSTANTIATE_TEST_SUITE_P(
                    "boards[0].hexagonal: bad_layout"},
         BrokenCase{"bad_gap", "{" HDR R"(, "boards": [{"id": "a", "type": "square_grid", "gap_m": 0, )" POSE "}]}",
                    "boards[0].gap_m: bad_gap"},
+        BrokenCase{"bad_marker", "{" HDR R"(, "boards": [{"id": "a", "type": "charuco", "marker_m": 0.03, )" POSE "}]}",
+                   "boards[0].marker_m: bad_marker"},
         BrokenCase{"bad_tag_grid", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "tag_cols": 0, )" POSE "}]}",
                    "boards[0].tag_cols: bad_tag_grid"},
         BrokenCase{"bad_start_id", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "start_id": 560, )" POSE "}]}",

@@ -1,0 +1,362 @@
+#include "detectors/charuco/charuco_detector.h"
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include "detectors/common/corner_refine.h"
+#include "detectors/common/edge_lines.h"
+#include "detectors/common/homography.h"
+
+namespace linecal {
+namespace {
+
+// Where each of the board's markers is printed: its square and its corners in the board frame
+// (metres; top-left, top-right, bottom-right, bottom-left as seen facing the print, the order
+// of DecodedMarker::corners_px).
+struct PrintedMarker {
+  int row = 0;
+  int col = 0;
+  std::array<Eigen::Vector2d, 4> corners_board;
+};
+
+struct CharucoGeometry {
+  double square_m = 0.0;
+  Eigen::Vector2d top_left_board;      // the top-left corner of the top-left square
+  std::vector<PrintedMarker> markers;  // by id
+  std::vector<int> marker_of_square;   // row-major over the squares, -1: black
+};
+
+CharucoGeometry GeometryOf(const Board& board) {
+  const BoardParams& p = board.params();
+  CharucoGeometry g;
+  g.square_m = p.square_m * p.scale;
+  const double half_marker = 0.5 * p.marker_m * p.scale;
+  g.top_left_board = Eigen::Vector2d(-0.5 * p.cols * g.square_m, 0.5 * p.rows * g.square_m);
+  g.marker_of_square.assign(p.cols * p.rows, -1);
+  for (int r = 0; r < p.rows; ++r) {
+    for (int c = 0; c < p.cols; ++c) {
+      if (!CharucoSquareHasMarker(p, r, c)) continue;
+      const Eigen::Vector2d centre =
+          g.top_left_board + g.square_m * Eigen::Vector2d(c + 0.5, -(r + 0.5));
+      g.marker_of_square[r * p.cols + c] = static_cast<int>(g.markers.size());
+      g.markers.push_back(PrintedMarker{r,
+                                        c,
+                                        {centre + Eigen::Vector2d(-half_marker, half_marker),
+                                         centre + Eigen::Vector2d(half_marker, half_marker),
+                                         centre + Eigen::Vector2d(half_marker, -half_marker),
+                                         centre + Eigen::Vector2d(-half_marker, -half_marker)}});
+    }
+  }
+  return g;
+}
+
+Eigen::Vector2d Centre(const std::array<Eigen::Vector2d, 4>& corners) {
+  return 0.25 * (corners[0] + corners[1] + corners[2] + corners[3]);
+}
+
+// The board's markers read once each, by id (nullopt: not read, or read more than once).
+std::vector<std::optional<DecodedMarker>> BoardMarkers(const MarkerScan& scan, int count) {
+  std::vector<std::optional<DecodedMarker>> by_id(count);
+  std::vector<int> reads(count, 0);
+  for (const DecodedMarker& m : scan.markers) {
+    if (m.id >= count) continue;
+    if (++reads[m.id] == 1) by_id[m.id] = m;
+  }
+  for (int id = 0; id < count; ++id) {
+    if (reads[id] > 1) by_id[id].reset();
+  }
+  return by_id;
+}
+
+// The homography of the markers `ids` (board metres to image pixels), through their corners.
+std::optional<Eigen::Matrix3d> MarkersHomography(
+    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& read,
+    const std::vector<int>& ids) {
+  std::vector<Eigen::Vector2d> src;
+  std::vector<Eigen::Vector2d> dst;
+  for (int id : ids) {
+    for (int k = 0; k < 4; ++k) {
+      src.push_back(g.markers[id].corners_board[k]);
+      dst.push_back(read[id]->corners_px[k]);
+    }
+  }
+  // Four or eight exact correspondences: the DLT is the fit; refinement adds nothing worth it.
+  const std::optional<HomographyFit> fit = FitHomography(src, dst, {.refine = false});
+  if (!fit) return std::nullopt;
+  return fit->H;
+}
+
+// How far marker j's centre is from where marker i's own homography puts it, in local square
+// sides (infinity when i's homography fails).
+double PredictionError(const CharucoGeometry& g,
+                       const std::vector<std::optional<DecodedMarker>>& read, int i, int j,
+                       const Eigen::Vector2d& centre_j_px) {
+  const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, read, {i});
+  if (!H) return std::numeric_limits<double>::infinity();
+  const double side_px = LocalSquareSide(*H, Centre(g.markers[i].corners_board), g.square_m);
+  const Eigen::Vector2d predicted = ApplyHomography(*H, Centre(g.markers[j].corners_board));
+  const double error = (predicted - centre_j_px).norm() / side_px;
+  return std::isfinite(error) ? error : std::numeric_limits<double>::infinity();
+}
+
+// The markers that agree on one placement of the board. Two markers within two squares of each
+// other on the board agree when either's homography puts the other within max_neighbour_error
+// square sides of where it is read; the largest connected group of at least two is the board.
+// Every other marker of the scan is then judged from the marker of that group nearest to it in
+// the image (local, as a lens bends the board): one of the board's ids, read once, where that
+// marker puts it joins the board (the far side of an occluder); any other whose centre that
+// marker places on the board's page is a marker the board does not print there. A board seen
+// shifted by whole squares (the legacy and current layouts of an even row count are such a shift
+// of each other, with mostly the same ids) shows such markers; so does a board of another size.
+// Markers off the page (another board beside this one) do not count. kept: by id, nullopt where
+// not kept. Returns kNone, kTooFewFeatures (no group of two), kAmbiguous (another group as large
+// that does not join: two placements) or kWrongBoard (a marker on the page that the board does
+// not print there).
+// O(markers^2).
+DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, const MarkerScan& scan,
+                              const CharucoOptions& options,
+                              std::vector<std::optional<DecodedMarker>>* kept) {
+  const std::vector<std::optional<DecodedMarker>> read = *kept;
+  const int count = static_cast<int>(read.size());
+  std::vector<int> group(count);
+  for (int i = 0; i < count; ++i) group[i] = i;
+  const auto root = [&group](int i) {
+    while (group[i] != i) i = group[i] = group[group[i]];
+    return i;
+  };
+  for (int i = 0; i < count; ++i) {
+    for (int j = i + 1; j < count && read[i]; ++j) {
+      if (!read[j] || std::abs(g.markers[j].row - g.markers[i].row) > 2 ||
+          std::abs(g.markers[j].col - g.markers[i].col) > 2) {
+        continue;
+      }
+      if (PredictionError(g, read, i, j, Centre(read[j]->corners_px)) <=
+              options.max_neighbour_error ||
+          PredictionError(g, read, j, i, Centre(read[i]->corners_px)) <=
+              options.max_neighbour_error) {
+        group[root(i)] = root(j);
+      }
+    }
+  }
+  std::vector<int> size(count, 0);
+  for (int i = 0; i < count; ++i) {
+    if (read[i]) ++size[root(i)];
+  }
+  const auto largest = std::max_element(size.begin(), size.end());
+  if (*largest < 2) return DetectReason::kTooFewFeatures;
+  const int board_group = static_cast<int>(largest - size.begin());
+  // Another group as large: it must join this one (the board's two sides of an occluder), or
+  // there are two placements of the board.
+  int rival_group = -1;
+  for (int i = 0; i < count; ++i) {
+    if (i != board_group && size[i] == *largest) rival_group = i;
+  }
+  for (int i = 0; i < count; ++i) {
+    if (read[i] && root(i) != board_group) (*kept)[i].reset();
+  }
+
+  const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
+  std::vector<std::optional<DecodedMarker>> joined = *kept;
+  for (const DecodedMarker& m : scan.markers) {
+    if (m.id < count && (*kept)[m.id] && (*kept)[m.id]->corners_px[0] == m.corners_px[0]) continue;
+    const Eigen::Vector2d centre_px = Centre(m.corners_px);
+    int nearest = -1;
+    double nearest_px = std::numeric_limits<double>::infinity();
+    for (int id = 0; id < count; ++id) {
+      if (!(*kept)[id]) continue;
+      const double d = (Centre((*kept)[id]->corners_px) - centre_px).norm();
+      if (d < nearest_px) {
+        nearest_px = d;
+        nearest = id;
+      }
+    }
+    if (m.id < count && read[m.id] && read[m.id]->corners_px[0] == m.corners_px[0] &&
+        PredictionError(g, *kept, nearest, m.id, centre_px) <= options.max_neighbour_error) {
+      joined[m.id] = m;
+      continue;
+    }
+    const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, *kept, {nearest});
+    if (!H) continue;
+    const Eigen::Vector2d p_board = ApplyHomography(H->inverse(), centre_px);
+    if (std::abs(p_board.x()) < half_page.x() && std::abs(p_board.y()) < half_page.y()) {
+      return DetectReason::kWrongBoard;
+    }
+  }
+  for (int i = 0; i < count && rival_group >= 0; ++i) {
+    if (read[i] && root(i) == rival_group && !joined[i]) return DetectReason::kAmbiguous;
+  }
+  *kept = std::move(joined);
+  return DetectReason::kNone;
+}
+
+// The homography of the kept markers in the squares rows r - 1 - ring .. r + ring and cols
+// c - 1 - ring .. c + ring (those touching inner corner (r, c) and `ring` squares beyond);
+// nullopt when none is kept there.
+std::optional<Eigen::Matrix3d> CornerHomography(
+    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& kept,
+    const BoardParams& p, int r, int c, int ring) {
+  std::vector<int> ids;
+  for (int sr = std::max(0, r - 1 - ring); sr <= std::min(p.rows - 1, r + ring); ++sr) {
+    for (int sc = std::max(0, c - 1 - ring); sc <= std::min(p.cols - 1, c + ring); ++sc) {
+      const int id = g.marker_of_square[sr * p.cols + sc];
+      if (id >= 0 && kept[id]) ids.push_back(id);
+    }
+  }
+  if (ids.empty()) return std::nullopt;
+  return MarkersHomography(g, kept, ids);
+}
+
+// The largest saddle-fit window (half side, pixels) whose patch around uv_px stays inside the
+// image: RefineXCornerOnPatch's patch reaches the window, a pixel of movement, the blur's 3 sigma
+// and 2 pixels beyond it (one more for the pixel the start falls in). Near the image border a
+// smaller window still fits a corner there.
+double BorderRoomPx(const ImageView8& image, const Eigen::Vector2d& uv_px, double blur_sigma_px) {
+  const double room = std::min({uv_px.x(), uv_px.y(), image.width - 1.0 - uv_px.x(),
+                                image.height - 1.0 - uv_px.y()});
+  return room - std::ceil(3.0 * blur_sigma_px) - 4.0;
+}
+
+// The radius of the largest disc about the image of p_board inside the image of the square of
+// half side half_m about it: how far from the corner a window may reach, in pixels, whatever
+// the direction (under perspective the square's image is narrowest across its acute angles).
+// NaN when a corner maps to infinity.
+double InscribedRadiusPx(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_board, double half_m) {
+  const Eigen::Vector2d centre = ApplyHomography(H, p_board);
+  std::array<Eigen::Vector2d, 4> corners;
+  const std::array<Eigen::Vector2d, 4> steps = {Eigen::Vector2d(-1, -1), Eigen::Vector2d(1, -1),
+                                                Eigen::Vector2d(1, 1), Eigen::Vector2d(-1, 1)};
+  for (int k = 0; k < 4; ++k) corners[k] = ApplyHomography(H, p_board + half_m * steps[k]);
+  double radius = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Vector2d edge = corners[(k + 1) % 4] - corners[k];
+    const Eigen::Vector2d to_centre = centre - corners[k];
+    radius = std::min(radius,
+                      std::abs(edge.x() * to_centre.y() - edge.y() * to_centre.x()) / edge.norm());
+  }
+  return radius;
+}
+
+// True when both black squares at the corner look darker than both white ones: probes in the
+// middle of the black squares' quarter next to the corner, and in the white squares' margin
+// between the corner and the marker (half way along its diagonal). A probe off the image (a
+// corner at the image's border) is left out; at least one of each paint must be in it (a board
+// shifted by a square shows the opposite paints there). `dark_first`: the squares up
+// left and down right of the corner are the black ones.
+bool CornerPaintAgrees(const ImageView8& image, const Eigen::Matrix3d& H,
+                       const Eigen::Vector2d& corner_board, double square_m, double margin_m,
+                       bool dark_first, int min_contrast) {
+  // Quarter-square into a black square: clear of its edges by far more than the blur.
+  const double black_offset = 0.25 * square_m;
+  const double white_offset = 0.5 * margin_m;
+  const std::array<Eigen::Vector2d, 4> diagonals = {
+      Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, -1),   // up left, down right
+      Eigen::Vector2d(1, 1), Eigen::Vector2d(-1, -1)};  // up right, down left
+  double darkest_white = 255.0;
+  double lightest_black = 0.0;
+  int blacks = 0;
+  int whites = 0;
+  for (int k = 0; k < 4; ++k) {
+    const bool black = (k < 2) == dark_first;
+    const Eigen::Vector2d p_board =
+        corner_board + (black ? black_offset : white_offset) * diagonals[k];
+    const Eigen::Vector2d uv = ApplyHomography(H, p_board);
+    if (!InsideForBilinearGrey(image, uv)) continue;
+    const double grey = BilinearGrey(image, uv.x(), uv.y());
+    if (black) {
+      lightest_black = std::max(lightest_black, grey);
+      ++blacks;
+    } else {
+      darkest_white = std::min(darkest_white, grey);
+      ++whites;
+    }
+  }
+  if (blacks == 0 || whites == 0) return false;
+  // Half the marker scan's contrast: the white probes sit in a margin a few pixels wide, which
+  // the blur darkens.
+  return darkest_white - lightest_black >= 0.5 * min_contrast;
+}
+
+}  // namespace
+
+std::string_view CharucoOptions::Validate() const {
+  if (const std::string_view bad = markers.Validate(); !bad.empty()) return bad;
+  if (!(blur_sigma_px >= 0.5 && blur_sigma_px <= 4.0)) return "blur_sigma_px";
+  if (!(max_neighbour_error > 0.0 && max_neighbour_error <= 0.5)) return "max_neighbour_error";
+  return {};
+}
+
+Detection DetectCharuco(const ImageView8& image, const Board& board,
+                        const CharucoOptions& options) {
+  Detection detection;
+  detection.reason =
+      CheckDetectorInput(image, board, BoardType::kCharuco, options.Validate().empty());
+  if (detection.reason != DetectReason::kNone) return detection;
+
+  const BoardParams& p = board.params();
+  const CharucoGeometry g = GeometryOf(board);
+  const int marker_count = static_cast<int>(g.markers.size());
+  const MarkerScan scan = ScanMarkers(image, Aruco4x4_50Family(), options.markers, marker_count);
+  if (scan.markers.empty()) {
+    detection.reason =
+        scan.reason == DetectReason::kNone ? DetectReason::kNoCandidates : scan.reason;
+    return detection;
+  }
+  std::vector<std::optional<DecodedMarker>> read = BoardMarkers(scan, marker_count);
+  if (std::none_of(read.begin(), read.end(), [](const auto& m) { return m.has_value(); })) {
+    detection.reason = DetectReason::kWrongBoard;
+    return detection;
+  }
+  detection.reason = KeepBoardMarkers(board, g, scan, options, &read);
+  if (detection.reason != DetectReason::kNone) return detection;
+
+  // The white squares are white only in their margin around the marker: the saddle fit's
+  // window stays inside it, where the corner looks like a chessboard's. (What lies beyond,
+  // the markers' black borders, is point-symmetric about the corner too, so its blurred edge
+  // does not move the fixed point; but it turns the fit away from a saddle where it fills
+  // much of the window.)
+  const double margin_m = 0.5 * (p.square_m - p.marker_m) * p.scale;
+  for (int r = 1; r < p.rows; ++r) {
+    for (int c = 1; c < p.cols; ++c) {
+      const int id = (p.cols - 1) * (r - 1) + (c - 1);
+      const BoardFeature& feature = board.features()[id];
+      // First from the markers in the two squares that touch the corner (the most local: a
+      // lens bends them least), then, where they were not read or the fit fails from there,
+      // from the kept markers of the 4 x 4 squares around it (more markers average their
+      // corners' errors under hard light and blur; still local).
+      std::optional<Eigen::Vector2d> refined;
+      std::optional<Eigen::Matrix3d> H;
+      for (const int ring : {0, 1}) {
+        H = CornerHomography(g, read, p, r, c, ring);
+        if (!H) continue;
+        const Eigen::Vector2d predicted = ApplyHomography(*H, feature.p_board);
+        const double reach_px = std::min(InscribedRadiusPx(*H, feature.p_board, margin_m),
+                                         BorderRoomPx(image, predicted, options.blur_sigma_px));
+        if (!std::isfinite(reach_px)) continue;
+        refined = RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
+        if (refined) break;
+      }
+      if (!refined) continue;
+      // The square up left of the corner is black when it holds no marker.
+      const bool dark_first = !CharucoSquareHasMarker(p, r - 1, c - 1);
+      if (!CornerPaintAgrees(image, *H, feature.p_board, g.square_m, margin_m, dark_first,
+                             scan.min_contrast)) {
+        continue;
+      }
+      detection.features.push_back({id, *refined, feature.p_board, feature.marker});
+    }
+  }
+  if (detection.features.empty()) {
+    detection.reason = DetectReason::kTooFewFeatures;
+    return detection;
+  }
+  detection.found = detection.features.size() == board.features().size();
+  detection.reason = detection.found ? DetectReason::kNone : DetectReason::kPartial;
+  return detection;
+}
+
+}  // namespace linecal

@@ -1,0 +1,61 @@
+#pragma once
+// Detector of OpenCV's ChArUco boards (docs/boards.md, ChArUco): a chessboard of cols x rows
+// squares whose white squares hold DICT_4X4_50 markers; the features are the chessboard's inner
+// corners with OpenCV's charuco ids.
+//
+// Method: the markers are found and decoded by the project's square-marker scan
+// (detectors/markers/square_markers.h, ScanMarkers). A marker is kept only when its id belongs
+// to the board, is read once, and a neighbouring marker (within two squares) lies where the
+// marker's own homography puts it: a marker of another board, or a misread id, has no such
+// neighbour; and the board is refused when a marker lies on its page where it prints no such
+// marker. Each inner corner is then predicted from the homography of the (one or two) kept
+// markers in the squares that touch it — local, so that a lens that bends the board moves the
+// prediction little — or, where they were not read or the fit fails from there, of the kept
+// markers of the 4 x 4 squares around it; refined by the saddle fit
+// (detectors/common/corner_refine.h) and kept only when the fit is a saddle within a pixel of
+// the prediction and the image shows the board's paint around it: both black squares darker
+// than both white ones.
+
+#include <string_view>
+
+#include "detectors/boards/board.h"
+#include "detectors/core/image_view.h"
+#include "detectors/detection.h"
+#include "detectors/markers/square_markers.h"
+
+namespace linecal {
+
+struct CharucoOptions {
+  MarkerDetectOptions markers;
+  // Gaussian blur of the saddle fit, pixels. Below the checker detector's 1.5: the fit's
+  // window stays in the white margin between a corner and its markers (an eighth of the square
+  // at OpenCV's usual 3/4 markers), and a wider blur carries the markers' black borders into
+  // it (pose grid of tests/detectors/charuco: worst clean RMS 0.060 px at 1.5, 0.041 at 1.0).
+  // [0.5, 4].
+  double blur_sigma_px = 1.0;
+  // A marker is kept when a neighbour's centre lies within this fraction of the local square
+  // side of where the marker's homography puts it. A misread or foreign marker is off by a
+  // square or more; noise on a 12 px marker and a strong lens over two squares move the
+  // prediction by a few percent. (0, 0.5].
+  double max_neighbour_error = 0.25;
+
+  // Empty when valid, else the name of the first field out of range. O(1).
+  std::string_view Validate() const;
+};
+
+// Finds `board` (type kCharuco; any other type gives kWrongBoard) in `image`. found = true with
+// every inner corner (ids 0..(cols-1)(rows-1)-1, row-major from the top-left) when all pass;
+// found = false, kPartial with the corners that pass, ordered by id, when some do not (part of
+// the board out of view or hidden); otherwise found = false, no features, and the reason:
+// kBadImage (invalid view or options), kLowContrast or kNoCandidates (the marker scan's),
+// kWrongBoard (markers, but none of the board's ids; or a marker on the board's page that the
+// board does not print there: another id, an id read twice, or the board seen shifted by whole
+// squares, as the other layout of the legacy flag is), kAmbiguous (two groups of agreeing
+// markers of the same size: two placements of the board), kTooFewFeatures (no two of the
+// board's markers agree, or no corner passes). Pure function. Cost: the marker scan (about
+// 3 ms at 1280 x 720) plus a small blur and fit per corner: about 5 ms for a 7 x 5 board at
+// 1280 x 720 (tests/detectors/charuco).
+Detection DetectCharuco(const ImageView8& image, const Board& board,
+                        const CharucoOptions& options = {});
+
+}  // namespace linecal

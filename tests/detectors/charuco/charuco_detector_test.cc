@@ -1,0 +1,388 @@
+// OpenCV's ChArUco board (docs/boards.md) and its detector on golden renders
+// (station/sim/camera_render.h, exact ground truth): the layout, ids and errors of the board;
+// every corner found with its id and sub-pixel over a grid of poses, through a strongly
+// distorting and a fisheye lens; partial views with the seen corners and no wrong id; nothing
+// on other boards or without a board; the reasons for bad input.
+#include "detectors/charuco/charuco_detector.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <vector>
+
+#include "detectors/detect.h"
+#include "tests/detectors/board_scene.h"
+#include "tests/support/reference_cameras.h"
+
+namespace linecal {
+namespace {
+
+using test_scene::BoardView;
+using test_scene::CleanRender;
+using test_scene::ExpectComplete;
+using test_scene::FeatureRmsPx;
+using test_scene::kCleanRmsBarPx;
+using test_scene::kNoisyRmsBarPx;
+using test_scene::MaxErrorPx;
+using test_scene::NoisyRender;
+using test_scene::RenderView;
+
+// A 7 x 5 board of 40 mm squares and 30 mm markers (cells of 5 mm): at 1 m in front of the test
+// camera (f 1000 px) squares of 40 px and marker cells of 5 px.
+BoardParams Charuco(int cols = 7, int rows = 5, bool legacy = false) {
+  BoardParams p;
+  p.type = BoardType::kCharuco;
+  p.cols = cols;
+  p.rows = rows;
+  p.square_m = 0.04;
+  p.marker_m = 0.03;
+  p.charuco_legacy = legacy;
+  return p;
+}
+
+// ---- The board ----------------------------------------------------------------------------
+
+TEST(CharucoBoardTest, CornerIdsAreRowMajorFromTheTopLeft) {
+  const Board board = *Board::Create(Charuco(5, 4));
+  EXPECT_STREQ(board.name(), "charuco");
+  EXPECT_EQ(BoardTypeFromName("charuco"), BoardType::kCharuco);
+  ASSERT_EQ(board.features().size(), 12u);  // (5 - 1) x (4 - 1)
+  // The squares span x in [-0.1, 0.1] and y in [-0.08, 0.08]; one square of margin around.
+  EXPECT_NEAR(board.page_size_m().x(), 0.28, 1e-12);
+  EXPECT_NEAR(board.page_size_m().y(), 0.24, 1e-12);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      const BoardFeature& f = board.features()[4 * r + c];
+      EXPECT_EQ(f.id, 4 * r + c);
+      EXPECT_EQ(f.kind, FeatureKind::kXCorner);
+      EXPECT_EQ(f.marker, -1);
+      EXPECT_NEAR(f.p_board.x(), -0.06 + 0.04 * c, 1e-12);
+      EXPECT_NEAR(f.p_board.y(), 0.04 - 0.04 * r, 1e-12);
+    }
+  }
+}
+
+// The centre of square (row, col) and a point in its white margin near its top-left corner.
+Eigen::Vector2d SquareCentre(const BoardParams& p, int row, int col) {
+  return {-0.5 * p.cols * p.square_m + (col + 0.5) * p.square_m,
+          0.5 * p.rows * p.square_m - (row + 0.5) * p.square_m};
+}
+Eigen::Vector2d MarginPoint(const BoardParams& p, int row, int col) {
+  const double inset = 0.25 * (p.square_m - p.marker_m);
+  return SquareCentre(p, row, col) +
+         Eigen::Vector2d(-0.5 * p.square_m + inset, 0.5 * p.square_m - inset);
+}
+
+TEST(CharucoBoardTest, TopLeftSquareIsBlackUnlessTheLegacyPatternHasEvenRows) {
+  for (const auto& [rows, legacy, top_left_white] :
+       {std::tuple{4, false, false}, std::tuple{4, true, true}, std::tuple{5, false, false},
+        std::tuple{5, true, false}}) {
+    SCOPED_TRACE(testing::Message() << rows << " rows, legacy " << legacy);
+    const BoardParams p = Charuco(5, rows, legacy);
+    const Board board = *Board::Create(p);
+    EXPECT_EQ(CharucoSquareHasMarker(p, 0, 0), top_left_white);
+    EXPECT_EQ(board.PaintAt(MarginPoint(p, 0, 0)), top_left_white ? Paint::kWhite : Paint::kBlack);
+    EXPECT_EQ(board.PaintAt(MarginPoint(p, 0, 1)), top_left_white ? Paint::kBlack : Paint::kWhite);
+    // Every marker has the one-cell black border: the point a half cell inside its top-left.
+    const double cell = p.marker_m / 6.0;
+    const Eigen::Vector2d border =
+        SquareCentre(p, 0, top_left_white ? 0 : 1) +
+        Eigen::Vector2d(-0.5 * p.marker_m + 0.5 * cell, 0.5 * p.marker_m - 0.5 * cell);
+    EXPECT_EQ(board.PaintAt(border), Paint::kBlack);
+    EXPECT_EQ(CharucoMarkerCount(p), 5 * rows / 2);
+  }
+}
+
+// Marker 0's data cells are those of DICT_4X4_50 id 0 (0xB532: first data row 1011), so the
+// first data cell of the first marker square is white and the second black.
+TEST(CharucoBoardTest, MarkersCarryTheirIdsInRowMajorOrder) {
+  const BoardParams p = Charuco(5, 5);
+  const Board board = *Board::Create(p);
+  const double cell = p.marker_m / 6.0;
+  const auto data_cell = [&](int row, int col, int dr, int dc) -> Eigen::Vector2d {
+    return SquareCentre(p, row, col) + Eigen::Vector2d(-0.5 * p.marker_m + (1.5 + dc) * cell,
+                                                       0.5 * p.marker_m - (1.5 + dr) * cell);
+  };
+  // id 0 in square (0, 1): 0xB532 = 1011 0101 0011 0010.
+  EXPECT_EQ(board.PaintAt(data_cell(0, 1, 0, 0)), Paint::kWhite);
+  EXPECT_EQ(board.PaintAt(data_cell(0, 1, 0, 1)), Paint::kBlack);
+  EXPECT_EQ(board.PaintAt(data_cell(0, 1, 3, 3)), Paint::kBlack);
+  // id 2 in square (1, 0): 0x332D = 0011 0011 0010 1101.
+  EXPECT_EQ(board.PaintAt(data_cell(1, 0, 0, 0)), Paint::kBlack);
+  EXPECT_EQ(board.PaintAt(data_cell(1, 0, 0, 2)), Paint::kWhite);
+  EXPECT_EQ(board.PaintAt(data_cell(1, 0, 3, 3)), Paint::kWhite);
+}
+
+TEST(CharucoBoardTest, BadParamsAreRefusedWithTheirReason) {
+  BoardParams p = Charuco();
+  p.marker_m = p.square_m;
+  BoardParamsError e = BoardParamsError::kOk;
+  EXPECT_FALSE(Board::Create(p, &e).has_value());
+  EXPECT_EQ(e, BoardParamsError::kBadMarker);
+  EXPECT_STREQ(BoardParamsErrorName(e), "bad_marker");
+  p.marker_m = std::nan("");
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kBadMarker);
+  p.marker_m = 0.0;
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kBadMarker);
+  p = Charuco(11, 10);  // 55 markers
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kBadMarkerCount);
+  EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadMarkerCount), "bad_marker_count");
+  p = Charuco(10, 10);  // 50 markers: the whole dictionary
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kOk);
+  p = Charuco(1, 5);
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kBadCols);
+  // marker_m is a ChArUco field only.
+  BoardParams checker;
+  checker.type = BoardType::kChecker;
+  checker.marker_m = 1.0;
+  EXPECT_EQ(ValidateBoardParams(checker), BoardParamsError::kOk);
+}
+
+// ---- Detection on renders -----------------------------------------------------------------
+
+TEST(CharucoDetectorTest, FindsEveryCornerOverAPoseGrid) {
+  double worst_clean = 0.0;
+  double worst_noisy = 0.0;
+  std::uint64_t seed = 1;
+  for (const bool legacy : {false, true}) {
+    for (const double distance : {0.8, 1.2}) {
+      for (const double yaw : {-40.0, 0.0, 35.0}) {
+        for (const double pitch : {-25.0, 20.0}) {
+          for (const double roll : {0.0, 170.0}) {
+            BoardView v;
+            v.params = Charuco(7, legacy ? 4 : 5, legacy);
+            v.distance_m = distance;
+            v.yaw_deg = yaw;
+            v.pitch_deg = pitch;
+            v.roll_deg = roll;
+            SCOPED_TRACE(testing::Message() << "legacy " << legacy << " d " << distance << " yaw "
+                                            << yaw << " pitch " << pitch << " roll " << roll);
+            const Board board = *Board::Create(v.params);
+            for (const bool noisy : {false, true}) {
+              const CameraFrame frame =
+                  RenderView(v, noisy ? NoisyRender() : CleanRender(), ++seed);
+              const Detection d = DetectCharuco(frame.image8.view(), board);
+              ExpectComplete(d, board);
+              int matched = 0;
+              int unknown = 0;
+              const double rms = FeatureRmsPx(d, frame, &matched, &unknown);
+              EXPECT_EQ(unknown, 0);
+              EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+              EXPECT_LT(rms, noisy ? kNoisyRmsBarPx : kCleanRmsBarPx);
+              (noisy ? worst_noisy : worst_clean) =
+                  std::max(noisy ? worst_noisy : worst_clean, rms);
+            }
+          }
+        }
+      }
+    }
+  }
+  std::printf("pose grid: worst RMS clean %.4f px, noisy %.4f px\n", worst_clean, worst_noisy);
+}
+
+// docs/conventions.md's strongly distorting pinhole (k1 -0.30) and its 190-degree fisheye, the
+// board off the axis where the lens bends its rows: each corner is predicted from its own
+// markers, so the bending does not matter. The saddle of a bent corner is not exactly
+// point-symmetric; 0.1 px bounds the bias (as the circle grid's lens test).
+TEST(CharucoDetectorTest, StrongDistortionAndFisheye) {
+  constexpr double kLensRmsBarPx = 0.1;
+  struct Case {
+    const char* name;
+    CameraModel camera;
+    BoardView view;
+  };
+  BoardView pinhole;
+  pinhole.params = Charuco();
+  pinhole.distance_m = 0.7;
+  pinhole.offset_m = Eigen::Vector2d(0.35, 0.15);
+  pinhole.yaw_deg = -25.0;
+  BoardView fisheye = pinhole;
+  fisheye.distance_m = 0.45;
+  fisheye.offset_m = Eigen::Vector2d(0.3, 0.0);
+  fisheye.yaw_deg = -30.0;
+  const std::vector<Case> cases = {
+      {"strong pinhole", *CameraModel::Create(reference_cameras::StrongPinhole()), pinhole},
+      {"fisheye", *CameraModel::Create(reference_cameras::Fisheye190()), fisheye}};
+  std::uint64_t seed = 100;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const absl::StatusOr<CameraFrame> rendered = RenderCameraFrame(
+        c.camera, test_scene::TestCameraPose(), test_scene::SceneOf(c.view), CleanRender(), ++seed);
+    ASSERT_TRUE(rendered.ok()) << rendered.status();
+    const CameraFrame& frame = *rendered;
+    const Board board = *Board::Create(c.view.params);
+    const Detection d = DetectCharuco(frame.image8.view(), board);
+    ExpectComplete(d, board);
+    int matched = 0;
+    int unknown = 0;
+    const double rms = FeatureRmsPx(d, frame, &matched, &unknown);
+    EXPECT_EQ(unknown, 0);
+    EXPECT_LT(rms, kLensRmsBarPx);
+    std::printf("%s: RMS %.4f px\n", c.name, rms);
+  }
+}
+
+// A partial detection: found false, reason partial, at least 4 corners but not all, in id order,
+// each with its own board position and within half a pixel of its truth (a wrong id is off by a
+// square, tens of pixels).
+void ExpectSeenCornersOnly(const Detection& d, const CameraFrame& frame, const Board& board) {
+  EXPECT_FALSE(d.found);
+  EXPECT_EQ(d.reason, DetectReason::kPartial);
+  ASSERT_GE(d.features.size(), 4u);
+  EXPECT_LT(d.features.size(), board.features().size());
+  int matched = 0;
+  int unknown = 0;
+  FeatureRmsPx(d, frame, &matched, &unknown);
+  EXPECT_EQ(unknown, 0);
+  EXPECT_LT(MaxErrorPx(d, frame), 0.5);
+  for (std::size_t i = 1; i < d.features.size(); ++i) {
+    EXPECT_LT(d.features[i - 1].id, d.features[i].id);
+  }
+  for (const DetectedFeature& f : d.features) {
+    EXPECT_EQ(f.p_board, board.features()[f.id].p_board);
+  }
+}
+
+// Part of the board out of the image: the corners in view are reported with their ids
+// (complete false), and none with a wrong id (a wrong id is off by a square, 40 px).
+TEST(CharucoDetectorTest, PartialViewReportsTheSeenCornersWithTheirIds) {
+  std::uint64_t seed = 200;
+  for (const double offset_x : {-0.62, 0.6}) {
+    for (const double offset_y : {0.0, 0.33}) {
+      SCOPED_TRACE(testing::Message() << offset_x << ", " << offset_y);
+      BoardView v;
+      v.params = Charuco();
+      v.distance_m = 1.0;
+      v.offset_m = Eigen::Vector2d(offset_x, offset_y);
+      const Board board = *Board::Create(v.params);
+      const CameraFrame frame = RenderView(v, NoisyRender(), ++seed);
+      ExpectSeenCornersOnly(DetectCharuco(frame.image8.view(), board), frame, board);
+    }
+  }
+}
+
+// Part of the board hidden by something in front of it (a grey post over its right side, and a
+// dark one across its middle rows): the corners in view with their ids, none where it is hidden.
+TEST(CharucoDetectorTest, HiddenPartLeavesTheSeenCornersWithTheirIds) {
+  BoardView v;
+  v.params = Charuco();
+  v.distance_m = 1.0;
+  v.yaw_deg = 15.0;
+  const Board board = *Board::Create(v.params);
+  std::uint64_t seed = 250;
+  for (const auto& [x0, y0, x1, y1, grey] :
+       {std::tuple{700, 0, 1280, 720, 150}, std::tuple{0, 330, 1280, 390, 30}}) {
+    SCOPED_TRACE(testing::Message() << x0 << " " << y0 << " " << x1 << " " << y1);
+    CameraFrame frame = RenderView(v, NoisyRender(), ++seed);
+    for (int y = y0; y < y1; ++y) {
+      for (int x = x0; x < x1; ++x) frame.image8.at(x, y) = static_cast<std::uint8_t>(grey);
+    }
+    const Detection d = DetectCharuco(frame.image8.view(), board);
+    ExpectSeenCornersOnly(d, frame, board);
+    for (const DetectedFeature& f : d.features) {
+      const bool hidden = f.uv_px.x() >= x0 - 1 && f.uv_px.x() < x1 + 1 && f.uv_px.y() >= y0 - 1 &&
+                          f.uv_px.y() < y1 + 1;
+      EXPECT_FALSE(hidden) << f.id;
+    }
+  }
+}
+
+// ---- Nothing where there is no such board ---------------------------------------------------
+
+TEST(CharucoDetectorTest, FindsNothingOnOtherBoards) {
+  const Board board = *Board::Create(Charuco());
+  std::uint64_t seed = 300;
+  for (BoardType type :
+       {BoardType::kAruco, BoardType::kRoundHole, BoardType::kChecker, BoardType::kApriltag}) {
+    SCOPED_TRACE(BoardTypeName(type));
+    BoardView v;
+    v.params.type = type;
+    v.distance_m = type == BoardType::kChecker ? 1.0 : 3.0;
+    const CameraFrame frame = RenderView(v, CleanRender(), ++seed);
+    const Detection d = DetectCharuco(frame.image8.view(), board);
+    EXPECT_FALSE(d.found);
+    EXPECT_TRUE(d.features.empty());
+  }
+  // A ChArUco board of another size: its markers share ids 0..16 but not their squares.
+  BoardView v;
+  v.params = Charuco(9, 6);
+  v.distance_m = 1.0;
+  const CameraFrame frame = RenderView(v, CleanRender(), ++seed);
+  const Detection d = DetectCharuco(frame.image8.view(), board);
+  EXPECT_FALSE(d.found);
+  int matched = 0;
+  int unknown = 0;
+  FeatureRmsPx(d, frame, &matched, &unknown);
+  EXPECT_EQ(unknown, 0);
+}
+
+// With an even row count the legacy layout is the current one shifted by a square, with mostly
+// the same ids in the same places: each board must refuse the other's print (its markers in the
+// margin, where the shifted board prints none), never report corners a square off.
+TEST(CharucoDetectorTest, LegacyAndCurrentLayoutsAreToldApart) {
+  std::uint64_t seed = 350;
+  for (const bool drawn_legacy : {false, true}) {
+    SCOPED_TRACE(drawn_legacy ? "legacy print" : "current print");
+    BoardView v;
+    v.params = Charuco(7, 4, drawn_legacy);
+    v.distance_m = 1.0;
+    v.yaw_deg = 20.0;
+    const CameraFrame frame = RenderView(v, NoisyRender(), ++seed);
+    ExpectComplete(DetectCharuco(frame.image8.view(), *Board::Create(v.params)),
+                   *Board::Create(v.params));
+    const Detection d =
+        DetectCharuco(frame.image8.view(), *Board::Create(Charuco(7, 4, !drawn_legacy)));
+    EXPECT_FALSE(d.found);
+    EXPECT_EQ(d.reason, DetectReason::kWrongBoard);
+    EXPECT_TRUE(d.features.empty());
+  }
+}
+
+TEST(CharucoDetectorTest, BoardFreeImagesGiveNoFeatures) {
+  const Board board = *Board::Create(Charuco());
+  const Image8 noise = test_scene::UniformNoiseImage(1280, 720);
+  Detection d = DetectCharuco(noise.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_TRUE(d.features.empty());
+  const Image8 grey(640, 480, 128);
+  d = DetectCharuco(grey.view(), board);
+  EXPECT_FALSE(d.found);
+  EXPECT_TRUE(d.features.empty());
+}
+
+TEST(CharucoDetectorTest, BadInputGivesAReason) {
+  const Board board = *Board::Create(Charuco());
+  const Image8 image(64, 64, 128);
+  EXPECT_EQ(DetectCharuco(ImageView8{}, board).reason, DetectReason::kBadImage);
+  CharucoOptions bad;
+  bad.blur_sigma_px = 0.1;
+  EXPECT_EQ(bad.Validate(), "blur_sigma_px");
+  EXPECT_EQ(DetectCharuco(image.view(), board, bad).reason, DetectReason::kBadImage);
+  bad = CharucoOptions();
+  bad.max_neighbour_error = 0.0;
+  EXPECT_EQ(bad.Validate(), "max_neighbour_error");
+  BoardParams checker;
+  checker.type = BoardType::kChecker;
+  EXPECT_EQ(DetectCharuco(image.view(), *Board::Create(checker)).reason, DetectReason::kWrongBoard);
+}
+
+TEST(CharucoDetectorTest, DetectBoardDispatchesAndIsFast) {
+  BoardView v;
+  v.params = Charuco();
+  v.distance_m = 1.0;
+  const Board board = *Board::Create(v.params);
+  const CameraFrame frame = RenderView(v, NoisyRender(), 400);
+  const std::optional<Detection> d = DetectBoard(frame.image8.view(), board);
+  ASSERT_TRUE(d.has_value());
+  ExpectComplete(*d, board);
+  const double ms =
+      test_scene::BestThreadCpuMs(5, [&] { DetectCharuco(frame.image8.view(), board); });
+  std::printf("1280 x 720: %.2f ms\n", ms);
+  // The marker scan's budget (about 3 ms) plus the corners; 4x for a shared machine.
+  EXPECT_LT(ms, 20.0);
+}
+
+}  // namespace
+}  // namespace linecal
