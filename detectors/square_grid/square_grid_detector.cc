@@ -461,7 +461,10 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
     j_lo = std::min(j_lo, point.second);
     j_hi = std::max(j_hi, point.second);
   }
-  for (const auto& [w, h] : sizes) {
+  for (const std::pair<int, int>& size : sizes) {
+    // Plain ints, not structured bindings: the lambda below captures them (clang 14 refuses
+    // to capture a binding, and the fuzz build uses clang).
+    const int w = size.first, h = size.second;
     for (int wj = j_lo; wj + h - 1 <= j_hi; ++wj) {
       for (int wi = i_lo; wi + w - 1 <= i_hi; ++wi) {
         Window win;
