@@ -122,13 +122,15 @@ TEST_F(CameraSourcesTest, CancelEndsTheAcquisitionWithinHalfASecond) {
   std::atomic<int> frames{0};
   request.progress = [&](const std::string&) { ++frames; };
   steady_clock::time_point cancelled_at;
+  std::atomic<bool> returned{false};  // the canceller must not outwait a failed acquisition
   std::thread canceller([&] {
-    while (frames.load() < 2) std::this_thread::sleep_for(milliseconds(5));
+    while (frames.load() < 2 && !returned) std::this_thread::sleep_for(milliseconds(5));
     cancelled_at = steady_clock::now();
     cancel = true;
   });
   absl::StatusOr<CaptureSensor> sensor = source->Acquire(Camera("front_camera"), request);
   const auto returned_at = steady_clock::now();
+  returned = true;
   canceller.join();
   EXPECT_EQ(sensor.status().code(), absl::StatusCode::kCancelled);
   EXPECT_LT(Seconds(returned_at - cancelled_at), 0.5);
