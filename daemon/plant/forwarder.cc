@@ -98,7 +98,6 @@ struct Forwarder::Shared {
   std::chrono::steady_clock::time_point drain_deadline;  // once stop
   bool exited = false;
   absl::Status last_error;
-  int64_t shipped = 0;
   std::thread thread;     // joined or detached by the first Stop
   std::mutex stop_mutex;  // one Stop at a time
 
@@ -106,6 +105,9 @@ struct Forwarder::Shared {
   // after which the thread never touches either (they may be gone). Taken after `mutex`.
   std::mutex store_mutex;
   bool abandoned = false;
+  // Counted under store_mutex together with MarkShipped, so that Stats, reading both under
+  // it, never sees a batch gone from the backlog and not yet counted.
+  int64_t shipped = 0;
 
   Shared(Store* s, ForwarderOptions o) : store(s), options(std::move(o)) {}
 
@@ -162,9 +164,9 @@ absl::Status Forwarder::Shared::ShipQueued(std::unique_ptr<PlantDb>* db) {
       if (abandoned) return absl::CancelledError("stopped");
       // Not removed (a full disk): the batch is sent again, which the plant ignores.
       if (absl::Status s = store->MarkShipped(last_seq); !s.ok()) return s;
+      shipped += static_cast<int64_t>(cycles.size());
     }
     std::lock_guard<std::mutex> lock(mutex);
-    shipped += static_cast<int64_t>(cycles.size());
     last_error = absl::OkStatus();
   }
 }
@@ -231,9 +233,13 @@ ForwarderStats Forwarder::Stats() {
   {
     std::lock_guard<std::mutex> lock(shared_->mutex);
     stats.last_error = shared_->last_error;
-    stats.shipped = shared_->shipped;
   }
-  absl::StatusOr<OutboxBacklog> backlog = store_->Backlog();
+  absl::StatusOr<OutboxBacklog> backlog;
+  {
+    std::lock_guard<std::mutex> lock(shared_->store_mutex);
+    stats.shipped = shared_->shipped;
+    backlog = store_->Backlog();
+  }
   if (!backlog.ok()) {
     stats.last_error = backlog.status();
     return stats;
