@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "station/aftersale/document.h"
 #include "station/io/image_io.h"
 #include "station/io/json_reader.h"
 #include "station/model/pose_json.h"
@@ -115,20 +116,8 @@ int RunSimLanes(const Args& args) {
   fs::create_directories(dir, ec);
   if (ec) return cli::BadInput(kCommand, absl::StrCat("--out: cannot create ", dir.string(), ": ", ec.message()));
   const std::string image_name = sensor->name + ".png";
-  const std::vector<double> distortion = k.type == CameraModelType::kPinhole
-                                             ? std::vector<double>{k.k1, k.k2, k.p1, k.p2, k.k3}
-                                             : std::vector<double>{k.k1, k.k2, k.k3, k.k4};
-  nlohmann::json input = {
-      {"name", sensor->name},
-      {"image", image_name},
-      {"intrinsics",
-       {{"model", CameraModelTypeName(k.type)}, {"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy},
-        {"distortion", distortion}}},
-      {"camera_height_m", xyz.z()},
-      {"longitudinal_offset_m", xyz.x()},
-      {"lateral_offset_m", xyz.y()},
-      {"looking_backward", std::cos(angles.yaw) < 0},
-      {"tolerance_percent", 1.0}};
+  nlohmann::json input = AftersaleCameraInput(sensor->name, k, xyz, std::cos(angles.yaw) < 0);
+  input["image"] = image_name;
   if (o.paint_lane_lines && o.marker_distances_m[0] == 0) {
     nlohmann::json lanes = nlohmann::json::array();
     for (const auto& lane : scene->lanes_px) {

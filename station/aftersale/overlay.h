@@ -1,0 +1,50 @@
+#pragma once
+// What the after-sale calibration draws over the camera's image (docs/aftersale.md): the
+// ground grid and the horizon of the estimated pose, and each lane line through its points to
+// the vanishing point, all as polylines in the image as stored (distorted pixels, centre of
+// the top-left pixel at (0, 0)). `linecal aftersale --out` rasterises them into the overlay
+// PNG; the console's after-sale page draws them over the photo. One implementation, so both
+// show the same lines.
+
+#include <optional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "station/camera/camera_model.h"
+#include "station/solvers/lane_calibration.h"
+
+namespace linecal {
+
+// Distorted pixels; nullopt where the line leaves the image or the camera's view (a gap).
+using ImagePolyline = std::vector<std::optional<Eigen::Vector2d>>;
+
+struct LaneOverlayOptions {
+  // Straight segments a line is cut into: enough for the lens's curvature to look smooth.
+  // 200 for a full-resolution PNG; a page redrawn as points move can take fewer. [1, 10000].
+  int segments = 200;
+};
+
+struct LaneOverlay {
+  // Every 5 m from 5 to 50 m ahead of the camera (across, from 5 m left to 5 m right), then
+  // every metre from 5 m left to 5 m right (along, from 2 to 50 m ahead), in the car frame
+  // around the camera's footprint; only where the ground is in the image.
+  std::vector<ImagePolyline> ground_grid;
+  // The images of ground directions at infinity, every degree from 60 left to 60 right.
+  ImagePolyline horizon;
+  // Per lane line: from its point farthest from the vanishing point to the vanishing point,
+  // straight in the undistorted image and bent through the lens.
+  std::vector<ImagePolyline> lane_lines;
+  // The vanishing point as a distorted pixel, when the lens has one for it.
+  std::optional<Eigen::Vector2d> vanishing_point_uv;
+};
+
+// The overlay of `result` for `camera` (the intrinsics of `input`). O(segments x 23 lines).
+LaneOverlay LaneOverlayOf(const CameraModel& camera, const LaneCalibrationInput& input,
+                          const LaneCalibrationResult& result,
+                          const LaneOverlayOptions& options = {});
+
+// The undistorted pixel q (image of K) as a distorted one; false when the lens has none.
+bool DistortedPixelOf(const CameraModel& camera, const Eigen::Vector2d& q, Eigen::Vector2d* uv);
+
+}  // namespace linecal
