@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "daemon/web/aftersale_api.h"
 #include "daemon/web/console_json.h"
 
 namespace linecal {
@@ -55,10 +56,56 @@ void SendJson(httplib::Response& res, const nlohmann::json& body, int status = 2
   res.set_content(body.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace), kJson);
 }
 
-void SendError(httplib::Response& res, const absl::Status& s) {
+// `status` 0: the HTTP status of the error's code (HttpStatus).
+void SendError(httplib::Response& res, const absl::Status& s, int status = 0) {
   std::string code = absl::StatusCodeToString(s.code());
   for (char& c : code) c = c == ' ' ? '_' : static_cast<char>(std::tolower(c));
-  SendJson(res, {{"error", std::string(s.message())}, {"code", code}}, HttpStatus(s.code()));
+  SendJson(res, {{"error", std::string(s.message())}, {"code", code}},
+           status != 0 ? status : HttpStatus(s.code()));
+}
+
+// The request's body through `read`, at most `max_bytes` of it kept: false when it is longer
+// (the rest is read and dropped, so that the client, still sending, gets the answer) or is a
+// multipart form (not taken: its parts are dropped the same way).
+bool ReadBoundedBody(const httplib::Request& req, const httplib::ContentReader& read,
+                     std::int64_t max_bytes, std::string* body) {
+  bool fits = !req.is_multipart_form_data();
+  const auto keep = [&](const char* data, size_t n) {
+    if (fits && static_cast<std::int64_t>(body->size() + n) <= max_bytes) {
+      body->append(data, n);
+    } else {
+      fits = false;
+      body->clear();
+    }
+    return true;
+  };
+  if (req.is_multipart_form_data()) {
+    read([](const httplib::MultipartFormData&) { return true; }, keep);
+  } else {
+    read(keep);
+  }
+  return fits;
+}
+
+// The after-sale page's POSTs (aftersale_api.h): the body under `max_bytes`, then `answer`.
+void ServeBoundedPost(const httplib::Request& req, httplib::Response& res,
+                      const httplib::ContentReader& read, std::int64_t max_bytes,
+                      const std::string& what,
+                      absl::StatusOr<nlohmann::json> (*answer)(std::string_view)) {
+  std::string body;
+  if (!ReadBoundedBody(req, read, max_bytes, &body)) {
+    if (req.is_multipart_form_data()) {
+      return SendError(res, absl::InvalidArgumentError(absl::StrCat(
+                                what, ": send the file's bytes as the body, not a form")),
+                       415);
+    }
+    return SendError(res, absl::ResourceExhaustedError(
+                              absl::StrCat(what, ": larger than ", max_bytes, " bytes")),
+                     413);
+  }
+  absl::StatusOr<nlohmann::json> j = answer(body);
+  if (!j.ok()) return SendError(res, j.status());
+  SendJson(res, *j);
 }
 
 const char* ContentType(const std::string& extension) {
@@ -307,6 +354,18 @@ void WebServer::Route() {
   });
   s.Get("/api/events",
         [this](const httplib::Request& req, httplib::Response& res) { Events(req, res); });
+  // The after-sale page: computations over the request, nothing of the station changes.
+  s.Get("/api/aftersale/cameras", [this](const httplib::Request&, httplib::Response& res) {
+    SendJson(res, AftersaleCamerasJson(core_->car_models()));
+  });
+  s.Post("/api/aftersale/photo", [](const httplib::Request& req, httplib::Response& res,
+                                    const httplib::ContentReader& read) {
+    ServeBoundedPost(req, res, read, kMaxPhotoBytes, "photo", AftersalePhotoJson);
+  });
+  s.Post("/api/aftersale", [](const httplib::Request& req, httplib::Response& res,
+                              const httplib::ContentReader& read) {
+    ServeBoundedPost(req, res, read, kMaxAftersaleRequestBytes, "request", AftersaleSolveJson);
+  });
   s.Get("/vendor/chart.js", [this](const httplib::Request& req, httplib::Response& res) {
     ServeFile(options_.chart_js_path, req, res);
   });

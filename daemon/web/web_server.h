@@ -19,6 +19,10 @@
 //                     every new cycle's as they happen (an `event: cycle` with the cycle
 //                     before its `event: cycle_event`s); ?cycle=ID: that cycle's events
 //                     only, then `event: end`. The events are StationCore::WatchCycle's.
+//   GET  /api/aftersale/cameras, POST /api/aftersale/photo, POST /api/aftersale
+//                     the after-sale page's calls (aftersale_api.h); a photo over
+//                     kMaxPhotoBytes or a request over kMaxAftersaleRequestBytes gets 413,
+//                     a multipart form 415
 //   GET  /, /NAME.html, /NAME.js, /NAME.css  files of the static folder; /vendor/chart.js
 //                     Debian's Chart.js; /favicon.ico 204 (no icon).
 // Every /api/ call but login and session needs a live session when the daemon has an

@@ -262,21 +262,39 @@ absl::StatusOr<Decoded> DecodeJpeg(const std::string& path, std::FILE* file,
   return out;
 }
 
+// `file` read from its start; `path` names it in messages.
+absl::StatusOr<Decoded> DecodeStream(const std::string& path, std::FILE* file,
+                                     const InputBudget& budget) {
+  std::uint8_t magic[8] = {};
+  const std::size_t n = std::fread(magic, 1, sizeof magic, file);
+  std::rewind(file);
+  if (n == sizeof magic && std::memcmp(magic, kPngSignature, sizeof kPngSignature) == 0) {
+    return DecodePng(path, file, budget);
+  }
+  if (n >= sizeof kJpegSignature &&
+      std::memcmp(magic, kJpegSignature, sizeof kJpegSignature) == 0) {
+    return DecodeJpeg(path, file, budget);
+  }
+  return absl::InvalidArgumentError(absl::StrCat(path, ": not a PNG or JPEG file"));
+}
+
 absl::StatusOr<Decoded> Decode(const std::string& path, const InputBudget& budget) {
   if (absl::Status s = CheckFileBytes(path, budget); !s.ok()) return s;
   FilePtr file(std::fopen(path.c_str(), "rb"), std::fclose);
   if (file == nullptr) return FileError(path, "cannot open", errno);
-  std::uint8_t magic[8] = {};
-  const std::size_t n = std::fread(magic, 1, sizeof magic, file.get());
-  std::rewind(file.get());
-  if (n == sizeof magic && std::memcmp(magic, kPngSignature, sizeof kPngSignature) == 0) {
-    return DecodePng(path, file.get(), budget);
+  return DecodeStream(path, file.get(), budget);
+}
+
+Image8 ToImage8(const Decoded& d) {
+  // To 8 bits: 16-bit values scale by 255/65535 = 1/257.
+  const double to_8 = d.bit_depth == 16 ? 1.0 / 257.0 : 1.0;
+  Image8 out(d.width, d.height);
+  for (int y = 0; y < d.height; ++y) {
+    for (int x = 0; x < d.width; ++x) {
+      out.at(x, y) = static_cast<std::uint8_t>(std::lround(d.Grey(x, y) * to_8));
+    }
   }
-  if (n >= sizeof kJpegSignature &&
-      std::memcmp(magic, kJpegSignature, sizeof kJpegSignature) == 0) {
-    return DecodeJpeg(path, file.get(), budget);
-  }
-  return absl::InvalidArgumentError(absl::StrCat(path, ": not a PNG or JPEG file"));
+  return out;
 }
 
 // ---- PNG writing -------------------------------------------------------------------------
@@ -371,16 +389,22 @@ absl::StatusOr<Image8> ReadImage8(const std::string& path) {
 absl::StatusOr<Image8> ReadImage8(const std::string& path, const InputBudget& budget) {
   absl::StatusOr<Decoded> decoded = Decode(path, budget);
   if (!decoded.ok()) return decoded.status();
-  const Decoded& d = *decoded;
-  // To 8 bits: 16-bit values scale by 255/65535 = 1/257.
-  const double to_8 = d.bit_depth == 16 ? 1.0 / 257.0 : 1.0;
-  Image8 out(d.width, d.height);
-  for (int y = 0; y < d.height; ++y) {
-    for (int x = 0; x < d.width; ++x) {
-      out.at(x, y) = static_cast<std::uint8_t>(std::lround(d.Grey(x, y) * to_8));
-    }
+  return ToImage8(*decoded);
+}
+
+absl::StatusOr<Image8> DecodeImage8(std::string_view bytes, const std::string& name,
+                                    const InputBudget& budget) {
+  if (static_cast<std::int64_t>(bytes.size()) > budget.max_file_bytes) {
+    return OverBudget(name, static_cast<std::int64_t>(bytes.size()), "bytes",
+                      budget.max_file_bytes, "max_file_bytes");
   }
-  return out;
+  if (bytes.empty()) return absl::InvalidArgumentError(absl::StrCat(name, ": empty"));
+  // fmemopen only reads the buffer ("rb"), whatever its non-const parameter says.
+  FilePtr file(fmemopen(const_cast<char*>(bytes.data()), bytes.size(), "rb"), std::fclose);
+  if (file == nullptr) return FileError(name, "cannot open", errno);
+  absl::StatusOr<Decoded> decoded = DecodeStream(name, file.get(), budget);
+  if (!decoded.ok()) return decoded.status();
+  return ToImage8(*decoded);
 }
 
 absl::StatusOr<Image16> ReadImage16(const std::string& path) {

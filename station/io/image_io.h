@@ -14,6 +14,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -55,6 +56,11 @@ absl::StatusOr<Image8> ReadImage8(const std::string& path);
 // header, before any pixel memory is allocated) is refused with OverBudget's InvalidArgument.
 // Memory: at most about 7 bytes a pixel of the budget (a 16-bit RGB decode plus the result).
 absl::StatusOr<Image8> ReadImage8(const std::string& path, const InputBudget& budget);
+
+// ReadImage8 of a file's bytes in memory (an upload); `name` stands for the file in messages
+// ("photo: not a PNG or JPEG file"). The budget's max_file_bytes applies to bytes.size().
+absl::StatusOr<Image8> DecodeImage8(std::string_view bytes, const std::string& name,
+                                    const InputBudget& budget);
 
 // Reads a PNG or JPEG file as 16-bit grey. 16-bit PNG samples are kept; 8-bit samples v
 // become v * 257 (so 255 maps to 65535). Errors as ReadImage8.

@@ -225,9 +225,11 @@ absl::StatusOr<JsonField> JsonDocument::Root() const {
   return root;
 }
 
+std::string JsonFileText(const nlohmann::json& j) { return j.dump(2) + "\n"; }
+
 absl::Status WriteJsonFile(const std::string& path, const nlohmann::json& j) {
   const std::string tmp = path + ".tmp";
-  const std::string text = j.dump(2) + "\n";
+  const std::string text = JsonFileText(j);
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return absl::InternalError(absl::StrCat(tmp, ": cannot create: ", std::strerror(errno)));
   size_t done = 0;

@@ -95,4 +95,8 @@ absl::StatusOr<std::string> ReadTextFile(const std::string& path);
 // a crash never leaves a half-written document. Indented for people to read.
 absl::Status WriteJsonFile(const std::string& path, const nlohmann::json& j);
 
+// The text WriteJsonFile writes for `j` (indented by two, one final newline), for a document
+// that is served instead of written with the same bytes.
+std::string JsonFileText(const nlohmann::json& j);
+
 }  // namespace linecal
