@@ -101,8 +101,9 @@ absl::StatusOr<nlohmann::json> AftersaleSolveJson(std::string_view body) {
   AftersaleRequest request;
   if (absl::Status s = ReadAftersaleInput(*input, &request); !s.ok()) return s;
   if (!request.image.empty()) {
-    return input->Error("image", "not taken here: the photo is uploaded (POST "
-                                 "/api/aftersale/photo) and its size given as image_size");
+    return input->Error("image",
+                        "not taken here: the photo is uploaded (POST "
+                        "/api/aftersale/photo) and its size given as image_size");
   }
   absl::StatusOr<LaneCalibrationInput> in = AftersaleSolverInput(request, (*size)[0], (*size)[1]);
   if (!in.ok()) return in.status();

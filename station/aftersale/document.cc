@@ -81,7 +81,8 @@ absl::Status ReadPoints(const JsonField& root, AftersaleRequest* r) {
   const auto where = [&](const std::string& key) {
     return absl::StrCat(root.source(), ": ", root.ChildPath(key));
   };
-  if (root.Has("lanes") && root.Has("markers")) return root.Error("give lanes or markers, not both");
+  if (root.Has("lanes") && root.Has("markers"))
+    return root.Error("give lanes or markers, not both");
   if (root.Has("lanes")) {
     if (absl::Status s = ReadLanes(root, r); !s.ok()) return s;
   }
@@ -177,10 +178,10 @@ absl::StatusOr<std::vector<std::vector<Eigen::Vector2d>>> LanesOfMarkers(
 }
 
 absl::Status ReadAftersaleInput(const JsonField& root, AftersaleRequest* r) {
-  if (absl::Status s = root.AllowOnlyKeys(
-          {"name", "image", "intrinsics", "camera_height_m", "longitudinal_offset_m",
-           "lateral_offset_m", "looking_backward", "lanes", "markers", "roll_line", "roll_deg",
-           "marked_point", "tolerance_percent"});
+  if (absl::Status s = root.AllowOnlyKeys({"name", "image", "intrinsics", "camera_height_m",
+                                           "longitudinal_offset_m", "lateral_offset_m",
+                                           "looking_backward", "lanes", "markers", "roll_line",
+                                           "roll_deg", "marked_point", "tolerance_percent"});
       !s.ok()) {
     return s;
   }
@@ -202,10 +203,10 @@ absl::Status ReadAftersaleInput(const JsonField& root, AftersaleRequest* r) {
     if (!h.ok()) return h.status();
     r->camera_height_m = *h;
   }
-  for (const auto& [key, slot] : {std::pair{"longitudinal_offset_m", &r->longitudinal_offset_m},
-                                  std::pair{"lateral_offset_m", &r->lateral_offset_m},
-                                  std::pair{"roll_deg", &r->roll_deg},
-                                  std::pair{"tolerance_percent", &r->tolerance_percent}}) {
+  for (const auto& [key, slot] :
+       {std::pair{"longitudinal_offset_m", &r->longitudinal_offset_m},
+        std::pair{"lateral_offset_m", &r->lateral_offset_m}, std::pair{"roll_deg", &r->roll_deg},
+        std::pair{"tolerance_percent", &r->tolerance_percent}}) {
     absl::StatusOr<double> v = root.NumberOr(key, *slot);
     if (!v.ok()) return v.status();
     *slot = *v;
@@ -255,9 +256,8 @@ absl::StatusOr<LaneCalibrationInput> AftersaleSolverInput(const AftersaleRequest
   if (!r.camera_height_m) return missing("camera_height_m", "--camera-height-m");
   if (r.lanes_px.empty()) return missing("lanes", "--lane, --markers,");
   if (r.marked_point_px.has_value() != r.measured_distance_m.has_value()) {
-    return r.marked_point_px
-               ? missing("marked_point.measured_distance_m", "--measured-distance-m")
-               : missing("marked_point.uv_px", "--marked-point");
+    return r.marked_point_px ? missing("marked_point.measured_distance_m", "--measured-distance-m")
+                             : missing("marked_point.uv_px", "--marked-point");
   }
   in.camera_height_m = *r.camera_height_m;
   in.longitudinal_offset_m = r.longitudinal_offset_m;

@@ -8,14 +8,13 @@
 // Units and frames as lane_calibration.h: image points are distorted pixels with the centre of
 // the top-left pixel at (0, 0); metres; the input's angles in degrees.
 
+#include <Eigen/Core>
 #include <array>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"

@@ -6,10 +6,9 @@
 // PNG; the console's after-sale page draws them over the photo. One implementation, so both
 // show the same lines.
 
+#include <Eigen/Core>
 #include <optional>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "station/camera/camera_model.h"
 #include "station/solvers/lane_calibration.h"

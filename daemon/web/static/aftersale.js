@@ -345,6 +345,7 @@ class AftersalePage {
     const request = this.request();
     if (!request || !this.checkSize()) {
       this.answer = null;
+      this.answered = "";
       this.showResult();
       return;
     }
@@ -354,9 +355,11 @@ class AftersalePage {
     try {
       this.answer = await postJson("/api/aftersale", text, "application/json");
       this.showMessage("");
+      delete document.body.dataset.refused;
     } catch (error) {
       this.answer = null;
       this.showMessage("Refused: " + error.message);
+      document.body.dataset.refused = text;
     }
     this.answered = text;
     this.inFlight = false;

@@ -94,8 +94,8 @@ class AftersaleApiTest : public ::testing::Test {
   fs::path SimLanes(const std::string& camera, const std::string& options) const {
     const fs::path scene = dir_ / "scene";
     const testing_tools::LinecalRun run =
-        RunLinecal("sim lanes --car " + kDeploy + "/cars/reference.json --camera " + camera +
-                   " " + options + " --out " + scene.string());
+        RunLinecal("sim lanes --car " + kDeploy + "/cars/reference.json --camera " + camera + " " +
+                   options + " --out " + scene.string());
     EXPECT_EQ(run.exit_code, 0) << run.err;
     return scene;
   }
@@ -143,7 +143,8 @@ TEST_F(AftersaleApiTest, SolveEqualsTheCommandAndExportsItsBytes) {
     json expected = json::parse(cli.out);
     for (const char* file_key : {"image", "export"}) expected.erase(file_key);
 
-    const auto [status, answer] = Post("/api/aftersale", ApiRequest(scene, c.width, c.height).dump());
+    const auto [status, answer] =
+        Post("/api/aftersale", ApiRequest(scene, c.width, c.height).dump());
     ASSERT_EQ(status, 200) << answer.dump();
     // Equal as parsed JSON: every number the same double, every key and string the same.
     EXPECT_EQ(answer["result"], expected) << answer["result"].dump(2) << "\nvs\n"
@@ -228,8 +229,7 @@ TEST_F(AftersaleApiTest, CamerasAreTheCarModelsCamerasAtTheirNominalMounting) {
     EXPECT_EQ(in["intrinsics"]["fx"].get<double>(), s->intrinsics->fx);
     EXPECT_EQ(in["intrinsics"]["cy"].get<double>(), s->intrinsics->cy);
     EXPECT_EQ(in["camera_height_m"].get<double>(), s->T_car_sensor_nominal.translation().z());
-    EXPECT_EQ(in["longitudinal_offset_m"].get<double>(),
-              s->T_car_sensor_nominal.translation().x());
+    EXPECT_EQ(in["longitudinal_offset_m"].get<double>(), s->T_car_sensor_nominal.translation().x());
     if (c["camera"] == "front_camera") front = !in["looking_backward"].get<bool>();
     if (c["camera"] == "surround_rear") rear = in["looking_backward"].get<bool>();
   }

@@ -266,6 +266,31 @@ def test(args, work):
             given = json.load(f)
         check(given == dict(request["input"], image=f"{CAMERA}.png"), f"the input download: {given}")
 
+        # A lane point dragged above the horizon: the page shows the command's refusal. Its
+        # refused POST is the one console error allowed ("Failed to load resource ... 400").
+        check(not console.errors(driver), "console errors before the refusal")
+        first = page_points(driver)["lane0"][0]
+        x, y = round(rect[0] + (first[0] + 0.5) * scale), round(rect[1] + (first[1] + 0.5) * scale)
+        actions = ActionBuilder(driver)
+        actions.pointer_action.move_to_location(x, y).pointer_down()
+        actions.pointer_action.move_to_location(x, round(rect[1] + 20)).pointer_up()
+        actions.perform()
+        wait(driver, "the refusal", lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-refused"))
+        refused = json.loads(driver.find_element(By.TAG_NAME, "body").get_attribute("data-refused"))
+        path = os.path.join(work, "input-refused.json")
+        with open(path, "w") as f:
+            json.dump(dict(refused["input"], image=os.path.join(scene, f"{CAMERA}.png")), f)
+        out = subprocess.run([args.linecal, "aftersale", "--input", path], capture_output=True, text=True,
+                             timeout=console.WAIT_S)
+        check(out.returncode == 2 and "above the horizon" in out.stderr, f"the command on the refused points: {out.stderr}")
+        message = driver.find_element(By.ID, "message").text
+        check("Refused: " + out.stderr.removeprefix("linecal aftersale: ").strip() == message,
+              f"the page says '{message}', the command '{out.stderr.strip()}'")
+        check(driver.find_element(By.ID, "result").get_attribute("hidden") is not None, "a refused result is hidden")
+        refused_errors = console.errors(driver)
+        check(len(refused_errors) == 1 and "/api/aftersale" in refused_errors[0]["message"]
+              and "400" in refused_errors[0]["message"], f"console errors at the refusal: {refused_errors}")
+
         print(f"after-sale page: {sum(len(v) for v in points.values())} points clicked at scale {scale:.4f} "
               f"(worst {worst:.3f} px from the scene's points), {compared} numbers equal to linecal aftersale's, "
               f"3 export files equal byte for byte, certificate on {pages} page")
