@@ -85,7 +85,7 @@ nlohmann::json AftersaleCamerasJson(const std::vector<CarModel>& cars) {
            {"input", AftersaleCameraInput(s.name, *s.intrinsics, T.translation(), backward)}});
     }
   }
-  return {{"cameras", cameras}};
+  return {{"cameras", cameras}, {"max_photo_bytes", kMaxPhotoBytes}};
 }
 
 absl::StatusOr<nlohmann::json> AftersaleSolveJson(std::string_view body) {

@@ -45,7 +45,8 @@ absl::StatusOr<nlohmann::json> AftersalePhotoJson(std::string_view bytes);
 // GET /api/aftersale/cameras: {"cameras": [{car_model_id, camera, image_size: [w, h], input}]}
 // for every camera with intrinsics of the station's car models, in their order; `input` is the
 // input document's camera part at the nominal mounting (AftersaleCameraInput: intrinsics,
-// camera_height_m, offsets, looking_backward, tolerance_percent).
+// camera_height_m, offsets, looking_backward, tolerance_percent), and max_photo_bytes
+// (kMaxPhotoBytes), so that the page refuses a larger photo before sending it.
 nlohmann::json AftersaleCamerasJson(const std::vector<CarModel>& cars);
 
 // POST /api/aftersale: the body {"image_size": [w, h], "input": {...}} where input is the

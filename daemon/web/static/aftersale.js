@@ -94,6 +94,7 @@ class AftersalePage {
     await showLogout();
     const answer = await getJson("/api/aftersale/cameras");
     this.cameras = answer.cameras;
+    this.maxPhotoBytes = answer.max_photo_bytes;
     const select = $("camera");
     this.cameras.forEach((c, i) => {
       const option = document.createElement("option");
@@ -155,6 +156,11 @@ class AftersalePage {
     if (!file) return;
     this.showMessage("");
     delete document.body.dataset.photo;
+    if (file.size > this.maxPhotoBytes) {
+      this.showMessage("Photo refused: " + file.name + " is " + (file.size / 1048576).toFixed(1) +
+        " MiB, linecald takes at most " + (this.maxPhotoBytes / 1048576).toFixed(0) + " MiB.");
+      return;
+    }
     try {
       // The daemon reads it as `linecal aftersale` does (and refuses what it cannot read);
       // the page draws its own decode, of the same size.

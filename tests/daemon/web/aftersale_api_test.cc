@@ -213,7 +213,9 @@ TEST_F(AftersaleApiTest, OverlayIsTheCommandsLinesAtThePagesDensity) {
 TEST_F(AftersaleApiTest, CamerasAreTheCarModelsCamerasAtTheirNominalMounting) {
   httplib::Result r = Client().Get("/api/aftersale/cameras", Cookie());
   ASSERT_TRUE(r && r->status == 200);
-  const json cameras = json::parse(r->body)["cameras"];
+  const json answer = json::parse(r->body);
+  EXPECT_EQ(answer["max_photo_bytes"], kMaxPhotoBytes);
+  const json cameras = answer["cameras"];
   const json car = json::parse(ReadBytes(kDeploy + "/cars/reference.json"));
   size_t expected = 0;
   for (const json& s : car["sensors"]) expected += s["kind"] == "camera" ? 1 : 0;

@@ -213,6 +213,44 @@ TEST_F(ImageIoTest, JpegGreyAndColour) {
   EXPECT_NEAR(c->at(8, 8), 257 * (0.299 * 200 + 0.587 * 100 + 0.114 * 50), 257 * kJpegTolerance);
 }
 
+// DecodeImage8 reads bytes in memory (an upload) as ReadImage8 reads the same bytes in a file,
+// under the budget's byte and pixel limits, naming the upload in its errors.
+TEST_F(ImageIoTest, DecodeImage8ReadsBytesAsTheFile) {
+  Image8 grey(40, 30);
+  for (int y = 0; y < 30; ++y) {
+    for (int x = 0; x < 40; ++x) grey.at(x, y) = static_cast<std::uint8_t>(x * 6 + y);
+  }
+  ASSERT_TRUE(WritePng8(Path("g.png"), grey.view()).ok());
+  WriteGreyJpeg(Path("g.jpg"), grey, 90);
+  for (const char* name : {"g.png", "g.jpg"}) {
+    const absl::StatusOr<Image8> file = ReadImage8(Path(name));
+    const absl::StatusOr<Image8> memory = DecodeImage8(ReadBytes(Path(name)), "photo", {});
+    ASSERT_TRUE(file.ok() && memory.ok()) << name << ": " << memory.status();
+    ASSERT_EQ(memory->width, 40);
+    ASSERT_EQ(memory->height, 30);
+    for (int y = 0; y < 30; ++y) {
+      for (int x = 0; x < 40; ++x) ASSERT_EQ(memory->at(x, y), file->at(x, y)) << name;
+    }
+  }
+  const std::string png = ReadBytes(Path("g.png"));
+  EXPECT_EQ(DecodeImage8("not an image", "photo", {}).status().message(),
+            "photo: not a PNG or JPEG file");
+  EXPECT_EQ(DecodeImage8("", "photo", {}).status().message(), "photo: empty");
+  InputBudget small;
+  small.max_file_bytes = static_cast<std::int64_t>(png.size()) - 1;
+  EXPECT_EQ(DecodeImage8(png, "photo", small).status().message(),
+            OverBudget("photo", static_cast<std::int64_t>(png.size()), "bytes",
+                       small.max_file_bytes, "max_file_bytes")
+                .message());
+  InputBudget few;
+  few.max_image_pixels = 40 * 30 - 1;
+  EXPECT_NE(DecodeImage8(png, "photo", few).status().message().find("photo: 1200 pixels exceed"),
+            std::string::npos);
+  EXPECT_EQ(DecodeImage8(png.substr(0, png.size() / 2), "photo", {}).status().message().rfind(
+                "photo: bad PNG", 0),
+            0u);
+}
+
 TEST_F(ImageIoTest, ErrorsNameTheFile) {
   const absl::StatusOr<Image8> missing = ReadImage8(Path("missing.png"));
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
