@@ -291,6 +291,9 @@ def test(args, work):
         check(len(refused_errors) == 1 and "/api/aftersale" in refused_errors[0]["message"]
               and "400" in refused_errors[0]["message"], f"console errors at the refusal: {refused_errors}")
 
+        solve_ms = sorted(json.loads(driver.find_element(By.TAG_NAME, "body").get_attribute("data-solve-ms")))
+        print(f"after-sale page: {len(solve_ms)} solves, points sent to overlay drawn: median "
+              f"{solve_ms[len(solve_ms) // 2]:.1f} ms, worst {solve_ms[-1]:.1f} ms")
         print(f"after-sale page: {sum(len(v) for v in points.values())} points clicked at scale {scale:.4f} "
               f"(worst {worst:.3f} px from the scene's points), {compared} numbers equal to linecal aftersale's, "
               f"3 export files equal byte for byte, certificate on {pages} page")
