@@ -5,10 +5,12 @@
 //
 // Routes (docs/console.md, "API"):
 //   POST /api/login   {"token": "..."}: 200 and a session cookie (HttpOnly, SameSite=Strict,
-//                     Secure under TLS) when it is the daemon's auth_token; 401 JSON else;
-//                     409 when the daemon has no auth_token (nothing to log in to)
+//                     Secure under TLS) when it is the daemon's auth_token (a read-only
+//                     session) or the operator token (an operator session); 401 JSON else;
+//                     409 when the daemon has neither (nothing to log in to)
 //   POST /api/logout  ends the cookie's session
-//   GET  /api/session {login_required, role}: whether the pages need a login
+//   GET  /api/session {login_required, logged_in, operator_login, role}: whether the pages
+//                     need a login, and the session's role (sessions.h)
 //   GET  /api/status  the station (console_json.h StatusJson), as gRPC GetStationStatus
 //   GET  /api/cycles?limit=N&before=ID&vin=V&verdict=W
 //                     {cycles: [...], next_before: "ID" or ""} newest first, as ListCycles:

@@ -98,8 +98,12 @@
     figure.className = "view " + cls;
     figure.dataset.sensor = sensor;
     const [x0, y0] = at([box[0], box[2]]), [x1, y1] = at([box[1], box[3]]);
-    const left = Math.min(x0, x1), top = Math.min(y0, y1);
-    const width = Math.abs(x1 - x0), height = Math.abs(y1 - y0);
+    let left = Math.min(x0, x1), top = Math.min(y0, y1);
+    let width = Math.abs(x1 - x0), height = Math.abs(y1 - y0);
+    // Landscape, 4:3 to 3:2, so that a long narrow area (a radar's reflectors ahead) still
+    // fits the screen: the short side grows about the centre.
+    if (height > width * 0.75) { left -= (height / 0.75 - width) / 2; width = height / 0.75; }
+    if (width > height * 1.5) { top -= (width / 1.5 - height) / 2; height = width / 1.5; }
     const plot = svg("svg", { viewBox: [left, top, width, height].join(" "), class: "top" });
     plot.appendChild(svg("rect", { x: left, y: top, width: width, height: height, class: "ground" }));
     const s = Math.max(width, height) / 150;
