@@ -72,7 +72,9 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
     std::vector<BoardObservation> found =
         DetectCameraFrame(capture, sensor, image->view(), &out.boards, capture_options.stop);
     if (capture_options.stop.stop_requested()) return Stopped();
-    if (frame_index == 0 && capture_options.keep_first_frame_features) out.first_frame_observations = found;
+    if (frame_index == 0 && capture_options.keep_first_frame_features) {
+      out.first_frame_observations = found;
+    }
     for (BoardObservation& o : found) observations.push_back(std::move(o));
   }
   if (capture_options.stop.stop_requested()) return Stopped();
@@ -379,7 +381,8 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
   // views; without intrinsics CalibrateCamera reports the sensor's error.
   std::optional<CameraModel> camera;
   if (sensor.intrinsics) {
-    if (absl::StatusOr<CameraModel> m = CameraModel::Create(*sensor.intrinsics); m.ok()) camera = *std::move(m);
+    absl::StatusOr<CameraModel> m = CameraModel::Create(*sensor.intrinsics);
+    if (m.ok()) camera = *std::move(m);
   }
   const Rigid3d T_camera_station =
       sensor.T_car_sensor_nominal.Inverse() * capture.manifest.aligner.T_station_car().Inverse();
@@ -394,8 +397,9 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
       // Not found in the raw image: look again in a perspective view of where the board is
       // expected (station/camera/board_view.h), as a wide-angle lens bends it too far.
       const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
-      if (std::optional<Detection> v = DetectInBoardView(*camera, image, T_camera_board, board->board);
-          v && v->found) {
+      std::optional<Detection> v =
+          DetectInBoardView(*camera, image, T_camera_board, board->board);
+      if (v && v->found) {
         d = std::move(v);
       }
     }

@@ -20,7 +20,9 @@ namespace {
 constexpr double kLidarViewMarginM = 1.0;
 
 nlohmann::json Xy(double x, double y) { return nlohmann::json::array({x, y}); }
-nlohmann::json Xyz(const Eigen::Vector3d& p) { return nlohmann::json::array({p.x(), p.y(), p.z()}); }
+nlohmann::json Xyz(const Eigen::Vector3d& p) {
+  return nlohmann::json::array({p.x(), p.y(), p.z()});
+}
 
 // The mounting to draw with: the cycle's solved one (16 values, row-major), else the nominal.
 Rigid3d MountingOf(const SensorModel& sensor, const std::vector<double>& T_car_sensor) {
@@ -42,11 +44,13 @@ absl::StatusOr<nlohmann::json> CameraView(const Capture& capture, const SensorMo
   }
   absl::StatusOr<CameraModel> camera = CameraModel::Create(*sensor.intrinsics);
   if (!camera.ok()) return camera.status();
-  absl::StatusOr<Image8> image = ReadCaptureImage(capture, recorded.frames[static_cast<size_t>(frame)]);
+  absl::StatusOr<Image8> image =
+      ReadCaptureImage(capture, recorded.frames[static_cast<size_t>(frame)]);
   if (!image.ok()) return image.status();
   std::vector<BoardDetectionSummary> summaries;
   for (const std::string& id : sensor.targets) summaries.push_back({id, 0, 0, ""});
-  const std::vector<BoardObservation> found = DetectCameraFrame(capture, sensor, image->view(), &summaries);
+  const std::vector<BoardObservation> found =
+      DetectCameraFrame(capture, sensor, image->view(), &summaries);
 
   const Rigid3d T_camera_station =
       (capture.manifest.aligner.T_station_car() * MountingOf(sensor, T_car_sensor)).Inverse();
@@ -56,7 +60,8 @@ absl::StatusOr<nlohmann::json> CameraView(const Capture& capture, const SensorMo
     nlohmann::json detected = nlohmann::json::array(), reprojected = nlohmann::json::array();
     for (const BoardObservation& o : found) {
       if (o.board_id != sensor.targets[i]) continue;
-      for (const DetectedFeature& f : o.features) detected.push_back({f.id, f.uv_px.x(), f.uv_px.y()});
+      for (const DetectedFeature& f : o.features)
+        detected.push_back({f.id, f.uv_px.x(), f.uv_px.y()});
     }
     if (const StationBoard* board = capture.station.FindBoard(sensor.targets[i])) {
       const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
@@ -94,7 +99,8 @@ absl::StatusOr<nlohmann::json> CameraView(const Capture& capture, const SensorMo
 nlohmann::json Outline(const Board& board, const Rigid3d& T_frame_board) {
   const Eigen::Vector2d h = 0.5 * board.page_size_m();
   nlohmann::json corners = nlohmann::json::array();
-  for (const auto& [sx, sy] : std::array<std::pair<double, double>, 4>{{{-1, -1}, {1, -1}, {1, 1}, {-1, 1}}}) {
+  for (const auto& [sx, sy] :
+       std::array<std::pair<double, double>, 4>{{{-1, -1}, {1, -1}, {1, 1}, {-1, 1}}}) {
     corners.push_back(Xyz(T_frame_board * Eigen::Vector3d(sx * h.x(), sy * h.y(), 0)));
   }
   return corners;
@@ -147,7 +153,8 @@ absl::StatusOr<nlohmann::json> LidarView(const Capture& capture, const SensorMod
       view["outline"] = Outline(board->board, d.T_lidar_board);
       extend(view["outline"]);
       nlohmann::json holes = nlohmann::json::array();
-      for (const RoundHoleHole& h : d.holes) holes.push_back({{"id", h.id}, {"p", Xyz(h.p_lidar)}, {"rings", h.rings}});
+      for (const RoundHoleHole& h : d.holes)
+        holes.push_back({{"id", h.id}, {"p", Xyz(h.p_lidar)}, {"rings", h.rings}});
       view["holes"] = std::move(holes);
       view["plane_inliers"] = d.plane_inliers;
       view["plane_rms_m"] = d.plane_rms_m;
@@ -158,7 +165,9 @@ absl::StatusOr<nlohmann::json> LidarView(const Capture& capture, const SensorMod
   x1 += kLidarViewMarginM;
   y0 -= kLidarViewMarginM;
   y1 += kLidarViewMarginM;
-  auto inside = [&](const RoundHoleCloudPoint& p) { return p.x >= x0 && p.x <= x1 && p.y >= y0 && p.y <= y1; };
+  auto inside = [&](const RoundHoleCloudPoint& p) {
+    return p.x >= x0 && p.x <= x1 && p.y >= y0 && p.y <= y1;
+  };
   size_t in_area = 0, total = 0;
   for (const auto& f : frames) {
     total += f.size();
@@ -193,8 +202,9 @@ absl::StatusOr<nlohmann::json> RadarView(const Capture& capture, const SensorMod
   absl::StatusOr<std::vector<CanFrame>> frames = ReadCaptureCanLog(capture, *recorded.can_log);
   if (!frames.ok()) return frames.status();
   const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *model, RadarConventions{});
-  absl::StatusOr<RadarCalibrationRun> run = CalibrateRadar(
-      sensor, capture.station, capture.manifest.aligner.T_station_car(), decoded.cycles, RadarCalibrationOptions{});
+  absl::StatusOr<RadarCalibrationRun> run =
+      CalibrateRadar(sensor, capture.station, capture.manifest.aligner.T_station_car(),
+                     decoded.cycles, RadarCalibrationOptions{});
   if (!run.ok()) return run.status();
   const std::vector<RadarCycle> used = CalibrationCycles(decoded.cycles, sensor);
   size_t total = 0;
@@ -211,17 +221,19 @@ absl::StatusOr<nlohmann::json> RadarView(const Capture& capture, const SensorMod
   for (size_t i = 0; i < run->expected.size() && i < run->association.reflectors.size(); ++i) {
     const ExpectedReflector& e = run->expected[i];
     const ReflectorObservation& o = run->association.reflectors[i];
-    nlohmann::json r{{"id", e.reflector_id},
-                     {"in_view", e.in_view},
-                     {"status", ReflectorStatusName(o.status)},
-                     {"expected", Xy(e.range_m * std::cos(e.azimuth_rad), e.range_m * std::sin(e.azimuth_rad))},
-                     {"n_used", o.n_used}};
+    nlohmann::json r{
+        {"id", e.reflector_id},
+        {"in_view", e.in_view},
+        {"status", ReflectorStatusName(o.status)},
+        {"expected", Xy(e.range_m * std::cos(e.azimuth_rad), e.range_m * std::sin(e.azimuth_rad))},
+        {"n_used", o.n_used}};
     if (o.status == ReflectorStatus::kFound) {
       r["found"] = Xy(o.range_m * std::cos(o.azimuth_rad), o.range_m * std::sin(o.azimuth_rad));
     }
     for (const RadarReflectorResidual& res : run->result.residuals) {
       if (res.reflector_id != e.reflector_id) continue;
-      r["solved"] = Xy(e.range_m * std::cos(res.azimuth_predicted_rad), e.range_m * std::sin(res.azimuth_predicted_rad));
+      r["solved"] = Xy(e.range_m * std::cos(res.azimuth_predicted_rad),
+                       e.range_m * std::sin(res.azimuth_predicted_rad));
     }
     reflectors.push_back(std::move(r));
   }
@@ -252,7 +264,8 @@ absl::StatusOr<nlohmann::json> SensorViewJson(const Capture& capture, const std:
   const CaptureSensor* recorded = capture.manifest.FindSensor(sensor);
   const SensorModel* model = capture.car.FindSensor(sensor);
   if (recorded == nullptr || model == nullptr) {
-    return absl::NotFoundError(absl::StrCat("sensor: '", sensor.substr(0, 64), "' is not in the capture"));
+    return absl::NotFoundError(
+        absl::StrCat("sensor: '", sensor.substr(0, 64), "' is not in the capture"));
   }
   switch (model->kind) {
     case SensorKind::kCamera:

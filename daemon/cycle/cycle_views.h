@@ -15,11 +15,10 @@
 // Numbers are metres and pixels; points are [x, y] arrays (features [id, u, v]) to keep a
 // view of 20,000 points near 400 kB.
 
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "station/capture/capture.h"

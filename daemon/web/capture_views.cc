@@ -25,8 +25,8 @@ const char* ContentTypeOf(const std::string& path) {
 absl::StatusOr<size_t> ParseIndex(const std::string& text, size_t size, const char* what) {
   size_t index = 0;
   if (!absl::SimpleAtoi(text, &index) || index >= size) {
-    return absl::InvalidArgumentError(absl::StrCat(what, " = ", QuoteInput(text), ": must be in [0, ",
-                                                   size, ")"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, " = ", QuoteInput(text), ": must be in [0, ", size, ")"));
   }
   return index;
 }
@@ -39,7 +39,8 @@ absl::StatusOr<nlohmann::json> CaptureViews::Files(int64_t cycle_id) {
   if (absl::IsFailedPrecondition(capture.status()) &&
       (absl::StartsWith(capture.status().message(), "capture_not_kept") ||
        absl::StartsWith(capture.status().message(), "capture_unreadable"))) {
-    return nlohmann::json{{"cycle_id", id}, {"kept", false}, {"reason", capture.status().message()}};
+    return nlohmann::json{
+        {"cycle_id", id}, {"kept", false}, {"reason", capture.status().message()}};
   }
   if (!capture.ok()) return capture.status();
   nlohmann::json files = nlohmann::json::array();
@@ -69,7 +70,8 @@ absl::StatusOr<CaptureFileToSend> CaptureViews::File(int64_t cycle_id, const std
   out.bytes = fs::file_size(out.path, ec);
   if (ec) return absl::NotFoundError(absl::StrCat("file ", *i, ": ", ec.message()));
   out.content_type = ContentTypeOf(list[*i].path);
-  out.download_name = absl::StrCat("cycle-", cycle_id, "-", absl::StrReplaceAll(list[*i].path, {{"/", "_"}}));
+  out.download_name =
+      absl::StrCat("cycle-", cycle_id, "-", absl::StrReplaceAll(list[*i].path, {{"/", "_"}}));
   return out;
 }
 

@@ -12,10 +12,9 @@
 #include <cstdint>
 #include <list>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "daemon/core/station_core.h"
@@ -27,9 +26,9 @@ inline constexpr size_t kViewCacheSize = 32;
 
 // A file of a capture to send: where it is, its size and how the browser should take it.
 struct CaptureFileToSend {
-  std::string path;          // on disk, inside the capture
+  std::string path;  // on disk, inside the capture
   std::uint64_t bytes = 0;
-  std::string content_type;  // image/png, application/json, text/plain, application/octet-stream
+  std::string content_type;   // image/png, application/json, text/plain, application/octet-stream
   std::string download_name;  // cycle-<id>-<path with '/' as '_'>
 };
 

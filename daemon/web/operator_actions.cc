@@ -10,9 +10,9 @@ namespace linecal {
 absl::Status CheckSameSiteAction(const std::string& action_header, const std::string& origin,
                                  const std::string& host, bool tls) {
   if (action_header != kActionHeaderValue) {
-    return absl::PermissionDeniedError(absl::StrCat(
-        "csrf: the request lacks the header ", kActionHeader, ": ", kActionHeaderValue,
-        " that the console's pages send"));
+    return absl::PermissionDeniedError(absl::StrCat("csrf: the request lacks the header ",
+                                                    kActionHeader, ": ", kActionHeaderValue,
+                                                    " that the console's pages send"));
   }
   if (!origin.empty() && origin != absl::StrCat(tls ? "https://" : "http://", host)) {
     return absl::PermissionDeniedError(

@@ -5,6 +5,8 @@
 // counts, a reprojected board feature computed here from the stored mounting, the LiDAR holes
 // of CalibrateLidarFrames, the radar's reflectors), refusals of bad ids; operator POSTs
 // refused for read-only sessions and cross-site requests, taken for an operator.
+#include "daemon/cycle/cycle_views.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -14,7 +16,6 @@
 #include <string>
 
 #include "daemon/cycle/capture_calibration.h"
-#include "daemon/cycle/cycle_views.h"
 #include "daemon/web/operator_actions.h"
 #include "daemon/web/web_server.h"
 #include "station/camera/camera_model.h"
@@ -63,7 +64,8 @@ class CycleViewsTest : public ::testing::Test {
   }
   httplib::Client Client() const { return httplib::Client("127.0.0.1", web_->port()); }
   std::string Login(const std::string& token) const {
-    httplib::Result r = Client().Post("/api/login", json{{"token", token}}.dump(), "application/json");
+    httplib::Result r =
+        Client().Post("/api/login", json{{"token", token}}.dump(), "application/json");
     EXPECT_TRUE(r && r->status == 200);
     if (!r) return "";
     const std::string cookie = r->get_header_value("Set-Cookie");
@@ -145,7 +147,8 @@ TEST_F(CycleViewsTest, ViewsEqualWhatTheCycleComputed) {
       // Every feature the cycle detected in the frame, in order, as equal doubles.
       std::vector<json> expected;
       for (const BoardObservation& o : s.first_frame_observations) {
-        for (const DetectedFeature& f : o.features) expected.push_back({o.board_id, f.id, f.uv_px.x(), f.uv_px.y()});
+        for (const DetectedFeature& f : o.features)
+          expected.push_back({o.board_id, f.id, f.uv_px.x(), f.uv_px.y()});
       }
       std::vector<json> shown;
       for (const json& b : view["boards"]) {
@@ -156,8 +159,8 @@ TEST_F(CycleViewsTest, ViewsEqualWhatTheCycleComputed) {
       // The frame under the overlay is the capture's file, byte for byte.
       const size_t image = view["image"].get<size_t>();
       EXPECT_EQ(list[image].path, view["file"]);
-      httplib::Result png = Client().Get((base + "/capture/" + std::to_string(image)).c_str(),
-                                         {{"Cookie", reader_}});
+      httplib::Result png =
+          Client().Get((base + "/capture/" + std::to_string(image)).c_str(), {{"Cookie", reader_}});
       ASSERT_TRUE(png);
       EXPECT_EQ(png->status, 200);
       EXPECT_EQ(png->get_header_value("Content-Type"), "image/png");
@@ -173,13 +176,15 @@ TEST_F(CycleViewsTest, ViewsEqualWhatTheCycleComputed) {
       const StationBoard* board = capture->station.FindBoard(board_view["id"]);
       ASSERT_NE(board, nullptr);
       Eigen::Matrix4d T_car_camera;
-      for (int i = 0; i < 16; ++i) T_car_camera(i / 4, i % 4) = result->T_car_sensor[static_cast<size_t>(i)];
-      const Eigen::Matrix4d T_camera_board = T_car_camera.inverse() *
-                                             capture->manifest.aligner.T_station_car().Matrix().inverse() *
-                                             board->T_station_board.Matrix();
+      for (int i = 0; i < 16; ++i)
+        T_car_camera(i / 4, i % 4) = result->T_car_sensor[static_cast<size_t>(i)];
+      const Eigen::Matrix4d T_camera_board =
+          T_car_camera.inverse() * capture->manifest.aligner.T_station_car().Matrix().inverse() *
+          board->T_station_board.Matrix();
       const Eigen::Vector2d p_board = board->board.features()[first[0].get<size_t>()].p_board;
       const Eigen::Vector4d p = T_camera_board * Eigen::Vector4d(p_board.x(), p_board.y(), 0, 1);
-      absl::StatusOr<CameraModel> camera = CameraModel::Create(*capture->car.FindSensor(s.name)->intrinsics);
+      absl::StatusOr<CameraModel> camera =
+          CameraModel::Create(*capture->car.FindSensor(s.name)->intrinsics);
       ASSERT_TRUE(camera.ok());
       Eigen::Vector2d uv;
       ASSERT_TRUE(camera->Project(p.head<3>(), &uv));
@@ -197,7 +202,8 @@ TEST_F(CycleViewsTest, ViewsEqualWhatTheCycleComputed) {
       }
       const std::vector<std::span<const RoundHoleCloudPoint>> spans(frames.begin(), frames.end());
       std::vector<RoundHoleCloudDetection> detections;
-      CalibrateLidarFrames(capture->station, capture->manifest.aligner.T_station_car(), model, spans, &detections);
+      CalibrateLidarFrames(capture->station, capture->manifest.aligner.T_station_car(), model,
+                           spans, &detections);
       ASSERT_EQ(view["boards"].size(), detections.size());
       int holes = 0;
       for (size_t b = 0; b < detections.size(); ++b) {
@@ -207,7 +213,8 @@ TEST_F(CycleViewsTest, ViewsEqualWhatTheCycleComputed) {
         ASSERT_EQ(shown.size(), detections[b].holes.size());
         for (size_t h = 0; h < shown.size(); ++h) {
           EXPECT_EQ(shown[h]["id"], detections[b].holes[h].id);
-          for (int k = 0; k < 3; ++k) EXPECT_EQ(shown[h]["p"][k], detections[b].holes[h].p_lidar[k]);
+          for (int k = 0; k < 3; ++k)
+            EXPECT_EQ(shown[h]["p"][k], detections[b].holes[h].p_lidar[k]);
         }
         holes += static_cast<int>(shown.size());
       }
@@ -241,14 +248,16 @@ TEST_F(CycleViewsTest, RefusesWhatIsNotThere) {
   EXPECT_EQ(status, 400);
   std::tie(status, body) = GetJson(base + "/views/no_such_sensor");
   EXPECT_EQ(status, 404);
-  EXPECT_EQ(body["error"], "sensor: 'no_such_sensor' is not in cycle " + std::to_string(id) + "'s capture");
+  EXPECT_EQ(body["error"],
+            "sensor: 'no_such_sensor' is not in cycle " + std::to_string(id) + "'s capture");
   std::tie(status, body) = GetJson(base + "/views/front_camera?frame=1");
   EXPECT_EQ(status, 400);
   EXPECT_EQ(body["error"], "frame = 1: front_camera has 1 frames");
   std::tie(status, body) = GetJson("/api/cycles/77/capture");
   EXPECT_EQ(status, 404);
   // A path instead of an index never reaches a file.
-  httplib::Result r = Client().Get((base + "/capture/..%2Fstation.db").c_str(), {{"Cookie", reader_}});
+  httplib::Result r =
+      Client().Get((base + "/capture/..%2Fstation.db").c_str(), {{"Cookie", reader_}});
   ASSERT_TRUE(r);
   EXPECT_NE(r->status, 200);
 
@@ -262,8 +271,9 @@ TEST_F(CycleViewsTest, RefusesWhatIsNotThere) {
   std::tie(status, body) = GetJson(plain + "/capture");
   EXPECT_EQ(status, 200);
   EXPECT_FALSE(body["kept"]);
-  EXPECT_EQ(body["reason"], "capture_not_kept: cycle " + std::to_string(id + 1) +
-                                "'s capture was not kept (the cycle was started without record_capture)");
+  EXPECT_EQ(body["reason"],
+            "capture_not_kept: cycle " + std::to_string(id + 1) +
+                "'s capture was not kept (the cycle was started without record_capture)");
   std::tie(status, body) = GetJson(plain + "/views/front_camera");
   EXPECT_EQ(status, 409);
 }
@@ -274,12 +284,14 @@ TEST_F(CycleViewsTest, OnlyOperatorsStartAndCancelCycles) {
   auto [status, body] = Post("/api/cycles", start, reader_);
   EXPECT_EQ(status, 403);
   EXPECT_EQ(body["code"], "permission_denied");
-  EXPECT_EQ(body["error"], "operator role required: this session is read-only; log in with the operator token");
+  EXPECT_EQ(body["error"],
+            "operator role required: this session is read-only; log in with the operator token");
   // An operator's cookie without the action header (a form of another site) or from another
   // origin: refused before anything else.
   std::tie(status, body) = Post("/api/cycles", start, operator_, false);
   EXPECT_EQ(status, 403);
-  EXPECT_EQ(body["error"], "csrf: the request lacks the header X-Linecal-Action: 1 that the console's pages send");
+  EXPECT_EQ(body["error"],
+            "csrf: the request lacks the header X-Linecal-Action: 1 that the console's pages send");
   std::tie(status, body) = Post("/api/cycles", start, operator_, true, "http://evil.example");
   EXPECT_EQ(status, 403);
   EXPECT_EQ(body["error"], "csrf: Origin 'http://evil.example' is not this console's");
@@ -310,13 +322,15 @@ TEST_F(CycleViewsTest, OnlyOperatorsStartAndCancelCycles) {
   std::tie(status, body) = Post("/api/cycles", {{"vin", kVin}}, operator_);
   EXPECT_EQ(status, 400);
   EXPECT_EQ(body["error"], "request: car_model_id: missing");
-  std::tie(status, body) = Post("/api/cycles", {{"vin", "123"}, {"car_model_id", "reference"}}, operator_);
+  std::tie(status, body) =
+      Post("/api/cycles", {{"vin", "123"}, {"car_model_id", "reference"}}, operator_);
   EXPECT_EQ(status, 400);
   EXPECT_EQ(body["error"].get<std::string>().rfind("vin: ", 0), 0u) << body;
 
   // Cancel: read-only refused, the operator's accepted, the cycle ends cancelled; a second
   // cancel of the ended cycle is 409 as CancelCycle's FailedPrecondition.
-  std::tie(status, body) = Post("/api/cycles", {{"vin", kVin}, {"car_model_id", "reference"}}, operator_);
+  std::tie(status, body) =
+      Post("/api/cycles", {{"vin", kVin}, {"car_model_id", "reference"}}, operator_);
   ASSERT_EQ(status, 200) << body;
   const std::string running = body["cycle_id"];
   std::tie(status, body) = Post("/api/cycles/" + running + "/cancel", json::object(), reader_);
@@ -335,7 +349,8 @@ TEST(OperatorActionsTest, SameSiteCheck) {
   EXPECT_TRUE(CheckSameSiteAction("1", "", "station:8080", false).ok());
   EXPECT_TRUE(CheckSameSiteAction("1", "http://station:8080", "station:8080", false).ok());
   EXPECT_TRUE(CheckSameSiteAction("1", "https://station:8443", "station:8443", true).ok());
-  EXPECT_TRUE(absl::IsPermissionDenied(CheckSameSiteAction("1", "http://station:8443", "station:8443", true)));
+  EXPECT_TRUE(absl::IsPermissionDenied(
+      CheckSameSiteAction("1", "http://station:8443", "station:8443", true)));
   EXPECT_TRUE(absl::IsPermissionDenied(CheckSameSiteAction("", "", "station:8080", false)));
   EXPECT_TRUE(absl::IsPermissionDenied(CheckSameSiteAction("1", "null", "station:8080", false)));
 }
