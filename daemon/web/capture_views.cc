@@ -2,10 +2,9 @@
 
 #include <filesystem>
 
-#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_replace.h"
+#include "absl/strings/ascii.h"
 #include "daemon/cycle/cycle_views.h"
 
 namespace linecal {
@@ -36,9 +35,8 @@ absl::StatusOr<size_t> ParseIndex(const std::string& text, size_t size, const ch
 absl::StatusOr<nlohmann::json> CaptureViews::Files(int64_t cycle_id) {
   absl::StatusOr<Capture> capture = core_->CycleCapture(cycle_id);
   const std::string id = std::to_string(cycle_id);
-  if (absl::IsFailedPrecondition(capture.status()) &&
-      (absl::StartsWith(capture.status().message(), "capture_not_kept") ||
-       absl::StartsWith(capture.status().message(), "capture_unreadable"))) {
+  // Running, not kept or unreadable: the page says why there is nothing to show.
+  if (absl::IsFailedPrecondition(capture.status())) {
     return nlohmann::json{
         {"cycle_id", id}, {"kept", false}, {"reason", capture.status().message()}};
   }
@@ -70,8 +68,12 @@ absl::StatusOr<CaptureFileToSend> CaptureViews::File(int64_t cycle_id, const std
   out.bytes = fs::file_size(out.path, ec);
   if (ec) return absl::NotFoundError(absl::StrCat("file ", *i, ": ", ec.message()));
   out.content_type = ContentTypeOf(list[*i].path);
-  out.download_name =
-      absl::StrCat("cycle-", cycle_id, "-", absl::StrReplaceAll(list[*i].path, {{"/", "_"}}));
+  out.download_name = absl::StrCat("cycle-", cycle_id, "-", list[*i].path);
+  // A replayed capture comes from outside: only these characters go into the header's
+  // quoted file name, so that no quote or line break of a path ends up there.
+  for (char& c : out.download_name) {
+    if (!absl::ascii_isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '-') c = '_';
+  }
   return out;
 }
 

@@ -29,7 +29,7 @@ struct CaptureFileToSend {
   std::string path;  // on disk, inside the capture
   std::uint64_t bytes = 0;
   std::string content_type;   // image/png, application/json, text/plain, application/octet-stream
-  std::string download_name;  // cycle-<id>-<path with '/' as '_'>
+  std::string download_name;  // cycle-<id>-<path>, every byte but [A-Za-z0-9.-] as '_'
 };
 
 class CaptureViews {
@@ -37,9 +37,9 @@ class CaptureViews {
   explicit CaptureViews(StationCore* core) : core_(core) {}
 
   // {cycle_id, kept: true, files: [{index, path, sensor, role, bytes}]}, or {cycle_id, kept:
-  // false, reason} when the cycle's capture was not kept or does not read (an answer, not an
-  // error: most cycles keep none). NotFound for an unknown cycle; FailedPrecondition while it
-  // runs. Cost: ReadCapture's plus a stat per file.
+  // false, reason} while the cycle runs or when its capture was not kept or does not read
+  // (CycleCapture's FailedPrecondition message; an answer, not an error: most cycles keep
+  // none). NotFound for an unknown cycle. Cost: ReadCapture's plus a stat per file.
   absl::StatusOr<nlohmann::json> Files(int64_t cycle_id);
   // File `index` (decimal, of Files' list). InvalidArgument for an index that is not one;
   // errors of CycleCapture.

@@ -88,8 +88,32 @@
     figure.appendChild(legend([["detected", "detected (" + view.detected_features + ")"],
                                ["reprojected", "board at the " + view.mounting + " mounting (" +
                                                view.reprojected_features + ")"]]));
-    figure.appendChild(text("figcaption", "frame " + (view.frame + 1) + " of " + view.frames + " · " + boards));
+    const caption = text("figcaption", "frame " + (view.frame + 1) + " of " + view.frames + " · " + boards);
+    if (view.frames > 1) caption.prepend(frameChoice(view, cycleId, figure), " ");
+    figure.appendChild(caption);
     return figure;
+  }
+
+  // A camera with several frames: a choice of frame that replaces the figure by that frame's.
+  function frameChoice(view, cycleId, figure) {
+    const select = document.createElement("select");
+    select.className = "frame-choice";
+    for (let k = 0; k < view.frames; ++k) {
+      const option = text("option", "frame " + (k + 1));
+      option.value = String(k);
+      option.selected = k === view.frame;
+      select.appendChild(option);
+    }
+    select.addEventListener("change", async () => {
+      try {
+        const next = await json("/api/cycles/" + encodeURIComponent(cycleId) + "/views/" +
+                                encodeURIComponent(view.sensor) + "?frame=" + select.value);
+        figure.replaceWith(cameraView(next, cycleId));
+      } catch (error) {
+        figure.appendChild(text("p", "view: " + error.message, "message"));
+      }
+    });
+    return select;
   }
 
   // A top view: `at` maps a sensor-frame [x, y] to SVG coordinates (forward up).

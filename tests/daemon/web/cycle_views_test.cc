@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -164,6 +165,10 @@ TEST_F(CycleViewsTest, ViewsEqualWhatTheCycleComputed) {
       ASSERT_TRUE(png);
       EXPECT_EQ(png->status, 200);
       EXPECT_EQ(png->get_header_value("Content-Type"), "image/png");
+      std::string name = list[image].path;
+      std::replace(name.begin(), name.end(), '/', '_');
+      EXPECT_EQ(png->get_header_value("Content-Disposition"),
+                "attachment; filename=\"cycle-" + std::to_string(id) + "-" + name + "\"");
       std::ifstream in(fs::path(capture->dir) / list[image].path, std::ios::binary);
       std::ostringstream bytes;
       bytes << in.rdbuf();
@@ -276,6 +281,14 @@ TEST_F(CycleViewsTest, RefusesWhatIsNotThere) {
                 "'s capture was not kept (the cycle was started without record_capture)");
   std::tie(status, body) = GetJson(plain + "/views/front_camera");
   EXPECT_EQ(status, 409);
+
+  // While a cycle runs its capture is not shown yet: said, not refused.
+  ASSERT_TRUE(core_->StartCycle(request).ok());
+  const std::string running = "/api/cycles/" + std::to_string(id + 2);
+  std::tie(status, body) = GetJson(running + "/capture");
+  EXPECT_EQ(status, 200);
+  EXPECT_FALSE(body["kept"]);
+  EXPECT_EQ(body["reason"], "cycle " + std::to_string(id + 2) + " is running");
 }
 
 TEST_F(CycleViewsTest, OnlyOperatorsStartAndCancelCycles) {
