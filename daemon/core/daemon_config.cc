@@ -286,7 +286,7 @@ bool IsListenAddress(const std::string& address) {
 // The `web` object (docs/daemon.md, "Console"): where the console listens, its TLS (the
 // shape of the top-level tls) and its pages' folder.
 absl::StatusOr<WebConfig> ReadWeb(const JsonField& f, const fs::path& base) {
-  if (absl::Status s = f.AllowOnlyKeys({"listen", "tls", "static_dir"}); !s.ok()) return s;
+  if (absl::Status s = f.AllowOnlyKeys({"listen", "tls", "static_dir", "operator_token"}); !s.ok()) return s;
   WebConfig c;
   absl::StatusOr<std::string> listen = f.String("listen");
   if (!listen.ok()) return listen.status();
@@ -308,6 +308,9 @@ absl::StatusOr<WebConfig> ReadWeb(const JsonField& f, const fs::path& base) {
     if (!tls.ok()) return tls.status();
     c.tls = *std::move(tls);
   }
+  absl::StatusOr<std::string> operator_token = f.StringOr("operator_token", "");
+  if (!operator_token.ok()) return operator_token.status();
+  c.operator_token = *operator_token;
   return c;
 }
 
@@ -459,6 +462,10 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
     absl::StatusOr<WebConfig> web = ReadWeb(*web_field, base);
     if (!web.ok()) return web.status();
     c.web = *std::move(web);
+    // One token, one role: a login with it could not say which session it opens.
+    if (!c.web->operator_token.empty() && c.web->operator_token == c.auth_token) {
+      return web_field->Error("operator_token", "must differ from auth_token");
+    }
   }
   return c;
 }

@@ -37,6 +37,9 @@ struct WebConfig {
   std::optional<TlsConfig> tls;  // absent: plain HTTP
   // The pages' folder; empty: found from the binary's place (daemon/web/web_server.h).
   std::string static_dir;
+  // A login with it is an operator session (start and cancel cycles from the live page);
+  // empty: nobody may (docs/console.md, "Login and roles"). Never equal to auth_token.
+  std::string operator_token;
 };
 
 struct DaemonConfig {

@@ -825,6 +825,33 @@ absl::StatusOr<CyclePage> StationCore::ListCycles(const CycleFilter& filter) {
   return page;
 }
 
+absl::StatusOr<Capture> StationCore::CycleCapture(int64_t cycle_id) {
+  absl::StatusOr<StoredCycle> cycle = GetCycle(cycle_id);
+  if (!cycle.ok()) return cycle.status();
+  if (cycle->state == CycleState::kRunning) {
+    return absl::FailedPreconditionError(absl::StrCat("cycle ", cycle_id, " is running"));
+  }
+  std::error_code ec;
+  if (cycle->capture_path.empty() ||
+      !fs::is_directory(fs::path(config_.data_root) / cycle->capture_path, ec)) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "capture_not_kept: cycle ", cycle_id,
+        "'s capture was not kept (the cycle was started without record_capture)"));
+  }
+  // The store's path is the core's own, but a folder below the data root may have been
+  // replaced by a link since: checked as a replay capture is.
+  absl::StatusOr<fs::path> dir = ResolveInside(config_.data_root, cycle->capture_path,
+                                               absl::StrCat("'", cycle->capture_path, "'"),
+                                               "data_root");
+  if (!dir.ok()) return dir.status();
+  absl::StatusOr<Capture> capture = ReadCapture(dir->string(), config_.input_budget);
+  if (!capture.ok()) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("capture_unreadable: ", capture.status().message()));
+  }
+  return capture;
+}
+
 absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event) {
   if (absl::StatusOr<StoredCycle> c = store_->GetCycle(cycle_id); !c.ok()) return c.status();
   int64_t next = 0;

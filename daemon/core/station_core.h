@@ -164,6 +164,13 @@ class StationCore {
   absl::Status CancelCycle(int64_t cycle_id);
   absl::StatusOr<StoredCycle> GetCycle(int64_t cycle_id);
   absl::StatusOr<CyclePage> ListCycles(const CycleFilter& filter);
+  // The capture of an ended cycle when it was kept (record_capture, or the replay source's),
+  // read as a replay reads it: inside the data root after resolving links, ReadCapture under
+  // the input budget. NotFound for an unknown cycle; FailedPrecondition while the cycle runs,
+  // or when its capture was not kept or is gone ("capture_not_kept: ..."); InvalidArgument
+  // when it resolves outside the data root or does not read. Cost: ReadCapture's (stat calls
+  // and three small JSON files).
+  absl::StatusOr<Capture> CycleCapture(int64_t cycle_id);
   // Calls on_event for every event of the cycle in order, those already stored first, then
   // as they come, until the cycle has ended and all its events were delivered (OK), or
   // on_event returns false (Cancelled: the watcher went away). NotFound for unknown ids.

@@ -58,19 +58,7 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
                                         const CaptureSensor& recorded, const CaptureCalibrationOptions& capture_options) {
   const CameraCalibrationOptions& options = capture_options.camera;
   SensorCalibration out;
-  std::vector<const StationBoard*> boards;
-  for (const std::string& id : sensor.targets) {
-    if (const StationBoard* b = capture.station.FindBoard(id)) boards.push_back(b);
-    out.boards.push_back({id, 0, 0, ""});
-  }
-  // The camera model and the nominal pose of the station in the camera frame, for the board
-  // views; without intrinsics CalibrateCamera below reports the sensor's error.
-  std::optional<CameraModel> camera;
-  if (sensor.intrinsics) {
-    if (absl::StatusOr<CameraModel> m = CameraModel::Create(*sensor.intrinsics); m.ok()) camera = *std::move(m);
-  }
-  const Rigid3d T_camera_station =
-      sensor.T_car_sensor_nominal.Inverse() * capture.manifest.aligner.T_station_car().Inverse();
+  for (const std::string& id : sensor.targets) out.boards.push_back({id, 0, 0, ""});
   std::vector<BoardObservation> observations;
   for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
     if (capture_options.stop.stop_requested()) return Stopped();
@@ -81,36 +69,13 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
       out.message = std::string(image.status().message());
       return out;
     }
-    for (size_t i = 0; i < boards.size(); ++i) {
-      if (capture_options.stop.stop_requested()) return Stopped();
-      std::optional<Detection> d = DetectBoard(image->view(), boards[i]->board);
-      if (d && !d->found && camera) {
-        // Not found in the raw image: look again in a perspective view of where the board is
-        // expected (station/camera/board_view.h), as a wide-angle lens bends it too far.
-        const Rigid3d T_camera_board = T_camera_station * boards[i]->T_station_board;
-        if (std::optional<Detection> v = DetectInBoardView(*camera, image->view(), T_camera_board, boards[i]->board);
-            v && v->found) {
-          d = std::move(v);
-        }
-      }
-      if (!d) {
-        out.boards[i].last_reason = "no_detector";
-        continue;
-      }
-      // Whole boards, and partial views whose reported features the detector is certain of.
-      if (d->found) {
-        ++out.boards[i].frames_found;
-      } else if (d->reason == DetectReason::kPartial && !d->features.empty()) {
-        ++out.boards[i].frames_partial;
-      } else {
-        out.boards[i].last_reason = DetectReasonName(d->reason);
-        continue;
-      }
-      observations.push_back({boards[i]->id, d->features});
-      if (frame_index == 0 && capture_options.keep_first_frame_features) {
-        out.first_frame_observations.push_back(observations.back());
-      }
+    std::vector<BoardObservation> found =
+        DetectCameraFrame(capture, sensor, image->view(), &out.boards, capture_options.stop);
+    if (capture_options.stop.stop_requested()) return Stopped();
+    if (frame_index == 0 && capture_options.keep_first_frame_features) {
+      out.first_frame_observations = found;
     }
+    for (BoardObservation& o : found) observations.push_back(std::move(o));
   }
   if (capture_options.stop.stop_requested()) return Stopped();
   absl::StatusOr<CameraCalibrationResult> r =
@@ -406,6 +371,54 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
   absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, station, T_station_car, observations);
   if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
   return out;
+}
+
+std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const SensorModel& sensor,
+                                                const ImageView8& image,
+                                                std::vector<BoardDetectionSummary>* summaries,
+                                                std::stop_token stop) {
+  // The camera model and the nominal pose of the station in the camera frame, for the board
+  // views; without intrinsics CalibrateCamera reports the sensor's error.
+  std::optional<CameraModel> camera;
+  if (sensor.intrinsics) {
+    absl::StatusOr<CameraModel> m = CameraModel::Create(*sensor.intrinsics);
+    if (m.ok()) camera = *std::move(m);
+  }
+  const Rigid3d T_camera_station =
+      sensor.T_car_sensor_nominal.Inverse() * capture.manifest.aligner.T_station_car().Inverse();
+  std::vector<BoardObservation> observations;
+  for (size_t i = 0; i < sensor.targets.size(); ++i) {
+    if (stop.stop_requested()) break;
+    const StationBoard* board = capture.station.FindBoard(sensor.targets[i]);
+    if (board == nullptr) continue;
+    BoardDetectionSummary& summary = (*summaries)[i];
+    std::optional<Detection> d = DetectBoard(image, board->board);
+    if (d && !d->found && camera) {
+      // Not found in the raw image: look again in a perspective view of where the board is
+      // expected (station/camera/board_view.h), as a wide-angle lens bends it too far.
+      const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
+      std::optional<Detection> v =
+          DetectInBoardView(*camera, image, T_camera_board, board->board);
+      if (v && v->found) {
+        d = std::move(v);
+      }
+    }
+    if (!d) {
+      summary.last_reason = "no_detector";
+      continue;
+    }
+    // Whole boards, and partial views whose reported features the detector is certain of.
+    if (d->found) {
+      ++summary.frames_found;
+    } else if (d->reason == DetectReason::kPartial && !d->features.empty()) {
+      ++summary.frames_partial;
+    } else {
+      summary.last_reason = DetectReasonName(d->reason);
+      continue;
+    }
+    observations.push_back({board->id, d->features});
+  }
+  return observations;
 }
 
 }  // namespace linecal

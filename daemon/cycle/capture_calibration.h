@@ -103,6 +103,17 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
                                        std::span<const std::span<const RoundHoleCloudPoint>> frames,
                                        std::vector<RoundHoleCloudDetection>* detections = nullptr);
 
+// The target boards of camera `sensor` in one frame, as a cycle detects them (the cycle page
+// draws the same): DetectBoard on the image, else DetectInBoardView where the nominal
+// mounting and the capture's aligner put the board; whole boards and the certain features of
+// partial views, in sensor.targets order. `summaries` (one per target, same order) count the
+// frames found and keep the last reason. Returns what was found before a stop was requested.
+// Cost: the detectors' (tens to hundreds of ms a board on the reference frames).
+std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const SensorModel& sensor,
+                                                const ImageView8& image,
+                                                std::vector<BoardDetectionSummary>* summaries,
+                                                std::stop_token stop = {});
+
 // The results document of docs/interfaces.md ("Results"): per sensor name, kind, verdict, reason,
 // message, T_car_sensor (4x4 row-major), yaw/pitch/roll (deg) and x/y/z (m), their deviation
 // and 1-sigma, residual RMS, features used; cameras also the vanishing point, the ground

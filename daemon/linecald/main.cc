@@ -242,9 +242,11 @@ int main(int argc, char** argv) {
   if (config->web) {
     const std::string pages =
         linecal::FindStaticDir(config->web->static_dir, LINECAL_WEB_STATIC_DIR);
-    absl::StatusOr<std::unique_ptr<linecal::WebServer>> started = linecal::WebServer::Start(
-        core->get(),
-        {config->web->listen, config->web->tls, pages, config->auth_token, LINECAL_VERSION});
+    linecal::WebServerOptions options{config->web->listen, config->web->tls, pages,
+                                      config->auth_token, LINECAL_VERSION};
+    options.operator_token = config->web->operator_token;
+    absl::StatusOr<std::unique_ptr<linecal::WebServer>> started =
+        linecal::WebServer::Start(core->get(), std::move(options));
     if (!started.ok()) {
       std::fprintf(stderr, "linecald: %s\n", std::string(started.status().message()).c_str());
       return 1;

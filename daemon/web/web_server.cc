@@ -17,6 +17,7 @@
 #include "absl/strings/strip.h"
 #include "daemon/web/aftersale_api.h"
 #include "daemon/web/console_json.h"
+#include "daemon/web/operator_actions.h"
 
 namespace linecal {
 namespace {
@@ -216,7 +217,10 @@ std::string FindStaticDir(const std::string& configured, const std::string& sour
 }
 
 WebServer::WebServer(StationCore* core, WebServerOptions options)
-    : core_(core), options_(std::move(options)), sessions_(options_.auth_token) {}
+    : core_(core),
+      options_(std::move(options)),
+      sessions_(options_.auth_token, options_.operator_token),
+      views_(core) {}
 
 absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(StationCore* core,
                                                             WebServerOptions options) {
@@ -303,7 +307,7 @@ void WebServer::Route() {
     res.set_header("Set-Cookie",
                    absl::StrCat(kCookie, "=", *id, "; Path=/; HttpOnly; SameSite=Strict",
                                 options_.tls ? "; Secure" : ""));
-    SendJson(res, {{"role", "read-only"}});
+    SendJson(res, {{"role", RoleName(sessions_.RoleOf(*id))}});
   });
   s.Post("/api/logout", [this](const httplib::Request& req, httplib::Response& res) {
     sessions_.Logout(CookieValue(req.get_header_value("Cookie"), kCookie));
@@ -313,8 +317,10 @@ void WebServer::Route() {
   });
   s.Get("/api/session", [this](const httplib::Request& req, httplib::Response& res) {
     SendJson(res, {{"login_required", sessions_.login_required()},
+                   {"operator_login", !options_.operator_token.empty()},
                    {"logged_in", Authorized(req)},
-                   {"role", "read-only"}});
+                   {"role", RoleName(sessions_.RoleOf(
+                                CookieValue(req.get_header_value("Cookie"), kCookie)))}});
   });
   // The API below needs a session: checked before routing.
   s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
@@ -366,6 +372,8 @@ void WebServer::Route() {
                               const httplib::ContentReader& read) {
     ServeBoundedPost(req, res, read, kMaxAftersaleRequestBytes, "request", AftersaleSolveJson);
   });
+  RouteCycleViews();
+  RouteOperator();
   s.Get("/vendor/chart.js", [this](const httplib::Request& req, httplib::Response& res) {
     ServeFile(options_.chart_js_path, req, res);
   });
@@ -518,6 +526,94 @@ void WebServer::FollowStation(httplib::DataSink& sink) {
     }
     std::this_thread::sleep_for(kNewCyclePoll);
   }
+}
+
+void WebServer::RouteCycleViews() {
+  httplib::Server& s = *server_;
+  s.Get(R"(/api/cycles/([^/]+)/capture)", [this](const httplib::Request& req,
+                                                 httplib::Response& res) {
+    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+    if (!id.ok()) return SendError(res, id.status());
+    absl::StatusOr<nlohmann::json> files = views_.Files(*id);
+    if (!files.ok()) return SendError(res, files.status());
+    SendJson(res, *files);
+  });
+  s.Get(R"(/api/cycles/([^/]+)/capture/([^/]+))", [this](const httplib::Request& req,
+                                                         httplib::Response& res) {
+    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+    if (!id.ok()) return SendError(res, id.status());
+    absl::StatusOr<CaptureFileToSend> file = views_.File(*id, req.matches[2]);
+    if (!file.ok()) return SendError(res, file.status());
+    auto in = std::make_shared<std::ifstream>(file->path, std::ios::binary);
+    if (!*in) return SendError(res, absl::NotFoundError("file: cannot open it"));
+    // The capture's files are up to input_budget.max_file_bytes: sent in pieces, never whole
+    // in memory. A finished cycle's capture does not change, so the browser may keep it.
+    res.set_header("Cache-Control", "private, max-age=3600");
+    res.set_header("Content-Disposition",
+                   absl::StrCat("attachment; filename=\"", file->download_name, "\""));
+    res.set_content_provider(
+        file->bytes, file->content_type,
+        [in](size_t offset, size_t length, httplib::DataSink& sink) {
+          std::vector<char> buffer(std::min<size_t>(length, 1 << 16));
+          in->seekg(static_cast<std::streamoff>(offset));
+          in->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+          const std::streamsize got = in->gcount();
+          return got > 0 && sink.write(buffer.data(), static_cast<size_t>(got));
+        });
+  });
+  s.Get(R"(/api/cycles/([^/]+)/views/([^/]+))", [this](const httplib::Request& req,
+                                                       httplib::Response& res) {
+    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+    if (!id.ok()) return SendError(res, id.status());
+    absl::StatusOr<std::string> view =
+        views_.View(*id, req.matches[2], req.get_param_value("frame"));
+    if (!view.ok()) return SendError(res, view.status());
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(*view, kJson);
+  });
+}
+
+bool WebServer::OperatorAllowed(const httplib::Request& req, httplib::Response& res) {
+  if (absl::Status s = CheckSameSiteAction(req.get_header_value(kActionHeader),
+                                           req.get_header_value("Origin"),
+                                           req.get_header_value("Host"), options_.tls.has_value());
+      !s.ok()) {
+    SendError(res, s, 403);
+    return false;
+  }
+  const std::string session = CookieValue(req.get_header_value("Cookie"), kCookie);
+  if (sessions_.RoleOf(session) != Role::kOperator) {
+    SendError(res,
+              absl::PermissionDeniedError(
+                  options_.operator_token.empty()
+                      ? "operator role required: the daemon has no web.operator_token, so "
+                        "cycles are started over gRPC only"
+                      : "operator role required: this session is read-only; log in with the "
+                        "operator token"),
+              403);
+    return false;
+  }
+  return true;
+}
+
+void WebServer::RouteOperator() {
+  httplib::Server& s = *server_;
+  s.Post("/api/cycles", [this](const httplib::Request& req, httplib::Response& res) {
+    if (!OperatorAllowed(req, res)) return;
+    absl::StatusOr<CycleRequest> request = CycleRequestFromJson(req.body);
+    if (!request.ok()) return SendError(res, request.status());
+    absl::StatusOr<int64_t> id = core_->StartCycle(*request);
+    if (!id.ok()) return SendError(res, id.status());
+    SendJson(res, {{"cycle_id", std::to_string(*id)}});
+  });
+  s.Post(R"(/api/cycles/([^/]+)/cancel)", [this](const httplib::Request& req,
+                                                 httplib::Response& res) {
+    if (!OperatorAllowed(req, res)) return;
+    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+    if (!id.ok()) return SendError(res, id.status());
+    if (absl::Status c = core_->CancelCycle(*id); !c.ok()) return SendError(res, c);
+    SendJson(res, {{"cycle_id", std::to_string(*id)}, {"cancel", "accepted"}});
+  });
 }
 
 }  // namespace linecal

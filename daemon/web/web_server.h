@@ -5,10 +5,12 @@
 //
 // Routes (docs/console.md, "API"):
 //   POST /api/login   {"token": "..."}: 200 and a session cookie (HttpOnly, SameSite=Strict,
-//                     Secure under TLS) when it is the daemon's auth_token; 401 JSON else;
-//                     409 when the daemon has no auth_token (nothing to log in to)
+//                     Secure under TLS) when it is the daemon's auth_token (a read-only
+//                     session) or the operator token (an operator session); 401 JSON else;
+//                     409 when the daemon has neither (nothing to log in to)
 //   POST /api/logout  ends the cookie's session
-//   GET  /api/session {login_required, role}: whether the pages need a login
+//   GET  /api/session {login_required, logged_in, operator_login, role}: whether the pages
+//                     need a login, and the session's role (sessions.h)
 //   GET  /api/status  the station (console_json.h StatusJson), as gRPC GetStationStatus
 //   GET  /api/cycles?limit=N&before=ID&vin=V&verdict=W
 //                     {cycles: [...], next_before: "ID" or ""} newest first, as ListCycles:
@@ -23,6 +25,14 @@
 //                     the after-sale page's calls (aftersale_api.h); a photo over
 //                     kMaxPhotoBytes or a request over kMaxAftersaleRequestBytes gets 413,
 //                     a multipart form 415
+//   GET  /api/cycles/ID/capture        the kept capture's files (capture_views.h), or why none
+//   GET  /api/cycles/ID/capture/N      file N of that list (a download; a camera's frame)
+//   GET  /api/cycles/ID/views/SENSOR?frame=K  the sensor's view (daemon/cycle/cycle_views.h)
+//   POST /api/cycles            operators: start a cycle (operator_actions.h's body), as
+//                               gRPC StartCycle; {"cycle_id": "N"}
+//   POST /api/cycles/ID/cancel  operators: cancel it, as gRPC CancelCycle
+//                     Both POSTs need an operator session (403 JSON for a read-only one) and
+//                     pass CheckSameSiteAction (403 else).
 //   GET  /, /NAME.html, /NAME.js, /NAME.css  files of the static folder; /vendor/chart.js
 //                     Debian's Chart.js; /favicon.ico 204 (no icon).
 // Every /api/ call but login and session needs a live session when the daemon has an
@@ -41,6 +51,7 @@
 #include "absl/status/statusor.h"
 #include "daemon/core/daemon_config.h"
 #include "daemon/core/station_core.h"
+#include "daemon/web/capture_views.h"
 #include "daemon/web/sessions.h"
 
 namespace httplib {
@@ -77,6 +88,7 @@ struct WebServerOptions {
   std::string auth_token;        // the daemon's; empty: no login
   std::string version;           // /api/status's version
   std::string chart_js_path = kChartJsPath;
+  std::string operator_token = "";  // web.operator_token; empty: no operator sessions
 };
 
 class WebServer {
@@ -106,10 +118,17 @@ class WebServer {
   // Writes events to `sink` until the stream ends or the client goes away.
   void FollowStation(httplib::DataSink& sink);
   void FollowCycle(int64_t cycle_id, httplib::DataSink& sink);
+  // The routes of the cycle page's recorded data and of the operator's actions.
+  void RouteCycleViews();
+  void RouteOperator();
+  // Whether the request may change the station: an operator session and CheckSameSiteAction;
+  // else answers 403 and returns false.
+  bool OperatorAllowed(const httplib::Request& req, httplib::Response& res);
 
   StationCore* core_;
   const WebServerOptions options_;
   Sessions sessions_;
+  CaptureViews views_;
   std::unique_ptr<httplib::Server> server_;
   std::thread thread_;
   int port_ = 0;

@@ -345,6 +345,11 @@ TEST_F(DaemonConfigTest, WebKeyReadsBackAndIsChecked) {
   EXPECT_EQ(c->web->listen, "127.0.0.1:8080");
   EXPECT_EQ(c->web->static_dir, (dir_ / "pages").string());
   EXPECT_FALSE(c->web->tls.has_value());
+  EXPECT_EQ(c->web->operator_token, "");
+  absl::StatusOr<DaemonConfig> operators =
+      Read(head + R"("auth_token": "a", "web": {"listen": "h:1", "operator_token": "b"}})");
+  ASSERT_TRUE(operators.ok()) << operators.status();
+  EXPECT_EQ(operators->web->operator_token, "b");
   absl::StatusOr<DaemonConfig> none = Read(head + R"("listen": "127.0.0.1:1"})");
   ASSERT_TRUE(none.ok()) << none.status();
   EXPECT_FALSE(none->web.has_value());
@@ -358,6 +363,9 @@ TEST_F(DaemonConfigTest, WebKeyReadsBackAndIsChecked) {
       {R"("web": {"listen": "h:1", "static_dir": "nowhere"})", "web.static_dir: '"},
       {R"("web": {"listen": "h:1", "tls": {"cert": "c.pem"}})", "web.tls.cert"},
       {R"("web": "127.0.0.1:8080")", "web: expected an object"},
+      {R"("web": {"listen": "h:1", "operator_token": 7})", "web.operator_token"},
+      {R"("auth_token": "same", "web": {"listen": "h:1", "operator_token": "same"})",
+       "web.operator_token: must differ from auth_token"},
   };
   for (const auto& [text, expected] : bad) {
     absl::StatusOr<DaemonConfig> r = Read(head + text + "}");

@@ -24,6 +24,7 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 VIN = "1M8GDM9AXKP042788"
 TOKEN = "line-3-browser-token"
+OPERATOR_TOKEN = "line-3-operator-token"
 # docs/console.md "Bars": a sensor's verdict on the live page within 200 ms of its event.
 VERDICT_BAR_MS = 200.0
 # Every wait's bound: a full reference-car cycle takes about 4 s in Release; 60 s is a hung
@@ -61,7 +62,7 @@ def start_daemon(linecald, source_dir, work):
         "station": os.path.join(source_dir, "deploy/stations/reference.json"),
         "car_models": [os.path.join(source_dir, "deploy/cars/reference.json")],
         "data_root": "data",
-        "web": {"listen": "127.0.0.1:0"},
+        "web": {"listen": "127.0.0.1:0", "operator_token": OPERATOR_TOKEN},
     }
     os.makedirs(os.path.join(work, "data"))
     path = os.path.join(work, "linecald.json")
@@ -232,6 +233,11 @@ def test(args, work):
 
         left = errors(driver)
         check(not left, f"console errors: {left}")
+
+        operated = operator_cycle(driver, args, address, url, shots)
+        cycle_views(driver, url, operated, shots)
+        left = errors(driver)
+        check(not left, f"console errors: {left}")
     finally:
         driver.quit()
         daemon.send_signal(signal.SIGTERM)
@@ -239,6 +245,84 @@ def test(args, work):
             daemon.wait(timeout=30)
         except subprocess.TimeoutExpired:
             daemon.kill()
+
+
+def operator_cycle(driver, args, address, url, shots):
+    """An operator logs in from the live page, starts a cycle that keeps its capture, and the
+    page shows it to its end; GetCycle has it done with the VIN typed. Returns its id."""
+    driver.get(url)
+    wait(driver, "the operator log-in link", lambda d: d.find_elements(By.ID, "operator-login"))
+    check(not driver.find_elements(By.ID, "operator"), "a read-only session shows the operator's controls")
+    driver.find_element(By.ID, "operator-login").click()
+    wait(driver, "the login page", lambda d: "/login.html" in d.current_url)
+    driver.find_element(By.ID, "token").send_keys(OPERATOR_TOKEN)
+    driver.find_element(By.ID, "login").click()
+    wait(driver, "the operator's controls", lambda d: d.find_elements(By.ID, "op-start"))
+    wait(driver, "the event stream", lambda d: d.find_element(By.ID, "connection").text == "live")
+    driver.find_element(By.ID, "op-vin").send_keys(VIN)
+    check(driver.find_element(By.ID, "op-model").get_attribute("value") == "reference", "car model choice")
+    driver.find_element(By.ID, "op-record").click()
+    driver.find_element(By.ID, "op-start").click()
+    form = driver.find_element(By.ID, "operator")
+    cycle_id = wait(driver, "the started cycle", lambda d: form.get_attribute("data-started"))
+    wait(driver, "the cycle's end", lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ended") == cycle_id)
+    driver.save_screenshot(os.path.join(shots, "operator.png"))
+    cycle = linecal(args.linecal, address, "cycle", "show", cycle_id)
+    check(cycle["vin"] == VIN and cycle["state"] == "CYCLE_STATE_DONE",
+          f"the operator's cycle: {cycle['vin']} {cycle['state']}")
+    check(driver.find_element(By.ID, "op-start").is_enabled(), "start stays disabled after the end")
+    print(f"operator: cycle {cycle_id} started from the live page, ended {verdict_word(cycle['verdict'])}")
+    return cycle_id
+
+
+def api_json(driver, url, path):
+    """GET an API path with the browser's session cookie (outside the page: no console entry)."""
+    import urllib.request
+    cookie = "; ".join(f"{c['name']}={c['value']}" for c in driver.get_cookies())
+    with urllib.request.urlopen(urllib.request.Request(url.rstrip("/") + path, headers={"Cookie": cookie})) as r:
+        return json.load(r)
+
+
+def cycle_views(driver, url, cycle_id, shots):
+    """The cycle page of a cycle with a capture: every camera's frame loads at its size and
+    shows as many detected features as the API's view has; the LiDAR and radar views draw
+    the API's fitted boards and found reflectors; the capture's files are linked."""
+    driver.get(f"{url}cycle.html?id={cycle_id}")
+    wait(driver, "the views", lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-views") == cycle_id)
+    capture = api_json(driver, url, f"/api/cycles/{cycle_id}/capture")
+    links = driver.find_elements(By.CSS_SELECTOR, "#capture ul.files a")
+    check(len(links) == len(capture["files"]), f"{len(links)} capture links for {len(capture['files'])} files")
+    counts = []
+    for figure in driver.find_elements(By.CSS_SELECTOR, "figure.camera-view"):
+        sensor = figure.get_attribute("data-sensor")
+        view = api_json(driver, url, f"/api/cycles/{cycle_id}/views/{sensor}")
+        wait(driver, f"{sensor}'s frame", lambda d: figure.get_attribute("data-image-loaded"))
+        loaded = int(figure.get_attribute("data-image-loaded"))
+        check(loaded == view["width"], f"{sensor}: frame {loaded} px wide, the view says {view['width']}")
+        drawn = len(figure.find_elements(By.CSS_SELECTOR, "circle.detected"))
+        check(drawn == view["detected_features"], f"{sensor}: {drawn} features drawn, API {view['detected_features']}")
+        crosses = len(figure.find_elements(By.CSS_SELECTOR, "path.reprojected"))
+        check(crosses == view["reprojected_features"], f"{sensor}: {crosses} reprojected, API {view['reprojected_features']}")
+        counts.append(f"{sensor} {drawn}")
+    cameras = [s["name"] for s in api_json(driver, url, f"/api/cycles/{cycle_id}")["sensors"] if s["kind"] == "camera"]
+    check(len(counts) == len(cameras), f"camera views: {counts} for the cameras {cameras}")
+    for figure in driver.find_elements(By.CSS_SELECTOR, "figure.lidar-view"):
+        view = api_json(driver, url, f"/api/cycles/{cycle_id}/views/{figure.get_attribute('data-sensor')}")
+        fitted = len(figure.find_elements(By.CSS_SELECTOR, "polygon.fitted"))
+        check(fitted == sum(1 for b in view["boards"] if b["found"]), f"lidar: {fitted} boards drawn")
+        check(int(figure.get_attribute("data-points")) == len(view["points"]), "lidar: points drawn")
+    for figure in driver.find_elements(By.CSS_SELECTOR, "figure.radar-view"):
+        view = api_json(driver, url, f"/api/cycles/{cycle_id}/views/{figure.get_attribute('data-sensor')}")
+        found = len(figure.find_elements(By.CSS_SELECTOR, "circle.found"))
+        check(found == sum(1 for r in view["reflectors"] if r["status"] == "found"), f"radar: {found} found drawn")
+    check(driver.find_elements(By.CSS_SELECTOR, "figure.lidar-view") and
+          driver.find_elements(By.CSS_SELECTOR, "figure.radar-view"), "lidar and radar views")
+    for cls, name in (("camera-view", "cycle-camera.png"), ("lidar-view", "cycle-lidar.png"),
+                      ("radar-view", "cycle-radar.png")):
+        figure = driver.find_element(By.CSS_SELECTOR, f"figure.{cls}")
+        driver.execute_script("arguments[0].scrollIntoView()", figure)
+        figure.screenshot(os.path.join(shots, name))
+    print(f"cycle views: features drawn equal to the API's: {', '.join(counts)}")
 
 
 def main():
