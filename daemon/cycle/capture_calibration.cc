@@ -393,9 +393,11 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
     if (board == nullptr) continue;
     BoardDetectionSummary& summary = (*summaries)[i];
     std::optional<Detection> d = DetectBoard(image, board->board);
-    if (d && !d->found && camera) {
-      // Not found in the raw image: look again in a perspective view of where the board is
-      // expected (station/camera/board_view.h), as a wide-angle lens bends it too far.
+    if (d && camera && (!d->found || ViewRefinesMarkerCorners(*camera, board->board))) {
+      // Not found in the raw image, or a marker board whose corners a fisheye shifts there:
+      // look again in a perspective view of where the board is expected
+      // (station/camera/board_view.h); where the view does not show the whole board, the raw
+      // detection stands.
       const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
       std::optional<Detection> v =
           DetectInBoardView(*camera, image, T_camera_board, board->board);

@@ -147,4 +147,10 @@ std::optional<Detection> DetectInBoardView(const CameraModel& camera, const Imag
   return d;
 }
 
+bool ViewRefinesMarkerCorners(const CameraModel& camera, const Board& board) {
+  return camera.type() == CameraModelType::kFisheye &&
+         std::any_of(board.features().begin(), board.features().end(),
+                     [](const BoardFeature& f) { return f.kind == FeatureKind::kMarkerCorner; });
+}
+
 }  // namespace linecal
