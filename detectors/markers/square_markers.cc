@@ -11,7 +11,7 @@
 #include <optional>
 #include <span>
 
-#include "detectors/boards/aruco_dict_4x4_50.h"
+#include "detectors/boards/aruco_dictionaries.h"
 #include "detectors/common/binarise.h"
 #include "detectors/common/contours.h"
 #include "detectors/common/edge_lines.h"
@@ -500,17 +500,20 @@ std::string_view MarkerDetectOptions::Validate() const {
   return {};
 }
 
-MarkerFamily Aruco4x4_50Family() {
+MarkerFamily ArucoFamily(ArucoDictionary dictionary) {
+  const ArucoDictionaryInfo& info = ArucoDictionaryInfoOf(dictionary);
   MarkerFamily family;
-  family.cells = kAruco4x4MarkerCells;
+  family.cells = info.marker_cells();
   family.border_cells = 1;
-  for (int i = 0; i < kAruco4x4DataBits * kAruco4x4DataBits; ++i) {
-    family.bit_cells.push_back({1 + i / kAruco4x4DataBits, 1 + i % kAruco4x4DataBits});
+  for (int i = 0; i < info.data_bits * info.data_bits; ++i) {
+    family.bit_cells.push_back({1 + i / info.data_bits, 1 + i % info.data_bits});
   }
-  family.codes.assign(kAruco4x4_50Codes.begin(), kAruco4x4_50Codes.end());
-  family.max_correction_bits = kAruco4x4_50MaxCorrectionBits;
+  family.codes.assign(info.codes.begin(), info.codes.end());
+  family.max_correction_bits = info.max_correction_bits;
   return family;
 }
+
+MarkerFamily Aruco4x4_50Family() { return ArucoFamily(ArucoDictionary::k4x4_50); }
 
 MarkerFamily Tag36h11Family(int border_bits) {
   apriltag_family_t* tf = tag36h11_create();
@@ -528,6 +531,15 @@ MarkerFamily Tag36h11Family(int border_bits) {
   family.max_correction_bits = 2;
   tag36h11_destroy(tf);
   return family;
+}
+
+std::optional<int> CellsDisagreeingWithMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& corners_px,
+                                              double min_contrast) {
+  std::vector<double> values;
+  if (!SampleCells(image, corners_px, family.cells, &values)) return std::nullopt;
+  return CellsDisagreeing(values, MarkerCells(family, id), family.cells, min_contrast);
 }
 
 MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,

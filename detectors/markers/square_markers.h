@@ -14,6 +14,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string_view>
 #include <vector>
 
@@ -37,8 +38,11 @@ struct MarkerFamily {
   int max_correction_bits = 1;
 };
 
-// OpenCV's DICT_4X4_50 (detectors/boards/aruco_dict_4x4_50.h): 6 x 6 cells, 1-cell border,
-// at most 1 corrected bit (OpenCV's maxCorrectionBits). O(1).
+// One of OpenCV's predefined ArUco dictionaries (detectors/boards/aruco_dictionaries.h): (n + 2)
+// x (n + 2) cells for n x n data bits, 1-cell border, at most the dictionary's maxCorrectionBits
+// corrected (OpenCV's strictness). Cost: copies the codes (up to 1024).
+MarkerFamily ArucoFamily(ArucoDictionary dictionary);
+// ArucoFamily(DICT_4X4_50): 6 x 6 cells, at most 1 corrected bit; the station's marker boards.
 MarkerFamily Aruco4x4_50Family();
 // tag36h11 (libapriltag's codes) with a black border of border_bits (1 or 2) cells:
 // 8 x 8 or 10 x 10 cells. At most 2 corrected bits: tag36h11's minimum distance is 11,
@@ -122,6 +126,18 @@ struct MarkerScan {
 // O(cells^2 + codes) per quad.
 MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
                        const MarkerDetectOptions& options, int enough_markers = 0);
+
+// How many cells of marker `id` of `family` (border included) disagree with what the image
+// shows inside `corners_px` (the marker's corners in its canonical order, as
+// DecodedMarker::corners_px): the cells are sampled through the quad's homography and judged
+// against a plane of illumination plus the marker's contrast, as the markers a board places
+// are. Tells a marker that was misread (its cells still show the expected print within a few
+// cells) from another marker (most cells differ). nullopt when a cell leaves the image or the
+// light and dark cells differ by less than min_contrast. O(cells^2).
+std::optional<int> CellsDisagreeingWithMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& corners_px,
+                                              double min_contrast);
 
 // Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features, markers of
 // `family`) from the markers of `scan`, and checks the whole board: every marker id at most
