@@ -271,6 +271,48 @@ DetectReason KeepBoardMarkers(const ImageView8& image, const Board& board, const
   return DetectReason::kNone;
 }
 
+// Reads the board's markers that the scan missed (too small or foreshortened for a quad of
+// their own, or joined to the dark squares by blur) where the kept markers within two squares
+// of theirs put them (ReadPlacedMarker: the expected id in the board's orientation, its
+// corners within a quarter cell of the prediction); repeated while markers are added, so that
+// a marker beyond a placed one is placed from it. At least two markers make the prediction:
+// one alone extrapolates its own corners' errors over the squares between them.
+// O(passes * markers * (markers + marker side)).
+void PlaceMissedMarkers(const ImageView8& image, const CharucoGeometry& g,
+                        const MarkerFamily& family, int min_contrast,
+                        std::vector<std::optional<DecodedMarker>>* kept) {
+  const int count = static_cast<int>(kept->size());
+  for (bool added = true; added;) {
+    added = false;
+    for (int id = 0; id < count; ++id) {
+      if ((*kept)[id]) continue;
+      std::vector<int> near;
+      for (int j = 0; j < count; ++j) {
+        if ((*kept)[j] && std::abs(g.markers[j].row - g.markers[id].row) <= 2 &&
+            std::abs(g.markers[j].col - g.markers[id].col) <= 2) {
+          near.push_back(j);
+        }
+      }
+      if (near.size() < 2) continue;
+      const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, *kept, near);
+      if (!H) continue;
+      std::array<Eigen::Vector2d, 4> predicted;
+      for (int k = 0; k < 4; ++k) {
+        predicted[k] = ApplyHomography(*H, g.markers[id].corners_board[k]);
+      }
+      if (!std::all_of(predicted.begin(), predicted.end(),
+                       [](const Eigen::Vector2d& uv) { return uv.allFinite(); })) {
+        continue;
+      }
+      const std::optional<DecodedMarker> placed =
+          ReadPlacedMarker(image, family, id, predicted, min_contrast);
+      if (!placed) continue;
+      (*kept)[id] = placed;
+      added = true;
+    }
+  }
+}
+
 // The kept markers in the squares rows r - 1 - ring .. r + ring and cols c - 1 - ring ..
 // c + ring (those touching inner corner (r, c) and `ring` squares beyond), by id.
 std::vector<int> MarkersAround(const CharucoGeometry& g,
@@ -434,6 +476,7 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
   }
   detection.reason = KeepBoardMarkers(image, board, g, family, scan, options, &read);
   if (detection.reason != DetectReason::kNone) return detection;
+  PlaceMissedMarkers(image, g, family, scan.min_contrast, &read);
 
   // The white squares are white only in their margin around the marker: the saddle fit's
   // window stays inside it, where the corner looks like a chessboard's. (What lies beyond,

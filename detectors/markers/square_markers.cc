@@ -542,6 +542,19 @@ std::optional<int> CellsDisagreeingWithMarker(const ImageView8& image, const Mar
   return CellsDisagreeing(values, MarkerCells(family, id), family.cells, min_contrast);
 }
 
+std::optional<DecodedMarker> ReadPlacedMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& predicted_px,
+                                              double min_contrast) {
+  std::optional<DecodedMarker> marker =
+      ReadPredictedMarker(image, family, id, predicted_px, min_contrast);
+  if (!marker || !WithinCells(marker->corners_px, predicted_px, family.cells,
+                              kPlacedMarkerMaxMoveCells)) {
+    return std::nullopt;
+  }
+  return marker;
+}
+
 MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
                        const MarkerDetectOptions& options, int enough_markers) {
   MarkerScan scan;

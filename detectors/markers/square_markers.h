@@ -139,6 +139,18 @@ std::optional<int> CellsDisagreeingWithMarker(const ImageView8& image, const Mar
                                               const std::array<Eigen::Vector2d, 4>& corners_px,
                                               double min_contrast);
 
+// Reads marker `id` of `family` where a board model puts it, as VerifyMarkerBoard reads the
+// markers the scan missed: `predicted_px` (its corners in canonical order, clockwise in the
+// image) are refined on the marker's edges knowing its cells, and the marker is accepted when
+// its cells show its print within the placed-marker tolerance (the larger of the family's
+// correction bits and a sixth of its data bits) and no corner moved more than a quarter of a
+// cell from its prediction. nullopt otherwise (not there, too blurred or small, or another
+// marker). Cost: O(side + cells^2).
+std::optional<DecodedMarker> ReadPlacedMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& predicted_px,
+                                              double min_contrast);
+
 // Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features, markers of
 // `family`) from the markers of `scan`, and checks the whole board: every marker id at most
 // once, one board homography through all their corners within the residual bound, no marker
