@@ -14,6 +14,7 @@
 
 #include "detectors/detect.h"
 #include "tests/detectors/board_scene.h"
+#include "tests/detectors/circle/circle_scene.h"
 #include "tests/support/reference_cameras.h"
 
 namespace linecal {
@@ -379,6 +380,40 @@ TEST(CharucoDetectorTest, EveryMarkerSizeIsFoundWithItsIds) {
     const Detection wrong = DetectCharuco(frame.image8.view(), *Board::Create(other));
     EXPECT_FALSE(wrong.found);
     EXPECT_TRUE(wrong.features.empty());
+  }
+}
+
+// detectors_eval's hard set (noise 6, blur 1.5, a 4:1 light gradient, gamma, JPEG 80, clutter)
+// on the default 9 x 6 board at its nearest distance, turned 35-50 degrees: the far side's
+// markers are too foreshortened for the scan (cells of 1-2 px across) and some corners' saddle
+// fits fail there. These renders (the evaluation's seeds 60 and 165) were partial detections
+// until the missed markers were read where their neighbours put them; now every corner is
+// found with its id, none farther from its truth than a third of a marker cell.
+TEST(CharucoDetectorTest, HardRendersWithForeshortenedMarkersAreFoundWhole) {
+  BoardParams params;
+  params.type = BoardType::kCharuco;
+  const Board board = *Board::Create(params);
+  const CameraModel camera = circle_scene::Camera();
+  for (const auto& [yaw, pitch, roll, seed] :
+       {std::tuple{-50.0, 0.0, 0.0, std::uint64_t{60}},
+        std::tuple{-35.0, -35.0, -30.0, std::uint64_t{165}}}) {
+    SCOPED_TRACE(testing::Message() << "seed " << seed);
+    const double distance =
+        circle_scene::EvaluationDistances(board, camera, false, yaw, pitch).front();
+    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
+        circle_scene::OneBoard(BoardType::kCharuco,
+                               circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed)),
+        circle_scene::HardEffects(seed), seed, camera);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    const Detection d = DetectCharuco(frame->image8.view(), board);
+    ExpectComplete(d, board);
+    int matched = 0;
+    int unknown = 0;
+    FeatureRmsPx(d, *frame, &matched, &unknown);
+    EXPECT_EQ(unknown, 0);
+    EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+    // A marker cell is 3.1 mm: 8 px face-on at these distances, 5 px on the far side.
+    EXPECT_LT(MaxErrorPx(d, *frame), 5.0 / 3.0);
   }
 }
 
