@@ -75,11 +75,10 @@ std::vector<std::optional<DecodedMarker>> BoardMarkers(const MarkerScan& scan, i
   return by_id;
 }
 
-// The homography fit of the markers `ids` (board metres to image pixels), through their
-// corners.
-std::optional<HomographyFit> MarkersFit(const CharucoGeometry& g,
-                                        const std::vector<std::optional<DecodedMarker>>& read,
-                                        const std::vector<int>& ids) {
+// The homography of the markers `ids` (board metres to image pixels), through their corners.
+std::optional<Eigen::Matrix3d> MarkersHomography(
+    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& read,
+    const std::vector<int>& ids) {
   std::vector<Eigen::Vector2d> src;
   std::vector<Eigen::Vector2d> dst;
   for (int id : ids) {
@@ -89,14 +88,7 @@ std::optional<HomographyFit> MarkersFit(const CharucoGeometry& g,
     }
   }
   // Four or eight exact correspondences: the DLT is the fit; refinement adds nothing worth it.
-  return FitHomography(src, dst, {.refine = false});
-}
-
-// The homography of MarkersFit.
-std::optional<Eigen::Matrix3d> MarkersHomography(
-    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& read,
-    const std::vector<int>& ids) {
-  const std::optional<HomographyFit> fit = MarkersFit(g, read, ids);
+  const std::optional<HomographyFit> fit = FitHomography(src, dst, {.refine = false});
   if (!fit) return std::nullopt;
   return fit->H;
 }
@@ -342,8 +334,9 @@ std::optional<Eigen::Matrix3d> CornerHomography(
 // corner whose saddle fit failed (blur and noise can leave a corner's small window in the
 // white margin without a clear saddle): nullopt unless the prediction is an interpolation that
 // holds, i.e. kept markers lie on both sides of the corner along both board axes, and one
-// homography carries all their corners within max_residual_cells marker cells (a misplaced
-// marker corner, or a lens that bends the neighbourhood, would move the prediction by as much).
+// homography (with the dilation of their print, FitDilatedHomography) carries all their corners
+// within max_residual_cells marker cells (a misplaced marker corner, or a lens that bends the
+// neighbourhood, would move the prediction by as much).
 // The caller checks the paint around it. The error is the markers' corners' (their edges are
 // fitted over their whole sides), a small fraction of a pixel. O(markers).
 std::optional<Eigen::Vector2d> InterpolatedCorner(
@@ -362,15 +355,32 @@ std::optional<Eigen::Vector2d> InterpolatedCorner(
     right = right || g.markers[id].col >= c;
   }
   if (!(above && below && left && right)) return std::nullopt;
-  const std::optional<HomographyFit> fit = MarkersFit(g, kept, ids);
+  // The markers' corners in the order of PrintedMarker::corners_board (top-left, top-right,
+  // bottom-right, bottom-left; board y up) and their outward diagonals.
+  const std::array<Eigen::Vector2d, 4> diagonals = {
+      Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, 1), Eigen::Vector2d(1, -1),
+      Eigen::Vector2d(-1, -1)};
+  std::vector<Eigen::Vector2d> p_board;
+  std::vector<Eigen::Vector2d> outward;
+  std::vector<Eigen::Vector2d> uv;
+  for (int id : ids) {
+    for (int k = 0; k < 4; ++k) {
+      p_board.push_back(g.markers[id].corners_board[k]);
+      outward.push_back(diagonals[k]);
+      uv.push_back(kept[id]->corners_px[k]);
+    }
+  }
+  // The dilation of the markers' dark print (gamma after blur) is taken out: the chessboard's
+  // corner, a saddle between two dark squares, does not move with it.
+  const std::optional<DilatedHomographyFit> fit =
+      FitDilatedHomography(p_board, outward, uv, ids.size());
   if (!fit) return std::nullopt;
-  const double marker_side_px =
-      LocalSquareSide(fit->H, corner_board, p.marker_m * p.scale);
-  if (!(fit->max_residual <=
+  const double marker_side_px = LocalSquareSide(fit->fit.H, corner_board, p.marker_m * p.scale);
+  if (!(fit->fit.max_residual <=
         options.markers.max_residual_cells * marker_side_px / family.cells)) {
     return std::nullopt;
   }
-  return ApplyHomography(fit->H, corner_board);
+  return ApplyHomography(fit->fit.H, corner_board);
 }
 
 // The largest saddle-fit window (half side, pixels) whose patch around uv_px stays inside the

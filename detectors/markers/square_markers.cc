@@ -625,10 +625,7 @@ namespace {
 // renders: 0.7-0.8 px RMS at gamma 0.6 or 1.6 under blur 1.5 (0.15 px at gamma 1). The board
 // fit takes it as one more unknown, the dilation: each corner k of a marker is observed at
 // H (p_k + dilation * d_k), d_k its outward diagonal (+-1, +-1) in the board frame.
-struct BoardFit {
-  HomographyFit fit;
-  double dilation_m = 0.0;
-};
+using BoardFit = DilatedHomographyFit;
 
 // Markers needed to fit the dilation: with two, a marker's size and the pair's spacing are
 // all there is to tell it from the homography's scale.
@@ -682,6 +679,20 @@ std::optional<BoardFit> FitBoard(const std::vector<Eigen::Vector2d>& p,
     for (std::size_t i = 0; i < p.size(); ++i) dilated[i] = p[i] + board.dilation_m * d[i];
   }
 }
+
+}  // namespace
+
+std::optional<DilatedHomographyFit> FitDilatedHomography(
+    const std::vector<Eigen::Vector2d>& p_board,
+    const std::vector<Eigen::Vector2d>& outward_diagonal,
+    const std::vector<Eigen::Vector2d>& uv_px, std::size_t markers) {
+  if (p_board.size() != outward_diagonal.size() || p_board.size() != uv_px.size()) {
+    return std::nullopt;
+  }
+  return FitBoard(p_board, outward_diagonal, uv_px, markers);
+}
+
+namespace {
 
 // The outward diagonal (+-1, +-1) of each corner of a marker, board frame.
 std::array<Eigen::Vector2d, 4> OutwardDiagonals(const std::vector<const BoardFeature*>& corners) {
