@@ -462,13 +462,11 @@ std::string_view CharucoOptions::Validate() const {
   return {};
 }
 
-Detection DetectCharuco(const ImageView8& image, const Board& board,
-                        const CharucoOptions& options) {
-  Detection detection;
-  detection.reason =
-      CheckDetectorInput(image, board, BoardType::kCharuco, options.Validate().empty());
-  if (detection.reason != DetectReason::kNone) return detection;
+namespace {
 
+// DetectCharuco on a view already checked.
+Detection DetectOnce(const ImageView8& image, const Board& board, const CharucoOptions& options) {
+  Detection detection;
   const BoardParams& p = board.params();
   const CharucoGeometry g = GeometryOf(board);
   const int marker_count = static_cast<int>(g.markers.size());
@@ -535,6 +533,101 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
   detection.found = detection.features.size() == board.features().size();
   detection.reason = detection.found ? DetectReason::kNone : DetectReason::kPartial;
   return detection;
+}
+
+// Marker cells below this many pixels are under what the marker scan is made for (4 px cells,
+// docs/acceptance.md): blur joins such a marker to the black squares around it through the
+// thin white margin, and no quad of its own is found.
+constexpr double kSmallCellPx = 4.0;
+
+// The patch [x0, x0 + w) x [y0, y0 + h) of `image` at twice its resolution, by bilinear
+// interpolation: output pixel (x, y) samples the input at (x0 + (x + 0.5) / 2 - 0.5, ...),
+// clamped to the image. O(w * h).
+Image8 DoublePatch(const ImageView8& image, int x0, int y0, int w, int h) {
+  // The patch is at least 2 x 2 (the caller's check), so the image is too.
+  Image8 out(2 * w, 2 * h);
+  for (int y = 0; y < out.height; ++y) {
+    const double v = std::clamp(y0 + 0.5 * y - 0.25, 0.0, image.height - 1.0);
+    const int top = std::min(static_cast<int>(v), image.height - 2);
+    const double fy = v - top;
+    for (int x = 0; x < out.width; ++x) {
+      const double u = std::clamp(x0 + 0.5 * x - 0.25, 0.0, image.width - 1.0);
+      const int left = std::min(static_cast<int>(u), image.width - 2);
+      const double fx = u - left;
+      const double upper = (1.0 - fx) * image.At(left, top) + fx * image.At(left + 1, top);
+      const double lower =
+          (1.0 - fx) * image.At(left, top + 1) + fx * image.At(left + 1, top + 1);
+      out.at(x, y) = static_cast<std::uint8_t>(std::lround((1.0 - fy) * upper + fy * lower));
+    }
+  }
+  return out;
+}
+
+// A partial detection whose markers' cells are under kSmallCellPx, looked for again on the
+// board's part of the image at twice the resolution, where the markers' white margins are
+// wide enough for the scan: the patch is the board's page where the corners found put it (their
+// homography), with two squares more around it, clipped to the image. The features found there
+// are returned in the image's pixels when there are more of them; otherwise `partial` itself.
+// Only a board already identified by its verified corners is looked for again, so the
+// upsampled scan adds no detection where there was none. Cost: the detection on a patch of 4
+// times its pixels.
+Detection DetectSmallMarkersUpsampled(const ImageView8& image, const Board& board,
+                                      const CharucoOptions& options, Detection partial) {
+  const BoardParams& p = board.params();
+  std::vector<Eigen::Vector2d> src;
+  std::vector<Eigen::Vector2d> dst;
+  for (const DetectedFeature& f : partial.features) {
+    src.push_back(f.p_board);
+    dst.push_back(f.uv_px);
+  }
+  const std::optional<HomographyFit> fit = FitHomography(src, dst);
+  if (!fit) return partial;
+  const double cell_px =
+      LocalSquareSide(fit->H, src.front(), p.marker_m * p.scale) /
+      ArucoDictionaryInfoOf(p.charuco_dictionary).marker_cells();
+  if (!(cell_px < kSmallCellPx)) return partial;
+  const Eigen::Vector2d half =
+      0.5 * board.page_size_m() + Eigen::Vector2d::Constant(2.0 * p.square_m * p.scale);
+  Eigen::AlignedBox2d box;
+  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(-half.x(), -half.y()),
+                                        Eigen::Vector2d(half.x(), -half.y()),
+                                        Eigen::Vector2d(half.x(), half.y()),
+                                        Eigen::Vector2d(-half.x(), half.y())}) {
+    box.extend(ApplyHomography(fit->H, corner));
+  }
+  if (!box.min().allFinite() || !box.max().allFinite()) return partial;
+  const int x0 = std::max(0, static_cast<int>(std::floor(box.min().x())));
+  const int y0 = std::max(0, static_cast<int>(std::floor(box.min().y())));
+  const int x1 = std::min(image.width, static_cast<int>(std::ceil(box.max().x())) + 1);
+  const int y1 = std::min(image.height, static_cast<int>(std::ceil(box.max().y())) + 1);
+  if (x1 - x0 < 2 || y1 - y0 < 2 || 2 * (x1 - x0) > kMaxImageSide ||
+      2 * (y1 - y0) > kMaxImageSide) {
+    return partial;
+  }
+  const Image8 doubled = DoublePatch(image, x0, y0, x1 - x0, y1 - y0);
+  Detection again = DetectOnce(doubled.view(), board, options);
+  if (again.features.size() <= partial.features.size()) return partial;
+  for (DetectedFeature& f : again.features) {
+    // Output pixel x samples the input at x0 + x / 2 - 0.25 (DoublePatch).
+    f.uv_px = Eigen::Vector2d(x0, y0) + 0.5 * f.uv_px - Eigen::Vector2d::Constant(0.25);
+  }
+  return again;
+}
+
+}  // namespace
+
+Detection DetectCharuco(const ImageView8& image, const Board& board,
+                        const CharucoOptions& options) {
+  Detection detection;
+  detection.reason =
+      CheckDetectorInput(image, board, BoardType::kCharuco, options.Validate().empty());
+  if (detection.reason != DetectReason::kNone) return detection;
+  detection = DetectOnce(image, board, options);
+  // Four corners fix the homography that places the patch.
+  if (detection.reason != DetectReason::kPartial || detection.features.size() < 4) {
+    return detection;
+  }
+  return DetectSmallMarkersUpsampled(image, board, options, std::move(detection));
 }
 
 }  // namespace linecal

@@ -21,6 +21,9 @@
 // the markers), the corner is the prediction of the markers of the 4 x 4 squares around it when
 // that is an interpolation that holds: markers on every side of it, one homography through
 // all their corners within MarkerDetectOptions::max_residual_cells, and the paint check.
+// Markers the scan missed are read where the kept markers around them put them. A partial
+// board whose marker cells are under 4 px (the scan's design size) is looked for again on its
+// part of the image at twice the resolution, and the result with more corners is returned.
 
 #include <string_view>
 
@@ -60,7 +63,8 @@ struct CharucoOptions {
 // markers of the same size: two placements of the board), kTooFewFeatures (no two of the
 // board's markers agree, or no corner passes). Pure function. Cost: the marker scan (about
 // 3 ms at 1280 x 720) plus a small blur and fit per corner: about 5 ms for a 7 x 5 board at
-// 1280 x 720 (tests/detectors/charuco).
+// 1280 x 720 (tests/detectors/charuco); a partial board of small markers adds the detection on
+// its doubled patch (4 times the patch's pixels).
 Detection DetectCharuco(const ImageView8& image, const Board& board,
                         const CharucoOptions& options = {});
 
