@@ -1,9 +1,10 @@
 #pragma once
 // OpenCV's predefined ArUco dictionaries (cv::aruco::PREDEFINED_DICTIONARY_NAME) as data: their
 // names, marker sizes, marker counts and maxCorrectionBits, over the codes of
-// aruco_dictionary_codes.h (included by aruco_dictionaries.cc only: a few thousand constants) (each family stored once: OpenCV's DICT_nXn_50, _100 and _250 are
-// the first markers of DICT_nXn_1000). tests/detectors/boards/aruco_dict_test.cc checks every
-// code and every figure against cv::aruco::getPredefinedDictionary.
+// aruco_dictionary_codes.h (included by aruco_dictionaries.cc only: a few thousand constants) (each
+// family stored once: OpenCV's DICT_nXn_50, _100 and _250 are the first markers of DICT_nXn_1000).
+// tests/detectors/boards/aruco_dict_test.cc checks every code and every figure against
+// cv::aruco::getPredefinedDictionary.
 //
 // A marker of n x n data bits is (n + 2) x (n + 2) cells: a one-cell black border around the
 // data cells. Code layout, in the marker's canonical orientation (as OpenCV draws it): the cell

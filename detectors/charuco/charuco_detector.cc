@@ -143,8 +143,7 @@ std::optional<PrintedRead> AsPrintedMarker(const ImageView8& image, const Charuc
   for (int turn = 0; turn < 4; ++turn) {
     double sum_px = 0.0;
     for (int k = 0; k < 4; ++k) {
-      sum_px += (m.corners_px[(turn + k) % 4] -
-                 ApplyHomography(H, g.markers[id].corners_board[k]))
+      sum_px += (m.corners_px[(turn + k) % 4] - ApplyHomography(H, g.markers[id].corners_board[k]))
                     .norm();
     }
     if (sum_px < best_px) {
@@ -357,9 +356,9 @@ std::optional<Eigen::Vector2d> InterpolatedCorner(
   if (!(above && below && left && right)) return std::nullopt;
   // The markers' corners in the order of PrintedMarker::corners_board (top-left, top-right,
   // bottom-right, bottom-left; board y up) and their outward diagonals.
-  const std::array<Eigen::Vector2d, 4> diagonals = {
-      Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, 1), Eigen::Vector2d(1, -1),
-      Eigen::Vector2d(-1, -1)};
+  const std::array<Eigen::Vector2d, 4> diagonals = {Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, 1),
+                                                    Eigen::Vector2d(1, -1),
+                                                    Eigen::Vector2d(-1, -1)};
   std::vector<Eigen::Vector2d> p_board;
   std::vector<Eigen::Vector2d> outward;
   std::vector<Eigen::Vector2d> uv;
@@ -555,8 +554,7 @@ Image8 DoublePatch(const ImageView8& image, int x0, int y0, int w, int h) {
       const int left = std::min(static_cast<int>(u), image.width - 2);
       const double fx = u - left;
       const double upper = (1.0 - fx) * image.At(left, top) + fx * image.At(left + 1, top);
-      const double lower =
-          (1.0 - fx) * image.At(left, top + 1) + fx * image.At(left + 1, top + 1);
+      const double lower = (1.0 - fx) * image.At(left, top + 1) + fx * image.At(left + 1, top + 1);
       out.at(x, y) = static_cast<std::uint8_t>(std::lround((1.0 - fy) * upper + fy * lower));
     }
   }
@@ -582,17 +580,15 @@ Detection DetectSmallMarkersUpsampled(const ImageView8& image, const Board& boar
   }
   const std::optional<HomographyFit> fit = FitHomography(src, dst);
   if (!fit) return partial;
-  const double cell_px =
-      LocalSquareSide(fit->H, src.front(), p.marker_m * p.scale) /
-      ArucoDictionaryInfoOf(p.charuco_dictionary).marker_cells();
+  const double cell_px = LocalSquareSide(fit->H, src.front(), p.marker_m * p.scale) /
+                         ArucoDictionaryInfoOf(p.charuco_dictionary).marker_cells();
   if (!(cell_px < kSmallCellPx)) return partial;
   const Eigen::Vector2d half =
       0.5 * board.page_size_m() + Eigen::Vector2d::Constant(2.0 * p.square_m * p.scale);
   Eigen::AlignedBox2d box;
-  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(-half.x(), -half.y()),
-                                        Eigen::Vector2d(half.x(), -half.y()),
-                                        Eigen::Vector2d(half.x(), half.y()),
-                                        Eigen::Vector2d(-half.x(), half.y())}) {
+  for (const Eigen::Vector2d& corner :
+       {Eigen::Vector2d(-half.x(), -half.y()), Eigen::Vector2d(half.x(), -half.y()),
+        Eigen::Vector2d(half.x(), half.y()), Eigen::Vector2d(-half.x(), half.y())}) {
     box.extend(ApplyHomography(fit->H, corner));
   }
   if (!box.min().allFinite() || !box.max().allFinite()) return partial;

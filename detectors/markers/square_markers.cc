@@ -548,8 +548,8 @@ std::optional<DecodedMarker> ReadPlacedMarker(const ImageView8& image, const Mar
                                               double min_contrast) {
   std::optional<DecodedMarker> marker =
       ReadPredictedMarker(image, family, id, predicted_px, min_contrast);
-  if (!marker || !WithinCells(marker->corners_px, predicted_px, family.cells,
-                              kPlacedMarkerMaxMoveCells)) {
+  if (!marker ||
+      !WithinCells(marker->corners_px, predicted_px, family.cells, kPlacedMarkerMaxMoveCells)) {
     return std::nullopt;
   }
   return marker;
@@ -684,8 +684,8 @@ std::optional<BoardFit> FitBoard(const std::vector<Eigen::Vector2d>& p,
 
 std::optional<DilatedHomographyFit> FitDilatedHomography(
     const std::vector<Eigen::Vector2d>& p_board,
-    const std::vector<Eigen::Vector2d>& outward_diagonal,
-    const std::vector<Eigen::Vector2d>& uv_px, std::size_t markers) {
+    const std::vector<Eigen::Vector2d>& outward_diagonal, const std::vector<Eigen::Vector2d>& uv_px,
+    std::size_t markers) {
   if (p_board.size() != outward_diagonal.size() || p_board.size() != uv_px.size()) {
     return std::nullopt;
   }

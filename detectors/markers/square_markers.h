@@ -12,13 +12,12 @@
 //
 // Image coordinates: pixel-centre convention (docs/conventions.md). Pure functions, no state.
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <optional>
 #include <string_view>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "detectors/boards/board.h"
 #include "detectors/common/homography.h"
@@ -168,8 +167,8 @@ struct DilatedHomographyFit {
 // degenerate points). O(n) per round, four rounds.
 std::optional<DilatedHomographyFit> FitDilatedHomography(
     const std::vector<Eigen::Vector2d>& p_board,
-    const std::vector<Eigen::Vector2d>& outward_diagonal,
-    const std::vector<Eigen::Vector2d>& uv_px, std::size_t markers);
+    const std::vector<Eigen::Vector2d>& outward_diagonal, const std::vector<Eigen::Vector2d>& uv_px,
+    std::size_t markers);
 
 // Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features, markers of
 // `family`) from the markers of `scan`, and checks the whole board: every marker id at most

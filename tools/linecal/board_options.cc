@@ -158,9 +158,8 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
                           " m)");
     case BoardParamsError::kBadMarkerCount:
       return absl::StrCat(ArucoDictionaryInfoOf(p.charuco_dictionary).name, " has ",
-                          ArucoDictionaryInfoOf(p.charuco_dictionary).marker_count(),
-                          " markers; ", p.cols, " x ", p.rows, " squares hold ",
-                          CharucoMarkerCount(p));
+                          ArucoDictionaryInfoOf(p.charuco_dictionary).marker_count(), " markers; ",
+                          p.cols, " x ", p.rows, " squares hold ", CharucoMarkerCount(p));
   }
   return "invalid";
 }
@@ -270,9 +269,8 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
     const std::string dictionary = cl.Get("dictionary", "");
     const std::optional<ArucoDictionary> d = ArucoDictionaryFromName(dictionary);
     if (!d.has_value()) {
-      return absl::InvalidArgumentError(absl::StrCat("--dictionary: unknown dictionary '",
-                                                     dictionary, "' (one of ", DictionaryNames(),
-                                                     ")"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--dictionary: unknown dictionary '", dictionary, "' (one of ", DictionaryNames(), ")"));
     }
     p.charuco_dictionary = *d;
   }

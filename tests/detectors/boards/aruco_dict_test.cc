@@ -91,9 +91,9 @@ TEST(ArucoDictionaries, SmallerDictionariesArePrefixesOfTheThousand) {
       const cv::Ptr<cv::aruco::Dictionary> dict = cv::aruco::getPredefinedDictionary(
           static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(4 * family + size));
       SCOPED_TRACE(AllArucoDictionaries()[4 * family + size].name);
-      EXPECT_EQ(cv::norm(dict->bytesList, all->bytesList.rowRange(0, dict->bytesList.rows),
-                         cv::NORM_INF),
-                0.0);
+      EXPECT_EQ(
+          cv::norm(dict->bytesList, all->bytesList.rowRange(0, dict->bytesList.rows), cv::NORM_INF),
+          0.0);
       EXPECT_EQ(AllArucoDictionaries()[4 * family + size].codes.data(),
                 AllArucoDictionaries()[4 * family + 3].codes.data());
     }

@@ -135,8 +135,7 @@ TEST(CharucoBoardTest, MarkersOfEveryDictionaryCarryTheirCodes) {
         for (int c = -1; c <= n; ++c) {
           const bool border = r < 0 || c < 0 || r == n || c == n;
           const bool white = !border && ArucoCellIsWhite(info.codes[id], n, r, c);
-          const Eigen::Vector2d centre =
-              top_left + cell * Eigen::Vector2d(c + 1.5, -(r + 1.5));
+          const Eigen::Vector2d centre = top_left + cell * Eigen::Vector2d(c + 1.5, -(r + 1.5));
           wrong += board.PaintAt(centre) != (white ? Paint::kWhite : Paint::kBlack);
         }
       }
@@ -349,8 +348,8 @@ TEST(CharucoDetectorTest, EveryMarkerSizeIsFoundWithItsIds) {
     for (const double yaw : {-35.0, 0.0, 30.0}) {
       for (const double roll : {0.0, 100.0}) {
         for (const bool noisy : {false, true}) {
-          SCOPED_TRACE(testing::Message() << "yaw " << yaw << " roll " << roll << " noisy "
-                                          << noisy);
+          SCOPED_TRACE(testing::Message()
+                       << "yaw " << yaw << " roll " << roll << " noisy " << noisy);
           v.yaw_deg = yaw;
           v.roll_deg = roll;
           const CameraFrame frame = RenderView(v, noisy ? NoisyRender() : CleanRender(), ++seed);

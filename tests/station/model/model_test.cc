@@ -167,8 +167,7 @@ TEST(StationLayoutTest, CharucoParametersRoundTrip) {
     bad.replace(bad.find("\"DICT_5X5_1000\""), 15, dictionary);
     const absl::StatusOr<StationLayout> refused = ParseStationLayout(bad, "st.json");
     ASSERT_FALSE(refused.ok());
-    EXPECT_NE(refused.status().message().find(message), std::string::npos)
-        << refused.status();
+    EXPECT_NE(refused.status().message().find(message), std::string::npos) << refused.status();
   }
   std::string too_many = json;
   too_many.replace(too_many.find("\"cols\": 5"), 9, "\"cols\": 15");
