@@ -175,15 +175,17 @@ void DrawVerticalBoard(Drawing& d) {
 // Draws DICT_4X4_50 marker `id` with its top-left corner at PDF (x, y) in its canonical
 // orientation (as the PDFs print all four), and adds its corners as features: top-left,
 // top-right, bottom-right, bottom-left as seen facing the print.
-// Paints DICT_4X4_50 marker `id` of cells `cell_mm` wide with its top-left corner at PDF (x, y),
-// in its canonical orientation.
-void PaintArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf, double cell_mm) {
-  d.PdfRect(Paint::kBlack, x_pdf, y_pdf, cell_mm * kAruco4x4MarkerCells,
-            cell_mm * kAruco4x4MarkerCells);
-  const std::uint16_t code = kAruco4x4_50Codes[id];
-  for (int r = 0; r < kAruco4x4DataBits; ++r) {
-    for (int c = 0; c < kAruco4x4DataBits; ++c) {
-      if (Aruco4x4CellIsWhite(code, r, c)) {
+// Paints marker `id` of `dictionary` with cells `cell_mm` wide and its top-left corner at PDF
+// (x, y), in its canonical orientation.
+void PaintArucoMarker(Drawing& d, const ArucoDictionaryInfo& dictionary, int id, double x_pdf,
+                      double y_pdf, double cell_mm) {
+  const int bits = dictionary.data_bits;
+  d.PdfRect(Paint::kBlack, x_pdf, y_pdf, cell_mm * dictionary.marker_cells(),
+            cell_mm * dictionary.marker_cells());
+  const std::uint64_t code = dictionary.codes[id];
+  for (int r = 0; r < bits; ++r) {
+    for (int c = 0; c < bits; ++c) {
+      if (ArucoCellIsWhite(code, bits, r, c)) {
         // +1: the one-cell black border.
         d.PdfRect(Paint::kWhite, x_pdf + cell_mm * (c + 1), y_pdf + cell_mm * (r + 1), cell_mm,
                   cell_mm);
@@ -195,7 +197,7 @@ void PaintArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf, double cel
 void DrawArucoMarker(Drawing& d, int id, double x_pdf, double y_pdf) {
   constexpr double kCell = 40.0;
   constexpr double kSide = kCell * kAruco4x4MarkerCells;
-  PaintArucoMarker(d, id, x_pdf, y_pdf, kCell);
+  PaintArucoMarker(d, ArucoDictionaryInfoOf(ArucoDictionary::k4x4_50), id, x_pdf, y_pdf, kCell);
   d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf, y_pdf), id);
   d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf + kSide, y_pdf), id);
   d.Feature(FeatureKind::kMarkerCorner, d.Pdf(x_pdf + kSide, y_pdf + kSide), id);
@@ -445,6 +447,7 @@ void DrawCharuco(Drawing& d, const BoardParams& p) {
   const double sq = p.square_m * 1e3;
   const double m = p.marker_m * 1e3;
   const double origin = kCharucoMarginSquares * sq;
+  const ArucoDictionaryInfo& dictionary = ArucoDictionaryInfoOf(p.charuco_dictionary);
   int next_id = 0;
   for (int r = 0; r < p.rows; ++r) {
     for (int c = 0; c < p.cols; ++c) {
@@ -455,7 +458,8 @@ void DrawCharuco(Drawing& d, const BoardParams& p) {
         continue;
       }
       const double inset = 0.5 * (sq - m);
-      PaintArucoMarker(d, next_id++, x + inset, y + inset, m / kAruco4x4MarkerCells);
+      PaintArucoMarker(d, dictionary, next_id++, x + inset, y + inset,
+                       m / dictionary.marker_cells());
     }
   }
   for (int r = 1; r < p.rows; ++r) {
@@ -631,7 +635,10 @@ BoardParamsError ValidateBoardParams(const BoardParams& p) {
     if (!(std::isfinite(p.marker_m) && p.marker_m > 0.0 && p.marker_m < p.square_m)) {
       return BoardParamsError::kBadMarker;
     }
-    if (CharucoMarkerCount(p) > kCharucoMaxMarkers) return BoardParamsError::kBadMarkerCount;
+    // One marker per white square, each of its own id.
+    if (CharucoMarkerCount(p) > ArucoDictionaryInfoOf(p.charuco_dictionary).marker_count()) {
+      return BoardParamsError::kBadMarkerCount;
+    }
   }
   return BoardParamsError::kOk;
 }

@@ -19,6 +19,8 @@
 #include <string_view>
 #include <vector>
 
+#include "detectors/boards/aruco_dictionaries.h"
+
 namespace linecal {
 
 enum class BoardType {
@@ -32,7 +34,7 @@ enum class BoardType {
   kCircleGrid,  // OpenCV's circle grid, symmetric or asymmetric: cols x rows circles;
                 // or BoofCV's hexagonal grid (hexagonal)
   kSquareGrid,  // BoofCV's square grid: cols x rows black squares apart by white gaps
-  kCharuco,     // OpenCV's ChArUco: cols x rows squares, DICT_4X4_50 markers in the white ones
+  kCharuco,     // OpenCV's ChArUco: cols x rows squares, ArUco markers in the white ones
 };
 
 inline constexpr std::array<BoardType, 10> kAllBoardTypes = {
@@ -99,9 +101,12 @@ struct BoardParams {
   int apriltag_rows = 6;
   double apriltag_spacing = 0.3;
   int apriltag_start_id = 0;
-  // kCharuco only (docs/boards.md, ChArUco): the side of the DICT_4X4_50 markers centred in the
-  // white squares, OpenCV's markerLength; below square_m. Default 18.75 mm (3/4 of the square).
+  // kCharuco only (docs/boards.md, ChArUco): the side of the markers centred in the white
+  // squares, OpenCV's markerLength; below square_m. Default 18.75 mm (3/4 of the square).
   double marker_m = 0.01875;
+  // kCharuco only: the OpenCV dictionary of the markers (ids 0, 1, ... of it). Default
+  // DICT_4X4_50, OpenCV's usual choice and the one of the station's marker boards.
+  ArucoDictionary charuco_dictionary = ArucoDictionary::k4x4_50;
   // kCharuco only: OpenCV's legacy pattern (CharucoBoard::setLegacyPattern, boards made before
   // OpenCV 4.6): with an even number of rows the top-left square is white and holds marker 0;
   // otherwise (and always when false, the default) the top-left square is black.
@@ -123,7 +128,7 @@ enum class BoardParamsError {
   kBadLayout,      // hexagonal and asymmetric both set: two layouts at once
   kBadGap,         // not finite or outside (0, kMaxSquareGridGapM]
   kBadMarker,       // kCharuco: marker_m not finite, not > 0, or not below square_m
-  kBadMarkerCount,  // kCharuco: more white squares than DICT_4X4_50 has markers (50)
+  kBadMarkerCount,  // kCharuco: more white squares than charuco_dictionary has markers
 };
 
 // A board of 2.6 mm or of 260 m is a typo, not a board: scales outside this range are refused.
@@ -149,10 +154,6 @@ inline constexpr int kMaxAprilGridTags = 50;
 inline constexpr double kMinAprilGridSpacing = 0.05;
 inline constexpr double kMaxAprilGridSpacing = 1.0;
 inline constexpr int kTag36h11Codes = 587;
-// Markers in OpenCV's DICT_4X4_50, the ChArUco boards' dictionary: a kCharuco board holds one
-// marker per white square, so at most this many white squares.
-inline constexpr int kCharucoMaxMarkers = 50;
-
 // kCharuco: whether square (row, col), 0-based from the top-left, is white and holds a marker
 // (OpenCV's layout, p.charuco_legacy included), and how many markers the board holds
 // (ids 0..count-1, row-major over those squares). O(1).

@@ -25,6 +25,7 @@ struct PrintedMarker {
 };
 
 struct CharucoGeometry {
+  int rows = 0;  // squares
   double square_m = 0.0;
   Eigen::Vector2d top_left_board;      // the top-left corner of the top-left square
   std::vector<PrintedMarker> markers;  // by id
@@ -34,6 +35,7 @@ struct CharucoGeometry {
 CharucoGeometry GeometryOf(const Board& board) {
   const BoardParams& p = board.params();
   CharucoGeometry g;
+  g.rows = p.rows;
   g.square_m = p.square_m * p.scale;
   const double half_marker = 0.5 * p.marker_m * p.scale;
   g.top_left_board = Eigen::Vector2d(-0.5 * p.cols * g.square_m, 0.5 * p.rows * g.square_m);
@@ -104,6 +106,64 @@ double PredictionError(const CharucoGeometry& g,
   return std::isfinite(error) ? error : std::numeric_limits<double>::infinity();
 }
 
+// A marker of the scan seen where the board prints one: the printed marker's id and the scanned
+// quad's corners in that marker's canonical order.
+struct PrintedRead {
+  int id = 0;
+  DecodedMarker marker;
+};
+
+// Whether scanned marker m, whose centre the homography H (board metres to pixels, from a kept
+// marker near it) puts at p_board on the page, is the marker the board prints there: p_board
+// within max_neighbour_error squares of the centre of a square that holds a marker, and the
+// image's cells inside m's quad, turned to that marker's orientation under H, disagreeing with
+// its print in at most as many cells as a marker the board places may (the larger of the
+// dictionary's correction bits and a sixth of its data bits, kPlacedMarkerMaxWrongFraction of
+// square_markers.cc). A different marker there differs from it in at least the dictionary's
+// minimum distance, more than twice its correction bits. nullopt otherwise.
+std::optional<PrintedRead> AsPrintedMarker(const ImageView8& image, const CharucoGeometry& g,
+                                           const MarkerFamily& family, const Eigen::Matrix3d& H,
+                                           const DecodedMarker& m, const Eigen::Vector2d& p_board,
+                                           const CharucoOptions& options, int min_contrast) {
+  const Eigen::Vector2d from_top_left = (p_board - g.top_left_board) / g.square_m;
+  const int col = static_cast<int>(std::floor(from_top_left.x()));
+  const int row = static_cast<int>(std::floor(-from_top_left.y()));
+  const int cols = static_cast<int>(g.marker_of_square.size()) / g.rows;
+  if (row < 0 || row >= g.rows || col < 0 || col >= cols) return std::nullopt;
+  const int id = g.marker_of_square[row * cols + col];
+  if (id < 0) return std::nullopt;
+  const Eigen::Vector2d square_centre =
+      g.top_left_board + g.square_m * Eigen::Vector2d(col + 0.5, -(row + 0.5));
+  if ((p_board - square_centre).norm() > options.max_neighbour_error * g.square_m) {
+    return std::nullopt;
+  }
+  // The turn of m's corners nearest to where H puts the printed marker's.
+  int best_turn = 0;
+  double best_px = std::numeric_limits<double>::infinity();
+  for (int turn = 0; turn < 4; ++turn) {
+    double sum_px = 0.0;
+    for (int k = 0; k < 4; ++k) {
+      sum_px += (m.corners_px[(turn + k) % 4] - ApplyHomography(H, g.markers[id].corners_board[k]))
+                    .norm();
+    }
+    if (sum_px < best_px) {
+      best_px = sum_px;
+      best_turn = turn;
+    }
+  }
+  PrintedRead read;
+  read.id = id;
+  read.marker.id = id;
+  for (int k = 0; k < 4; ++k) read.marker.corners_px[k] = m.corners_px[(best_turn + k) % 4];
+  const std::optional<int> wrong =
+      CellsDisagreeingWithMarker(image, family, id, read.marker.corners_px, min_contrast);
+  // A sixth of the data bits: kPlacedMarkerMaxWrongFraction of square_markers.cc.
+  const int data_bits = static_cast<int>(family.bit_cells.size());
+  if (!wrong || *wrong > std::max(family.max_correction_bits, data_bits / 6)) return std::nullopt;
+  read.marker.hamming = *wrong;
+  return read;
+}
+
 // The markers that agree on one placement of the board. Two markers within two squares of each
 // other on the board agree when either's homography puts the other within max_neighbour_error
 // square sides of where it is read; the largest connected group of at least two is the board.
@@ -113,12 +173,15 @@ double PredictionError(const CharucoGeometry& g,
 // marker places on the board's page is a marker the board does not print there. A board seen
 // shifted by whole squares (the legacy and current layouts of an even row count are such a shift
 // of each other, with mostly the same ids) shows such markers; so does a board of another size.
-// Markers off the page (another board beside this one) do not count. kept: by id, nullopt where
-// not kept. Returns kNone, kTooFewFeatures (no group of two), kAmbiguous (another group as large
-// that does not join: two placements) or kWrongBoard (a marker on the page that the board does
-// not print there).
+// Markers off the page (another board beside this one) do not count; nor does a marker read
+// where the board prints one, whose cells show that marker's print (AsPrintedMarker): a misread
+// of the board's own marker (blur, glare) is left out rather than refusing the board. kept: by
+// id, nullopt where not kept. Returns kNone, kTooFewFeatures (no group of two), kAmbiguous
+// (another group as large that does not join: two placements) or kWrongBoard (a marker on the
+// page that the board does not print there).
 // O(markers^2).
-DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, const MarkerScan& scan,
+DetectReason KeepBoardMarkers(const ImageView8& image, const Board& board, const CharucoGeometry& g,
+                              const MarkerFamily& family, const MarkerScan& scan,
                               const CharucoOptions& options,
                               std::vector<std::optional<DecodedMarker>>* kept) {
   const std::vector<std::optional<DecodedMarker>> read = *kept;
@@ -184,7 +247,12 @@ DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, cons
     if (!H) continue;
     const Eigen::Vector2d p_board = ApplyHomography(H->inverse(), centre_px);
     if (std::abs(p_board.x()) < half_page.x() && std::abs(p_board.y()) < half_page.y()) {
-      return DetectReason::kWrongBoard;
+      const std::optional<PrintedRead> printed =
+          AsPrintedMarker(image, g, family, *H, m, p_board, options, scan.min_contrast);
+      if (!printed) return DetectReason::kWrongBoard;
+      // The board's own marker: joined when the scan read its id (it was dropped only for
+      // being read twice, by a misread elsewhere), else a misread, left out.
+      if (printed->id == m.id && !joined[m.id]) joined[m.id] = printed->marker;
     }
   }
   for (int i = 0; i < count && rival_group >= 0; ++i) {
@@ -194,12 +262,53 @@ DetectReason KeepBoardMarkers(const Board& board, const CharucoGeometry& g, cons
   return DetectReason::kNone;
 }
 
-// The homography of the kept markers in the squares rows r - 1 - ring .. r + ring and cols
-// c - 1 - ring .. c + ring (those touching inner corner (r, c) and `ring` squares beyond);
-// nullopt when none is kept there.
-std::optional<Eigen::Matrix3d> CornerHomography(
-    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& kept,
-    const BoardParams& p, int r, int c, int ring) {
+// Reads the board's markers that the scan missed (too small or foreshortened for a quad of
+// their own, or joined to the dark squares by blur) where the kept markers within two squares
+// of theirs put them (ReadPlacedMarker: the expected id in the board's orientation, its
+// corners within a quarter cell of the prediction); repeated while markers are added, so that
+// a marker beyond a placed one is placed from it. At least two markers make the prediction:
+// one alone extrapolates its own corners' errors over the squares between them.
+// O(passes * markers * (markers + marker side)).
+void PlaceMissedMarkers(const ImageView8& image, const CharucoGeometry& g,
+                        const MarkerFamily& family, int min_contrast,
+                        std::vector<std::optional<DecodedMarker>>* kept) {
+  const int count = static_cast<int>(kept->size());
+  for (bool added = true; added;) {
+    added = false;
+    for (int id = 0; id < count; ++id) {
+      if ((*kept)[id]) continue;
+      std::vector<int> near;
+      for (int j = 0; j < count; ++j) {
+        if ((*kept)[j] && std::abs(g.markers[j].row - g.markers[id].row) <= 2 &&
+            std::abs(g.markers[j].col - g.markers[id].col) <= 2) {
+          near.push_back(j);
+        }
+      }
+      if (near.size() < 2) continue;
+      const std::optional<Eigen::Matrix3d> H = MarkersHomography(g, *kept, near);
+      if (!H) continue;
+      std::array<Eigen::Vector2d, 4> predicted;
+      for (int k = 0; k < 4; ++k) {
+        predicted[k] = ApplyHomography(*H, g.markers[id].corners_board[k]);
+      }
+      if (!std::all_of(predicted.begin(), predicted.end(),
+                       [](const Eigen::Vector2d& uv) { return uv.allFinite(); })) {
+        continue;
+      }
+      const std::optional<DecodedMarker> placed =
+          ReadPlacedMarker(image, family, id, predicted, min_contrast);
+      if (!placed) continue;
+      (*kept)[id] = placed;
+      added = true;
+    }
+  }
+}
+
+// The kept markers in the squares rows r - 1 - ring .. r + ring and cols c - 1 - ring ..
+// c + ring (those touching inner corner (r, c) and `ring` squares beyond), by id.
+std::vector<int> MarkersAround(const CharucoGeometry& g,
+                               const std::vector<std::optional<DecodedMarker>>& kept,
+                               const BoardParams& p, int r, int c, int ring) {
   std::vector<int> ids;
   for (int sr = std::max(0, r - 1 - ring); sr <= std::min(p.rows - 1, r + ring); ++sr) {
     for (int sc = std::max(0, c - 1 - ring); sc <= std::min(p.cols - 1, c + ring); ++sc) {
@@ -207,8 +316,70 @@ std::optional<Eigen::Matrix3d> CornerHomography(
       if (id >= 0 && kept[id]) ids.push_back(id);
     }
   }
+  return ids;
+}
+
+// The homography of the kept markers around inner corner (r, c) (MarkersAround); nullopt when
+// none is kept there.
+std::optional<Eigen::Matrix3d> CornerHomography(
+    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& kept,
+    const BoardParams& p, int r, int c, int ring) {
+  const std::vector<int> ids = MarkersAround(g, kept, p, r, c, ring);
   if (ids.empty()) return std::nullopt;
   return MarkersHomography(g, kept, ids);
+}
+
+// Inner corner (r, c) where the kept markers of the 4 x 4 squares around it put it, for a
+// corner whose saddle fit failed (blur and noise can leave a corner's small window in the
+// white margin without a clear saddle): nullopt unless the prediction is an interpolation that
+// holds, i.e. kept markers lie on both sides of the corner along both board axes, and one
+// homography (with the dilation of their print, FitDilatedHomography) carries all their corners
+// within max_residual_cells marker cells (a misplaced marker corner, or a lens that bends the
+// neighbourhood, would move the prediction by as much).
+// The caller checks the paint around it. The error is the markers' corners' (their edges are
+// fitted over their whole sides), a small fraction of a pixel. O(markers).
+std::optional<Eigen::Vector2d> InterpolatedCorner(
+    const CharucoGeometry& g, const std::vector<std::optional<DecodedMarker>>& kept,
+    const BoardParams& p, const MarkerFamily& family, const CharucoOptions& options, int r, int c,
+    const Eigen::Vector2d& corner_board) {
+  const std::vector<int> ids = MarkersAround(g, kept, p, r, c, 1);
+  bool above = false;
+  bool below = false;
+  bool left = false;
+  bool right = false;
+  for (int id : ids) {
+    above = above || g.markers[id].row < r;
+    below = below || g.markers[id].row >= r;
+    left = left || g.markers[id].col < c;
+    right = right || g.markers[id].col >= c;
+  }
+  if (!(above && below && left && right)) return std::nullopt;
+  // The markers' corners in the order of PrintedMarker::corners_board (top-left, top-right,
+  // bottom-right, bottom-left; board y up) and their outward diagonals.
+  const std::array<Eigen::Vector2d, 4> diagonals = {Eigen::Vector2d(-1, 1), Eigen::Vector2d(1, 1),
+                                                    Eigen::Vector2d(1, -1),
+                                                    Eigen::Vector2d(-1, -1)};
+  std::vector<Eigen::Vector2d> p_board;
+  std::vector<Eigen::Vector2d> outward;
+  std::vector<Eigen::Vector2d> uv;
+  for (int id : ids) {
+    for (int k = 0; k < 4; ++k) {
+      p_board.push_back(g.markers[id].corners_board[k]);
+      outward.push_back(diagonals[k]);
+      uv.push_back(kept[id]->corners_px[k]);
+    }
+  }
+  // The dilation of the markers' dark print (gamma after blur) is taken out: the chessboard's
+  // corner, a saddle between two dark squares, does not move with it.
+  const std::optional<DilatedHomographyFit> fit =
+      FitDilatedHomography(p_board, outward, uv, ids.size());
+  if (!fit) return std::nullopt;
+  const double marker_side_px = LocalSquareSide(fit->fit.H, corner_board, p.marker_m * p.scale);
+  if (!(fit->fit.max_residual <=
+        options.markers.max_residual_cells * marker_side_px / family.cells)) {
+    return std::nullopt;
+  }
+  return ApplyHomography(fit->fit.H, corner_board);
 }
 
 // The largest saddle-fit window (half side, pixels) whose patch around uv_px stays inside the
@@ -290,17 +461,16 @@ std::string_view CharucoOptions::Validate() const {
   return {};
 }
 
-Detection DetectCharuco(const ImageView8& image, const Board& board,
-                        const CharucoOptions& options) {
-  Detection detection;
-  detection.reason =
-      CheckDetectorInput(image, board, BoardType::kCharuco, options.Validate().empty());
-  if (detection.reason != DetectReason::kNone) return detection;
+namespace {
 
+// DetectCharuco on a view already checked.
+Detection DetectOnce(const ImageView8& image, const Board& board, const CharucoOptions& options) {
+  Detection detection;
   const BoardParams& p = board.params();
   const CharucoGeometry g = GeometryOf(board);
   const int marker_count = static_cast<int>(g.markers.size());
-  const MarkerScan scan = ScanMarkers(image, Aruco4x4_50Family(), options.markers, marker_count);
+  const MarkerFamily family = ArucoFamily(p.charuco_dictionary);
+  const MarkerScan scan = ScanMarkers(image, family, options.markers, marker_count);
   if (scan.markers.empty()) {
     detection.reason =
         scan.reason == DetectReason::kNone ? DetectReason::kNoCandidates : scan.reason;
@@ -311,8 +481,9 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
     detection.reason = DetectReason::kWrongBoard;
     return detection;
   }
-  detection.reason = KeepBoardMarkers(board, g, scan, options, &read);
+  detection.reason = KeepBoardMarkers(image, board, g, family, scan, options, &read);
   if (detection.reason != DetectReason::kNone) return detection;
+  PlaceMissedMarkers(image, g, family, scan.min_contrast, &read);
 
   // The white squares are white only in their margin around the marker: the saddle fit's
   // window stays inside it, where the corner looks like a chessboard's. (What lies beyond,
@@ -340,7 +511,11 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
         refined = RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
         if (refined) break;
       }
-      if (!refined) continue;
+      if (!refined) {
+        refined = InterpolatedCorner(g, read, p, family, options, r, c, feature.p_board);
+        if (!refined) continue;
+        H = CornerHomography(g, read, p, r, c, 1);
+      }
       // The square up left of the corner is black when it holds no marker.
       const bool dark_first = !CharucoSquareHasMarker(p, r - 1, c - 1);
       if (!CornerPaintAgrees(image, *H, feature.p_board, g.square_m, margin_m, dark_first,
@@ -357,6 +532,98 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
   detection.found = detection.features.size() == board.features().size();
   detection.reason = detection.found ? DetectReason::kNone : DetectReason::kPartial;
   return detection;
+}
+
+// Marker cells below this many pixels are under what the marker scan is made for (4 px cells,
+// docs/acceptance.md): blur joins such a marker to the black squares around it through the
+// thin white margin, and no quad of its own is found.
+constexpr double kSmallCellPx = 4.0;
+
+// The patch [x0, x0 + w) x [y0, y0 + h) of `image` at twice its resolution, by bilinear
+// interpolation: output pixel (x, y) samples the input at (x0 + (x + 0.5) / 2 - 0.5, ...),
+// clamped to the image. O(w * h).
+Image8 DoublePatch(const ImageView8& image, int x0, int y0, int w, int h) {
+  // The patch is at least 2 x 2 (the caller's check), so the image is too.
+  Image8 out(2 * w, 2 * h);
+  for (int y = 0; y < out.height; ++y) {
+    const double v = std::clamp(y0 + 0.5 * y - 0.25, 0.0, image.height - 1.0);
+    const int top = std::min(static_cast<int>(v), image.height - 2);
+    const double fy = v - top;
+    for (int x = 0; x < out.width; ++x) {
+      const double u = std::clamp(x0 + 0.5 * x - 0.25, 0.0, image.width - 1.0);
+      const int left = std::min(static_cast<int>(u), image.width - 2);
+      const double fx = u - left;
+      const double upper = (1.0 - fx) * image.At(left, top) + fx * image.At(left + 1, top);
+      const double lower = (1.0 - fx) * image.At(left, top + 1) + fx * image.At(left + 1, top + 1);
+      out.at(x, y) = static_cast<std::uint8_t>(std::lround((1.0 - fy) * upper + fy * lower));
+    }
+  }
+  return out;
+}
+
+// A partial detection whose markers' cells are under kSmallCellPx, looked for again on the
+// board's part of the image at twice the resolution, where the markers' white margins are
+// wide enough for the scan: the patch is the board's page where the corners found put it (their
+// homography), with two squares more around it, clipped to the image. The features found there
+// are returned in the image's pixels when there are more of them; otherwise `partial` itself.
+// Only a board already identified by its verified corners is looked for again, so the
+// upsampled scan adds no detection where there was none. Cost: the detection on a patch of 4
+// times its pixels.
+Detection DetectSmallMarkersUpsampled(const ImageView8& image, const Board& board,
+                                      const CharucoOptions& options, Detection partial) {
+  const BoardParams& p = board.params();
+  std::vector<Eigen::Vector2d> src;
+  std::vector<Eigen::Vector2d> dst;
+  for (const DetectedFeature& f : partial.features) {
+    src.push_back(f.p_board);
+    dst.push_back(f.uv_px);
+  }
+  const std::optional<HomographyFit> fit = FitHomography(src, dst);
+  if (!fit) return partial;
+  const double cell_px = LocalSquareSide(fit->H, src.front(), p.marker_m * p.scale) /
+                         ArucoDictionaryInfoOf(p.charuco_dictionary).marker_cells();
+  if (!(cell_px < kSmallCellPx)) return partial;
+  const Eigen::Vector2d half =
+      0.5 * board.page_size_m() + Eigen::Vector2d::Constant(2.0 * p.square_m * p.scale);
+  Eigen::AlignedBox2d box;
+  for (const Eigen::Vector2d& corner :
+       {Eigen::Vector2d(-half.x(), -half.y()), Eigen::Vector2d(half.x(), -half.y()),
+        Eigen::Vector2d(half.x(), half.y()), Eigen::Vector2d(-half.x(), half.y())}) {
+    box.extend(ApplyHomography(fit->H, corner));
+  }
+  if (!box.min().allFinite() || !box.max().allFinite()) return partial;
+  const int x0 = std::max(0, static_cast<int>(std::floor(box.min().x())));
+  const int y0 = std::max(0, static_cast<int>(std::floor(box.min().y())));
+  const int x1 = std::min(image.width, static_cast<int>(std::ceil(box.max().x())) + 1);
+  const int y1 = std::min(image.height, static_cast<int>(std::ceil(box.max().y())) + 1);
+  if (x1 - x0 < 2 || y1 - y0 < 2 || 2 * (x1 - x0) > kMaxImageSide ||
+      2 * (y1 - y0) > kMaxImageSide) {
+    return partial;
+  }
+  const Image8 doubled = DoublePatch(image, x0, y0, x1 - x0, y1 - y0);
+  Detection again = DetectOnce(doubled.view(), board, options);
+  if (again.features.size() <= partial.features.size()) return partial;
+  for (DetectedFeature& f : again.features) {
+    // Output pixel x samples the input at x0 + x / 2 - 0.25 (DoublePatch).
+    f.uv_px = Eigen::Vector2d(x0, y0) + 0.5 * f.uv_px - Eigen::Vector2d::Constant(0.25);
+  }
+  return again;
+}
+
+}  // namespace
+
+Detection DetectCharuco(const ImageView8& image, const Board& board,
+                        const CharucoOptions& options) {
+  Detection detection;
+  detection.reason =
+      CheckDetectorInput(image, board, BoardType::kCharuco, options.Validate().empty());
+  if (detection.reason != DetectReason::kNone) return detection;
+  detection = DetectOnce(image, board, options);
+  // Four corners fix the homography that places the patch.
+  if (detection.reason != DetectReason::kPartial || detection.features.size() < 4) {
+    return detection;
+  }
+  return DetectSmallMarkersUpsampled(image, board, options, std::move(detection));
 }
 
 }  // namespace linecal

@@ -1,20 +1,29 @@
 #pragma once
 // Detector of OpenCV's ChArUco boards (docs/boards.md, ChArUco): a chessboard of cols x rows
-// squares whose white squares hold DICT_4X4_50 markers; the features are the chessboard's inner
-// corners with OpenCV's charuco ids.
+// squares whose white squares hold the markers of one of OpenCV's predefined ArUco dictionaries
+// (BoardParams::charuco_dictionary); the features are the chessboard's inner corners with
+// OpenCV's charuco ids.
 //
 // Method: the markers are found and decoded by the project's square-marker scan
 // (detectors/markers/square_markers.h, ScanMarkers). A marker is kept only when its id belongs
 // to the board, is read once, and a neighbouring marker (within two squares) lies where the
 // marker's own homography puts it: a marker of another board, or a misread id, has no such
 // neighbour; and the board is refused when a marker lies on its page where it prints no such
-// marker. Each inner corner is then predicted from the homography of the (one or two) kept
-// markers in the squares that touch it — local, so that a lens that bends the board moves the
-// prediction little — or, where they were not read or the fit fails from there, of the kept
-// markers of the 4 x 4 squares around it; refined by the saddle fit
+// marker. A marker read where the board prints another one, whose cells still show the printed
+// one's code (within the cells a placed marker may miss), is that marker misread: it is left
+// out, and the board kept. Each inner corner is then predicted from the homography of the (one
+// or two) kept markers in the squares that touch it — local, so that a lens that bends the
+// board moves the prediction little — or, where they were not read or the fit fails from
+// there, of the kept markers of the 4 x 4 squares around it; refined by the saddle fit
 // (detectors/common/corner_refine.h) and kept only when the fit is a saddle within a pixel of
 // the prediction and the image shows the board's paint around it: both black squares darker
-// than both white ones.
+// than both white ones. Where the saddle fit fails (blur and noise in the small window between
+// the markers), the corner is the prediction of the markers of the 4 x 4 squares around it when
+// that is an interpolation that holds: markers on every side of it, one homography through
+// all their corners within MarkerDetectOptions::max_residual_cells, and the paint check.
+// Markers the scan missed are read where the kept markers around them put them. A partial
+// board whose marker cells are under 4 px (the scan's design size) is looked for again on its
+// part of the image at twice the resolution, and the result with more corners is returned.
 
 #include <string_view>
 
@@ -54,7 +63,8 @@ struct CharucoOptions {
 // markers of the same size: two placements of the board), kTooFewFeatures (no two of the
 // board's markers agree, or no corner passes). Pure function. Cost: the marker scan (about
 // 3 ms at 1280 x 720) plus a small blur and fit per corner: about 5 ms for a 7 x 5 board at
-// 1280 x 720 (tests/detectors/charuco).
+// 1280 x 720 (tests/detectors/charuco); a partial board of small markers adds the detection on
+// its doubled patch (4 times the patch's pixels).
 Detection DetectCharuco(const ImageView8& image, const Board& board,
                         const CharucoOptions& options = {});
 

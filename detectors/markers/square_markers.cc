@@ -11,7 +11,7 @@
 #include <optional>
 #include <span>
 
-#include "detectors/boards/aruco_dict_4x4_50.h"
+#include "detectors/boards/aruco_dictionaries.h"
 #include "detectors/common/binarise.h"
 #include "detectors/common/contours.h"
 #include "detectors/common/edge_lines.h"
@@ -500,17 +500,20 @@ std::string_view MarkerDetectOptions::Validate() const {
   return {};
 }
 
-MarkerFamily Aruco4x4_50Family() {
+MarkerFamily ArucoFamily(ArucoDictionary dictionary) {
+  const ArucoDictionaryInfo& info = ArucoDictionaryInfoOf(dictionary);
   MarkerFamily family;
-  family.cells = kAruco4x4MarkerCells;
+  family.cells = info.marker_cells();
   family.border_cells = 1;
-  for (int i = 0; i < kAruco4x4DataBits * kAruco4x4DataBits; ++i) {
-    family.bit_cells.push_back({1 + i / kAruco4x4DataBits, 1 + i % kAruco4x4DataBits});
+  for (int i = 0; i < info.data_bits * info.data_bits; ++i) {
+    family.bit_cells.push_back({1 + i / info.data_bits, 1 + i % info.data_bits});
   }
-  family.codes.assign(kAruco4x4_50Codes.begin(), kAruco4x4_50Codes.end());
-  family.max_correction_bits = kAruco4x4_50MaxCorrectionBits;
+  family.codes.assign(info.codes.begin(), info.codes.end());
+  family.max_correction_bits = info.max_correction_bits;
   return family;
 }
+
+MarkerFamily Aruco4x4_50Family() { return ArucoFamily(ArucoDictionary::k4x4_50); }
 
 MarkerFamily Tag36h11Family(int border_bits) {
   apriltag_family_t* tf = tag36h11_create();
@@ -528,6 +531,28 @@ MarkerFamily Tag36h11Family(int border_bits) {
   family.max_correction_bits = 2;
   tag36h11_destroy(tf);
   return family;
+}
+
+std::optional<int> CellsDisagreeingWithMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& corners_px,
+                                              double min_contrast) {
+  std::vector<double> values;
+  if (!SampleCells(image, corners_px, family.cells, &values)) return std::nullopt;
+  return CellsDisagreeing(values, MarkerCells(family, id), family.cells, min_contrast);
+}
+
+std::optional<DecodedMarker> ReadPlacedMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& predicted_px,
+                                              double min_contrast) {
+  std::optional<DecodedMarker> marker =
+      ReadPredictedMarker(image, family, id, predicted_px, min_contrast);
+  if (!marker ||
+      !WithinCells(marker->corners_px, predicted_px, family.cells, kPlacedMarkerMaxMoveCells)) {
+    return std::nullopt;
+  }
+  return marker;
 }
 
 MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
@@ -600,10 +625,7 @@ namespace {
 // renders: 0.7-0.8 px RMS at gamma 0.6 or 1.6 under blur 1.5 (0.15 px at gamma 1). The board
 // fit takes it as one more unknown, the dilation: each corner k of a marker is observed at
 // H (p_k + dilation * d_k), d_k its outward diagonal (+-1, +-1) in the board frame.
-struct BoardFit {
-  HomographyFit fit;
-  double dilation_m = 0.0;
-};
+using BoardFit = DilatedHomographyFit;
 
 // Markers needed to fit the dilation: with two, a marker's size and the pair's spacing are
 // all there is to tell it from the homography's scale.
@@ -657,6 +679,20 @@ std::optional<BoardFit> FitBoard(const std::vector<Eigen::Vector2d>& p,
     for (std::size_t i = 0; i < p.size(); ++i) dilated[i] = p[i] + board.dilation_m * d[i];
   }
 }
+
+}  // namespace
+
+std::optional<DilatedHomographyFit> FitDilatedHomography(
+    const std::vector<Eigen::Vector2d>& p_board,
+    const std::vector<Eigen::Vector2d>& outward_diagonal, const std::vector<Eigen::Vector2d>& uv_px,
+    std::size_t markers) {
+  if (p_board.size() != outward_diagonal.size() || p_board.size() != uv_px.size()) {
+    return std::nullopt;
+  }
+  return FitBoard(p_board, outward_diagonal, uv_px, markers);
+}
+
+namespace {
 
 // The outward diagonal (+-1, +-1) of each corner of a marker, board frame.
 std::array<Eigen::Vector2d, 4> OutwardDiagonals(const std::vector<const BoardFeature*>& corners) {

@@ -12,14 +12,15 @@
 //
 // Image coordinates: pixel-centre convention (docs/conventions.md). Pure functions, no state.
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string_view>
 #include <vector>
 
-#include <Eigen/Core>
-
 #include "detectors/boards/board.h"
+#include "detectors/common/homography.h"
 #include "detectors/core/image_view.h"
 #include "detectors/detection.h"
 
@@ -37,8 +38,11 @@ struct MarkerFamily {
   int max_correction_bits = 1;
 };
 
-// OpenCV's DICT_4X4_50 (detectors/boards/aruco_dict_4x4_50.h): 6 x 6 cells, 1-cell border,
-// at most 1 corrected bit (OpenCV's maxCorrectionBits). O(1).
+// One of OpenCV's predefined ArUco dictionaries (detectors/boards/aruco_dictionaries.h): (n + 2)
+// x (n + 2) cells for n x n data bits, 1-cell border, at most the dictionary's maxCorrectionBits
+// corrected (OpenCV's strictness). Cost: copies the codes (up to 1024).
+MarkerFamily ArucoFamily(ArucoDictionary dictionary);
+// ArucoFamily(DICT_4X4_50): 6 x 6 cells, at most 1 corrected bit; the station's marker boards.
 MarkerFamily Aruco4x4_50Family();
 // tag36h11 (libapriltag's codes) with a black border of border_bits (1 or 2) cells:
 // 8 x 8 or 10 x 10 cells. At most 2 corrected bits: tag36h11's minimum distance is 11,
@@ -122,6 +126,49 @@ struct MarkerScan {
 // O(cells^2 + codes) per quad.
 MarkerScan ScanMarkers(const ImageView8& image, const MarkerFamily& family,
                        const MarkerDetectOptions& options, int enough_markers = 0);
+
+// How many cells of marker `id` of `family` (border included) disagree with what the image
+// shows inside `corners_px` (the marker's corners in its canonical order, as
+// DecodedMarker::corners_px): the cells are sampled through the quad's homography and judged
+// against a plane of illumination plus the marker's contrast, as the markers a board places
+// are. Tells a marker that was misread (its cells still show the expected print within a few
+// cells) from another marker (most cells differ). nullopt when a cell leaves the image or the
+// light and dark cells differ by less than min_contrast. O(cells^2).
+std::optional<int> CellsDisagreeingWithMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& corners_px,
+                                              double min_contrast);
+
+// Reads marker `id` of `family` where a board model puts it, as VerifyMarkerBoard reads the
+// markers the scan missed: `predicted_px` (its corners in canonical order, clockwise in the
+// image) are refined on the marker's edges knowing its cells, and the marker is accepted when
+// its cells show its print within the placed-marker tolerance (the larger of the family's
+// correction bits and a sixth of its data bits) and no corner moved more than a quarter of a
+// cell from its prediction. nullopt otherwise (not there, too blurred or small, or another
+// marker). Cost: O(side + cells^2).
+std::optional<DecodedMarker> ReadPlacedMarker(const ImageView8& image, const MarkerFamily& family,
+                                              int id,
+                                              const std::array<Eigen::Vector2d, 4>& predicted_px,
+                                              double min_contrast);
+
+// A homography through square markers' edge-located corners, with the one bias a homography
+// cannot take up: a gamma after the optics' blur moves every dark-to-light edge by the same
+// amount, so every marker grows or shrinks about its centre (0.7-0.8 px RMS at gamma 0.6 or 1.6
+// under blur 1.5) while their pitch stays. Corner i of a marker is observed at
+// H (p_board[i] + dilation_m * outward_diagonal[i]), the diagonal (+-1, +-1) in the board frame.
+struct DilatedHomographyFit {
+  HomographyFit fit;  // residuals of the dilated points
+  double dilation_m = 0.0;
+};
+
+// Fits H and, with 3 markers or more (with two, a marker's size and their spacing are all there
+// is to tell the dilation from the homography's scale), the dilation to the corners uv_px[i] of
+// board points p_board[i] (`markers` markers). nullopt when a homography fit fails (sizes,
+// degenerate points). O(n) per round, four rounds.
+std::optional<DilatedHomographyFit> FitDilatedHomography(
+    const std::vector<Eigen::Vector2d>& p_board,
+    const std::vector<Eigen::Vector2d>& outward_diagonal, const std::vector<Eigen::Vector2d>& uv_px,
+    std::size_t markers);
 
 // Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features, markers of
 // `family`) from the markers of `scan`, and checks the whole board: every marker id at most

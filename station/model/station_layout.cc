@@ -69,7 +69,7 @@ const char* KeyOfBoardError(BoardParamsError error) {
     case BoardParamsError::kBadMarker:
       return "marker_m";
     case BoardParamsError::kBadMarkerCount:
-      return "cols";
+      return "dictionary";
   }
   return "type";
 }
@@ -78,7 +78,7 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
                                 "diameter_m", "asymmetric", "light_circles", "border_bits",
                                 "tag_cols", "tag_rows", "tag_spacing", "start_id", "gap_m",
-                                "marker_m", "legacy_pattern", "pose", "hexagonal"});
+                                "marker_m", "legacy_pattern", "dictionary", "pose", "hexagonal"});
       !s.ok()) {
     return s;
   }
@@ -134,6 +134,12 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   absl::StatusOr<bool> legacy = f.BoolOr("legacy_pattern", params.charuco_legacy);
   if (!legacy.ok()) return legacy.status();
   params.charuco_legacy = *legacy;
+  absl::StatusOr<std::string> dictionary =
+      f.StringOr("dictionary", ArucoDictionaryInfoOf(params.charuco_dictionary).name);
+  if (!dictionary.ok()) return dictionary.status();
+  const std::optional<ArucoDictionary> known = ArucoDictionaryFromName(*dictionary);
+  if (!known) return f.Error("dictionary", "unknown ArUco dictionary '" + *dictionary + "'");
+  params.charuco_dictionary = *known;
   if (absl::Status s = ReadAprilGrid(f, &params); !s.ok()) return s;
   BoardParamsError error = BoardParamsError::kOk;
   std::optional<Board> board = Board::Create(params, &error);
@@ -287,6 +293,7 @@ nlohmann::json BoardParamsToJson(const BoardParams& p) {
     j["square_m"] = p.square_m;
     j["marker_m"] = p.marker_m;
     j["legacy_pattern"] = p.charuco_legacy;
+    j["dictionary"] = ArucoDictionaryInfoOf(p.charuco_dictionary).name;
   }
   return j;
 }

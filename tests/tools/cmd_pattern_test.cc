@@ -302,5 +302,41 @@ TEST_F(PatternCliTest, CharucoPatternIsDetectedWithItsCornerIds) {
             2);
 }
 
+// --dictionary: the board drawn with OpenCV's DICT_6X6_250 is found with that flag, every
+// corner with its id; read as the default DICT_4X4_50 board, nothing. Errors name the flag and
+// the value.
+TEST_F(PatternCliTest, CharucoDictionaryFlagDrawsAndDetectsThatDictionary) {
+  const std::string board = "--board charuco --cols 5 --rows 4 --square 0.03 --marker 0.024";
+  const std::string flags = board + " --dictionary DICT_6X6_250";
+  const auto drawn = RunLinecal("pattern " + flags + " --dpi 150 --out " + Path("d.png"));
+  ASSERT_EQ(drawn.exit_code, 0) << drawn.err;
+  const auto run = RunLinecal("detect " + flags + " --json --image " + Path("d.png"));
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  EXPECT_TRUE(j.at("complete").get<bool>());
+  ASSERT_EQ(j.at("features").size(), 12u);
+  for (int id = 0; id < 12; ++id) EXPECT_EQ(j.at("features")[id].at("id").get<int>(), id);
+  const auto other = RunLinecal("detect " + board + " --json --image " + Path("d.png"));
+  EXPECT_EQ(other.exit_code, 1) << other.err;
+  EXPECT_TRUE(nlohmann::json::parse(other.out).at("features").empty());
+
+  const struct {
+    std::string args;
+    std::string message;
+  } errors[] = {
+      {board + " --dictionary DICT_5X5_60",
+       "--dictionary: unknown dictionary 'DICT_5X5_60' (one of DICT_4X4_50, DICT_4X4_100"},
+      {"--board charuco --cols 15 --rows 14 --dictionary DICT_6X6_100",
+       "--dictionary: DICT_6X6_100 has 100 markers; 15 x 14 squares hold 105"},
+      {"--board checker --dictionary DICT_6X6_100",
+       "--dictionary applies to --board charuco only, not checker"},
+  };
+  for (const auto& e : errors) {
+    const auto bad = RunLinecal("pattern " + e.args + " --out " + Path("b.png"));
+    EXPECT_EQ(bad.exit_code, 2) << e.args;
+    EXPECT_NE(bad.err.find(e.message), std::string::npos) << e.args << "\n" << bad.err;
+  }
+}
+
 }  // namespace
 }  // namespace linecal

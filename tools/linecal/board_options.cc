@@ -12,6 +12,12 @@
 namespace linecal::tools {
 namespace {
 
+std::string DictionaryNames() {
+  std::vector<std::string> names;
+  for (const ArucoDictionaryInfo& d : AllArucoDictionaries()) names.emplace_back(d.name);
+  return absl::StrJoin(names, ", ");
+}
+
 std::string BoardNames() {
   std::vector<std::string> names;
   for (BoardType t : kAllBoardTypes) names.emplace_back(BoardTypeName(t));
@@ -49,7 +55,7 @@ const char* OptionOf(BoardParamsError e) {
     case BoardParamsError::kBadMarker:
       return "marker";
     case BoardParamsError::kBadMarkerCount:
-      return "cols";
+      return "dictionary";
   }
   return "board";
 }
@@ -79,7 +85,7 @@ absl::Status AprilGridFromCommandLine(const cli::CommandLine& cl, BoardParams* p
 absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
   for (const char* option : {"board", "scale", "cols", "rows", "square", "gap", "spacing",
                              "asymmetric", "tag-cols", "tag-rows", "tag-spacing", "start-id",
-                             "hexagonal", "marker", "legacy-pattern"}) {
+                             "hexagonal", "marker", "legacy-pattern", "dictionary"}) {
     if (cl.Has(option)) {
       return absl::InvalidArgumentError(
           absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
@@ -151,8 +157,9 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
       return absl::StrCat(p.marker_m, " m must be > 0 and below the square (", p.square_m,
                           " m)");
     case BoardParamsError::kBadMarkerCount:
-      return absl::StrCat(p.cols, " x ", p.rows, " squares hold ", CharucoMarkerCount(p),
-                          " markers; DICT_4X4_50 has ", kCharucoMaxMarkers);
+      return absl::StrCat(ArucoDictionaryInfoOf(p.charuco_dictionary).name, " has ",
+                          ArucoDictionaryInfoOf(p.charuco_dictionary).marker_count(), " markers; ",
+                          p.cols, " x ", p.rows, " squares hold ", CharucoMarkerCount(p));
   }
   return "invalid";
 }
@@ -172,8 +179,10 @@ std::vector<cli::OptionSpec> BoardOptionSpecs() {
        "checker, square_grid and charuco: square side in metres (default 0.025)"},
       {"gap", "METRES", "square_grid only: white gap between squares in metres (default 0.025)"},
       {"marker", "METRES",
-       "charuco only: DICT_4X4_50 marker side in metres, OpenCV's markerLength (default "
-       "0.01875)"},
+       "charuco only: marker side in metres, OpenCV's markerLength (default 0.01875)"},
+      {"dictionary", "NAME",
+       "charuco only: OpenCV's ArUco dictionary of the markers, e.g. DICT_5X5_100 (default "
+       "DICT_4X4_50)"},
       {"legacy-pattern", "",
        "charuco only: OpenCV's legacy pattern (boards made before 4.6: with an even row count "
        "the top-left square is white)"},
@@ -218,6 +227,7 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
       {"gap", {BoardType::kSquareGrid}},
       {"marker", {BoardType::kCharuco}},
       {"legacy-pattern", {BoardType::kCharuco}},
+      {"dictionary", {BoardType::kCharuco}},
       {"spacing", {BoardType::kCircleGrid}},
       {"diameter", {BoardType::kCircleGrid}},
       {"asymmetric", {BoardType::kCircleGrid}},
@@ -255,6 +265,15 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
   absl::StatusOr<double> marker = cl.GetDouble("marker", p.marker_m);
   if (!marker.ok()) return marker.status();
   if (absl::Status s = AprilGridFromCommandLine(cl, &p); !s.ok()) return s;
+  if (cl.Has("dictionary")) {
+    const std::string dictionary = cl.Get("dictionary", "");
+    const std::optional<ArucoDictionary> d = ArucoDictionaryFromName(dictionary);
+    if (!d.has_value()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--dictionary: unknown dictionary '", dictionary, "' (one of ", DictionaryNames(), ")"));
+    }
+    p.charuco_dictionary = *d;
+  }
   p.scale = *scale;
   p.cols = *cols;
   p.rows = *rows;

@@ -2,7 +2,7 @@
 // The command-line options that choose a board (docs/boards.md), shared by every subcommand that
 // takes --board: --board NAME [--scale S] [--cols N --rows M] [--square METRES] [--gap METRES]
 // [--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] [--light-circles]
-// [--border-bits 1|2],
+// [--border-bits 1|2] [--marker METRES] [--legacy-pattern] [--dictionary NAME],
 // or --target FILE (target_file.h).
 
 #include <string>
@@ -22,6 +22,8 @@ std::vector<cli::OptionSpec> BoardOptionSpecs();
 // and the value): neither --board nor --target; an unknown board name (the message lists the
 // names), --cols/--rows with a board other than checker, circle_grid and square_grid, --square
 // with one other than checker and square_grid, --gap with one other than square_grid,
+// --marker/--legacy-pattern/--dictionary with one other than charuco, a dictionary name that is
+// not one of OpenCV's predefined ones (the message lists them),
 // --spacing/--diameter/--asymmetric/--hexagonal/--light-circles with one other than
 // circle_grid, --border-bits with one other than apriltag, a value that is not a number, and
 // values ValidateBoardParams refuses. With --target: the file's errors (target_file.h), any

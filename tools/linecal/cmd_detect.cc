@@ -257,7 +257,8 @@ int RunDetect(const Args& args) {
   cli::CommandLine cl(
       "linecal detect --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
       "[--gap METRES] [--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] "
-      "[--light-circles] --image FILE [--intrinsics FILE [--camera NAME]] [--json] "
+      "[--light-circles] [--marker METRES] [--legacy-pattern] [--dictionary NAME] "
+      "--image FILE [--intrinsics FILE [--camera NAME]] [--json] "
       "[--overlay OUT.png]\n"
       "       linecal detect --board round_hole [--scale S] --cloud FILE [--cloud FILE ...] "
       "[--json]",

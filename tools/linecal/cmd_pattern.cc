@@ -38,7 +38,7 @@ int RunPattern(const Args& args) {
       "linecal pattern --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
       "[--gap METRES] [--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] "
       "[--light-circles] [--border-bits 1|2] [--marker METRES] [--legacy-pattern] "
-      "--out FILE.svg|FILE.png [--dpi N] [--json]",
+      "[--dictionary NAME] --out FILE.svg|FILE.png [--dpi N] [--json]",
       "Writes a printable drawing of a board at true size: SVG with its size in millimetres, "
       "or PNG at --dpi with the physical resolution recorded in the file. Print at 100% "
       "(no fit to page).",

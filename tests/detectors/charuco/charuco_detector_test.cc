@@ -14,6 +14,7 @@
 
 #include "detectors/detect.h"
 #include "tests/detectors/board_scene.h"
+#include "tests/detectors/circle/circle_scene.h"
 #include "tests/support/reference_cameras.h"
 
 namespace linecal {
@@ -115,6 +116,34 @@ TEST(CharucoBoardTest, MarkersCarryTheirIdsInRowMajorOrder) {
   EXPECT_EQ(board.PaintAt(data_cell(1, 0, 3, 3)), Paint::kWhite);
 }
 
+// A board of any of OpenCV's dictionaries prints its markers' cells: every data cell of the
+// first two markers (ids 0 and 1, squares (0, 1) and (0, 3)) as the dictionary's code says, and
+// the one-cell border black.
+TEST(CharucoBoardTest, MarkersOfEveryDictionaryCarryTheirCodes) {
+  for (const ArucoDictionaryInfo& info : AllArucoDictionaries()) {
+    SCOPED_TRACE(info.name);
+    BoardParams p = Charuco(5, 5);
+    p.charuco_dictionary = info.dictionary;
+    const Board board = *Board::Create(p);
+    const int n = info.data_bits;
+    const double cell = p.marker_m / info.marker_cells();
+    int wrong = 0;
+    for (const auto& [id, col] : {std::pair{0, 1}, std::pair{1, 3}}) {
+      const Eigen::Vector2d top_left =
+          SquareCentre(p, 0, col) + Eigen::Vector2d(-0.5 * p.marker_m, 0.5 * p.marker_m);
+      for (int r = -1; r <= n; ++r) {
+        for (int c = -1; c <= n; ++c) {
+          const bool border = r < 0 || c < 0 || r == n || c == n;
+          const bool white = !border && ArucoCellIsWhite(info.codes[id], n, r, c);
+          const Eigen::Vector2d centre = top_left + cell * Eigen::Vector2d(c + 1.5, -(r + 1.5));
+          wrong += board.PaintAt(centre) != (white ? Paint::kWhite : Paint::kBlack);
+        }
+      }
+    }
+    EXPECT_EQ(wrong, 0);
+  }
+}
+
 TEST(CharucoBoardTest, BadParamsAreRefusedWithTheirReason) {
   BoardParams p = Charuco();
   p.marker_m = p.square_m;
@@ -130,6 +159,15 @@ TEST(CharucoBoardTest, BadParamsAreRefusedWithTheirReason) {
   EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kBadMarkerCount);
   EXPECT_STREQ(BoardParamsErrorName(BoardParamsError::kBadMarkerCount), "bad_marker_count");
   p = Charuco(10, 10);  // 50 markers: the whole dictionary
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kOk);
+  // The bound is the board's dictionary's marker count.
+  p = Charuco(11, 10);
+  p.charuco_dictionary = ArucoDictionary::k6x6_100;
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kOk);
+  p = Charuco(15, 14);  // 105 markers
+  p.charuco_dictionary = ArucoDictionary::k6x6_100;
+  EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kBadMarkerCount);
+  p.charuco_dictionary = ArucoDictionary::kArucoOriginal;  // 1024 markers
   EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kOk);
   p = Charuco(1, 5);
   EXPECT_EQ(ValidateBoardParams(p), BoardParamsError::kBadCols);
@@ -286,6 +324,123 @@ TEST(CharucoDetectorTest, HiddenPartLeavesTheSeenCornersWithTheirIds) {
                           f.uv_px.y() < y1 + 1;
       EXPECT_FALSE(hidden) << f.id;
     }
+  }
+}
+
+// One dictionary of each marker size (4, 5, 6 and 7 data bits a side, and ArUco's original):
+// a 7 x 5 board of 50 mm squares and 37.5 mm markers (7 x 7 bits: cells of 4.2 mm, 4.6 px at
+// 0.9 m) found whole over a few poses, clean and noisy, every corner with its id and within
+// the render bars; half out of view, the corners in view with their ids; and not found as a
+// board of another dictionary.
+TEST(CharucoDetectorTest, EveryMarkerSizeIsFoundWithItsIds) {
+  std::uint64_t seed = 500;
+  for (const ArucoDictionary dictionary :
+       {ArucoDictionary::k4x4_250, ArucoDictionary::k5x5_100, ArucoDictionary::k6x6_50,
+        ArucoDictionary::k7x7_1000, ArucoDictionary::kArucoOriginal}) {
+    SCOPED_TRACE(ArucoDictionaryInfoOf(dictionary).name);
+    BoardView v;
+    v.params = Charuco();
+    v.params.square_m = 0.05;
+    v.params.marker_m = 0.0375;
+    v.params.charuco_dictionary = dictionary;
+    v.distance_m = 0.9;
+    const Board board = *Board::Create(v.params);
+    for (const double yaw : {-35.0, 0.0, 30.0}) {
+      for (const double roll : {0.0, 100.0}) {
+        for (const bool noisy : {false, true}) {
+          SCOPED_TRACE(testing::Message()
+                       << "yaw " << yaw << " roll " << roll << " noisy " << noisy);
+          v.yaw_deg = yaw;
+          v.roll_deg = roll;
+          const CameraFrame frame = RenderView(v, noisy ? NoisyRender() : CleanRender(), ++seed);
+          const Detection d = DetectCharuco(frame.image8.view(), board);
+          ExpectComplete(d, board);
+          int matched = 0;
+          int unknown = 0;
+          const double rms = FeatureRmsPx(d, frame, &matched, &unknown);
+          EXPECT_EQ(unknown, 0);
+          EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+          EXPECT_LT(rms, noisy ? kNoisyRmsBarPx : kCleanRmsBarPx);
+        }
+      }
+    }
+    BoardView partial = v;
+    partial.yaw_deg = 0.0;
+    partial.roll_deg = 0.0;
+    partial.offset_m = Eigen::Vector2d(0.5, 0.0);
+    const CameraFrame cut = RenderView(partial, NoisyRender(), ++seed);
+    ExpectSeenCornersOnly(DetectCharuco(cut.image8.view(), board), cut, board);
+    // The same board with the 4 x 4 (or, for those, the 5 x 5) dictionary: no marker of it.
+    BoardParams other = v.params;
+    other.charuco_dictionary = ArucoDictionaryInfoOf(dictionary).data_bits == 4
+                                   ? ArucoDictionary::k5x5_50
+                                   : ArucoDictionary::k4x4_50;
+    const CameraFrame frame = RenderView(v, CleanRender(), ++seed);
+    const Detection wrong = DetectCharuco(frame.image8.view(), *Board::Create(other));
+    EXPECT_FALSE(wrong.found);
+    EXPECT_TRUE(wrong.features.empty());
+  }
+}
+
+// detectors_eval's hard set (noise 6, blur 1.5, a 4:1 light gradient, gamma, JPEG 80, clutter)
+// on the default 9 x 6 board at its nearest distance, turned 35-50 degrees: the far side's
+// markers are too foreshortened for the scan (cells of 1-2 px across) and some corners' saddle
+// fits fail there. These renders (the evaluation's seeds 60 and 165) were partial detections
+// until the missed markers were read where their neighbours put them; now every corner is
+// found with its id, none farther from its truth than a third of a marker cell.
+TEST(CharucoDetectorTest, HardRendersWithForeshortenedMarkersAreFoundWhole) {
+  BoardParams params;
+  params.type = BoardType::kCharuco;
+  const Board board = *Board::Create(params);
+  const CameraModel camera = circle_scene::Camera();
+  for (const auto& [yaw, pitch, roll, seed] :
+       {std::tuple{-50.0, 0.0, 0.0, std::uint64_t{60}},
+        std::tuple{-35.0, -35.0, -30.0, std::uint64_t{165}}}) {
+    SCOPED_TRACE(testing::Message() << "seed " << seed);
+    const double distance =
+        circle_scene::EvaluationDistances(board, camera, false, yaw, pitch).front();
+    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
+        circle_scene::OneBoard(BoardType::kCharuco,
+                               circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed)),
+        circle_scene::HardEffects(seed), seed, camera);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    const Detection d = DetectCharuco(frame->image8.view(), board);
+    ExpectComplete(d, board);
+    int matched = 0;
+    int unknown = 0;
+    FeatureRmsPx(d, *frame, &matched, &unknown);
+    EXPECT_EQ(unknown, 0);
+    EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+    // A marker cell is 3.1 mm: 8 px face-on at these distances, 5 px on the far side.
+    EXPECT_LT(MaxErrorPx(d, *frame), 5.0 / 3.0);
+  }
+}
+
+// A small board far off: the deepcharuco photos' 5 x 5 board (10 mm squares, 7.5 mm markers:
+// cells of 1.25 mm) at 0.45 m, cells of 2.8 px, under the 4 px the marker scan is made for:
+// clean renders are still found whole, every corner with its id. (The photos' heavier blur
+// closes the 1.7 px margins between markers and squares; there the board's part of the image
+// is read again at twice the resolution: PhotosTest.CharucoPhotoWithSmallMarkersIsFoundWhole.)
+TEST(CharucoDetectorTest, MarkersWithCellsUnderFourPixelsAreFoundWithTheirIds) {
+  BoardView v;
+  v.params = Charuco(5, 5);
+  v.params.square_m = 0.01;
+  v.params.marker_m = 0.0075;
+  v.distance_m = 0.45;
+  const Board board = *Board::Create(v.params);
+  std::uint64_t seed = 600;
+  for (const double yaw : {0.0, 30.0}) {
+    SCOPED_TRACE(testing::Message() << "yaw " << yaw);
+    v.yaw_deg = yaw;
+    const CameraFrame frame = RenderView(v, CleanRender(), ++seed);
+    const Detection d = DetectCharuco(frame.image8.view(), board);
+    ExpectComplete(d, board);
+    int matched = 0;
+    int unknown = 0;
+    const double rms = FeatureRmsPx(d, frame, &matched, &unknown);
+    EXPECT_EQ(unknown, 0);
+    EXPECT_EQ(matched, 16);
+    EXPECT_LT(rms, kNoisyRmsBarPx);
   }
 }
 

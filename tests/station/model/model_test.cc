@@ -143,7 +143,8 @@ TEST(StationLayoutTest, SquareGridParametersRoundTrip) {
 TEST(StationLayoutTest, CharucoParametersRoundTrip) {
   const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
       {"id": "c", "type": "charuco", "cols": 5, "rows": 4, "square_m": 0.03, "marker_m": 0.022,
-       "legacy_pattern": true, "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}}]})";
+       "legacy_pattern": true, "dictionary": "DICT_5X5_1000",
+       "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}}]})";
   absl::StatusOr<StationLayout> s = ParseStationLayout(json, "st.json");
   ASSERT_TRUE(s.ok()) << s.status();
   absl::StatusOr<StationLayout> again = ParseStationLayout(StationLayoutToJson(*s).dump(), "copy");
@@ -155,7 +156,26 @@ TEST(StationLayoutTest, CharucoParametersRoundTrip) {
   EXPECT_EQ(p.square_m, 0.03);
   EXPECT_EQ(p.marker_m, 0.022);
   EXPECT_TRUE(p.charuco_legacy);
+  EXPECT_EQ(p.charuco_dictionary, ArucoDictionary::k5x5_1000);
   EXPECT_EQ(again->boards.at(0).board.features().size(), 12u);
+  // An unknown dictionary, or one with fewer markers than the board's white squares, is
+  // refused naming the key.
+  for (const auto& [dictionary, message] :
+       {std::pair{"\"DICT_5X5_60\"", "unknown ArUco dictionary 'DICT_5X5_60'"},
+        std::pair{"7", "dictionary"}}) {
+    std::string bad = json;
+    bad.replace(bad.find("\"DICT_5X5_1000\""), 15, dictionary);
+    const absl::StatusOr<StationLayout> refused = ParseStationLayout(bad, "st.json");
+    ASSERT_FALSE(refused.ok());
+    EXPECT_NE(refused.status().message().find(message), std::string::npos) << refused.status();
+  }
+  std::string too_many = json;
+  too_many.replace(too_many.find("\"cols\": 5"), 9, "\"cols\": 15");
+  too_many.replace(too_many.find("\"rows\": 4"), 9, "\"rows\": 14");
+  too_many.replace(too_many.find("DICT_5X5_1000"), 13, "DICT_5X5_100");
+  const absl::StatusOr<StationLayout> refused = ParseStationLayout(too_many, "st.json");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("dictionary"), std::string::npos) << refused.status();
 }
 
 TEST(StationLayoutTest, AprilGridParametersRoundTrip) {
