@@ -255,6 +255,43 @@ void MergeCloseVertices(double min_distance_px, std::vector<Eigen::Vector2d>* po
   }
 }
 
+// Twice the signed area of the closed polygon (shoelace; positive when clockwise in y-down
+// image coordinates).
+double TwiceSignedArea(const std::vector<Eigen::Vector2d>& polygon) {
+  double sum = 0.0;
+  for (std::size_t k = 0; k < polygon.size(); ++k) {
+    sum += Cross(polygon[k], polygon[(k + 1) % polygon.size()]);
+  }
+  return sum;
+}
+
+// The four vertices of `polygon` (in order) that enclose the largest area, when that area is
+// at least kMinQuadAreaFraction of the polygon's; else the polygon unchanged. O(n^4) for the
+// few vertices it is given.
+void ReduceToLargestQuad(std::vector<Eigen::Vector2d>* polygon) {
+  const int n = static_cast<int>(polygon->size());
+  double best_area = 0.0;
+  std::vector<Eigen::Vector2d> best;
+  for (int a = 0; a < n; ++a) {
+    for (int b = a + 1; b < n; ++b) {
+      for (int c = b + 1; c < n; ++c) {
+        for (int d = c + 1; d < n; ++d) {
+          std::vector<Eigen::Vector2d> quad = {(*polygon)[a], (*polygon)[b], (*polygon)[c],
+                                               (*polygon)[d]};
+          const double area = std::abs(TwiceSignedArea(quad));
+          if (area > best_area) {
+            best_area = area;
+            best = std::move(quad);
+          }
+        }
+      }
+    }
+  }
+  if (best_area >= kMinQuadAreaFraction * std::abs(TwiceSignedArea(*polygon))) {
+    *polygon = std::move(best);
+  }
+}
+
 }  // namespace
 
 std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& options) {
@@ -281,6 +318,8 @@ std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& op
       polygon.push_back(contour[v].cast<double>());
     }
     MergeCloseVertices(options.merge_vertices_fraction * length, &polygon);
+    const int vertices = static_cast<int>(polygon.size());
+    if (vertices > 4 && vertices <= options.max_polygon_vertices) ReduceToLargestQuad(&polygon);
     if (polygon.size() != 4) continue;
     Quad quad;
     quad.component = i;

@@ -79,7 +79,21 @@ struct QuadOptions {
   // chamfer of a few pixels that the polygon keeps as two vertices; a square's true corners
   // are a quarter of the length apart. [0, 0.1].
   double merge_vertices_fraction = 0.0;
+  // Polygons of 5 up to this many vertices (4: never, as the marker detectors use it) give
+  // the quad of their four vertices that encloses the most area, when it holds at least
+  // kMinQuadAreaFraction of the polygon's area. Blur and a gamma round a small square's
+  // corners into chamfers of two vertices, and Douglas-Peucker can keep a fifth vertex in
+  // the middle of a side (its first chord joining two neighbouring corners of a foreshortened
+  // square, the farthest point lies anywhere on the opposite side); both leave a quad that
+  // covers nearly all of the polygon, while a disc, a hexagon or a pentagon loses over a
+  // quarter. [4, 8].
+  int max_polygon_vertices = 4;
 };
+
+// The smallest share of its polygon's area that the quad of max_polygon_vertices keeps: a
+// square whose four corners are chamfered by a quarter of its side keeps 0.97; a regular
+// pentagon 0.72, an octagon 0.71.
+inline constexpr double kMinQuadAreaFraction = 0.9;
 
 // A quad: corners as contour pixel centres, clockwise in the image (y down).
 struct Quad {
