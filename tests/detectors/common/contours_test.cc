@@ -136,9 +136,10 @@ TEST(ContoursTest, FindsARotatedSquareAndNotADiscOrATriangle) {
 
 TEST(ContoursTest, ChamferedSquareIsAQuadOnlyWhenMoreVerticesAreAllowed) {
   Image8 img = Blank(160, 80);
-  // A 40 px square at (10..50, 20..60) with its top-right corner cut by 9 px along each side:
-  // five vertices that Douglas-Peucker keeps.
-  FillConvex(&img, {{10, 20}, {41, 20}, {50, 29}, {50, 60}, {10, 60}});
+  // A 40 px square at (10..50, 20..60) with every corner cut by 9 px along each side: eight
+  // vertices that Douglas-Peucker keeps, too far apart to merge.
+  FillConvex(&img, {{19, 20}, {41, 20}, {50, 29}, {50, 51}, {41, 60}, {19, 60}, {10, 51},
+                    {10, 29}});
   // A regular hexagon of radius 20 at (110, 40): its largest quad holds two thirds of it.
   std::vector<Eigen::Vector2d> hexagon;
   for (int k = 0; k < 6; ++k) {
@@ -153,12 +154,13 @@ TEST(ContoursTest, ChamferedSquareIsAQuadOnlyWhenMoreVerticesAreAllowed) {
   options.max_polygon_vertices = 8;
   const std::vector<Quad> quads = FindQuads(labels, options);
   ASSERT_EQ(quads.size(), 1u);
-  // The chamfer gives one of its vertices: within the cut (9 px) of the square's corner.
+  // The square's own corners, where its sides' lines meet: within a pixel (the contour runs
+  // through the centres of the pixels inside its edges).
   const std::vector<Eigen::Vector2d> corners = {{10, 20}, {50, 20}, {50, 60}, {10, 60}};
   for (const Eigen::Vector2d& c : corners) {
     double best = 1e9;
     for (const Eigen::Vector2d& q : quads[0].corners_px) best = std::min(best, (q - c).norm());
-    EXPECT_LT(best, 9.5);
+    EXPECT_LT(best, 1.0);
   }
 }
 
