@@ -625,7 +625,8 @@ std::optional<Square> FindPredictedSquare(const ImageView8& image, const Predict
   const Eigen::Vector2d origin(x0, y0);
   std::optional<Square> best;
   double nearest = 0.5 * p.side_px;
-  for (const Quad& quad : FindQuads(LabelComponents(window.view()), SquareQuadOptions(min_side_px))) {
+  const ComponentLabels labels = LabelComponents(window.view());
+  for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
     for (Eigen::Vector2d& c : *corners) c += origin;
     for (int pass = 0; pass < 2 && corners; ++pass) {

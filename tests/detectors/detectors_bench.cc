@@ -72,9 +72,10 @@ const Image8& Frame(int board, int width, int height, int cell_px = 0) {
   // 45% of the width seen straight on (the 30 degree turn narrows it by cos 30), and a tall
   // board (the vertical one) no more than 80% of the height.
   const double distance_m =
-      cell_px > 0 ? camera.intrinsics().fx * circle_scene::SmallestFeatureM(BoardOf(board)) / cell_px
-                  : std::max(camera.intrinsics().fx * page_m.x() / (0.45 * width),
-                             camera.intrinsics().fy * page_m.y() / (0.8 * height));
+      cell_px > 0
+          ? camera.intrinsics().fx * circle_scene::SmallestFeatureM(BoardOf(board)) / cell_px
+          : std::max(camera.intrinsics().fx * page_m.x() / (0.45 * width),
+                     camera.intrinsics().fy * page_m.y() / (0.8 * height));
   CameraRenderOptions o = circle_scene::Effects(2.0, 0.7);
   o.clutter = true;
   StationLayout layout =
