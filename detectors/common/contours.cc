@@ -255,6 +255,85 @@ void MergeCloseVertices(double min_distance_px, std::vector<Eigen::Vector2d>* po
   }
 }
 
+// Twice the signed area of the closed polygon (shoelace; positive when clockwise in y-down
+// image coordinates).
+double TwiceSignedArea(const std::vector<Eigen::Vector2d>& polygon) {
+  double sum = 0.0;
+  for (std::size_t k = 0; k < polygon.size(); ++k) {
+    sum += Cross(polygon[k], polygon[(k + 1) % polygon.size()]);
+  }
+  return sum;
+}
+
+// The largest distance of the contour points strictly between indices a and b (along the
+// contour, modulo its size) from the chord a-b.
+double ChordDeviation(const std::vector<Eigen::Vector2i>& contour, int a, int b) {
+  const int n = static_cast<int>(contour.size());
+  const Eigen::Vector2d pa = contour[a].cast<double>(), pb = contour[b].cast<double>();
+  double worst = 0.0;
+  for (int k = (a + 1) % n; k != b; k = (k + 1) % n) {
+    worst = std::max(worst, PointLineDistance(contour[k].cast<double>(), pa, pb));
+  }
+  return worst;
+}
+
+// Removes from `vertices` (contour indices, increasing) the vertex whose neighbours' chord
+// deviates least from the contour, while that deviation is within epsilon_px and more than
+// four vertices remain: Douglas-Peucker keeps every point where it split, even one that a
+// later split left on a straight side. O(vertices^2 x perimeter).
+void DropStraightVertices(const std::vector<Eigen::Vector2i>& contour, double epsilon_px,
+                          std::vector<int>* vertices) {
+  while (vertices->size() > 4) {
+    const std::size_t n = vertices->size();
+    std::size_t best = n;
+    double best_deviation = epsilon_px;
+    for (std::size_t k = 0; k < n; ++k) {
+      const double deviation =
+          ChordDeviation(contour, (*vertices)[(k + n - 1) % n], (*vertices)[(k + 1) % n]);
+      if (deviation <= best_deviation) {
+        best_deviation = deviation;
+        best = k;
+      }
+    }
+    if (best == n) return;
+    vertices->erase(vertices->begin() + static_cast<std::ptrdiff_t>(best));
+  }
+}
+
+// Chamfers are at most this share of the shortest true side (a square's corner cut by a
+// quarter of its side leaves a chamfer of 0.71 of what remains of the side); the edges of a
+// blob of noise come in any length.
+constexpr double kMaxCutEdgeFraction = 0.75;
+
+// The quad whose sides lie on the four longest edges of `polygon` (in order, over four
+// vertices), when every other edge is shorter than kMaxCutEdgeFraction of the shortest of
+// them and the polygon covers at least kMinQuadAreaFraction of the quad; else the polygon
+// unchanged. O(n log n).
+void ReduceToLongestSides(std::vector<Eigen::Vector2d>* polygon) {
+  const std::vector<Eigen::Vector2d>& v = *polygon;
+  const int n = static_cast<int>(v.size());
+  std::vector<int> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  const auto length = [&](int k) { return (v[(k + 1) % n] - v[k]).norm(); };
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return length(a) > length(b); });
+  if (length(order[4]) >= kMaxCutEdgeFraction * length(order[3])) return;
+  std::vector<int> sides(order.begin(), order.begin() + 4);
+  std::sort(sides.begin(), sides.end());
+  std::vector<Eigen::Vector2d> quad;
+  for (int t = 0; t < 4; ++t) {
+    const int a = sides[(t + 3) % 4], b = sides[t];
+    const Eigen::Vector2d da = v[(a + 1) % n] - v[a], db = v[(b + 1) % n] - v[b];
+    const double det = Cross(da, db);
+    // Near-parallel sides (under about 3 degrees) meet nowhere useful.
+    if (std::abs(det) < 0.05 * da.norm() * db.norm()) return;
+    quad.push_back(v[a] + da * (Cross(v[b] - v[a], db) / det));
+  }
+  if (std::abs(TwiceSignedArea(v)) < kMinQuadAreaFraction * std::abs(TwiceSignedArea(quad))) {
+    return;
+  }
+  *polygon = std::move(quad);
+}
+
 }  // namespace
 
 std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& options) {
@@ -276,11 +355,14 @@ std::vector<Quad> FindQuads(const ComponentLabels& labels, const QuadOptions& op
     for (std::size_t k = 0; k < contour.size(); ++k) {
       length += (contour[(k + 1) % contour.size()] - contour[k]).cast<double>().norm();
     }
+    const double epsilon_px = options.polygon_epsilon_fraction * length;
+    std::vector<int> vertices = ApproximateClosedPolygon(contour, epsilon_px);
+    if (options.max_polygon_vertices > 4) DropStraightVertices(contour, epsilon_px, &vertices);
     std::vector<Eigen::Vector2d> polygon;
-    for (int v : ApproximateClosedPolygon(contour, options.polygon_epsilon_fraction * length)) {
-      polygon.push_back(contour[v].cast<double>());
-    }
+    for (int v : vertices) polygon.push_back(contour[v].cast<double>());
     MergeCloseVertices(options.merge_vertices_fraction * length, &polygon);
+    const int n = static_cast<int>(polygon.size());
+    if (n > 4 && n <= options.max_polygon_vertices) ReduceToLongestSides(&polygon);
     if (polygon.size() != 4) continue;
     Quad quad;
     quad.component = i;

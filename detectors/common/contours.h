@@ -79,7 +79,22 @@ struct QuadOptions {
   // chamfer of a few pixels that the polygon keeps as two vertices; a square's true corners
   // are a quarter of the length apart. [0, 0.1].
   double merge_vertices_fraction = 0.0;
+  // Above 4 (4: never, as the marker detectors use it): vertices that the contour between
+  // their neighbours leaves within the polygon tolerance are dropped (Douglas-Peucker keeps
+  // every point where it split: when its first chord joins two neighbouring corners of a
+  // foreshortened square, the farthest point lies anywhere on the opposite side), and
+  // polygons of 5 up to this many vertices give the quad whose sides lie on their four
+  // longest edges, when the others are short and the polygon fills the quad
+  // (kMinQuadAreaFraction). Blur and a gamma round a small square's corners into chamfers
+  // of two vertices each; a disc, a hexagon or a pentagon fills under 0.8 of such a quad.
+  // [4, 8].
+  int max_polygon_vertices = 4;
 };
+
+// The smallest share of the quad of max_polygon_vertices that its polygon must fill: a
+// square whose four corners are cut by a quarter of its side fills 0.875; a disc 0.785 of
+// its square, a regular hexagon 0.75, a regular pentagon 0.69.
+inline constexpr double kMinQuadAreaFraction = 0.85;
 
 // A quad: corners as contour pixel centres, clockwise in the image (y down).
 struct Quad {

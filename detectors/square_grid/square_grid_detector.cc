@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <utility>
 #include <vector>
 
@@ -67,12 +68,19 @@ std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
   }
   std::array<Eigen::Vector2d, 4> out;
   for (int k = 0; k < 4; ++k) {
-    const int j = (k + 3) % 4;  // corner k ends side k - 1 and starts side k
-    const std::optional<Eigen::Vector2d> p = IntersectLines(lines[j], lines[k]);
-    const double side =
-        std::min((corners[(k + 1) % 4] - corners[k]).norm(), (corners[k] - corners[j]).norm());
-    if (!p || (*p - corners[k]).norm() > side / 3.0) return std::nullopt;
+    const std::optional<Eigen::Vector2d> p = IntersectLines(lines[(k + 3) % 4], lines[k]);
+    if (!p) return std::nullopt;
     out[k] = *p;
+  }
+  // Corner k ends side k - 1 and starts side k. The sides of the quad or of the refined
+  // square, whichever is longer: a foreshortened square's contour at a dark surround (a
+  // lens's rim) falls short of its corners by a good part of its short side.
+  const auto shorter_side = [](const std::array<Eigen::Vector2d, 4>& q, int k) {
+    return std::min((q[(k + 1) % 4] - q[k]).norm(), (q[k] - q[(k + 3) % 4]).norm());
+  };
+  for (int k = 0; k < 4; ++k) {
+    const double side = std::max(shorter_side(corners, k), shorter_side(out, k));
+    if ((out[k] - corners[k]).norm() > side / 3.0) return std::nullopt;
   }
   return out;
 }
@@ -93,17 +101,24 @@ std::optional<Square> MakeSquare(const std::array<Eigen::Vector2d, 4>& corners) 
   return s;
 }
 
-// The dark squares of the image: quads of the dark components, refined twice (the second fit
-// starts from edges measured along the right normals).
-std::vector<Square> FindSquares(const ImageView8& image, const Image8& dark, double gap_ratio,
-                                int min_side_px) {
+// The quads of dark squares of at least min_side_px.
+QuadOptions SquareQuadOptions(int min_side_px) {
   QuadOptions quad_options;
   quad_options.min_side_px = min_side_px;
   // A quarter of a side: the chamfer blur and noise leave at a small square's acute corner
   // (4 px of a 22 px side, seen on renders at yaw 30, pitch 30), never two of its corners.
   quad_options.merge_vertices_fraction = 0.06;
+  // A blurred square under a gamma is rounded at every corner: up to two vertices each.
+  quad_options.max_polygon_vertices = 8;
+  return quad_options;
+}
+
+// The dark squares of the image: quads of the dark components, refined twice (the second fit
+// starts from edges measured along the right normals).
+std::vector<Square> FindSquares(const ImageView8& image, const Image8& dark, double gap_ratio,
+                                int min_side_px) {
   std::vector<Square> squares;
-  for (const Quad& quad : FindQuads(LabelComponents(dark.view()), quad_options)) {
+  for (const Quad& quad : FindQuads(LabelComponents(dark.view()), SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
     for (int pass = 0; pass < 2 && corners; ++pass) {
       corners = RefineCorners(image, *corners, gap_ratio);
@@ -274,6 +289,20 @@ bool LocallyConsistent(const Window& win, double gap_ratio, double fraction) {
     const double residual = ((p2 - p1) - 0.5 * gap_ratio * ((p1 - p0) + (p3 - p2))).norm();
     return residual <= std::max(1.0, fraction * side);
   });
+}
+
+// Two neighbouring squares at grid points a and b (4-neighbours) as a window of their own,
+// LocallyConsistent.
+bool PairConsistent(const std::vector<Square>& squares, const GridSquare& a,
+                    std::pair<int, int> at_a, const GridSquare& b, std::pair<int, int> at_b,
+                    double gap_ratio, double fraction) {
+  const bool b_first = at_b < at_a;
+  Window pair;
+  pair.w = at_a.first == at_b.first ? 1 : 2;
+  pair.h = 3 - pair.w;
+  pair.squares = b_first ? std::vector<GridSquare>{b, a} : std::vector<GridSquare>{a, b};
+  for (const GridSquare& gs : pair.squares) pair.geometry.push_back(&squares[gs.square]);
+  return LocallyConsistent(pair, gap_ratio, fraction);
 }
 
 // Corners located on edges carry one bias that the geometry cannot show square by square: a
@@ -484,11 +513,20 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
           search->refusal = DetectReason::kVerificationFailed;
           continue;
         }
-        // The grid goes on: a square linked next to the window along one of its sides.
+        // The grid goes on: a square linked next to the window along one of its sides, in
+        // the gap geometry of the window's square beside it (a dark shadow or edge that
+        // touches a square links as a neighbour of another size, no gap away).
         const bool continues = std::any_of(group.begin(), group.end(), [&](const auto& entry) {
           const auto [i, j] = entry.first;
           const bool in_i = i >= wi && i < wi + w, in_j = j >= wj && j < wj + h;
-          return (in_i && (j == wj - 1 || j == wj + h)) || (in_j && (i == wi - 1 || i == wi + w));
+          std::pair<int, int> inside = {i, j};
+          if (in_i && j == wj - 1) inside.second = wj;
+          else if (in_i && j == wj + h) inside.second = wj + h - 1;
+          else if (in_j && i == wi - 1) inside.first = wi;
+          else if (in_j && i == wi + w) inside.first = wi + w - 1;
+          else return false;
+          return PairConsistent(squares, group.at(inside), inside, entry.second, entry.first,
+                                pitch_ratio - 1.0, options.max_residual_side_fraction);
         });
         if (continues) {
           search->refusal = DetectReason::kWrongBoard;
@@ -504,6 +542,164 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
       }
     }
   }
+}
+
+// ---- 4. Squares the binarisation lost -------------------------------------------------------
+
+// A window may lack this fraction of its squares (at least one) for them to be looked for:
+// the rest of the grid, linked, places each of them to a fraction of a side.
+constexpr double kMaxMissingFraction = 0.125;
+
+// Where a square is looked for (method, step 4): its centre predicted by its linked
+// neighbours, their mean side, their dark level and the light level of the gaps between
+// them and it.
+struct Prediction {
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  double side_px = 0.0;
+  double dark = 0.0;
+  double light = 0.0;
+};
+
+// The square at grid point `point` of `group`, predicted by its 4-neighbours in the group:
+// each carries its homography one pitch over (a neighbour on each side averages a lens's
+// bending out; near a fisheye's rim one neighbour alone can miss by a third of a side).
+// nullopt with fewer than two neighbours or a sample off the image.
+std::optional<Prediction> PredictSquare(const ImageView8& image,
+                                        const std::vector<Square>& squares,
+                                        const std::map<std::pair<int, int>, GridSquare>& group,
+                                        std::pair<int, int> point, double gap_ratio) {
+  constexpr std::array<int, 4> kDi = {1, 0, -1, 0};
+  constexpr std::array<int, 4> kDj = {0, 1, 0, -1};
+  Prediction p;
+  int n = 0;
+  for (int g = 0; g < 4; ++g) {
+    const auto it = group.find({point.first + kDi[g], point.second + kDj[g]});
+    if (it == group.end()) continue;
+    const Square& s = squares[it->second.square];
+    // The neighbour's side that faces the missing square points along global direction g + 2.
+    const std::array<double, 2>& out = kSideDirection[(it->second.rotation + g + 2) % 4];
+    const double pitch = 1.0 + gap_ratio, half_gap = 0.5 + 0.5 * gap_ratio;
+    const Eigen::Vector2d centre =
+        ApplyHomography(s.H, Eigen::Vector2d(0.5 + pitch * out[0], 0.5 + pitch * out[1]));
+    const Eigen::Vector2d gap =
+        ApplyHomography(s.H, Eigen::Vector2d(0.5 + half_gap * out[0], 0.5 + half_gap * out[1]));
+    if (!centre.allFinite() || !gap.allFinite()) return std::nullopt;
+    const std::optional<double> light = MeanGrey(image, gap, 0.1 * s.side_px);
+    const std::optional<double> dark = MeanGrey(image, s.centre, 0.2 * s.side_px);
+    if (!light || !dark) return std::nullopt;
+    p.centre += centre;
+    p.side_px += s.side_px;
+    p.dark += *dark;
+    p.light += *light;
+    ++n;
+  }
+  if (n < 2) return std::nullopt;
+  p.centre /= n;
+  p.side_px /= n;
+  p.dark /= n;
+  p.light /= n;
+  return p;
+}
+
+// The dark square at a prediction, found in a window around it with a threshold of its own:
+// halfway between its neighbours' dark level and the gaps' light level. A lens's dark rim
+// or a shadow next to a square lowers the local-contrast threshold there, so that the
+// square's edge falls on its light side and its quad loses its corners. The window reaches
+// half a gap beyond the square at any turn; the quad nearest the predicted centre, within
+// half a side (a neighbour is a pitch away), refined as the others (its corners on its own
+// edges) and of a side within kMaxSideRatio of the prediction's. nullopt when there is none.
+std::optional<Square> FindPredictedSquare(const ImageView8& image, const Prediction& p,
+                                          double gap_ratio, int min_contrast, int min_side_px) {
+  if (!(p.light - p.dark >= min_contrast)) return std::nullopt;
+  const double threshold = 0.5 * (p.dark + p.light);
+  const double reach = std::sqrt(0.5) * (1.0 + gap_ratio) * p.side_px;
+  const int x0 = std::max(0, static_cast<int>(std::floor(p.centre.x() - reach)));
+  const int y0 = std::max(0, static_cast<int>(std::floor(p.centre.y() - reach)));
+  const int x1 = std::min(image.width - 1, static_cast<int>(std::ceil(p.centre.x() + reach)));
+  const int y1 = std::min(image.height - 1, static_cast<int>(std::ceil(p.centre.y() + reach)));
+  if (x1 - x0 < min_side_px || y1 - y0 < min_side_px) return std::nullopt;
+  Image8 window(x1 - x0 + 1, y1 - y0 + 1);
+  for (int y = y0; y <= y1; ++y) {
+    for (int x = x0; x <= x1; ++x) window.at(x - x0, y - y0) = image.At(x, y) < threshold;
+  }
+  const Eigen::Vector2d origin(x0, y0);
+  std::optional<Square> best;
+  double nearest = 0.5 * p.side_px;
+  const ComponentLabels labels = LabelComponents(window.view());
+  for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
+    std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
+    for (Eigen::Vector2d& c : *corners) c += origin;
+    for (int pass = 0; pass < 2 && corners; ++pass) {
+      corners = RefineCorners(image, *corners, gap_ratio);
+    }
+    if (!corners) continue;
+    const std::optional<Square> s = MakeSquare(*corners);
+    if (!s) continue;
+    const double ratio = s->side_px / p.side_px;
+    const double dist = (s->centre - p.centre).norm();
+    if (ratio > kMaxSideRatio || ratio < 1.0 / kMaxSideRatio || dist > nearest) continue;
+    nearest = dist;
+    best = s;
+  }
+  return best;
+}
+
+// The squares missing from windows of a group that lack at most kMaxMissingFraction of
+// their squares, each found at its prediction (FindPredictedSquare); empty when none is.
+std::vector<Square> RecoverSquares(const ImageView8& image, const std::vector<Square>& squares,
+                                   const std::map<std::pair<int, int>, GridSquare>& group,
+                                   const Board& board, int min_contrast, int min_side_px) {
+  const int cols = board.params().cols, rows = board.params().rows;
+  const double gap_ratio = board.params().gap_m / board.params().square_m;
+  const int max_missing = std::max(1, static_cast<int>(kMaxMissingFraction * cols * rows));
+  std::vector<Square> found;
+  if (static_cast<int>(group.size()) < cols * rows - max_missing) return found;
+  int i_lo = 1 << 30, i_hi = -(1 << 30), j_lo = 1 << 30, j_hi = -(1 << 30);
+  for (const auto& [point, gs] : group) {
+    i_lo = std::min(i_lo, point.first);
+    i_hi = std::max(i_hi, point.first);
+    j_lo = std::min(j_lo, point.second);
+    j_hi = std::max(j_hi, point.second);
+  }
+  std::set<std::pair<int, int>> tried;
+  for (const auto& [w, h] : {std::pair{cols, rows}, std::pair{rows, cols}}) {
+    for (int wj = j_lo; wj + h - 1 <= j_hi; ++wj) {
+      for (int wi = i_lo; wi + w - 1 <= i_hi; ++wi) {
+        std::vector<std::pair<int, int>> missing;
+        for (int j = wj; j < wj + h; ++j) {
+          for (int i = wi; i < wi + w; ++i) {
+            if (group.count({i, j}) == 0) missing.emplace_back(i, j);
+          }
+        }
+        if (missing.empty() || static_cast<int>(missing.size()) > max_missing) continue;
+        for (const std::pair<int, int>& point : missing) {
+          if (!tried.insert(point).second) continue;
+          const std::optional<Prediction> p =
+              PredictSquare(image, squares, group, point, gap_ratio);
+          if (!p) continue;
+          if (std::optional<Square> s =
+                  FindPredictedSquare(image, *p, gap_ratio, min_contrast, min_side_px)) {
+            found.push_back(*s);
+          }
+        }
+      }
+    }
+  }
+  return found;
+}
+
+// The verified windows of every linked group of `squares` (steps 2 and 3); the groups in
+// *groups.
+Search SearchSquares(const ImageView8& image, const std::vector<Square>& squares,
+                     const Board& board, const SquareGridOptions& options, int min_contrast,
+                     std::vector<std::map<std::pair<int, int>, GridSquare>>* groups) {
+  const double gap_ratio = board.params().gap_m / board.params().square_m;
+  *groups = GridGroups(LinkSquares(squares, gap_ratio, options.max_link_side_fraction));
+  Search search;
+  for (const auto& group : *groups) {
+    SearchGroup(image, squares, group, board, options, min_contrast, &search);
+  }
+  return search;
 }
 
 }  // namespace
@@ -541,17 +737,28 @@ Detection DetectSquareGrid(const ImageView8& image, const Board& board,
     result.reason = DetectReason::kLowContrast;
     return result;
   }
-  const std::vector<Square> squares =
-      FindSquares(image, dark, gap_ratio, options.min_square_side_px);
+  std::vector<Square> squares = FindSquares(image, dark, gap_ratio, options.min_square_side_px);
   if (squares.empty()) {
     result.reason = DetectReason::kNoCandidates;
     return result;
   }
-  Search search;
-  const std::vector<std::array<Link, 4>> links =
-      LinkSquares(squares, gap_ratio, options.max_link_side_fraction);
-  for (const auto& group : GridGroups(links)) {
-    SearchGroup(image, squares, group, board, options, min_contrast, &search);
+  std::vector<std::map<std::pair<int, int>, GridSquare>> groups;
+  Search search = SearchSquares(image, squares, board, options, min_contrast, &groups);
+  if (search.found.empty()) {
+    // Step 4: the squares that the grid places where the binarisation lost them, then every
+    // check again with them among the others.
+    std::vector<Square> recovered;
+    for (const auto& group : groups) {
+      for (const Square& s : RecoverSquares(image, squares, group, board, min_contrast,
+                                            options.min_square_side_px)) {
+        recovered.push_back(s);
+      }
+    }
+    if (!recovered.empty()) {
+      squares.insert(squares.end(), recovered.begin(), recovered.end());
+      Search again = SearchSquares(image, squares, board, options, min_contrast, &groups);
+      if (!again.found.empty()) search = std::move(again);
+    }
   }
   if (search.found.empty()) {
     result.reason = search.refusal;

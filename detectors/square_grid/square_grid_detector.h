@@ -4,8 +4,9 @@
 //
 // Method:
 //   1. Dark squares: the local-contrast binarisation and the quads of its dark components
-//      (binarise.h, contours.h), each quad's corners refined to where lines fitted to the
-//      edges of its four sides meet (edge_lines.h).
+//      (binarise.h, contours.h; a corner rounded by blur may leave two vertices, the quad
+//      then lies on the four longest sides), each quad's corners refined to where lines
+//      fitted to the edges of its four sides meet (edge_lines.h).
 //   2. Links: each quad's homography (its corners onto a unit square) puts the centre of the
 //      gap beyond each of its sides (half a gap out, the gap known from the board); two
 //      quads of a similar size whose sides put it at the same point, within
@@ -19,8 +20,14 @@
 //        - the paint: each gap between neighbouring squares and each crossing of gaps lighter
 //          than the squares around it by half the board's contrast (a chessboard prints a
 //          black square at every crossing, an AprilGrid a corner square);
-//        - the grid does not go on: no square linked beyond the window (a larger grid:
-//          kWrongBoard).
+//        - the grid does not go on: no square linked beyond the window in the gap geometry
+//          of the window's square beside it (a larger grid: kWrongBoard).
+//   4. Lost squares: when no window passes, each square missing from a window that lacks at
+//      most an eighth of its squares is predicted by its linked neighbours' homographies and
+//      looked for there with a threshold of its own (halfway between the neighbours' dark
+//      level and the gaps' light level: a lens's dark rim or a shadow lowers the local
+//      threshold); a quad found there is refined as in step 1, and steps 2 and 3 run again
+//      with it among the squares. Nothing is placed where no square is seen.
 //
 // Orientation: the print is the same under a turn of 180 degrees (and of 90 degrees when
 // cols == rows), so nothing printed fixes it; among the rotations that fit, the detector
@@ -68,8 +75,9 @@ struct SquareGridOptions {
 // cols x rows group of linked squares), kVerificationFailed (complete groups failed the local
 // geometry or paint checks), kWrongBoard (every complete group is part of a larger grid),
 // kAmbiguous (two different grids). Pure function; cost: a binarisation and labelling, O(W * H),
-// O(perimeter) per dark component, and O(quads^2) for the links: 4-6 ms on the corpus's
-// 640 x 480 photos, about 12 ms for 54 squares at 1280 x 720 (wall clock, shared machine).
+// O(perimeter) per dark component, and O(quads^2) for the links (twice when step 4 finds a
+// square): 4-6 ms on the corpus's 640 x 480 photos, 7.5 ms of CPU for 54 squares at
+// 1280 x 720 (detectors_bench, machine under a load of 6-7; docs/detectors.md, "Speed").
 Detection DetectSquareGrid(const ImageView8& image, const Board& board,
                            const SquareGridOptions& options = {});
 

@@ -134,6 +134,36 @@ TEST(ContoursTest, FindsARotatedSquareAndNotADiscOrATriangle) {
   EXPECT_GT(turn, 0.0);  // clockwise in the image
 }
 
+TEST(ContoursTest, ChamferedSquareIsAQuadOnlyWhenMoreVerticesAreAllowed) {
+  Image8 img = Blank(160, 80);
+  // A 40 px square at (10..50, 20..60) with every corner cut by 9 px along each side: eight
+  // vertices that Douglas-Peucker keeps, too far apart to merge.
+  FillConvex(&img, {{19, 20}, {41, 20}, {50, 29}, {50, 51}, {41, 60}, {19, 60}, {10, 51},
+                    {10, 29}});
+  // A regular hexagon of radius 20 at (110, 40): its largest quad holds two thirds of it.
+  std::vector<Eigen::Vector2d> hexagon;
+  for (int k = 0; k < 6; ++k) {
+    const double t = k * std::numbers::pi / 3.0;
+    hexagon.push_back(Eigen::Vector2d(110, 40) + 20.0 * Eigen::Vector2d(std::cos(t), std::sin(t)));
+  }
+  FillConvex(&img, hexagon);
+  const ComponentLabels labels = LabelComponents(img.view());
+  ASSERT_EQ(labels.components.size(), 2u);
+  EXPECT_TRUE(FindQuads(labels).empty());
+  QuadOptions options;
+  options.max_polygon_vertices = 8;
+  const std::vector<Quad> quads = FindQuads(labels, options);
+  ASSERT_EQ(quads.size(), 1u);
+  // The square's own corners, where its sides' lines meet: within a pixel (the contour runs
+  // through the centres of the pixels inside its edges).
+  const std::vector<Eigen::Vector2d> corners = {{10, 20}, {50, 20}, {50, 60}, {10, 60}};
+  for (const Eigen::Vector2d& c : corners) {
+    double best = 1e9;
+    for (const Eigen::Vector2d& q : quads[0].corners_px) best = std::min(best, (q - c).norm());
+    EXPECT_LT(best, 1.0);
+  }
+}
+
 TEST(ContoursTest, QuadsTouchingTheBorderAreDropped) {
   Image8 img = Blank(60, 60);
   FillRect(&img, 0, 10, 30, 40);

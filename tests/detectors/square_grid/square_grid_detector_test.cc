@@ -124,6 +124,37 @@ TEST(SquareGridDetectorTest, PoseGridWithNoiseBlurAndLighting) {
   EXPECT_LT(rms_noisy, kNoisyRmsBarPx);
 }
 
+// The default 9 x 6 board pitched 50 degrees, squares of about 20 px face-on, clean and
+// under blur 1.0 with gamma 1.4: squares whose contour gives Douglas-Peucker a fifth vertex on
+// a side, or whose corners blur and the gamma round into chamfers (QuadOptions::
+// max_polygon_vertices). The full render grid lost such views (docs/detectors.md).
+TEST(SquareGridDetectorTest, PitchedGridWithRoundedCorners) {
+  BoardParams params;
+  params.type = BoardType::kSquareGrid;
+  std::uint64_t seed = 300;
+  for (double pitch : {-50.0, 50.0}) {
+    for (double roll : {-30.0, 30.0}) {
+      for (const int soft : {0, 1}) {
+        BoardView view;
+        view.params = params;
+        view.distance_m = 1.3;
+        view.pitch_deg = pitch;
+        view.roll_deg = roll;
+        CameraRenderOptions options = CleanRender();
+        if (soft) {
+          options.blur_sigma_px = 1.0;
+          options.gamma = 1.4;
+        }
+        SCOPED_TRACE(testing::Message()
+                     << "pitch " << pitch << " roll " << roll << " soft " << soft);
+        double rms = 0.0;
+        ExpectFound(RenderView(view, options, ++seed), params, &rms);
+        EXPECT_LT(rms, kNoisyRmsBarPx);
+      }
+    }
+  }
+}
+
 // Through the strong wide-angle pinhole (k1 -0.30) near the image corner and the 190-degree
 // fisheye 40 degrees off its axis, BoofCV's 3 x 4 board with equal squares and gaps.
 TEST(SquareGridDetectorTest, StrongDistortionAndFisheye) {
