@@ -173,6 +173,12 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     if (absl::Status s = CheckTargetsExist(*car, *station); !s.ok()) return s;
     cars.push_back(std::move(*car));
   }
+  for (const SimulatedBoardMove& m : config.simulated_moves) {
+    if (station->FindBoard(m.move.board_id) == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat(config.station_path, ": no board '", m.move.board_id,
+                                                     "' (source.moved_boards)"));
+    }
+  }
   if (cars.empty()) return absl::InvalidArgumentError("car_models: at least one car model is needed");
   std::error_code ec;
   fs::create_directories(config.data_root, ec);
@@ -492,6 +498,9 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       o.camera_frames = frames;
       o.lidar.rotations = o.camera_frames;
       o.cancel = &cancel_;  // a cancel or a drain stops before the next sensor
+      for (const SimulatedBoardMove& m : config_.simulated_moves) {
+        if (id >= m.from_cycle) o.moved_boards.push_back(m.move);
+      }
       absl::StatusOr<SimulationSummary> sim = SimulateCapture(
           station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
           [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });

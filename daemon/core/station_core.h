@@ -58,6 +58,7 @@
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
+#include "station/sim/simulator.h"
 
 namespace linecal {
 
@@ -67,6 +68,13 @@ enum class CycleSource { kSimulator, kReplay, kLive };
 using SensorSourceFactory =
     std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(const std::string& sensor, const SourceConfig& config)>;
 
+// simulator: a board that stands moved from cycle `from_cycle` on (a knocked board, for the
+// station-health alarm's tests and demos; SimulatorOptions::moved_boards).
+struct SimulatedBoardMove {
+  MovedBoard move;
+  int64_t from_cycle = 1;  // the first cycle id that sees the board moved
+};
+
 struct StationCoreConfig {
   std::string station_id = "demo";
   std::string station_path;                // linecal.station file
@@ -75,6 +83,7 @@ struct StationCoreConfig {
   std::string data_root;                   // captures are written and read below it
   CycleSource source = CycleSource::kSimulator;
   std::string replay_capture;              // replay: a capture directory relative to data_root
+  std::vector<SimulatedBoardMove> simulated_moves;  // simulator: boards moved from a cycle on
   // live: the source of every sensor of every car model, by sensor name (a name shared by
   // several car models has one source). Create checks that each sensor has one of its kind.
   std::map<std::string, SourceConfig> live_sources;
