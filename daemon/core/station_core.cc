@@ -904,7 +904,28 @@ StationStatusInfo StationCore::Status() {
   std::error_code ec;
   const fs::space_info space = fs::space(config_.data_root, ec);
   if (!ec) s.disk_free_bytes = space.available;
+  absl::StatusOr<StationHealth> health = Trends(kHealthWindowCycles);
+  if (health.ok()) {
+    s.target_alarms = std::move(health->alarms);
+  } else {
+    s.health_error = std::string(health.status().message());
+  }
   return s;
+}
+
+absl::StatusOr<StationHealth> StationCore::Trends(int cycles, const StationHealthOptions& options) {
+  absl::StatusOr<std::vector<TrendRow>> rows = store_->RecentSolvedResults(cycles);
+  if (!rows.ok()) return rows.status();
+  std::vector<HealthCycle> health_cycles;
+  for (const TrendRow& row : *rows) {
+    if (health_cycles.empty() || health_cycles.back().cycle_id != row.cycle_id) {
+      health_cycles.push_back({row.cycle_id, row.started_ns, row.car_model_id, {}});
+    }
+    const MountingValues& d = row.deviation;
+    health_cycles.back().results.push_back(
+        {row.sensor, {d.yaw_deg, d.pitch_deg, d.roll_deg, d.x_m, d.y_m, d.z_m, row.residual_rms}});
+  }
+  return ComputeStationHealth(cars_, health_cycles, options);
 }
 
 void StationCore::WaitIdle() {

@@ -57,6 +57,7 @@
 #include "station/io/input_budget.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
+#include "station/health/station_health.h"
 #include "station/model/station_layout.h"
 #include "station/sim/simulator.h"
 
@@ -116,6 +117,10 @@ inline constexpr std::chrono::milliseconds kCalibrationStopGrace{1000};
 // a cycle of the reference car writes about 10 MB of capture and tens of kB of results.
 inline constexpr std::uint64_t kFreeBytesToServe = 16u << 20;
 
+// Cycles the station status judges its health over: 200 cars hold a baseline of 180 before
+// the alarm's 20 recent ones, and read in a few milliseconds.
+inline constexpr int kHealthWindowCycles = 200;
+
 struct CycleRequest {
   std::string vin;
   std::string car_model_id;
@@ -148,6 +153,10 @@ struct StationStatusInfo {
   std::uint64_t disk_free_bytes = 0;
   std::optional<ForwarderStats> plant;            // with a `plant` section: the forwarding's state
   std::chrono::seconds plant_max_backlog_age{0};  // plant.max_backlog_age_s (Health)
+  // Moved-target alarms over the newest kHealthWindowCycles cycles (station/health); empty
+  // when none is raised or the store could not be read (health_error says why).
+  std::vector<TargetAlarm> target_alarms;
+  std::string health_error;
 
   // What serves `sensor`: its live source's description, else `source` (the simulator and a
   // recorded capture serve every sensor).
@@ -178,6 +187,10 @@ class StationCore {
   // on_event returns false (Cancelled: the watcher went away). NotFound for unknown ids.
   absl::Status WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event);
   StationStatusInfo Status();
+  // Trends, alarms and per-target counts over the newest `cycles` (1..100000) cycles that
+  // ended done (ComputeStationHealth). InvalidArgument for the count or options; the store's
+  // errors. Cost: one store query and O(cycles × sensors).
+  absl::StatusOr<StationHealth> Trends(int cycles, const StationHealthOptions& options = {});
   // OK when the station can run and store cycles. Else why not: FailedPrecondition when the
   // data root or the database file was removed (until a restart), ResourceExhausted while
   // the disk is full (a cycle's end waiting to be stored, or the last write refused for want
