@@ -16,6 +16,7 @@
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
 #include "daemon/web/console_json.h"
+#include "daemon/web/trends_json.h"
 
 namespace linecal {
 namespace {
@@ -307,6 +308,20 @@ void WebServer::Route() {
   });
   s.Get("/api/events",
         [this](const httplib::Request& req, httplib::Response& res) { Events(req, res); });
+  // Trends and station health (docs/console.md): ?cycles=N (1..100000, default 200), &sensor=S.
+  s.Get("/api/trends", [this](const httplib::Request& req, httplib::Response& res) {
+    int cycles = kHealthWindowCycles;
+    if (req.has_param("cycles")) {
+      const std::string n = req.get_param_value("cycles");
+      if (!absl::SimpleAtoi(n, &cycles) || cycles < 1 || cycles > 100000) {
+        return SendError(res, absl::InvalidArgumentError(
+                                  absl::StrCat("cycles = ", QuoteInput(n), ": must be in [1, 100000]")));
+      }
+    }
+    absl::StatusOr<StationHealth> health = core_->Trends(cycles);
+    if (!health.ok()) return SendError(res, health.status());
+    SendJson(res, TrendsJson(*health, req.get_param_value("sensor")));
+  });
   s.Get("/vendor/chart.js", [this](const httplib::Request& req, httplib::Response& res) {
     ServeFile(options_.chart_js_path, req, res);
   });

@@ -1,0 +1,116 @@
+// The trends page: per sensor and car model, each deviation axis and the residual of the last
+// N cars with tolerance bands and EWMA control limits, the moved-target alarm and the sensors
+// solved with each target (docs/console.md, "Trends and station health"). Charts are Debian's
+// Chart.js (/vendor/chart.js); getJson and $ come from app.js.
+"use strict";
+
+const UNITS = { yaw_deg: "°", pitch_deg: "°", roll_deg: "°", x_m: "m", y_m: "m", z_m: "m", residual_rms: "" };
+const charts = [];
+
+function line(label, data, color, dash) {
+  return { label, data, borderColor: color, borderWidth: 1, pointRadius: 0, borderDash: dash || [],
+           fill: false };
+}
+
+function seriesChart(canvas, series, ids) {
+  const flat = (v) => ids.map(() => v);
+  const datasets = [
+    { label: "result", data: series.values, borderColor: "#555", backgroundColor: "#555",
+      showLine: false, pointRadius: 1.5 },
+    line("EWMA", series.ewma, "#1565c0"),
+  ];
+  if (series.upper.length) {
+    datasets.push(line("control limits", series.upper, "#ef6c00", [6, 3]));
+    datasets.push(line("", series.lower, "#ef6c00", [6, 3]));
+  }
+  if (series.tolerance > 0) {
+    datasets.push(line("tolerance", flat(series.tolerance), "#b00020", [2, 2]));
+    datasets.push(line("", flat(-series.tolerance), "#b00020", [2, 2]));
+  }
+  return new Chart(canvas, {
+    type: "line",
+    data: { labels: ids, datasets },
+    options: {
+      animation: false, normalized: true, maintainAspectRatio: false, parsing: true,
+      plugins: { title: { display: true, text: series.name + (UNITS[series.name] ? " (" + UNITS[series.name] + ")" : "") },
+                 legend: { labels: { filter: (item) => item.text !== "" } } },
+      scales: { x: { title: { display: true, text: "cycle" }, ticks: { maxTicksLimit: 10 } } },
+    },
+  });
+}
+
+function showAlarms(alarms) {
+  const box = $("alarms");
+  box.replaceChildren();
+  for (const a of alarms) {
+    const div = document.createElement("div");
+    div.className = "alarm";
+    const shifts = a.sensors.map((s) => `${s.sensor} ${s.shift_sigmas >= 0 ? "+" : ""}${s.shift_sigmas.toFixed(1)} σ`);
+    div.textContent = `Target ${a.targets.join(" or ")} (car model ${a.car_model}) has likely moved ` +
+      `since cycle ${a.since_cycle_id}: residuals rose together (${shifts.join(", ")}); ` +
+      `check and re-survey it before more cars fail.`;
+    div.dataset.targets = a.targets.join(",");
+    box.appendChild(div);
+  }
+  $("no-alarm").hidden = alarms.length > 0;
+}
+
+function showCounts(counts) {
+  const labels = counts.length ? counts[0].cycle_ids : [];
+  const palette = ["#1565c0", "#2e7d32", "#ef6c00", "#6a1b9a", "#00838f", "#c62828", "#4e342e", "#546e7a"];
+  const datasets = counts.map((c, i) => ({ ...line(`${c.target} (of ${c.sensors})`, c.solved,
+                                                   palette[i % palette.length]), stepped: true }));
+  charts.push(new Chart($("counts"), {
+    type: "line", data: { labels, datasets },
+    options: { animation: false, maintainAspectRatio: false,
+               scales: { y: { beginAtZero: true, ticks: { stepSize: 1 } } } },
+  }));
+}
+
+async function load() {
+  const started = performance.now();
+  const sensor = $("sensor").value;
+  const body = await getJson(`/api/trends?cycles=${$("cycles").value}&sensor=${encodeURIComponent(sensor)}`);
+  const fetched = performance.now();
+  for (const c of charts.splice(0)) c.destroy();
+  $("charts").replaceChildren();
+  showAlarms(body.alarms);
+  for (const t of body.trends) {
+    for (const s of t.series) {
+      const holder = document.createElement("div");
+      const canvas = document.createElement("canvas");
+      canvas.dataset.series = s.name;
+      holder.appendChild(canvas);
+      $("charts").appendChild(holder);
+      charts.push(seriesChart(canvas, s, s.cycle_ids));
+    }
+  }
+  showCounts(body.counts);
+  const points = body.trends.reduce((n, t) => n + (t.series[0] ? t.series[0].values.length : 0), 0);
+  // Read by the browser test: the cars drawn and how long fetching and drawing took.
+  document.body.dataset.points = points;
+  document.body.dataset.fetchMs = (fetched - started).toFixed(1);
+  document.body.dataset.drawMs = (performance.now() - fetched).toFixed(1);
+  document.body.dataset.loaded = `${sensor}:${$("cycles").value}`;
+}
+
+async function trendsPage() {
+  const status = await getJson("/api/status");
+  for (const s of status.sensors) {
+    const option = document.createElement("option");
+    option.textContent = s.name;
+    $("sensor").appendChild(option);
+  }
+  const wanted = new URLSearchParams(location.search);
+  if (wanted.get("sensor")) $("sensor").value = wanted.get("sensor");
+  if (wanted.get("cycles")) $("cycles").value = wanted.get("cycles");
+  $("sensor").addEventListener("change", load);
+  $("cycles").addEventListener("change", load);
+  await load();
+}
+
+document.addEventListener("DOMContentLoaded", () => {
+  trendsPage().catch((error) => {
+    if (error.message !== "login required") document.title = "linecal · " + error.message;
+  });
+});
