@@ -90,15 +90,25 @@ std::optional<TargetAlarm> JudgeTargets(const CarModel& car, const std::vector<s
   }
   const double norm = std::sqrt(static_cast<double>(users.size()));
   double z = 0;
-  size_t rise = first_recent;  // where the EWMA last started up from at or below 0
+  std::vector<double> combined;
   for (size_t r = first_recent; r < rows.size(); ++r) {
     double sum = 0;
     for (size_t k = 0; k < users.size(); ++k) {
       sum += (*residuals[users[k]][rows[r]] - base[k].mean) / base[k].sigma;
     }
-    const double previous = z;
-    z = o.lambda * sum / norm + (1 - o.lambda) * z;
-    if (previous <= 0 && z > 0) rise = r;
+    combined.push_back(sum / norm);
+    z = o.lambda * combined.back() + (1 - o.lambda) * z;
+  }
+  // The rise's first cycle: the start of the recent tail with the largest sum, the maximum
+  // likelihood change point of a step in the mean (Hinkley 1970).
+  size_t rise = first_recent;
+  double tail = 0, best = -1;
+  for (size_t i = combined.size(); i-- > 0;) {
+    tail += combined[i];
+    if (tail > best) {
+      best = tail;
+      rise = first_recent + i;
+    }
   }
   const double statistic = z / EwmaSigma(o.lambda, static_cast<int>(recent));
   if (!(statistic > o.alarm_sigmas)) return std::nullopt;

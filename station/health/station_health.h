@@ -104,7 +104,9 @@ struct TargetAlarm {
   std::string car_model;
   std::vector<std::string> targets;  // used by exactly these sensors (sorted)
   std::vector<ShiftedSensor> sensors;
-  int64_t since_cycle = 0;  // the first cycle of the rise (the EWMA's last start from below 0)
+  // The first cycle of the rise: the start of the recent tail whose standardised residuals
+  // sum highest (the change point of a step in the mean); within the last recent_cars.
+  int64_t since_cycle = 0;
   int64_t last_cycle = 0;   // the newest cycle judged
   double statistic_sigmas = 0;  // the EWMA in its σ at last_cycle
   double alarm_sigmas = 0;

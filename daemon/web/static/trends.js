@@ -76,7 +76,9 @@ async function load() {
   $("charts").replaceChildren();
   showAlarms(body.alarms);
   for (const t of body.trends) {
-    for (const s of t.series) {
+    // The residual first: it is what a moved target raises (the mountings barely move).
+    const series = [t.series[t.series.length - 1], ...t.series.slice(0, -1)];
+    for (const s of series) {
       const holder = document.createElement("div");
       const canvas = document.createElement("canvas");
       canvas.dataset.series = s.name;
@@ -103,7 +105,13 @@ async function trendsPage() {
   }
   const wanted = new URLSearchParams(location.search);
   if (wanted.get("sensor")) $("sensor").value = wanted.get("sensor");
-  if (wanted.get("cycles")) $("cycles").value = wanted.get("cycles");
+  const cycles = wanted.get("cycles");
+  if (cycles && ![...$("cycles").options].some((o) => o.value === cycles)) {
+    const option = document.createElement("option");
+    option.textContent = cycles;
+    $("cycles").appendChild(option);
+  }
+  if (cycles) $("cycles").value = cycles;
   $("sensor").addEventListener("change", load);
   $("cycles").addEventListener("change", load);
   await load();
