@@ -173,6 +173,12 @@ def test(args, work):
                 m = open_trends(driver, url, query)
                 print(f"speed {query} run {attempt + 1}: {m['points']} cars, page loaded in {m['loaded_ms']:.0f} ms"
                       f" (trends fetched in {m['fetch_ms']:.0f} ms, drawn in {m['draw_ms']:.0f} ms)")
+        for attempt in range(3):
+            listed = driver.execute_script(
+                "const t = performance.now(); return fetch('/api/cycles?limit=1000').then((r) => r.json())"
+                ".then((b) => [b.cycles.length, performance.now() - t]);")
+            print(f"speed /api/cycles?limit=1000 run {attempt + 1}: {listed[0]} cycles fetched and parsed"
+                  f" in {listed[1]:.0f} ms")
         left = errors(driver)
         check(not left, f"console errors: {left}")
     finally:
