@@ -49,11 +49,18 @@ HealthSeries MakeSeries(int s, const std::vector<int64_t>& ids, std::vector<doub
   out.mean = b.mean;
   out.sigma = b.sigma;
   double z = b.sigma > 0 ? b.mean : (n > 0 ? out.values[0] : 0);
+  out.ewma.reserve(n);
+  out.lower.reserve(b.sigma > 0 ? n : 0);
+  out.upper.reserve(b.sigma > 0 ? n : 0);
+  // (1 − λ)^{2i} kept as a running product: pow() of an underflowing power is slow.
+  double decay = 1;
   for (size_t i = 0; i < n; ++i) {
     z = o.lambda * out.values[i] + (1 - o.lambda) * z;
     out.ewma.push_back(z);
+    decay *= (1 - o.lambda) * (1 - o.lambda);
     if (b.sigma > 0) {
-      const double half = o.chart_sigmas * b.sigma * EwmaSigma(o.lambda, static_cast<int>(i) + 1);
+      const double half =
+          o.chart_sigmas * b.sigma * std::sqrt(o.lambda / (2.0 - o.lambda) * (1.0 - decay));
       out.lower.push_back(b.mean - half);
       out.upper.push_back(b.mean + half);
     }
