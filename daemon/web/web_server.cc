@@ -10,9 +10,12 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <vector>
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
 #include "daemon/web/console_json.h"
@@ -67,6 +70,24 @@ const char* ContentType(const std::string& extension) {
   if (extension == ".js") return "text/javascript; charset=utf-8";
   if (extension == ".css") return "text/css; charset=utf-8";
   return "application/octet-stream";
+}
+
+// cpp-httplib 0.11 compresses every text, JavaScript and JSON answer with Brotli at its
+// slowest quality (11) when the browser accepts "br", as Chromium always does: measured 0.9 s
+// for Chart.js and 1.8 s for a list of 1,000 cycles, against 50 ms and 20 ms with its gzip
+// (level 6). The library has no setting for it, so "br" is taken out of the request's
+// Accept-Encoding before routing; the Request object httplib passes is its own non-const
+// local, so the const_cast is defined.
+void RefuseBrotli(const httplib::Request& req) {
+  auto& headers = const_cast<httplib::Headers&>(req.headers);
+  auto accepted = headers.find("Accept-Encoding");
+  if (accepted == headers.end()) return;
+  std::vector<std::string> kept;
+  for (absl::string_view e : absl::StrSplit(accepted->second, ',')) {
+    e = absl::StripAsciiWhitespace(e);
+    if (!e.empty() && !absl::StartsWith(e, "br")) kept.emplace_back(e);
+  }
+  accepted->second = absl::StrJoin(kept, ", ");
 }
 
 // The value of cookie `name` in a Cookie header ("a=1; linecal_session=abc"), or "".
@@ -272,6 +293,7 @@ void WebServer::Route() {
   });
   // The API below needs a session: checked before routing.
   s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+    RefuseBrotli(req);
     const bool open =
         req.path == "/api/login" || req.path == "/api/logout" || req.path == "/api/session";
     if (open || Authorized(req)) return httplib::Server::HandlerResponse::Unhandled;
