@@ -339,7 +339,8 @@ absl::StatusOr<std::vector<SimulatedBoardMove>> ParseMovedBoards(const JsonField
   std::vector<SimulatedBoardMove> moves;
   SimulatorOptions check;
   for (const JsonField& e : *entries) {
-    if (absl::Status s = e.AllowOnlyKeys({"board", "ypr_deg", "xyz_m", "from_cycle"}); !s.ok()) return s;
+    if (absl::Status s = e.AllowOnlyKeys({"board", "ypr_deg", "xyz_m", "from_cycle"}); !s.ok())
+      return s;
     SimulatedBoardMove m;
     absl::StatusOr<std::string> board = e.String("board");
     if (!board.ok()) return board.status();
@@ -417,9 +418,9 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
     if (!source.ok()) return source.status();
     absl::StatusOr<std::string> type = source->String("type");
     if (!type.ok()) return type.status();
-    if (absl::Status s = *type == "live" ? source->AllowOnlyKeys({"type", "sensors"})
-                     : *type == "simulator" ? source->AllowOnlyKeys({"type", "moved_boards"})
-                                            : source->AllowOnlyKeys({"type", "capture"});
+    if (absl::Status s = *type == "live"        ? source->AllowOnlyKeys({"type", "sensors"})
+                         : *type == "simulator" ? source->AllowOnlyKeys({"type", "moved_boards"})
+                                                : source->AllowOnlyKeys({"type", "capture"});
         !s.ok()) {
       return s;
     }

@@ -175,8 +175,8 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   }
   for (const SimulatedBoardMove& m : config.simulated_moves) {
     if (station->FindBoard(m.move.board_id) == nullptr) {
-      return absl::InvalidArgumentError(absl::StrCat(config.station_path, ": no board '", m.move.board_id,
-                                                     "' (source.moved_boards)"));
+      return absl::InvalidArgumentError(absl::StrCat(config.station_path, ": no board '",
+                                                     m.move.board_id, "' (source.moved_boards)"));
     }
   }
   if (cars.empty()) return absl::InvalidArgumentError("car_models: at least one car model is needed");

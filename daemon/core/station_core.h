@@ -54,10 +54,10 @@
 #include "daemon/plant/forwarder.h"
 #include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"
+#include "station/health/station_health.h"
 #include "station/io/input_budget.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
-#include "station/health/station_health.h"
 #include "station/model/station_layout.h"
 #include "station/sim/simulator.h"
 

@@ -49,14 +49,16 @@ nlohmann::json TrendsJson(const StationHealth& health, const std::string& sensor
   for (const TargetAlarm& a : health.alarms) alarms.push_back(TargetAlarmJson(a));
   nlohmann::json counts = nlohmann::json::array();
   for (const TargetCounts& c : health.counts) {
-    if (!sensor.empty() && std::find(targets.begin(), targets.end(), c.target) == targets.end()) continue;
+    if (!sensor.empty() && std::find(targets.begin(), targets.end(), c.target) == targets.end())
+      continue;
     counts.push_back({{"car_model", c.car_model},
                       {"target", c.target},
                       {"sensors", c.sensors},
                       {"cycle_ids", c.cycle_ids},
                       {"solved", c.solved}});
   }
-  return {{"trends", std::move(trends)}, {"alarms", std::move(alarms)}, {"counts", std::move(counts)}};
+  return {
+      {"trends", std::move(trends)}, {"alarms", std::move(alarms)}, {"counts", std::move(counts)}};
 }
 
 }  // namespace linecal

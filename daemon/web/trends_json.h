@@ -2,9 +2,8 @@
 // The station's health as the console's JSON (GET /api/trends, docs/console.md): the field
 // names of station/health/station_health.h and of the gRPC TargetAlarm.
 
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "station/health/station_health.h"
 

@@ -12,8 +12,8 @@
 #include <sstream>
 #include <vector>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
@@ -336,8 +336,8 @@ void WebServer::Route() {
     if (req.has_param("cycles")) {
       const std::string n = req.get_param_value("cycles");
       if (!absl::SimpleAtoi(n, &cycles) || cycles < 1 || cycles > 100000) {
-        return SendError(res, absl::InvalidArgumentError(
-                                  absl::StrCat("cycles = ", QuoteInput(n), ": must be in [1, 100000]")));
+        return SendError(res, absl::InvalidArgumentError(absl::StrCat("cycles = ", QuoteInput(n),
+                                                                      ": must be in [1, 100000]")));
       }
     }
     absl::StatusOr<StationHealth> health = core_->Trends(cycles);

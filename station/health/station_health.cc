@@ -69,16 +69,21 @@ HealthSeries MakeSeries(int s, const std::vector<int64_t>& ids, std::vector<doub
 }
 
 std::array<double, kHealthSeries> Tolerances(const SensorModel& m) {
-  return {m.tolerance.yaw_rad * kRadToDeg, m.tolerance.pitch_rad * kRadToDeg,
-          m.tolerance.roll_rad * kRadToDeg, m.tolerance.xyz_m.x(), m.tolerance.xyz_m.y(),
-          m.tolerance.xyz_m.z(), 0.0};
+  return {m.tolerance.yaw_rad * kRadToDeg,
+          m.tolerance.pitch_rad * kRadToDeg,
+          m.tolerance.roll_rad * kRadToDeg,
+          m.tolerance.xyz_m.x(),
+          m.tolerance.xyz_m.y(),
+          m.tolerance.xyz_m.z(),
+          0.0};
 }
 
 // The alarm of the targets used by exactly `users` (sensor indices of `car`), judged over the
 // last recent_cars cycles of the car model in which all of them were solved.
 std::optional<TargetAlarm> JudgeTargets(const CarModel& car, const std::vector<size_t>& users,
                                         const std::vector<std::vector<const double*>>& residuals,
-                                        const std::vector<int64_t>& ids, const StationHealthOptions& o) {
+                                        const std::vector<int64_t>& ids,
+                                        const StationHealthOptions& o) {
   // Cycles in which every user has a residual.
   std::vector<size_t> rows;
   for (size_t c = 0; c < ids.size(); ++c) {
@@ -141,8 +146,8 @@ std::optional<TargetAlarm> JudgeTargets(const CarModel& car, const std::vector<s
 }  // namespace
 
 const char* HealthSeriesName(int series) {
-  static constexpr const char* kNames[kHealthSeries] = {"yaw_deg", "pitch_deg", "roll_deg", "x_m",
-                                                        "y_m",     "z_m",       "residual_rms"};
+  static constexpr const char* kNames[kHealthSeries] = {
+      "yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m", "residual_rms"};
   return series >= 0 && series < kHealthSeries ? kNames[series] : "";
 }
 
@@ -163,8 +168,8 @@ absl::StatusOr<StationHealth> ComputeStationHealth(const std::vector<CarModel>& 
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   for (size_t i = 1; i < cycles.size(); ++i) {
     if (cycles[i].cycle_id <= cycles[i - 1].cycle_id) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("cycles: ids must increase, got ", cycles[i - 1].cycle_id, " then ", cycles[i].cycle_id));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "cycles: ids must increase, got ", cycles[i - 1].cycle_id, " then ", cycles[i].cycle_id));
     }
   }
   StationHealth health;
@@ -197,7 +202,8 @@ absl::StatusOr<StationHealth> ComputeStationHealth(const std::vector<CarModel>& 
         for (int k = 0; k < kHealthSeries; ++k) values[k].push_back(r->values[k]);
       }
       for (int k = 0; k < kHealthSeries; ++k) {
-        trend.series.push_back(MakeSeries(k, solved_ids, std::move(values[k]), tolerance[k], options));
+        trend.series.push_back(
+            MakeSeries(k, solved_ids, std::move(values[k]), tolerance[k], options));
       }
       health.trends.push_back(std::move(trend));
     }
@@ -226,7 +232,8 @@ absl::StatusOr<StationHealth> ComputeStationHealth(const std::vector<CarModel>& 
     for (const auto& [users, alarm] : raised) {
       bool explained = false;
       for (const std::vector<size_t>* k : kept) {
-        for (size_t u : users) explained = explained || std::find(k->begin(), k->end(), u) != k->end();
+        for (size_t u : users)
+          explained = explained || std::find(k->begin(), k->end(), u) != k->end();
       }
       if (explained) continue;
       kept.push_back(&users);

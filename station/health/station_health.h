@@ -79,8 +79,8 @@ struct HealthSeries {
   std::string name;                // HealthSeriesName
   std::vector<int64_t> cycle_ids;  // oldest first
   std::vector<double> values;
-  std::vector<double> ewma;  // from the first point
-  double mean = 0, sigma = 0;  // of the baseline; sigma 0 when it is too short
+  std::vector<double> ewma;          // from the first point
+  double mean = 0, sigma = 0;        // of the baseline; sigma 0 when it is too short
   std::vector<double> lower, upper;  // EWMA limits per point; empty without a baseline
   double tolerance = 0;  // ± the car model's tolerance (deviation axes); 0 for the residual
 };
@@ -107,7 +107,7 @@ struct TargetAlarm {
   // The first cycle of the rise: the start of the recent tail whose standardised residuals
   // sum highest (the change point of a step in the mean); within the last recent_cars.
   int64_t since_cycle = 0;
-  int64_t last_cycle = 0;   // the newest cycle judged
+  int64_t last_cycle = 0;       // the newest cycle judged
   double statistic_sigmas = 0;  // the EWMA in its σ at last_cycle
   double alarm_sigmas = 0;
 };

@@ -184,7 +184,8 @@ absl::Status SimulatorOptions::Validate() const {
     const std::string field = absl::StrCat("moved_boards[", i, "]");
     for (size_t j = 0; j < i; ++j) {
       if (moved_boards[j].board_id == b.board_id) {
-        return absl::InvalidArgumentError(absl::StrCat(field, ".board_id: '", b.board_id, "' moved twice"));
+        return absl::InvalidArgumentError(
+            absl::StrCat(field, ".board_id: '", b.board_id, "' moved twice"));
       }
     }
     for (const double a : {b.yaw_deg, b.pitch_deg, b.roll_deg}) {
@@ -204,7 +205,8 @@ absl::Status SimulatorOptions::Validate() const {
 namespace {
 
 // The station as it stands: `surveyed` with options.moved_boards applied.
-absl::StatusOr<StationLayout> StandingStation(const StationLayout& surveyed, const SimulatorOptions& options) {
+absl::StatusOr<StationLayout> StandingStation(const StationLayout& surveyed,
+                                              const SimulatorOptions& options) {
   StationLayout standing = surveyed;
   for (const MovedBoard& move : options.moved_boards) {
     auto board = std::find_if(standing.boards.begin(), standing.boards.end(),
@@ -213,8 +215,8 @@ absl::StatusOr<StationLayout> StandingStation(const StationLayout& surveyed, con
       return absl::InvalidArgumentError(
           absl::StrCat("moved_boards: the station has no board '", move.board_id, "'"));
     }
-    const Eigen::Matrix3d R_move =
-        RotationFromYawPitchRoll({move.yaw_deg * kDegToRad, move.pitch_deg * kDegToRad, move.roll_deg * kDegToRad});
+    const Eigen::Matrix3d R_move = RotationFromYawPitchRoll(
+        {move.yaw_deg * kDegToRad, move.pitch_deg * kDegToRad, move.roll_deg * kDegToRad});
     board->T_station_board = Rigid3d(R_move * board->T_station_board.RotationMatrix(),
                                      board->T_station_board.translation() + move.offset_m);
   }
@@ -223,9 +225,11 @@ absl::StatusOr<StationLayout> StandingStation(const StationLayout& surveyed, con
 
 }  // namespace
 
-absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed, const CarModel& car,
-                                                  const SimulatorOptions& options, std::uint64_t seed,
-                                                  const std::string& out_dir, const SimulatorProgress& progress) {
+absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
+                                                  const CarModel& car,
+                                                  const SimulatorOptions& options,
+                                                  std::uint64_t seed, const std::string& out_dir,
+                                                  const SimulatorProgress& progress) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   if (absl::Status s = CheckTargetsExist(car, surveyed); !s.ok()) return s;
   // Sensors see the standing station; the capture carries the surveyed one.

@@ -84,8 +84,8 @@ struct SimulationSummary {
 // Simulates the car in the station and writes the capture into `out_dir` (created if
 // missing; existing files of the same names are replaced). Errors: InvalidArgument for bad
 // options, a sensor name the car does not have, a moved board the station does not have,
-// or a car whose targets are not in the station; Internal for files that cannot be written (naming them); Cancelled once
-// options.cancel is true (checked before each sensor). Cost: dominated by the
+// or a car whose targets are not in the station; Internal for files that cannot be written (naming
+// them); Cancelled once options.cancel is true (checked before each sensor). Cost: dominated by the
 // camera renders (about 0.2 s per 1920x1080 frame) and LiDAR rotations.
 absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, const CarModel& car,
                                                   const SimulatorOptions& options, std::uint64_t seed,

@@ -2,9 +2,9 @@
 // bars over series with the noise of the real pipeline (docs/console.md, "Noise model").
 #include "station/health/station_health.h"
 
-#include <random>
-
 #include <gtest/gtest.h>
+
+#include <random>
 
 namespace linecal {
 namespace {
@@ -40,10 +40,13 @@ CarModel ReferenceLike() {
     car.sensors.push_back(m);
   };
   add("front_camera", SensorKind::kCamera,
-      {"front_chessboard", "front_circle", "front_vertical", "bumper_lidar_left", "bumper_lidar_right"});
+      {"front_chessboard", "front_circle", "front_vertical", "bumper_lidar_left",
+       "bumper_lidar_right"});
   add("surround_front", SensorKind::kCamera,
-      {"front_chessboard", "front_vertical", "bumper_lidar_left", "bumper_lidar_right", "left_front_board"});
-  add("surround_left", SensorKind::kCamera, {"left_floor_grid", "left_front_board", "left_rear_board"});
+      {"front_chessboard", "front_vertical", "bumper_lidar_left", "bumper_lidar_right",
+       "left_front_board"});
+  add("surround_left", SensorKind::kCamera,
+      {"left_floor_grid", "left_front_board", "left_rear_board"});
   add("bumper_lidar", SensorKind::kLidar, {"bumper_lidar_left", "bumper_lidar_right"});
   add("roof_lidar", SensorKind::kLidar, {"roof_lidar_left", "roof_lidar_right"});
   return car;
@@ -132,9 +135,11 @@ TEST(StationHealth, AlarmNamesTargetsSensorsShiftAndStart) {
     if (id >= 41) {
       for (HealthResult& r : c.results) {
         for (const SensorNoise& n : kReference) {
-          const bool user = r.sensor == std::string("front_camera") || r.sensor == std::string("surround_front") ||
+          const bool user = r.sensor == std::string("front_camera") ||
+                            r.sensor == std::string("surround_front") ||
                             r.sensor == std::string("bumper_lidar");
-          if (user && r.sensor == std::string(n.name)) r.values[kResidualSeries] += 3 * n.residual_sigma;
+          if (user && r.sensor == std::string(n.name))
+            r.values[kResidualSeries] += 3 * n.residual_sigma;
         }
       }
     }
@@ -162,7 +167,8 @@ TEST(StationHealth, RefusesBadInput) {
   o.lambda = 0;
   EXPECT_EQ(ComputeStationHealth({}, {}, o).status().message(), "lambda: must be in (0, 1]");
   std::vector<HealthCycle> cycles{{2, 0, "x", {}}, {2, 0, "x", {}}};
-  EXPECT_EQ(ComputeStationHealth({}, cycles).status().message(), "cycles: ids must increase, got 2 then 2");
+  EXPECT_EQ(ComputeStationHealth({}, cycles).status().message(),
+            "cycles: ids must increase, got 2 then 2");
 }
 
 // The bars of issue 23 over the noise model: a still station never alarms in 1,000 cars, and
