@@ -5,7 +5,6 @@
 #include <map>
 #include <numbers>
 #include <optional>
-#include <set>
 
 #include "absl/strings/str_cat.h"
 
