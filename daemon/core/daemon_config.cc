@@ -332,6 +332,45 @@ absl::Status CheckListenAddress(const std::string& address, const std::string& k
   return absl::InvalidArgumentError(absl::StrCat(key, ": ", QuoteInput(address), kListenForm));
 }
 
+namespace {
+
+// source.moved_boards: [{board, ypr_deg [3], xyz_m [3] (default 0), from_cycle (>= 1,
+// default 1)}], the bounds of SimulatorOptions::Validate.
+absl::StatusOr<std::vector<SimulatedBoardMove>> ParseMovedBoards(const JsonField& source) {
+  absl::StatusOr<std::vector<JsonField>> entries = source.Array("moved_boards");
+  if (!entries.ok()) return entries.status();
+  std::vector<SimulatedBoardMove> moves;
+  SimulatorOptions check;
+  for (const JsonField& e : *entries) {
+    if (absl::Status s = e.AllowOnlyKeys({"board", "ypr_deg", "xyz_m", "from_cycle"}); !s.ok())
+      return s;
+    SimulatedBoardMove m;
+    absl::StatusOr<std::string> board = e.String("board");
+    if (!board.ok()) return board.status();
+    m.move.board_id = *board;
+    absl::StatusOr<std::vector<double>> ypr = e.Numbers("ypr_deg", 3);
+    if (!ypr.ok()) return ypr.status();
+    m.move.yaw_deg = (*ypr)[0];
+    m.move.pitch_deg = (*ypr)[1];
+    m.move.roll_deg = (*ypr)[2];
+    if (e.Has("xyz_m")) {
+      absl::StatusOr<std::vector<double>> xyz = e.Numbers("xyz_m", 3);
+      if (!xyz.ok()) return xyz.status();
+      m.move.offset_m = Eigen::Vector3d((*xyz)[0], (*xyz)[1], (*xyz)[2]);
+    }
+    absl::StatusOr<std::int64_t> from = e.IntegerOr("from_cycle", 1);
+    if (!from.ok()) return from.status();
+    if (*from < 1) return e.Error("from_cycle", "must be >= 1");
+    m.from_cycle = *from;
+    check.moved_boards.push_back(m.move);
+    if (absl::Status s = check.Validate(); !s.ok()) return e.Error(std::string(s.message()));
+    moves.push_back(std::move(m));
+  }
+  return moves;
+}
+
+}  // namespace
+
 absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   absl::StatusOr<JsonDocument> doc = JsonDocument::FromFile(path);
   if (!doc.ok()) return doc.status();
@@ -382,8 +421,9 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
     if (!source.ok()) return source.status();
     absl::StatusOr<std::string> type = source->String("type");
     if (!type.ok()) return type.status();
-    if (absl::Status s = *type == "live" ? source->AllowOnlyKeys({"type", "sensors"})
-                                         : source->AllowOnlyKeys({"type", "capture"});
+    if (absl::Status s = *type == "live"        ? source->AllowOnlyKeys({"type", "sensors"})
+                         : *type == "simulator" ? source->AllowOnlyKeys({"type", "moved_boards"})
+                                                : source->AllowOnlyKeys({"type", "capture"});
         !s.ok()) {
       return s;
     }
@@ -400,6 +440,11 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
       }
     } else if (*type == "simulator") {
       c.core.source = CycleSource::kSimulator;
+      if (source->Has("moved_boards")) {
+        absl::StatusOr<std::vector<SimulatedBoardMove>> moves = ParseMovedBoards(*source);
+        if (!moves.ok()) return moves.status();
+        c.core.simulated_moves = *std::move(moves);
+      }
     } else if (*type == "replay") {
       c.core.source = CycleSource::kReplay;
       absl::StatusOr<std::string> capture = source->String("capture");

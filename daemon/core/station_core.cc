@@ -173,6 +173,12 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     if (absl::Status s = CheckTargetsExist(*car, *station); !s.ok()) return s;
     cars.push_back(std::move(*car));
   }
+  for (const SimulatedBoardMove& m : config.simulated_moves) {
+    if (station->FindBoard(m.move.board_id) == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat(config.station_path, ": no board '",
+                                                     m.move.board_id, "' (source.moved_boards)"));
+    }
+  }
   if (cars.empty()) return absl::InvalidArgumentError("car_models: at least one car model is needed");
   std::error_code ec;
   fs::create_directories(config.data_root, ec);
@@ -492,6 +498,9 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
       o.camera_frames = frames;
       o.lidar.rotations = o.camera_frames;
       o.cancel = &cancel_;  // a cancel or a drain stops before the next sensor
+      for (const SimulatedBoardMove& m : config_.simulated_moves) {
+        if (id >= m.from_cycle) o.moved_boards.push_back(m.move);
+      }
       absl::StatusOr<SimulationSummary> sim = SimulateCapture(
           station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
           [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });
@@ -922,7 +931,28 @@ StationStatusInfo StationCore::Status() {
   std::error_code ec;
   const fs::space_info space = fs::space(config_.data_root, ec);
   if (!ec) s.disk_free_bytes = space.available;
+  absl::StatusOr<StationHealth> health = Trends(kHealthWindowCycles);
+  if (health.ok()) {
+    s.target_alarms = std::move(health->alarms);
+  } else {
+    s.health_error = std::string(health.status().message());
+  }
   return s;
+}
+
+absl::StatusOr<StationHealth> StationCore::Trends(int cycles, const StationHealthOptions& options) {
+  absl::StatusOr<std::vector<TrendRow>> rows = store_->RecentSolvedResults(cycles);
+  if (!rows.ok()) return rows.status();
+  std::vector<HealthCycle> health_cycles;
+  for (const TrendRow& row : *rows) {
+    if (health_cycles.empty() || health_cycles.back().cycle_id != row.cycle_id) {
+      health_cycles.push_back({row.cycle_id, row.started_ns, row.car_model_id, {}});
+    }
+    const MountingValues& d = row.deviation;
+    health_cycles.back().results.push_back(
+        {row.sensor, {d.yaw_deg, d.pitch_deg, d.roll_deg, d.x_m, d.y_m, d.z_m, row.residual_rms}});
+  }
+  return ComputeStationHealth(cars_, health_cycles, options);
 }
 
 void StationCore::WaitIdle() {

@@ -54,10 +54,12 @@
 #include "daemon/plant/forwarder.h"
 #include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"
+#include "station/health/station_health.h"
 #include "station/io/input_budget.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
+#include "station/sim/simulator.h"
 
 namespace linecal {
 
@@ -67,6 +69,13 @@ enum class CycleSource { kSimulator, kReplay, kLive };
 using SensorSourceFactory =
     std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(const std::string& sensor, const SourceConfig& config)>;
 
+// simulator: a board that stands moved from cycle `from_cycle` on (a knocked board, for the
+// station-health alarm's tests and demos; SimulatorOptions::moved_boards).
+struct SimulatedBoardMove {
+  MovedBoard move;
+  int64_t from_cycle = 1;  // the first cycle id that sees the board moved
+};
+
 struct StationCoreConfig {
   std::string station_id = "demo";
   std::string station_path;                // linecal.station file
@@ -75,6 +84,7 @@ struct StationCoreConfig {
   std::string data_root;                   // captures are written and read below it
   CycleSource source = CycleSource::kSimulator;
   std::string replay_capture;              // replay: a capture directory relative to data_root
+  std::vector<SimulatedBoardMove> simulated_moves;  // simulator: boards moved from a cycle on
   // live: the source of every sensor of every car model, by sensor name (a name shared by
   // several car models has one source). Create checks that each sensor has one of its kind.
   std::map<std::string, SourceConfig> live_sources;
@@ -106,6 +116,10 @@ inline constexpr std::chrono::milliseconds kCalibrationStopGrace{1000};
 // Free bytes on the database's file system at which a full disk counts as over (Health):
 // a cycle of the reference car writes about 10 MB of capture and tens of kB of results.
 inline constexpr std::uint64_t kFreeBytesToServe = 16u << 20;
+
+// Cycles the station status judges its health over: 200 cars hold a baseline of 180 before
+// the alarm's 20 recent ones, and read in a few milliseconds.
+inline constexpr int kHealthWindowCycles = 200;
 
 struct CycleRequest {
   std::string vin;
@@ -139,6 +153,10 @@ struct StationStatusInfo {
   std::uint64_t disk_free_bytes = 0;
   std::optional<ForwarderStats> plant;            // with a `plant` section: the forwarding's state
   std::chrono::seconds plant_max_backlog_age{0};  // plant.max_backlog_age_s (Health)
+  // Moved-target alarms over the newest kHealthWindowCycles cycles (station/health); empty
+  // when none is raised or the store could not be read (health_error says why).
+  std::vector<TargetAlarm> target_alarms;
+  std::string health_error;
 
   // What serves `sensor`: its live source's description, else `source` (the simulator and a
   // recorded capture serve every sensor).
@@ -176,6 +194,10 @@ class StationCore {
   // on_event returns false (Cancelled: the watcher went away). NotFound for unknown ids.
   absl::Status WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event);
   StationStatusInfo Status();
+  // Trends, alarms and per-target counts over the newest `cycles` (1..100000) cycles that
+  // ended done (ComputeStationHealth). InvalidArgument for the count or options; the store's
+  // errors. Cost: one store query and O(cycles × sensors).
+  absl::StatusOr<StationHealth> Trends(int cycles, const StationHealthOptions& options = {});
   // OK when the station can run and store cycles. Else why not: FailedPrecondition when the
   // data root or the database file was removed (until a restart), ResourceExhausted while
   // the disk is full (a cycle's end waiting to be stored, or the last write refused for want

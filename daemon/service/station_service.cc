@@ -244,6 +244,22 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, cons
   if (s.running_cycle) response->set_running_cycle_id(std::to_string(*s.running_cycle));
   response->set_database_path(s.database_path);
   response->set_disk_free_bytes(s.disk_free_bytes);
+  for (const TargetAlarm& a : s.target_alarms) {
+    v1::TargetAlarm* alarm = response->add_target_alarms();
+    alarm->set_car_model(a.car_model);
+    for (const std::string& t : a.targets) alarm->add_targets(t);
+    for (const ShiftedSensor& x : a.sensors) {
+      v1::ShiftedSensor* sensor = alarm->add_sensors();
+      sensor->set_sensor(x.sensor);
+      sensor->set_baseline_residual(x.baseline_residual);
+      sensor->set_recent_residual(x.recent_residual);
+      sensor->set_shift_sigmas(x.shift_sigmas);
+    }
+    alarm->set_since_cycle_id(std::to_string(a.since_cycle));
+    alarm->set_last_cycle_id(std::to_string(a.last_cycle));
+    alarm->set_statistic_sigmas(a.statistic_sigmas);
+    alarm->set_alarm_sigmas(a.alarm_sigmas);
+  }
   if (s.plant) {
     v1::PlantForwarding* plant = response->mutable_plant();
     plant->set_backlog(s.plant->backlog);

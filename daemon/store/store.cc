@@ -594,6 +594,40 @@ absl::StatusOr<CyclePage> Store::ListCycles(const CycleFilter& filter) {
   return page;
 }
 
+absl::StatusOr<std::vector<TrendRow>> Store::RecentSolvedResults(int cycles) {
+  // 100,000: ten times the trends page's largest view, far below what fits in memory.
+  if (cycles < 1 || cycles > 100000) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("cycles = ", cycles, ": must be in [1, 100000]"));
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  Statement s(
+      db_,
+      "SELECT c.id, c.started_ns, c.car_model_id, r.sensor, r.d_yaw_deg, r.d_pitch_deg, "
+      "r.d_roll_deg, r.d_x_m, r.d_y_m, r.d_z_m, r.residual_rms FROM (SELECT id, started_ns, "
+      "car_model_id FROM cycles WHERE state = 'done' ORDER BY id DESC LIMIT ?1) c "
+      "JOIN sensor_results r ON r.cycle_id = c.id WHERE r.T_car_sensor <> '' "
+      "ORDER BY c.id, r.sensor");
+  s.Bind(1, static_cast<int64_t>(cycles));
+  std::vector<TrendRow> rows;
+  int rc;
+  while ((rc = s.Step()) == SQLITE_ROW) {
+    TrendRow row;
+    row.cycle_id = s.Int(0);
+    row.started_ns = s.Int(1);
+    row.car_model_id = s.Text(2);
+    row.sensor = s.Text(3);
+    MountingValues& d = row.deviation;
+    int col = 4;
+    for (double* v : {&d.yaw_deg, &d.pitch_deg, &d.roll_deg, &d.x_m, &d.y_m, &d.z_m})
+      *v = s.Real(col++);
+    row.residual_rms = s.Real(10);
+    rows.push_back(std::move(row));
+  }
+  if (rc != SQLITE_DONE) return SqliteError(db_, path_, "read trends", rc);
+  return rows;
+}
+
 absl::StatusOr<std::optional<int64_t>> Store::RunningCycle() {
   std::lock_guard<std::mutex> lock(mutex_);
   Statement s(db_, "SELECT id FROM cycles WHERE state = 'running' ORDER BY id DESC LIMIT 1");

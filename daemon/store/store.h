@@ -128,6 +128,16 @@ struct CyclePage {
   std::string next_page_token;      // empty on the last page
 };
 
+// A solved sensor result of a done cycle, as trends read it (Store::RecentSolvedResults).
+struct TrendRow {
+  int64_t cycle_id = 0;
+  int64_t started_ns = 0;
+  std::string car_model_id;
+  std::string sensor;
+  MountingValues deviation;
+  double residual_rms = 0;
+};
+
 struct StoreOptions {
   // How long a call waits for another process's lock before giving up with Unavailable.
   // 5 s: longer than any write of ours takes, short enough for a cycle to end in error
@@ -194,6 +204,10 @@ class Store {
   absl::StatusOr<CyclePage> ListCycles(const CycleFilter& filter);
   // The newest running cycle's id, if any.
   absl::StatusOr<std::optional<int64_t>> RunningCycle();
+  // The solved results (a mounting stored) of the newest `cycles` (1..100000) cycles that
+  // ended done, oldest cycle first, by sensor name within a cycle. InvalidArgument for a count
+  // out of range. One query; cost O(cycles × sensors) (10,000 cycles of 10 sensors: ~0.1 s).
+  absl::StatusOr<std::vector<TrendRow>> RecentSolvedResults(int cycles);
 
   // The first `limit` (>= 1) queued cycles in queue order, each with its sensors and events,
   // read in one transaction. Cost: three queries per cycle.

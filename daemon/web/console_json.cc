@@ -2,6 +2,7 @@
 
 #include <numbers>
 
+#include "daemon/web/trends_json.h"
 #include "detectors/core/pose.h"
 
 namespace linecal {
@@ -62,6 +63,8 @@ nlohmann::json EventJson(const StoredEvent& e) {
 }
 
 nlohmann::json StatusJson(const StationStatusInfo& s, const std::string& version) {
+  nlohmann::json alarms = nlohmann::json::array();
+  for (const TargetAlarm& a : s.target_alarms) alarms.push_back(TargetAlarmJson(a));
   nlohmann::json sensors = nlohmann::json::array();
   for (const auto& [name, kind] : s.sensors) {
     sensors.push_back(
@@ -73,7 +76,8 @@ nlohmann::json StatusJson(const StationStatusInfo& s, const std::string& version
           {"source", s.source},
           {"running_cycle_id", s.running_cycle ? std::to_string(*s.running_cycle) : ""},
           {"disk_free_bytes", s.disk_free_bytes},
-          {"sensors", std::move(sensors)}};
+          {"sensors", std::move(sensors)},
+          {"target_alarms", std::move(alarms)}};
 }
 
 nlohmann::json CarModelJson(const CarModel& car) {

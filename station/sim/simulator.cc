@@ -1,5 +1,6 @@
 #include "station/sim/simulator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <numbers>
@@ -178,6 +179,22 @@ absl::Status SimulatorOptions::Validate() const {
   if (camera_frames < 1 || camera_frames > 100) {
     return absl::InvalidArgumentError(absl::StrCat("camera_frames = ", camera_frames, ": must be in [1, 100]"));
   }
+  for (size_t i = 0; i < moved_boards.size(); ++i) {
+    const MovedBoard& b = moved_boards[i];
+    const std::string field = absl::StrCat("moved_boards[", i, "]");
+    for (size_t j = 0; j < i; ++j) {
+      if (moved_boards[j].board_id == b.board_id) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(field, ".board_id: '", b.board_id, "' moved twice"));
+      }
+    }
+    for (const double a : {b.yaw_deg, b.pitch_deg, b.roll_deg}) {
+      if (auto s = CheckBound((field + ".ypr_deg").c_str(), std::abs(a), 10); !s.ok()) return s;
+    }
+    if (!b.offset_m.allFinite() || b.offset_m.cwiseAbs().maxCoeff() > 0.5) {
+      return absl::InvalidArgumentError(absl::StrCat(field, ".xyz_m: each must be in [-0.5, 0.5]"));
+    }
+  }
   if (!lidar_pcd && !lidar_pcap) return absl::InvalidArgumentError("lidar_pcd, lidar_pcap: at least one must be on");
   if (auto s = camera.Validate(); !s.ok()) return absl::InvalidArgumentError(absl::StrCat("camera.", s.message()));
   if (auto s = lidar.Validate(); !s.ok()) return absl::InvalidArgumentError(absl::StrCat("lidar.", s.message()));
@@ -185,11 +202,40 @@ absl::Status SimulatorOptions::Validate() const {
   return absl::OkStatus();
 }
 
-absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, const CarModel& car,
-                                                  const SimulatorOptions& options, std::uint64_t seed,
-                                                  const std::string& out_dir, const SimulatorProgress& progress) {
+namespace {
+
+// The station as it stands: `surveyed` with options.moved_boards applied.
+absl::StatusOr<StationLayout> StandingStation(const StationLayout& surveyed,
+                                              const SimulatorOptions& options) {
+  StationLayout standing = surveyed;
+  for (const MovedBoard& move : options.moved_boards) {
+    auto board = std::find_if(standing.boards.begin(), standing.boards.end(),
+                              [&](const StationBoard& b) { return b.id == move.board_id; });
+    if (board == standing.boards.end()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("moved_boards: the station has no board '", move.board_id, "'"));
+    }
+    const Eigen::Matrix3d R_move = RotationFromYawPitchRoll(
+        {move.yaw_deg * kDegToRad, move.pitch_deg * kDegToRad, move.roll_deg * kDegToRad});
+    board->T_station_board = Rigid3d(R_move * board->T_station_board.RotationMatrix(),
+                                     board->T_station_board.translation() + move.offset_m);
+  }
+  return standing;
+}
+
+}  // namespace
+
+absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
+                                                  const CarModel& car,
+                                                  const SimulatorOptions& options,
+                                                  std::uint64_t seed, const std::string& out_dir,
+                                                  const SimulatorProgress& progress) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
-  if (absl::Status s = CheckTargetsExist(car, station); !s.ok()) return s;
+  if (absl::Status s = CheckTargetsExist(car, surveyed); !s.ok()) return s;
+  // Sensors see the standing station; the capture carries the surveyed one.
+  absl::StatusOr<StationLayout> standing = StandingStation(surveyed, options);
+  if (!standing.ok()) return standing.status();
+  const StationLayout& station = *standing;
   std::vector<const SensorModel*> sensors;
   if (options.sensors.empty()) {
     for (const SensorModel& s : car.sensors) sensors.push_back(&s);
@@ -267,8 +313,17 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, 
                       {"seed", seed},
                       {"T_station_car", PoseToJson(T_station_car, Eigen::Matrix3d::Identity())},
                       {"sensors", std::move(truth_sensors)}};
+  if (!options.moved_boards.empty()) {
+    nlohmann::json moved = nlohmann::json::array();
+    for (const MovedBoard& b : options.moved_boards) {
+      moved.push_back({{"board_id", b.board_id},
+                       {"ypr_deg", {b.yaw_deg, b.pitch_deg, b.roll_deg}},
+                       {"xyz_m", {b.offset_m.x(), b.offset_m.y(), b.offset_m.z()}}});
+    }
+    out.ground_truth["moved_boards"] = std::move(moved);
+  }
   if (absl::Status s = WriteJsonFile((dir / kCaptureGroundTruthFile).string(), out.ground_truth); !s.ok()) return s;
-  if (absl::Status s = WriteCapture(out_dir, m, station, car); !s.ok()) return s;
+  if (absl::Status s = WriteCapture(out_dir, m, surveyed, car); !s.ok()) return s;
   return out;
 }
 

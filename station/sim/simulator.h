@@ -31,6 +31,17 @@ namespace linecal {
 inline constexpr char kGroundTruthFormat[] = "linecal.ground_truth";
 inline constexpr int kGroundTruthVersion = 1;
 
+// A board standing away from where the station file surveyed it (a knocked board or stand):
+// the simulator renders and scans it at T_station_board = (R_move * R_surveyed,
+// t_surveyed + offset_m), R_move = Rz(yaw) * Ry(pitch) * Rx(roll) about the page centre in
+// station axes, while the capture keeps the surveyed station, so the calibration solves
+// against where the board should be, as on a real line (docs/simulator.md).
+struct MovedBoard {
+  std::string board_id;
+  double yaw_deg = 0, pitch_deg = 0, roll_deg = 0;
+  Eigen::Vector3d offset_m = Eigen::Vector3d::Zero();
+};
+
 struct SimulatorOptions {
   std::string vin = "1M8GDM9AXKP042788";
   // Capture time, ns since the epoch. A fixed default keeps captures reproducible.
@@ -50,6 +61,9 @@ struct SimulatorOptions {
   bool lidar_pcd = true;   // write one PCD per rotation
   bool lidar_pcap = true;  // write the vendor packets
   RadarSimOptions radar;
+  // Boards standing moved (each id at most once, a board of the station; angles within
+  // +-10 degrees and offsets within +-0.5 m: more is another station, not a moved board).
+  std::vector<MovedBoard> moved_boards;
   // Only these sensors (empty: all of the car model).
   std::vector<std::string> sensors;
   // When set and true, the simulation stops before its next sensor with Cancelled (a daemon
@@ -69,9 +83,9 @@ struct SimulationSummary {
 
 // Simulates the car in the station and writes the capture into `out_dir` (created if
 // missing; existing files of the same names are replaced). Errors: InvalidArgument for bad
-// options or a sensor name the car does not have, or a car whose targets are not in the
-// station; Internal for files that cannot be written (naming them); Cancelled once
-// options.cancel is true (checked before each sensor). Cost: dominated by the
+// options, a sensor name the car does not have, a moved board the station does not have,
+// or a car whose targets are not in the station; Internal for files that cannot be written (naming
+// them); Cancelled once options.cancel is true (checked before each sensor). Cost: dominated by the
 // camera renders (about 0.2 s per 1920x1080 frame) and LiDAR rotations.
 absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, const CarModel& car,
                                                   const SimulatorOptions& options, std::uint64_t seed,

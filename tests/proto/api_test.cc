@@ -64,12 +64,14 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
 }
 
 // Every floating-point field carries its unit in its name, and every time is int64 _ns.
-// The exceptions are unitless by nature: matrix entries and a residual whose unit is the
-// sensor kind's (documented on the field).
+// The exceptions are unitless by nature: matrix entries and residuals whose unit is the
+// sensor kind's (documented on the field). Multiples of a standard deviation end in _sigmas.
 TEST(ProtoApiTest, UnitsAreInTheFieldNames) {
   const std::set<std::string> unitless = {"linecal.v1.Transform.m",
                                           "linecal.v1.SensorResult.ground_homography",
-                                          "linecal.v1.SensorResult.residual_rms"};
+                                          "linecal.v1.SensorResult.residual_rms",
+                                          "linecal.v1.ShiftedSensor.baseline_residual",
+                                          "linecal.v1.ShiftedSensor.recent_residual"};
   const FileDescriptor* file = ApiFile();
   int checked = 0;
   for (int i = 0; i < file->message_type_count(); ++i) {
@@ -82,12 +84,14 @@ TEST(ProtoApiTest, UnitsAreInTheFieldNames) {
       }
       if (field->type() != FieldDescriptor::TYPE_DOUBLE || unitless.count(field->full_name())) continue;
       ++checked;
-      EXPECT_TRUE(EndsWith(name, "_m") || EndsWith(name, "_deg") || EndsWith(name, "_px"))
+      EXPECT_TRUE(EndsWith(name, "_m") || EndsWith(name, "_deg") || EndsWith(name, "_px") ||
+                  EndsWith(name, "_sigmas"))
           << field->full_name() << " has no unit suffix";
     }
   }
-  // Aligner (3), mounting angles (6), ranging (2), vanishing point (2).
-  EXPECT_EQ(checked, 13);
+  // Aligner (3), mounting angles (6), ranging (2), vanishing point (2), the moved-target
+  // alarm's statistic, limit and shifts (3).
+  EXPECT_EQ(checked, 16);
 }
 
 }  // namespace

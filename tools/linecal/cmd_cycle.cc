@@ -2,16 +2,17 @@
 // daemon's gRPC API. The daemon is found by --address or LINECAL_ADDRESS (default
 // 127.0.0.1:50051); a token by --token or LINECAL_TOKEN; TLS (docs/daemon.md,
 // "Authentication") by --tls-ca, --tls-cert, --tls-key or LINECAL_TLS_CA, _CERT, _KEY.
+#include <google/protobuf/util/json_util.h>
 #include <grpcpp/grpcpp.h>
 
 #include <cctype>
 #include <cstdio>
 #include <cstdlib>
-#include <google/protobuf/util/json_util.h>
 #include <string>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "linecal/v1/station.grpc.pb.h"
 #include "station/io/json_reader.h"
 #include "tools/cli/command_line.h"
@@ -300,6 +301,17 @@ int RunStatus(const Args& args) {
         static_cast<long long>(plant.backlog()), plant.oldest_unshipped_age_ns() / 1e9,
         plant.max_backlog_age_ns() / 1e9, static_cast<long long>(plant.shipped()),
         plant.last_error().empty() ? "" : ", last error: ", plant.last_error().c_str());
+  }
+  for (const v1::TargetAlarm& a : status.target_alarms()) {
+    std::printf("ALARM: target %s (car model %s) has likely moved since cycle %s: residuals of",
+                absl::StrJoin(a.targets(), " or ").c_str(), a.car_model().c_str(),
+                a.since_cycle_id().c_str());
+    for (const v1::ShiftedSensor& x : a.sensors()) {
+      std::printf(" %s %+.1f sigma (%.4g -> %.4g)", x.sensor().c_str(), x.shift_sigmas(),
+                  x.baseline_residual(), x.recent_residual());
+    }
+    std::printf(", EWMA %.1f sigma over the limit %.1f, cycle %s\n", a.statistic_sigmas(),
+                a.alarm_sigmas(), a.last_cycle_id().c_str());
   }
   for (const v1::SensorStatus& s : status.sensors()) {
     std::printf("  %-20s %-7s %s%s\n", s.name().c_str(), v1::SensorKind_Name(s.kind()).c_str() + 12,

@@ -378,3 +378,50 @@ TEST_F(DaemonConfigTest, WebKeyReadsBackAndIsChecked) {
 
 }  // namespace
 }  // namespace linecal
+
+namespace linecal {
+namespace {
+
+// source.moved_boards (the simulator's moved boards): read back, and each bad value refused
+// naming the entry's key.
+TEST_F(DaemonConfigTest, MovedBoardsReadBackAndAreChecked) {
+  const std::string head = R"({"station": "s.json", "car_models": [], "data_root": "data", )";
+  absl::StatusOr<DaemonConfig> c = Read(head + R"("source": {"type": "simulator", "moved_boards": [
+      {"board": "bumper_lidar_left", "ypr_deg": [0.3, 0, -0.1], "xyz_m": [0.01, 0, 0], "from_cycle": 16},
+      {"board": "front_circle", "ypr_deg": [0, 1, 0]}]}})");
+  ASSERT_TRUE(c.ok()) << c.status();
+  ASSERT_EQ(c->core.simulated_moves.size(), 2u);
+  const SimulatedBoardMove& m = c->core.simulated_moves[0];
+  EXPECT_EQ(m.move.board_id, "bumper_lidar_left");
+  EXPECT_EQ(m.move.yaw_deg, 0.3);
+  EXPECT_EQ(m.move.roll_deg, -0.1);
+  EXPECT_EQ(m.move.offset_m.x(), 0.01);
+  EXPECT_EQ(m.from_cycle, 16);
+  EXPECT_EQ(c->core.simulated_moves[1].from_cycle, 1);
+  EXPECT_EQ(c->core.simulated_moves[1].move.pitch_deg, 1.0);
+
+  const std::pair<std::string, std::string> bad[] = {
+      {R"([{"ypr_deg": [0, 0, 0]}])", "source.moved_boards[0].board: missing"},
+      {R"([{"board": "b", "ypr_deg": [0, 0]}])", "source.moved_boards[0].ypr_deg"},
+      {R"([{"board": "b", "ypr_deg": [0, 0, 0], "from_cycle": 0}])",
+       "source.moved_boards[0].from_cycle: must be >= 1"},
+      {R"([{"board": "b", "ypr_deg": [20, 0, 0]}])",
+       "moved_boards[0].ypr_deg = 20: must be in [0, 10]"},
+      {R"([{"board": "b", "ypr_deg": [0, 0, 0], "xyz_m": [1, 0, 0]}])",
+       "moved_boards[0].xyz_m: each must be in [-0.5, 0.5]"},
+      {R"([{"board": "b", "ypr_deg": [0, 0, 0]}, {"board": "b", "ypr_deg": [1, 0, 0]}])",
+       "moved_boards[1].board_id: 'b' moved twice"},
+      {R"([{"board": "b", "ypr_deg": [0, 0, 0], "turn": 1}])", "source.moved_boards[0].turn"},
+  };
+  for (const auto& [moves, expected] : bad) {
+    absl::StatusOr<DaemonConfig> r =
+        Read(head + R"("source": {"type": "simulator", "moved_boards": )" + moves + "}}");
+    ASSERT_FALSE(r.ok()) << moves;
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << moves;
+    EXPECT_NE(std::string(r.status().message()).find(expected), std::string::npos)
+        << moves << " -> " << r.status().message();
+  }
+}
+
+}  // namespace
+}  // namespace linecal

@@ -568,3 +568,46 @@ TEST_F(StoreTest, OutboxKillNineLeavesTheQueueExactlyTheEndedCycles) {
 
 }  // namespace
 }  // namespace linecal
+
+namespace linecal {
+namespace {
+
+// Trends read the solved results of the newest done cycles, oldest first, in one query:
+// unsolved results (no T_car_sensor), running and cancelled cycles and older cycles are left
+// out; the values are the stored doubles.
+TEST_F(StoreTest, RecentSolvedResultsAreTheNewestDoneCyclesOldestFirst) {
+  std::unique_ptr<Store> store = OpenOk();
+  std::vector<int64_t> ids;
+  for (int i = 0; i < 4; ++i) {
+    absl::StatusOr<int64_t> id = store->BeginCycle(Request("WVWZZZ1JZXW000001", 1000 + i));
+    ASSERT_TRUE(id.ok()) << id.status();
+    ids.push_back(*id);
+    StoredSensorResult camera = CameraResult();
+    camera.residual_rms = 0.25 + i;
+    ASSERT_TRUE(store->PutSensorResult(*id, camera).ok());
+    StoredSensorResult unsolved;
+    unsolved.sensor = "front_radar";
+    unsolved.kind = "radar";
+    unsolved.verdict = Verdict::kError;
+    ASSERT_TRUE(store->PutSensorResult(*id, unsolved).ok());
+    const CycleState state = i == 2 ? CycleState::kCancelled : CycleState::kDone;
+    ASSERT_TRUE(store->EndCycle(*id, state, Verdict::kFail, "", 5000 + i).ok());
+  }
+  ASSERT_TRUE(store->BeginCycle(Request("WVWZZZ1JZXW000001", 2000)).ok());  // running
+
+  absl::StatusOr<std::vector<TrendRow>> rows = store->RecentSolvedResults(2);
+  ASSERT_TRUE(rows.ok()) << rows.status();
+  ASSERT_EQ(rows->size(), 2u);  // cycles 2 and 4 (3 was cancelled), the camera only
+  EXPECT_EQ((*rows)[0].cycle_id, ids[1]);
+  EXPECT_EQ((*rows)[1].cycle_id, ids[3]);
+  EXPECT_EQ((*rows)[0].started_ns, 1001);
+  EXPECT_EQ((*rows)[1].car_model_id, "reference");
+  EXPECT_EQ((*rows)[1].sensor, "front_camera");
+  EXPECT_EQ((*rows)[1].deviation, CameraResult().deviation);
+  EXPECT_EQ((*rows)[1].residual_rms, 3.25);
+  EXPECT_EQ(store->RecentSolvedResults(0).status().message(), "cycles = 0: must be in [1, 100000]");
+  EXPECT_EQ(store->RecentSolvedResults(100001).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace linecal

@@ -1,0 +1,214 @@
+#!/usr/bin/python3
+"""The trends page in a real headless Chromium against a real linecald with the simulator
+source (docs/console.md, "Trends and station health"): 30 cycles of a car with the sensors of
+the bumper boards, `bumper_lidar_left` turned 0.3 degrees by the simulator from cycle 16
+(source.moved_boards); the page shows the alarm naming it, from the same cycle as `linecal
+status --json` (gRPC), and the browser logs no errors. Then 10,000 cycles of those results are
+added to the database and the speed of a 1,000-cycle page and of 10,000-cycle trends measured
+(printed, not asserted: docs/console.md's table). A screenshot goes to --screenshots.
+
+Exit 0 passed, 1 failed, 77 skipped when Chromium, its driver or Selenium is missing.
+"""
+import argparse
+import json
+import os
+import random
+import re
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from console_browser_test import (CHROMEDRIVER, CHROMIUM, TOKEN, VIN, WAIT_S, By, Failure,  # noqa: E402
+                                  browser, check, errors, skip, wait)
+
+CYCLES = 30
+MOVED_FROM = 16  # midway
+MOVED_BOARD = "bumper_lidar_left"
+# The sensors that use the bumper boards, and one that does not (a bystander that must not
+# be named): the reference car cut down so that 30 cycles take about a minute.
+SENSORS = ("front_camera", "surround_front", "surround_left", "bumper_lidar")
+# Cycles added for the speed measurements (issue 23's bars: 1,000 and 10,000).
+ADDED = 10000
+
+
+def start_daemon(linecald, source_dir, work):
+    with open(os.path.join(source_dir, "deploy/cars/reference.json")) as f:
+        car = json.load(f)
+    car["sensors"] = [s for s in car["sensors"] if s["name"] in SENSORS]
+    with open(os.path.join(work, "car.json"), "w") as f:
+        json.dump(car, f)
+    config = {
+        "listen": "127.0.0.1:0",
+        "auth_token": TOKEN,
+        "station": os.path.join(source_dir, "deploy/stations/reference.json"),
+        "car_models": [os.path.join(work, "car.json")],
+        "data_root": "data",
+        "source": {"type": "simulator",
+                   "moved_boards": [{"board": MOVED_BOARD, "ypr_deg": [0.3, 0, 0], "from_cycle": MOVED_FROM}]},
+        "web": {"listen": "127.0.0.1:0"},
+    }
+    os.makedirs(os.path.join(work, "data"), exist_ok=True)
+    path = os.path.join(work, "linecald.json")
+    with open(path, "w") as f:
+        json.dump(config, f)
+    log = open(os.path.join(work, "linecald.log"), "w+")
+    daemon = subprocess.Popen([linecald, "--config", path], stderr=log, stdout=log)
+    deadline = time.time() + WAIT_S
+    grpc_port = web_url = None
+    while time.time() < deadline and (grpc_port is None or web_url is None):
+        check(daemon.poll() is None, f"linecald exited: {open(log.name).read()}")
+        text = open(log.name).read()
+        m = re.findall(r"\(port (\d+)\)", text)
+        grpc_port = m[-1] if m else None
+        m = re.findall(r"console on (http://127\.0\.0\.1:\d+/)", text)
+        web_url = m[-1] if m else None
+        time.sleep(0.05)
+    check(grpc_port and web_url, f"linecald did not say where it listens: {open(log.name).read()}")
+    return daemon, f"127.0.0.1:{grpc_port}", web_url
+
+
+def stop(daemon):
+    daemon.send_signal(signal.SIGTERM)
+    try:
+        daemon.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        daemon.kill()
+
+
+def linecal(cli, address, *args):
+    out = subprocess.run([cli, *args, "--address", address, "--token", TOKEN, "--json"],
+                         capture_output=True, text=True, timeout=WAIT_S)
+    check(out.returncode in (0, 1), f"linecal {' '.join(args)}: {out.returncode} {out.stderr}")
+    return json.loads(out.stdout)
+
+
+def login(driver, url, page):
+    driver.get(url + page)
+    wait(driver, "the login page", lambda d: "/login.html" in d.current_url)
+    driver.find_element(By.ID, "token").send_keys(TOKEN)
+    driver.find_element(By.ID, "login").click()
+    wait(driver, "the trends page", lambda d: "/trends.html" in d.current_url)
+
+
+def open_trends(driver, url, query):
+    driver.get(f"{url}trends.html?{query}")
+    wait(driver, f"trends {query}", lambda d: d.execute_script("return document.body.dataset.loaded"))
+    return driver.execute_script(
+        "const b = document.body.dataset; const n = performance.getEntriesByType('navigation')[0];"
+        "return {points: +b.points, fetch_ms: +b.fetchMs, draw_ms: +b.drawMs,"
+        " loaded_ms: performance.now() - n.startTime};")
+
+
+def add_cycles(db, count):
+    """Appends `count` done cycles whose sensor results are copies of the stored ones, in turn."""
+    con = sqlite3.connect(db)
+    cycles = con.execute("SELECT vin, car_model_id, started_ns, request_json FROM cycles ORDER BY id").fetchall()
+    results = {}
+    columns = [r[1] for r in con.execute("PRAGMA table_info(sensor_results)")]
+    for row in con.execute("SELECT * FROM sensor_results ORDER BY cycle_id"):
+        results.setdefault(row[0], []).append(row)
+    source_ids = sorted(results)
+    next_id = con.execute("SELECT max(id) FROM cycles").fetchone()[0] + 1
+    started = cycles[-1][2]
+    marks = ",".join("?" * len(columns))
+    with con:
+        for k in range(count):
+            vin, model, _, request = cycles[k % len(cycles)]
+            started += 60_000_000_000
+            con.execute("INSERT INTO cycles (id, vin, car_model_id, state, verdict, reason, started_ns, ended_ns,"
+                        " request_json) VALUES (?, ?, ?, 'done', 'pass', '', ?, ?, ?)",
+                        (next_id + k, vin, model, started, started + 5_000_000_000, request))
+            for row in results[source_ids[k % len(source_ids)]]:
+                con.execute(f"INSERT INTO sensor_results VALUES ({marks})", (next_id + k, *row[1:]))
+    con.close()
+
+
+def test(args, work):
+    daemon, address, url = start_daemon(args.linecald, args.source_dir, work)
+    driver = browser()
+    try:
+        rng = random.Random(7)  # the aligner's reading of each car, within its bounds
+        for _ in range(CYCLES):
+            linecal(args.linecal, address, "cycle", "start", "--vin", VIN, "--car", "reference",
+                    "--lateral-m", f"{rng.uniform(-0.02, 0.02):.4f}",
+                    "--longitudinal-m", f"{rng.uniform(-0.02, 0.02):.4f}",
+                    "--thrust-deg", f"{rng.uniform(-0.2, 0.2):.3f}", "--wait")
+        status = linecal(args.linecal, address, "status")
+        alarms = status.get("targetAlarms", status.get("target_alarms", []))
+        check(len(alarms) == 1, f"gRPC status alarms: {alarms}")
+        alarm = alarms[0]
+        check(MOVED_BOARD in alarm["targets"], f"the alarm names {alarm['targets']}")
+        named = [s["sensor"] for s in alarm["sensors"]]
+        check(named == ["front_camera", "surround_front", "bumper_lidar"], f"the alarm's sensors: {named}")
+        since = int(alarm.get("sinceCycleId", alarm.get("since_cycle_id")))
+        print(f"gRPC status: {alarm}")
+
+        login(driver, url, f"trends.html?sensor=front_camera&cycles={CYCLES}")
+        wait(driver, "the trends", lambda d: d.execute_script("return document.body.dataset.loaded"))
+        banners = driver.find_elements(By.CLASS_NAME, "alarm")
+        check(len(banners) == 1, f"alarm banners: {[b.text for b in banners]}")
+        text = banners[0].text
+        check(MOVED_BOARD in text and f"since cycle {since}:" in text, f"the banner: {text}")
+        check(since <= CYCLES and since >= MOVED_FROM - 5, f"the rise starts at cycle {since}")
+        charts = driver.find_elements(By.CSS_SELECTOR, "#charts canvas")
+        check(len(charts) == 7, f"{len(charts)} charts")
+        os.makedirs(args.screenshots, exist_ok=True)
+        driver.save_screenshot(os.path.join(args.screenshots, "trends.png"))
+        print(f"trends page: the alarm names {MOVED_BOARD} since cycle {since} (moved from {MOVED_FROM})")
+        left = errors(driver)
+        check(not left, f"console errors: {left}")
+
+        # Speed (issue 23's bars), measured and printed: docs/console.md has the table.
+        stop(daemon)
+        add_cycles(os.path.join(work, "data", "linecal.db"), ADDED)
+        daemon, address, url = start_daemon(args.linecald, args.source_dir, work)
+        login(driver, url, "trends.html?sensor=front_camera&cycles=1000")
+        for query in ("sensor=front_camera&cycles=1000", "sensor=front_camera&cycles=10000"):
+            for attempt in range(3):
+                m = open_trends(driver, url, query)
+                print(f"speed {query} run {attempt + 1}: {m['points']} cars, page loaded in {m['loaded_ms']:.0f} ms"
+                      f" (trends fetched in {m['fetch_ms']:.0f} ms, drawn in {m['draw_ms']:.0f} ms)")
+        for attempt in range(3):
+            listed = driver.execute_script(
+                "const t = performance.now(); return fetch('/api/cycles?limit=1000').then((r) => r.json())"
+                ".then((b) => [b.cycles.length, performance.now() - t]);")
+            print(f"speed /api/cycles?limit=1000 run {attempt + 1}: {listed[0]} cycles fetched and parsed"
+                  f" in {listed[1]:.0f} ms")
+        left = errors(driver)
+        check(not left, f"console errors: {left}")
+    finally:
+        driver.quit()
+        stop(daemon)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--linecald", required=True)
+    parser.add_argument("--linecal", required=True)
+    parser.add_argument("--source-dir", required=True)
+    parser.add_argument("--screenshots", required=True, help="folder for trends.png")
+    args = parser.parse_args()
+    for path, package in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")):
+        if not os.access(path, os.X_OK):
+            skip(f"{path} is missing: install Debian's {package} (tools/setup does)")
+    work = tempfile.mkdtemp(prefix="trends_browser_")
+    try:
+        test(args, work)
+    except Failure as e:
+        print(f"FAILED: {e}")
+        log = os.path.join(work, "linecald.log")
+        print(open(log).read() if os.path.exists(log) else "")
+        return 1
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    print("PASSED")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
