@@ -171,26 +171,26 @@ TEST(StationHealth, RefusesBadInput) {
             "cycles: ids must increase, got 2 then 2");
 }
 
-// The bars of issue 23 over the noise model: a still station never alarms in 1,000 cars, and
-// bumper_lidar_left turned 0.3° raises the alarm within 20 cars. Not met by the residual
-// statistic (docs/console.md, "Moved-target alarm: measured"): run by hand with
-// --gtest_also_run_disabled_tests, it prints what it finds.
-TEST(StationHealth, DISABLED_BarsOverTheMeasuredNoise) {
+// The bar of issue 23 that the residual statistic meets, over the noise model: a still
+// station never raises the alarm in 1,000 cars (five lines of cars).
+TEST(StationHealth, StillStationNeverAlarmsInAThousandCars) {
   const CarModel car = ReferenceLike();
-  int false_alarm_runs = 0;
   for (std::uint64_t seed = 1; seed <= 5; ++seed) {
     Line line(seed);
     std::vector<HealthCycle> cycles;
     for (int64_t id = 1; id <= 1000; ++id) {
       cycles.push_back(line.Car(id, 1'000'000));
-      if (!AlarmsAt(car, cycles).empty()) {
-        ++false_alarm_runs;
-        std::printf("seed %lu: false alarm at car %ld\n", seed, id);
-        break;
-      }
+      ASSERT_TRUE(AlarmsAt(car, cycles).empty()) << "seed " << seed << ": false alarm at car "
+                                                 << id;
     }
   }
-  EXPECT_EQ(false_alarm_runs, 0);
+}
+
+// The bar it does not meet yet (docs/console.md, "Moved-target alarm: measured"):
+// bumper_lidar_left turned 0.3° raises the alarm within 20 cars in 18 of these 20 lines. A
+// measurement run by hand (--gtest_also_run_disabled_tests), kept to show the next step's gain.
+TEST(StationHealth, DISABLED_MovedBoardAlarmWithinTwentyCars) {
+  const CarModel car = ReferenceLike();
   int late = 0;
   for (std::uint64_t seed = 101; seed <= 120; ++seed) {
     Line line(seed);
