@@ -22,6 +22,7 @@
 #include "station/aftersale/overlay.h"
 #include "station/io/json_reader.h"
 #include "tests/daemon/scratch_dir.h"
+#include "tests/daemon/web/reference_core.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -31,8 +32,8 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 using testing_tools::RunLinecal;
 
-const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
-const std::string kStatic = std::string(LINECAL_SOURCE_DIR) + "/daemon/web/static";
+using testing_web::kDeploy;
+using testing_web::kStatic;
 constexpr char kToken[] = "workshop-7-token";
 
 std::string ReadBytes(const fs::path& path) {
@@ -56,12 +57,7 @@ class AftersaleApiTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = testing_daemon::FreshTestDir("web_aftersale");
-    StationCoreConfig config;
-    config.station_path = kDeploy + "/stations/reference.json";
-    config.car_model_paths = {kDeploy + "/cars/reference.json"};
-    config.db_path = (dir_ / "station.db").string();
-    config.data_root = (dir_ / "data").string();
-    absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
+    absl::StatusOr<std::unique_ptr<StationCore>> core = testing_web::ReferenceCore(dir_);
     ASSERT_TRUE(core.ok()) << core.status();
     core_ = *std::move(core);
     absl::StatusOr<std::unique_ptr<WebServer>> web =

@@ -12,16 +12,13 @@ Screenshots (aftersale.png, aftersale-certificate.png) go to --screenshots.
 Uses console_browser_test.py's daemon and browser helpers. Exit 0 passed, 1 failed, 77
 skipped when Chromium, its driver or Selenium is missing.
 """
-import argparse
 import base64
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -309,27 +306,7 @@ def test(args, work):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--linecald", required=True)
-    parser.add_argument("--linecal", required=True)
-    parser.add_argument("--source-dir", required=True)
-    parser.add_argument("--screenshots", required=True, help="folder for aftersale.png, aftersale-certificate.png")
-    args = parser.parse_args()
-    for path, package in ((console.CHROMIUM, "chromium"), (console.CHROMEDRIVER, "chromium-driver")):
-        if not os.access(path, os.X_OK):
-            console.skip(f"{path} is missing: install Debian's {package} (tools/setup does)")
-    work = tempfile.mkdtemp(prefix="aftersale_browser_")
-    try:
-        test(args, work)
-    except Failure as e:
-        print(f"FAILED: {e}")
-        log = os.path.join(work, "linecald.log")
-        print(open(log).read() if os.path.exists(log) else "")
-        return 1
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    print("PASSED")
-    return 0
+    return console.run_main(__doc__, "aftersale_browser_", "folder for aftersale.png, aftersale-certificate.png", test)
 
 
 if __name__ == "__main__":

@@ -325,27 +325,34 @@ def cycle_views(driver, url, cycle_id, shots):
     print(f"cycle views: features drawn equal to the API's: {', '.join(counts)}")
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__)
+def run_main(description, work_prefix, screenshots_help, test_fn):
+    """The browser tests' command line: flags, the skip without Chromium, a scratch folder,
+    the daemon's log on a failure. `test_fn(args, work)` raises Failure. The exit code."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--linecald", required=True)
     parser.add_argument("--linecal", required=True)
     parser.add_argument("--source-dir", required=True)
-    parser.add_argument("--screenshots", required=True, help="folder for login.png, live.png, cycle.png")
+    parser.add_argument("--screenshots", required=True, help=screenshots_help)
     args = parser.parse_args()
     for path, package in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")):
         if not os.access(path, os.X_OK):
             skip(f"{path} is missing: install Debian's {package} (tools/setup does)")
-    work = tempfile.mkdtemp(prefix="console_browser_")
+    work = tempfile.mkdtemp(prefix=work_prefix)
     try:
-        test(args, work)
+        test_fn(args, work)
     except Failure as e:
         print(f"FAILED: {e}")
-        print(open(os.path.join(work, "linecald.log")).read() if os.path.exists(os.path.join(work, "linecald.log")) else "")
+        log = os.path.join(work, "linecald.log")
+        print(open(log).read() if os.path.exists(log) else "")
         return 1
     finally:
         shutil.rmtree(work, ignore_errors=True)
     print("PASSED")
     return 0
+
+
+def main():
+    return run_main(__doc__, "console_browser_", "folder for login.png, live.png, cycle.png", test)
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@
 #include "daemon/web/web_server.h"
 #include "station/camera/camera_model.h"
 #include "tests/daemon/scratch_dir.h"
+#include "tests/daemon/web/reference_core.h"
 
 // After Eigen: httplib.h brings <resolv.h>, whose _res macro breaks Eigen's parameter names.
 #include <httplib.h>
@@ -31,8 +32,7 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-const std::string kDeploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
-const std::string kStatic = std::string(LINECAL_SOURCE_DIR) + "/daemon/web/static";
+using testing_web::kStatic;
 constexpr char kVin[] = "1M8GDM9AXKP042788";
 constexpr char kToken[] = "line-3-viewers";
 constexpr char kOperatorToken[] = "line-3-operators";
@@ -41,12 +41,7 @@ class CycleViewsTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = testing_daemon::FreshTestDir("web_views");
-    StationCoreConfig config;
-    config.station_path = kDeploy + "/stations/reference.json";
-    config.car_model_paths = {kDeploy + "/cars/reference.json"};
-    config.db_path = (dir_ / "station.db").string();
-    config.data_root = (dir_ / "data").string();
-    absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
+    absl::StatusOr<std::unique_ptr<StationCore>> core = testing_web::ReferenceCore(dir_);
     ASSERT_TRUE(core.ok()) << core.status();
     core_ = *std::move(core);
     WebServerOptions options{"127.0.0.1:0", std::nullopt, kStatic, kToken, "test"};

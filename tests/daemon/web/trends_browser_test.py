@@ -9,22 +9,19 @@ added to the database and the speed of a 1,000-cycle page and of 10,000-cycle tr
 
 Exit 0 passed, 1 failed, 77 skipped when Chromium, its driver or Selenium is missing.
 """
-import argparse
 import json
 import os
 import random
 import re
-import shutil
 import signal
 import sqlite3
 import subprocess
 import sys
-import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from console_browser_test import (CHROMEDRIVER, CHROMIUM, TOKEN, VIN, WAIT_S, By, Failure,  # noqa: E402
-                                  browser, check, errors, skip, wait)
+from console_browser_test import (TOKEN, VIN, WAIT_S, By, Failure,  # noqa: E402
+                                  browser, check, errors, run_main, wait)
 
 CYCLES = 30
 MOVED_FROM = 16  # midway
@@ -187,27 +184,7 @@ def test(args, work):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--linecald", required=True)
-    parser.add_argument("--linecal", required=True)
-    parser.add_argument("--source-dir", required=True)
-    parser.add_argument("--screenshots", required=True, help="folder for trends.png")
-    args = parser.parse_args()
-    for path, package in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")):
-        if not os.access(path, os.X_OK):
-            skip(f"{path} is missing: install Debian's {package} (tools/setup does)")
-    work = tempfile.mkdtemp(prefix="trends_browser_")
-    try:
-        test(args, work)
-    except Failure as e:
-        print(f"FAILED: {e}")
-        log = os.path.join(work, "linecald.log")
-        print(open(log).read() if os.path.exists(log) else "")
-        return 1
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    print("PASSED")
-    return 0
+    return run_main(__doc__, "trends_browser_", "folder for trends.png", test)
 
 
 if __name__ == "__main__":
