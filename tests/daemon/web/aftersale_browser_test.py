@@ -16,10 +16,8 @@ import base64
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import console_browser_test as console  # noqa: E402  (skips with 77 without Selenium)
@@ -298,11 +296,7 @@ def test(args, work):
         check(not left, f"console errors: {left}")
     finally:
         driver.quit()
-        daemon.send_signal(signal.SIGTERM)
-        try:
-            daemon.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
+        console.stop(daemon)
 
 
 def main():

@@ -64,7 +64,13 @@ def start_daemon(linecald, source_dir, work):
         "data_root": "data",
         "web": {"listen": "127.0.0.1:0", "operator_token": OPERATOR_TOKEN},
     }
-    os.makedirs(os.path.join(work, "data"))
+    os.makedirs(os.path.join(work, "data"), exist_ok=True)
+    return launch_daemon(linecald, work, config)
+
+
+def launch_daemon(linecald, work, config):
+    """linecald on `config` (written to work/linecald.json), its log in work/linecald.log; waits
+    for its gRPC port and console address (the last ones the log names: a restart appends)."""
     path = os.path.join(work, "linecald.json")
     with open(path, "w") as f:
         json.dump(config, f)
@@ -75,13 +81,22 @@ def start_daemon(linecald, source_dir, work):
     while time.time() < deadline and (grpc_port is None or web_url is None):
         check(daemon.poll() is None, f"linecald exited: {open(log.name).read()}")
         text = open(log.name).read()
-        m = re.search(r"\(port (\d+)\)", text)
-        grpc_port = m.group(1) if m else None
-        m = re.search(r"console on (http://127\.0\.0\.1:\d+/)", text)
-        web_url = m.group(1) if m else None
+        m = re.findall(r"\(port (\d+)\)", text)
+        grpc_port = m[-1] if m else None
+        m = re.findall(r"console on (http://127\.0\.0\.1:\d+/)", text)
+        web_url = m[-1] if m else None
         time.sleep(0.05)
     check(grpc_port and web_url, f"linecald did not say where it listens: {open(log.name).read()}")
     return daemon, f"127.0.0.1:{grpc_port}", web_url
+
+
+def stop(daemon):
+    """SIGTERM, then SIGKILL after 30 s."""
+    daemon.send_signal(signal.SIGTERM)
+    try:
+        daemon.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        daemon.kill()
 
 
 def linecal(cli, address, *args):
@@ -240,11 +255,7 @@ def test(args, work):
         check(not left, f"console errors: {left}")
     finally:
         driver.quit()
-        daemon.send_signal(signal.SIGTERM)
-        try:
-            daemon.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
+        stop(daemon)
 
 
 def operator_cycle(driver, args, address, url, shots):

@@ -12,16 +12,13 @@ Exit 0 passed, 1 failed, 77 skipped when Chromium, its driver or Selenium is mis
 import json
 import os
 import random
-import re
-import signal
 import sqlite3
 import subprocess
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from console_browser_test import (TOKEN, VIN, WAIT_S, By, Failure,  # noqa: E402
-                                  browser, check, errors, run_main, wait)
+                                  browser, check, errors, launch_daemon, run_main, stop, wait)
 
 CYCLES = 30
 MOVED_FROM = 16  # midway
@@ -50,31 +47,7 @@ def start_daemon(linecald, source_dir, work):
         "web": {"listen": "127.0.0.1:0"},
     }
     os.makedirs(os.path.join(work, "data"), exist_ok=True)
-    path = os.path.join(work, "linecald.json")
-    with open(path, "w") as f:
-        json.dump(config, f)
-    log = open(os.path.join(work, "linecald.log"), "w+")
-    daemon = subprocess.Popen([linecald, "--config", path], stderr=log, stdout=log)
-    deadline = time.time() + WAIT_S
-    grpc_port = web_url = None
-    while time.time() < deadline and (grpc_port is None or web_url is None):
-        check(daemon.poll() is None, f"linecald exited: {open(log.name).read()}")
-        text = open(log.name).read()
-        m = re.findall(r"\(port (\d+)\)", text)
-        grpc_port = m[-1] if m else None
-        m = re.findall(r"console on (http://127\.0\.0\.1:\d+/)", text)
-        web_url = m[-1] if m else None
-        time.sleep(0.05)
-    check(grpc_port and web_url, f"linecald did not say where it listens: {open(log.name).read()}")
-    return daemon, f"127.0.0.1:{grpc_port}", web_url
-
-
-def stop(daemon):
-    daemon.send_signal(signal.SIGTERM)
-    try:
-        daemon.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        daemon.kill()
+    return launch_daemon(linecald, work, config)
 
 
 def linecal(cli, address, *args):
