@@ -198,6 +198,21 @@ struct GridSquare {
   int rotation = 0;  // global direction g (0 +i, 1 +j, 2 -i, 3 -j) is side (rotation + g) % 4
 };
 
+// The smallest and largest grid indices (i, j) of a linked group's squares.
+struct GroupBounds {
+  int i_lo = 1 << 30, i_hi = -(1 << 30), j_lo = 1 << 30, j_hi = -(1 << 30);
+};
+GroupBounds BoundsOf(const std::map<std::pair<int, int>, GridSquare>& group) {
+  GroupBounds b;
+  for (const auto& entry : group) {
+    b.i_lo = std::min(b.i_lo, entry.first.first);
+    b.i_hi = std::max(b.i_hi, entry.first.first);
+    b.j_lo = std::min(b.j_lo, entry.first.second);
+    b.j_hi = std::max(b.j_hi, entry.first.second);
+  }
+  return b;
+}
+
 // Connected groups of linked squares with integer grid coordinates (i right, j down,
 // right-handed in the image), spread breadth-first; a link that would put a second square on
 // a grid point is not followed.
@@ -483,13 +498,8 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
   const double pitch_ratio = 1.0 + board.params().gap_m / board.params().square_m;
   std::vector<std::pair<int, int>> sizes = {{cols, rows}};
   if (cols != rows) sizes.emplace_back(rows, cols);
-  int i_lo = 1 << 30, i_hi = -(1 << 30), j_lo = 1 << 30, j_hi = -(1 << 30);
-  for (const auto& [point, gs] : group) {
-    i_lo = std::min(i_lo, point.first);
-    i_hi = std::max(i_hi, point.first);
-    j_lo = std::min(j_lo, point.second);
-    j_hi = std::max(j_hi, point.second);
-  }
+  const GroupBounds b = BoundsOf(group);
+  const int i_lo = b.i_lo, i_hi = b.i_hi, j_lo = b.j_lo, j_hi = b.j_hi;  // lambdas capture them
   for (const std::pair<int, int>& size : sizes) {
     // Plain ints, not structured bindings: the lambda below captures them (clang 14 refuses
     // to capture a binding, and the fuzz build uses clang).
@@ -654,13 +664,8 @@ std::vector<Square> RecoverSquares(const ImageView8& image, const std::vector<Sq
   const int max_missing = std::max(1, static_cast<int>(kMaxMissingFraction * cols * rows));
   std::vector<Square> found;
   if (static_cast<int>(group.size()) < cols * rows - max_missing) return found;
-  int i_lo = 1 << 30, i_hi = -(1 << 30), j_lo = 1 << 30, j_hi = -(1 << 30);
-  for (const auto& [point, gs] : group) {
-    i_lo = std::min(i_lo, point.first);
-    i_hi = std::max(i_hi, point.first);
-    j_lo = std::min(j_lo, point.second);
-    j_hi = std::max(j_hi, point.second);
-  }
+  const GroupBounds b = BoundsOf(group);
+  const int i_lo = b.i_lo, i_hi = b.i_hi, j_lo = b.j_lo, j_hi = b.j_hi;  // lambdas capture them
   std::set<std::pair<int, int>> tried;
   for (const auto& [w, h] : {std::pair{cols, rows}, std::pair{rows, cols}}) {
     for (int wj = j_lo; wj + h - 1 <= j_hi; ++wj) {
