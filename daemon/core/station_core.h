@@ -50,7 +50,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "daemon/plant/forwarder.h"
 #include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"

@@ -12,7 +12,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "daemon/drivers/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/io/image_io.h"
 #include "station/io/pcap.h"
 

@@ -5,9 +5,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "daemon/drivers/radar_decoder.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/io/candump.h"
-#include "station/sensors/radar_format.h"
+#include "station/sensors/radar/radar_format.h"
 
 namespace linecal {
 namespace {

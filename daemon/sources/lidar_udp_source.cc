@@ -8,7 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "station/io/pcap.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 
 namespace linecal {
 namespace {

@@ -15,7 +15,7 @@
 #include <string>
 
 #include "absl/status/status.h"
-#include "daemon/drivers/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 #include "daemon/drivers/udp_receiver.h"
 #include "daemon/sources/sensor_source.h"
 

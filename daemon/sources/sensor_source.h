@@ -2,7 +2,7 @@
 // Live sensor sources: what serves one sensor's raw data to a cycle. Which source serves which
 // sensor is station configuration (daemon_config, "sources"); the station core acquires every
 // sensor of a cycle at once, one thread per sensor, each with its own deadline, and then
-// calibrates the capture the sources wrote (daemon/cycle), so that a live cycle and
+// calibrates the capture the sources wrote (station/pipeline), so that a live cycle and
 // `linecal calibrate --capture` of its recording give identical results.
 //
 // A source writes its sensor's files into the cycle's capture directory, in the capture

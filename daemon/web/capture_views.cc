@@ -5,7 +5,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/ascii.h"
-#include "daemon/cycle/cycle_views.h"
+#include "station/pipeline/cycle_views.h"
 
 namespace linecal {
 namespace {

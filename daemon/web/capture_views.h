@@ -1,7 +1,7 @@
 #pragma once
 // The cycle page's recorded data (docs/console.md, "Cycle views"): the files of a cycle's
 // kept capture, for download and as the camera frames under the overlays, and each sensor's
-// view (daemon/cycle/cycle_views.h), over StationCore::CycleCapture. A client names a cycle
+// view (station/pipeline/cycle_views.h), over StationCore::CycleCapture. A client names a cycle
 // by id, a sensor by name and a file by its index in CaptureFileList, never by a path, so
 // nothing outside the cycle's capture (checked inside the data root) can be asked for.
 // Views are computed one at a time: each is a frame's detection or a LiDAR or radar fit, and

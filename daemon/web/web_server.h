@@ -27,7 +27,7 @@
 //                     a multipart form 415
 //   GET  /api/cycles/ID/capture        the kept capture's files (capture_views.h), or why none
 //   GET  /api/cycles/ID/capture/N      file N of that list (a download; a camera's frame)
-//   GET  /api/cycles/ID/views/SENSOR?frame=K  the sensor's view (daemon/cycle/cycle_views.h)
+//   GET  /api/cycles/ID/views/SENSOR?frame=K  the sensor's view (station/pipeline/cycle_views.h)
 //   POST /api/cycles            operators: start a cycle (operator_actions.h's body), as
 //                               gRPC StartCycle; {"cycle_id": "N"}
 //   POST /api/cycles/ID/cancel  operators: cancel it, as gRPC CancelCycle

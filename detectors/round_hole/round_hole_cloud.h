@@ -37,7 +37,7 @@
 
 namespace linecal {
 
-// One LiDAR return, as the decoders give it (station/sensors/lidar_point.h, without the
+// One LiDAR return, as the decoders give it (station/sensors/lidar/lidar_point.h, without the
 // fields the detector does not use). x, y, z: metres, LiDAR frame; ring: beam index sorted by
 // elevation. A frame's points may come in any order.
 struct RoundHoleCloudPoint {

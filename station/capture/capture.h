@@ -23,7 +23,7 @@
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
 #include "station/io/input_budget.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"

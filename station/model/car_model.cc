@@ -9,7 +9,7 @@
 #include "station/io/json_reader.h"
 #include "station/model/pose_json.h"
 #include "station/model/station_layout.h"
-#include "station/sensors/lidar_format.h"
+#include "station/sensors/lidar/lidar_format.h"
 
 namespace linecal {
 namespace {

@@ -11,7 +11,7 @@
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
 #include "station/camera/camera_model.h"
-#include "station/sensors/lidar_format.h"
+#include "station/sensors/lidar/lidar_format.h"
 
 namespace linecal {
 

@@ -12,7 +12,7 @@
 // Gaussian noise and are rounded to the packet's distance unit; intensity is the surface's
 // reflectivity on the 0..255 calibrated-reflectivity scale of these sensors.
 //
-// Frames: T_station_lidar maps the vendor LiDAR frame (station/sensors/lidar_format.h) into
+// Frames: T_station_lidar maps the vendor LiDAR frame (station/sensors/lidar/lidar_format.h) into
 // the station frame; points are in the LiDAR frame, metres.
 
 #include <cstdint>
@@ -22,8 +22,8 @@
 #include "detectors/core/pose.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
-#include "station/sensors/lidar_format.h"
-#include "station/sensors/lidar_point.h"
+#include "station/sensors/lidar/lidar_format.h"
+#include "station/sensors/lidar/lidar_point.h"
 
 namespace linecal {
 

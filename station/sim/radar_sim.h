@@ -17,7 +17,8 @@
 #include "detectors/core/pose.h"
 #include "station/io/candump.h"
 #include "station/model/station_layout.h"
-#include "station/sensors/radar_format.h"
+#include "station/sensors/radar/field_of_view.h"
+#include "station/sensors/radar/radar_format.h"
 
 namespace linecal {
 
@@ -33,30 +34,6 @@ struct RadarSimOptions {
   // OK or InvalidArgument naming the first bad field. O(1).
   absl::Status Validate() const;
 };
-
-// Field of view of a radar model: detections outside |azimuth| <= half_fov_rad or beyond
-// max_range_m are not reported.
-struct RadarFieldOfView {
-  double half_fov_rad = 0;
-  double max_range_m = 0;
-};
-// "ars408": the near scan (±60°, 70 m) that covers station distances; "esr": the mid-range
-// scan (±45°, 60 m). nullopt for other names.
-std::optional<RadarFieldOfView> RadarFieldOfViewOf(const std::string& model);
-
-// One reflector as the radar truly sees it (ground truth).
-struct RadarTruth {
-  std::string reflector_id;
-  double range_m = 0;
-  double azimuth_rad = 0;
-  bool in_view = false;  // inside the field of view and range
-};
-
-// The reflectors of `layout` seen from a radar at T_station_radar: exact range and azimuth
-// (the radar frame's x-y plane; a reflector above or below counts by its horizontal
-// projection's direction and its 3-D range). O(reflectors).
-std::vector<RadarTruth> RadarReflectorTruth(const StationLayout& layout, const Rigid3d& T_station_radar,
-                                            const RadarFieldOfView& fov);
 
 // Simulates `options.cycles` cycles of the radar `model` ("ars408" with `sensor_id`, or "esr")
 // starting at `start`, and returns the CAN frames it sends on `interface`, in time order.

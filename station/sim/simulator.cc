@@ -12,7 +12,7 @@
 #include "station/io/image_io.h"
 #include "station/io/json_reader.h"
 #include "station/io/pcap.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "station/model/pose_json.h"
 #include "station/model/vin.h"
 

@@ -60,7 +60,7 @@ struct LidarBoardObservation {
 // The observation of a found round-hole detection: its pose with the detector's 6x6
 // covariance (what the solve uses), its hole centres and normal with their sigmas (for the
 // closed-form start and the residual check; 1 mm is the floor below which the fit's own
-// sigma is not trusted). One conversion for the cycle (daemon/cycle) and the planner's
+// sigma is not trusted). One conversion for the cycle (station/pipeline) and the planner's
 // prediction (station/planner). O(holes).
 LidarBoardObservation LidarObservationFromDetection(const std::string& board_id,
                                                     const RoundHoleCloudDetection& detection);

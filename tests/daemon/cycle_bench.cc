@@ -38,13 +38,13 @@
 #include <grpcpp/grpcpp.h>
 
 #include "daemon/core/station_core.h"
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "daemon/service/station_service.h"
 #include "linecal/v1/station.grpc.pb.h"
 #include "station/capture/capture.h"
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "station/sim/simulator.h"
 #include "tests/daemon/bench_stats.h"
 #include "tests/support/postgres_cluster.h"

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "daemon/drivers/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 
 namespace {
 

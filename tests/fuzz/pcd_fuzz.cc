@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "station/io/input_budget.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 
 namespace {
 

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <cstdint>
 
-#include "daemon/drivers/radar_decoder.h"
+#include "station/sensors/radar/radar_decoder.h"
 
 namespace {
 

@@ -1,5 +1,5 @@
 #pragma once
-// LiDAR recordings made with the project's own encoder (station/sensors/lidar_format.h), for
+// LiDAR recordings made with the project's own encoder (station/sensors/lidar/lidar_format.h), for
 // tests that need packets but not a particular real sensor's: the pcap reader, the UDP
 // receiver, the UDP source, the decode command. The tests that compare against the real
 // recordings read those through tests/support/external_data.h instead.
@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
-#include "station/sensors/lidar_format.h"
+#include "station/sensors/lidar/lidar_format.h"
 
 namespace linecal::testing_support {
 

@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "tests/detectors/round_hole/round_hole_scene.h"
 #include "tests/support/external_data.h"
 #include "tests/tools/run_linecal.h"

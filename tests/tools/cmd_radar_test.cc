@@ -9,7 +9,7 @@
 #include <sstream>
 
 #include "station/io/candump.h"
-#include "station/sensors/radar_format.h"
+#include "station/sensors/radar/radar_format.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {

@@ -2,7 +2,7 @@
 // The per-camera picture of `linecal calibrate --report DIR`: the camera's first frame with
 // what the calibration found and what it implies, to judge a result by eye.
 
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "detectors/core/image_view.h"
 #include "station/io/image_io.h"
 #include "tools/linecal/detection_overlay.h"

@@ -1,5 +1,5 @@
 // linecal calibrate: one cycle's results from a capture, without the daemon
-// (daemon/cycle/capture_calibration.h does the work; the daemon replays through the same code).
+// (station/pipeline/capture_calibration.h does the work; the daemon replays through the same code).
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -8,7 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "station/io/image_io.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/calibration_report.h"

@@ -21,7 +21,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "station/model/aligner.h"
 #include "station/sim/lidar_sim.h"
 #include "tools/cli/command_line.h"

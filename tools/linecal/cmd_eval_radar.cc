@@ -17,11 +17,11 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
-#include "daemon/drivers/radar_decoder.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
-#include "station/radar/radar_calibration.h"
+#include "station/solvers/radar_calibration.h"
 #include "station/sim/radar_sim.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"

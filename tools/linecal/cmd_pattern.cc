@@ -10,7 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "detectors/boards/board.h"
 #include "detectors/core/image_view.h"
-#include "station/board_raster.h"
+#include "station/io/board_raster.h"
 #include "station/io/image_io.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/board_options.h"

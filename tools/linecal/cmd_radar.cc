@@ -5,7 +5,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
-#include "daemon/drivers/radar_decoder.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/io/candump.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"

@@ -7,7 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "station/io/image_io.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
 

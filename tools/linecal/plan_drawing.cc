@@ -14,7 +14,7 @@
 #include "absl/strings/str_format.h"
 #include "station/camera/camera_model.h"
 #include "station/io/image_io.h"
-#include "station/sim/radar_sim.h"
+#include "station/sensors/radar/field_of_view.h"
 
 namespace linecal::tools {
 namespace {

@@ -27,7 +27,7 @@
 #include "tests/daemon/loopback_udp.h"
 
 #include "daemon/core/station_core.h"
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "station/capture/capture.h"
 #include "station/sim/simulator.h"
 

@@ -21,7 +21,7 @@
 
 #include "tests/daemon/test_car.h"
 
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "station/capture/capture.h"
 #include "station/sim/simulator.h"
 

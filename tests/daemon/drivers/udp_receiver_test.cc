@@ -12,8 +12,8 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/drivers/lidar_decoder.h"
-#include "daemon/drivers/lidar_pcap.h"
+#include "station/sensors/lidar/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_pcap.h"
 #include "gtest/gtest.h"
 #include "station/io/pcap.h"
 #include "tests/support/lidar_recording.h"

@@ -14,9 +14,9 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/drivers/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/io/pcap.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "tests/daemon/loopback_udp.h"
 #include "tests/daemon/scratch_dir.h"
 #include "tests/support/lidar_recording.h"

@@ -5,7 +5,7 @@
 // counts, a reprojected board feature computed here from the stored mounting, the LiDAR holes
 // of CalibrateLidarFrames, the radar's reflectors), refusals of bad ids; operator POSTs
 // refused for read-only sessions and cross-site requests, taken for an operator.
-#include "daemon/cycle/cycle_views.h"
+#include "station/pipeline/cycle_views.h"
 
 #include <gtest/gtest.h>
 
@@ -16,7 +16,7 @@
 #include <sstream>
 #include <string>
 
-#include "daemon/cycle/capture_calibration.h"
+#include "station/pipeline/capture_calibration.h"
 #include "daemon/web/operator_actions.h"
 #include "daemon/web/web_server.h"
 #include "station/camera/camera_model.h"

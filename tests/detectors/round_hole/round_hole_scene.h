@@ -14,7 +14,7 @@
 #include "station/model/car_model.h"
 #include "station/model/pose_json.h"
 #include "station/model/station_layout.h"
-#include "station/sensors/lidar_format.h"
+#include "station/sensors/lidar/lidar_format.h"
 #include "station/sim/lidar_sim.h"
 
 namespace linecal {

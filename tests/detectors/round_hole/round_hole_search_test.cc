@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "tests/detectors/round_hole/round_hole_scene.h"
 #include "tests/support/external_data.h"
 

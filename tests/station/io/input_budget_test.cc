@@ -16,7 +16,7 @@
 
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "tests/support/crafted_files.h"
 
 namespace linecal {

@@ -10,7 +10,7 @@
 #include <string>
 
 #include "station/model/pose_json.h"
-#include "station/sensors/lidar_format.h"
+#include "station/sensors/lidar/lidar_format.h"
 
 namespace linecal {
 namespace {

@@ -12,11 +12,11 @@
 
 #include <gtest/gtest.h>
 
-#include "daemon/drivers/lidar_decoder.h"
-#include "daemon/drivers/lidar_pcap.h"
-#include "daemon/drivers/radar_decoder.h"
+#include "station/sensors/lidar/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_pcap.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/io/candump.h"
-#include "station/io/pcd.h"
+#include "station/sensors/lidar/pcd.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
 #include "station/sim/lidar_sim.h"

@@ -1,0 +1,426 @@
+#include "station/pipeline/capture_calibration.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <numbers>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "station/sensors/radar/radar_decoder.h"
+#include "detectors/detect.h"
+#include "detectors/round_hole/round_hole_cloud.h"
+#include "station/camera/board_view.h"
+#include "station/io/candump.h"
+#include "station/io/image_io.h"
+#include "station/sensors/lidar/pcd.h"
+#include "station/model/pose_json.h"
+#include "station/solvers/radar_calibration.h"
+#include "station/solvers/lidar_calibration.h"
+
+namespace linecal {
+namespace {
+
+constexpr double kDegPerRad = 180.0 / std::numbers::pi;
+
+std::int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+// A sensor whose work was stopped (CaptureCalibrationOptions::stop); CalibrateCapture
+// returns Cancelled instead of any such result.
+SensorCalibration Stopped() {
+  SensorCalibration out;
+  out.reason = "stopped";
+  return out;
+}
+
+// The fields the camera and LiDAR solvers' results share. False, with the sensor in error,
+// when the solver refused its input.
+template <typename Result>
+bool TakeResult(const absl::StatusOr<Result>& r, SensorCalibration* out) {
+  if (!r.ok()) {
+    out->reason = "invalid_input";
+    out->message = std::string(r.status().message());
+    return false;
+  }
+  out->verdict = r->verdict;
+  out->reason = r->reason;
+  out->message = r->message;
+  out->solved = r->solved;
+  out->mounting = r->mounting;
+  out->features_used = r->features_used;
+  return true;
+}
+
+SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorModel& sensor,
+                                        const CaptureSensor& recorded, const CaptureCalibrationOptions& capture_options) {
+  const CameraCalibrationOptions& options = capture_options.camera;
+  SensorCalibration out;
+  for (const std::string& id : sensor.targets) out.boards.push_back({id, 0, 0, ""});
+  std::vector<BoardObservation> observations;
+  for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
+    if (capture_options.stop.stop_requested()) return Stopped();
+    const CaptureFile& frame = recorded.frames[frame_index];
+    const absl::StatusOr<Image8> image = ReadCaptureImage(capture, frame);
+    if (!image.ok()) {
+      out.reason = "data_unreadable";
+      out.message = std::string(image.status().message());
+      return out;
+    }
+    std::vector<BoardObservation> found =
+        DetectCameraFrame(capture, sensor, image->view(), &out.boards, capture_options.stop);
+    if (capture_options.stop.stop_requested()) return Stopped();
+    if (frame_index == 0 && capture_options.keep_first_frame_features) {
+      out.first_frame_observations = found;
+    }
+    for (BoardObservation& o : found) observations.push_back(std::move(o));
+  }
+  if (capture_options.stop.stop_requested()) return Stopped();
+  absl::StatusOr<CameraCalibrationResult> r =
+      CalibrateCamera(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations, options);
+  if (!TakeResult(r, &out)) return out;
+  out.residual_rms = r->residual_rms_px;
+  if (r->solved) {
+    if (r->vanishing_point_valid) out.vanishing_point_px = r->vanishing_point_px;
+    out.ground_homography = r->ground_homography;
+    out.ranging = r->ranging;
+    out.board_method = r->board_method;
+    out.vanishing_point_disagreement_px = r->vanishing_point_disagreement_px;
+    out.ground_disagreement = r->ground_disagreement;
+    out.toolbox_ground_disagreement = r->toolbox_ground_disagreement;
+    out.vertical_roll = r->vertical_roll;
+  }
+  return out;
+}
+
+SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel& sensor,
+                                       const CaptureSensor& recorded, std::stop_token stop) {
+  SensorCalibration out;
+  // Every recorded rotation, accumulated: the boards stand still during a cycle.
+  std::vector<std::vector<RoundHoleCloudPoint>> frames;
+  for (const CaptureFile& f : recorded.frames) {
+    if (stop.stop_requested()) return Stopped();
+    absl::StatusOr<PcdCloud> cloud = ReadCaptureScan(capture, f);
+    if (!cloud.ok()) {
+      out.reason = "data_unreadable";
+      out.message = std::string(cloud.status().message());
+      return out;
+    }
+    std::vector<RoundHoleCloudPoint>& points = frames.emplace_back();
+    points.reserve(cloud->points.size());
+    for (const LidarPoint& p : cloud->points) points.push_back({p.x, p.y, p.z, p.ring});
+  }
+  if (frames.empty()) {
+    out.reason = "data_unreadable";
+    out.message = absl::StrCat(sensor.name, ": the capture has no PCD scans of this LiDAR");
+    return out;
+  }
+  if (stop.stop_requested()) return Stopped();
+  const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
+  return CalibrateLidarFrames(capture.station, capture.manifest.aligner.T_station_car(), sensor, views);
+}
+
+SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel& sensor,
+                                       const CaptureSensor& recorded, std::stop_token stop) {
+  SensorCalibration out;
+  const std::optional<RadarModel> model = ParseRadarModel(sensor.model);
+  if (!model || !recorded.can_log) {
+    out.reason = "data_unreadable";
+    out.message = absl::StrCat(sensor.name, ": no CAN log or unknown radar model '", sensor.model, "'");
+    return out;
+  }
+  const absl::StatusOr<std::vector<CanFrame>> frames =
+      ReadCaptureCanLog(capture, *recorded.can_log);
+  if (!frames.ok()) {
+    out.reason = "data_unreadable";
+    out.message = std::string(frames.status().message());
+    return out;
+  }
+  if (stop.stop_requested()) return Stopped();
+  const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *model, RadarConventions{});
+  const absl::StatusOr<RadarCalibrationRun> run = CalibrateRadar(
+      sensor, capture.station, capture.manifest.aligner.T_station_car(), decoded.cycles, RadarCalibrationOptions{});
+  if (!run.ok()) {
+    out.reason = "invalid_input";
+    out.message = std::string(run.status().message());
+    return out;
+  }
+  const RadarCalibrationResult& r = run->result;
+  out.verdict = r.verdict == RadarVerdict::kPass   ? SensorVerdict::kPass
+                : r.verdict == RadarVerdict::kFail ? SensorVerdict::kFail
+                                                   : SensorVerdict::kError;
+  out.reason = r.reason;
+  out.features_used = r.reflectors_used;
+  out.solved = r.reflectors_used > 0;
+  if (out.solved) {
+    // Yaw measured; pitch, roll and position nominal (unobservable without elevation), so
+    // their deviations are 0 with no uncertainty to report beyond the yaw's.
+    out.mounting.T_car_sensor = r.T_car_radar;
+    out.mounting.angles = {r.yaw_rad, r.pitch_rad, r.roll_rad};
+    out.mounting.position_m = r.T_car_radar.translation();
+    out.mounting.angles_deviation = {r.yaw_deviation_rad, 0, 0};
+    out.mounting.sigma[0] = r.yaw_sigma_rad;
+    out.mounting.observed = {true, false, false, false, false, false};
+    double sum_sq = 0;
+    for (const RadarReflectorResidual& res : r.residuals) sum_sq += res.residual_rad * res.residual_rad;
+    out.residual_rms = r.residuals.empty() ? 0 : std::sqrt(sum_sq / r.residuals.size()) * kDegPerRad;
+  }
+  out.message = out.verdict == SensorVerdict::kPass
+                    ? ""
+                    : absl::StrCat(sensor.name, ": ", r.reason, " (yaw deviation ", r.yaw_deviation_rad * kDegPerRad,
+                                   " deg, tolerance ", r.yaw_tolerance_rad * kDegPerRad, " deg)");
+  return out;
+}
+
+// Measured values, deviations from nominal and 1-sigma; components the sensor cannot
+// observe keep their nominal value, and their deviation and sigma are null.
+nlohmann::json MountingJson(const MountingEstimate& m) {
+  const double values[6] = {m.angles.yaw * kDegPerRad, m.angles.pitch * kDegPerRad, m.angles.roll * kDegPerRad,
+                            m.position_m.x(), m.position_m.y(), m.position_m.z()};
+  const double deviations[6] = {m.angles_deviation.yaw * kDegPerRad, m.angles_deviation.pitch * kDegPerRad,
+                                m.angles_deviation.roll * kDegPerRad, m.position_deviation_m.x(),
+                                m.position_deviation_m.y(), m.position_deviation_m.z()};
+  const char* names[6] = {"yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m"};
+  nlohmann::json measured, deviation, sigma;
+  for (int i = 0; i < 6; ++i) {
+    measured[names[i]] = values[i];
+    deviation[names[i]] = m.observed[i] ? nlohmann::json(deviations[i]) : nlohmann::json(nullptr);
+    sigma[names[i]] = m.observed[i] ? nlohmann::json(i < 3 ? m.sigma[i] * kDegPerRad : m.sigma[i])
+                                    : nlohmann::json(nullptr);
+  }
+  return {{"T_car_sensor", MatrixToJson(m.T_car_sensor.Matrix())},
+          {"mounting", measured},
+          {"deviation", deviation},
+          {"sigma", sigma}};
+}
+
+nlohmann::json Matrix3Json(const Eigen::Matrix3d& m) {
+  nlohmann::json h = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) h.push_back(m(r, c));
+  }
+  return h;
+}
+
+nlohmann::json FiniteOrNull(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+
+// "board_method" and "roll_from_vertical_board" of a solved camera (docs/solvers.md).
+nlohmann::json SeedFormulasJson(const SensorCalibration& s) {
+  const BoardMethodResult& b = s.board_method;
+  nlohmann::json board = {{"valid", b.valid}, {"reason", b.reason}, {"message", b.message}};
+  if (b.valid) {
+    nlohmann::json points_px = nlohmann::json::array(), points_car = nlohmann::json::array(),
+                   points_toolbox = nlohmann::json::array();
+    for (size_t i = 0; i < b.ground_points_px.size(); ++i) {
+      points_px.push_back({b.ground_points_px[i].x(), b.ground_points_px[i].y()});
+      points_car.push_back({b.ground_points_car_m[i].x(), b.ground_points_car_m[i].y()});
+      points_toolbox.push_back({b.toolbox_ground_points_car_m[i].x(), b.toolbox_ground_points_car_m[i].y()});
+    }
+    board["vanishing_point_px"] = {b.vanishing_point_px.x(), b.vanishing_point_px.y()};
+    board["homography_rms_px"] = b.homography_rms_px;
+    board["ground_points_px"] = points_px;
+    board["ground_points_car_m"] = points_car;
+    board["ground_homography"] = Matrix3Json(b.ground_homography);
+    board["toolbox_ground_points_car_m"] = points_toolbox;
+    board["toolbox_ground_homography"] = Matrix3Json(b.toolbox_ground_homography);
+    if (s.vanishing_point_px) board["vanishing_point_disagreement_px"] = s.vanishing_point_disagreement_px;
+    nlohmann::json ranging = nlohmann::json::array();
+    for (size_t i = 0; i < s.ground_disagreement.size() && i < s.ranging.size(); ++i) {
+      ranging.push_back({{"distance_m", s.ranging[i].true_distance_m},
+                         {"fraction", FiniteOrNull(s.ground_disagreement[i])},
+                         {"toolbox_fraction", FiniteOrNull(s.toolbox_ground_disagreement[i])}});
+    }
+    board["ranging_disagreement"] = ranging;
+  }
+  const VerticalBoardRoll& v = s.vertical_roll;
+  nlohmann::json roll = {{"valid", v.valid}, {"reason", v.reason}, {"message", v.message}};
+  if (v.valid) {
+    roll["roll_deg"] = v.roll_rad * kDegPerRad;
+    roll["pose_roll_deg"] = s.mounting.angles.roll * kDegPerRad;
+    roll["difference_deg"] = (v.roll_rad - s.mounting.angles.roll) * kDegPerRad;
+    roll["lines_used"] = v.lines_used;
+  }
+  return {{"board_method", board}, {"roll_from_vertical_board", roll}};
+}
+
+}  // namespace
+
+absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const CaptureCalibrationOptions& options) {
+  if (options.threads < 1 || options.threads > 64) {
+    return absl::InvalidArgumentError(absl::StrCat("threads = ", options.threads, ": must be in [1, 64]"));
+  }
+  if (absl::Status s = options.camera.Validate(); !s.ok()) return s;
+  const std::int64_t start = NowNs();
+  CycleCalibration cycle;
+  std::vector<const SensorModel*> sensors;
+  for (const SensorModel& s : capture.car.sensors) {
+    if (capture.manifest.FindSensor(s.name) != nullptr) sensors.push_back(&s);
+  }
+  cycle.sensors.resize(sensors.size());
+  // Each worker takes the next sensor; every result goes to its own slot.
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i = next++; i < sensors.size() && !options.stop.stop_requested(); i = next++) {
+      const SensorModel& s = *sensors[i];
+      const CaptureSensor& recorded = *capture.manifest.FindSensor(s.name);
+      const std::int64_t t0 = NowNs();
+      SensorCalibration r;
+      switch (s.kind) {
+        case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options); break;
+        case SensorKind::kRadar:
+          r = CalibrateRadarSensor(capture, s, recorded, options.stop);
+          break;
+        case SensorKind::kLidar:
+          r = CalibrateLidarSensor(capture, s, recorded, options.stop);
+          break;
+      }
+      r.name = s.name;
+      r.kind = s.kind;
+      r.elapsed_ns = NowNs() - t0;
+      cycle.sensors[i] = std::move(r);
+    }
+  };
+  const int threads = std::min<int>(options.threads, static_cast<int>(sensors.size()));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+  if (options.stop.stop_requested()) return absl::CancelledError("calibration stopped");
+
+  bool any_error = cycle.sensors.empty(), all_pass = !cycle.sensors.empty();
+  for (const SensorCalibration& s : cycle.sensors) {
+    any_error |= s.verdict == SensorVerdict::kError;
+    all_pass &= s.verdict == SensorVerdict::kPass;
+  }
+  cycle.verdict = all_pass ? SensorVerdict::kPass : any_error ? SensorVerdict::kError : SensorVerdict::kFail;
+  cycle.elapsed_ns = NowNs() - start;
+  return cycle;
+}
+
+nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibration& cycle) {
+  nlohmann::json sensors = nlohmann::json::array();
+  for (const SensorCalibration& s : cycle.sensors) {
+    nlohmann::json j = {{"name", s.name},
+                        {"kind", SensorKindName(s.kind)},
+                        {"verdict", SensorVerdictName(s.verdict)},
+                        {"reason", s.reason},
+                        {"message", s.message},
+                        {"features_used", s.features_used},
+                        {"residual_rms", s.residual_rms},
+                        {"elapsed_ms", s.elapsed_ns * 1e-6}};
+    if (s.solved) j.update(MountingJson(s.mounting));
+    if (s.kind != SensorKind::kRadar) {
+      nlohmann::json boards = nlohmann::json::array();
+      for (const BoardDetectionSummary& b : s.boards) {
+        boards.push_back({{"board", b.board_id},
+                          {"frames_found", b.frames_found},
+                          {"frames_partial", b.frames_partial},
+                          {"reason", b.last_reason}});
+      }
+      j["boards"] = boards;
+    }
+    if (s.kind == SensorKind::kCamera) {
+      if (s.vanishing_point_px) j["vanishing_point_px"] = {s.vanishing_point_px->x(), s.vanishing_point_px->y()};
+      if (s.ground_homography) j["ground_homography"] = Matrix3Json(*s.ground_homography);
+      nlohmann::json ranging = nlohmann::json::array();
+      for (const RangingCheck& c : s.ranging) {
+        ranging.push_back({{"true_distance_m", c.true_distance_m},
+                           {"measured_distance_m", FiniteOrNull(c.measured_distance_m)}});
+      }
+      if (!s.ranging.empty()) j["ranging"] = ranging;
+      if (s.solved) j.update(SeedFormulasJson(s));
+    }
+    sensors.push_back(std::move(j));
+  }
+  return {{"vin", capture.manifest.vin},
+          {"car_model", capture.manifest.car_model},
+          {"verdict", SensorVerdictName(cycle.verdict)},
+          {"elapsed_ms", cycle.elapsed_ns * 1e-6},
+          {"sensors", sensors}};
+}
+
+
+SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid3d& T_station_car,
+                                       const SensorModel& sensor,
+                                       std::span<const std::span<const RoundHoleCloudPoint>> frames,
+                                       std::vector<RoundHoleCloudDetection>* detections) {
+  SensorCalibration out;
+  if (detections != nullptr) detections->clear();
+  // Where the boards should be if the LiDAR sits at its nominal mounting.
+  const Rigid3d T_lidar_station = (T_station_car * sensor.T_car_sensor_nominal).Inverse();
+  std::vector<LidarBoardObservation> observations;
+  for (const std::string& id : sensor.targets) {
+    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
+    const StationBoard* board = station.FindBoard(id);
+    if (board == nullptr) {  // ReadCapture checked the targets; kept for safety of the data
+      if (detections != nullptr) detections->emplace_back();
+      continue;
+    }
+    const RoundHoleCloudDetection d =
+        DetectRoundHoleBoardInCloud(board->board, frames, T_lidar_station * board->T_station_board);
+    if (detections != nullptr) detections->push_back(d);
+    if (!d.found) {
+      summary.last_reason = RoundHoleCloudReasonName(d.reason);
+      continue;
+    }
+    summary.frames_found = static_cast<int>(frames.size());
+    observations.push_back(LidarObservationFromDetection(id, d));
+  }
+  absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, station, T_station_car, observations);
+  if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
+  return out;
+}
+
+std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const SensorModel& sensor,
+                                                const ImageView8& image,
+                                                std::vector<BoardDetectionSummary>* summaries,
+                                                std::stop_token stop) {
+  // The camera model and the nominal pose of the station in the camera frame, for the board
+  // views; without intrinsics CalibrateCamera reports the sensor's error.
+  std::optional<CameraModel> camera;
+  if (sensor.intrinsics) {
+    absl::StatusOr<CameraModel> m = CameraModel::Create(*sensor.intrinsics);
+    if (m.ok()) camera = *std::move(m);
+  }
+  const Rigid3d T_camera_station =
+      sensor.T_car_sensor_nominal.Inverse() * capture.manifest.aligner.T_station_car().Inverse();
+  std::vector<BoardObservation> observations;
+  for (size_t i = 0; i < sensor.targets.size(); ++i) {
+    if (stop.stop_requested()) break;
+    const StationBoard* board = capture.station.FindBoard(sensor.targets[i]);
+    if (board == nullptr) continue;
+    BoardDetectionSummary& summary = (*summaries)[i];
+    std::optional<Detection> d = DetectBoard(image, board->board);
+    if (d && camera && (!d->found || ViewRefinesMarkerCorners(*camera, board->board))) {
+      // Not found in the raw image, or a marker board whose corners a fisheye shifts there:
+      // look again in a perspective view of where the board is expected
+      // (station/camera/board_view.h); where the view does not show the whole board, the raw
+      // detection stands.
+      const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
+      std::optional<Detection> v =
+          DetectInBoardView(*camera, image, T_camera_board, board->board);
+      if (v && v->found) {
+        d = std::move(v);
+      }
+    }
+    if (!d) {
+      summary.last_reason = "no_detector";
+      continue;
+    }
+    // Whole boards, and partial views whose reported features the detector is certain of.
+    if (d->found) {
+      ++summary.frames_found;
+    } else if (d->reason == DetectReason::kPartial && !d->features.empty()) {
+      ++summary.frames_partial;
+    } else {
+      summary.last_reason = DetectReasonName(d->reason);
+      continue;
+    }
+    observations.push_back({board->id, d->features});
+  }
+  return observations;
+}
+
+}  // namespace linecal
