@@ -1,0 +1,2 @@
+// A fixture of check_folders.cmake: calibrate is not a simulating command.
+#include "station/sim/simulator.h"
