@@ -21,7 +21,6 @@
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "detectors/round_hole/round_hole_cloud.h"
@@ -113,12 +112,5 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
                                                 const ImageView8& image,
                                                 std::vector<BoardDetectionSummary>* summaries,
                                                 std::stop_token stop = {});
-
-// The results document of docs/interfaces.md ("Results"): per sensor name, kind, verdict, reason,
-// message, T_car_sensor (4x4 row-major), yaw/pitch/roll (deg) and x/y/z (m), their deviation
-// and 1-sigma, residual RMS, features used; cameras also the vanishing point, the ground
-// homography and the ranging check, and (docs/solvers.md) "board_method" (method (b) and its
-// disagreement) and "roll_from_vertical_board"; overall verdict, VIN, car model and timings.
-nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibration& cycle);
 
 }  // namespace linecal

@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "station/pipeline/capture_calibration.h"
+#include "station/pipeline/results_json.h"
 #include "station/io/image_io.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/calibration_report.h"
