@@ -520,7 +520,7 @@ PlaneFrame MakePlaneFrame(const Rigid3d& T_lidar_board_prior, const Eigen::Matri
 using OccluderAzimuths = std::map<int, std::vector<double>>;
 
 // Needs step 1's occluders and the reference azimuth; gives their azimuths on the scale the
-// in-plane points use (RelativeAzimuth's), sorted for Occluded.
+// in-plane points use (InPlane::azimuth_rad), sorted for Occluded.
 OccluderAzimuths RelativeOccluders(const std::map<int, std::vector<double>>& occluders,
                                    double azimuth0) {
   OccluderAzimuths occluder_azimuths;
