@@ -17,46 +17,25 @@ constexpr int kTile = 4;
 // board filling 80% of a 2448 px image (ArUco border cell: 71 px wide).
 constexpr int kThresholdPropagationPasses = 16;
 
-}  // namespace
 
-// Immerkaer's noise estimate made robust to edges: the median absolute response of the
-// Laplacian-difference kernel [1 -2 1; -2 4 -2; 1 -2 1] (std 6 sigma on white noise) over a
-// sparse grid of pixels, divided by 0.6745 (the median of |N(0, 1)|) and 6. O(W * H / 8).
-double EstimateNoiseSigma(const ImageView8& image) {
-  if (image.width < 3 || image.height < 3) return 0.0;
-  std::vector<int> histogram(4 * 255 * 4 + 1, 0);
-  long count = 0;
-  // Every 4th row and 2nd column: ample samples for a median, an eighth of the cost.
-  for (int y = 1; y + 1 < image.height; y += 4) {
-    const std::uint8_t* a = image.Row(y - 1);
-    const std::uint8_t* b = image.Row(y);
-    const std::uint8_t* c = image.Row(y + 1);
-    for (int x = 1; x + 1 < image.width; x += 2) {
-      const int r = a[x - 1] - 2 * a[x] + a[x + 1] - 2 * (b[x - 1] - 2 * b[x] + b[x + 1]) +
-                    c[x - 1] - 2 * c[x] + c[x + 1];
-      ++histogram[std::abs(r)];
-      ++count;
-    }
-  }
-  long seen = 0;
-  for (int v = 0; v < static_cast<int>(histogram.size()); ++v) {
-    seen += histogram[v];
-    if (2 * seen >= count) return v / (0.6745 * 6.0);
-  }
-  return 0.0;
-}
+// Per tile of kTile x kTile pixels, the darkest and brightest of its 2 x 2 pixel means.
+struct TileExtremes {
+  int tw = 0;  // tiles across
+  int th = 0;  // tiles down
+  std::vector<std::uint8_t> tmin;
+  std::vector<std::uint8_t> tmax;
+};
 
-// 1 where a pixel is darker than the local minimum plus dark_fraction of the local range (over
-// the 3 x 3 tiles around its tile); 0 elsewhere, including areas without printed contrast
-// that no threshold reaches. *max_contrast: the largest local max - min seen.
-Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast,
-                    double dark_fraction) {
-  const int tw = (image.width + kTile - 1) / kTile;
-  const int th = (image.height + kTile - 1) / kTile;
-  std::vector<std::uint8_t> tmin(static_cast<std::size_t>(tw) * th, 255);
-  std::vector<std::uint8_t> tmax(static_cast<std::size_t>(tw) * th, 0);
-  // The extremes are taken over 2 x 2 pixel means, which halve the noise (a 4 px cell still
-  // holds nine such means entirely inside it). Plain loops over rows, which vectorise.
+// Needs an image; gives its tiles' extremes, taken over 2 x 2 pixel means, which halve the
+// noise (a 4 px cell still holds nine such means entirely inside it). Plain loops over rows,
+// which vectorise. O(W * H).
+TileExtremes ComputeTileExtremes(const ImageView8& image) {
+  TileExtremes t;
+  t.tw = (image.width + kTile - 1) / kTile;
+  t.th = (image.height + kTile - 1) / kTile;
+  const int tw = t.tw;
+  t.tmin.assign(static_cast<std::size_t>(tw) * t.th, 255);
+  t.tmax.assign(static_cast<std::size_t>(tw) * t.th, 0);
   const int w = image.width;
   std::vector<std::uint16_t> pairs_a(static_cast<std::size_t>(w));
   std::vector<std::uint16_t> pairs_b(static_cast<std::size_t>(w));
@@ -73,8 +52,8 @@ Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast
     }
     // The padding of the last tile repeats its last mean, which changes no extreme.
     for (int x = w; x < tw * kTile; ++x) means[x] = means[w - 1];
-    std::uint8_t* mn = &tmin[static_cast<std::size_t>(y / kTile) * tw];
-    std::uint8_t* mx = &tmax[static_cast<std::size_t>(y / kTile) * tw];
+    std::uint8_t* mn = &t.tmin[static_cast<std::size_t>(y / kTile) * tw];
+    std::uint8_t* mx = &t.tmax[static_cast<std::size_t>(y / kTile) * tw];
     for (int tx = 0; tx < tw; ++tx) {
       const std::uint8_t* m = &means[static_cast<std::size_t>(tx) * kTile];
       const std::uint8_t lo = std::min(std::min(m[0], m[1]), std::min(m[2], m[3]));
@@ -84,7 +63,16 @@ Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast
     }
     pairs_a.swap(pairs_b);
   }
-  // Twice the threshold per tile, or -1 where the tile has no contrast of its own.
+  return t;
+}
+
+// Needs the tiles' extremes; gives twice the threshold per tile (the minimum plus
+// dark_fraction of the range over the 3 x 3 tiles around it), or -1 where that range is under
+// min_contrast. *max_contrast: the largest range seen. O(tiles).
+std::vector<int> TileThresholds(const TileExtremes& t, int min_contrast, double dark_fraction,
+                                int* max_contrast) {
+  const int tw = t.tw;
+  const int th = t.th;
   std::vector<int> thr2(static_cast<std::size_t>(tw) * th, -1);
   *max_contrast = 0;
   for (int ty = 0; ty < th; ++ty) {
@@ -97,8 +85,8 @@ Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast
         for (int dx = -1; dx <= 1; ++dx) {
           const int xx = tx + dx;
           if (xx < 0 || xx >= tw) continue;
-          lo = std::min<int>(lo, tmin[static_cast<std::size_t>(yy) * tw + xx]);
-          hi = std::max<int>(hi, tmax[static_cast<std::size_t>(yy) * tw + xx]);
+          lo = std::min<int>(lo, t.tmin[static_cast<std::size_t>(yy) * tw + xx]);
+          hi = std::max<int>(hi, t.tmax[static_cast<std::size_t>(yy) * tw + xx]);
         }
       }
       *max_contrast = std::max(*max_contrast, hi - lo);
@@ -108,8 +96,14 @@ Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast
       }
     }
   }
-  // Breadth-first, one ring of tiles per pass: each unknown tile next to known ones takes
-  // their mean, so the cost is the number of tiles reached, not passes x tiles.
+  return thr2;
+}
+
+// Needs the doubled thresholds of tw x th tiles (-1 unknown); gives unknown tiles the mean of
+// their known 4-neighbours, kThresholdPropagationPasses rings of tiles deep. Breadth-first,
+// one ring of tiles per pass, so the cost is the number of tiles reached, not passes x tiles.
+void PropagateThresholds(int tw, int th, std::vector<int>* thresholds) {
+  std::vector<int>& thr2 = *thresholds;
   std::vector<std::uint8_t> queued(thr2.size(), 0);
   std::vector<int> frontier;
   auto push_unknown_neighbours = [&](int i, std::vector<int>* out) {
@@ -152,6 +146,12 @@ Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast
     for (int i : frontier) push_unknown_neighbours(i, &next);
     frontier.swap(next);
   }
+}
+
+// Needs the image and the doubled thresholds of its tw tiles across; gives 1 where a pixel is
+// below its tile's threshold, 0 elsewhere and where the threshold is unknown. O(W * H).
+Image8 ApplyThresholds(const ImageView8& image, const std::vector<int>& thr2, int tw) {
+  const int w = image.width;
   Image8 dark(image.width, image.height, 0);
   // Per tile row, the doubled threshold of every pixel column (0 where unknown: 2 v < 0
   // never holds), so that the per-pixel loop is a plain comparison.
@@ -170,6 +170,45 @@ Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast
     }
   }
   return dark;
+}
+}  // namespace
+
+// Immerkaer's noise estimate made robust to edges: the median absolute response of the
+// Laplacian-difference kernel [1 -2 1; -2 4 -2; 1 -2 1] (std 6 sigma on white noise) over a
+// sparse grid of pixels, divided by 0.6745 (the median of |N(0, 1)|) and 6. O(W * H / 8).
+double EstimateNoiseSigma(const ImageView8& image) {
+  if (image.width < 3 || image.height < 3) return 0.0;
+  std::vector<int> histogram(4 * 255 * 4 + 1, 0);
+  long count = 0;
+  // Every 4th row and 2nd column: ample samples for a median, an eighth of the cost.
+  for (int y = 1; y + 1 < image.height; y += 4) {
+    const std::uint8_t* a = image.Row(y - 1);
+    const std::uint8_t* b = image.Row(y);
+    const std::uint8_t* c = image.Row(y + 1);
+    for (int x = 1; x + 1 < image.width; x += 2) {
+      const int r = a[x - 1] - 2 * a[x] + a[x + 1] - 2 * (b[x - 1] - 2 * b[x] + b[x + 1]) +
+                    c[x - 1] - 2 * c[x] + c[x + 1];
+      ++histogram[std::abs(r)];
+      ++count;
+    }
+  }
+  long seen = 0;
+  for (int v = 0; v < static_cast<int>(histogram.size()); ++v) {
+    seen += histogram[v];
+    if (2 * seen >= count) return v / (0.6745 * 6.0);
+  }
+  return 0.0;
+}
+
+// 1 where a pixel is darker than the local minimum plus dark_fraction of the local range (over
+// the 3 x 3 tiles around its tile); 0 elsewhere, including areas without printed contrast
+// that no threshold reaches. *max_contrast: the largest local max - min seen.
+Image8 BinariseDark(const ImageView8& image, int min_contrast, int* max_contrast,
+                    double dark_fraction) {
+  const TileExtremes tiles = ComputeTileExtremes(image);
+  std::vector<int> thr2 = TileThresholds(tiles, min_contrast, dark_fraction, max_contrast);
+  PropagateThresholds(tiles.tw, tiles.th, &thr2);
+  return ApplyThresholds(image, thr2, tiles.tw);
 }
 
 Image8 Erode(const Image8& in) {

@@ -124,45 +124,43 @@ RingResult TestRing(const ImageF& blurred, const Eigen::Vector2d& centre,
   return result;
 }
 
-}  // namespace
 
-std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& options) {
-  const int w = blurred.width;
-  const int h = blurred.height;
-  std::vector<XCorner> corners;
-  if (w < 5 || h < 5) return corners;
+// The saddle response R = Ixy^2 - Ixx Iyy, from central differences, computed row by row into
+// a ring of kRingRows rows, enough for the 5 x 5 non-maximum suppression (an image-sized buffer
+// would cost more in fresh pages than the arithmetic), with each row's maximum over 5 columns
+// in a second ring.
+class ResponseRows {
+ public:
+  static constexpr int kRingRows = 5;
 
-  // R = Ixy^2 - Ixx Iyy from central differences. For an ideal X-corner of contrast C
-  // blurred to sigma, Ixy at the vertex is C / (pi sigma^2); the floor takes half of that
-  // for min_contrast at sigma 2.5 px (detector blur plus a camera blur of 1.5 px, the
-  // worst of docs/acceptance.md), so any printed corner passes and flat noise does not.
-  constexpr double kWorstSigmaPx = 2.5;
-  const double ixy_floor =
-      0.5 * options.min_contrast / (std::numbers::pi * kWorstSigmaPx * kWorstSigmaPx);
-  const float floor = static_cast<float>(ixy_floor * ixy_floor);
-  // The response is computed row by row into a ring of five rows, enough for the 5 x 5
-  // non-maximum suppression below (an image-sized buffer would cost more in fresh pages
-  // than the arithmetic), with each row's maximum over 5 columns in a second ring.
-  constexpr int kRingRows = 5;
-  std::vector<float> response_ring(static_cast<std::size_t>(kRingRows) * w, 0.0f);
-  std::vector<float> row_max_ring(static_cast<std::size_t>(kRingRows) * w, 0.0f);
-  auto response_row = [&](int y) {
-    return response_ring.data() + static_cast<std::size_t>(y % kRingRows) * w;
-  };
-  auto row_max_row = [&](int y) {
-    return row_max_ring.data() + static_cast<std::size_t>(y % kRingRows) * w;
-  };
-  auto compute_row = [&](int y) {
-    float* __restrict out = response_row(y);
-    float* __restrict out_max = row_max_row(y);
-    if (y < 1 || y > h - 2) {
+  explicit ResponseRows(const ImageF& blurred)
+      : blurred_(blurred),
+        w_(blurred.width),
+        h_(blurred.height),
+        response_ring_(static_cast<std::size_t>(kRingRows) * w_, 0.0f),
+        row_max_ring_(static_cast<std::size_t>(kRingRows) * w_, 0.0f) {}
+
+  // Row y's response and 5-column maxima, once Compute(y) has run and until Compute(y + 5).
+  const float* Response(int y) const {
+    return response_ring_.data() + static_cast<std::size_t>(y % kRingRows) * w_;
+  }
+  const float* RowMax(int y) const {
+    return row_max_ring_.data() + static_cast<std::size_t>(y % kRingRows) * w_;
+  }
+
+  // Computes row y (zero on the image's first and last rows and columns).
+  void Compute(int y) {
+    float* __restrict out = response_ring_.data() + static_cast<std::size_t>(y % kRingRows) * w_;
+    float* __restrict out_max = row_max_ring_.data() + static_cast<std::size_t>(y % kRingRows) * w_;
+    const int w = w_;
+    if (y < 1 || y > h_ - 2) {
       std::fill(out, out + w, 0.0f);
       std::fill(out_max, out_max + w, 0.0f);
       return;
     }
-    const float* up = blurred.Row(y - 1);
-    const float* row = blurred.Row(y);
-    const float* down = blurred.Row(y + 1);
+    const float* up = blurred_.Row(y - 1);
+    const float* row = blurred_.Row(y);
+    const float* down = blurred_.Row(y + 1);
     out[0] = 0.0f;
     out[w - 1] = 0.0f;
     for (int x = 1; x < w - 1; ++x) {
@@ -176,29 +174,51 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
       out_max[x] = std::max(std::max(std::max(out[x - 2], out[x - 1]), std::max(out[x], out[x + 1])),
                             out[x + 2]);
     }
-  };
+  }
 
-  // Local maxima in a 5 x 5 neighbourhood (vertices of the smallest squares are 8 px apart),
-  // far enough from the border for the ring; ties go to the first in raster order. The
-  // vectorised pass keeps the pixels above the floor that no neighbour exceeds (at most a
-  // few hundred); only those are checked for ties one by one.
-  struct Peak {
-    float r;
-    int x;
-    int y;
-  };
+ private:
+  const ImageF& blurred_;
+  int w_ = 0;
+  int h_ = 0;
+  std::vector<float> response_ring_;
+  std::vector<float> row_max_ring_;
+};
+
+struct Peak {
+  float r;
+  int x;
+  int y;
+};
+
+// Needs the blurred image (at least 5 x 5) and the options; gives the response's local maxima
+// in a 5 x 5 neighbourhood (vertices of the smallest squares are 8 px apart) above the floor,
+// far enough from the border for the ring, strongest first, at most max_candidates. Ties go
+// to the first in raster order. The vectorised pass keeps the pixels above the floor that no
+// neighbour exceeds (at most a few hundred); only those are checked for ties one by one.
+std::vector<Peak> FindPeaks(const ImageF& blurred, const XCornerOptions& options) {
+  const int w = blurred.width;
+  const int h = blurred.height;
+  // For an ideal X-corner of contrast C blurred to sigma, Ixy at the vertex is
+  // C / (pi sigma^2); the floor takes half of that for min_contrast at sigma 2.5 px (detector
+  // blur plus a camera blur of 1.5 px, the worst of docs/acceptance.md), so any printed
+  // corner passes and flat noise does not.
+  constexpr double kWorstSigmaPx = 2.5;
+  const double ixy_floor =
+      0.5 * options.min_contrast / (std::numbers::pi * kWorstSigmaPx * kWorstSigmaPx);
+  const float floor = static_cast<float>(ixy_floor * ixy_floor);
+  ResponseRows rows(blurred);
   std::vector<Peak> peaks;
   std::vector<std::uint8_t> candidate(w, 0);
   const int margin = std::max(2, static_cast<int>(std::ceil(options.ring_radius_px)) + 1);
-  for (int y = margin - 2; y < std::min(h, margin + 2); ++y) compute_row(y);
+  for (int y = margin - 2; y < std::min(h, margin + 2); ++y) rows.Compute(y);
   for (int y = margin; y < h - margin; ++y) {
-    compute_row(y + 2);
-    const float* row = response_row(y);
-    const float* m0 = row_max_row(y - 2);
-    const float* m1 = row_max_row(y - 1);
-    const float* m2 = row_max_row(y);
-    const float* m3 = row_max_row(y + 1);
-    const float* m4 = row_max_row(y + 2);
+    rows.Compute(y + 2);
+    const float* row = rows.Response(y);
+    const float* m0 = rows.RowMax(y - 2);
+    const float* m1 = rows.RowMax(y - 1);
+    const float* m2 = rows.RowMax(y);
+    const float* m3 = rows.RowMax(y + 1);
+    const float* m4 = rows.RowMax(y + 2);
     std::uint8_t* __restrict is_candidate = candidate.data();
     for (int x = margin; x < w - margin; ++x) {
       const float m = std::max(std::max(std::max(m0[x], m1[x]), std::max(m3[x], m4[x])), m2[x]);
@@ -209,7 +229,7 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
       const float r = row[x];
       bool is_max = true;
       for (int dy = -2; dy <= 0 && is_max; ++dy) {
-        const float* other = response_row(y + dy);
+        const float* other = rows.Response(y + dy);
         for (int dx = -2; dx <= (dy < 0 ? 2 : -1); ++dx) {
           if (other[x + dx] == r) {
             is_max = false;
@@ -224,12 +244,19 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
   if (static_cast<int>(peaks.size()) > options.max_candidates) {
     peaks.resize(options.max_candidates);
   }
+  return peaks;
+}
 
+// Needs the peaks; gives the X-corners among them: each passes the ring test at the peak or
+// at its refined saddle, and is placed at the saddle. In the peaks' order.
+std::vector<XCorner> TestPeaks(const ImageF& blurred, const XCornerOptions& options,
+                               const std::vector<Peak>& peaks) {
   std::array<Eigen::Vector2d, kRingSamples> ring;
   for (int k = 0; k < kRingSamples; ++k) {
     const double a = (k + 0.5) * 2.0 * std::numbers::pi / kRingSamples;
     ring[k] = Eigen::Vector2d(std::cos(a), std::sin(a));
   }
+  std::vector<XCorner> corners;
   for (const Peak& peak : peaks) {
     const Eigen::Vector2d start(peak.x, peak.y);
     RingResult ring_result = TestRing(blurred, start, options, ring);
@@ -248,10 +275,15 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
     ring_result.corner.uv_px = *refined;
     corners.push_back(ring_result.corner);
   }
+  return corners;
+}
+
+// Needs X-corners; gives them by decreasing contrast, each one closer than kMergeDistancePx
+// to a stronger one left out: two maxima converging to one vertex. 2 px is far below the
+// smallest vertex spacing (8 px).
+std::vector<XCorner> MergeDuplicates(std::vector<XCorner> corners) {
   std::sort(corners.begin(), corners.end(),
             [](const XCorner& a, const XCorner& b) { return a.contrast > b.contrast; });
-  // Two maxima converging to one vertex: keep the first (highest contrast). 2 px is far
-  // below the smallest vertex spacing (8 px).
   constexpr double kMergeDistancePx = 2.0;
   std::vector<XCorner> merged;
   for (const XCorner& c : corners) {
@@ -265,6 +297,12 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
     if (!duplicate) merged.push_back(c);
   }
   return merged;
+}
+}  // namespace
+
+std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& options) {
+  if (blurred.width < 5 || blurred.height < 5) return {};
+  return MergeDuplicates(TestPeaks(blurred, options, FindPeaks(blurred, options)));
 }
 
 Eigen::Vector2d XCornerDirection(const XCorner& c, int k) {

@@ -1106,18 +1106,42 @@ Detection VerifyBentBoard(const BentBoardInputs& in, int min_contrast) {
                         in.image, in.options);
 }
 
-}  // namespace
 
-Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
-                            const MarkerDetectOptions& options, const ImageView8& image,
-                            const Board* sibling) {
-  // The board's markers: id -> its four corner features, in corner order (ids 4 k + c).
-  std::map<int, std::vector<const BoardFeature*>> board_markers;
+// What VerifyMarkerBoard's steps share: the board, the scan's image and options, and the
+// board's markers.
+struct MarkerBoardContext {
+  const Board& board;
+  const MarkerFamily& family;
+  const MarkerDetectOptions& options;
+  const ImageView8& image;
+  const BoardMarkers& board_markers;
+  int min_contrast = 0;  // the scan's
+};
+
+// Needs a board; gives its markers: id -> its four corner features, in corner order (ids
+// 4 k + c).
+BoardMarkers MarkersOfBoard(const Board& board) {
+  BoardMarkers board_markers;
   for (const BoardFeature& f : board.features()) {
     if (f.kind == FeatureKind::kMarkerCorner) board_markers[f.marker].push_back(&f);
   }
-  std::vector<const DecodedMarker*> on_board;
+  return board_markers;
+}
+
+// The scan's markers split by the board's ids.
+struct ScanSplit {
+  std::vector<const DecodedMarker*> on_board;  // ids of the board, sorted, each once
   std::vector<const DecodedMarker*> others;
+};
+
+// Needs the scan and the board's markers; gives the scan's markers split by the board's ids
+// in *split, or the failure: no marker of the board (kWrongBoard with markers of other ids,
+// else the scan's reason or kNoCandidates), an id seen twice (kAmbiguous), a single marker
+// (kTooFewFeatures, or kWrongBoard with markers of other ids).
+std::optional<Detection> SplitScan(const MarkerScan& scan, const BoardMarkers& board_markers,
+                                   ScanSplit* split) {
+  std::vector<const DecodedMarker*>& on_board = split->on_board;
+  std::vector<const DecodedMarker*>& others = split->others;
   for (const DecodedMarker& m : scan.markers) {
     (board_markers.count(m.id) != 0 ? on_board : others).push_back(&m);
   }
@@ -1133,66 +1157,76 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
   if (on_board.size() < 2) {
     return Fail(others.empty() ? DetectReason::kTooFewFeatures : DetectReason::kWrongBoard);
   }
-  // Small markers' sides placed on a model of the page around them (page_edge_fit.h) before
-  // any board fit: their edge-point corners are off by up to a quarter of a cell, which the
-  // fit's residual test refuses. Where the page fit fails, the edge-point corners stay.
-  const auto fit_to_page = [&](DecodedMarker* m) {
-    // The shortest side: a turned marker's border is narrowest across its foreshortened sides.
-    double side = std::numeric_limits<double>::infinity();
-    for (int k = 0; k < 4; ++k)
-      side = std::min(side, (m->corners_px[(k + 1) % 4] - m->corners_px[k]).norm());
-    if (side * family.border_cells >= kPageFitMaxBorderPx * family.cells) return;
-    const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
-    std::array<Eigen::Vector2d, 4> corners_board;
-    for (int c = 0; c < 4; ++c) corners_board[c] = f[c]->p_board;
-    FitMarkerSidesToPage(image, board, family.cells, corners_board, scan.min_contrast,
-                         &m->corners_px);
-  };
-  std::vector<DecodedMarker> read;
-  read.reserve(on_board.size());
-  for (const DecodedMarker*& m : on_board) {
-    read.push_back(*m);
-    fit_to_page(&read.back());
-    m = &read.back();
-  }
+  return std::nullopt;
+}
+
+// Needs a marker of the board; places a small marker's sides on a model of the page around
+// it (page_edge_fit.h): its edge-point corners are off by up to a quarter of a cell, which
+// the board fit's residual test refuses. Where the page fit fails, or the marker's border is
+// wider than kPageFitMaxBorderPx, the corners stay.
+void FitSmallMarkerToPage(const MarkerBoardContext& ctx, DecodedMarker* m) {
+  // The shortest side: a turned marker's border is narrowest across its foreshortened sides.
+  double side = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k)
+    side = std::min(side, (m->corners_px[(k + 1) % 4] - m->corners_px[k]).norm());
+  if (side * ctx.family.border_cells >= kPageFitMaxBorderPx * ctx.family.cells) return;
+  const std::vector<const BoardFeature*>& f = ctx.board_markers.at(m->id);
+  std::array<Eigen::Vector2d, 4> corners_board;
+  for (int c = 0; c < 4; ++c) corners_board[c] = f[c]->p_board;
+  FitMarkerSidesToPage(ctx.image, ctx.board, ctx.family.cells, corners_board, ctx.min_contrast,
+                       &m->corners_px);
+}
+
+// The board fit's correspondences: board points, their outward diagonals and image corners.
+struct Correspondences {
   std::vector<Eigen::Vector2d> p_board;
   std::vector<Eigen::Vector2d> diagonal;
   std::vector<Eigen::Vector2d> uv;
-  const auto add_corners = [&](const std::vector<const BoardFeature*>& f, const DecodedMarker& m) {
+
+  // Appends the four corners of `m`, whose corner features are `f`.
+  void Add(const std::vector<const BoardFeature*>& f, const DecodedMarker& m) {
     const std::array<Eigen::Vector2d, 4> d = OutwardDiagonals(f);
     for (int c = 0; c < 4; ++c) {
       p_board.push_back(f[c]->p_board);
       diagonal.push_back(d[c]);
       uv.push_back(m.corners_px[c]);
     }
-  };
-  double side_px = 0.0;
-  double side_m = 0.0;
+  }
+};
+
+// The markers' mean side, in the image and on the board.
+struct MeanSide {
+  double px = 0.0;
+  double m = 0.0;
+};
+
+// Needs the board's markers found (at least one); gives their mean side.
+MeanSide MeanSideOf(const std::vector<const DecodedMarker*>& on_board,
+                    const BoardMarkers& board_markers) {
+  MeanSide side;
   for (const DecodedMarker* m : on_board) {
     const std::vector<const BoardFeature*>& f = board_markers.at(m->id);
-    add_corners(f, *m);
     for (int c = 0; c < 4; ++c) {
-      side_px += (m->corners_px[(c + 1) % 4] - m->corners_px[c]).norm();
-      side_m += (f[(c + 1) % 4]->p_board - f[c]->p_board).norm();
+      side.px += (m->corners_px[(c + 1) % 4] - m->corners_px[c]).norm();
+      side.m += (f[(c + 1) % 4]->p_board - f[c]->p_board).norm();
     }
   }
-  side_px /= 4.0 * on_board.size();
-  side_m /= 4.0 * on_board.size();
-  const double max_residual_px = std::min(options.max_residual_fraction * side_px,
-                                          options.max_residual_cells * side_px / family.cells);
-  std::optional<BoardFit> board_fit = FitBoard(p_board, diagonal, uv, on_board.size());
-  if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
-    // No one homography holds the markers: a wrong board, or the board bent by a lens.
-    const BentBoardInputs bent{on_board, board_markers, others, board,   family,
-                               options,  image,         sibling, side_px / side_m};
-    return VerifyBentBoard(bent, scan.min_contrast);
-  }
-  // The markers the scan missed, where the checked board fit puts them. Again after each
-  // round that placed some: the fit through more of the board extrapolates less.
-  std::vector<DecodedMarker> placed;
-  placed.reserve(board_markers.size() - on_board.size());
+  side.px /= 4.0 * on_board.size();
+  side.m /= 4.0 * on_board.size();
+  return side;
+}
+
+// Needs the checked board fit through the found markers' correspondences (*corr, *board_fit);
+// reads the markers the scan missed where the fit puts them, again after each round that
+// placed some (the fit through more of the board extrapolates less), appends those kept to
+// *placed and their corners to *corr, and refits *board_fit. False when a refit exceeds
+// max_residual_px. O(missing * (rounds + side)).
+bool PlaceMissingMarkers(const MarkerBoardContext& ctx,
+                         const std::vector<const DecodedMarker*>& on_board, double max_residual_px,
+                         Correspondences* corr, std::optional<BoardFit>* board_fit,
+                         std::vector<DecodedMarker>* placed) {
   std::vector<int> missing;
-  for (const auto& entry : board_markers) {
+  for (const auto& entry : ctx.board_markers) {
     // Not a structured binding: clang 14 (the fuzz build) cannot capture one in a lambda.
     const int id = entry.first;
     if (std::none_of(on_board.begin(), on_board.end(),
@@ -1200,19 +1234,19 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       missing.push_back(id);
     }
   }
-  for (std::size_t placed_before = 0; !missing.empty(); placed_before = placed.size()) {
+  for (std::size_t placed_before = 0; !missing.empty(); placed_before = placed->size()) {
     std::vector<int> still_missing;
     for (int id : missing) {
-      const std::vector<const BoardFeature*>& f = board_markers.at(id);
+      const std::vector<const BoardFeature*>& f = ctx.board_markers.at(id);
       const std::array<Eigen::Vector2d, 4> d = OutwardDiagonals(f);
       std::array<Eigen::Vector2d, 4> corners;
       for (int c = 0; c < 4; ++c) {
-        corners[c] =
-            ApplyHomography(board_fit->fit.H, f[c]->p_board + board_fit->dilation_m * d[c]);
+        corners[c] = ApplyHomography((*board_fit)->fit.H,
+                                     f[c]->p_board + (*board_fit)->dilation_m * d[c]);
       }
       std::optional<DecodedMarker> marker =
-          ReadPredictedMarker(image, family, id, corners, scan.min_contrast);
-      if (marker.has_value()) fit_to_page(&*marker);
+          ReadPredictedMarker(ctx.image, ctx.family, id, corners, ctx.min_contrast);
+      if (marker.has_value()) FitSmallMarkerToPage(ctx, &*marker);
       // The board's homography through its other markers places a corner within a small part
       // of a cell (what is left is lens distortion over a marker pitch or two); edges that
       // pull a corner farther are not this marker's edges, or too blurred to place it. Small
@@ -1220,28 +1254,35 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       // (the round-hole board's black cells) pulls their edge-point corners by up to half a
       // cell.
       if (!marker.has_value() ||
-          !WithinCells(marker->corners_px, corners, family.cells, kPlacedMarkerMaxMoveCells)) {
+          !WithinCells(marker->corners_px, corners, ctx.family.cells, kPlacedMarkerMaxMoveCells)) {
         still_missing.push_back(id);
         continue;
       }
-      placed.push_back(*marker);
-      add_corners(f, *marker);
+      placed->push_back(*marker);
+      corr->Add(f, *marker);
     }
-    if (placed.size() == placed_before) break;
-    board_fit = FitBoard(p_board, diagonal, uv, on_board.size() + placed.size());
-    if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
-      return Fail(DetectReason::kVerificationFailed);
-    }
+    if (placed->size() == placed_before) break;
+    *board_fit =
+        FitBoard(corr->p_board, corr->diagonal, corr->uv, on_board.size() + placed->size());
+    if (!board_fit->has_value() || (*board_fit)->fit.max_residual > max_residual_px) return false;
     missing = std::move(still_missing);
   }
-  for (const DecodedMarker& m : placed) on_board.push_back(&m);
-  const BoardFit fitted = *board_fit;
+  return true;
+}
+
+// Needs the final board fit, the board's scale in the image and every marker of the board
+// found or placed; gives the detection (CheckAndReport) with the fit's homography as the
+// board's model and its dilation taken out of the corners.
+Detection ReportFittedBoard(const MarkerBoardContext& ctx, const BoardFit& fitted,
+                            double px_per_m, const std::vector<const DecodedMarker*>& on_board,
+                            const std::vector<const DecodedMarker*>& others,
+                            const Board* sibling) {
   BoardInImage model;
   model.to_image = [&fitted](const Eigen::Vector2d& p) -> std::optional<Eigen::Vector2d> {
     return ApplyHomography(fitted.fit.H, p);
   };
   model.H_image_board = fitted.fit.H;
-  model.px_per_m = side_px / side_m;
+  model.px_per_m = px_per_m;
   // The corner as printed: the dilation taken out where the fit places it.
   model.printed = [&fitted](const Eigen::Vector2d& corner_px, const Eigen::Vector2d& p_board,
                             const Eigen::Vector2d& diagonal) -> Eigen::Vector2d {
@@ -1252,7 +1293,47 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
     corrected += printed_px - dilated_px;
     return corrected;
   };
-  return CheckAndReport(model, on_board, board_markers, others, board, sibling, image, options);
+  return CheckAndReport(model, on_board, ctx.board_markers, others, ctx.board, sibling, ctx.image,
+                        ctx.options);
+}
+}  // namespace
+
+Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
+                            const MarkerDetectOptions& options, const ImageView8& image,
+                            const Board* sibling) {
+  const BoardMarkers board_markers = MarkersOfBoard(board);
+  ScanSplit split;
+  if (std::optional<Detection> failure = SplitScan(scan, board_markers, &split)) return *failure;
+  std::vector<const DecodedMarker*>& on_board = split.on_board;
+  const MarkerBoardContext ctx{board, family, options, image, board_markers, scan.min_contrast};
+  // Small markers' sides placed on the page before any board fit (FitSmallMarkerToPage).
+  std::vector<DecodedMarker> read;
+  read.reserve(on_board.size());
+  for (const DecodedMarker*& m : on_board) {
+    read.push_back(*m);
+    FitSmallMarkerToPage(ctx, &read.back());
+    m = &read.back();
+  }
+  Correspondences corr;
+  for (const DecodedMarker* m : on_board) corr.Add(board_markers.at(m->id), *m);
+  const MeanSide side = MeanSideOf(on_board, board_markers);
+  const double max_residual_px = std::min(options.max_residual_fraction * side.px,
+                                          options.max_residual_cells * side.px / family.cells);
+  std::optional<BoardFit> board_fit =
+      FitBoard(corr.p_board, corr.diagonal, corr.uv, on_board.size());
+  if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
+    // No one homography holds the markers: a wrong board, or the board bent by a lens.
+    const BentBoardInputs bent{on_board, board_markers, split.others, board,   family,
+                               options,  image,         sibling,      side.px / side.m};
+    return VerifyBentBoard(bent, scan.min_contrast);
+  }
+  // The markers the scan missed, where the checked board fit puts them.
+  std::vector<DecodedMarker> placed;
+  placed.reserve(board_markers.size() - on_board.size());
+  if (!PlaceMissingMarkers(ctx, on_board, max_residual_px, &corr, &board_fit, &placed))
+    return Fail(DetectReason::kVerificationFailed);
+  for (const DecodedMarker& m : placed) on_board.push_back(&m);
+  return ReportFittedBoard(ctx, *board_fit, side.px / side.m, on_board, split.others, sibling);
 }
 
 Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const MarkerFamily& family,

@@ -403,6 +403,667 @@ double ProfileVariance(const std::vector<Edge>& edges, const std::vector<double>
   return farthest * farthest;
 }
 
+
+// Two passes: the second fits the plane to the points the first pass's board pose puts on
+// paper, clear of the edges: the region also holds the board's stand, a post touching its
+// back below the page, whose points tilt the plane by a few tenths of a degree.
+constexpr int kPasses = 2;
+// A point within half a ring step of an edge of the page or a hole (where the edge fit
+// places it to) may be off the paper; the second pass's plane leaves those out, and this
+// much more. A fixed 2 cm (a step at 6 m) left out a third of a 16-ring board's points at
+// 3.6 m, and the normal's error grew by a fifth.
+constexpr double kPaperMarginM = 0.003;
+
+// The model every step matches the returns to: the hole circles of the drawing with their
+// feature ids, in feature order, and half the page.
+struct HoleModel {
+  std::vector<Circle> holes;
+  Eigen::Vector2d half_page = Eigen::Vector2d::Zero();
+};
+
+// Needs a round-hole board; gives its holes (each hole centre feature with the hole shape
+// around it) and half its page size.
+HoleModel MakeHoleModel(const Board& board) {
+  HoleModel model;
+  for (const BoardFeature& f : board.features()) {
+    if (f.kind != FeatureKind::kHoleCentre) continue;
+    for (const BoardShape& s : board.shapes()) {
+      if (s.paint == Paint::kHole && (s.centre_board() - f.p_board).norm() < 0.5 * s.radius_m()) {
+        model.holes.push_back({f.p_board, s.radius_m(), f.id});
+      }
+    }
+  }
+  model.half_page = 0.5 * board.page_size_m();
+  return model;
+}
+
+// Step 1's result: the returns near the expected board, and what stands in front of it.
+struct Roi {
+  std::vector<RoiPoint> points;
+  // Returns between the sensor and the board whose rays would meet the region: occluders
+  // (another board's stand, a person), by ring and frame (frame * 2^16 + ring), azimuth.
+  std::map<int, std::vector<double>> occluders;
+};
+
+// Step 1. Needs the frames, the prior's inverse and the options' margins; gives the finite
+// returns within the page plus roi_margin_m and within roi_depth_m of the expected plane (in
+// the expected board frame), and the occluders: returns more than kOccluderDepthM in front of
+// that plane whose rays meet the region. One transform per point.
+Roi CollectRoi(std::span<const std::span<const RoundHoleCloudPoint>> frames,
+               const Rigid3d& T_board_lidar_prior, const Eigen::Vector2d& half_page,
+               const RoundHoleCloudOptions& options) {
+  Roi roi;
+  const Eigen::Vector3d sensor_board = T_board_lidar_prior.translation();
+  for (std::size_t f = 0; f < frames.size(); ++f) {
+    for (const RoundHoleCloudPoint& p : frames[f]) {
+      const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
+      if (!p_lidar.allFinite()) continue;
+      const Eigen::Vector3d q = T_board_lidar_prior * p_lidar;
+      if (std::abs(q.x()) < half_page.x() + options.roi_margin_m &&
+          std::abs(q.y()) < half_page.y() + options.roi_margin_m &&
+          std::abs(q.z()) < options.roi_depth_m) {
+        roi.points.push_back({p_lidar, p.ring, static_cast<int>(f)});
+      }
+      if (q.z() > kOccluderDepthM && q.z() < sensor_board.z()) {
+        // Where its ray meets the expected plane (board z = 0).
+        const Eigen::Vector3d m =
+            sensor_board + (sensor_board.z() / (sensor_board.z() - q.z())) * (q - sensor_board);
+        if (std::abs(m.x()) < half_page.x() + options.roi_margin_m &&
+            std::abs(m.y()) < half_page.y() + options.roi_margin_m) {
+          roi.occluders[static_cast<int>(f) * 65536 + p.ring].push_back(std::atan2(p.y, p.x));
+        }
+      }
+    }
+  }
+  return roi;
+}
+
+// Needs the ROI's points and the prior's inverse; gives how many rings cross the page: one
+// ring across it is a line, which determines no plane, let alone the holes (a board far or
+// small for the ring spacing). A ring crosses the page when its points span half the page's
+// width, which a board's stand (a 6 cm post) never does.
+std::ptrdiff_t RingsAcrossPage(const std::vector<RoiPoint>& roi,
+                               const Rigid3d& T_board_lidar_prior,
+                               const Eigen::Vector2d& half_page) {
+  std::map<int, std::pair<double, double>> ring_span_m;
+  for (const RoiPoint& p : roi) {
+    const double x = (T_board_lidar_prior * p.p_lidar).x();
+    std::pair<double, double>& span = ring_span_m.try_emplace(p.ring, x, x).first->second;
+    span = {std::min(span.first, x), std::max(span.second, x)};
+  }
+  return std::count_if(
+      ring_span_m.begin(), ring_span_m.end(),
+      [&](const auto& span) { return span.second.second - span.second.first > half_page.x(); });
+}
+
+// Plane coordinates: origin o at the expected page centre's foot on the fitted plane, ex
+// along the expected x projected on it, ey = n x ex (LiDAR frame).
+struct PlaneFrame {
+  Eigen::Vector3d o = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ex = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ey = Eigen::Vector3d::Zero();
+};
+
+// Needs the prior and a fitted plane; gives the plane's coordinates (PlaneFrame).
+PlaneFrame MakePlaneFrame(const Rigid3d& T_lidar_board_prior, const Eigen::Matrix3d& R_prior,
+                          const PlaneFit& plane) {
+  const Eigen::Vector3d n = plane.n_lidar;
+  PlaneFrame frame;
+  frame.o = T_lidar_board_prior.translation() -
+            (n.dot(T_lidar_board_prior.translation()) - plane.d_m) * n;
+  frame.ex = (R_prior.col(0) - R_prior.col(0).dot(n) * n).normalized();
+  frame.ey = n.cross(frame.ex);
+  return frame;
+}
+
+// Occluders' azimuths relative to the expected board centre's, sorted, by ring and frame.
+using OccluderAzimuths = std::map<int, std::vector<double>>;
+
+// Needs step 1's occluders and the reference azimuth; gives their azimuths on the scale the
+// in-plane points use (InPlane::azimuth_rad), sorted for Occluded.
+OccluderAzimuths RelativeOccluders(const std::map<int, std::vector<double>>& occluders,
+                                   double azimuth0) {
+  OccluderAzimuths occluder_azimuths;
+  for (const auto& [group, azimuths] : occluders) {
+    std::vector<double>& a = occluder_azimuths[group];
+    for (double az : azimuths) a.push_back(std::remainder(az - azimuth0, 2.0 * std::numbers::pi));
+    std::sort(a.begin(), a.end());
+  }
+  return occluder_azimuths;
+}
+
+// True when a ray of ring-frame `group` between azimuths lo and hi hit something in front
+// of the board: a gap there, or the ring's end, is the occluder's, not a hole's or the page's.
+bool Occluded(const OccluderAzimuths& occluders, int group, double lo, double hi) {
+  const auto it = occluders.find(group);
+  if (it == occluders.end()) return false;
+  const auto first = std::upper_bound(it->second.begin(), it->second.end(), lo);
+  return first != it->second.end() && *first < hi;
+}
+
+// A plane inlier moved along its ray onto the plane.
+struct InPlane {
+  Eigen::Vector2d p_plane;
+  // Azimuth about the spin axis (LiDAR z), relative to the expected board centre's, so that a
+  // ring's points sort in firing order whatever azimuth the rotation starts at.
+  double azimuth_rad = 0.0;
+  int group = 0;  // frame * 2^16 + ring (rings are < 2^16): one ring of one frame
+};
+
+// Step 3's result.
+struct PlaneInliers {
+  std::vector<InPlane> points;
+  double sum_r2 = 0.0;    // of their range residuals, m^2
+  std::size_t rings = 0;  // distinct rings among them
+};
+
+// Step 3. Needs the ROI, the fitted plane with its coordinates and the reference azimuth;
+// gives the points within the plane fit's cut-off, moved along their rays onto the plane.
+PlaneInliers ProjectInliers(const std::vector<RoiPoint>& roi, const PlaneFit& plane,
+                            const PlaneFrame& frame, double azimuth0) {
+  const Eigen::Vector3d n = plane.n_lidar;
+  PlaneInliers inliers;
+  std::set<int> plane_rings;
+  for (const RoiPoint& p : roi) {
+    const double r = RangeResidual(n / plane.d_m, p.p_lidar);
+    const double along = n.dot(p.p_lidar);
+    if (!(std::abs(r) < plane.cutoff_m)) continue;
+    inliers.sum_r2 += r * r;
+    const Eigen::Vector3d q = (plane.d_m / along) * p.p_lidar - frame.o;
+    const double azimuth = std::remainder(std::atan2(p.p_lidar.y(), p.p_lidar.x()) - azimuth0,
+                                          2.0 * std::numbers::pi);
+    inliers.points.push_back(
+        {Eigen::Vector2d(q.dot(frame.ex), q.dot(frame.ey)), azimuth, p.frame * 65536 + p.ring});
+    plane_rings.insert(p.ring);
+  }
+  inliers.rings = plane_rings.size();
+  return inliers;
+}
+
+// Step 4's result: the ring edges and the coarse search's samples, with what the covariance
+// needs of each group (a ring of one frame, on the board, with at least two points).
+struct RingEdges {
+  std::vector<Edge> edges;
+  std::vector<Sample> samples;
+  std::vector<int> group_ring;
+  std::vector<int> group_frame;
+  std::vector<double> group_phase;  // per group with a step: see Edge::step_plane
+  int gaps = 0;                     // gaps found so far: the next Edge::gap
+};
+
+// One board ring's points (sorted by azimuth) and its median azimuth step, for the edges.
+struct RingView {
+  const std::vector<InPlane>& points;
+  double step = 0.0;
+  double a0 = 0.0;  // the ring's first azimuth
+
+  // One azimuth step of the ring at point a, towards b, in the plane.
+  Eigen::Vector2d StepVector(std::size_t a, std::size_t b) const {
+    const double da = points[b].azimuth_rad - points[a].azimuth_rad;
+    return Eigen::Vector2d((points[b].p_plane - points[a].p_plane) * (step / da));
+  }
+  // Point i's azimuth in steps from the ring's first point, plus `half`.
+  double StepsAlong(std::size_t i, double half) const {
+    return (points[i].azimuth_rad - a0) / step + half;
+  }
+};
+
+// Needs a board ring [begin, end) with a positive step; adds the edges of its gaps wider than
+// kGapSteps steps and not occluded, and its samples: every point (paper) and the missing rays
+// of each such gap (not paper).
+void AddRingGaps(const RingView& ring, std::size_t begin, std::size_t end,
+                 const OccluderAzimuths& occluders, int group, RingEdges* out) {
+  const std::vector<InPlane>& in_plane = ring.points;
+  const int key = in_plane[begin].group;
+  for (std::size_t i = begin; i < end; ++i) {
+    out->samples.push_back({in_plane[i].p_plane, true});
+    if (i + 1 == end) break;
+    const double da = in_plane[i + 1].azimuth_rad - in_plane[i].azimuth_rad;
+    if (da <= kGapSteps * ring.step ||
+        Occluded(occluders, key, in_plane[i].azimuth_rad, in_plane[i + 1].azimuth_rad)) {
+      continue;
+    }
+    const Eigen::Vector2d s = ring.StepVector(i, i + 1);
+    out->edges.push_back(
+        {in_plane[i].p_plane + 0.5 * s, group, out->gaps, s, ring.StepsAlong(i, 0.5)});
+    out->edges.push_back(
+        {in_plane[i + 1].p_plane - 0.5 * s, group, out->gaps, s, ring.StepsAlong(i + 1, -0.5)});
+    ++out->gaps;
+    const int missing =
+        static_cast<int>(std::min<double>(std::lround(da / ring.step) - 1, kMaxGapSamples));
+    for (int k = 1; k <= missing; ++k) out->samples.push_back({in_plane[i].p_plane + k * s, false});
+  }
+}
+
+// Needs a board ring [begin, end) of at least two points sorted by azimuth; adds its group and,
+// when its median step is positive, its ends' edges and virtual rays (unless an occluder hides
+// them), its firing phase and its gaps (AddRingGaps).
+void AddBoardRing(const std::vector<InPlane>& in_plane, std::size_t begin, std::size_t end,
+                  const OccluderAzimuths& occluders, RingEdges* out) {
+  const int group = static_cast<int>(out->group_ring.size());
+  out->group_ring.push_back(in_plane[begin].group % 65536);
+  out->group_frame.push_back(in_plane[begin].group / 65536);
+  out->group_phase.push_back(std::numeric_limits<double>::quiet_NaN());
+  std::vector<double> steps;
+  for (std::size_t i = begin + 1; i < end; ++i)
+    steps.push_back(in_plane[i].azimuth_rad - in_plane[i - 1].azimuth_rad);
+  const RingView ring{in_plane, Median(steps), in_plane[begin].azimuth_rad};
+  if (!(ring.step > 0.0)) return;
+  const Eigen::Vector2d first_step = ring.StepVector(begin, begin + 1);
+  const Eigen::Vector2d last_step = ring.StepVector(end - 2, end - 1);
+  const double a0 = ring.a0;
+  const int key = in_plane[begin].group;
+  const double reach = kEndSamples * ring.step;
+  const bool start_hidden = Occluded(occluders, key, a0 - reach, a0);
+  const bool end_hidden = Occluded(occluders, key, in_plane[end - 1].azimuth_rad,
+                                   in_plane[end - 1].azimuth_rad + reach);
+  if (!start_hidden)
+    out->edges.push_back({in_plane[begin].p_plane - 0.5 * first_step, group, -1, first_step, -0.5});
+  if (!end_hidden) {
+    out->edges.push_back({in_plane[end - 1].p_plane + 0.5 * last_step, group, -1, last_step,
+                          ring.StepsAlong(end - 1, 0.5)});
+  }
+  // The ring's azimuth phase in this frame: whether the frames fired at the same
+  // azimuths (then their edges share their quantisation errors).
+  std::complex<double> phasor = 0.0;
+  for (std::size_t i = begin; i < end; ++i)
+    phasor += std::polar(1.0, 2.0 * std::numbers::pi * in_plane[i].azimuth_rad / ring.step);
+  out->group_phase.back() = std::arg(phasor) / (2.0 * std::numbers::pi);
+  for (int k = 1; k <= kEndSamples; ++k) {
+    if (!start_hidden) out->samples.push_back({in_plane[begin].p_plane - k * first_step, false});
+    if (!end_hidden) out->samples.push_back({in_plane[end - 1].p_plane + k * last_step, false});
+  }
+  AddRingGaps(ring, begin, end, occluders, group, out);
+}
+
+// Step 4. Needs the plane inliers (sorted here by ring and frame, then azimuth); gives the
+// edges and samples of every ring on the board, ring by ring, frame by frame.
+RingEdges ExtractEdges(std::vector<InPlane> in_plane, const Eigen::Vector2d& half_page,
+                       const OccluderAzimuths& occluders) {
+  std::sort(in_plane.begin(), in_plane.end(), [](const InPlane& a, const InPlane& b) {
+    return a.group != b.group ? a.group < b.group : a.azimuth_rad < b.azimuth_rad;
+  });
+  RingEdges out;
+  for (std::size_t begin = 0; begin < in_plane.size();) {
+    std::size_t end = begin;
+    while (end < in_plane.size() && in_plane[end].group == in_plane[begin].group) ++end;
+    // A ring's points on the plane spanning under a tenth of the page are not the board's:
+    // the narrowest paper a ring crosses (hole to page side) is 0.12 of the page, and the
+    // stand's post (6 cm), which a LiDAR below the board sees just behind its lower edge,
+    // would otherwise give edges that pull the page down onto it.
+    const bool board_ring = (in_plane[end - 1].p_plane - in_plane[begin].p_plane).norm() >=
+                            kMinRingSpanPages * 2.0 * half_page.x();
+    if (end - begin >= 2 && board_ring) AddBoardRing(in_plane, begin, end, occluders, &out);
+    begin = end;
+  }
+  return out;
+}
+
+// Step 5a. Needs the samples and the page raster; gives the in-plane pose (x, y, theta) on the
+// coarse grid where the most samples agree with the drawing, ties to the one nearest the
+// prior. About 10^6 raster look-ups.
+Eigen::Vector3d CoarseSearch(const std::vector<Sample>& samples, const PaperRaster& raster,
+                             const RoundHoleCloudOptions& options) {
+  Eigen::Vector3d pose = Eigen::Vector3d::Zero();
+  const std::size_t stride = samples.size() / kMaxSamples + 1;
+  const int shifts = static_cast<int>(options.max_in_plane_shift_m / kShiftStepM);
+  const int rotations = static_cast<int>(options.max_in_plane_rotation_rad / kRotationStepRad);
+  int best_score = -1;
+  double best_distance = 0.0;
+  for (int ir = -rotations; ir <= rotations; ++ir) {
+    const Eigen::Matrix2d Rt = Rotation2(ir * kRotationStepRad).transpose();
+    for (int ix = -shifts; ix <= shifts; ++ix) {
+      for (int iy = -shifts; iy <= shifts; ++iy) {
+        const Eigen::Vector2d t(ix * kShiftStepM, iy * kShiftStepM);
+        int score = 0;
+        for (std::size_t i = 0; i < samples.size(); i += stride) {
+          score += raster.PaperAt(Rt * (samples[i].p_plane - t)) == samples[i].paper ? 1 : 0;
+        }
+        // Ties go to the pose nearest the prior (1 radian weighs as 1 m).
+        const double distance = t.squaredNorm() + std::pow(ir * kRotationStepRad, 2);
+        if (score > best_score || (score == best_score && distance < best_distance)) {
+          best_score = score;
+          best_distance = distance;
+          pose = Eigen::Vector3d(t.x(), t.y(), ir * kRotationStepRad);
+        }
+      }
+    }
+  }
+  return pose;
+}
+
+// Step 5b's state and result: the robust Gauss-Newton of the edges to the outline and the
+// hole circles, with what the covariance needs of its last iteration.
+struct EdgeFit {
+  Eigen::Vector3d pose = Eigen::Vector3d::Zero();  // (x, y, theta): p_plane = R(theta) m + (x, y)
+  std::vector<int> which;      // per edge: the boundary it fits (NearestBoundary's `which`)
+  std::vector<double> weight;  // per edge: its Tukey weight, 0 for an outlier
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  // Sum of w^2 J J^T v over the edges, v the edge's quantisation variance along its normal.
+  Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
+  // Sum of w J (d r / d w): how the plane's error (w = n / d) moves the edges, which the
+  // rays put where they meet the fitted plane, and with them the in-plane pose.
+  Eigen::Matrix3d K = Eigen::Matrix3d::Zero();
+  std::vector<Eigen::Vector3d> wJa;  // per edge: w J times the step seen through its normal
+  std::vector<double> true_steps;    // per edge: where its boundary is, in steps along the ring
+  std::vector<Eigen::Vector3d> steps_dpose;  // per edge: d true_steps / d pose
+  double rms = 0.0;
+  double last_gate = kInitialEdgeGateM;  // the edge fit's last robust gate, metres
+  int kept = 0;
+  bool degenerate = false;
+};
+
+// One iteration's sums besides those EdgeFit keeps.
+struct EdgeSums {
+  Eigen::Vector3d g = Eigen::Vector3d::Zero();
+  std::vector<double> abs_r;  // kept edges' residuals beyond their half step
+  double sum_r2 = 0.0;        // kept edges' squared residuals
+};
+
+// Needs the edges, the model, the plane's coordinates and the gate; gives one Gauss-Newton
+// iteration's normal equations at fit->pose: fit's which, weight, H, B, K, wJa, true_steps,
+// steps_dpose and kept, and `sums`.
+void AccumulateEdges(const std::vector<Edge>& edges, const HoleModel& model,
+                     const PlaneFrame& frame, double gate, EdgeFit* fit, EdgeSums* sums) {
+  const Eigen::Vector3d& pose = fit->pose;
+  const Eigen::Matrix2d R = Rotation2(pose.z());
+  // d(R^T)/d(theta).
+  Eigen::Matrix2d dRt;
+  dRt << -std::sin(pose.z()), std::cos(pose.z()), -std::cos(pose.z()), -std::sin(pose.z());
+  fit->H.setZero();
+  fit->B.setZero();
+  fit->K.setZero();
+  fit->wJa.assign(edges.size(), Eigen::Vector3d::Zero());
+  fit->true_steps.assign(edges.size(), 0.0);
+  fit->steps_dpose.assign(edges.size(), Eigen::Vector3d::Zero());
+  sums->g = Eigen::Vector3d::Zero();
+  sums->abs_r.clear();
+  sums->sum_r2 = 0.0;
+  fit->kept = 0;
+  for (std::size_t k = 0; k < edges.size(); ++k) {
+    const Eigen::Vector2d e = edges[k].p_plane - pose.head<2>();
+    Eigen::Vector2d grad;
+    const double r =
+        NearestBoundary(model.holes, model.half_page, R.transpose() * e, &grad, &fit->which[k]);
+    double& weight = fit->weight[k];
+    weight = 0.0;
+    // The edge moves along its ring by up to half a step, seen through the boundary's
+    // normal: only what lies beyond that can be an outlier (a chord through a stand's
+    // post, an occluder, an edge of the wrong hole). Gating the residual itself dropped
+    // and down-weighted edges at their quantisation's extremes, and the fit then swung
+    // on the rest (the rotation by up to a degree on a 16-ring board).
+    const double along = grad.dot(R.transpose() * edges[k].step_plane);
+    const double excess = std::max(std::abs(r) - 0.5 * std::abs(along), 0.0);
+    if (excess >= gate) continue;
+    sums->abs_r.push_back(excess);
+    const double u = excess / gate;
+    weight = (1.0 - u * u) * (1.0 - u * u);
+    Eigen::Vector3d J;
+    J.head<2>() = -(R * grad);
+    J.z() = grad.dot(dRt * e);
+    fit->H += weight * J * J.transpose();
+    sums->g += weight * J * r;
+    // Beyond the quantisation (below), what the edge's residual shows past the half step
+    // (a chord grazing a hole, where the model is far from linear), and a floor. Not
+    // r^2 - step^2 / 12: a quantisation error exceeds its RMS 42% of the time, and that
+    // would count it twice.
+    fit->B += weight * weight * (excess * excess + kEdgeFloorVarM2) * J * J.transpose();
+    fit->wJa[k] = weight * along * J;
+    // How the boundary's crossing of the ring (in steps) moves with the pose.
+    fit->steps_dpose[k] = std::abs(along) > kMinAlongM
+                              ? Eigen::Vector3d(-J / along)
+                              : Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+    // Where the fitted boundary crosses the ring, in steps: the edge moved by the residual
+    // along the ring (at most the half step it can be off by).
+    fit->true_steps[k] = edges[k].steps_along -
+                         (std::abs(along) > 0.0 ? std::clamp(r / along, -0.5, 0.5) : 0.0);
+    // A ray meets the plane w . p = 1 at p = ray / (w . ray): dp / dw = -p p^T; the edge
+    // residual sees the in-plane part of that through the boundary's normal.
+    const Eigen::Vector3d p_edge =
+        frame.o + edges[k].p_plane.x() * frame.ex + edges[k].p_plane.y() * frame.ey;
+    const Eigen::Vector2d normal_plane = R * grad;
+    const Eigen::Vector3d normal_lidar = normal_plane.x() * frame.ex + normal_plane.y() * frame.ey;
+    fit->K -= weight * J * (normal_lidar.dot(p_edge) * p_edge.transpose());
+    sums->sum_r2 += r * r;
+    ++fit->kept;
+  }
+}
+
+// Step 5b. Needs the edges, the model and the plane's coordinates, fit->pose the start (the
+// coarse search's, or the last pass's fit) and fit->last_gate the last pass's gate; gives the
+// fitted pose and everything EdgeFit holds of the last iteration. degenerate when the edges
+// do not fix the board along y (no ring through a hole) or at all.
+void FitEdges(const std::vector<Edge>& edges, const HoleModel& model, const PlaneFrame& frame,
+              EdgeFit* fit) {
+  fit->which.assign(edges.size(), -1);
+  fit->weight.assign(edges.size(), 0.0);
+  double gate = kInitialEdgeGateM;
+  fit->H.setZero();
+  fit->rms = 0.0;
+  fit->kept = 0;
+  fit->degenerate = false;
+  EdgeSums sums;
+  for (int it = 0; it < kEdgeIterations; ++it) {
+    AccumulateEdges(edges, model, frame, gate, fit, &sums);
+    if (fit->kept < kMinEdges) break;
+    fit->rms = std::sqrt(sums.sum_r2 / fit->kept);
+    // Singular: the edges do not fix the board along y (no ring through a hole) or at all.
+    const Eigen::LDLT<Eigen::Matrix3d> ldlt(fit->H);
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
+      fit->degenerate = true;
+      break;
+    }
+    const Eigen::Vector3d dx = ldlt.solve(-sums.g);
+    if (!dx.allFinite()) {
+      fit->degenerate = true;
+      break;
+    }
+    fit->pose += dx;
+    gate = std::max(kTukeyC * kMadToSigma * Median(sums.abs_r), kMinEdgeGateM);
+    fit->last_gate = gate;
+    if (dx.norm() < kConvergence) break;
+  }
+}
+
+// Needs the ROI, a pass's plane, coordinates, edges and fitted pose; gives the ROI points that
+// pose puts on paper farther than half the median ring step plus kPaperMarginM from every
+// boundary: the next pass's plane points.
+std::vector<RoiPoint> PointsOnPaper(const std::vector<RoiPoint>& roi, const Board& board,
+                                    const HoleModel& model, const PlaneFit& plane,
+                                    const PlaneFrame& frame, const std::vector<Edge>& edges,
+                                    const Eigen::Vector3d& pose) {
+  const Eigen::Vector3d n = plane.n_lidar;
+  const Eigen::Matrix2d Rt = Rotation2(pose.z()).transpose();
+  std::vector<double> step_lengths;
+  for (const Edge& e : edges) step_lengths.push_back(e.step_plane.norm());
+  const double inset = 0.5 * Median(step_lengths) + kPaperMarginM;
+  std::vector<RoiPoint> plane_points;
+  for (const RoiPoint& p : roi) {
+    const double along = n.dot(p.p_lidar);
+    if (along == 0.0) continue;
+    const Eigen::Vector3d q = (plane.d_m / along) * p.p_lidar - frame.o;
+    const Eigen::Vector2d m =
+        Rt * (Eigen::Vector2d(q.dot(frame.ex), q.dot(frame.ey)) - pose.head<2>());
+    Eigen::Vector2d grad;
+    int boundary = -1;
+    const Paint paint = board.PaintAt(m);
+    if ((paint == Paint::kWhite || paint == Paint::kBlack) &&
+        std::abs(NearestBoundary(model.holes, model.half_page, m, &grad, &boundary)) > inset) {
+      plane_points.push_back(p);
+    }
+  }
+  return plane_points;
+}
+
+// What steps 2-5b leave for the result: the last pass's plane, coordinates, edges and fit.
+struct BoardFitState {
+  PlaneFit plane;
+  PlaneFrame frame;
+  RingEdges rings;
+  EdgeFit fit;
+};
+
+// Steps 2-5b, in kPasses passes (the second refits the plane to the points on paper). Needs
+// the ROI, the model and the prior; gives the last pass's state in *state, and false (with
+// out->reason) when a pass finds no plane like the board's or too few rings on it. Fills out's
+// plane fields.
+bool FitPlaneAndEdges(const Board& board, const HoleModel& model, const Roi& roi,
+                      const Rigid3d& T_lidar_board_prior, const RoundHoleCloudOptions& options,
+                      BoardFitState* state, RoundHoleCloudDetection* out) {
+  const Eigen::Matrix3d R_prior = T_lidar_board_prior.RotationMatrix();
+  const Eigen::Vector3d n0 = R_prior.col(2);
+  std::vector<RoiPoint> plane_points = roi.points;
+  const PaperRaster raster(board);
+  for (int pass = 0; pass < kPasses; ++pass) {
+    // 2. Plane.
+    const PlaneFit& plane = state->plane = FitPlane(plane_points, n0, options.roi_depth_m);
+    out->reason = RoundHoleCloudReason::kNoPlane;
+    if (!plane.ok || plane.cutoff_m > kTukeyC * kMaxPlaneSigmaM ||
+        std::acos(std::clamp(plane.n_lidar.dot(n0), -1.0, 1.0)) > options.max_tilt_rad) {
+      return false;
+    }
+
+    // 3. Inliers moved along their rays onto the plane, in plane coordinates.
+    state->frame = MakePlaneFrame(T_lidar_board_prior, R_prior, plane);
+    const double azimuth0 = std::atan2(state->frame.o.y(), state->frame.o.x());
+    PlaneInliers inliers = ProjectInliers(roi.points, plane, state->frame, azimuth0);
+    out->plane_inliers = static_cast<int>(inliers.points.size());
+    if (out->plane_inliers < kMinPlanePoints) return false;
+    out->plane_rms_m = std::sqrt(inliers.sum_r2 / out->plane_inliers);
+    out->normal_sigma_rad = plane.normal_sigma_rad;
+    // Fewer than two rings on the board: not even the plane is determined by them.
+    if (inliers.rings < 2) {
+      out->reason = RoundHoleCloudReason::kTooFewRingsThroughHoles;
+      return false;
+    }
+
+    // 4. Edges and coarse-search samples, ring by ring.
+    state->rings = ExtractEdges(std::move(inliers.points), model.half_page,
+                                RelativeOccluders(roi.occluders, azimuth0));
+
+    // 5a. Coarse search of the in-plane pose: the most samples where the drawing agrees. The
+    // second pass starts from the first pass's pose (its plane differs by a fraction of a
+    // degree, which moves the page by a fraction of a millimetre).
+    if (pass == 0) state->fit.pose = CoarseSearch(state->rings.samples, raster, options);
+
+    // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles, from the pose.
+    FitEdges(state->rings.edges, model, state->frame, &state->fit);
+    if (state->fit.degenerate || pass + 1 == kPasses) break;
+    plane_points = PointsOnPaper(roi.points, board, model, plane, state->frame,
+                                 state->rings.edges, state->fit.pose);
+  }
+  return true;
+}
+
+// Rings through holes: gaps whose two edges both fit the same hole.
+struct HoleRings {
+  std::vector<std::set<int>> per_hole;  // the rings through each hole
+  int total = 0;                        // distinct rings through any
+};
+
+// Needs the edges and their fit; gives the rings through each hole.
+HoleRings RingsThroughHoles(const RingEdges& rings, const EdgeFit& fit, std::size_t holes) {
+  const std::vector<Edge>& edges = rings.edges;
+  HoleRings out;
+  out.per_hole.resize(holes);
+  std::set<int> rings_through;
+  for (std::size_t k = 0; k + 1 < edges.size(); ++k) {
+    if (edges[k].gap < 0 || edges[k + 1].gap != edges[k].gap) continue;
+    if (fit.weight[k] > 0.0 && fit.weight[k + 1] > 0.0 && fit.which[k] >= 0 &&
+        fit.which[k] == fit.which[k + 1]) {
+      out.per_hole[fit.which[k]].insert(rings.group_ring[edges[k].group]);
+      rings_through.insert(rings.group_ring[edges[k].group]);
+    }
+  }
+  out.total = static_cast<int>(rings_through.size());
+  return out;
+}
+
+// Needs the fitted plane, its coordinates and the in-plane pose; gives T_lidar_board.
+Rigid3d BoardPose(const PlaneFit& plane, const PlaneFrame& frame, const Eigen::Vector3d& pose) {
+  Eigen::Matrix3d R_lidar_plane;
+  R_lidar_plane << frame.ex, frame.ey, plane.n_lidar;
+  const Rigid3d T_lidar_plane(R_lidar_plane, frame.o);
+  const Rigid3d T_plane_board(
+      Eigen::Quaterniond(Eigen::AngleAxisd(pose.z(), Eigen::Vector3d::UnitZ())),
+      Eigen::Vector3d(pose.x(), pose.y(), 0.0));
+  return T_lidar_plane * T_plane_board;
+}
+
+// Covariance of the pose, board frame, (theta_x, theta_y, theta_z, t_x, t_y, t_z). Needs the
+// last pass's state and the pose it gives (T_lidar_board). Assigned in place, not returned:
+// Eigen evaluates a returned sum of products in another order, which moved the last bits.
+// In-plane (t_x, t_y, theta_z): the sandwich H^-1 B H^-1 of the edges' quantisation errors
+// (each edge uniform within half a step along its ring), through the fit's Jacobian — a ring
+// that crosses a hole near its centre hardly places the board's y, one near its top or
+// bottom does. Frames that fired at the same azimuths repeat those errors exactly, so their
+// edges count once, not once per frame.
+// The plane's error moves the in-plane pose too: by -H^-1 K dw (the rays' meeting points
+// slide across the plane as it moves, by tan(incidence) of its shift).
+void PoseCovariance(const BoardFitState& state, const Rigid3d& T_lidar_board,
+                    Eigen::Matrix<double, 6, 6>* pose_covariance) {
+  const EdgeFit& fit = state.fit;
+  const RingEdges& rings = state.rings;
+  const Eigen::Matrix3d H_inv = fit.H.inverse();
+  const double repeats = FrameRepeats(rings.group_ring, rings.group_frame, rings.group_phase);
+  // The quantisation's correlations need the boundaries' separations, which the pose places
+  // only to its own uncertainty: first without it, then with the covariance that gives.
+  Eigen::Matrix3d cov_quantisation = Eigen::Matrix3d::Zero();
+  for (int round = 0; round < 2; ++round) {
+    const Eigen::Matrix3d B_quantisation = QuantisationB(
+        rings.edges, rings.group_frame, fit.wJa, fit.true_steps, fit.steps_dpose, cov_quantisation);
+    cov_quantisation = H_inv * (fit.B + B_quantisation) * H_inv * repeats;
+  }
+  const Eigen::Matrix3d dpose_dw = -H_inv * fit.K;
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();  // (dx, dy, dtheta) -> (t_x, t_y, theta_z)
+  A.topLeftCorner<2, 2>() = Rotation2(-fit.pose.z());
+  A(2, 2) = 1.0;
+  // Out of the plane (theta_x, theta_y, t_z), from the plane fit's covariance of w = n / d:
+  // the normal moves by d (I - n n^T) dw and the plane at the board's centre c by -d c . dw.
+  const PlaneFit& plane = state.plane;
+  const Eigen::Matrix3d R_lb = T_lidar_board.RotationMatrix();
+  Eigen::Matrix3d G;
+  G.row(0) = -plane.d_m * R_lb.col(1).transpose();
+  G.row(1) = plane.d_m * R_lb.col(0).transpose();
+  G.row(2) = -plane.d_m * T_lidar_board.translation().transpose();
+  // pose error = M_q q + M_w dw for the in-plane quantisation error q and the plane's dw.
+  Eigen::Matrix<double, 6, 3> M_q = Eigen::Matrix<double, 6, 3>::Zero();
+  Eigen::Matrix<double, 6, 3> M_w = Eigen::Matrix<double, 6, 3>::Zero();
+  const std::array<int, 3> in_index = {3, 4, 2}, out_index = {0, 1, 5};
+  const Eigen::Matrix3d in_from_w = A * dpose_dw;
+  for (int a = 0; a < 3; ++a) {
+    M_q.row(in_index[a]) = A.row(a);
+    M_w.row(in_index[a]) = in_from_w.row(a);
+    M_w.row(out_index[a]) = G.row(a);
+  }
+  *pose_covariance =
+      M_q * cov_quantisation * M_q.transpose() + M_w * plane.cov_w * M_w.transpose();
+}
+
+// With kFewRingsThroughHoles or fewer rings through the holes: widens the board's y and
+// rotation variances in *pose_covariance to their profiles' (ProfileVariance). Needs the edges
+// and their fit.
+void WidenByProfiles(const std::vector<Edge>& edges, const EdgeFit& fit, const HoleModel& model,
+                     Eigen::Matrix<double, 6, 6>* pose_covariance) {
+  const Eigen::Vector3d& pose = fit.pose;
+  double reach = 0.0;
+  for (const Circle& c : model.holes) reach = std::max(reach, c.radius_m);
+  // y along the board's own y, x and rotation held: nothing else moves with it by symmetry.
+  const Eigen::Vector3d along_y(-std::sin(pose.z()), std::cos(pose.z()), 0.0);
+  const double y_profile = ProfileVariance(edges, fit.weight, model.holes, model.half_page, pose,
+                                           fit.last_gate, along_y, 1e-3, reach);
+  (*pose_covariance)(4, 4) = std::max((*pose_covariance)(4, 4), y_profile);
+  // The rotation with x and y as the fit moves them with it (H^-1's column), reaching as far
+  // as turns the outer holes by a radius.
+  const Eigen::Matrix3d H_inv = fit.H.inverse();
+  const Eigen::Vector3d with_theta = H_inv.col(2) / H_inv(2, 2);
+  double outer = 0.0;
+  for (const Circle& c : model.holes) outer = std::max(outer, c.centre_board.norm());
+  const double theta_profile = ProfileVariance(edges, fit.weight, model.holes, model.half_page,
+                                               pose, fit.last_gate, with_theta, 5e-4,
+                                               reach / outer);
+  (*pose_covariance)(2, 2) = std::max((*pose_covariance)(2, 2), theta_profile);
+}
 }  // namespace
 
 bool RoundHoleCloudOptions::Valid() const {
@@ -439,409 +1100,31 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   const Eigen::Matrix4d prior_matrix = T_lidar_board_prior.Matrix();
   if (board.type() != BoardType::kRoundHole || !options.Valid() || !prior_matrix.allFinite())
     return out;
-
-  // The model: hole circles (from the drawing) with their feature ids, and the page.
-  std::vector<Circle> holes;
-  for (const BoardFeature& f : board.features()) {
-    if (f.kind != FeatureKind::kHoleCentre) continue;
-    for (const BoardShape& s : board.shapes()) {
-      if (s.paint == Paint::kHole && (s.centre_board() - f.p_board).norm() < 0.5 * s.radius_m()) {
-        holes.push_back({f.p_board, s.radius_m(), f.id});
-      }
-    }
-  }
-  const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
+  const HoleModel model = MakeHoleModel(board);
 
   // 1. Region of interest, in the expected board frame.
   const Rigid3d T_board_lidar_prior = T_lidar_board_prior.Inverse();
-  const Eigen::Vector3d sensor_board = T_board_lidar_prior.translation();
-  std::vector<RoiPoint> roi;
-  // Returns between the sensor and the board whose rays would meet the region: occluders
-  // (another board's stand, a person), by ring and frame (frame * 2^16 + ring), azimuth.
-  std::map<int, std::vector<double>> occluders;
-  for (std::size_t f = 0; f < frames.size(); ++f) {
-    for (const RoundHoleCloudPoint& p : frames[f]) {
-      const Eigen::Vector3d p_lidar(p.x, p.y, p.z);
-      if (!p_lidar.allFinite()) continue;
-      const Eigen::Vector3d q = T_board_lidar_prior * p_lidar;
-      if (std::abs(q.x()) < half_page.x() + options.roi_margin_m &&
-          std::abs(q.y()) < half_page.y() + options.roi_margin_m &&
-          std::abs(q.z()) < options.roi_depth_m) {
-        roi.push_back({p_lidar, p.ring, static_cast<int>(f)});
-      }
-      if (q.z() > kOccluderDepthM && q.z() < sensor_board.z()) {
-        // Where its ray meets the expected plane (board z = 0).
-        const Eigen::Vector3d m =
-            sensor_board + (sensor_board.z() / (sensor_board.z() - q.z())) * (q - sensor_board);
-        if (std::abs(m.x()) < half_page.x() + options.roi_margin_m &&
-            std::abs(m.y()) < half_page.y() + options.roi_margin_m) {
-          occluders[static_cast<int>(f) * 65536 + p.ring].push_back(std::atan2(p.y, p.x));
-        }
-      }
-    }
-  }
-  out.roi_points = static_cast<int>(roi.size());
+  const Roi roi = CollectRoi(frames, T_board_lidar_prior, model.half_page, options);
+  out.roi_points = static_cast<int>(roi.points.size());
   if (out.roi_points < kMinPlanePoints) {
     out.reason = RoundHoleCloudReason::kBoardNotInRoi;
     return out;
   }
-  // One ring across the page is a line: it determines no plane, let alone the holes (a board
-  // far or small for the ring spacing). A ring crosses the page when its points span half the
-  // page's width, which a board's stand (a 6 cm post) never does.
-  std::map<int, std::pair<double, double>> ring_span_m;
-  for (const RoiPoint& p : roi) {
-    const double x = (T_board_lidar_prior * p.p_lidar).x();
-    std::pair<double, double>& span = ring_span_m.try_emplace(p.ring, x, x).first->second;
-    span = {std::min(span.first, x), std::max(span.second, x)};
-  }
-  const auto crossing = std::count_if(
-      ring_span_m.begin(), ring_span_m.end(),
-      [&](const auto& span) { return span.second.second - span.second.first > half_page.x(); });
-  if (crossing < 2) {
+  if (RingsAcrossPage(roi.points, T_board_lidar_prior, model.half_page) < 2) {
     out.reason = RoundHoleCloudReason::kTooFewRingsThroughHoles;
     return out;
   }
 
-  const Eigen::Matrix3d R_prior = T_lidar_board_prior.RotationMatrix();
-  const Eigen::Vector3d n0 = R_prior.col(2);
-  // Two passes: the second fits the plane to the points the first pass's board pose puts on
-  // paper, clear of the edges: the region also holds the board's stand, a post touching its
-  // back below the page, whose points tilt the plane by a few tenths of a degree.
-  constexpr int kPasses = 2;
-  // A point within half a ring step of an edge of the page or a hole (where the edge fit
-  // places it to) may be off the paper; the second pass's plane leaves those out, and this
-  // much more. A fixed 2 cm (a step at 6 m) left out a third of a 16-ring board's points at
-  // 3.6 m, and the normal's error grew by a fifth.
-  constexpr double kPaperMarginM = 0.003;
-  std::vector<RoiPoint> plane_points = roi;
-  PlaneFit plane;
-  Eigen::Vector3d o, ex, ey;
-  Eigen::Vector3d pose = Eigen::Vector3d::Zero();  // (x, y, theta): p_plane = R(theta) m + (x, y)
-  std::vector<Edge> edges;
-  std::vector<int> group_ring;
-  std::vector<int> group_frame;
-  std::vector<double> group_phase;  // per group with a step: see Edge::step_plane
-  std::vector<int> which;
-  std::vector<double> weight;
-  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-  // Sum of w^2 J J^T v over the edges, v the edge's quantisation variance along its normal.
-  Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
-  // Sum of w J (d r / d w): how the plane's error (w = n / d) moves the edges, which the
-  // rays put where they meet the fitted plane, and with them the in-plane pose.
-  Eigen::Matrix3d K = Eigen::Matrix3d::Zero();
-  std::vector<Eigen::Vector3d> wJa;  // per edge: w J times the step seen through its normal
-  std::vector<double> true_steps;    // per edge: where its boundary is, in steps along the ring
-  std::vector<Eigen::Vector3d> steps_dpose;  // per edge: d true_steps / d pose
-  double rms = 0.0;
-  double last_gate = kInitialEdgeGateM;  // the edge fit's last robust gate, metres
-  int kept = 0;
-  bool degenerate = false;
-  const PaperRaster raster(board);
-  for (int pass = 0; pass < kPasses; ++pass) {
-    // 2. Plane.
-    plane = FitPlane(plane_points, n0, options.roi_depth_m);
-    out.reason = RoundHoleCloudReason::kNoPlane;
-    if (!plane.ok || plane.cutoff_m > kTukeyC * kMaxPlaneSigmaM ||
-        std::acos(std::clamp(plane.n_lidar.dot(n0), -1.0, 1.0)) > options.max_tilt_rad) {
-      return out;
-    }
-    const Eigen::Vector3d n = plane.n_lidar;
+  // 2-5b. Plane, inliers on it, edges, coarse search and edge fit.
+  BoardFitState state;
+  if (!FitPlaneAndEdges(board, model, roi, T_lidar_board_prior, options, &state, &out))
+    return out;
+  const EdgeFit& fit = state.fit;
+  out.edges = fit.kept;
+  out.edge_rms_m = fit.rms;
 
-    // 3. Inliers moved along their rays onto the plane, in plane coordinates: origin at the
-    // expected page centre's foot on the plane, x along the expected x projected on it.
-    o = T_lidar_board_prior.translation() -
-        (n.dot(T_lidar_board_prior.translation()) - plane.d_m) * n;
-    ex = (R_prior.col(0) - R_prior.col(0).dot(n) * n).normalized();
-    ey = n.cross(ex);
-    // Azimuth about the spin axis (LiDAR z), relative to the expected board centre's, so that a
-    // ring's points sort in firing order whatever azimuth the rotation starts at.
-    const double azimuth0 = std::atan2(o.y(), o.x());
-    // The occluders' azimuths on the same scale, sorted.
-    std::map<int, std::vector<double>> occluder_azimuths;
-    for (const auto& [group, azimuths] : occluders) {
-      std::vector<double>& a = occluder_azimuths[group];
-      for (double az : azimuths) a.push_back(std::remainder(az - azimuth0, 2.0 * std::numbers::pi));
-      std::sort(a.begin(), a.end());
-    }
-    // True when a ray of ring-frame `group` between azimuths lo and hi hit something in front
-    // of the board: a gap there, or the ring's end, is the occluder's, not a hole's or the
-    // page's.
-    const auto occluded = [&](int group, double lo, double hi) {
-      const auto it = occluder_azimuths.find(group);
-      if (it == occluder_azimuths.end()) return false;
-      const auto first = std::upper_bound(it->second.begin(), it->second.end(), lo);
-      return first != it->second.end() && *first < hi;
-    };
-    struct InPlane {
-      Eigen::Vector2d p_plane;
-      double azimuth_rad = 0.0;
-      int group = 0;
-    };
-    std::vector<InPlane> in_plane;
-    double sum_r2 = 0.0;
-    std::set<int> plane_rings;
-    for (const RoiPoint& p : roi) {
-      const double r = RangeResidual(n / plane.d_m, p.p_lidar);
-      const double along = n.dot(p.p_lidar);
-      if (!(std::abs(r) < plane.cutoff_m)) continue;
-      sum_r2 += r * r;
-      const Eigen::Vector3d q = (plane.d_m / along) * p.p_lidar - o;
-      const double azimuth = std::remainder(std::atan2(p.p_lidar.y(), p.p_lidar.x()) - azimuth0,
-                                            2.0 * std::numbers::pi);
-      // Rings are < 2^16, so frame * 2^16 + ring names one ring of one frame.
-      in_plane.push_back(
-          {Eigen::Vector2d(q.dot(ex), q.dot(ey)), azimuth, p.frame * 65536 + p.ring});
-      plane_rings.insert(p.ring);
-    }
-    out.plane_inliers = static_cast<int>(in_plane.size());
-    if (out.plane_inliers < kMinPlanePoints) return out;
-    out.plane_rms_m = std::sqrt(sum_r2 / out.plane_inliers);
-    out.normal_sigma_rad = plane.normal_sigma_rad;
-    // Fewer than two rings on the board: not even the plane is determined by them.
-    if (plane_rings.size() < 2) {
-      out.reason = RoundHoleCloudReason::kTooFewRingsThroughHoles;
-      return out;
-    }
-
-    // 4. Edges and coarse-search samples, ring by ring.
-    std::sort(in_plane.begin(), in_plane.end(), [](const InPlane& a, const InPlane& b) {
-      return a.group != b.group ? a.group < b.group : a.azimuth_rad < b.azimuth_rad;
-    });
-    edges.clear();
-    std::vector<Sample> samples;
-    group_ring.clear();
-    group_frame.clear();
-    group_phase.clear();
-    int gaps = 0;
-    std::vector<double> steps;
-    for (std::size_t begin = 0; begin < in_plane.size();) {
-      std::size_t end = begin;
-      while (end < in_plane.size() && in_plane[end].group == in_plane[begin].group) ++end;
-      // A ring's points on the plane spanning under a tenth of the page are not the board's:
-      // the narrowest paper a ring crosses (hole to page side) is 0.12 of the page, and the
-      // stand's post (6 cm), which a LiDAR below the board sees just behind its lower edge,
-      // would otherwise give edges that pull the page down onto it.
-      const bool board_ring =
-          (in_plane[end - 1].p_plane - in_plane[begin].p_plane).norm() >= kMinRingSpanPages * 2.0 * half_page.x();
-      if (end - begin >= 2 && board_ring) {
-        const int group = static_cast<int>(group_ring.size());
-        group_ring.push_back(in_plane[begin].group % 65536);
-        group_frame.push_back(in_plane[begin].group / 65536);
-        group_phase.push_back(std::numeric_limits<double>::quiet_NaN());
-        steps.clear();
-        for (std::size_t i = begin + 1; i < end; ++i)
-          steps.push_back(in_plane[i].azimuth_rad - in_plane[i - 1].azimuth_rad);
-        const double step = Median(steps);
-        if (step > 0.0) {
-          // One azimuth step of the ring at point a, towards b, in the plane.
-          const auto step_vector = [&](std::size_t a, std::size_t b) {
-            const double da = in_plane[b].azimuth_rad - in_plane[a].azimuth_rad;
-            return Eigen::Vector2d((in_plane[b].p_plane - in_plane[a].p_plane) * (step / da));
-          };
-          const Eigen::Vector2d first_step = step_vector(begin, begin + 1);
-          const Eigen::Vector2d last_step = step_vector(end - 2, end - 1);
-          const double a0 = in_plane[begin].azimuth_rad;
-          const auto steps_along = [&](std::size_t i, double half) {
-            return (in_plane[i].azimuth_rad - a0) / step + half;
-          };
-          const int key = in_plane[begin].group;
-          const double reach = kEndSamples * step;
-          const bool start_hidden = occluded(key, a0 - reach, a0);
-          const bool end_hidden =
-              occluded(key, in_plane[end - 1].azimuth_rad, in_plane[end - 1].azimuth_rad + reach);
-          if (!start_hidden)
-            edges.push_back({in_plane[begin].p_plane - 0.5 * first_step, group, -1, first_step, -0.5});
-          if (!end_hidden) {
-            edges.push_back({in_plane[end - 1].p_plane + 0.5 * last_step, group, -1, last_step,
-                             steps_along(end - 1, 0.5)});
-          }
-          // The ring's azimuth phase in this frame: whether the frames fired at the same
-          // azimuths (then their edges share their quantisation errors).
-          std::complex<double> phasor = 0.0;
-          for (std::size_t i = begin; i < end; ++i)
-            phasor += std::polar(1.0, 2.0 * std::numbers::pi * in_plane[i].azimuth_rad / step);
-          group_phase.back() = std::arg(phasor) / (2.0 * std::numbers::pi);
-          for (int k = 1; k <= kEndSamples; ++k) {
-            if (!start_hidden) samples.push_back({in_plane[begin].p_plane - k * first_step, false});
-            if (!end_hidden) samples.push_back({in_plane[end - 1].p_plane + k * last_step, false});
-          }
-          for (std::size_t i = begin; i < end; ++i) {
-            samples.push_back({in_plane[i].p_plane, true});
-            if (i + 1 == end) break;
-            const double da = in_plane[i + 1].azimuth_rad - in_plane[i].azimuth_rad;
-            if (da <= kGapSteps * step ||
-                occluded(key, in_plane[i].azimuth_rad, in_plane[i + 1].azimuth_rad)) {
-              continue;
-            }
-            const Eigen::Vector2d s = step_vector(i, i + 1);
-            edges.push_back({in_plane[i].p_plane + 0.5 * s, group, gaps, s, steps_along(i, 0.5)});
-            edges.push_back(
-                {in_plane[i + 1].p_plane - 0.5 * s, group, gaps, s, steps_along(i + 1, -0.5)});
-            ++gaps;
-            const int missing =
-                static_cast<int>(std::min<double>(std::lround(da / step) - 1, kMaxGapSamples));
-            for (int k = 1; k <= missing; ++k)
-              samples.push_back({in_plane[i].p_plane + k * s, false});
-          }
-        }
-      }
-      begin = end;
-    }
-
-    // 5a. Coarse search of the in-plane pose: the most samples where the drawing agrees. The
-    // second pass starts from the first pass's pose (its plane differs by a fraction of a
-    // degree, which moves the page by a fraction of a millimetre).
-    if (pass == 0) {
-      const std::size_t stride = samples.size() / kMaxSamples + 1;
-      const int shifts = static_cast<int>(options.max_in_plane_shift_m / kShiftStepM);
-      const int rotations = static_cast<int>(options.max_in_plane_rotation_rad / kRotationStepRad);
-      int best_score = -1;
-      double best_distance = 0.0;
-      for (int ir = -rotations; ir <= rotations; ++ir) {
-        const Eigen::Matrix2d Rt = Rotation2(ir * kRotationStepRad).transpose();
-        for (int ix = -shifts; ix <= shifts; ++ix) {
-          for (int iy = -shifts; iy <= shifts; ++iy) {
-            const Eigen::Vector2d t(ix * kShiftStepM, iy * kShiftStepM);
-            int score = 0;
-            for (std::size_t i = 0; i < samples.size(); i += stride) {
-              score += raster.PaperAt(Rt * (samples[i].p_plane - t)) == samples[i].paper ? 1 : 0;
-            }
-            // Ties go to the pose nearest the prior (1 radian weighs as 1 m).
-            const double distance = t.squaredNorm() + std::pow(ir * kRotationStepRad, 2);
-            if (score > best_score || (score == best_score && distance < best_distance)) {
-              best_score = score;
-              best_distance = distance;
-              pose = Eigen::Vector3d(t.x(), t.y(), ir * kRotationStepRad);
-            }
-          }
-        }
-      }
-    }
-
-    // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles, from `pose`.
-    const auto fit_edges = [&]() {
-    which.assign(edges.size(), -1);
-    weight.assign(edges.size(), 0.0);
-    double gate = kInitialEdgeGateM;
-    H.setZero();
-    rms = 0.0;
-    kept = 0;
-    degenerate = false;
-    std::vector<double> abs_r;
-    for (int it = 0; it < kEdgeIterations; ++it) {
-      const Eigen::Matrix2d R = Rotation2(pose.z());
-      // d(R^T)/d(theta).
-      Eigen::Matrix2d dRt;
-      dRt << -std::sin(pose.z()), std::cos(pose.z()), -std::cos(pose.z()), -std::sin(pose.z());
-      H.setZero();
-      B.setZero();
-      K.setZero();
-      wJa.assign(edges.size(), Eigen::Vector3d::Zero());
-      true_steps.assign(edges.size(), 0.0);
-      steps_dpose.assign(edges.size(), Eigen::Vector3d::Zero());
-      Eigen::Vector3d g = Eigen::Vector3d::Zero();
-      abs_r.clear();
-      double sum_r2_edges = 0.0;
-      kept = 0;
-      for (std::size_t k = 0; k < edges.size(); ++k) {
-        const Eigen::Vector2d e = edges[k].p_plane - pose.head<2>();
-        Eigen::Vector2d grad;
-        const double r = NearestBoundary(holes, half_page, R.transpose() * e, &grad, &which[k]);
-        weight[k] = 0.0;
-        // The edge moves along its ring by up to half a step, seen through the boundary's
-        // normal: only what lies beyond that can be an outlier (a chord through a stand's
-        // post, an occluder, an edge of the wrong hole). Gating the residual itself dropped
-        // and down-weighted edges at their quantisation's extremes, and the fit then swung
-        // on the rest (the rotation by up to a degree on a 16-ring board).
-        const double along = grad.dot(R.transpose() * edges[k].step_plane);
-        const double excess = std::max(std::abs(r) - 0.5 * std::abs(along), 0.0);
-        if (excess >= gate) continue;
-        abs_r.push_back(excess);
-        const double u = excess / gate;
-        weight[k] = (1.0 - u * u) * (1.0 - u * u);
-        Eigen::Vector3d J;
-        J.head<2>() = -(R * grad);
-        J.z() = grad.dot(dRt * e);
-        H += weight[k] * J * J.transpose();
-        g += weight[k] * J * r;
-        // Beyond the quantisation (below), what the edge's residual shows past the half step
-        // (a chord grazing a hole, where the model is far from linear), and a floor. Not
-        // r^2 - step^2 / 12: a quantisation error exceeds its RMS 42% of the time, and that
-        // would count it twice.
-        B += weight[k] * weight[k] * (excess * excess + kEdgeFloorVarM2) * J * J.transpose();
-        wJa[k] = weight[k] * along * J;
-        // How the boundary's crossing of the ring (in steps) moves with the pose.
-        steps_dpose[k] = std::abs(along) > kMinAlongM
-                             ? Eigen::Vector3d(-J / along)
-                             : Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-        // Where the fitted boundary crosses the ring, in steps: the edge moved by the residual
-        // along the ring (at most the half step it can be off by).
-        true_steps[k] = edges[k].steps_along -
-                        (std::abs(along) > 0.0 ? std::clamp(r / along, -0.5, 0.5) : 0.0);
-        // A ray meets the plane w . p = 1 at p = ray / (w . ray): dp / dw = -p p^T; the edge
-        // residual sees the in-plane part of that through the boundary's normal.
-        const Eigen::Vector3d p_edge = o + edges[k].p_plane.x() * ex + edges[k].p_plane.y() * ey;
-        const Eigen::Vector2d normal_plane = R * grad;
-        const Eigen::Vector3d normal_lidar = normal_plane.x() * ex + normal_plane.y() * ey;
-        K -= weight[k] * J * (normal_lidar.dot(p_edge) * p_edge.transpose());
-        sum_r2_edges += r * r;
-        ++kept;
-      }
-      if (kept < kMinEdges) break;
-      rms = std::sqrt(sum_r2_edges / kept);
-      // Singular: the edges do not fix the board along y (no ring through a hole) or at all.
-      const Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
-      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
-        degenerate = true;
-        break;
-      }
-      const Eigen::Vector3d dx = ldlt.solve(-g);
-      if (!dx.allFinite()) {
-        degenerate = true;
-        break;
-      }
-      pose += dx;
-      gate = std::max(kTukeyC * kMadToSigma * Median(abs_r), kMinEdgeGateM);
-      last_gate = gate;
-      if (dx.norm() < kConvergence) break;
-    }
-    };
-    fit_edges();
-    if (degenerate || pass + 1 == kPasses) break;
-    // The points on paper, by the board pose of this pass, for the next pass's plane.
-    const Eigen::Matrix2d Rt = Rotation2(pose.z()).transpose();
-    std::vector<double> step_lengths;
-    for (const Edge& e : edges) step_lengths.push_back(e.step_plane.norm());
-    const double inset = 0.5 * Median(step_lengths) + kPaperMarginM;
-    plane_points.clear();
-    for (const RoiPoint& p : roi) {
-      const double along = n.dot(p.p_lidar);
-      if (along == 0.0) continue;
-      const Eigen::Vector3d q = (plane.d_m / along) * p.p_lidar - o;
-      const Eigen::Vector2d m = Rt * (Eigen::Vector2d(q.dot(ex), q.dot(ey)) - pose.head<2>());
-      Eigen::Vector2d grad;
-      int boundary = -1;
-      const Paint paint = board.PaintAt(m);
-      if ((paint == Paint::kWhite || paint == Paint::kBlack) &&
-          std::abs(NearestBoundary(holes, half_page, m, &grad, &boundary)) > inset) {
-        plane_points.push_back(p);
-      }
-    }
-  }
-  out.edges = kept;
-  out.edge_rms_m = rms;
-
-  // Rings through holes: gaps whose two edges both fit the same hole.
-  std::vector<std::set<int>> hole_rings(holes.size());
-  std::set<int> rings_through;
-  for (std::size_t k = 0; k + 1 < edges.size(); ++k) {
-    if (edges[k].gap < 0 || edges[k + 1].gap != edges[k].gap) continue;
-    if (weight[k] > 0.0 && weight[k + 1] > 0.0 && which[k] >= 0 && which[k] == which[k + 1]) {
-      hole_rings[which[k]].insert(group_ring[edges[k].group]);
-      rings_through.insert(group_ring[edges[k].group]);
-    }
-  }
-  out.rings_through_holes = static_cast<int>(rings_through.size());
+  const HoleRings hole_rings = RingsThroughHoles(state.rings, fit, model.holes.size());
+  out.rings_through_holes = hole_rings.total;
   if (out.rings_through_holes < options.min_rings_through_holes) {
     out.reason = RoundHoleCloudReason::kTooFewRingsThroughHoles;
     return out;
@@ -849,83 +1132,22 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
   out.reason = RoundHoleCloudReason::kFitFailed;
   // An edge fit that left the coarse search's range by as much again has slid onto wrong
   // associations (edges of one hole on another).
-  if (degenerate || kept < kMinEdges || rms > kMaxEdgeRmsM ||
-      pose.head<2>().norm() > 2.0 * options.max_in_plane_shift_m) {
+  if (fit.degenerate || fit.kept < kMinEdges || fit.rms > kMaxEdgeRmsM ||
+      fit.pose.head<2>().norm() > 2.0 * options.max_in_plane_shift_m) {
     return out;
   }
-  Eigen::Matrix3d R_lidar_plane;
-  R_lidar_plane << ex, ey, plane.n_lidar;
-  const Rigid3d T_lidar_plane(R_lidar_plane, o);
-  const Rigid3d T_plane_board(
-      Eigen::Quaterniond(Eigen::AngleAxisd(pose.z(), Eigen::Vector3d::UnitZ())),
-      Eigen::Vector3d(pose.x(), pose.y(), 0.0));
-  out.T_lidar_board = T_lidar_plane * T_plane_board;
-
-  // Covariance of the pose, board frame, (theta_x, theta_y, theta_z, t_x, t_y, t_z).
-  // In-plane (t_x, t_y, theta_z): the sandwich H^-1 B H^-1 of the edges' quantisation errors
-  // (each edge uniform within half a step along its ring), through the fit's Jacobian — a ring
-  // that crosses a hole near its centre hardly places the board's y, one near its top or
-  // bottom does. Frames that fired at the same azimuths repeat those errors exactly, so their
-  // edges count once, not once per frame.
-  // The plane's error moves the in-plane pose too: by -H^-1 K dw (the rays' meeting points
-  // slide across the plane as it moves, by tan(incidence) of its shift).
-  const Eigen::Matrix3d H_inv = H.inverse();
-  const double repeats = FrameRepeats(group_ring, group_frame, group_phase);
-  // The quantisation's correlations need the boundaries' separations, which the pose places
-  // only to its own uncertainty: first without it, then with the covariance that gives.
-  Eigen::Matrix3d cov_quantisation = Eigen::Matrix3d::Zero();
-  for (int round = 0; round < 2; ++round) {
-    const Eigen::Matrix3d B_quantisation =
-        QuantisationB(edges, group_frame, wJa, true_steps, steps_dpose, cov_quantisation);
-    cov_quantisation = H_inv * (B + B_quantisation) * H_inv * repeats;
-  }
-  const Eigen::Matrix3d dpose_dw = -H_inv * K;
-  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();  // (dx, dy, dtheta) -> (t_x, t_y, theta_z)
-  A.topLeftCorner<2, 2>() = Rotation2(-pose.z());
-  A(2, 2) = 1.0;
-  // Out of the plane (theta_x, theta_y, t_z), from the plane fit's covariance of w = n / d:
-  // the normal moves by d (I - n n^T) dw and the plane at the board's centre c by -d c . dw.
-  const Eigen::Matrix3d R_lb = out.T_lidar_board.RotationMatrix();
-  Eigen::Matrix3d G;
-  G.row(0) = -plane.d_m * R_lb.col(1).transpose();
-  G.row(1) = plane.d_m * R_lb.col(0).transpose();
-  G.row(2) = -plane.d_m * out.T_lidar_board.translation().transpose();
-  // pose error = M_q q + M_w dw for the in-plane quantisation error q and the plane's dw.
-  Eigen::Matrix<double, 6, 3> M_q = Eigen::Matrix<double, 6, 3>::Zero();
-  Eigen::Matrix<double, 6, 3> M_w = Eigen::Matrix<double, 6, 3>::Zero();
-  const std::array<int, 3> in_index = {3, 4, 2}, out_index = {0, 1, 5};
-  const Eigen::Matrix3d in_from_w = A * dpose_dw;
-  for (int a = 0; a < 3; ++a) {
-    M_q.row(in_index[a]) = A.row(a);
-    M_w.row(in_index[a]) = in_from_w.row(a);
-    M_w.row(out_index[a]) = G.row(a);
-  }
-  out.pose_covariance =
-      M_q * cov_quantisation * M_q.transpose() + M_w * plane.cov_w * M_w.transpose();
-  if (out.rings_through_holes <= kFewRingsThroughHoles) {
-    double reach = 0.0;
-    for (const Circle& c : holes) reach = std::max(reach, c.radius_m);
-    // y along the board's own y, x and rotation held: nothing else moves with it by symmetry.
-    const Eigen::Vector3d along_y(-std::sin(pose.z()), std::cos(pose.z()), 0.0);
-    const double y_profile =
-        ProfileVariance(edges, weight, holes, half_page, pose, last_gate, along_y, 1e-3, reach);
-    out.pose_covariance(4, 4) = std::max(out.pose_covariance(4, 4), y_profile);
-    // The rotation with x and y as the fit moves them with it (H^-1's column), reaching as far
-    // as turns the outer holes by a radius.
-    const Eigen::Vector3d with_theta = H_inv.col(2) / H_inv(2, 2);
-    double outer = 0.0;
-    for (const Circle& c : holes) outer = std::max(outer, c.centre_board.norm());
-    const double theta_profile = ProfileVariance(edges, weight, holes, half_page, pose, last_gate,
-                                                 with_theta, 5e-4, reach / outer);
-    out.pose_covariance(2, 2) = std::max(out.pose_covariance(2, 2), theta_profile);
-  }
+  out.T_lidar_board = BoardPose(state.plane, state.frame, fit.pose);
+  PoseCovariance(state, out.T_lidar_board, &out.pose_covariance);
+  if (out.rings_through_holes <= kFewRingsThroughHoles)
+    WidenByProfiles(state.rings.edges, fit, model, &out.pose_covariance);
   const Eigen::Matrix2d cov_in = out.pose_covariance.block<2, 2>(3, 3);
   out.in_plane_sigma_m = Eigen::Vector2d(std::sqrt(cov_in(0, 0)), std::sqrt(cov_in(1, 1)));
-  for (std::size_t i = 0; i < holes.size(); ++i) {
-    out.holes.push_back({holes[i].id,
-                         out.T_lidar_board * Eigen::Vector3d(holes[i].centre_board.x(),
-                                                             holes[i].centre_board.y(), 0.0),
-                         static_cast<int>(hole_rings[i].size())});
+  for (std::size_t i = 0; i < model.holes.size(); ++i) {
+    const Circle& hole = model.holes[i];
+    out.holes.push_back(
+        {hole.id,
+         out.T_lidar_board * Eigen::Vector3d(hole.centre_board.x(), hole.centre_board.y(), 0.0),
+         static_cast<int>(hole_rings.per_hole[i].size())});
   }
   out.found = true;
   out.reason = RoundHoleCloudReason::kNone;

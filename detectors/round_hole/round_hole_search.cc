@@ -8,6 +8,7 @@
 #include <map>
 #include <numbers>
 #include <numeric>
+#include <optional>
 #include <set>
 #include <unordered_map>
 
@@ -260,6 +261,311 @@ std::vector<RoundHoleBoardFit> RankFits(const std::vector<RoundHoleCloudDetectio
   return ranked;
 }
 
+
+using CellMap = std::unordered_map<CellKey, Cell, CellKeyHash>;
+
+// The points the search looks at: every stride-th point of one frame, in range.
+struct SearchPoints {
+  std::vector<Eigen::Vector3d> pts;
+  std::vector<int> rings;  // per point
+};
+
+// Needs the frames and the options' range; gives the first frame with points in range, every
+// stride-th point of it: a denser frame than kMaxSearchPoints (a 64-ring rotation holds 115k)
+// only adds cost. Empty when no frame has a point in range.
+SearchPoints SelectSearchPoints(std::span<const std::span<const RoundHoleCloudPoint>> frames,
+                                const RoundHoleSearchOptions& options) {
+  SearchPoints points;
+  for (const auto& frame : frames) {
+    const std::size_t stride = frame.size() / kMaxSearchPoints + 1;
+    for (std::size_t k = 0; k < frame.size(); k += stride) {
+      const RoundHoleCloudPoint& p = frame[k];
+      const Eigen::Vector3d q(p.x, p.y, p.z);
+      const double r = q.norm();
+      if (!std::isfinite(r) || r < options.min_range_m || r > options.max_range_m) continue;
+      points.pts.push_back(q);
+      points.rings.push_back(p.ring);
+    }
+    if (!points.pts.empty()) break;
+  }
+  return points;
+}
+
+// The cube of side cell_m that holds q.
+CellKey KeyOf(const Eigen::Vector3d& q, double cell_m) {
+  return CellKey{static_cast<int>(std::floor(q.x() / cell_m)),
+                 static_cast<int>(std::floor(q.y() / cell_m)),
+                 static_cast<int>(std::floor(q.z() / cell_m))};
+}
+
+// Step 1. Needs the search points and the cube size; gives the cubes with their points, those
+// whose neighbourhood (the cube and its 26 neighbours) is flat, spread across two rings or
+// more and holds most of the cube's points marked flat with the plane's normal (towards the
+// sensor) and centroid. *flat_cells: how many.
+CellMap FlatCells(const SearchPoints& points, double cell_m, int* flat_cells) {
+  const std::vector<Eigen::Vector3d>& pts = points.pts;
+  CellMap cells;
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    cells[KeyOf(pts[i], cell_m)].points.push_back(int(i));
+  std::vector<int> neighbourhood;
+  for (auto& [key, cell] : cells) {
+    if (cell.points.size() < 3) continue;
+    neighbourhood.clear();
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = cells.find({key.x + dx, key.y + dy, key.z + dz});
+          if (it != cells.end())
+            neighbourhood.insert(neighbourhood.end(), it->second.points.begin(),
+                                 it->second.points.end());
+        }
+    const LocalPlane plane = FitLocalPlane(pts, neighbourhood);
+    if (!plane.ok || plane.major(1) < kMinMinorSpreadM) continue;
+    std::set<int> plane_rings;
+    for (int i : plane.inliers) plane_rings.insert(points.rings[i]);
+    if (plane_rings.size() < 2) continue;
+    const auto own_on_plane = std::count_if(cell.points.begin(), cell.points.end(), [&](int i) {
+      return std::abs(plane.normal.dot(pts[i] - plane.centroid)) < plane.gate_m;
+    });
+    if (2 * own_on_plane < static_cast<std::ptrdiff_t>(cell.points.size())) continue;
+    cell.flat = true;
+    cell.normal = plane.normal.dot(plane.centroid) > 0.0 ? -plane.normal : plane.normal;
+    cell.centroid = plane.centroid;
+    ++*flat_cells;
+  }
+  return cells;
+}
+
+// Step 2. Needs the cubes of step 1; gives the patches, flat cubes joined breadth-first through
+// flat neighbours on the same plane (kPatchCosAngle, kPatchOffsetM), and sets each cube's
+// patch.
+std::vector<std::vector<Cell*>> JoinPatches(CellMap* cells) {
+  std::vector<std::vector<Cell*>> patches;
+  for (auto& [key, cell] : *cells) {
+    if (!cell.flat || cell.patch >= 0) continue;
+    const int id = static_cast<int>(patches.size());
+    std::vector<Cell*>& patch = patches.emplace_back();
+    std::deque<std::pair<CellKey, Cell*>> queue = {{key, &cell}};
+    cell.patch = id;
+    while (!queue.empty()) {
+      const auto [k, c] = queue.front();
+      queue.pop_front();
+      patch.push_back(c);
+      for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dz = -1; dz <= 1; ++dz) {
+            const CellKey nk{k.x + dx, k.y + dy, k.z + dz};
+            const auto it = cells->find(nk);
+            if (it == cells->end() || !it->second.flat || it->second.patch >= 0) continue;
+            Cell& n = it->second;
+            if (n.normal.dot(c->normal) < kPatchCosAngle ||
+                std::abs(c->normal.dot(n.centroid - c->centroid)) > kPatchOffsetM ||
+                std::abs(n.normal.dot(c->centroid - n.centroid)) > kPatchOffsetM) {
+              continue;
+            }
+            n.patch = id;
+            queue.push_back({nk, &n});
+          }
+    }
+  }
+  return patches;
+}
+
+// A patch's plane with the axes of an upright board facing the sensor on it, and the extent
+// of its inliers along them from the centroid.
+struct PatchFrame {
+  LocalPlane plane;
+  Eigen::Vector3d n, ex, ey;  // z towards the sensor, y up the spin axis, x = y cross z
+  double lo_x = 1e9, hi_x = -1e9, lo_y = 1e9, hi_y = -1e9;
+};
+
+// Needs a patch and the page size; gives its plane and axes, or nothing for a patch whose plane
+// fails, a floor (kMaxNormalZ), one far larger than the page (a wall) or far narrower.
+std::optional<PatchFrame> FramePatch(const std::vector<Cell*>& patch,
+                                     const std::vector<Eigen::Vector3d>& pts,
+                                     const Eigen::Vector2d& page) {
+  std::vector<int> members;
+  for (const Cell* c : patch) members.insert(members.end(), c->points.begin(), c->points.end());
+  PatchFrame f;
+  f.plane = FitLocalPlane(pts, members);
+  const LocalPlane& plane = f.plane;
+  if (!plane.ok) return std::nullopt;
+  f.n = plane.normal.dot(plane.centroid) > 0.0 ? -plane.normal : plane.normal;
+  if (std::abs(f.n.z()) > kMaxNormalZ) return std::nullopt;
+  // Board axes of an upright board facing the sensor: y up the spin axis projected onto the
+  // plane, z the normal towards the sensor, x = y cross z.
+  f.ey = (Eigen::Vector3d::UnitZ() - f.n.z() * f.n).normalized();
+  f.ex = f.ey.cross(f.n);
+  for (int i : plane.inliers) {
+    const Eigen::Vector3d d = pts[i] - plane.centroid;
+    f.lo_x = std::min(f.lo_x, d.dot(f.ex));
+    f.hi_x = std::max(f.hi_x, d.dot(f.ex));
+    f.lo_y = std::min(f.lo_y, d.dot(f.ey));
+    f.hi_y = std::max(f.hi_y, d.dot(f.ey));
+  }
+  // A patch far larger than the page is a wall or a floor; skip the gathering.
+  // One far narrower than its rings' span on the page is not a board either.
+  if (f.hi_x - f.lo_x > 2.0 * page.x() || f.hi_y - f.lo_y > 2.0 * page.y() ||
+      f.hi_x - f.lo_x < 0.5 * page.x()) {
+    return std::nullopt;
+  }
+  return f;
+}
+
+// One ring's points near a patch's plane, in its axes.
+struct RingOnPlane {
+  std::vector<double> x, y;
+};
+
+// Needs a patch's frame, the search points and the cubes; gives every point of the frame near
+// the plane (kGatherDepthM) and the patch (kGatherMarginM), per ring, but those on another
+// plane (OnAnotherPlane).
+std::map<int, RingOnPlane> GatherRings(const PatchFrame& f, const SearchPoints& points,
+                                       const CellMap& cells, double cell_m) {
+  const std::vector<Eigen::Vector3d>& pts = points.pts;
+  std::map<int, RingOnPlane> ring_points;
+  const double reach2 = std::pow(f.hi_x - f.lo_x + f.hi_y - f.lo_y + 2.0 * kGatherMarginM, 2);
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const Eigen::Vector3d d = pts[i] - f.plane.centroid;
+    if (d.squaredNorm() > reach2) continue;
+    if (OnAnotherPlane(cells, KeyOf(pts[i], cell_m), pts[i], f.n)) continue;
+    const double x = d.dot(f.ex), y = d.dot(f.ey);
+    if (std::abs(d.dot(f.n)) > kGatherDepthM || x < f.lo_x - kGatherMarginM ||
+        x > f.hi_x + kGatherMarginM || y < f.lo_y - kGatherMarginM ||
+        y > f.hi_y + kGatherMarginM) {
+      continue;
+    }
+    RingOnPlane& ring = ring_points[points.rings[i]];
+    ring.x.push_back(x);
+    ring.y.push_back(y);
+  }
+  return ring_points;
+}
+
+// The rings that cross the page: each one's width, mid-point across and median height, and how
+// many show a hole's chord.
+struct RingCrossings {
+  std::vector<double> widths, mids, ys;
+  int rings_with_gap = 0;
+};
+
+// Needs a patch's rings (their x sorted here), the page and the widest hole chord; gives the
+// rings whose span is the page's width (kMaxWidthRatio) and which of them show a gap a hole
+// would leave.
+RingCrossings CrossingRings(std::map<int, RingOnPlane>* ring_points, const Eigen::Vector2d& page,
+                            double max_hole_chord) {
+  RingCrossings out;
+  for (auto& [ring, on_plane] : *ring_points) {
+    std::sort(on_plane.x.begin(), on_plane.x.end());
+    const double width = on_plane.x.back() - on_plane.x.front();
+    // Wider than the page: not the board's (the floor's rings along the plane's foot).
+    if (width < 0.5 * page.x() || width > kMaxWidthRatio * page.x()) continue;
+    out.widths.push_back(width);
+    out.mids.push_back(0.5 * (on_plane.x.front() + on_plane.x.back()));
+    out.ys.push_back(Median(on_plane.y));
+    // A hole's chord: a gap along the ring wider than 2.5 of its point spacings (and 4 cm),
+    // narrower than a hole.
+    std::vector<double> spacing(on_plane.x.size() - 1);
+    for (std::size_t k = 1; k < on_plane.x.size(); ++k)
+      spacing[k - 1] = on_plane.x[k] - on_plane.x[k - 1];
+    const double min_gap = std::max(2.5 * Median(spacing), kMinHoleChordM);
+    out.rings_with_gap += std::any_of(spacing.begin(), spacing.end(),
+                                      [&](double g) { return g > min_gap && g < max_hole_chord; })
+                              ? 1
+                              : 0;
+  }
+  return out;
+}
+
+// Step 3 for one patch. Needs the patch, the search points, the cubes, the page and the widest
+// hole chord (plus kMinHoleChordM); gives the candidate when the patch is board-sized (its
+// crossing rings as wide as the page, no taller) with enough rings crossing a hole, and sets
+// *board_sized when it is board-sized at all.
+std::optional<Candidate> CandidateOfPatch(const std::vector<Cell*>& patch,
+                                          const SearchPoints& points, const CellMap& cells,
+                                          const Eigen::Vector2d& page, double max_hole_chord,
+                                          const RoundHoleSearchOptions& options,
+                                          bool* board_sized) {
+  *board_sized = false;
+  const std::optional<PatchFrame> f = FramePatch(patch, points.pts, page);
+  if (!f.has_value()) return std::nullopt;
+  std::map<int, RingOnPlane> ring_points = GatherRings(*f, points, cells, options.cell_m);
+  const RingCrossings crossing = CrossingRings(&ring_points, page, max_hole_chord);
+  if (crossing.widths.size() < 2) return std::nullopt;
+  const double width = Median(crossing.widths);
+  if (width < kMinWidthRatio * page.x() || width > kMaxWidthRatio * page.x()) return std::nullopt;
+  const auto [y_lo, y_hi] = std::minmax_element(crossing.ys.begin(), crossing.ys.end());
+  const double height = *y_hi - *y_lo;
+  if (height > kMaxHeightRatio * page.y()) return std::nullopt;
+  *board_sized = true;
+  // Fewer rings cross a hole than the whole-board fit needs: a plain panel, not worth it.
+  if (crossing.rings_with_gap < options.fit.min_rings_through_holes) return std::nullopt;
+  // The centre: the crossing rings' mid-points across, the middle of the outermost crossing
+  // rings up; the page's true top and bottom lie up to a ring spacing beyond them, which is
+  // what the vertical shift range must cover.
+  const Eigen::Vector3d centre =
+      f->plane.centroid + Median(crossing.mids) * f->ex + 0.5 * (*y_lo + *y_hi) * f->ey;
+  Eigen::Matrix3d R;
+  R << f->ex, f->ey, f->n;
+  Candidate c;
+  c.T_lidar_board = Rigid3d(R, centre);
+  c.shift_range_m =
+      std::max(options.fit.max_in_plane_shift_m,
+               std::min(0.5 * std::max(page.y() - height, 0.0) + 0.04, kMaxShiftRangeM));
+  c.width_error = std::abs(width / page.x() - 1.0);
+  return c;
+}
+
+// Step 4's result: the distinct boards found with empty holes, and the failure that got
+// furthest.
+struct FittedBoards {
+  std::vector<RoundHoleCloudDetection> boards;
+  std::vector<double> fills;  // per board: HoleGeometry::Fill
+  RoundHoleCloudDetection best_failure;
+  bool have_failure = false;
+};
+
+// Step 4. Needs the candidates; gives the whole-board fit from each, kept when found with
+// empty holes (kMaxHoleFill); a board found twice (kSameBoardPages) keeps its better fit. The
+// failure kept is the one with most edges fitted.
+FittedBoards FitCandidates(const Board& board,
+                           std::span<const std::span<const RoundHoleCloudPoint>> frames,
+                           const std::vector<Candidate>& candidates,
+                           const RoundHoleSearchOptions& options, const Eigen::Vector2d& page) {
+  const HoleGeometry holes(board, page);
+  FittedBoards out;
+  std::vector<RoundHoleCloudDetection>& boards = out.boards;
+  for (const Candidate& c : candidates) {
+    RoundHoleCloudOptions fit = options.fit;
+    fit.max_in_plane_shift_m = c.shift_range_m;
+    RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(board, frames, c.T_lidar_board, fit);
+    if (d.found) {
+      const double fill = holes.Fill(frames, d);
+      if (fill <= kMaxHoleFill) {
+        const auto same = std::find_if(boards.begin(), boards.end(), [&](const auto& b) {
+          return (b.T_lidar_board.translation() - d.T_lidar_board.translation()).norm() <
+                 kSameBoardPages * page.x();
+        });
+        if (same == boards.end()) {
+          boards.push_back(std::move(d));
+          out.fills.push_back(fill);
+        } else if (d.edge_rms_m < same->edge_rms_m) {
+          *same = std::move(d);
+          out.fills[same - boards.begin()] = fill;
+        }
+        continue;
+      }
+      d.found = false;
+      d.reason = RoundHoleCloudReason::kFitFailed;
+    }
+    // The failure that got furthest: most edges fitted.
+    if (!out.have_failure || d.edges > out.best_failure.edges) {
+      out.best_failure = std::move(d);
+      out.have_failure = true;
+    }
+  }
+  return out;
+}
 }  // namespace
 
 bool RoundHoleSearchOptions::Valid() const {
@@ -335,90 +641,15 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
   RoundHoleSearchResult out;
   if (board.type() != BoardType::kRoundHole || !options.Valid()) return out;
   const Eigen::Vector2d page = board.page_size_m();
-
-  // The first frame with points in range is searched for patches, every stride-th point of
-  // it: a denser frame than kMaxSearchPoints (a 64-ring rotation holds 115k) only adds cost.
-  std::vector<Eigen::Vector3d> pts;
-  std::vector<int> rings;
-  for (const auto& frame : frames) {
-    const std::size_t stride = frame.size() / kMaxSearchPoints + 1;
-    for (std::size_t k = 0; k < frame.size(); k += stride) {
-      const RoundHoleCloudPoint& p = frame[k];
-      const Eigen::Vector3d q(p.x, p.y, p.z);
-      const double r = q.norm();
-      if (!std::isfinite(r) || r < options.min_range_m || r > options.max_range_m) continue;
-      pts.push_back(q);
-      rings.push_back(p.ring);
-    }
-    if (!pts.empty()) break;
-  }
+  const SearchPoints points = SelectSearchPoints(frames, options);
   out.reason = RoundHoleSearchReason::kNoPoints;
-  if (pts.empty()) return out;
+  if (points.pts.empty()) return out;
 
   // 1. Cubes and their neighbourhoods' planes.
-  std::unordered_map<CellKey, Cell, CellKeyHash> cells;
-  const auto key_of = [&](const Eigen::Vector3d& q) {
-    return CellKey{static_cast<int>(std::floor(q.x() / options.cell_m)),
-                   static_cast<int>(std::floor(q.y() / options.cell_m)),
-                   static_cast<int>(std::floor(q.z() / options.cell_m))};
-  };
-  for (std::size_t i = 0; i < pts.size(); ++i) cells[key_of(pts[i])].points.push_back(int(i));
-  std::vector<int> neighbourhood;
-  for (auto& [key, cell] : cells) {
-    if (cell.points.size() < 3) continue;
-    neighbourhood.clear();
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          const auto it = cells.find({key.x + dx, key.y + dy, key.z + dz});
-          if (it != cells.end())
-            neighbourhood.insert(neighbourhood.end(), it->second.points.begin(),
-                                 it->second.points.end());
-        }
-    const LocalPlane plane = FitLocalPlane(pts, neighbourhood);
-    if (!plane.ok || plane.major(1) < kMinMinorSpreadM) continue;
-    std::set<int> plane_rings;
-    for (int i : plane.inliers) plane_rings.insert(rings[i]);
-    if (plane_rings.size() < 2) continue;
-    const auto own_on_plane = std::count_if(cell.points.begin(), cell.points.end(), [&](int i) {
-      return std::abs(plane.normal.dot(pts[i] - plane.centroid)) < plane.gate_m;
-    });
-    if (2 * own_on_plane < static_cast<std::ptrdiff_t>(cell.points.size())) continue;
-    cell.flat = true;
-    cell.normal = plane.normal.dot(plane.centroid) > 0.0 ? -plane.normal : plane.normal;
-    cell.centroid = plane.centroid;
-    ++out.planar_cells;
-  }
+  CellMap cells = FlatCells(points, options.cell_m, &out.planar_cells);
 
   // 2. Patches: flat cubes joined through flat neighbours on the same plane.
-  std::vector<std::vector<Cell*>> patches;
-  for (auto& [key, cell] : cells) {
-    if (!cell.flat || cell.patch >= 0) continue;
-    const int id = static_cast<int>(patches.size());
-    std::vector<Cell*>& patch = patches.emplace_back();
-    std::deque<std::pair<CellKey, Cell*>> queue = {{key, &cell}};
-    cell.patch = id;
-    while (!queue.empty()) {
-      const auto [k, c] = queue.front();
-      queue.pop_front();
-      patch.push_back(c);
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            const CellKey nk{k.x + dx, k.y + dy, k.z + dz};
-            const auto it = cells.find(nk);
-            if (it == cells.end() || !it->second.flat || it->second.patch >= 0) continue;
-            Cell& n = it->second;
-            if (n.normal.dot(c->normal) < kPatchCosAngle ||
-                std::abs(c->normal.dot(n.centroid - c->centroid)) > kPatchOffsetM ||
-                std::abs(n.normal.dot(c->centroid - n.centroid)) > kPatchOffsetM) {
-              continue;
-            }
-            n.patch = id;
-            queue.push_back({nk, &n});
-          }
-    }
-  }
+  const std::vector<std::vector<Cell*>> patches = JoinPatches(&cells);
 
   // 3. Board-sized patches.
   double max_hole_chord = 0.0;
@@ -427,92 +658,11 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
   max_hole_chord += kMinHoleChordM;
   std::vector<Candidate> candidates;
   for (const std::vector<Cell*>& patch : patches) {
-    std::vector<int> members;
-    for (const Cell* c : patch) members.insert(members.end(), c->points.begin(), c->points.end());
-    const LocalPlane plane = FitLocalPlane(pts, members);
-    if (!plane.ok) continue;
-    Eigen::Vector3d n = plane.normal.dot(plane.centroid) > 0.0 ? -plane.normal : plane.normal;
-    if (std::abs(n.z()) > kMaxNormalZ) continue;
-    // Board axes of an upright board facing the sensor: y up the spin axis projected onto the
-    // plane, z the normal towards the sensor, x = y cross z.
-    const Eigen::Vector3d ey = (Eigen::Vector3d::UnitZ() - n.z() * n).normalized();
-    const Eigen::Vector3d ex = ey.cross(n);
-    double lo_x = 1e9, hi_x = -1e9, lo_y = 1e9, hi_y = -1e9;
-    for (int i : plane.inliers) {
-      const Eigen::Vector3d d = pts[i] - plane.centroid;
-      lo_x = std::min(lo_x, d.dot(ex));
-      hi_x = std::max(hi_x, d.dot(ex));
-      lo_y = std::min(lo_y, d.dot(ey));
-      hi_y = std::max(hi_y, d.dot(ey));
-    }
-    // A patch far larger than the page is a wall or a floor; skip the gathering.
-    // One far narrower than its rings' span on the page is not a board either.
-    if (hi_x - lo_x > 2.0 * page.x() || hi_y - lo_y > 2.0 * page.y() ||
-        hi_x - lo_x < 0.5 * page.x()) {
-      continue;
-    }
-    // Every point of the frame near the plane and the patch, per ring: x span and y.
-    struct RingOnPlane {
-      std::vector<double> x, y;
-    };
-    std::map<int, RingOnPlane> ring_points;
-    const double reach2 = std::pow(hi_x - lo_x + hi_y - lo_y + 2.0 * kGatherMarginM, 2);
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      const Eigen::Vector3d d = pts[i] - plane.centroid;
-      if (d.squaredNorm() > reach2) continue;
-      if (OnAnotherPlane(cells, key_of(pts[i]), pts[i], n)) continue;
-      const double x = d.dot(ex), y = d.dot(ey);
-      if (std::abs(d.dot(n)) > kGatherDepthM || x < lo_x - kGatherMarginM ||
-          x > hi_x + kGatherMarginM || y < lo_y - kGatherMarginM || y > hi_y + kGatherMarginM) {
-        continue;
-      }
-      RingOnPlane& ring = ring_points[rings[i]];
-      ring.x.push_back(x);
-      ring.y.push_back(y);
-    }
-    std::vector<double> widths, mids, ys;
-    int rings_with_gap = 0;
-    for (auto& [ring, on_plane] : ring_points) {
-      std::sort(on_plane.x.begin(), on_plane.x.end());
-      const double width = on_plane.x.back() - on_plane.x.front();
-      // Wider than the page: not the board's (the floor's rings along the plane's foot).
-      if (width < 0.5 * page.x() || width > kMaxWidthRatio * page.x()) continue;
-      widths.push_back(width);
-      mids.push_back(0.5 * (on_plane.x.front() + on_plane.x.back()));
-      ys.push_back(Median(on_plane.y));
-      // A hole's chord: a gap along the ring wider than 2.5 of its point spacings (and 4 cm),
-      // narrower than a hole.
-      std::vector<double> spacing(on_plane.x.size() - 1);
-      for (std::size_t k = 1; k < on_plane.x.size(); ++k)
-        spacing[k - 1] = on_plane.x[k] - on_plane.x[k - 1];
-      const double min_gap = std::max(2.5 * Median(spacing), kMinHoleChordM);
-      rings_with_gap += std::any_of(spacing.begin(), spacing.end(),
-                                    [&](double g) { return g > min_gap && g < max_hole_chord; })
-                            ? 1
-                            : 0;
-    }
-    if (widths.size() < 2) continue;
-    const double width = Median(widths);
-    if (width < kMinWidthRatio * page.x() || width > kMaxWidthRatio * page.x()) continue;
-    const auto [y_lo, y_hi] = std::minmax_element(ys.begin(), ys.end());
-    const double height = *y_hi - *y_lo;
-    if (height > kMaxHeightRatio * page.y()) continue;
-    ++out.board_sized_patches;
-    // Fewer rings cross a hole than the whole-board fit needs: a plain panel, not worth it.
-    if (rings_with_gap < options.fit.min_rings_through_holes) continue;
-    // The centre: the crossing rings' mid-points across, the middle of the outermost crossing
-    // rings up; the page's true top and bottom lie up to a ring spacing beyond them, which is
-    // what the vertical shift range must cover.
-    const Eigen::Vector3d centre = plane.centroid + Median(mids) * ex + 0.5 * (*y_lo + *y_hi) * ey;
-    Eigen::Matrix3d R;
-    R << ex, ey, n;
-    Candidate c;
-    c.T_lidar_board = Rigid3d(R, centre);
-    c.shift_range_m =
-        std::max(options.fit.max_in_plane_shift_m,
-                 std::min(0.5 * std::max(page.y() - height, 0.0) + 0.04, kMaxShiftRangeM));
-    c.width_error = std::abs(width / page.x() - 1.0);
-    candidates.push_back(c);
+    bool board_sized = false;
+    const std::optional<Candidate> c =
+        CandidateOfPatch(patch, points, cells, page, max_hole_chord, options, &board_sized);
+    if (board_sized) ++out.board_sized_patches;
+    if (c.has_value()) candidates.push_back(*c);
   }
   out.reason = out.board_sized_patches > 0 ? RoundHoleSearchReason::kBoardNotFound
                                            : RoundHoleSearchReason::kNoPlane;
@@ -524,54 +674,21 @@ RoundHoleSearchResult SearchRoundHoleBoardInCloud(
   out.candidates = static_cast<int>(candidates.size());
 
   // 4. The whole-board fit from each candidate, and the empty-holes test.
-  const HoleGeometry holes(board, page);
-  std::vector<RoundHoleCloudDetection> boards;
-  std::vector<double> fills;
-  RoundHoleCloudDetection best_failure;
-  bool have_failure = false;
-  for (const Candidate& c : candidates) {
-    RoundHoleCloudOptions fit = options.fit;
-    fit.max_in_plane_shift_m = c.shift_range_m;
-    RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(board, frames, c.T_lidar_board, fit);
-    if (d.found) {
-      const double fill = holes.Fill(frames, d);
-      if (fill <= kMaxHoleFill) {
-        const auto same = std::find_if(boards.begin(), boards.end(), [&](const auto& b) {
-          return (b.T_lidar_board.translation() - d.T_lidar_board.translation()).norm() <
-                 kSameBoardPages * page.x();
-        });
-        if (same == boards.end()) {
-          boards.push_back(std::move(d));
-          fills.push_back(fill);
-        } else if (d.edge_rms_m < same->edge_rms_m) {
-          *same = std::move(d);
-          fills[same - boards.begin()] = fill;
-        }
-        continue;
-      }
-      d.found = false;
-      d.reason = RoundHoleCloudReason::kFitFailed;
-    }
-    // The failure that got furthest: most edges fitted.
-    if (!have_failure || d.edges > best_failure.edges) {
-      best_failure = std::move(d);
-      have_failure = true;
-    }
-  }
-  out.boards_fitted = static_cast<int>(boards.size());
-  if (boards.empty()) {
+  FittedBoards fitted = FitCandidates(board, frames, candidates, options, page);
+  out.boards_fitted = static_cast<int>(fitted.boards.size());
+  if (fitted.boards.empty()) {
     out.reason = RoundHoleSearchReason::kBoardNotFound;
-    out.detection = std::move(best_failure);
+    out.detection = std::move(fitted.best_failure);
     return out;
   }
 
   // 5. Ranking.
   std::vector<std::size_t> order;
-  out.fits = RankFits(boards, fills, &order);
+  out.fits = RankFits(fitted.boards, fitted.fills, &order);
   const std::size_t best = order.front();
   out.found = out.fits.front().verdict == RoundHoleFitVerdict::kChosen;
   out.reason = out.found ? RoundHoleSearchReason::kNone : RoundHoleSearchReason::kAmbiguous;
-  out.detection = std::move(boards[best]);
+  out.detection = std::move(fitted.boards[best]);
   if (!out.found) {
     out.detection.found = false;
     out.detection.holes.clear();
