@@ -1,12 +1,11 @@
 // linecal eval aftersale: Monte Carlo accuracy of the lane-line calibration (docs/aftersale.md).
 #include <cmath>
 #include <cstdio>
+#include <nlohmann/json.hpp>
 #include <numbers>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
 #include "station/sim/lane_scene.h"
@@ -14,7 +13,7 @@
 #include "tools/cli/command_line.h"
 #include "tools/linecal/car_camera.h"
 #include "tools/linecal/commands.h"
-#include "tools/linecal/eval_stats.h"
+#include "tools/linecal/eval_harness.h"
 
 namespace linecal::tools {
 namespace {
@@ -135,24 +134,28 @@ int RunEvalAftersale(const Args& args) {
     rows.push_back(row);
   }
 
-  nlohmann::json out = nlohmann::json::array();
-  if (!cl.Has("json")) {
-    std::printf("| point noise, px | p95 vanishing point, px | p95 yaw / pitch / roll, deg | p95 ranging 5-30 m, %% | "
-                "p95 marked point, %% | refused |\n| --- | --- | --- | --- | --- | --- |\n");
-  }
+  EvalReport report(cl);
+  report.Table(
+      "| point noise, px | p95 vanishing point, px | p95 yaw / pitch / roll, deg | p95 ranging "
+      "5-30 m, %% | "
+      "p95 marked point, %% | refused |\n| --- | --- | --- | --- | --- | --- |\n");
   for (const Row& r : rows) {
     const double vp = Percentile(r.vp, 0.95), yaw = Percentile(r.yaw, 0.95), pitch = Percentile(r.pitch, 0.95),
                  roll = Percentile(r.roll, 0.95), rg = Percentile(r.ranging, 0.95), mk = Percentile(r.marked, 0.95);
-    out.push_back({{"noise_px", r.noise_px}, {"trials", r.trials}, {"refused", r.errors},
-                   {"vanishing_point_p95_px", vp}, {"yaw_p95_deg", yaw}, {"pitch_p95_deg", pitch},
-                   {"roll_p95_deg", roll}, {"ranging_p95_percent", rg}, {"marked_point_p95_percent", mk}});
-    if (!cl.Has("json")) {
-      std::printf("| %.2f | %.3f | %.4f / %.4f / %.4f | %.3f | %.3f | %d of %d |\n", r.noise_px, vp, yaw, pitch, roll, rg,
-                  mk, r.errors, r.trials);
-    }
+    report.AddRow({{"noise_px", r.noise_px},
+                   {"trials", r.trials},
+                   {"refused", r.errors},
+                   {"vanishing_point_p95_px", vp},
+                   {"yaw_p95_deg", yaw},
+                   {"pitch_p95_deg", pitch},
+                   {"roll_p95_deg", roll},
+                   {"ranging_p95_percent", rg},
+                   {"marked_point_p95_percent", mk}});
+    report.Table("| %.2f | %.3f | %.4f / %.4f / %.4f | %.3f | %.3f | %d of %d |\n", r.noise_px, vp,
+                 yaw, pitch, roll, rg, mk, r.errors, r.trials);
   }
-  if (cl.Has("json")) std::printf("%s\n", out.dump(2).c_str());
-  return cli::kExitOk;
+  // No bars here (docs/aftersale.md reads the table): the JSON is the rows alone, exit 0.
+  return report.Finish(nullptr, "", true);
 }
 
 }  // namespace linecal::tools
