@@ -97,9 +97,9 @@ class CycleViewsTest : public ::testing::Test {
     return id.ok() ? *id : 0;
   }
 
-  // A camera's view in cycle `id` equals what the cycle computed: every
-  // detected feature in order, the frame under the overlay byte for byte, and a reprojected
-  // feature computed here from the stored 4x4 mounting.
+  // A camera's view in cycle `id` equals what the cycle computed: every detected feature in
+  // order, the frame under the overlay byte for byte, and a reprojected feature computed here
+  // from the stored 4x4 mounting.
   void ExpectCameraView(const json& view, const SensorCalibration& s,
                         const StoredSensorResult& result, const Capture& capture,
                         const std::vector<CaptureFileEntry>& list, int64_t id) {
