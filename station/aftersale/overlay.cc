@@ -1,5 +1,6 @@
 #include "station/aftersale/overlay.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -78,6 +79,41 @@ LaneOverlay LaneOverlayOf(const CameraModel& camera, const LaneCalibrationInput&
   Eigen::Vector2d vp_uv;
   if (DistortedPixelOf(camera, r.vanishing_point_px, &vp_uv)) out.vanishing_point_uv = vp_uv;
   return out;
+}
+
+Image8 BirdsEyeImage(const Image8& image, const CameraModel& camera,
+                     const LaneCalibrationInput& input, const LaneCalibrationResult& result,
+                     const BirdsEyeLayout& layout) {
+  const int w = layout.width(), h = layout.height();
+  Image8 page(w, h, 0);
+  const Eigen::Vector3d c = result.T_car_camera.translation();
+  const Rigid3d T_camera_car = result.T_car_camera.Inverse();
+  const double along = input.looking_backward ? -1 : 1;
+  const CameraIntrinsics& k = camera.intrinsics();
+  for (int row = 0; row < h; ++row) {
+    for (int col = 0; col < w; ++col) {
+      const double ahead = layout.far_m - (row + 0.5) / layout.px_per_m;
+      const double left = layout.half_width_m - (col + 0.5) / layout.px_per_m;
+      // For a camera looking backward, its left is the car's right.
+      const Eigen::Vector3d g(c.x() + along * ahead, c.y() + along * left, 1.0);
+      // The ground point in the undistorted image; it must be in front of the camera, which
+      // the homography alone cannot tell (q and -q are the same pixel).
+      const Eigen::Vector3d q = result.ground_homography * g;
+      if ((T_camera_car * Eigen::Vector3d(g.x(), g.y(), 0)).z() <= 0) continue;
+      Eigen::Vector2d uv;
+      if (!DistortedPixelOf(camera, q.hnormalized(), &uv) || !camera.IsInImage(uv)) continue;
+      // Bilinear sample of the stored image.
+      const double x = std::clamp(uv.x(), 0.0, k.width - 1.0);
+      const double y = std::clamp(uv.y(), 0.0, k.height - 1.0);
+      const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+      const int x1 = std::min(x0 + 1, k.width - 1), y1 = std::min(y0 + 1, k.height - 1);
+      const double fx = x - x0, fy = y - y0;
+      const double v = (1 - fy) * ((1 - fx) * image.at(x0, y0) + fx * image.at(x1, y0)) +
+                       fy * ((1 - fx) * image.at(x0, y1) + fx * image.at(x1, y1));
+      page.at(col, row) = static_cast<std::uint8_t>(std::lround(v));
+    }
+  }
+  return page;
 }
 
 }  // namespace linecal

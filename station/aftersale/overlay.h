@@ -10,6 +10,7 @@
 #include <optional>
 #include <vector>
 
+#include "detectors/core/image_view.h"
 #include "station/camera/camera_model.h"
 #include "station/solvers/lane_calibration.h"
 
@@ -45,5 +46,24 @@ LaneOverlay LaneOverlayOf(const CameraModel& camera, const LaneCalibrationInput&
 
 // The undistorted pixel q (image of K) as a distorted one; false when the lens has none.
 bool DistortedPixelOf(const CameraModel& camera, const Eigen::Vector2d& q, Eigen::Vector2d* uv);
+
+// The bird's-eye view's page: the ground from `near_m` to `far_m` ahead of the camera and
+// `half_width_m` to either side of its footprint, at `px_per_m`; forward up, left on the left
+// (for a camera looking backward, the camera's forward and left). The defaults, 20 px/m over
+// 3..43 m and +-8 m, show the lane and its neighbours on a 320 x 800 px page.
+struct BirdsEyeLayout {
+  double px_per_m = 20, near_m = 3, far_m = 43, half_width_m = 8;
+  int width() const { return static_cast<int>(2 * half_width_m * px_per_m); }
+  int height() const { return static_cast<int>((far_m - near_m) * px_per_m); }
+};
+
+// The ground seen from above through the estimate (`linecal aftersale --out`, its
+// <name>-birdseye.png without the grid lines): each page pixel's ground point is taken through
+// the ground homography (the estimated pose) and the lens into `image` (the camera's image as
+// stored, the size of input.intrinsics) and sampled bilinearly; 0 where the ground point is
+// behind the camera or outside the image. O(width x height of the page).
+Image8 BirdsEyeImage(const Image8& image, const CameraModel& camera,
+                     const LaneCalibrationInput& input, const LaneCalibrationResult& result,
+                     const BirdsEyeLayout& layout = {});
 
 }  // namespace linecal

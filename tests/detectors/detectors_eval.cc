@@ -119,6 +119,121 @@ void CountFalseDetections(const Image8& image, const BoardType* shown, const Opt
   }
 }
 
+// One render of the grid: the board, the effect set (index into kSets), the pose, the size of
+// the smallest feature face-on (px), the render's seed, and the features a whole view shows.
+struct RenderCase {
+  BoardType type;
+  std::size_t set;
+  double distance, roll, yaw, pitch, feature_px;
+  std::uint64_t seed;
+  int expected;
+};
+
+// Scores one render of `c.type`: the other boards' false detections, then, when the whole board
+// is in view, the detection against the rendered truth into `results` (found, the features'
+// errors, wrong when one is off by more than 0.4 x the smallest feature); prints misses, wrong
+// detections and boards partly in view, and writes missed renders to options.misses_dir.
+void ScoreRender(const RenderCase& c, const CameraFrame& frame, const Options& options,
+                 std::array<BoardResult, kAllBoardTypes.size()>* results) {
+  CountFalseDetections(frame.image8, &c.type, options, results);
+  const auto visible =
+      std::count_if(frame.features.begin(), frame.features.end(),
+                    [](const RenderedFeature& f) { return f.kind != FeatureKind::kHoleCentre; });
+  if (visible != c.expected) {
+    if (visible > 0 && visible < c.expected / 2) return;  // mostly out of view
+    if (visible > 0) {
+      std::printf(
+          "not wholly in view: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: "
+          "%d of %d\n",
+          BoardTypeName(c.type), kSets[c.set].name, c.distance, c.roll, c.yaw, c.pitch,
+          static_cast<int>(visible), c.expected);
+    }
+    return;
+  }
+  const Detection d = *DetectBoard(frame.image8.view(), BoardOf(c.type));
+  Tally& t = (*results)[static_cast<int>(c.type)].sets[c.set];
+  ++t.frames;
+  if (!d.found) {
+    std::printf(
+        "miss: %s %s, distance %.2f m (feature %.1f px) roll %.0f yaw %.0f pitch %.0f "
+        "seed %llu: %s\n",
+        BoardTypeName(c.type), kSets[c.set].name, c.distance, c.feature_px, c.roll, c.yaw, c.pitch,
+        static_cast<unsigned long long>(c.seed), DetectReasonName(d.reason));
+    if (!options.misses_dir.empty()) {
+      const std::string path = options.misses_dir + "/" + BoardTypeName(c.type) + "_" +
+                               kSets[c.set].name + "_seed" + std::to_string(c.seed) + ".png";
+      const absl::Status written = WritePng8(path, frame.image8.view());
+      if (!written.ok()) std::fprintf(stderr, "%s\n", written.ToString().c_str());
+    }
+    return;
+  }
+  ++t.found;
+  double worst = 0.0;
+  for (const DetectedFeature& f : d.features) {
+    const auto truth = std::find_if(frame.features.begin(), frame.features.end(),
+                                    [&](const RenderedFeature& r) { return r.feature_id == f.id; });
+    if (truth == frame.features.end()) continue;
+    const Eigen::Vector2d e = f.uv_px - truth->uv_px;
+    t.sum_sq_px += e.squaredNorm();
+    t.sum_error_px += e;
+    ++t.features;
+    worst = std::max(worst, e.norm());
+  }
+  t.max_px = std::max(t.max_px, worst);
+  if (worst > 0.4 * c.feature_px) {
+    ++t.wrong;
+    std::printf(
+        "wrong: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: a feature %.1f "
+        "px off\n",
+        BoardTypeName(c.type), kSets[c.set].name, c.distance, c.roll, c.yaw, c.pitch, worst);
+  }
+}
+
+// Prints the results as a markdown table, a line under each board that misses a bar (false or
+// wrong detections, accuracy); returns whether every board meets every bar.
+bool PrintResults(const Options& options,
+                  const std::array<BoardResult, kAllBoardTypes.size()>& results) {
+  bool bars_met = true;
+  std::printf("\n%d x %d, %s grid x %d from seed %llu, %d board-free renders\n\n", options.width,
+              options.height, options.reduced ? "reduced" : "full", options.repeat,
+              static_cast<unsigned long long>(options.seed), options.board_free);
+  std::printf(
+      "| board | renders (whole board) | found | rate clean / noisy / hard | false | wrong | "
+      "RMS clean px | max clean px | RMS noisy px | max noisy px | circle bias px |\n");
+  std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (BoardType type : options.boards) {
+    const BoardResult& r = results[static_cast<int>(type)];
+    int frames = 0;
+    int found = 0;
+    int wrong = 0;
+    for (const Tally& t : r.sets) {
+      frames += t.frames;
+      found += t.found;
+      wrong += t.wrong;
+    }
+    const auto rms = [](const Tally& t) {
+      return t.features ? std::sqrt(t.sum_sq_px / t.features) : 0.0;
+    };
+    const auto rate = [](const Tally& t) { return 100.0 * t.found / std::max(1, t.frames); };
+    const Tally& clean = r.sets[0];
+    const Tally& noisy = r.sets[1];
+    const double bias = clean.features ? (clean.sum_error_px / clean.features).norm() : 0.0;
+    char bias_text[32] = "—";
+    if (type == BoardType::kCircle) std::snprintf(bias_text, sizeof bias_text, "%.4f", bias);
+    std::printf(
+        "| %s | %d | %d | %.1f%% / %.1f%% / %.1f%% | %d | %d | %.4f | %.3f | %.4f | %.3f | %s |\n",
+        BoardTypeName(type), frames, found, rate(r.sets[0]), rate(r.sets[1]), rate(r.sets[2]),
+        r.false_detections, wrong, rms(clean), clean.max_px, rms(noisy), noisy.max_px, bias_text);
+    const bool safe = r.false_detections == 0 && wrong == 0;
+    const bool accurate = rms(clean) <= kCleanRmsBarPx && rms(noisy) <= kNoisyRmsBarPx &&
+                          (type != BoardType::kCircle || bias <= kCircleBiasBarPx);
+    if (!safe) std::printf("  ^ %s: false or wrong detections\n", BoardTypeName(type));
+    if (!accurate) std::printf("  ^ %s misses a bar on accuracy\n", BoardTypeName(type));
+    if (!safe || !accurate) bars_met = false;
+  }
+  return bars_met;
+}
+
 int Run(const Options& options) {
   const CameraModel camera = circle_scene::Camera(options.width, options.height);
   std::array<BoardResult, kAllBoardTypes.size()> results;
@@ -161,60 +276,8 @@ int Run(const Options& options) {
                 std::fprintf(stderr, "render: %s\n", frame.status().ToString().c_str());
                 return 2;
               }
-              CountFalseDetections(frame->image8, &type, options, &results);
-              const auto visible = std::count_if(
-                  frame->features.begin(), frame->features.end(),
-                  [](const RenderedFeature& f) { return f.kind != FeatureKind::kHoleCentre; });
-              if (visible != expected) {
-                if (visible > 0 && visible < expected / 2) continue;  // mostly out of view
-                if (visible > 0) {
-                  std::printf(
-                      "not wholly in view: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: "
-                      "%d of %d\n",
-                      BoardTypeName(type), kSets[s].name, distance, roll, yaw, pitch,
-                      static_cast<int>(visible), expected);
-                }
-                continue;
-              }
-              const Detection d = *DetectBoard(frame->image8.view(), board);
-              Tally& t = results[static_cast<int>(type)].sets[s];
-              ++t.frames;
-              if (!d.found) {
-                std::printf(
-                    "miss: %s %s, distance %.2f m (feature %.1f px) roll %.0f yaw %.0f pitch %.0f "
-                    "seed %llu: %s\n",
-                    BoardTypeName(type), kSets[s].name, distance, feature_px, roll, yaw, pitch,
-                    static_cast<unsigned long long>(seed - 1), DetectReasonName(d.reason));
-                if (!options.misses_dir.empty()) {
-                  const std::string path = options.misses_dir + "/" + BoardTypeName(type) + "_" +
-                                           kSets[s].name + "_seed" + std::to_string(seed - 1) +
-                                           ".png";
-                  const absl::Status written = WritePng8(path, frame->image8.view());
-                  if (!written.ok()) std::fprintf(stderr, "%s\n", written.ToString().c_str());
-                }
-                continue;
-              }
-              ++t.found;
-              double worst = 0.0;
-              for (const DetectedFeature& f : d.features) {
-                const auto truth =
-                    std::find_if(frame->features.begin(), frame->features.end(),
-                                 [&](const RenderedFeature& r) { return r.feature_id == f.id; });
-                if (truth == frame->features.end()) continue;
-                const Eigen::Vector2d e = f.uv_px - truth->uv_px;
-                t.sum_sq_px += e.squaredNorm();
-                t.sum_error_px += e;
-                ++t.features;
-                worst = std::max(worst, e.norm());
-              }
-              t.max_px = std::max(t.max_px, worst);
-              if (worst > 0.4 * feature_px) {
-                ++t.wrong;
-                std::printf(
-                    "wrong: %s %s, distance %.2f m roll %.0f yaw %.0f pitch %.0f: a feature %.1f "
-                    "px off\n",
-                    BoardTypeName(type), kSets[s].name, distance, roll, yaw, pitch, worst);
-              }
+              ScoreRender({type, s, distance, roll, yaw, pitch, feature_px, seed - 1, expected},
+                          *frame, options, &results);
             }
           }
         }
@@ -232,40 +295,7 @@ int Run(const Options& options) {
     CountFalseDetections(frame->image8, nullptr, options, &results);
   }
 
-  bool bars_met = true;
-  std::printf("\n%d x %d, %s grid x %d from seed %llu, %d board-free renders\n\n", options.width,
-              options.height, options.reduced ? "reduced" : "full", options.repeat,
-              static_cast<unsigned long long>(options.seed), options.board_free);
-  std::printf("| board | renders (whole board) | found | rate clean / noisy / hard | false | wrong | "
-              "RMS clean px | max clean px | RMS noisy px | max noisy px | circle bias px |\n");
-  std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
-  for (BoardType type : options.boards) {
-    const BoardResult& r = results[static_cast<int>(type)];
-    int frames = 0;
-    int found = 0;
-    int wrong = 0;
-    for (const Tally& t : r.sets) {
-      frames += t.frames;
-      found += t.found;
-      wrong += t.wrong;
-    }
-    const auto rms = [](const Tally& t) { return t.features ? std::sqrt(t.sum_sq_px / t.features) : 0.0; };
-    const auto rate = [](const Tally& t) { return 100.0 * t.found / std::max(1, t.frames); };
-    const Tally& clean = r.sets[0];
-    const Tally& noisy = r.sets[1];
-    const double bias = clean.features ? (clean.sum_error_px / clean.features).norm() : 0.0;
-    char bias_text[32] = "—";
-    if (type == BoardType::kCircle) std::snprintf(bias_text, sizeof bias_text, "%.4f", bias);
-    std::printf("| %s | %d | %d | %.1f%% / %.1f%% / %.1f%% | %d | %d | %.4f | %.3f | %.4f | %.3f | %s |\n",
-                BoardTypeName(type), frames, found, rate(r.sets[0]), rate(r.sets[1]), rate(r.sets[2]),
-                r.false_detections, wrong, rms(clean), clean.max_px, rms(noisy), noisy.max_px, bias_text);
-    const bool safe = r.false_detections == 0 && wrong == 0;
-    const bool accurate = rms(clean) <= kCleanRmsBarPx && rms(noisy) <= kNoisyRmsBarPx &&
-                          (type != BoardType::kCircle || bias <= kCircleBiasBarPx);
-    if (!safe) std::printf("  ^ %s: false or wrong detections\n", BoardTypeName(type));
-    if (!accurate) std::printf("  ^ %s misses a bar on accuracy\n", BoardTypeName(type));
-    if (!safe || !accurate) bars_met = false;
-  }
+  const bool bars_met = PrintResults(options, results);
   return options.check && !bars_met ? 1 : 0;
 }
 

@@ -144,49 +144,21 @@ RgbImage DrawOverlay(const Image8& image, const CameraModel& camera, const LaneC
   return img;
 }
 
-// The ground seen from above through the estimate: forward up, left on the left, 20 px/m,
-// 3..43 m ahead of the camera and ±8 m across its footprint; each pixel's ground point taken
-// through the ground homography (the estimated pose) and the lens into the image. Grid lines
-// every 5 m ahead and every metre across.
+// <name>-birdseye.png: the ground seen from above through the estimate
+// (station/aftersale/overlay.h, BirdsEyeImage) with grid lines every 5 m ahead and every
+// metre across.
 RgbImage DrawBirdsEye(const Image8& image, const CameraModel& camera, const LaneCalibrationInput& in,
                       const LaneCalibrationResult& r) {
-  constexpr double kPxPerM = 20, kNearM = 3, kFarM = 43, kHalfWidthM = 8;
-  const int w = static_cast<int>(2 * kHalfWidthM * kPxPerM), h = static_cast<int>((kFarM - kNearM) * kPxPerM);
-  RgbImage img(w, h, {0, 0, 0});
-  const Eigen::Vector3d c = r.T_car_camera.translation();
-  const Rigid3d T_camera_car = r.T_car_camera.Inverse();
-  const double along = in.looking_backward ? -1 : 1;
-  const CameraIntrinsics& k = camera.intrinsics();
-  for (int row = 0; row < h; ++row) {
-    for (int col = 0; col < w; ++col) {
-      const double ahead = kFarM - (row + 0.5) / kPxPerM;
-      const double left = kHalfWidthM - (col + 0.5) / kPxPerM;
-      // For a camera looking backward, its left is the car's right.
-      const Eigen::Vector3d g(c.x() + along * ahead, c.y() + along * left, 1.0);
-      // The ground point in the undistorted image; it must be in front of the camera, which
-      // the homography alone cannot tell (q and -q are the same pixel).
-      const Eigen::Vector3d q = r.ground_homography * g;
-      if ((T_camera_car * Eigen::Vector3d(g.x(), g.y(), 0)).z() <= 0) continue;
-      Eigen::Vector2d uv;
-      if (!DistortedPixelOf(camera, q.hnormalized(), &uv) || !camera.IsInImage(uv)) continue;
-      // Bilinear sample of the stored image.
-      const double x = std::clamp(uv.x(), 0.0, k.width - 1.0), y = std::clamp(uv.y(), 0.0, k.height - 1.0);
-      const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-      const int x1 = std::min(x0 + 1, k.width - 1), y1 = std::min(y0 + 1, k.height - 1);
-      const double fx = x - x0, fy = y - y0;
-      const double v = (1 - fy) * ((1 - fx) * image.at(x0, y0) + fx * image.at(x1, y0)) +
-                       fy * ((1 - fx) * image.at(x0, y1) + fx * image.at(x1, y1));
-      const auto g8 = static_cast<std::uint8_t>(std::lround(v));
-      PutPixel(&img, col, row, {g8, g8, g8});
-    }
-  }
+  const BirdsEyeLayout layout;
+  const int w = layout.width(), h = layout.height();
+  RgbImage img = GreyToRgb(BirdsEyeImage(image, camera, in, r, layout).view());
   const RgbColour grid{0, 200, 255};
-  for (double d = 5; d < kFarM; d += 5) {
-    const double row = (kFarM - d) * kPxPerM;
+  for (double d = 5; d < layout.far_m; d += 5) {
+    const double row = (layout.far_m - d) * layout.px_per_m;
     DrawSegment(&img, {0, row}, {w - 1.0, row}, 1, grid);
   }
-  for (double y = -kHalfWidthM + 1; y < kHalfWidthM; y += 1) {
-    const double col = (kHalfWidthM - y) * kPxPerM;
+  for (double y = -layout.half_width_m + 1; y < layout.half_width_m; y += 1) {
+    const double col = (layout.half_width_m - y) * layout.px_per_m;
     DrawSegment(&img, {col, 0}, {col, h - 1.0}, 1, grid);
   }
   return img;

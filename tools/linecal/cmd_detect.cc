@@ -236,9 +236,9 @@ void PrintCheck(const cli::CommandLine& cl, const CameraModel& camera,
               check.pose.residual_rms_px);
 }
 
-}  // namespace
-
-int RunDetect(const Args& args) {
+// The options of `linecal detect`: the board's (board_options.h), then the image or clouds and
+// what to print or draw.
+std::vector<cli::OptionSpec> DetectOptionSpecs() {
   std::vector<cli::OptionSpec> options = BoardOptionSpecs();
   options.push_back({"image", "FILE", "PNG or JPEG, 8- or 16-bit, grey or colour"});
   options.push_back({"cloud", "FILE",
@@ -254,6 +254,70 @@ int RunDetect(const Args& args) {
   options.push_back({"camera", "NAME",
                      "the camera of --intrinsics when the file holds several (car model, "
                      "Kalibr camchain)"});
+  return options;
+}
+
+// The 8-bit image the detector sees: the file's own samples, or the 16-bit range stretched.
+Image8 DetectorImage(const Image16& image16) {
+  Image8 image8;
+  if (Holds8BitSamples(image16)) {
+    image8 = Image8(image16.width, image16.height);
+    for (std::size_t i = 0; i < image8.pixels.size(); ++i) {
+      image8.pixels[i] = static_cast<std::uint8_t>(image16.pixels[i] / 257);
+    }
+  } else {
+    image8 = RangeTo8Bit(image16.view());
+  }
+  return image8;
+}
+
+// An image detection as one JSON object on stdout, with the --intrinsics check when it ran.
+void PrintDetectionJson(const cli::CommandLine& cl, const Board& board, const Detection& detection,
+                        const std::optional<CameraModel>& camera,
+                        const std::optional<UndistortedBoard>& check, double elapsed_ms) {
+  // x, y at the default scale (docs/interfaces.md): the ids' positions on the PDF board.
+  const double scale = board.params().scale;
+  nlohmann::json features = nlohmann::json::array();
+  for (const DetectedFeature& f : detection.features) {
+    features.push_back({{"id", f.id},
+                        {"u", f.uv_px.x()},
+                        {"v", f.uv_px.y()},
+                        {"x", f.p_board.x() / scale},
+                        {"y", f.p_board.y() / scale},
+                        {"marker", f.marker}});
+  }
+  // complete: every feature of the board is here (false for a partial view of a board
+  // with ids, whose seen features are listed).
+  const bool complete = detection.features.size() == board.features().size();
+  nlohmann::json report = {{"board", board.name()}, {"found", detection.found},
+                           {"complete", complete},  {"reason", DetectReasonName(detection.reason)},
+                           {"features", features},  {"elapsed_ms", elapsed_ms}};
+  if (check.has_value()) report["intrinsics"] = CheckToJson(cl, *camera, *check);
+  std::printf("%s\n", report.dump().c_str());
+}
+
+// An image detection as text on stdout: a summary line, a line per feature and the
+// --intrinsics check when it ran.
+void PrintDetectionText(const cli::CommandLine& cl, const Board& board, const Detection& detection,
+                        const std::optional<CameraModel>& camera,
+                        const std::optional<UndistortedBoard>& check, double elapsed_ms) {
+  // x, y at the default scale (docs/interfaces.md): the ids' positions on the PDF board.
+  const double scale = board.params().scale;
+  std::printf(
+      "%s: %s%s, %zu features, %.2f ms\n", board.name(), detection.found ? "found" : "not found",
+      detection.found ? "" : absl::StrCat(" (", DetectReasonName(detection.reason), ")").c_str(),
+      detection.features.size(), elapsed_ms);
+  for (const DetectedFeature& f : detection.features) {
+    std::printf("%4d  u %9.3f  v %9.3f  x %8.4f  y %8.4f%s\n", f.id, f.uv_px.x(), f.uv_px.y(),
+                f.p_board.x() / scale, f.p_board.y() / scale,
+                f.marker >= 0 ? absl::StrFormat("  marker %d", f.marker).c_str() : "");
+  }
+  if (check.has_value()) PrintCheck(cl, *camera, *check);
+}
+
+}  // namespace
+
+int RunDetect(const Args& args) {
   cli::CommandLine cl(
       "linecal detect --board NAME [--scale S] [--cols N --rows M] [--square METRES] "
       "[--gap METRES] [--spacing METRES --diameter METRES] [--asymmetric | --hexagonal] "
@@ -272,7 +336,7 @@ int RunDetect(const Args& args) {
       "at most 1 px RMS, else verification_failed) and the board's pose T_camera_board is "
       "printed; features stay in raw pixels. Exit 0 when the "
       "whole board was found, 1 when not (the reason is printed), 2 on bad usage or input.",
-      std::move(options));
+      DetectOptionSpecs());
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
 
   const absl::StatusOr<BoardParams> params = BoardParamsFromCommandLine(cl);
@@ -307,16 +371,7 @@ int RunDetect(const Args& args) {
     if (!read.ok()) return cli::BadInput(kCommand, std::string(read.status().message()));
     camera = *std::move(read);
   }
-  // The 8-bit image the detector sees: the file's own samples, or the 16-bit range stretched.
-  Image8 image8;
-  if (Holds8BitSamples(*image16)) {
-    image8 = Image8(image16->width, image16->height);
-    for (std::size_t i = 0; i < image8.pixels.size(); ++i) {
-      image8.pixels[i] = static_cast<std::uint8_t>(image16->pixels[i] / 257);
-    }
-  } else {
-    image8 = RangeTo8Bit(image16->view());
-  }
+  const Image8 image8 = DetectorImage(*image16);
 
   const auto start = std::chrono::steady_clock::now();
   std::optional<Detection> detection = DetectBoard(image8.view(), *board);
@@ -340,40 +395,10 @@ int RunDetect(const Args& args) {
     if (!written.ok()) return cli::BadInput(kCommand, std::string(written.message()));
   }
 
-  // x, y at the default scale (docs/interfaces.md): the ids' positions on the PDF board.
-  const double scale = board->params().scale;
   if (cl.Has("json")) {
-    nlohmann::json features = nlohmann::json::array();
-    for (const DetectedFeature& f : detection->features) {
-      features.push_back({{"id", f.id},
-                          {"u", f.uv_px.x()},
-                          {"v", f.uv_px.y()},
-                          {"x", f.p_board.x() / scale},
-                          {"y", f.p_board.y() / scale},
-                          {"marker", f.marker}});
-    }
-    // complete: every feature of the board is here (false for a partial view of a board
-    // with ids, whose seen features are listed).
-    const bool complete = detection->features.size() == board->features().size();
-    nlohmann::json report = {
-        {"board", board->name()}, {"found", detection->found},
-        {"complete", complete},   {"reason", DetectReasonName(detection->reason)},
-        {"features", features},   {"elapsed_ms", elapsed_ms}};
-    if (check.has_value()) report["intrinsics"] = CheckToJson(cl, *camera, *check);
-    std::printf("%s\n", report.dump().c_str());
+    PrintDetectionJson(cl, *board, *detection, camera, check, elapsed_ms);
   } else {
-    std::printf("%s: %s%s, %zu features, %.2f ms\n", board->name(),
-                detection->found ? "found" : "not found",
-                detection->found
-                    ? ""
-                    : absl::StrCat(" (", DetectReasonName(detection->reason), ")").c_str(),
-                detection->features.size(), elapsed_ms);
-    for (const DetectedFeature& f : detection->features) {
-      std::printf("%4d  u %9.3f  v %9.3f  x %8.4f  y %8.4f%s\n", f.id, f.uv_px.x(), f.uv_px.y(),
-                  f.p_board.x() / scale, f.p_board.y() / scale,
-                  f.marker >= 0 ? absl::StrFormat("  marker %d", f.marker).c_str() : "");
-    }
-    if (check.has_value()) PrintCheck(cl, *camera, *check);
+    PrintDetectionText(cl, *board, *detection, camera, check, elapsed_ms);
   }
   return detection->found ? cli::kExitOk : cli::kExitNegative;
 }

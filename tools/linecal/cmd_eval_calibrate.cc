@@ -25,7 +25,7 @@
 #include "station/solvers/seed_formulas.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
-#include "tools/linecal/eval_stats.h"
+#include "tools/linecal/eval_harness.h"
 
 namespace linecal::tools {
 namespace {
@@ -41,15 +41,12 @@ constexpr double kRangingBarFraction = 0.005;
 // The seed formulas (method (b)) against the extrinsic (method (a)): 0.5 px, 0.5%.
 constexpr double kSeedVanishingPointBarPx = 0.5;
 constexpr double kSeedRangingBarFraction = 0.005;
-constexpr double kSigmaRatioLow = 0.8, kSigmaRatioHigh = 1.2;
-constexpr double kCoverageLow = 0.93, kCoverageHigh = 0.97;
 // Mounting errors within ±this x the tolerance: about a third of the cars out of tolerance.
 constexpr double kErrorRangeOfTolerance = 1.5;
 // Features closer than this to the image border are not used (a detector's window needs it).
 constexpr double kFeatureMarginPx = 8.0;
 // Ground distances of the ranging bar.
 const double kRangingDistancesM[] = {5, 10, 20, 50};
-const char* kComponents[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
 
 struct CameraSamples {
   int cars = 0;
@@ -135,6 +132,78 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
   }
 }
 
+// One camera's statistics against the bars: its JSON row and its table line in `report`.
+// Returns whether the camera meets every bar.
+bool ReportCamera(const std::string& name, const CameraSamples& c, EvalReport* report) {
+  const MountingSummary summary = Summarise(c.mounting);
+  const ErrorSigmaStats* stats = summary.stats;
+  const double vp95 = Percentile(c.vp_errors_px, 0.95);
+  const double range95 = Percentile(c.ranging_errors, 0.95);
+  const double seed_vp95 = Percentile(c.seed_vp_px, 0.95);
+  const double seed_range95 = Percentile(c.seed_ranging, 0.95);
+  const double toolbox_range95 = Percentile(c.toolbox_ranging, 0.95);
+  const double roll_lines95 = Percentile(c.line_roll_errors, 0.95);
+  const double roll_lines_pose95 = Percentile(c.line_roll_vs_pose, 0.95);
+  const bool seed_meets =
+      seed_vp95 <= kSeedVanishingPointBarPx && seed_range95 <= kSeedRangingBarFraction;
+  const double agreement = summary.agreement;
+  const int solved = static_cast<int>(c.mounting.errors[0].size());
+  const bool meets = solved == c.cars && MaxAngleP95(summary) <= kAngleP95BarDeg * kDegToRad &&
+                     MaxPositionP95(summary) <= kPositionP95BarM && vp95 <= kVanishingPointBarPx &&
+                     range95 <= kRangingBarFraction && SigmaMeetsBars(summary) &&
+                     agreement == 1.0 && seed_meets;
+  const std::string errors = ReasonsText(c.reasons);
+  nlohmann::json row = {{"camera", name},
+                        {"cars", c.cars},
+                        {"solved", solved},
+                        {"vanishing_point_p95_px", vp95},
+                        {"ranging_p95_fraction", range95},
+                        {"verdict_agreement", agreement},
+                        {"verdicts_judged", c.mounting.verdicts_judged},
+                        {"errors", c.reasons},
+                        {"meets_bars", meets}};
+  // Method (b) and the vertical board's roll, where the camera saw those boards.
+  row["board_method_cars"] = c.seed_vp_px.size();
+  row["board_method_refusals"] = c.seed_refusals;
+  row["board_method_vanishing_point_p95_px"] =
+      c.seed_vp_px.empty() ? nlohmann::json(nullptr) : nlohmann::json(seed_vp95);
+  row["board_method_ranging_p95_fraction"] =
+      c.seed_ranging.empty() ? nlohmann::json(nullptr) : nlohmann::json(seed_range95);
+  row["board_method_toolbox_ranging_p95_fraction"] =
+      c.toolbox_ranging.empty() ? nlohmann::json(nullptr) : nlohmann::json(toolbox_range95);
+  row["board_method_meets_bars"] = seed_meets;
+  row["vertical_roll_cars"] = c.line_roll_errors.size();
+  row["vertical_roll_p95_abs_error_deg"] = c.line_roll_errors.empty()
+                                               ? nlohmann::json(nullptr)
+                                               : nlohmann::json(roll_lines95 * kRadToDeg);
+  row["vertical_roll_p95_vs_pose_deg"] = c.line_roll_vs_pose.empty()
+                                             ? nlohmann::json(nullptr)
+                                             : nlohmann::json(roll_lines_pose95 * kRadToDeg);
+  AddMountingColumns(summary, &row);
+  report->AddRow(std::move(row));
+  // Side cameras have no vanishing point or ranging along the car: "-".
+  const std::string vp = c.vp_errors_px.empty() ? "-" : absl::StrFormat("%.3f", vp95);
+  const std::string range = c.ranging_errors.empty() ? "-" : absl::StrFormat("%.3f", range95 * 100);
+  // "-": the camera does not see the wide chessboard (method (b)) or the vertical board.
+  const std::string seed = c.seed_vp_px.empty()
+                               ? "-"
+                               : absl::StrFormat("%.3f / %.3f / %.3f", seed_vp95,
+                                                 seed_range95 * 100, toolbox_range95 * 100);
+  const std::string roll =
+      c.line_roll_errors.empty()
+          ? "-"
+          : absl::StrFormat("%.4f / %.4f", roll_lines95 * kRadToDeg, roll_lines_pose95 * kRadToDeg);
+  report->Table(
+      "%-16s %5d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %7s %8s | %5.2f..%-5.2f "
+      "%4.2f..%-4.2f | %6.1f%% | %-27s | %-15s | %s%s\n",
+      name, c.cars, solved, stats[0].p95_abs_error * kRadToDeg, stats[1].p95_abs_error * kRadToDeg,
+      stats[2].p95_abs_error * kRadToDeg, stats[3].p95_abs_error * 1e3,
+      stats[4].p95_abs_error * 1e3, stats[5].p95_abs_error * 1e3, vp, range, summary.ratio_lo,
+      summary.ratio_hi, summary.cover_lo, summary.cover_hi, agreement * 100, seed, roll,
+      errors.empty() ? "-" : errors, meets ? "" : "  (misses a bar)");
+  return meets;
+}
+
 }  // namespace
 
 int RunEvalCalibrate(const Args& args) {
@@ -171,108 +240,33 @@ int RunEvalCalibrate(const Args& args) {
 
   std::mt19937_64 rng(static_cast<std::uint64_t>(in.seed));
   std::map<std::string, CameraSamples> samples;
-  for (int i = 0; i < in.cars; ++i) {
+  // The trials cannot fail: a camera that is not solved is a counted reason.
+  (void)RunTrials(in.cars, 50, kCommand, [&](int) {
     EvaluateCar(in.station, in.car, rng, *noise, in.frames, &samples);
-    if ((i + 1) % 50 == 0) std::fprintf(stderr, "eval calibrate: %d / %d cars\n", i + 1, in.cars);
-  }
+    return absl::OkStatus();
+  });
 
+  EvalReport report(cl);
+  report.Table("%-16s %5s %6s | %-27s | %-24s | %7s %8s | %11s %9s | %7s | %-27s | %-15s | %s\n",
+               "camera", "cars", "solved", "p95 |err| yaw/pitch/roll deg", "p95 |err| x/y/z mm",
+               "vp px", "range %", "err/sigma", "cover95", "verdict", "(b)-(a) vp px/rng%/toolbox%",
+               "roll lines deg", "errors");
   bool all_meet = true;
-  nlohmann::json rows = nlohmann::json::array();
-  if (!cl.Has("json")) {
-    std::printf("%-16s %5s %6s | %-27s | %-24s | %7s %8s | %11s %9s | %7s | %-27s | %-15s | %s\n", "camera", "cars",
-                "solved", "p95 |err| yaw/pitch/roll deg", "p95 |err| x/y/z mm", "vp px", "range %", "err/sigma",
-                "cover95", "verdict", "(b)-(a) vp px/rng%/toolbox%", "roll lines deg", "errors");
-  }
   for (const SensorModel& s : in.car.sensors) {
-    if (!samples.count(s.name)) continue;
-    const CameraSamples& c = samples[s.name];
-    const MountingSummary summary = Summarise(c.mounting);
-    const ErrorSigmaStats* stats = summary.stats;
-    const double ratio_lo = summary.ratio_lo, ratio_hi = summary.ratio_hi;
-    const double cover_lo = summary.cover_lo, cover_hi = summary.cover_hi;
-    const double vp95 = Percentile(c.vp_errors_px, 0.95);
-    const double range95 = Percentile(c.ranging_errors, 0.95);
-    const double seed_vp95 = Percentile(c.seed_vp_px, 0.95);
-    const double seed_range95 = Percentile(c.seed_ranging, 0.95);
-    const double toolbox_range95 = Percentile(c.toolbox_ranging, 0.95);
-    const double roll_lines95 = Percentile(c.line_roll_errors, 0.95);
-    const double roll_lines_pose95 = Percentile(c.line_roll_vs_pose, 0.95);
-    const bool seed_meets = seed_vp95 <= kSeedVanishingPointBarPx && seed_range95 <= kSeedRangingBarFraction;
-    const double agreement = summary.agreement;
-    const int solved = static_cast<int>(c.mounting.errors[0].size());
-    const bool meets = solved == c.cars &&
-                       std::max({stats[0].p95_abs_error, stats[1].p95_abs_error, stats[2].p95_abs_error}) <=
-                           kAngleP95BarDeg * kDegToRad &&
-                       std::max({stats[3].p95_abs_error, stats[4].p95_abs_error, stats[5].p95_abs_error}) <=
-                           kPositionP95BarM &&
-                       vp95 <= kVanishingPointBarPx && range95 <= kRangingBarFraction && ratio_lo >= kSigmaRatioLow &&
-                       ratio_hi <= kSigmaRatioHigh && cover_lo >= kCoverageLow && cover_hi <= kCoverageHigh &&
-                       agreement == 1.0 && seed_meets;
-    all_meet &= meets;
-    std::string errors;
-    for (const auto& [reason, count] : c.reasons) absl::StrAppend(&errors, errors.empty() ? "" : ", ", reason, " ", count);
-    nlohmann::json row = {{"camera", s.name},           {"cars", c.cars},
-                          {"solved", solved},           {"vanishing_point_p95_px", vp95},
-                          {"ranging_p95_fraction", range95}, {"verdict_agreement", agreement},
-                          {"verdicts_judged", c.mounting.verdicts_judged}, {"errors", c.reasons},
-                          {"meets_bars", meets}};
-    // Method (b) and the vertical board's roll, where the camera saw those boards.
-    row["board_method_cars"] = c.seed_vp_px.size();
-    row["board_method_refusals"] = c.seed_refusals;
-    row["board_method_vanishing_point_p95_px"] = c.seed_vp_px.empty() ? nlohmann::json(nullptr) : nlohmann::json(seed_vp95);
-    row["board_method_ranging_p95_fraction"] =
-        c.seed_ranging.empty() ? nlohmann::json(nullptr) : nlohmann::json(seed_range95);
-    row["board_method_toolbox_ranging_p95_fraction"] =
-        c.toolbox_ranging.empty() ? nlohmann::json(nullptr) : nlohmann::json(toolbox_range95);
-    row["board_method_meets_bars"] = seed_meets;
-    row["vertical_roll_cars"] = c.line_roll_errors.size();
-    row["vertical_roll_p95_abs_error_deg"] =
-        c.line_roll_errors.empty() ? nlohmann::json(nullptr) : nlohmann::json(roll_lines95 * kRadToDeg);
-    row["vertical_roll_p95_vs_pose_deg"] =
-        c.line_roll_vs_pose.empty() ? nlohmann::json(nullptr) : nlohmann::json(roll_lines_pose95 * kRadToDeg);
-    for (int i = 0; i < 6; ++i) {
-      const double scale = i < 3 ? kRadToDeg : 1e3;
-      const std::string unit = i < 3 ? "_deg" : "_mm";
-      row[absl::StrCat(kComponents[i], "_p95_abs_error", unit)] = stats[i].p95_abs_error * scale;
-      row[absl::StrCat(kComponents[i], "_error_over_sigma")] = stats[i].error_over_sigma;
-      row[absl::StrCat(kComponents[i], "_coverage95")] = stats[i].coverage95;
-    }
-    rows.push_back(row);
-    if (!cl.Has("json")) {
-      // Side cameras have no vanishing point or ranging along the car: "-".
-      const std::string vp = c.vp_errors_px.empty() ? "-" : absl::StrFormat("%.3f", vp95);
-      const std::string range = c.ranging_errors.empty() ? "-" : absl::StrFormat("%.3f", range95 * 100);
-      // "-": the camera does not see the wide chessboard (method (b)) or the vertical board.
-      const std::string seed = c.seed_vp_px.empty()
-                                   ? "-"
-                                   : absl::StrFormat("%.3f / %.3f / %.3f", seed_vp95, seed_range95 * 100,
-                                                     toolbox_range95 * 100);
-      const std::string roll = c.line_roll_errors.empty()
-                                   ? "-"
-                                   : absl::StrFormat("%.4f / %.4f", roll_lines95 * kRadToDeg,
-                                                     roll_lines_pose95 * kRadToDeg);
-      std::printf("%-16s %5d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %7s %8s | %5.2f..%-5.2f %4.2f..%-4.2f | %6.1f%% | %-27s | %-15s | %s%s\n",
-                  s.name.c_str(), c.cars, solved, stats[0].p95_abs_error * kRadToDeg,
-                  stats[1].p95_abs_error * kRadToDeg, stats[2].p95_abs_error * kRadToDeg,
-                  stats[3].p95_abs_error * 1e3, stats[4].p95_abs_error * 1e3, stats[5].p95_abs_error * 1e3, vp.c_str(),
-                  range.c_str(), ratio_lo, ratio_hi, cover_lo, cover_hi, agreement * 100, seed.c_str(), roll.c_str(),
-                  errors.empty() ? "-" : errors.c_str(), meets ? "" : "  (misses a bar)");
-    }
+    if (samples.count(s.name)) all_meet &= ReportCamera(s.name, samples.at(s.name), &report);
   }
-  if (cl.Has("json")) {
-    std::printf("%s\n", nlohmann::json({{"cars", in.cars}, {"seed", in.seed}, {"noise_px", *noise}, {"frames", in.frames}, {"cameras", rows},
-                                        {"meets_bars", all_meet}})
-                            .dump(2)
-                            .c_str());
-  } else {
-    std::printf("bars: p95 angles <= %.2f deg, positions <= %.0f mm, vanishing point <= %.1f px, ranging <= %.1f%%, "
-                "error/sigma %.1f..%.1f, coverage %.2f..%.2f, verdict agreement 100%%, method (b) vs (a) <= %.1f px / "
-                "%.1f%%: %s\n",
-                kAngleP95BarDeg, kPositionP95BarM * 1e3, kVanishingPointBarPx, kRangingBarFraction * 100,
-                kSigmaRatioLow, kSigmaRatioHigh, kCoverageLow, kCoverageHigh, kSeedVanishingPointBarPx,
-                kSeedRangingBarFraction * 100, all_meet ? "all met" : "NOT all met");
-  }
-  return all_meet ? cli::kExitOk : cli::kExitNegative;
+  report.Table(
+      "bars: p95 angles <= %.2f deg, positions <= %.0f mm, vanishing point <= %.1f px, ranging <= "
+      "%.1f%%, "
+      "error/sigma %.1f..%.1f, coverage %.2f..%.2f, verdict agreement 100%%, method (b) vs (a) <= "
+      "%.1f px / "
+      "%.1f%%: %s\n",
+      kAngleP95BarDeg, kPositionP95BarM * 1e3, kVanishingPointBarPx, kRangingBarFraction * 100,
+      kSigmaRatioLow, kSigmaRatioHigh, kCoverageLow, kCoverageHigh, kSeedVanishingPointBarPx,
+      kSeedRangingBarFraction * 100, all_meet ? "all met" : "NOT all met");
+  return report.Finish(
+      {{"cars", in.cars}, {"seed", in.seed}, {"noise_px", *noise}, {"frames", in.frames}},
+      "cameras", all_meet);
 }
 
 }  // namespace linecal::tools

@@ -26,7 +26,7 @@
 #include "station/sim/lidar_sim.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
-#include "tools/linecal/eval_stats.h"
+#include "tools/linecal/eval_harness.h"
 
 namespace linecal::tools {
 namespace {
@@ -43,11 +43,8 @@ constexpr LidarBars kBars64 = {0.05, 0.005, 0.01};
 constexpr LidarBars kBars16 = {0.1, 0.010, 0.02};
 constexpr double kNormalBarDeg = 0.1;
 constexpr double kMsPerFrameBar = 50.0;
-constexpr double kSigmaRatioLow = 0.8, kSigmaRatioHigh = 1.2;
-constexpr double kCoverageLow = 0.93, kCoverageHigh = 0.97;
 // Mounting errors within ±this x the tolerance: about a third of the cars out of tolerance.
 constexpr double kErrorRangeOfTolerance = 1.5;
-const char* kComponents[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
 
 struct LidarSamples {
   int cars = 0;
@@ -140,6 +137,99 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, const std::m
   }
 }
 
+// The beam table of every LiDAR of `car`, by sensor name; an error naming the sensor when one
+// has none, or naming --car `car_file` when the car has no LiDAR.
+absl::StatusOr<std::map<std::string, LidarBeamTable>> BeamTables(const CarModel& car,
+                                                                 const std::string& car_file) {
+  std::map<std::string, LidarBeamTable> beams;
+  for (const SensorModel& s : car.sensors) {
+    if (s.kind != SensorKind::kLidar) continue;
+    absl::StatusOr<LidarBeamTable> table = LidarBeamTableOf(s);
+    if (!table.ok())
+      return absl::InvalidArgumentError(absl::StrCat(s.name, ": ", table.status().message()));
+    beams.emplace(s.name, *std::move(table));
+  }
+  if (beams.empty())
+    return absl::InvalidArgumentError(
+        absl::StrCat("--car ", car_file, ": the car model has no LiDAR"));
+  return beams;
+}
+
+// One LiDAR's statistics against the bars of its ring count: its JSON row and its table lines
+// in `report`. Returns whether the LiDAR meets every bar.
+bool ReportLidar(const std::string& name, const LidarSamples& c, EvalReport* report) {
+  const LidarBars& bars = c.rings >= 64 ? kBars64 : kBars16;
+  const MountingSummary summary = Summarise(c.mounting);
+  const ErrorSigmaStats* stats = summary.stats;
+  const double ratio_lo = summary.ratio_lo, ratio_hi = summary.ratio_hi;
+  const double cover_lo = summary.cover_lo, cover_hi = summary.cover_hi;
+  const double agreement = summary.agreement;
+  const int solved = static_cast<int>(c.mounting.errors[0].size());
+  const double centre95 = Percentile(c.centre_errors_m, 0.95);
+  const double centre_max = c.centre_errors_m.empty() ? 0.0
+                                                      : *std::max_element(c.centre_errors_m.begin(),
+                                                                          c.centre_errors_m.end());
+  const double normal95 = Percentile(c.normal_errors_rad, 0.95);
+  const double ms_per_frame = c.frames ? c.detect_ms / c.frames : 0.0;
+  const bool detector_ok = centre_max <= bars.centre_m && normal95 <= kNormalBarDeg * kDegToRad;
+  const bool meets = solved == c.cars && MaxAngleP95(summary) <= bars.angle_deg * kDegToRad &&
+                     MaxPositionP95(summary) <= bars.position_m && SigmaMeetsBars(summary) &&
+                     agreement == 1.0 && detector_ok && ms_per_frame <= kMsPerFrameBar;
+  const std::string errors = ReasonsText(c.reasons);
+  nlohmann::json row = {{"lidar", name},
+                        {"rings", c.rings},
+                        {"cars", c.cars},
+                        {"solved", solved},
+                        {"error_over_sigma_min", ratio_lo},
+                        {"error_over_sigma_max", ratio_hi},
+                        {"coverage95_min", cover_lo},
+                        {"coverage95_max", cover_hi},
+                        {"verdict_agreement", agreement},
+                        {"verdicts_judged", c.mounting.verdicts_judged},
+                        {"hole_centre_p95_mm", centre95 * 1e3},
+                        {"hole_centre_max_mm", centre_max * 1e3},
+                        {"normal_p95_deg", normal95 * kRadToDeg},
+                        {"ms_per_frame", ms_per_frame},
+                        {"errors", c.reasons},
+                        {"meets_bars", meets}};
+  AddMountingColumns(summary, &row);
+  const char* kBoardComponents[6] = {"theta_x", "theta_y", "theta_z", "t_x", "t_y", "t_z"};
+  std::array<ErrorSigmaStats, 6> board;
+  for (int k = 0; k < 6; ++k) {
+    board[k] = SummariseErrors(c.board_errors[k], c.board_sigmas[k]);
+    row[absl::StrCat("board_", kBoardComponents[k], "_error_over_sigma")] =
+        board[k].error_over_sigma;
+    row[absl::StrCat("board_", kBoardComponents[k], "_coverage95")] = board[k].coverage95;
+  }
+  report->AddRow(std::move(row));
+  report->Table(
+      "%-13s %5d %4d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %5.2f..%-5.2f %4.2f..%-4.2f | "
+      "%6.1f%% | "
+      "%4.1f/%-4.1f %6.3f | %5.1f | %s%s\n",
+      name, c.rings, c.cars, solved, stats[0].p95_abs_error * kRadToDeg,
+      stats[1].p95_abs_error * kRadToDeg, stats[2].p95_abs_error * kRadToDeg,
+      stats[3].p95_abs_error * 1e3, stats[4].p95_abs_error * 1e3, stats[5].p95_abs_error * 1e3,
+      ratio_lo, ratio_hi, cover_lo, cover_hi, agreement * 100, centre95 * 1e3, centre_max * 1e3,
+      normal95 * kRadToDeg, ms_per_frame, errors.empty() ? "-" : errors,
+      meets ? "" : "  (misses a bar)");
+  report->Table(
+      "%-13s error/sigma yaw %.2f pitch %.2f roll %.2f x %.2f y %.2f z %.2f; coverage %.2f %.2f "
+      "%.2f %.2f %.2f %.2f\n",
+      "", stats[0].error_over_sigma, stats[1].error_over_sigma, stats[2].error_over_sigma,
+      stats[3].error_over_sigma, stats[4].error_over_sigma, stats[5].error_over_sigma,
+      stats[0].coverage95, stats[1].coverage95, stats[2].coverage95, stats[3].coverage95,
+      stats[4].coverage95, stats[5].coverage95);
+  report->Table(
+      "%-13s board pose (%zu boards) error/sigma theta_x %.2f theta_y %.2f theta_z %.2f t_x "
+      "%.2f t_y "
+      "%.2f t_z %.2f; coverage %.2f %.2f %.2f %.2f %.2f %.2f\n",
+      "", c.board_errors[0].size(), board[0].error_over_sigma, board[1].error_over_sigma,
+      board[2].error_over_sigma, board[3].error_over_sigma, board[4].error_over_sigma,
+      board[5].error_over_sigma, board[0].coverage95, board[1].coverage95, board[2].coverage95,
+      board[3].coverage95, board[4].coverage95, board[5].coverage95);
+  return meets;
+}
+
 }  // namespace
 
 int RunEvalLidar(const Args& args) {
@@ -169,124 +259,40 @@ int RunEvalLidar(const Args& args) {
   const absl::StatusOr<double> noise = cl.GetDouble("noise-m", 0.02);
   if (!noise.ok()) return cli::BadInput(kCommand, std::string(noise.status().message()));
   if (!(*noise >= 0 && *noise <= 1)) return cli::BadInput(kCommand, absl::StrCat("--noise-m: ", *noise, ": must be in [0, 1]"));
-  std::map<std::string, LidarBeamTable> beams;
-  for (const SensorModel& s : in.car.sensors) {
-    if (s.kind != SensorKind::kLidar) continue;
-    absl::StatusOr<LidarBeamTable> table = LidarBeamTableOf(s);
-    if (!table.ok()) return cli::BadInput(kCommand, absl::StrCat(s.name, ": ", table.status().message()));
-    beams.emplace(s.name, *std::move(table));
-  }
-  if (beams.empty()) return cli::BadInput(kCommand, absl::StrCat("--car ", cl.Get("car"), ": the car model has no LiDAR"));
+  const absl::StatusOr<std::map<std::string, LidarBeamTable>> beams =
+      BeamTables(in.car, cl.Get("car"));
+  if (!beams.ok()) return cli::BadInput(kCommand, std::string(beams.status().message()));
 
   std::mt19937_64 rng(static_cast<std::uint64_t>(in.seed));
   std::map<std::string, LidarSamples> samples;
-  for (int i = 0; i < in.cars; ++i) {
-    EvaluateCar(in.station, in.car, beams, rng, *noise, in.frames, static_cast<std::uint64_t>(in.seed) * 1000003u + i, &samples);
-    if ((i + 1) % 10 == 0) std::fprintf(stderr, "eval lidar: %d / %d cars\n", i + 1, in.cars);
-  }
+  // The trials cannot fail: a LiDAR that is not solved is a counted reason.
+  (void)RunTrials(in.cars, 10, kCommand, [&](int i) {
+    EvaluateCar(in.station, in.car, *beams, rng, *noise, in.frames,
+                static_cast<std::uint64_t>(in.seed) * 1000003u + i, &samples);
+    return absl::OkStatus();
+  });
 
+  EvalReport report(cl);
+  report.Table("%-13s %5s %4s %6s | %-27s | %-24s | %11s %9s | %7s | %-9s %-8s | %5s | %s\n",
+               "lidar", "rings", "cars", "solved", "p95 |err| yaw/pitch/roll deg",
+               "p95 |err| x/y/z mm", "err/sigma", "cover95", "verdict", "centre mm", "normal",
+               "ms/f", "errors");
   bool all_meet = true;
-  nlohmann::json rows = nlohmann::json::array();
-  if (!cl.Has("json")) {
-    std::printf("%-13s %5s %4s %6s | %-27s | %-24s | %11s %9s | %7s | %-9s %-8s | %5s | %s\n", "lidar", "rings", "cars",
-                "solved", "p95 |err| yaw/pitch/roll deg", "p95 |err| x/y/z mm", "err/sigma", "cover95", "verdict",
-                "centre mm", "normal", "ms/f", "errors");
-  }
   for (const SensorModel& s : in.car.sensors) {
-    if (!samples.count(s.name)) continue;
-    const LidarSamples& c = samples[s.name];
-    const LidarBars& bars = c.rings >= 64 ? kBars64 : kBars16;
-    const MountingSummary summary = Summarise(c.mounting);
-    const ErrorSigmaStats* stats = summary.stats;
-    const double ratio_lo = summary.ratio_lo, ratio_hi = summary.ratio_hi;
-    const double cover_lo = summary.cover_lo, cover_hi = summary.cover_hi;
-    const double agreement = summary.agreement;
-    const int solved = static_cast<int>(c.mounting.errors[0].size());
-    const double centre95 = Percentile(c.centre_errors_m, 0.95);
-    const double centre_max = c.centre_errors_m.empty() ? 0.0 : *std::max_element(c.centre_errors_m.begin(), c.centre_errors_m.end());
-    const double normal95 = Percentile(c.normal_errors_rad, 0.95);
-    const double ms_per_frame = c.frames ? c.detect_ms / c.frames : 0.0;
-    const bool angles_ok = std::max({stats[0].p95_abs_error, stats[1].p95_abs_error, stats[2].p95_abs_error}) <=
-                           bars.angle_deg * kDegToRad;
-    const bool positions_ok =
-        std::max({stats[3].p95_abs_error, stats[4].p95_abs_error, stats[5].p95_abs_error}) <= bars.position_m;
-    const bool sigma_ok = ratio_lo >= kSigmaRatioLow && ratio_hi <= kSigmaRatioHigh && cover_lo >= kCoverageLow &&
-                          cover_hi <= kCoverageHigh;
-    const bool detector_ok = centre_max <= bars.centre_m && normal95 <= kNormalBarDeg * kDegToRad;
-    const bool meets = solved == c.cars && angles_ok && positions_ok && sigma_ok && agreement == 1.0 &&
-                       detector_ok && ms_per_frame <= kMsPerFrameBar;
-    all_meet &= meets;
-    std::string errors;
-    for (const auto& [reason, count] : c.reasons) absl::StrAppend(&errors, errors.empty() ? "" : ", ", reason, " ", count);
-    nlohmann::json row = {{"lidar", s.name},
-                          {"rings", c.rings},
-                          {"cars", c.cars},
-                          {"solved", solved},
-                          {"error_over_sigma_min", ratio_lo},
-                          {"error_over_sigma_max", ratio_hi},
-                          {"coverage95_min", cover_lo},
-                          {"coverage95_max", cover_hi},
-                          {"verdict_agreement", agreement},
-                          {"verdicts_judged", c.mounting.verdicts_judged},
-                          {"hole_centre_p95_mm", centre95 * 1e3},
-                          {"hole_centre_max_mm", centre_max * 1e3},
-                          {"normal_p95_deg", normal95 * kRadToDeg},
-                          {"ms_per_frame", ms_per_frame},
-                          {"errors", c.reasons},
-                          {"meets_bars", meets}};
-    for (int i = 0; i < 6; ++i) {
-      const double scale = i < 3 ? kRadToDeg : 1e3;
-      const std::string unit = i < 3 ? "_deg" : "_mm";
-      row[absl::StrCat(kComponents[i], "_p95_abs_error", unit)] = stats[i].p95_abs_error * scale;
-      row[absl::StrCat(kComponents[i], "_error_over_sigma")] = stats[i].error_over_sigma;
-      row[absl::StrCat(kComponents[i], "_coverage95")] = stats[i].coverage95;
-    }
-    const char* kBoardComponents[6] = {"theta_x", "theta_y", "theta_z", "t_x", "t_y", "t_z"};
-    std::array<ErrorSigmaStats, 6> board;
-    for (int k = 0; k < 6; ++k) {
-      board[k] = SummariseErrors(c.board_errors[k], c.board_sigmas[k]);
-      row[absl::StrCat("board_", kBoardComponents[k], "_error_over_sigma")] =
-          board[k].error_over_sigma;
-      row[absl::StrCat("board_", kBoardComponents[k], "_coverage95")] = board[k].coverage95;
-    }
-    rows.push_back(row);
-    if (!cl.Has("json")) {
-      std::printf("%-13s %5d %4d %6d | %8.4f %8.4f %8.4f  | %7.2f %7.2f %7.2f  | %5.2f..%-5.2f %4.2f..%-4.2f | %6.1f%% | "
-                  "%4.1f/%-4.1f %6.3f | %5.1f | %s%s\n",
-                  s.name.c_str(), c.rings, c.cars, solved, stats[0].p95_abs_error * kRadToDeg,
-                  stats[1].p95_abs_error * kRadToDeg, stats[2].p95_abs_error * kRadToDeg, stats[3].p95_abs_error * 1e3,
-                  stats[4].p95_abs_error * 1e3, stats[5].p95_abs_error * 1e3, ratio_lo, ratio_hi, cover_lo, cover_hi,
-                  agreement * 100, centre95 * 1e3, centre_max * 1e3, normal95 * kRadToDeg, ms_per_frame,
-                  errors.empty() ? "-" : errors.c_str(), meets ? "" : "  (misses a bar)");
-      std::printf("%-13s error/sigma yaw %.2f pitch %.2f roll %.2f x %.2f y %.2f z %.2f; coverage %.2f %.2f %.2f %.2f %.2f %.2f\n",
-                  "", stats[0].error_over_sigma, stats[1].error_over_sigma, stats[2].error_over_sigma,
-                  stats[3].error_over_sigma, stats[4].error_over_sigma, stats[5].error_over_sigma, stats[0].coverage95,
-                  stats[1].coverage95, stats[2].coverage95, stats[3].coverage95, stats[4].coverage95,
-                  stats[5].coverage95);
-      std::printf(
-          "%-13s board pose (%zu boards) error/sigma theta_x %.2f theta_y %.2f theta_z %.2f t_x "
-          "%.2f t_y "
-          "%.2f t_z %.2f; coverage %.2f %.2f %.2f %.2f %.2f %.2f\n",
-          "", c.board_errors[0].size(), board[0].error_over_sigma, board[1].error_over_sigma,
-          board[2].error_over_sigma, board[3].error_over_sigma, board[4].error_over_sigma,
-          board[5].error_over_sigma, board[0].coverage95, board[1].coverage95, board[2].coverage95,
-          board[3].coverage95, board[4].coverage95, board[5].coverage95);
-    }
+    if (samples.count(s.name)) all_meet &= ReportLidar(s.name, samples.at(s.name), &report);
   }
-  if (cl.Has("json")) {
-    std::printf("%s\n", nlohmann::json({{"cars", in.cars}, {"seed", in.seed}, {"noise_m", *noise}, {"frames", in.frames},
-                                        {"lidars", rows}, {"meets_bars", all_meet}})
-                            .dump(2)
-                            .c_str());
-  } else {
-    std::printf("bars: p95 angles <= %.2f/%.2f deg and positions <= %.0f/%.0f mm (64/16 rings), worst hole centre <= "
-                "%.0f/%.0f mm, p95 normal <= %.1f deg, error/sigma %.1f..%.1f, coverage %.2f..%.2f, verdict "
-                "agreement 100%%, <= %.0f ms per rotation: %s\n",
-                kBars64.angle_deg, kBars16.angle_deg, kBars64.position_m * 1e3, kBars16.position_m * 1e3,
-                kBars64.centre_m * 1e3, kBars16.centre_m * 1e3, kNormalBarDeg, kSigmaRatioLow, kSigmaRatioHigh,
-                kCoverageLow, kCoverageHigh, kMsPerFrameBar, all_meet ? "all met" : "NOT all met");
-  }
-  return all_meet ? cli::kExitOk : cli::kExitNegative;
+  report.Table(
+      "bars: p95 angles <= %.2f/%.2f deg and positions <= %.0f/%.0f mm (64/16 rings), worst hole "
+      "centre <= "
+      "%.0f/%.0f mm, p95 normal <= %.1f deg, error/sigma %.1f..%.1f, coverage %.2f..%.2f, verdict "
+      "agreement 100%%, <= %.0f ms per rotation: %s\n",
+      kBars64.angle_deg, kBars16.angle_deg, kBars64.position_m * 1e3, kBars16.position_m * 1e3,
+      kBars64.centre_m * 1e3, kBars16.centre_m * 1e3, kNormalBarDeg, kSigmaRatioLow,
+      kSigmaRatioHigh, kCoverageLow, kCoverageHigh, kMsPerFrameBar,
+      all_meet ? "all met" : "NOT all met");
+  return report.Finish(
+      {{"cars", in.cars}, {"seed", in.seed}, {"noise_m", *noise}, {"frames", in.frames}}, "lidars",
+      all_meet);
 }
 
 }  // namespace linecal::tools

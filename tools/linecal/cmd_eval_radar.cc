@@ -25,25 +25,17 @@
 #include "station/sim/radar_sim.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
-#include "tools/linecal/eval_stats.h"
+#include "tools/linecal/eval_harness.h"
 
 namespace linecal::tools {
 namespace {
 
 constexpr char kCommand[] = "eval radar";
-constexpr double kDegToRad = std::numbers::pi / 180.0;
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 // Acceptance bars (docs/acceptance.md, "Solvers").
 constexpr double kYawP95BarDeg = 0.05;
-constexpr double kSigmaRatioLow = 0.8;
-constexpr double kSigmaRatioHigh = 1.2;
-constexpr double kCoverageLow = 0.93;
-constexpr double kCoverageHigh = 0.97;
 // Yaw errors are drawn within ±this x the tolerance: half the cars in, half out.
 constexpr double kYawErrorRangeOfTolerance = 2.0;
-// The simulator's default aligner bounds (simulator.h): the car stands within ±2 cm, ±0.2°.
-constexpr double kAlignerOffsetM = 0.02;
-constexpr double kAlignerThrustDeg = 0.2;
 // docs/acceptance.md: σ 0.1° per detection, 50 cycles.
 constexpr double kAzimuthSigmaDeg = 0.1;
 constexpr int kCycles = 50;
@@ -135,6 +127,82 @@ nlohmann::json SummaryJson(const std::string& name, const Summary& s) {
           {"reasons", s.reasons}};
 }
 
+// The flags of this evaluation besides the harness's: the mounting position error bound per
+// axis and the range noise, metres.
+struct RadarEvalFlags {
+  double offset_m = 0;
+  double range_noise_m = 0;
+};
+
+// --position-error-m and --range-noise-m; the error names the flag and the value.
+absl::StatusOr<RadarEvalFlags> ReadRadarEvalFlags(const cli::CommandLine& cl) {
+  const absl::StatusOr<double> offset_m = cl.GetDouble("position-error-m", 0.0);
+  if (!offset_m.ok()) return offset_m.status();
+  // Beyond 0.5 m it is another car, as the simulator says (simulator.cc).
+  if (!(*offset_m >= 0 && *offset_m <= 0.5)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--position-error-m: ", *offset_m, ": must be in [0, 0.5]"));
+  }
+  const absl::StatusOr<double> range_noise_m = cl.GetDouble("range-noise-m", kDefaultRangeNoiseM);
+  if (!range_noise_m.ok()) return range_noise_m.status();
+  // The simulator's own bound (RadarSimOptions::Validate).
+  if (!(*range_noise_m >= 0 && *range_noise_m <= 5)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--range-noise-m: ", *range_noise_m, ": must be in [0, 5]"));
+  }
+  return RadarEvalFlags{*offset_m, *range_noise_m};
+}
+
+// One random car: every radar of in.car gets a random mounting, its CAN traffic is simulated,
+// decoded and calibrated, and the estimate against the truth goes into its model's group. The
+// error names the sensor when the simulator or the decoder cannot handle it.
+absl::Status EvaluateCar(const EvalInputs& in, const RadarSimOptions& sim, double offset_m,
+                         std::mt19937_64& rng, std::map<std::string, Group>* groups) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Rigid3d T_station_car = RandomAligner(rng).T_station_car();
+  for (const SensorModel& sensor : in.car.sensors) {
+    if (sensor.kind != SensorKind::kRadar) continue;
+    const Eigen::Matrix3d r_base = SensorBaseRotation(SensorKind::kRadar);
+    const YawPitchRoll nominal =
+        MountingAngles(sensor.T_car_sensor_nominal.RotationMatrix(), r_base);
+    const YawPitchRoll truth{
+        nominal.yaw + kYawErrorRangeOfTolerance * sensor.tolerance.yaw_rad * u(rng),
+        nominal.pitch + sensor.tolerance.pitch_rad * u(rng),
+        nominal.roll + sensor.tolerance.roll_rad * u(rng)};
+    const Eigen::Vector3d offset(offset_m * u(rng), offset_m * u(rng), offset_m * u(rng));
+    const Rigid3d T_car_radar(MountingRotation(truth, r_base),
+                              sensor.T_car_sensor_nominal.translation() + offset);
+    const absl::StatusOr<std::vector<CanFrame>> frames =
+        SimulateRadar(sensor.model, sensor.radar_sensor_id, in.station, T_station_car * T_car_radar,
+                      CanTime{}, "can0", sim, rng());
+    if (!frames.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": ", frames.status().message()));
+    }
+    const std::optional<RadarModel> model = ParseRadarModel(sensor.model);
+    if (!model) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(sensor.name, ": unknown radar model '", sensor.model, "'"));
+    }
+    const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *model, RadarConventions{});
+    const absl::StatusOr<RadarCalibrationRun> run = CalibrateRadar(
+        sensor, in.station, T_station_car, decoded.cycles, RadarCalibrationOptions{});
+    if (!run.ok()) return run.status();
+
+    Group& g = (*groups)[sensor.model];
+    ++g.cars;
+    const RadarCalibrationResult& r = run->result;
+    ++g.reasons[r.reason.empty() ? "pass" : r.reason];
+    if (r.verdict == RadarVerdict::kError) continue;
+    ++g.calibrated;
+    const double true_deviation = truth.yaw - nominal.yaw;
+    const bool truly_in = std::abs(true_deviation) <= sensor.tolerance.yaw_rad;
+    g.samples.push_back({(r.yaw_rad - truth.yaw) * kRadToDeg, r.yaw_sigma_rad * kRadToDeg,
+                         r.yaw_ci95_rad * kRadToDeg, truly_in == (r.verdict == RadarVerdict::kPass),
+                         (std::abs(true_deviation) - sensor.tolerance.yaw_rad) / r.yaw_sigma_rad});
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 int RunEvalRadar(const Args& args) {
@@ -158,129 +226,59 @@ int RunEvalRadar(const Args& args) {
        {"position-error-m", "M", "mounting position error bound per axis, metres (default 0)"},
        {"json", "", "print one JSON object"}});
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
-  // 200 cars put the 95th percentile and the coverage within about ±1.5 percentage points.
-  const absl::StatusOr<int> cars = cl.GetInt("cars", 200);
-  if (!cars.ok()) return cli::BadInput(kCommand, std::string(cars.status().message()));
-  if (*cars < 1 || *cars > 100000) {
-    return cli::BadInput(kCommand, absl::StrCat("--cars: ", *cars, ": must be in [1, 100000]"));
+  EvalInputs in;
+  if (absl::Status s = ReadCarsAndSeed(cl, &in); !s.ok()) {
+    return cli::BadInput(kCommand, std::string(s.message()));
   }
-  const absl::StatusOr<int> seed = cl.GetInt("seed", 1);
-  if (!seed.ok()) return cli::BadInput(kCommand, std::string(seed.status().message()));
-  const absl::StatusOr<double> offset_m = cl.GetDouble("position-error-m", 0.0);
-  if (!offset_m.ok()) return cli::BadInput(kCommand, std::string(offset_m.status().message()));
-  // Beyond 0.5 m it is another car, as the simulator says (simulator.cc).
-  if (!(*offset_m >= 0 && *offset_m <= 0.5)) {
-    return cli::BadInput(kCommand,
-                         absl::StrCat("--position-error-m: ", *offset_m, ": must be in [0, 0.5]"));
+  const absl::StatusOr<RadarEvalFlags> flags = ReadRadarEvalFlags(cl);
+  if (!flags.ok()) return cli::BadInput(kCommand, std::string(flags.status().message()));
+  if (absl::Status s = ReadStationAndCar(cl, &in); !s.ok()) {
+    return cli::BadInput(kCommand, std::string(s.message()));
   }
-  const absl::StatusOr<double> range_noise_m = cl.GetDouble("range-noise-m", kDefaultRangeNoiseM);
-  if (!range_noise_m.ok()) {
-    return cli::BadInput(kCommand, std::string(range_noise_m.status().message()));
-  }
-  // The simulator's own bound (RadarSimOptions::Validate).
-  if (!(*range_noise_m >= 0 && *range_noise_m <= 5)) {
-    return cli::BadInput(
-        kCommand, absl::StrCat("--range-noise-m: ", *range_noise_m, ": must be in [0, 5]"));
-  }
-  const absl::StatusOr<StationLayout> station = ReadStationLayout(cl.Get("station"));
-  if (!station.ok()) return cli::BadInput(kCommand, std::string(station.status().message()));
-  const absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
-  if (!car.ok()) return cli::BadInput(kCommand, std::string(car.status().message()));
-  if (absl::Status s = CheckTargetsExist(*car, *station); !s.ok()) {
+  if (absl::Status s = CheckTargetsExist(in.car, in.station); !s.ok()) {
     return cli::BadInput(kCommand, std::string(s.message()));
   }
 
   RadarSimOptions sim;
   sim.cycles = kCycles;
   sim.azimuth_sigma_deg = kAzimuthSigmaDeg;
-  sim.range_sigma_m = *range_noise_m;
-  std::mt19937_64 rng(static_cast<std::uint64_t>(*seed));
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  sim.range_sigma_m = flags->range_noise_m;
+  std::mt19937_64 rng(static_cast<std::uint64_t>(in.seed));
   std::map<std::string, Group> groups;  // by radar model
-  for (int c = 0; c < *cars; ++c) {
-    AlignerMeasurement aligner;
-    aligner.longitudinal_offset_m = kAlignerOffsetM * u(rng);
-    aligner.lateral_offset_m = kAlignerOffsetM * u(rng);
-    aligner.thrust_angle_rad = kAlignerThrustDeg * kDegToRad * u(rng);
-    const Rigid3d T_station_car = aligner.T_station_car();
-    for (const SensorModel& sensor : car->sensors) {
-      if (sensor.kind != SensorKind::kRadar) continue;
-      const Eigen::Matrix3d r_base = SensorBaseRotation(SensorKind::kRadar);
-      const YawPitchRoll nominal =
-          MountingAngles(sensor.T_car_sensor_nominal.RotationMatrix(), r_base);
-      const YawPitchRoll truth{
-          nominal.yaw + kYawErrorRangeOfTolerance * sensor.tolerance.yaw_rad * u(rng),
-          nominal.pitch + sensor.tolerance.pitch_rad * u(rng),
-          nominal.roll + sensor.tolerance.roll_rad * u(rng)};
-      const Eigen::Vector3d offset(*offset_m * u(rng), *offset_m * u(rng), *offset_m * u(rng));
-      const Rigid3d T_car_radar(MountingRotation(truth, r_base),
-                                sensor.T_car_sensor_nominal.translation() + offset);
-      const absl::StatusOr<std::vector<CanFrame>> frames =
-          SimulateRadar(sensor.model, sensor.radar_sensor_id, *station, T_station_car * T_car_radar,
-                        CanTime{}, "can0", sim, rng());
-      if (!frames.ok()) {
-        return cli::BadInput(kCommand, absl::StrCat(sensor.name, ": ", frames.status().message()));
-      }
-      const std::optional<RadarModel> model = ParseRadarModel(sensor.model);
-      if (!model) {
-        return cli::BadInput(
-            kCommand, absl::StrCat(sensor.name, ": unknown radar model '", sensor.model, "'"));
-      }
-      const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *model, RadarConventions{});
-      const absl::StatusOr<RadarCalibrationRun> run = CalibrateRadar(
-          sensor, *station, T_station_car, decoded.cycles, RadarCalibrationOptions{});
-      if (!run.ok()) return cli::BadInput(kCommand, std::string(run.status().message()));
-
-      Group& g = groups[sensor.model];
-      ++g.cars;
-      const RadarCalibrationResult& r = run->result;
-      ++g.reasons[r.reason.empty() ? "pass" : r.reason];
-      if (r.verdict == RadarVerdict::kError) continue;
-      ++g.calibrated;
-      const double true_deviation = truth.yaw - nominal.yaw;
-      const bool truly_in = std::abs(true_deviation) <= sensor.tolerance.yaw_rad;
-      g.samples.push_back(
-          {(r.yaw_rad - truth.yaw) * kRadToDeg, r.yaw_sigma_rad * kRadToDeg,
-           r.yaw_ci95_rad * kRadToDeg, truly_in == (r.verdict == RadarVerdict::kPass),
-           (std::abs(true_deviation) - sensor.tolerance.yaw_rad) / r.yaw_sigma_rad});
-    }
-    if ((c + 1) % 50 == 0) {
-      std::fprintf(stderr, "linecal %s: %d / %d cars\n", kCommand, c + 1, *cars);
-    }
+  if (absl::Status s =
+          RunTrials(in.cars, 50, absl::StrCat("linecal ", kCommand),
+                    [&](int) { return EvaluateCar(in, sim, flags->offset_m, rng, &groups); });
+      !s.ok()) {
+    return cli::BadInput(kCommand, std::string(s.message()));
   }
 
   bool all_meet = !groups.empty();
-  nlohmann::json rows = nlohmann::json::array();
   std::vector<std::pair<std::string, Summary>> summaries;
   for (const auto& [name, g] : groups) {
     summaries.emplace_back(name, Summarise(g));
     all_meet &= summaries.back().second.meets_bars;
   }
-  if (cl.Has("json")) {
-    for (const auto& [name, s] : summaries) rows.push_back(SummaryJson(name, s));
-    const nlohmann::json out = {{"cars", *cars},
-                                {"seed", *seed},
-                                {"position_error_m", *offset_m},
-                                {"range_noise_m", *range_noise_m},
-                                {"azimuth_sigma_deg", kAzimuthSigmaDeg},
-                                {"cycles", kCycles},
-                                {"groups", rows},
-                                {"meets_bars", all_meet}};
-    std::printf("%s\n", out.dump(2).c_str());
-  } else {
-    std::printf(
-        "| radar model | runs | calibrated | p95 abs yaw error (deg) | RMS error (deg) | "
-        "RMS reported 1-sigma (deg) | error / sigma | 95%% coverage | verdict agreement | "
-        "wrong verdicts > 1 sigma from the edge | meets bars |\n");
-    std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
-    for (const auto& [name, s] : summaries) {
-      std::printf("| %s | %d | %d | %.4f | %.4f | %.4f | %.2f | %.3f | %.3f | %d (max %.1f) | %s |\n",
-                  name.c_str(), s.cars, s.calibrated, s.p95_abs_error_deg, s.rms_error_deg,
-                  s.rms_sigma_deg, s.sigma_ratio, s.coverage95, s.verdict_agreement,
-                  s.wrong_verdicts_off_edge, s.max_wrong_edge_sigmas, s.meets_bars ? "yes" : "no");
-    }
+  EvalReport report(cl);
+  report.Table(
+      "| radar model | runs | calibrated | p95 abs yaw error (deg) | RMS error (deg) | "
+      "RMS reported 1-sigma (deg) | error / sigma | 95%% coverage | verdict agreement | "
+      "wrong verdicts > 1 sigma from the edge | meets bars |\n");
+  report.Table("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const auto& [name, s] : summaries) {
+    report.AddRow(SummaryJson(name, s));
+    report.Table(
+        "| %s | %d | %d | %.4f | %.4f | %.4f | %.2f | %.3f | %.3f | %d (max %.1f) | %s |\n", name,
+        s.cars, s.calibrated, s.p95_abs_error_deg, s.rms_error_deg, s.rms_sigma_deg, s.sigma_ratio,
+        s.coverage95, s.verdict_agreement, s.wrong_verdicts_off_edge, s.max_wrong_edge_sigmas,
+        s.meets_bars ? "yes" : "no");
   }
-  return all_meet ? cli::kExitOk : cli::kExitNegative;
+  return report.Finish({{"cars", in.cars},
+                        {"seed", in.seed},
+                        {"position_error_m", flags->offset_m},
+                        {"range_noise_m", flags->range_noise_m},
+                        {"azimuth_sigma_deg", kAzimuthSigmaDeg},
+                        {"cycles", kCycles}},
+                       "groups", all_meet);
 }
 
 }  // namespace linecal::tools

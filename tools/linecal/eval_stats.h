@@ -1,7 +1,7 @@
 #pragma once
-// What the `linecal eval ...` programs share: their common flags, random cars, percentiles and
-// the checks of a reported 1-sigma against the spread of the errors it describes
-// (docs/acceptance.md).
+// The statistics the `linecal eval ...` programs share (eval_harness.h runs them): random cars,
+// percentiles and the checks of a reported 1-sigma against the spread of the errors it
+// describes (docs/acceptance.md).
 
 #include <algorithm>
 #include <array>
@@ -11,13 +11,10 @@
 #include <span>
 #include <vector>
 
-#include "absl/status/statusor.h"
-#include "absl/strings/str_cat.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
 #include "station/solvers/mounting.h"
-#include "tools/cli/command_line.h"
 
 namespace linecal::tools {
 
@@ -138,44 +135,6 @@ inline MountingSummary Summarise(const MountingSamples& c) {
   }
   s.agreement = c.verdicts_judged ? static_cast<double>(c.verdicts_agree) / c.verdicts_judged : 1.0;
   return s;
-}
-
-// The flags of an evaluation over random cars: --station, --car (their targets must exist in
-// the station), --cars (default 200, [1, 100000]: 200 put the 95th percentiles and the
-// coverage within about +-1.5 percentage points), --seed (default 1) and --frames
-// (`default_frames`, [1, 100]). The error names the flag or the file.
-struct EvalInputs {
-  StationLayout station;
-  CarModel car;
-  int cars = 0;
-  int seed = 0;
-  int frames = 0;
-};
-inline absl::StatusOr<EvalInputs> ReadEvalInputs(const cli::CommandLine& cl, int default_frames) {
-  EvalInputs in;
-  absl::StatusOr<StationLayout> station = ReadStationLayout(cl.Get("station"));
-  if (!station.ok()) return station.status();
-  in.station = *std::move(station);
-  absl::StatusOr<CarModel> car = ReadCarModel(cl.Get("car"));
-  if (!car.ok()) return car.status();
-  in.car = *std::move(car);
-  const absl::StatusOr<int> cars = cl.GetInt("cars", 200);
-  if (!cars.ok()) return cars.status();
-  if (*cars < 1 || *cars > 100000) {
-    return absl::InvalidArgumentError(absl::StrCat("--cars: ", *cars, ": must be in [1, 100000]"));
-  }
-  const absl::StatusOr<int> seed = cl.GetInt("seed", 1);
-  if (!seed.ok()) return seed.status();
-  const absl::StatusOr<int> frames = cl.GetInt("frames", default_frames);
-  if (!frames.ok()) return frames.status();
-  if (*frames < 1 || *frames > 100) {
-    return absl::InvalidArgumentError(absl::StrCat("--frames: ", *frames, ": must be in [1, 100]"));
-  }
-  if (absl::Status s = CheckTargetsExist(in.car, in.station); !s.ok()) return s;
-  in.cars = *cars;
-  in.seed = *seed;
-  in.frames = *frames;
-  return in;
 }
 
 }  // namespace linecal::tools

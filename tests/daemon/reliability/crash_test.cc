@@ -341,6 +341,202 @@ void CycleLoop(Run& r, Client& client, const std::atomic<bool>& killed, std::ato
   }
 }
 
+// The scratch paths of `r` under workspace.dir and linecald's configuration file: the
+// reference station and the workspace's car, replaying the capture.
+void WriteConfig(Run& r, const Workspace& workspace) {
+  r.config_path = (r.dir / "linecald.json").string();
+  r.log_path = (r.dir / "linecald.log").string();
+  r.db_path = (r.dir / "data" / "linecal.db").string();
+  std::ofstream(r.config_path) << nlohmann::json{
+      {"listen", "127.0.0.1:0"},
+      {"station_id", "crash"},
+      {"station", ReferenceStationPath()},
+      {"car_models", {workspace.car_path}},
+      {"data_root", "data"},
+      {"db", "linecal.db"},
+      {"source",
+       {{"type", "replay"},
+        {"capture", "replay"}}}}.dump(2);
+}
+
+// Round 0: the start-up and cycle times the kill moments are drawn against (r.startup_s,
+// r.cycle_s), one cycle that must end done, then SIGTERM. The error is a setup failure.
+absl::Status RoundZero(Run& r) {
+  const Clock::time_point t0 = Clock::now();
+  absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+  if (!daemon.ok()) return daemon.status();
+  absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
+  if (!port.ok()) return port.status();
+  r.startup_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  Client client(*port);
+  std::atomic<int> phase{kIdle};
+  CycleCall call;
+  const Clock::time_point c0 = Clock::now();
+  if (absl::Status s = OneCycle(
+          client, &phase, [](const std::string&) {}, &call);
+      !s.ok())
+    return s;
+  r.cycle_s = std::chrono::duration<double>(Clock::now() - c0).count();
+  if (call.cycle.state() != v1::CYCLE_STATE_DONE) {
+    return absl::InternalError("round 0's cycle ended " + Describe(call.cycle));
+  }
+  ++r.started;
+  r.committed[call.id] = call.cycle;
+  r.rss_after_cycle_kb =
+      ReadProcessStatus(std::to_string((*daemon)->pid())).value_or(ProcessStatus{}).rss_kb;
+  (*daemon)->Signal(SIGTERM);
+  const int status = (*daemon)->Wait();
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    Violation(r, "round 0: SIGTERM: " + DescribeWaitStatus(status));
+  }
+  return absl::OkStatus();
+}
+
+// Round `round` (1..): every kStartupKillEvery-th round a daemon killed while starting; then
+// a daemon started and verified, and killed at a random moment of its cycles; a progress line
+// every 10 rounds. False when it did not restart (a violation: the rounds end); the error is
+// a setup failure.
+absl::StatusOr<bool> KillRound(Run& r, int round, Clock::time_point start) {
+  const std::string when = absl::StrCat("round ", round);
+  if (round % kStartupKillEvery == 0) {
+    absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+    if (!daemon.ok()) return daemon.status();
+    std::this_thread::sleep_for(std::chrono::duration<double>(
+        std::uniform_real_distribution<double>(0, r.startup_s)(r.rng)));
+    (*daemon)->Signal(SIGKILL);
+    const int status = (*daemon)->Wait();
+    // Killed, or it had already started and was killed idle: both fine; exiting otherwise is not.
+    if (!(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)) {
+      Violation(r, absl::StrCat(when, ": killed while starting: ", DescribeWaitStatus(status)));
+    }
+    ++r.startup_kills;
+  }
+  absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+  if (!daemon.ok()) return daemon.status();
+  absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
+  if (!port.ok()) {
+    Violation(r, absl::StrCat(when, ": restart: ", port.status().message()));
+    return false;
+  }
+  Client client(*port);
+  Verify(r, client, when);
+
+  // Armed now, just before the round's first StartCycle.
+  std::atomic<bool> killed{false};
+  std::atomic<int> phase{kIdle};
+  const double kill_after_s = std::uniform_real_distribution<double>(0, 2.2 * r.cycle_s)(r.rng);
+  std::thread killer([&] {
+    std::this_thread::sleep_for(std::chrono::duration<double>(kill_after_s));
+    ++r.phase_kills[phase.load()];
+    killed = true;
+    (*daemon)->Signal(SIGKILL);
+  });
+  CycleLoop(r, client, killed, &phase);
+  killer.join();
+  const int status = (*daemon)->Wait();
+  if (!(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)) {
+    Violation(r, absl::StrCat(when, ": the daemon ended by itself: ", DescribeWaitStatus(status)));
+  }
+  ++r.cycle_kills;
+  if (round % 10 == 0 || round == r.flags.cycles) {
+    std::printf("  round %3d  %6.1f s  cycles started %d  violations %zu\n", round,
+                std::chrono::duration<double>(Clock::now() - start).count(), r.started,
+                r.violations.size());
+    std::fflush(stdout);
+  }
+  return true;
+}
+
+// What the final restart and the clean stop leave, for the report.
+struct FinalState {
+  int final_status = -1;             // the wait status after SIGHUP
+  std::string last_id;               // the cycle running at SIGHUP
+  double descriptors_served_s = -1;  // after the descriptors freed up; -1: not served
+  absl::Status integrity = absl::UnknownError("not opened");
+  int aborted_at_open = -1;  // cycles running at the store's last open
+};
+
+// The last restart: everything verified once more, also after a second daemon on the same
+// configuration was refused and after its descriptors ran out; then a cycle started and
+// SIGHUP, which must drain as SIGTERM does (exit 0, the cycle cancelled or, had it ended
+// first, done). The error is a setup failure.
+absl::Status FinalRestart(Run& r, FinalState* f) {
+  absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
+  if (!daemon.ok()) return daemon.status();
+  absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
+  if (port.ok()) {
+    Client client(*port);
+    Verify(r, client, "final restart");
+    SecondDaemonRefused(r, (*daemon)->pid());
+    Verify(r, client, "after a second daemon");
+    f->descriptors_served_s = DescriptorsExhausted(r, **daemon, *port);
+    // A new channel: the restarted gRPC server closed the old one's connection.
+    Client again(*port);
+    Verify(r, again, "after the descriptors ran out");
+    f->last_id = StartOnly(r, again);
+  } else {
+    Violation(r, absl::StrCat("final restart: ", port.status().message()));
+  }
+  (*daemon)->Signal(SIGHUP);
+  f->final_status = (*daemon)->Wait();
+  if (!WIFEXITED(f->final_status) || WEXITSTATUS(f->final_status) != 0) {
+    Violation(r, "final SIGHUP: " + DescribeWaitStatus(f->final_status));
+  }
+  return absl::OkStatus();
+}
+
+// The file itself after the clean stop: its integrity, no cycle left running, the cycle
+// running at SIGHUP cancelled or done.
+void CheckStoreAfterStop(Run& r, FinalState* f) {
+  if (absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(r.db_path); store.ok()) {
+    f->integrity = (*store)->IntegrityCheck();
+    f->aborted_at_open = (*store)->aborted_at_open();
+    int64_t id = 0;
+    if (absl::SimpleAtoi(f->last_id, &id)) {
+      const absl::StatusOr<StoredCycle> last = (*store)->GetCycle(id);
+      const bool ended = last.ok() && (last->state == CycleState::kCancelled ||
+                                       last->state == CycleState::kDone);
+      if (!ended) {
+        Violation(r, absl::StrCat("the cycle running at SIGHUP: ",
+                                  last.ok() ? CycleStateName(last->state)
+                                            : last.status().ToString()));
+      }
+    }
+  } else {
+    f->integrity = store.status();
+  }
+  if (!f->integrity.ok()) Violation(r, "integrity_check: " + f->integrity.ToString());
+  if (f->aborted_at_open != 0)
+    Violation(r, absl::StrCat(f->aborted_at_open, " cycles running after the clean stop"));
+}
+
+// The report on stdout: kills, cycles, what the store holds, and every violation.
+void PrintReport(const Run& r, Clock::time_point start, const FinalState& f) {
+  std::printf("\n%d rounds in %.1f s: %d kills during cycles, %d during start-up\n", r.flags.cycles,
+              std::chrono::duration<double>(Clock::now() - start).count(), r.cycle_kills,
+              r.startup_kills);
+  std::printf("kills by what the client was doing:\n");
+  for (int p = 0; p < kPhases; ++p) std::printf("  %-32s %d\n", kPhaseNames[p], r.phase_kills[p]);
+  std::printf("cycles started (answered): %d; stored in all: %zu\n", r.started, r.committed.size());
+  std::printf("  interrupted, stored aborted (daemon_restarted): %d\n", r.interrupted);
+  std::printf("  ended just before the kill, unseen by the client: %d\n", r.ended_unseen);
+  std::printf("  stored by a StartCycle whose answer the kill cut off: %d\n", r.unacknowledged);
+  std::printf("daemon RSS after one cycle: %.1f MB\n", r.rss_after_cycle_kb / 1024.0);
+  if (f.descriptors_served_s >= 0) {
+    std::printf(
+        "descriptors exhausted (accept4 EMFILE): a new connection served %.1f s after they "
+        "freed up, same process\n",
+        f.descriptors_served_s);
+  } else {
+    std::printf("descriptors exhausted: not served again (see the violations)\n");
+  }
+  std::printf("integrity_check: %s; final SIGHUP: %s; running at the last open: %d\n",
+              f.integrity.ok() ? "ok" : std::string(f.integrity.message()).c_str(),
+              DescribeWaitStatus(f.final_status).c_str(), f.aborted_at_open);
+  std::printf("violations: %zu\n", r.violations.size());
+  for (const std::string& v : r.violations) std::printf("  %s\n", v.c_str());
+}
+
 int Main(const ProgramFlags& flags, const std::string& linecald) {
   absl::StatusOr<Workspace> workspace = PrepareWorkspace(flags, "crash", kCarId, "data/replay");
   if (!workspace.ok()) {
@@ -357,171 +553,22 @@ int Main(const ProgramFlags& flags, const std::string& linecald) {
     if (workspace->owned) fs::remove_all(r.dir);
     return 2;
   };
-  r.config_path = (r.dir / "linecald.json").string();
-  r.log_path = (r.dir / "linecald.log").string();
-  r.db_path = (r.dir / "data" / "linecal.db").string();
-  std::ofstream(r.config_path) << nlohmann::json{{"listen", "127.0.0.1:0"},
-                                                 {"station_id", "crash"},
-                                                 {"station", ReferenceStationPath()},
-                                                 {"car_models", {workspace->car_path}},
-                                                 {"data_root", "data"},
-                                                 {"db", "linecal.db"},
-                                                 {"source", {{"type", "replay"}, {"capture", "replay"}}}}
-                                      .dump(2);
+  WriteConfig(r, *workspace);
   std::printf("linecal-crash-test: %d rounds, seed %llu, scratch %s\n", flags.cycles,
               static_cast<unsigned long long>(flags.seed), r.dir.c_str());
   const Clock::time_point start = Clock::now();
-
-  // Round 0: the times the kill moments are drawn against.
-  {
-    const Clock::time_point t0 = Clock::now();
-    absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
-    if (!daemon.ok()) return setup_failed(daemon.status());
-    absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
-    if (!port.ok()) return setup_failed(port.status());
-    r.startup_s = std::chrono::duration<double>(Clock::now() - t0).count();
-    Client client(*port);
-    std::atomic<int> phase{kIdle};
-    CycleCall call;
-    const Clock::time_point c0 = Clock::now();
-    if (absl::Status s = OneCycle(client, &phase, [](const std::string&) {}, &call); !s.ok()) return setup_failed(s);
-    r.cycle_s = std::chrono::duration<double>(Clock::now() - c0).count();
-    if (call.cycle.state() != v1::CYCLE_STATE_DONE) {
-      return setup_failed(absl::InternalError("round 0's cycle ended " + Describe(call.cycle)));
-    }
-    ++r.started;
-    r.committed[call.id] = call.cycle;
-    r.rss_after_cycle_kb = ReadProcessStatus(std::to_string((*daemon)->pid())).value_or(ProcessStatus{}).rss_kb;
-    (*daemon)->Signal(SIGTERM);
-    const int status = (*daemon)->Wait();
-    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-      Violation(r, "round 0: SIGTERM: " + DescribeWaitStatus(status));
-    }
-  }
-  std::printf("  start-up %.0f ms, one cycle %.0f ms (round 0)\n", r.startup_s * 1e3, r.cycle_s * 1e3);
-
+  if (absl::Status s = RoundZero(r); !s.ok()) return setup_failed(s);
+  std::printf("  start-up %.0f ms, one cycle %.0f ms (round 0)\n", r.startup_s * 1e3,
+              r.cycle_s * 1e3);
   for (int round = 1; round <= flags.cycles; ++round) {
-    const std::string when = absl::StrCat("round ", round);
-    if (round % kStartupKillEvery == 0) {
-      absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
-      if (!daemon.ok()) return setup_failed(daemon.status());
-      std::this_thread::sleep_for(std::chrono::duration<double>(
-          std::uniform_real_distribution<double>(0, r.startup_s)(r.rng)));
-      (*daemon)->Signal(SIGKILL);
-      const int status = (*daemon)->Wait();
-      // Killed, or it had already started and was killed idle: both fine; exiting otherwise is not.
-      if (!(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)) {
-        Violation(r, absl::StrCat(when, ": killed while starting: ", DescribeWaitStatus(status)));
-      }
-      ++r.startup_kills;
-    }
-    absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
-    if (!daemon.ok()) return setup_failed(daemon.status());
-    absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
-    if (!port.ok()) {
-      Violation(r, absl::StrCat(when, ": restart: ", port.status().message()));
-      break;
-    }
-    Client client(*port);
-    Verify(r, client, when);
-
-    // Armed now, just before the round's first StartCycle.
-    std::atomic<bool> killed{false};
-    std::atomic<int> phase{kIdle};
-    const double kill_after_s = std::uniform_real_distribution<double>(0, 2.2 * r.cycle_s)(r.rng);
-    std::thread killer([&] {
-      std::this_thread::sleep_for(std::chrono::duration<double>(kill_after_s));
-      ++r.phase_kills[phase.load()];
-      killed = true;
-      (*daemon)->Signal(SIGKILL);
-    });
-    CycleLoop(r, client, killed, &phase);
-    killer.join();
-    const int status = (*daemon)->Wait();
-    if (!(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)) {
-      Violation(r, absl::StrCat(when, ": the daemon ended by itself: ", DescribeWaitStatus(status)));
-    }
-    ++r.cycle_kills;
-    if (round % 10 == 0 || round == flags.cycles) {
-      std::printf("  round %3d  %6.1f s  cycles started %d  violations %zu\n", round,
-                  std::chrono::duration<double>(Clock::now() - start).count(), r.started, r.violations.size());
-      std::fflush(stdout);
-    }
+    const absl::StatusOr<bool> go_on = KillRound(r, round, start);
+    if (!go_on.ok()) return setup_failed(go_on.status());
+    if (!*go_on) break;
   }
-
-  // The last restart: everything verified once more, also after a second daemon on the same
-  // configuration was refused and after its descriptors ran out; then a cycle started and
-  // SIGHUP, which must drain as SIGTERM does (exit 0, the cycle cancelled or, had it ended
-  // first, done); then the file itself.
-  int final_status = -1;
-  std::string last_id;
-  double descriptors_served_s = -1;
-  {
-    absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon = Spawn(r);
-    if (!daemon.ok()) return setup_failed(daemon.status());
-    absl::StatusOr<int> port = (*daemon)->WaitReady(kStartTimeout);
-    if (port.ok()) {
-      Client client(*port);
-      Verify(r, client, "final restart");
-      SecondDaemonRefused(r, (*daemon)->pid());
-      Verify(r, client, "after a second daemon");
-      descriptors_served_s = DescriptorsExhausted(r, **daemon, *port);
-      // A new channel: the restarted gRPC server closed the old one's connection.
-      Client again(*port);
-      Verify(r, again, "after the descriptors ran out");
-      last_id = StartOnly(r, again);
-    } else {
-      Violation(r, absl::StrCat("final restart: ", port.status().message()));
-    }
-    (*daemon)->Signal(SIGHUP);
-    final_status = (*daemon)->Wait();
-    if (!WIFEXITED(final_status) || WEXITSTATUS(final_status) != 0) {
-      Violation(r, "final SIGHUP: " + DescribeWaitStatus(final_status));
-    }
-  }
-  absl::Status integrity = absl::UnknownError("not opened");
-  int aborted_at_open = -1;
-  if (absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(r.db_path); store.ok()) {
-    integrity = (*store)->IntegrityCheck();
-    aborted_at_open = (*store)->aborted_at_open();
-    int64_t id = 0;
-    if (absl::SimpleAtoi(last_id, &id)) {
-      const absl::StatusOr<StoredCycle> last = (*store)->GetCycle(id);
-      const bool ended = last.ok() && (last->state == CycleState::kCancelled ||
-                                       last->state == CycleState::kDone);
-      if (!ended) {
-        Violation(r, absl::StrCat("the cycle running at SIGHUP: ",
-                                  last.ok() ? CycleStateName(last->state)
-                                            : last.status().ToString()));
-      }
-    }
-  } else {
-    integrity = store.status();
-  }
-  if (!integrity.ok()) Violation(r, "integrity_check: " + integrity.ToString());
-  if (aborted_at_open != 0) Violation(r, absl::StrCat(aborted_at_open, " cycles running after the clean stop"));
-
-  std::printf("\n%d rounds in %.1f s: %d kills during cycles, %d during start-up\n", flags.cycles,
-              std::chrono::duration<double>(Clock::now() - start).count(), r.cycle_kills, r.startup_kills);
-  std::printf("kills by what the client was doing:\n");
-  for (int p = 0; p < kPhases; ++p) std::printf("  %-32s %d\n", kPhaseNames[p], r.phase_kills[p]);
-  std::printf("cycles started (answered): %d; stored in all: %zu\n", r.started, r.committed.size());
-  std::printf("  interrupted, stored aborted (daemon_restarted): %d\n", r.interrupted);
-  std::printf("  ended just before the kill, unseen by the client: %d\n", r.ended_unseen);
-  std::printf("  stored by a StartCycle whose answer the kill cut off: %d\n", r.unacknowledged);
-  std::printf("daemon RSS after one cycle: %.1f MB\n", r.rss_after_cycle_kb / 1024.0);
-  if (descriptors_served_s >= 0) {
-    std::printf("descriptors exhausted (accept4 EMFILE): a new connection served %.1f s after they "
-                "freed up, same process\n",
-                descriptors_served_s);
-  } else {
-    std::printf("descriptors exhausted: not served again (see the violations)\n");
-  }
-  std::printf("integrity_check: %s; final SIGHUP: %s; running at the last open: %d\n",
-              integrity.ok() ? "ok" : std::string(integrity.message()).c_str(),
-              DescribeWaitStatus(final_status).c_str(), aborted_at_open);
-  std::printf("violations: %zu\n", r.violations.size());
-  for (const std::string& v : r.violations) std::printf("  %s\n", v.c_str());
+  FinalState f;
+  if (absl::Status s = FinalRestart(r, &f); !s.ok()) return setup_failed(s);
+  CheckStoreAfterStop(r, &f);
+  PrintReport(r, start, f);
   if (workspace->owned && r.violations.empty()) fs::remove_all(r.dir);
   return r.violations.empty() ? 0 : 1;
 }

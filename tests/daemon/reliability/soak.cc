@@ -742,6 +742,238 @@ std::size_t HeapInUseBytes() {
   return m.uordblks + m.hblkhd;
 }
 
+// What a soak run gathers, for the final checks and the report.
+struct SoakTally {
+  std::map<std::string, std::map<std::string, int>> outcomes;  // fault -> outcome -> cycles
+  std::vector<std::string> violations;
+  int threads_before = 0, fds_before = 0;      // before cycle 0
+  int threads_baseline = 0, fds_baseline = 0;  // after cycle 0
+  int threads_end = 0, fds_end = 0;
+  // Memory after the warm-up (cycle rss_from), every kMemorySampleEvery cycles and at the end:
+  // the cycle number, the resident set and the heap in use, MB.
+  std::vector<double> memory_cycles, rss_mb, heap_mb;
+  double wall_s = 0;
+  int ended = 0, stored = 0;  // started cycles ended with a reason; cycles in the store
+  absl::Status integrity;
+  bool memory_checked = false;
+  MemoryGrowth rss_growth, heap_growth;
+  double rss_bound_mb = 0;
+};
+
+// The soak's scratch copy of the capture, the replaying core (returned; `s` points to it) and
+// the cycle request, in `s`. The error is the setup's.
+absl::StatusOr<std::unique_ptr<StationCore>> SetUpSoak(const Workspace& workspace,
+                                                       const ProgramFlags& flags, Soak* s) {
+  const fs::path dir = workspace.dir;
+  s->dir = dir;
+  s->rng.seed(flags.seed);
+  s->pristine = dir / "pristine";
+  s->capture = dir / "data" / "replay";
+  s->db_path = (dir / "soak.db").string();
+  fs::copy(s->pristine, s->capture, fs::copy_options::recursive);
+  absl::StatusOr<Capture> layout = ReadCapture(s->pristine.string());
+  if (!layout.ok()) return layout.status();
+  s->layout = *std::move(layout);
+
+  StationCoreConfig config;
+  config.station_id = "soak";
+  config.station_path = ReferenceStationPath();
+  config.car_model_paths = {workspace.car_path};
+  config.db_path = s->db_path;
+  config.data_root = (dir / "data").string();
+  config.source = CycleSource::kReplay;
+  config.replay_capture = "replay";
+  config.busy_timeout = kBusyTimeout;
+  s->config = config;
+  absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
+  if (!core.ok()) return core.status();
+  s->core = core->get();
+  s->request.vin = kVin;
+  s->request.car_model_id = kCarId;
+  return core;
+}
+
+// Runs flags.cycles cycles: cycle 0 clean (the reference), then each fault once, then faults
+// drawn by weight; restores the capture after each and tallies outcomes, violations, threads,
+// descriptors and memory samples in `t`, with a progress line every 50 cycles. The error is a
+// setup failure (cycle 0 not done, a capture not restored).
+absl::Status RunCycles(Soak& s, const std::vector<Fault>& faults, const ProgramFlags& flags,
+                       int rss_from, SoakTally* t) {
+  std::vector<int> weights;
+  for (const Fault& f : faults) weights.push_back(f.weight);
+  std::discrete_distribution<size_t> draw(weights.begin(), weights.end());
+  const Clock::time_point start = Clock::now();
+  for (int cycle = 0; cycle < flags.cycles; ++cycle) {
+    const Fault& fault = cycle == 0 ? faults[0] : cycle <= static_cast<int>(faults.size()) ? faults[cycle - 1] : faults[draw(s.rng)];
+    absl::StatusOr<std::string> outcome;
+    if (cycle == 0) {
+      const Clock::time_point t0 = Clock::now();
+      absl::StatusOr<StoredCycle> c = RunOneCycle(s);
+      s.clean_time = Clock::now() - t0;
+      if (!c.ok()) return c.status();
+      if (c->state != CycleState::kDone) return Violation("cycle 0 did not end done: " + c->reason);
+      s.clean = *std::move(c);
+      outcome = std::string("done (the reference)");
+    } else {
+      outcome = fault.run(s);
+    }
+    if (absl::Status st = Restore(s); !st.ok()) return st;
+    if (outcome.ok()) {
+      ++t->outcomes[fault.name][*outcome];
+    } else {
+      ++t->outcomes[fault.name]["VIOLATION"];
+      t->violations.push_back(
+          absl::StrCat("cycle ", cycle, " (", fault.name, "): ", outcome.status().message()));
+      std::fprintf(stderr, "linecal-soak: %s\n", t->violations.back().c_str());
+    }
+    if (cycle == 0) {
+      // After the first cycle: one-time allocations (thread pools, caches) are made by now.
+      t->threads_baseline = SettledEntryCount("/proc/self/task");
+      t->fds_baseline = SettledEntryCount("/proc/self/fd");
+    }
+    if (cycle + 1 >= rss_from &&
+        ((cycle + 1 - rss_from) % kMemorySampleEvery == 0 || cycle + 1 == flags.cycles)) {
+      t->memory_cycles.push_back(cycle + 1);
+      t->rss_mb.push_back(Mb(ReadProcessStatus().value_or(ProcessStatus{}).rss_kb));
+      t->heap_mb.push_back(HeapInUseBytes() / 1048576.0);
+    }
+    if ((cycle + 1) % 50 == 0 || cycle + 1 == flags.cycles) {
+      const ProcessStatus p = ReadProcessStatus().value_or(ProcessStatus{});
+      std::printf("  cycle %4d  %7.1f s  rss %.1f MB  threads %d  violations %zu\n", cycle + 1,
+                  std::chrono::duration<double>(Clock::now() - start).count(), Mb(p.rss_kb),
+                  p.threads, t->violations.size());
+      std::fflush(stdout);
+    }
+  }
+  t->wall_s = std::chrono::duration<double>(Clock::now() - start).count();
+  return absl::OkStatus();
+}
+
+// The final checks into `t`: every started cycle is stored, ended, with a reason, and nothing
+// else is stored; the database's integrity; threads and descriptors back to their count after
+// cycle 0.
+void CheckStoreAndProcess(Soak& s, SoakTally* t) {
+  for (const std::int64_t id : s.started) {
+    absl::StatusOr<StoredCycle> c = s.core->GetCycle(id);
+    absl::Status st = c.ok() ? ExpectEnded(*c) : c.status();
+    if (st.ok()) {
+      ++t->ended;
+    } else {
+      t->violations.push_back(absl::StrCat("final check: cycle ", id, ": ", st.message()));
+    }
+  }
+  CycleFilter all;
+  all.page_size = 1000;
+  do {
+    absl::StatusOr<CyclePage> page = s.core->ListCycles(all);
+    if (!page.ok()) {
+      t->violations.push_back(absl::StrCat("ListCycles: ", page.status().ToString()));
+      break;
+    }
+    t->stored += static_cast<int>(page->cycles.size());
+    all.page_token = page->next_page_token;
+  } while (!all.page_token.empty());
+  if (t->stored != static_cast<int>(s.started.size())) {
+    t->violations.push_back(
+        absl::StrCat(t->stored, " cycles stored, ", s.started.size(), " started"));
+  }
+  t->integrity = s.core->store().IntegrityCheck();
+  if (!t->integrity.ok())
+    t->violations.push_back(absl::StrCat("integrity_check: ", t->integrity.ToString()));
+  t->threads_end = SettledEntryCount("/proc/self/task");
+  t->fds_end = SettledEntryCount("/proc/self/fd");
+  if (t->threads_end != t->threads_baseline) {
+    t->violations.push_back(absl::StrCat("threads: ", t->threads_baseline, " after cycle 0, ",
+                                         t->threads_end, " at the end"));
+  }
+  if (t->fds_end != t->fds_baseline) {
+    t->violations.push_back(absl::StrCat("descriptors: ", t->fds_baseline, " after cycle 0, ",
+                                         t->fds_end, " at the end"));
+  }
+}
+
+// A least-squares line through every sample after the warm-up, for the resident set and the
+// heap in use, against the bounds of reliability_support.h (kSoak*): a leak is a line that
+// rises past its bound per 1,000 cycles, its slope kSoakMinSignificance standard errors
+// (from the scatter about it and its autocorrelation) above 0. Not judged with fewer than
+// kMinMemorySamples samples.
+void JudgeMemory(int rss_from, SoakTally* t) {
+  t->memory_checked = t->memory_cycles.size() >= kMinMemorySamples;
+  if (!t->memory_checked) return;
+  const LinearTrend line = FitLinearTrend(t->memory_cycles, t->rss_mb);
+  t->rss_bound_mb = kSoakRssGrowthFractionPer1000 * (line.intercept + line.slope * rss_from);
+  t->rss_growth =
+      JudgeMemoryGrowth(t->memory_cycles, t->rss_mb, t->rss_bound_mb, kSoakMinSignificance);
+  t->heap_growth = JudgeMemoryGrowth(t->memory_cycles, t->heap_mb, kSoakHeapGrowthMbPer1000,
+                                     kSoakMinSignificance);
+  for (const auto& [name, g, bound] :
+       {std::tuple{"RSS", t->rss_growth, t->rss_bound_mb},
+        std::tuple{"heap in use", t->heap_growth, kSoakHeapGrowthMbPer1000}}) {
+    if (!g.leak) continue;
+    t->violations.push_back(absl::StrFormat(
+        "%s grows %.2f MB per 1000 cycles (bound %.2f MB), %.2f MB over the run, %.1f standard "
+        "errors above 0 (scatter %.2f MB)",
+        name, g.growth_per_1000, bound, g.run_growth, g.significance, g.trend.scatter));
+  }
+}
+
+// The report on stdout: outcomes per fault, cycle times, the store's and the process's counts,
+// the memory trend and every violation.
+void PrintReport(const Soak& s, const std::vector<Fault>& faults, const ProgramFlags& flags,
+                 int rss_from, const SoakTally& t) {
+  std::vector<Clock::duration> times = s.cycle_times;
+  std::sort(times.begin(), times.end());
+  const auto ms = [](Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); };
+  std::printf("\nfaults (cycles, outcome):\n");
+  for (const Fault& f : faults) {
+    const auto outcomes = t.outcomes.find(f.name);
+    if (outcomes == t.outcomes.end()) continue;
+    for (const auto& [what, n] : outcomes->second)
+      std::printf("  %-24s %5d  %s\n", f.name.c_str(), n, what.c_str());
+  }
+  std::printf(
+      "\n%d cycles in %.1f s; cycle wall time median %.0f ms, p95 %.0f ms, max %.0f ms (clean: "
+      "%.0f ms)\n",
+      flags.cycles, t.wall_s, ms(times[times.size() / 2]), ms(times[times.size() * 95 / 100]),
+      ms(times.back()), ms(s.clean_time));
+  std::printf("started %zu, stored %d, ended with state and reason %d\n", s.started.size(),
+              t.stored, t.ended);
+  std::printf("integrity_check: %s\n",
+              t.integrity.ok() ? "ok" : std::string(t.integrity.message()).c_str());
+  std::printf("threads: %d before cycle 0, %d after it, %d at the end\n", t.threads_before,
+              t.threads_baseline, t.threads_end);
+  std::printf("descriptors: %d before cycle 0, %d after it, %d at the end\n", t.fds_before,
+              t.fds_baseline, t.fds_end);
+  const ProcessStatus end = ReadProcessStatus().value_or(ProcessStatus{});
+  if (t.memory_checked) {
+    // Allocated and not freed (heap in use), against what the allocator holds (RSS): a leak
+    // grows the first.
+    const auto [rss_min, rss_max] = std::minmax_element(t.rss_mb.begin(), t.rss_mb.end());
+    const auto [heap_min, heap_max] = std::minmax_element(t.heap_mb.begin(), t.heap_mb.end());
+    std::printf(
+        "memory trend over %zu samples, cycles %d-%d (least squares, MB = intercept + slope x "
+        "cycle):\n",
+        t.memory_cycles.size(), rss_from, flags.cycles);
+    for (const auto& [name, g, bound, lo, hi] :
+         {std::tuple{"RSS", t.rss_growth, t.rss_bound_mb, *rss_min, *rss_max},
+          std::tuple{"heap in use", t.heap_growth, kSoakHeapGrowthMbPer1000, *heap_min,
+                     *heap_max}}) {
+      std::printf("  %-11s slope %+.5f MB/cycle = %+.2f MB per 1000 cycles (bound %.2f), intercept %.2f MB, "
+                  "scatter %.2f MB, autocorrelation %.2f, slope %+.1f standard errors (leak above %.0f), "
+                  "rise over the run %+.2f MB, range %.1f-%.1f MB: %s\n",
+                  name, g.trend.slope, g.growth_per_1000, bound, g.trend.intercept, g.trend.scatter,
+                  g.trend.autocorrelation, g.significance, kSoakMinSignificance, g.run_growth, lo, hi,
+                  g.leak ? "LEAK" : "no leak");
+    }
+    std::printf("RSS at the end %.1f MB, peak %.1f MB\n", Mb(end.rss_kb), Mb(end.hwm_kb));
+  } else {
+    std::printf("RSS: %.1f MB at the end, peak %.1f MB (growth not checked: fewer than %zu samples after cycle %d)\n",
+                Mb(end.rss_kb), Mb(end.hwm_kb), kMinMemorySamples, rss_from);
+  }
+  std::printf("violations: %zu\n", t.violations.size());
+  for (const std::string& v : t.violations) std::printf("  %s\n", v.c_str());
+}
+
 int Run(const ProgramFlags& flags, int rss_from) {
   absl::StatusOr<Workspace> workspace = PrepareWorkspace(flags, "soak", kCarId, "pristine");
   if (!workspace.ok()) {
@@ -755,191 +987,24 @@ int Run(const ProgramFlags& flags, int rss_from) {
     return 2;
   };
   Soak s;
-  s.dir = dir;
-  s.rng.seed(flags.seed);
-  s.pristine = dir / "pristine";
-  s.capture = dir / "data" / "replay";
-  s.db_path = (dir / "soak.db").string();
-  fs::copy(s.pristine, s.capture, fs::copy_options::recursive);
-  absl::StatusOr<Capture> layout = ReadCapture(s.pristine.string());
-  if (!layout.ok()) return setup_failed(layout.status());
-  s.layout = *std::move(layout);
-
-  StationCoreConfig config;
-  config.station_id = "soak";
-  config.station_path = ReferenceStationPath();
-  config.car_model_paths = {workspace->car_path};
-  config.db_path = s.db_path;
-  config.data_root = (dir / "data").string();
-  config.source = CycleSource::kReplay;
-  config.replay_capture = "replay";
-  config.busy_timeout = kBusyTimeout;
-  s.config = config;
-  absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
+  absl::StatusOr<std::unique_ptr<StationCore>> core = SetUpSoak(*workspace, flags, &s);
   if (!core.ok()) return setup_failed(core.status());
-  s.core = core->get();
-  s.request.vin = kVin;
-  s.request.car_model_id = kCarId;
 
   const std::vector<Fault> faults = Faults();
-  std::vector<int> weights;
-  for (const Fault& f : faults) weights.push_back(f.weight);
-  std::discrete_distribution<size_t> draw(weights.begin(), weights.end());
-  std::map<std::string, std::map<std::string, int>> outcomes;  // fault -> outcome -> cycles
-  std::vector<std::string> violations;
-  const int threads_before = SettledEntryCount("/proc/self/task");
-  const int fds_before = SettledEntryCount("/proc/self/fd");
-  int threads_baseline = 0, fds_baseline = 0;
-  // Memory after the warm-up (cycle rss_from), every kMemorySampleEvery cycles and at the end:
-  // the cycle number, the resident set and the heap in use, MB.
-  std::vector<double> memory_cycles, rss_mb, heap_mb;
-  const Clock::time_point start = Clock::now();
+  SoakTally t;
+  t.threads_before = SettledEntryCount("/proc/self/task");
+  t.fds_before = SettledEntryCount("/proc/self/fd");
   std::printf("linecal-soak: %d cycles, seed %llu, %zu sensors, scratch %s\n", flags.cycles,
-              static_cast<unsigned long long>(flags.seed), s.layout.manifest.sensors.size(), dir.c_str());
-
-  for (int cycle = 0; cycle < flags.cycles; ++cycle) {
-    const Fault& fault = cycle == 0 ? faults[0] : cycle <= static_cast<int>(faults.size()) ? faults[cycle - 1] : faults[draw(s.rng)];
-    absl::StatusOr<std::string> outcome;
-    if (cycle == 0) {
-      const Clock::time_point t0 = Clock::now();
-      absl::StatusOr<StoredCycle> c = RunOneCycle(s);
-      s.clean_time = Clock::now() - t0;
-      if (!c.ok()) return setup_failed(c.status());
-      if (c->state != CycleState::kDone) return setup_failed(Violation("cycle 0 did not end done: " + c->reason));
-      s.clean = *std::move(c);
-      outcome = std::string("done (the reference)");
-    } else {
-      outcome = fault.run(s);
-    }
-    if (absl::Status st = Restore(s); !st.ok()) return setup_failed(st);
-    if (outcome.ok()) {
-      ++outcomes[fault.name][*outcome];
-    } else {
-      ++outcomes[fault.name]["VIOLATION"];
-      violations.push_back(absl::StrCat("cycle ", cycle, " (", fault.name, "): ", outcome.status().message()));
-      std::fprintf(stderr, "linecal-soak: %s\n", violations.back().c_str());
-    }
-    if (cycle == 0) {
-      // After the first cycle: one-time allocations (thread pools, caches) are made by now.
-      threads_baseline = SettledEntryCount("/proc/self/task");
-      fds_baseline = SettledEntryCount("/proc/self/fd");
-    }
-    if (cycle + 1 >= rss_from &&
-        ((cycle + 1 - rss_from) % kMemorySampleEvery == 0 || cycle + 1 == flags.cycles)) {
-      memory_cycles.push_back(cycle + 1);
-      rss_mb.push_back(Mb(ReadProcessStatus().value_or(ProcessStatus{}).rss_kb));
-      heap_mb.push_back(HeapInUseBytes() / 1048576.0);
-    }
-    if ((cycle + 1) % 50 == 0 || cycle + 1 == flags.cycles) {
-      const ProcessStatus p = ReadProcessStatus().value_or(ProcessStatus{});
-      std::printf("  cycle %4d  %7.1f s  rss %.1f MB  threads %d  violations %zu\n", cycle + 1,
-                  std::chrono::duration<double>(Clock::now() - start).count(), Mb(p.rss_kb), p.threads,
-                  violations.size());
-      std::fflush(stdout);
-    }
-  }
-  const double wall_s = std::chrono::duration<double>(Clock::now() - start).count();
-
-  // Every started cycle is stored, ended, with a reason; nothing else is stored.
-  int ended = 0;
-  for (const std::int64_t id : s.started) {
-    absl::StatusOr<StoredCycle> c = s.core->GetCycle(id);
-    absl::Status st = c.ok() ? ExpectEnded(*c) : c.status();
-    if (st.ok()) {
-      ++ended;
-    } else {
-      violations.push_back(absl::StrCat("final check: cycle ", id, ": ", st.message()));
-    }
-  }
-  int stored = 0;
-  CycleFilter all;
-  all.page_size = 1000;
-  do {
-    absl::StatusOr<CyclePage> page = s.core->ListCycles(all);
-    if (!page.ok()) {
-      violations.push_back(absl::StrCat("ListCycles: ", page.status().ToString()));
-      break;
-    }
-    stored += static_cast<int>(page->cycles.size());
-    all.page_token = page->next_page_token;
-  } while (!all.page_token.empty());
-  if (stored != static_cast<int>(s.started.size())) {
-    violations.push_back(absl::StrCat(stored, " cycles stored, ", s.started.size(), " started"));
-  }
-  const absl::Status integrity = s.core->store().IntegrityCheck();
-  if (!integrity.ok()) violations.push_back(absl::StrCat("integrity_check: ", integrity.ToString()));
-  const int threads_end = SettledEntryCount("/proc/self/task");
-  const int fds_end = SettledEntryCount("/proc/self/fd");
-  if (threads_end != threads_baseline) {
-    violations.push_back(absl::StrCat("threads: ", threads_baseline, " after cycle 0, ", threads_end, " at the end"));
-  }
-  if (fds_end != fds_baseline) {
-    violations.push_back(absl::StrCat("descriptors: ", fds_baseline, " after cycle 0, ", fds_end, " at the end"));
-  }
-  const ProcessStatus end = ReadProcessStatus().value_or(ProcessStatus{});
-  // A least-squares line through every sample after the warm-up, for the resident set and the
-  // heap in use, against the bounds of reliability_support.h (kSoak*): a leak is a line that
-  // rises past its bound per 1,000 cycles, its slope kSoakMinSignificance standard errors
-  // (from the scatter about it and its autocorrelation) above 0.
-  const bool memory_checked = memory_cycles.size() >= kMinMemorySamples;
-  MemoryGrowth rss_growth, heap_growth;
-  double rss_bound_mb = 0;
-  if (memory_checked) {
-    const LinearTrend line = FitLinearTrend(memory_cycles, rss_mb);
-    rss_bound_mb = kSoakRssGrowthFractionPer1000 * (line.intercept + line.slope * rss_from);
-    rss_growth = JudgeMemoryGrowth(memory_cycles, rss_mb, rss_bound_mb, kSoakMinSignificance);
-    heap_growth = JudgeMemoryGrowth(memory_cycles, heap_mb, kSoakHeapGrowthMbPer1000, kSoakMinSignificance);
-    for (const auto& [name, g, bound] : {std::tuple{"RSS", rss_growth, rss_bound_mb},
-                                         std::tuple{"heap in use", heap_growth, kSoakHeapGrowthMbPer1000}}) {
-      if (!g.leak) continue;
-      violations.push_back(absl::StrFormat(
-          "%s grows %.2f MB per 1000 cycles (bound %.2f MB), %.2f MB over the run, %.1f standard "
-          "errors above 0 (scatter %.2f MB)",
-          name, g.growth_per_1000, bound, g.run_growth, g.significance, g.trend.scatter));
-    }
-  }
-
-  std::vector<Clock::duration> times = s.cycle_times;
-  std::sort(times.begin(), times.end());
-  const auto ms = [](Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); };
-  std::printf("\nfaults (cycles, outcome):\n");
-  for (const Fault& f : faults) {
-    for (const auto& [what, n] : outcomes[f.name]) std::printf("  %-24s %5d  %s\n", f.name.c_str(), n, what.c_str());
-  }
-  std::printf("\n%d cycles in %.1f s; cycle wall time median %.0f ms, p95 %.0f ms, max %.0f ms (clean: %.0f ms)\n",
-              flags.cycles, wall_s, ms(times[times.size() / 2]), ms(times[times.size() * 95 / 100]), ms(times.back()),
-              ms(s.clean_time));
-  std::printf("started %zu, stored %d, ended with state and reason %d\n", s.started.size(), stored, ended);
-  std::printf("integrity_check: %s\n", integrity.ok() ? "ok" : std::string(integrity.message()).c_str());
-  std::printf("threads: %d before cycle 0, %d after it, %d at the end\n", threads_before, threads_baseline, threads_end);
-  std::printf("descriptors: %d before cycle 0, %d after it, %d at the end\n", fds_before, fds_baseline, fds_end);
-  if (memory_checked) {
-    // Allocated and not freed (heap in use), against what the allocator holds (RSS): a leak
-    // grows the first.
-    const auto [rss_min, rss_max] = std::minmax_element(rss_mb.begin(), rss_mb.end());
-    const auto [heap_min, heap_max] = std::minmax_element(heap_mb.begin(), heap_mb.end());
-    std::printf("memory trend over %zu samples, cycles %d-%d (least squares, MB = intercept + slope x cycle):\n",
-                memory_cycles.size(), rss_from, flags.cycles);
-    for (const auto& [name, g, bound, lo, hi] :
-         {std::tuple{"RSS", rss_growth, rss_bound_mb, *rss_min, *rss_max},
-          std::tuple{"heap in use", heap_growth, kSoakHeapGrowthMbPer1000, *heap_min, *heap_max}}) {
-      std::printf("  %-11s slope %+.5f MB/cycle = %+.2f MB per 1000 cycles (bound %.2f), intercept %.2f MB, "
-                  "scatter %.2f MB, autocorrelation %.2f, slope %+.1f standard errors (leak above %.0f), "
-                  "rise over the run %+.2f MB, range %.1f-%.1f MB: %s\n",
-                  name, g.trend.slope, g.growth_per_1000, bound, g.trend.intercept, g.trend.scatter,
-                  g.trend.autocorrelation, g.significance, kSoakMinSignificance, g.run_growth, lo, hi,
-                  g.leak ? "LEAK" : "no leak");
-    }
-    std::printf("RSS at the end %.1f MB, peak %.1f MB\n", Mb(end.rss_kb), Mb(end.hwm_kb));
-  } else {
-    std::printf("RSS: %.1f MB at the end, peak %.1f MB (growth not checked: fewer than %zu samples after cycle %d)\n",
-                Mb(end.rss_kb), Mb(end.hwm_kb), kMinMemorySamples, rss_from);
-  }
-  std::printf("violations: %zu\n", violations.size());
-  for (const std::string& v : violations) std::printf("  %s\n", v.c_str());
+              static_cast<unsigned long long>(flags.seed), s.layout.manifest.sensors.size(),
+              dir.c_str());
+  if (absl::Status st = RunCycles(s, faults, flags, rss_from, &t); !st.ok())
+    return setup_failed(st);
+  CheckStoreAndProcess(s, &t);
+  JudgeMemory(rss_from, &t);
+  PrintReport(s, faults, flags, rss_from, t);
   core->reset();
   if (workspace->owned) fs::remove_all(dir);
-  return violations.empty() ? 0 : 1;
+  return t.violations.empty() ? 0 : 1;
 }
 
 }  // namespace

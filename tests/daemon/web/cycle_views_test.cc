@@ -97,6 +97,100 @@ class CycleViewsTest : public ::testing::Test {
     return id.ok() ? *id : 0;
   }
 
+  // A camera's view in cycle `id` equals what the cycle computed: every detected feature in
+  // order, the frame under the overlay byte for byte, and a reprojected feature computed here
+  // from the stored 4x4 mounting.
+  void ExpectCameraView(const json& view, const SensorCalibration& s,
+                        const StoredSensorResult& result, const Capture& capture,
+                        const std::vector<CaptureFileEntry>& list, int64_t id) {
+    const std::string base = "/api/cycles/" + std::to_string(id);
+    EXPECT_EQ(view["mounting"], "solved");
+    // Every feature the cycle detected in the frame, in order, as equal doubles.
+    std::vector<json> expected;
+    for (const BoardObservation& o : s.first_frame_observations) {
+      for (const DetectedFeature& f : o.features)
+        expected.push_back({o.board_id, f.id, f.uv_px.x(), f.uv_px.y()});
+    }
+    std::vector<json> shown;
+    for (const json& b : view["boards"]) {
+      for (const json& f : b["detected"]) shown.push_back({b["id"], f[0], f[1], f[2]});
+    }
+    EXPECT_EQ(shown, expected);
+    EXPECT_EQ(view["detected_features"], result.features_used);
+    // The frame under the overlay is the capture's file, byte for byte.
+    const size_t image = view["image"].get<size_t>();
+    EXPECT_EQ(list[image].path, view["file"]);
+    httplib::Result png =
+        Client().Get((base + "/capture/" + std::to_string(image)).c_str(), {{"Cookie", reader_}});
+    ASSERT_TRUE(png);
+    EXPECT_EQ(png->status, 200);
+    EXPECT_EQ(png->get_header_value("Content-Type"), "image/png");
+    std::string name = list[image].path;
+    std::replace(name.begin(), name.end(), '/', '_');
+    EXPECT_EQ(png->get_header_value("Content-Disposition"),
+              "attachment; filename=\"cycle-" + std::to_string(id) + "-" + name + "\"");
+    std::ifstream in(fs::path(capture.dir) / list[image].path, std::ios::binary);
+    std::ostringstream bytes;
+    bytes << in.rdbuf();
+    EXPECT_EQ(png->body, bytes.str());
+    // One reprojected feature, computed here from the stored 4x4 mounting.
+    ASSERT_FALSE(view["boards"].empty());
+    const json& board_view = view["boards"][0];
+    ASSERT_FALSE(board_view["reprojected"].empty());
+    const json& first = board_view["reprojected"][0];
+    const StationBoard* board = capture.station.FindBoard(board_view["id"]);
+    ASSERT_NE(board, nullptr);
+    Eigen::Matrix4d T_car_camera;
+    for (int i = 0; i < 16; ++i)
+      T_car_camera(i / 4, i % 4) = result.T_car_sensor[static_cast<size_t>(i)];
+    const Eigen::Matrix4d T_camera_board =
+        T_car_camera.inverse() * capture.manifest.aligner.T_station_car().Matrix().inverse() *
+        board->T_station_board.Matrix();
+    const Eigen::Vector2d p_board = board->board.features()[first[0].get<size_t>()].p_board;
+    const Eigen::Vector4d p = T_camera_board * Eigen::Vector4d(p_board.x(), p_board.y(), 0, 1);
+    absl::StatusOr<CameraModel> camera =
+        CameraModel::Create(*capture.car.FindSensor(s.name)->intrinsics);
+    ASSERT_TRUE(camera.ok());
+    Eigen::Vector2d uv;
+    ASSERT_TRUE(camera->Project(p.head<3>(), &uv));
+    EXPECT_NEAR(first[1].get<double>(), uv.x(), 1e-6);
+    EXPECT_NEAR(first[2].get<double>(), uv.y(), 1e-6);
+  }
+
+  // A LiDAR's view equals the cycle's detections (found boards and their holes, exactly) and
+  // holds at most kMaxViewPoints points.
+  static void ExpectLidarView(const json& view, const SensorCalibration& s,
+                              const StoredSensorResult& result, const Capture& capture) {
+    const SensorModel& model = *capture.car.FindSensor(s.name);
+    std::vector<std::vector<RoundHoleCloudPoint>> frames;
+    for (const CaptureFile& f : capture.manifest.FindSensor(s.name)->frames) {
+      absl::StatusOr<PcdCloud> cloud = ReadCaptureScan(capture, f);
+      ASSERT_TRUE(cloud.ok());
+      auto& points = frames.emplace_back();
+      for (const LidarPoint& p : cloud->points) points.push_back({p.x, p.y, p.z, p.ring});
+    }
+    const std::vector<std::span<const RoundHoleCloudPoint>> spans(frames.begin(), frames.end());
+    std::vector<RoundHoleCloudDetection> detections;
+    CalibrateLidarFrames(capture.station, capture.manifest.aligner.T_station_car(), model, spans,
+                         &detections);
+    ASSERT_EQ(view["boards"].size(), detections.size());
+    int holes = 0;
+    for (size_t b = 0; b < detections.size(); ++b) {
+      ASSERT_EQ(view["boards"][b]["found"], detections[b].found);
+      if (!detections[b].found) continue;
+      const json& shown = view["boards"][b]["holes"];
+      ASSERT_EQ(shown.size(), detections[b].holes.size());
+      for (size_t h = 0; h < shown.size(); ++h) {
+        EXPECT_EQ(shown[h]["id"], detections[b].holes[h].id);
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(shown[h]["p"][k], detections[b].holes[h].p_lidar[k]);
+      }
+      holes += static_cast<int>(shown.size());
+    }
+    EXPECT_EQ(holes, result.features_used);
+    EXPECT_LE(view["points"].size(), static_cast<size_t>(kMaxViewPoints));
+    EXPECT_GT(view["points"].size(), 0u);
+  }
+
   fs::path dir_;
   std::unique_ptr<StationCore> core_;
   std::unique_ptr<WebServer> web_;
@@ -139,88 +233,10 @@ TEST_F(CycleViewsTest, ViewsEqualWhatTheCycleComputed) {
     EXPECT_EQ(view["cycle_id"], std::to_string(id));
     if (s.kind == SensorKind::kCamera) {
       ++cameras;
-      EXPECT_EQ(view["mounting"], "solved");
-      // Every feature the cycle detected in the frame, in order, as equal doubles.
-      std::vector<json> expected;
-      for (const BoardObservation& o : s.first_frame_observations) {
-        for (const DetectedFeature& f : o.features)
-          expected.push_back({o.board_id, f.id, f.uv_px.x(), f.uv_px.y()});
-      }
-      std::vector<json> shown;
-      for (const json& b : view["boards"]) {
-        for (const json& f : b["detected"]) shown.push_back({b["id"], f[0], f[1], f[2]});
-      }
-      EXPECT_EQ(shown, expected);
-      EXPECT_EQ(view["detected_features"], result->features_used);
-      // The frame under the overlay is the capture's file, byte for byte.
-      const size_t image = view["image"].get<size_t>();
-      EXPECT_EQ(list[image].path, view["file"]);
-      httplib::Result png =
-          Client().Get((base + "/capture/" + std::to_string(image)).c_str(), {{"Cookie", reader_}});
-      ASSERT_TRUE(png);
-      EXPECT_EQ(png->status, 200);
-      EXPECT_EQ(png->get_header_value("Content-Type"), "image/png");
-      std::string name = list[image].path;
-      std::replace(name.begin(), name.end(), '/', '_');
-      EXPECT_EQ(png->get_header_value("Content-Disposition"),
-                "attachment; filename=\"cycle-" + std::to_string(id) + "-" + name + "\"");
-      std::ifstream in(fs::path(capture->dir) / list[image].path, std::ios::binary);
-      std::ostringstream bytes;
-      bytes << in.rdbuf();
-      EXPECT_EQ(png->body, bytes.str());
-      // One reprojected feature, computed here from the stored 4x4 mounting.
-      ASSERT_FALSE(view["boards"].empty());
-      const json& board_view = view["boards"][0];
-      ASSERT_FALSE(board_view["reprojected"].empty());
-      const json& first = board_view["reprojected"][0];
-      const StationBoard* board = capture->station.FindBoard(board_view["id"]);
-      ASSERT_NE(board, nullptr);
-      Eigen::Matrix4d T_car_camera;
-      for (int i = 0; i < 16; ++i)
-        T_car_camera(i / 4, i % 4) = result->T_car_sensor[static_cast<size_t>(i)];
-      const Eigen::Matrix4d T_camera_board =
-          T_car_camera.inverse() * capture->manifest.aligner.T_station_car().Matrix().inverse() *
-          board->T_station_board.Matrix();
-      const Eigen::Vector2d p_board = board->board.features()[first[0].get<size_t>()].p_board;
-      const Eigen::Vector4d p = T_camera_board * Eigen::Vector4d(p_board.x(), p_board.y(), 0, 1);
-      absl::StatusOr<CameraModel> camera =
-          CameraModel::Create(*capture->car.FindSensor(s.name)->intrinsics);
-      ASSERT_TRUE(camera.ok());
-      Eigen::Vector2d uv;
-      ASSERT_TRUE(camera->Project(p.head<3>(), &uv));
-      EXPECT_NEAR(first[1].get<double>(), uv.x(), 1e-6);
-      EXPECT_NEAR(first[2].get<double>(), uv.y(), 1e-6);
+      ASSERT_NO_FATAL_FAILURE(ExpectCameraView(view, s, *result, *capture, list, id));
     } else if (s.kind == SensorKind::kLidar) {
       ++lidars;
-      const SensorModel& model = *capture->car.FindSensor(s.name);
-      std::vector<std::vector<RoundHoleCloudPoint>> frames;
-      for (const CaptureFile& f : capture->manifest.FindSensor(s.name)->frames) {
-        absl::StatusOr<PcdCloud> cloud = ReadCaptureScan(*capture, f);
-        ASSERT_TRUE(cloud.ok());
-        auto& points = frames.emplace_back();
-        for (const LidarPoint& p : cloud->points) points.push_back({p.x, p.y, p.z, p.ring});
-      }
-      const std::vector<std::span<const RoundHoleCloudPoint>> spans(frames.begin(), frames.end());
-      std::vector<RoundHoleCloudDetection> detections;
-      CalibrateLidarFrames(capture->station, capture->manifest.aligner.T_station_car(), model,
-                           spans, &detections);
-      ASSERT_EQ(view["boards"].size(), detections.size());
-      int holes = 0;
-      for (size_t b = 0; b < detections.size(); ++b) {
-        ASSERT_EQ(view["boards"][b]["found"], detections[b].found);
-        if (!detections[b].found) continue;
-        const json& shown = view["boards"][b]["holes"];
-        ASSERT_EQ(shown.size(), detections[b].holes.size());
-        for (size_t h = 0; h < shown.size(); ++h) {
-          EXPECT_EQ(shown[h]["id"], detections[b].holes[h].id);
-          for (int k = 0; k < 3; ++k)
-            EXPECT_EQ(shown[h]["p"][k], detections[b].holes[h].p_lidar[k]);
-        }
-        holes += static_cast<int>(shown.size());
-      }
-      EXPECT_EQ(holes, result->features_used);
-      EXPECT_LE(view["points"].size(), static_cast<size_t>(kMaxViewPoints));
-      EXPECT_GT(view["points"].size(), 0u);
+      ASSERT_NO_FATAL_FAILURE(ExpectLidarView(view, s, *result, *capture));
     } else {
       ++radars;
       int found = 0;

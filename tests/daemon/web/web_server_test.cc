@@ -221,6 +221,63 @@ TEST_F(WebServerTest, WithoutATokenNoLoginIsNeeded) {
   EXPECT_EQ(page->status, 200);
 }
 
+// The console's JSON of sensor `i` of a cycle (camera first, then radar) carries exactly the
+// numbers of gRPC GetCycle's SensorResult.
+void ExpectSensorEqualsGrpc(const json& s, const v1::SensorResult& gs, int i) {
+  SCOPED_TRACE(gs.name());
+  EXPECT_EQ(s["name"], gs.name());
+  EXPECT_EQ(s["kind"], i == 0 ? "camera" : "radar");
+  EXPECT_EQ(s["reason"], gs.reason());
+  EXPECT_EQ(s["message"], gs.message());
+  // Exactly equal doubles: JSON carries the shortest text that reads back to the same double.
+  ASSERT_EQ(s["t_car_sensor"].size(), static_cast<size_t>(gs.t_car_sensor().m_size()));
+  for (int k = 0; k < gs.t_car_sensor().m_size(); ++k) {
+    EXPECT_EQ(s["t_car_sensor"][k].get<double>(), gs.t_car_sensor().m(k)) << k;
+  }
+  const std::pair<const char*, const v1::MountingAngles*> groups[] = {
+      {"mounting", &gs.mounting()},
+      {"deviation", &gs.deviation()},
+      {"uncertainty", &gs.uncertainty()}};
+  for (const auto& [key, m] : groups) {
+    EXPECT_EQ(s[key]["yaw_deg"].get<double>(), m->yaw_deg()) << key;
+    EXPECT_EQ(s[key]["pitch_deg"].get<double>(), m->pitch_deg()) << key;
+    EXPECT_EQ(s[key]["roll_deg"].get<double>(), m->roll_deg()) << key;
+    EXPECT_EQ(s[key]["x_m"].get<double>(), m->x_m()) << key;
+    EXPECT_EQ(s[key]["y_m"].get<double>(), m->y_m()) << key;
+    EXPECT_EQ(s[key]["z_m"].get<double>(), m->z_m()) << key;
+  }
+  EXPECT_EQ(s["residual_rms"].get<double>(), gs.residual_rms());
+  EXPECT_EQ(s["features_used"].get<uint32_t>(), gs.features_used());
+  // gRPC has no presence for them: 0 when the JSON leaves them out.
+  EXPECT_EQ(s.value("vanishing_point_u_px", 0.0), gs.vanishing_point_u_px());
+  EXPECT_EQ(s.value("vanishing_point_v_px", 0.0), gs.vanishing_point_v_px());
+  ASSERT_EQ(s.value("ground_homography", json::array()).size(),
+            static_cast<size_t>(gs.ground_homography_size()));
+  for (int k = 0; k < gs.ground_homography_size(); ++k) {
+    EXPECT_EQ(s["ground_homography"][k].get<double>(), gs.ground_homography(k));
+  }
+}
+
+// The console's JSON of a done cycle carries exactly the numbers of gRPC GetCycle's.
+void ExpectCycleEqualsGrpc(const json& c, const v1::Cycle& g) {
+  EXPECT_EQ(c["cycle_id"], g.cycle_id());
+  EXPECT_EQ(c["vin"], g.vin());
+  EXPECT_EQ(c["car_model_id"], g.car_model_id());
+  EXPECT_EQ(c["state"], "done");
+  EXPECT_EQ(g.state(), v1::CYCLE_STATE_DONE);
+  EXPECT_EQ(c["verdict"], g.verdict() == v1::VERDICT_PASS   ? "pass"
+                          : g.verdict() == v1::VERDICT_FAIL ? "fail"
+                                                            : "error");
+  EXPECT_EQ(c["reason"], g.reason());
+  EXPECT_EQ(c["started_ns"].get<int64_t>(), g.started_ns());
+  EXPECT_EQ(c["ended_ns"].get<int64_t>(), g.ended_ns());
+  ASSERT_EQ(c["sensors"].size(), static_cast<size_t>(g.sensors_size()));
+  ASSERT_EQ(g.sensors_size(), 2);
+  for (int i = 0; i < g.sensors_size(); ++i) {
+    ASSERT_NO_FATAL_FAILURE(ExpectSensorEqualsGrpc(c["sensors"][i], g.sensors(i), i));
+  }
+}
+
 TEST_F(WebServerTest, CycleNumbersEqualGrpcGetCycle) {
   Start(kToken);
   const std::string cookie = Login(kToken);
@@ -233,55 +290,7 @@ TEST_F(WebServerTest, CycleNumbersEqualGrpcGetCycle) {
     const v1::Cycle g = GetCycleOverGrpc(id, kToken);
     const auto [status, c] = GetJson("/api/cycles/" + std::to_string(id), cookie);
     ASSERT_EQ(status, 200) << c;
-    EXPECT_EQ(c["cycle_id"], g.cycle_id());
-    EXPECT_EQ(c["vin"], g.vin());
-    EXPECT_EQ(c["car_model_id"], g.car_model_id());
-    EXPECT_EQ(c["state"], "done");
-    EXPECT_EQ(g.state(), v1::CYCLE_STATE_DONE);
-    EXPECT_EQ(c["verdict"], g.verdict() == v1::VERDICT_PASS   ? "pass"
-                            : g.verdict() == v1::VERDICT_FAIL ? "fail"
-                                                              : "error");
-    EXPECT_EQ(c["reason"], g.reason());
-    EXPECT_EQ(c["started_ns"].get<int64_t>(), g.started_ns());
-    EXPECT_EQ(c["ended_ns"].get<int64_t>(), g.ended_ns());
-    ASSERT_EQ(c["sensors"].size(), static_cast<size_t>(g.sensors_size()));
-    ASSERT_EQ(g.sensors_size(), 2);
-    for (int i = 0; i < g.sensors_size(); ++i) {
-      const v1::SensorResult& gs = g.sensors(i);
-      const json& s = c["sensors"][i];
-      SCOPED_TRACE(gs.name());
-      EXPECT_EQ(s["name"], gs.name());
-      EXPECT_EQ(s["kind"], i == 0 ? "camera" : "radar");
-      EXPECT_EQ(s["reason"], gs.reason());
-      EXPECT_EQ(s["message"], gs.message());
-      // Exactly equal doubles: JSON carries the shortest text that reads back to the same double.
-      ASSERT_EQ(s["t_car_sensor"].size(), static_cast<size_t>(gs.t_car_sensor().m_size()));
-      for (int k = 0; k < gs.t_car_sensor().m_size(); ++k) {
-        EXPECT_EQ(s["t_car_sensor"][k].get<double>(), gs.t_car_sensor().m(k)) << k;
-      }
-      const std::pair<const char*, const v1::MountingAngles*> groups[] = {
-          {"mounting", &gs.mounting()},
-          {"deviation", &gs.deviation()},
-          {"uncertainty", &gs.uncertainty()}};
-      for (const auto& [key, m] : groups) {
-        EXPECT_EQ(s[key]["yaw_deg"].get<double>(), m->yaw_deg()) << key;
-        EXPECT_EQ(s[key]["pitch_deg"].get<double>(), m->pitch_deg()) << key;
-        EXPECT_EQ(s[key]["roll_deg"].get<double>(), m->roll_deg()) << key;
-        EXPECT_EQ(s[key]["x_m"].get<double>(), m->x_m()) << key;
-        EXPECT_EQ(s[key]["y_m"].get<double>(), m->y_m()) << key;
-        EXPECT_EQ(s[key]["z_m"].get<double>(), m->z_m()) << key;
-      }
-      EXPECT_EQ(s["residual_rms"].get<double>(), gs.residual_rms());
-      EXPECT_EQ(s["features_used"].get<uint32_t>(), gs.features_used());
-      // gRPC has no presence for them: 0 when the JSON leaves them out.
-      EXPECT_EQ(s.value("vanishing_point_u_px", 0.0), gs.vanishing_point_u_px());
-      EXPECT_EQ(s.value("vanishing_point_v_px", 0.0), gs.vanishing_point_v_px());
-      ASSERT_EQ(s.value("ground_homography", json::array()).size(),
-                static_cast<size_t>(gs.ground_homography_size()));
-      for (int k = 0; k < gs.ground_homography_size(); ++k) {
-        EXPECT_EQ(s["ground_homography"][k].get<double>(), gs.ground_homography(k));
-      }
-    }
+    ASSERT_NO_FATAL_FAILURE(ExpectCycleEqualsGrpc(c, g));
   }
 
   // Pages of the list, newest first, as gRPC ListCycles pages them.

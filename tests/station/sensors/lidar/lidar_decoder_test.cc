@@ -199,61 +199,74 @@ struct RoundTripCase {
 
 class LidarRoundTrip : public ::testing::TestWithParam<RoundTripCase> {};
 
-TEST_P(LidarRoundTrip, DecodesWhatWasEncoded) {
-  const LidarModel model = GetParam().model;
-  const LidarReturnMode mode = GetParam().mode;
+// Random columns of `model` in `mode` (seed 42) for 2.3 turns at 600 rpm from 300°, in whole
+// packets: a tenth of the echoes without a return, a third of the second returns equal to the
+// first; and the settings that encode them.
+struct RoundTripColumns {
+  LidarEncodeSettings settings;
+  std::vector<LidarColumn> cols;
+  int returns = 1;
+  int per_packet = 0;
+  int step_cdeg = 0;
+  int start_cdeg = 30000;  // start at 300°: the first wrap comes early
+};
+RoundTripColumns RandomColumns(LidarModel model, LidarReturnMode mode) {
   const LidarModelInfo& info = GetLidarModelInfo(model);
-  const LidarBeamTable table = SyntheticBeamTable(model);
-  const int returns = mode == LidarReturnMode::kDual ? 2 : 1;
-  const int per_packet = ColumnsPerPacket(model, returns);
+  RoundTripColumns c;
+  c.returns = mode == LidarReturnMode::kDual ? 2 : 1;
+  c.per_packet = ColumnsPerPacket(model, c.returns);
   // 600 rpm: one turn per 100 ms, i.e. the column step in 0.01° is 3600°/s × period.
-  const int step_cdeg = static_cast<int>(std::lround(3600.0 * info.column_period_ns * 1e-9 * 100));
-  const int start_cdeg = 30000;  // start at 300°: the first wrap comes early
+  c.step_cdeg = static_cast<int>(std::lround(3600.0 * info.column_period_ns * 1e-9 * 100));
   // 2.3 turns, in whole packets.
-  int columns = static_cast<int>(2.3 * 36000 / step_cdeg);
-  columns -= columns % per_packet;
+  int columns = static_cast<int>(2.3 * 36000 / c.step_cdeg);
+  columns -= columns % c.per_packet;
 
   std::mt19937 rng(42);
   std::uniform_real_distribution<double> range(0.5, 100.0);
   std::uniform_int_distribution<int> intensity(0, 255);
   std::bernoulli_distribution no_return(0.1), same_echo(0.3);
-  LidarEncodeSettings settings;
-  settings.model = model;
-  settings.return_mode = mode;
-  settings.first_column_time_ns = 1'700'000'000'123'456'000;  // 2023-11-14
-  std::vector<LidarColumn> cols(columns);
+  c.settings.model = model;
+  c.settings.return_mode = mode;
+  c.settings.first_column_time_ns = 1'700'000'000'123'456'000;  // 2023-11-14
+  c.cols.resize(columns);
   for (int k = 0; k < columns; ++k) {
-    cols[k].azimuth_centideg = static_cast<std::uint16_t>((start_cdeg + k * step_cdeg) % 36000);
-    for (int r = 0; r < returns; ++r) {
-      for (int c = 0; c < info.channels; ++c) {
+    c.cols[k].azimuth_centideg =
+        static_cast<std::uint16_t>((c.start_cdeg + k * c.step_cdeg) % 36000);
+    for (int r = 0; r < c.returns; ++r) {
+      for (int ch = 0; ch < info.channels; ++ch) {
         LidarEcho e{no_return(rng) ? 0.0 : range(rng), static_cast<std::uint8_t>(intensity(rng))};
-        if (r == 1 && same_echo(rng)) e = cols[k].echoes[c];
-        cols[k].echoes.push_back(e);
+        if (r == 1 && same_echo(rng)) e = c.cols[k].echoes[ch];
+        c.cols[k].echoes.push_back(e);
       }
     }
   }
-  const absl::StatusOr<std::vector<std::vector<std::uint8_t>>> packets =
-      EncodeLidarPackets(settings, cols);
-  ASSERT_TRUE(packets.ok()) << packets.status();
-  ASSERT_EQ(packets->size(), static_cast<std::size_t>(columns / per_packet));
+  return c;
+}
 
-  // The expected points, in the decoder's order, with their unwrapped corrected azimuths.
-  struct Expected {
-    LidarPoint point;
-    double azimuth_cdeg;  // from the start of turn 0
-  };
-  std::vector<Expected> expected;
+// An expected point with its unwrapped corrected azimuth.
+struct ExpectedPoint {
+  LidarPoint point;
+  double azimuth_cdeg;  // from the start of turn 0
+};
+
+// The points the decoder must give for `c` through `table`, in the decoder's order: no echo,
+// a second return equal to the first and ranges outside 0.3..200 m give none.
+std::vector<ExpectedPoint> ExpectedPoints(const RoundTripColumns& c, const LidarBeamTable& table) {
+  const LidarModel model = c.settings.model;
+  const LidarModelInfo& info = GetLidarModelInfo(model);
+  const int columns = static_cast<int>(c.cols.size());
+  std::vector<ExpectedPoint> expected;
   const double unit = info.distance_unit_m;
-  auto expect = [&](int k, int r, int c) {
-    const LidarEcho& e = cols[k].echoes[r * info.channels + c];
+  auto expect = [&](int k, int r, int ch) {
+    const LidarEcho& e = c.cols[k].echoes[r * info.channels + ch];
     const double counts = std::round(e.range_m / unit);
     if (counts == 0) return;
-    if (r == 1 && counts == std::round(cols[k].echoes[c].range_m / unit)) return;
+    if (r == 1 && counts == std::round(c.cols[k].echoes[ch].range_m / unit)) return;
     const double range_m = counts * unit;
     if (range_m < 0.3 || range_m > 200.0) return;
-    const LidarBeam& beam = table.beams[c];
-    const double az_rad =
-        BeamAzimuthRad(beam, (start_cdeg + k * step_cdeg) / 100.0 * kDeg, step_cdeg / 100.0 * kDeg);
+    const LidarBeam& beam = table.beams[ch];
+    const double az_rad = BeamAzimuthRad(beam, (c.start_cdeg + k * c.step_cdeg) / 100.0 * kDeg,
+                                         c.step_cdeg / 100.0 * kDeg);
     const Eigen::Vector3d p = LidarPointFromPolar(range_m, az_rad, beam.elevation_rad);
     LidarPoint pt;
     pt.x = static_cast<float>(p.x());
@@ -261,26 +274,64 @@ TEST_P(LidarRoundTrip, DecodesWhatWasEncoded) {
     pt.z = static_cast<float>(p.z());
     pt.intensity = e.intensity;
     pt.ring = beam.ring;
-    pt.time_ns =
-        settings.first_column_time_ns + k * info.column_period_ns + ChannelTimeOffsetNs(model, c);
+    pt.time_ns = c.settings.first_column_time_ns + k * info.column_period_ns +
+                 ChannelTimeOffsetNs(model, ch);
     expected.push_back({pt, az_rad / kDeg * 100.0});
   };
   if (model == LidarModel::kVlp16) {
     // Block (pair) by block, return by return, firing by firing, laser by laser.
     for (int k = 0; k < columns; k += 2) {
-      for (int r = 0; r < returns; ++r) {
+      for (int r = 0; r < c.returns; ++r) {
         for (int f = 0; f < 2; ++f) {
-          for (int c = 0; c < info.channels; ++c) expect(k + f, r, c);
+          for (int ch = 0; ch < info.channels; ++ch) expect(k + f, r, ch);
         }
       }
     }
   } else {
     for (int k = 0; k < columns; ++k) {
-      for (int c = 0; c < info.channels; ++c) {
-        for (int r = 0; r < returns; ++r) expect(k, r, c);
+      for (int ch = 0; ch < info.channels; ++ch) {
+        for (int r = 0; r < c.returns; ++r) expect(k, r, ch);
       }
     }
   }
+  return expected;
+}
+
+// The scan of `rotation` holds the expected points of that rotation, in order: ring,
+// intensity, position within float32 steps and time within the packets' whole µs.
+void ExpectRotation(const LidarScan& scan, int rotation,
+                    const std::vector<ExpectedPoint>& expected) {
+  std::vector<LidarPoint> want;
+  for (const ExpectedPoint& e : expected) {
+    if (std::floor(e.azimuth_cdeg / 36000.0) == rotation) want.push_back(e.point);
+  }
+  EXPECT_EQ(scan.rotation, rotation);
+  ASSERT_EQ(scan.points.size(), want.size()) << "rotation " << rotation;
+  // float32 steps are below 8 µm at 100 m.
+  constexpr double kPositionTolM = 2e-5;
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    const LidarPoint& got = scan.points[i];
+    ASSERT_EQ(got.ring, want[i].ring) << i;
+    ASSERT_EQ(got.intensity, want[i].intensity) << i;
+    ASSERT_NEAR(got.x, want[i].x, kPositionTolM) << i;
+    ASSERT_NEAR(got.y, want[i].y, kPositionTolM) << i;
+    ASSERT_NEAR(got.z, want[i].z, kPositionTolM) << i;
+    // The packet time field holds whole µs: decoded times are up to 1 µs early.
+    ASSERT_LE(got.time_ns, want[i].time_ns) << i;
+    ASSERT_GT(got.time_ns, want[i].time_ns - 1000) << i;
+  }
+}
+
+TEST_P(LidarRoundTrip, DecodesWhatWasEncoded) {
+  const LidarModel model = GetParam().model;
+  const LidarModelInfo& info = GetLidarModelInfo(model);
+  const LidarBeamTable table = SyntheticBeamTable(model);
+  const RoundTripColumns c = RandomColumns(model, GetParam().mode);
+  const absl::StatusOr<std::vector<std::vector<std::uint8_t>>> packets =
+      EncodeLidarPackets(c.settings, c.cols);
+  ASSERT_TRUE(packets.ok()) << packets.status();
+  ASSERT_EQ(packets->size(), c.cols.size() / c.per_packet);
+  const std::vector<ExpectedPoint> expected = ExpectedPoints(c, table);
 
   absl::StatusOr<LidarDecoder> decoder = LidarDecoder::Create(table);
   ASSERT_TRUE(decoder.ok());
@@ -288,7 +339,7 @@ TEST_P(LidarRoundTrip, DecodesWhatWasEncoded) {
   for (std::size_t p = 0; p < packets->size(); ++p) {
     // Host time: the packet's own time (used for the VLP-16's hour).
     decoder->AddPacket((*packets)[p],
-                       settings.first_column_time_ns + p * per_packet * info.column_period_ns,
+                       c.settings.first_column_time_ns + p * c.per_packet * info.column_period_ns,
                        &scans);
   }
   decoder->Finish(&scans);
@@ -299,26 +350,7 @@ TEST_P(LidarRoundTrip, DecodesWhatWasEncoded) {
   ASSERT_EQ(scans.size(), 2u);
   EXPECT_EQ(decoder->stats().partial_rotations, 2);
   for (int rotation = 1; rotation <= 2; ++rotation) {
-    std::vector<LidarPoint> want;
-    for (const Expected& e : expected) {
-      if (std::floor(e.azimuth_cdeg / 36000.0) == rotation) want.push_back(e.point);
-    }
-    const LidarScan& scan = scans[rotation - 1];
-    EXPECT_EQ(scan.rotation, rotation);
-    ASSERT_EQ(scan.points.size(), want.size()) << "rotation " << rotation;
-    // float32 steps are below 8 µm at 100 m.
-    constexpr double kPositionTolM = 2e-5;
-    for (std::size_t i = 0; i < want.size(); ++i) {
-      const LidarPoint& got = scan.points[i];
-      ASSERT_EQ(got.ring, want[i].ring) << i;
-      ASSERT_EQ(got.intensity, want[i].intensity) << i;
-      ASSERT_NEAR(got.x, want[i].x, kPositionTolM) << i;
-      ASSERT_NEAR(got.y, want[i].y, kPositionTolM) << i;
-      ASSERT_NEAR(got.z, want[i].z, kPositionTolM) << i;
-      // The packet time field holds whole µs: decoded times are up to 1 µs early.
-      ASSERT_LE(got.time_ns, want[i].time_ns) << i;
-      ASSERT_GT(got.time_ns, want[i].time_ns - 1000) << i;
-    }
+    ASSERT_NO_FATAL_FAILURE(ExpectRotation(scans[rotation - 1], rotation, expected));
   }
 }
 
