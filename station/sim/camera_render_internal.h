@@ -4,7 +4,7 @@
 //   camera_render.cc            option and layout checks, VisibleCameraFeatures,
 //                               RenderCameraFrame (the pipeline below, in order)
 //   camera_render_occluders.cc  occluders placed per frame
-//   camera_render_scene.cc      the scene in the camera frame: labels, wall clutter, tracing
+//   camera_render_scene.cc      the scene in the camera frame: labels, wall clutter, looks
 //   camera_render_rays.cc       the pixel-corner rays and the surfaces each tile may show
 //   camera_render_pixel.cc      integrating one pixel over its area
 //   camera_render_image.cc      the linear image, pixel by pixel, over threads
@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -147,6 +148,44 @@ class Scene {
   std::vector<SceneSurface> surfaces_;
 };
 
+// Scene::Intersect and Scene::Trace are inline: every pixel corner and probe traces.
+inline bool Scene::Intersect(const SceneSurface& s, const Eigen::Vector3d& d_camera, double max_t,
+                             double* t, Eigen::Vector2d* p_surface) {
+  const double tt = -s.eye_surface.z() / s.R_surface_camera.row(2).dot(d_camera);
+  // Also refuses rays parallel to the plane (inf or NaN).
+  if (!(tt > 0.0 && tt < max_t)) return false;
+  const Eigen::Vector2d p =
+      s.eye_surface.head<2>() + tt * (s.R_surface_camera.topRows<2>() * d_camera);
+  if (!(std::abs(p.x()) <= s.half_size_m.x() && std::abs(p.y()) <= s.half_size_m.y())) {
+    return false;
+  }
+  *t = tt;
+  *p_surface = p;
+  return true;
+}
+
+inline Hit Scene::Trace(const Eigen::Vector3d& d_camera, const std::uint32_t* candidates, int n,
+                        int exclude, double max_t) const {
+  Hit best;
+  best.t = max_t;
+  best.look = Look{kBackgroundLabel, looks_.background};
+  for (int k = 0; k < n; ++k) {
+    const int i = static_cast<int>(candidates[k]);
+    if (i == exclude) continue;
+    const SceneSurface& s = surfaces_[i];
+    double t;
+    Eigen::Vector2d p;
+    if (!Intersect(s, d_camera, best.t, &t, &p)) continue;
+    const std::optional<Look> look = LookAt(s, p);
+    if (!look.has_value()) continue;
+    best.look = *look;
+    best.surface = i;
+    best.t = t;
+    best.p_surface = p;
+  }
+  return best;
+}
+
 // The indices of all the scene's surfaces, as candidates for Scene::Trace.
 std::vector<std::uint32_t> AllSurfaces(const Scene& scene);
 
@@ -251,8 +290,28 @@ struct CornerSample {
 // True if all four corners of a pixel hit one surface and every other candidate's plane
 // lies behind it (or is never met) along all four corner rays: depths along blended rays
 // are harmonic blends of the corners' depths, so that order holds inside the pixel too.
-bool InFrontOverPixel(const Scene& scene, const std::array<CornerSample*, 4>& c,
-                      const std::uint32_t* candidates, int n);
+// Inline: every pixel asks.
+inline bool InFrontOverPixel(const Scene& scene, const std::array<CornerSample*, 4>& c,
+                             const std::uint32_t* candidates, int n) {
+  const int front = c[0]->hit.surface;
+  if (front < 0) return false;
+  for (int k = 1; k < 4; ++k) {
+    if (c[k]->hit.surface != front) return false;
+  }
+  for (int i = 0; i < n; ++i) {
+    const int other = static_cast<int>(candidates[i]);
+    if (other == front) continue;
+    const SceneSurface& o = scene.surfaces()[other];
+    bool behind = true, never = true;
+    for (int k = 0; k < 4; ++k) {
+      const double t = -o.eye_surface.z() / o.R_surface_camera.row(2).dot(c[k]->ray);
+      behind = behind && t > c[k]->hit.t;
+      never = never && t < 0.0;
+    }
+    if (!behind && !never) return false;
+  }
+  return true;
+}
 
 // Integrates pixels of one scene; one per thread (it keeps the current pixel's state).
 class PixelIntegrator {

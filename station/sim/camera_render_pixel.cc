@@ -19,28 +19,6 @@ namespace linecal::camera_render_internal {
 // (exact for straight edges; circles of radius R px are off by ~L^4/R^3 of a pixel), after
 // two more probes confirm the arc. Anything else splits the cell into quarters.
 
-bool InFrontOverPixel(const Scene& scene, const std::array<CornerSample*, 4>& c,
-                      const std::uint32_t* candidates, int n) {
-  const int front = c[0]->hit.surface;
-  if (front < 0) return false;
-  for (int k = 1; k < 4; ++k) {
-    if (c[k]->hit.surface != front) return false;
-  }
-  for (int i = 0; i < n; ++i) {
-    const int other = static_cast<int>(candidates[i]);
-    if (other == front) continue;
-    const SceneSurface& o = scene.surfaces()[other];
-    bool behind = true, never = true;
-    for (int k = 0; k < 4; ++k) {
-      const double t = -o.eye_surface.z() / o.R_surface_camera.row(2).dot(c[k]->ray);
-      behind = behind && t > c[k]->hit.t;
-      never = never && t < 0.0;
-    }
-    if (!behind && !never) return false;
-  }
-  return true;
-}
-
 double PixelIntegrator::Integrate(const std::array<CornerSample*, 4>& c,
                                   const std::uint32_t* candidates, int n) {
   for (int k = 0; k < 4; ++k) rays_[k] = &c[k]->ray;

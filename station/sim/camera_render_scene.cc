@@ -142,21 +142,6 @@ Scene::Scene(const Rigid3d& T_station_camera, const StationLayout& layout,
       layout.floor_reflectivity);
 }
 
-bool Scene::Intersect(const SceneSurface& s, const Eigen::Vector3d& d_camera, double max_t,
-                      double* t, Eigen::Vector2d* p_surface) {
-  const double tt = -s.eye_surface.z() / s.R_surface_camera.row(2).dot(d_camera);
-  // Also refuses rays parallel to the plane (inf or NaN).
-  if (!(tt > 0.0 && tt < max_t)) return false;
-  const Eigen::Vector2d p =
-      s.eye_surface.head<2>() + tt * (s.R_surface_camera.topRows<2>() * d_camera);
-  if (!(std::abs(p.x()) <= s.half_size_m.x() && std::abs(p.y()) <= s.half_size_m.y())) {
-    return false;
-  }
-  *t = tt;
-  *p_surface = p;
-  return true;
-}
-
 std::optional<Look> Scene::LookAt(const SceneSurface& s,
                                   const Eigen::Vector2d& p_surface) const {
   switch (s.kind) {
@@ -224,28 +209,6 @@ bool Scene::UniformOver(const SceneSurface& s, const std::array<Eigen::Vector2d,
     }
   }
   return true;
-}
-
-Hit Scene::Trace(const Eigen::Vector3d& d_camera, const std::uint32_t* candidates, int n,
-                 int exclude, double max_t) const {
-  Hit best;
-  best.t = max_t;
-  best.look = Look{kBackgroundLabel, looks_.background};
-  for (int k = 0; k < n; ++k) {
-    const int i = static_cast<int>(candidates[k]);
-    if (i == exclude) continue;
-    const SceneSurface& s = surfaces_[i];
-    double t;
-    Eigen::Vector2d p;
-    if (!Intersect(s, d_camera, best.t, &t, &p)) continue;
-    const std::optional<Look> look = LookAt(s, p);
-    if (!look.has_value()) continue;
-    best.look = *look;
-    best.surface = i;
-    best.t = t;
-    best.p_surface = p;
-  }
-  return best;
 }
 
 std::optional<Look> Scene::BoardLook(const SceneSurface& s, Paint paint) const {
