@@ -337,6 +337,159 @@ double HoleRadiusM(const Board& board) {
   return 0;
 }
 
+// Checks LiDAR target `id` of `layout` for the LiDAR at its nominal mounting T_station_lidar
+// (beams at `elevations`) into *t: type, field of view, rings through each hole, sight of
+// the holes' rims and the page, the floor. The board when it is usable (no reason), else
+// nullptr.
+const StationBoard* AssessLidarTarget(const std::string& id, const StationLayout& layout,
+                                      const FloorLimits* floor, const PlannerOptions& o,
+                                      const std::vector<double>& elevations,
+                                      const Rigid3d& T_station_lidar, TargetAssessment* t) {
+  const Rigid3d T_lidar_station = T_station_lidar.Inverse();
+  const Eigen::Vector3d eye = T_station_lidar.translation();
+  const StationBoard* b = TargetBoard(layout, id, t);
+  if (b == nullptr) return nullptr;
+  if (b->board.type() != BoardType::kRoundHole) {
+    AddReason(&t->reasons, "wrong_target_type");
+    return nullptr;
+  }
+  const Eigen::Vector3d normal = b->T_station_board.RotationMatrix().col(2);
+  const Eigen::Vector3d to_eye = eye - b->T_station_board.translation();
+  const double range = to_eye.norm();
+  if (normal.dot(to_eye) <= 0 || range < kLidarMinRangeM || range > kLidarMaxRangeM) {
+    AddReason(&t->reasons, "board_outside_fov");
+  }
+  const double radius = HoleRadiusM(b->board);
+  const Eigen::Vector3d normal_lidar = T_lidar_station.RotationMatrix() * normal;
+  t->fewest_rings = std::numeric_limits<int>::max();
+  std::optional<Occluding> occluder;
+  for (const BoardFeature& f : b->board.features()) {
+    if (f.kind != FeatureKind::kHoleCentre) continue;
+    ++t->features;
+    const Eigen::Vector3d c = FeaturePoint(*b, f.p_board);
+    t->fewest_rings = std::min(t->fewest_rings, RingsThroughHole(elevations, T_lidar_station * c, normal_lidar, radius));
+    // The hole's rim, where the rings' edges are measured, must be in sight.
+    for (int k = 0; k < 8 && !occluder; ++k) {
+      const double phi = 2 * kPi * k / 8;
+      const Eigen::Vector2d rim = f.p_board + radius * Eigen::Vector2d(std::cos(phi), std::sin(phi));
+      occluder = Occluder(eye, FeaturePoint(*b, rim), layout, id);
+    }
+  }
+  if (t->features == 0) t->fewest_rings = 0;
+  if (t->fewest_rings < o.min_rings_per_hole) {
+    AddReason(&t->reasons, "too_few_rings");
+    t->detail += absl::StrFormat(" %d ring(s) through the worst hole < %d;", t->fewest_rings, o.min_rings_per_hole);
+  }
+  NoteOccluder(occluder, t);
+  NoteHiddenPage(HiddenPageOf(eye, *b, layout, [](const Eigen::Vector3d&) { return true; }),
+                 occluder.has_value(), t);
+  CheckBoardFloor(floor, *b, t);
+  return t->reasons.empty() ? b : nullptr;
+}
+
+// Per usable board, the detector's sigmas and board-pose covariance summed over the
+// simulated mountings that found it, and the detector's reason at the nominal mounting.
+struct DetectorSpread {
+  std::vector<double> centre_var, normal_var;
+  std::vector<Eigen::Matrix<double, 6, 6>> pose_covariance;  // board frame
+  std::vector<int> found;
+  std::vector<RoundHoleCloudReason> nominal_reason;
+};
+
+// The detector's own hole-centre sigma on simulated rotations (fixed seed). Where the rings
+// cross the holes depends on the true mounting, and with it the detector's sigma (by up to
+// 1.6x between cars for two rings per hole): the prediction is its RMS over the nominal
+// mounting and pitch or roll half a tolerance either way. Five simulated rotations, each
+// searched for every usable board.
+absl::StatusOr<DetectorSpread> SimulateDetectorSpread(const SensorModel& sensor, const StationLayout& layout,
+                                                      const std::vector<const StationBoard*>& usable) {
+  const Rigid3d& T_station_lidar = sensor.T_car_sensor_nominal;
+  const Rigid3d T_lidar_station = T_station_lidar.Inverse();
+  absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
+  if (!beams.ok()) return beams.status();
+  const YawPitchRoll nominal = MountingAngles(T_station_lidar.RotationMatrix(), LidarBaseRotation());
+  const double dp = 0.5 * sensor.tolerance.pitch_rad, dr = 0.5 * sensor.tolerance.roll_rad;
+  const double offsets[5][2] = {{0, 0}, {dp, 0}, {-dp, 0}, {0, dr}, {0, -dr}};
+  DetectorSpread s;
+  s.centre_var.assign(usable.size(), 0);
+  s.normal_var.assign(usable.size(), 0);
+  s.pose_covariance.assign(usable.size(), Eigen::Matrix<double, 6, 6>::Zero());
+  s.found.assign(usable.size(), 0);
+  s.nominal_reason.assign(usable.size(), RoundHoleCloudReason::kBadInput);
+  for (int k = 0; k < 5; ++k) {
+    YawPitchRoll ypr = nominal;
+    ypr.pitch += offsets[k][0];
+    ypr.roll += offsets[k][1];
+    const Rigid3d T_station_true(MountingRotation(ypr, LidarBaseRotation()), T_station_lidar.translation());
+    absl::StatusOr<LidarSimResult> sim = SimulateLidar(*beams, T_station_true, layout, LidarSimOptions{}, 0, 1);
+    if (!sim.ok()) return sim.status();
+    std::vector<std::vector<RoundHoleCloudPoint>> frames;
+    for (const LidarScan& scan : sim->scans) {
+      std::vector<RoundHoleCloudPoint>& pts = frames.emplace_back();
+      for (const LidarPoint& p : scan.points) pts.push_back({p.x, p.y, p.z, p.ring});
+    }
+    const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
+    for (size_t i = 0; i < usable.size(); ++i) {
+      const RoundHoleCloudDetection d =
+          DetectRoundHoleBoardInCloud(usable[i]->board, views, T_lidar_station * usable[i]->T_station_board);
+      if (k == 0) s.nominal_reason[i] = d.reason;
+      if (!d.found) continue;
+      const LidarBoardObservation o = LidarObservationFromDetection(usable[i]->id, d);
+      s.centre_var[i] += o.centre_sigma_m * o.centre_sigma_m;
+      s.normal_var[i] += o.normal_sigma_rad * o.normal_sigma_rad;
+      s.pose_covariance[i] += o.pose_covariance;
+      ++s.found[i];
+    }
+  }
+  return s;
+}
+
+// The exact observations of the usable boards with the detector's mean sigmas and pose
+// covariance (the prediction, not the measurement); a board the detector missed at the
+// nominal mounting or at all gets "board_not_detected" in a's targets instead.
+std::vector<LidarBoardObservation> PredictedObservations(const std::vector<const StationBoard*>& usable,
+                                                         const DetectorSpread& s,
+                                                         const Rigid3d& T_lidar_station,
+                                                         SensorAssessment* a) {
+  std::vector<LidarBoardObservation> observations;
+  for (size_t i = 0; i < usable.size(); ++i) {
+    const StationBoard* b = usable[i];
+    if (s.nominal_reason[i] != RoundHoleCloudReason::kNone || s.found[i] == 0) {
+      for (TargetAssessment& t : a->targets) {
+        if (t.target != b->id) continue;
+        AddReason(&t.reasons, "board_not_detected");
+        t.detail += absl::StrCat(" detector: ", RoundHoleCloudReasonName(s.nominal_reason[i]), ";");
+      }
+      continue;
+    }
+    LidarBoardObservation obs = ExactHoles(*b, T_lidar_station, std::sqrt(s.centre_var[i] / s.found[i]));
+    obs.normal_sigma_rad = std::sqrt(s.normal_var[i] / s.found[i]);
+    obs.T_lidar_board = T_lidar_station * b->T_station_board;
+    obs.pose_covariance = s.pose_covariance[i] / s.found[i];
+    observations.push_back(obs);
+  }
+  return observations;
+}
+
+// The mounting CalibrateLidar would give from `observations` (the car at the station's
+// origin), taken into *a; "too_few_features" with fewer than three holes.
+absl::Status PredictLidarMounting(const SensorModel& sensor, const StationLayout& layout,
+                                  const std::vector<LidarBoardObservation>& observations,
+                                  const PlannerOptions& o, SensorAssessment* a) {
+  LidarCalibrationOptions lo;
+  lo.max_sigma_fraction_of_tolerance = o.max_sigma_fraction_of_tolerance;
+  int holes = 0;
+  for (const LidarBoardObservation& ob : observations) holes += static_cast<int>(ob.holes.size());
+  if (holes >= 3) {
+    absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, layout, Rigid3d(), observations, lo);
+    if (!r.ok()) return r.status();
+    TakeMounting(r->solved, r->mounting, sensor, o, a);
+  } else {
+    AddReason(&a->reasons, "too_few_features");
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const StationLayout& layout,
                                              const FloorLimits* floor, const PlannerOptions& o, bool predict,
                                              bool simulate) {
@@ -347,123 +500,23 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
   a.kind = sensor.kind;
   const Rigid3d& T_station_lidar = sensor.T_car_sensor_nominal;
   const Rigid3d T_lidar_station = T_station_lidar.Inverse();
-  const Eigen::Vector3d eye = T_station_lidar.translation();
   std::vector<const StationBoard*> usable;
   for (const std::string& id : sensor.targets) {
     TargetAssessment& t = a.targets.emplace_back();
-    const StationBoard* b = TargetBoard(layout, id, &t);
-    if (b == nullptr) continue;
-    if (b->board.type() != BoardType::kRoundHole) {
-      AddReason(&t.reasons, "wrong_target_type");
-      continue;
-    }
-    const Eigen::Vector3d normal = b->T_station_board.RotationMatrix().col(2);
-    const Eigen::Vector3d to_eye = eye - b->T_station_board.translation();
-    const double range = to_eye.norm();
-    if (normal.dot(to_eye) <= 0 || range < kLidarMinRangeM || range > kLidarMaxRangeM) {
-      AddReason(&t.reasons, "board_outside_fov");
-    }
-    const double radius = HoleRadiusM(b->board);
-    const Eigen::Vector3d normal_lidar = T_lidar_station.RotationMatrix() * normal;
-    t.fewest_rings = std::numeric_limits<int>::max();
-    std::optional<Occluding> occluder;
-    for (const BoardFeature& f : b->board.features()) {
-      if (f.kind != FeatureKind::kHoleCentre) continue;
-      ++t.features;
-      const Eigen::Vector3d c = FeaturePoint(*b, f.p_board);
-      t.fewest_rings = std::min(t.fewest_rings, RingsThroughHole(*elevations, T_lidar_station * c, normal_lidar, radius));
-      // The hole's rim, where the rings' edges are measured, must be in sight.
-      for (int k = 0; k < 8 && !occluder; ++k) {
-        const double phi = 2 * kPi * k / 8;
-        const Eigen::Vector2d rim = f.p_board + radius * Eigen::Vector2d(std::cos(phi), std::sin(phi));
-        occluder = Occluder(eye, FeaturePoint(*b, rim), layout, id);
-      }
-    }
-    if (t.features == 0) t.fewest_rings = 0;
-    if (t.fewest_rings < o.min_rings_per_hole) {
-      AddReason(&t.reasons, "too_few_rings");
-      t.detail += absl::StrFormat(" %d ring(s) through the worst hole < %d;", t.fewest_rings, o.min_rings_per_hole);
-    }
-    NoteOccluder(occluder, &t);
-    NoteHiddenPage(HiddenPageOf(eye, *b, layout, [](const Eigen::Vector3d&) { return true; }),
-                   occluder.has_value(), &t);
-    CheckBoardFloor(floor, *b, &t);
-    if (t.reasons.empty()) usable.push_back(b);
+    const StationBoard* b = AssessLidarTarget(id, layout, floor, o, *elevations, T_station_lidar, &t);
+    if (b != nullptr) usable.push_back(b);
   }
   std::vector<LidarBoardObservation> observations;
   if (predict && simulate && !usable.empty()) {
-    // The detector's own hole-centre sigma on simulated rotations (fixed seed). Where the
-    // rings cross the holes depends on the true mounting, and with it the detector's sigma
-    // (by up to 1.6x between cars for two rings per hole): the prediction is its RMS over
-    // the nominal mounting and pitch or roll half a tolerance either way.
-    absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
-    if (!beams.ok()) return beams.status();
-    const YawPitchRoll nominal = MountingAngles(T_station_lidar.RotationMatrix(), LidarBaseRotation());
-    const double dp = 0.5 * sensor.tolerance.pitch_rad, dr = 0.5 * sensor.tolerance.roll_rad;
-    const double offsets[5][2] = {{0, 0}, {dp, 0}, {-dp, 0}, {0, dr}, {0, -dr}};
-    std::vector<double> centre_var(usable.size(), 0), normal_var(usable.size(), 0);
-    // The detector's board-pose covariance (board frame), which the solve weighs the board by.
-    std::vector<Eigen::Matrix<double, 6, 6>> pose_covariance(usable.size(), Eigen::Matrix<double, 6, 6>::Zero());
-    std::vector<int> found(usable.size(), 0);
-    std::vector<RoundHoleCloudReason> nominal_reason(usable.size(), RoundHoleCloudReason::kBadInput);
-    for (int k = 0; k < 5; ++k) {
-      YawPitchRoll ypr = nominal;
-      ypr.pitch += offsets[k][0];
-      ypr.roll += offsets[k][1];
-      const Rigid3d T_station_true(MountingRotation(ypr, LidarBaseRotation()), T_station_lidar.translation());
-      absl::StatusOr<LidarSimResult> sim = SimulateLidar(*beams, T_station_true, layout, LidarSimOptions{}, 0, 1);
-      if (!sim.ok()) return sim.status();
-      std::vector<std::vector<RoundHoleCloudPoint>> frames;
-      for (const LidarScan& scan : sim->scans) {
-        std::vector<RoundHoleCloudPoint>& pts = frames.emplace_back();
-        for (const LidarPoint& p : scan.points) pts.push_back({p.x, p.y, p.z, p.ring});
-      }
-      const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
-      for (size_t i = 0; i < usable.size(); ++i) {
-        const RoundHoleCloudDetection d =
-            DetectRoundHoleBoardInCloud(usable[i]->board, views, T_lidar_station * usable[i]->T_station_board);
-        if (k == 0) nominal_reason[i] = d.reason;
-        if (!d.found) continue;
-        const LidarBoardObservation o = LidarObservationFromDetection(usable[i]->id, d);
-        centre_var[i] += o.centre_sigma_m * o.centre_sigma_m;
-        normal_var[i] += o.normal_sigma_rad * o.normal_sigma_rad;
-        pose_covariance[i] += o.pose_covariance;
-        ++found[i];
-      }
-    }
-    for (size_t i = 0; i < usable.size(); ++i) {
-      const StationBoard* b = usable[i];
-      if (nominal_reason[i] != RoundHoleCloudReason::kNone || found[i] == 0) {
-        for (TargetAssessment& t : a.targets) {
-          if (t.target != b->id) continue;
-          AddReason(&t.reasons, "board_not_detected");
-          t.detail += absl::StrCat(" detector: ", RoundHoleCloudReasonName(nominal_reason[i]), ";");
-        }
-        continue;
-      }
-      // The exact board with the detector's sigma: the prediction, not the measurement.
-      LidarBoardObservation obs = ExactHoles(*b, T_lidar_station, std::sqrt(centre_var[i] / found[i]));
-      obs.normal_sigma_rad = std::sqrt(normal_var[i] / found[i]);
-      obs.T_lidar_board = T_lidar_station * b->T_station_board;
-      obs.pose_covariance = pose_covariance[i] / found[i];
-      observations.push_back(obs);
-    }
+    absl::StatusOr<DetectorSpread> spread = SimulateDetectorSpread(sensor, layout, usable);
+    if (!spread.ok()) return spread.status();
+    observations = PredictedObservations(usable, *spread, T_lidar_station, &a);
   } else if (predict) {
     for (const StationBoard* b : usable) observations.push_back(ExactHoles(*b, T_lidar_station, kProxyCentreSigmaM));
   }
   CollectTargetReasons(&a);
   if (predict) {
-    LidarCalibrationOptions lo;
-    lo.max_sigma_fraction_of_tolerance = o.max_sigma_fraction_of_tolerance;
-    int holes = 0;
-    for (const LidarBoardObservation& ob : observations) holes += static_cast<int>(ob.holes.size());
-    if (holes >= 3) {
-      absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, layout, Rigid3d(), observations, lo);
-      if (!r.ok()) return r.status();
-      TakeMounting(r->solved, r->mounting, sensor, o, &a);
-    } else {
-      AddReason(&a.reasons, "too_few_features");
-    }
+    if (absl::Status s = PredictLidarMounting(sensor, layout, observations, o, &a); !s.ok()) return s;
   }
   Finish(&a);
   return a;

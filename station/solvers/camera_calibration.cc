@@ -104,6 +104,128 @@ Eigen::Matrix3d GroundHomography(const CameraIntrinsics& intrinsics, const Rigid
   return h / h(2, 2);
 }
 
+namespace {
+
+// The correspondences of the observed boards: every detection of every frame, each
+// feature's mean over the frames, and the boards seen (id, T_car_board) in first-seen order.
+struct CameraInputs {
+  std::vector<PnpCorrespondence> points;
+  std::vector<PnpCorrespondence> means;
+  std::vector<std::pair<std::string, Rigid3d>> boards_seen;
+};
+
+// The correspondences of `observations` (boards of `station`, T_car_station from the
+// aligner); InvalidArgument naming the sensor for a board not in the station.
+absl::StatusOr<CameraInputs> CollectCorrespondences(const SensorModel& sensor, const StationLayout& station,
+                                                    const Rigid3d& T_car_station,
+                                                    std::span<const BoardObservation> observations) {
+  CameraInputs in;
+  // Per board feature, the sum of its detections over the frames and their count: frames of a
+  // still scene repeat each feature (see `on_means` in CalibrateCamera).
+  std::map<std::pair<std::string, int>, std::pair<PnpCorrespondence, int>> sums;
+  for (const BoardObservation& o : observations) {
+    const StationBoard* board = station.FindBoard(o.board_id);
+    if (board == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": observed board '", o.board_id,
+                                                     "' is not in station '", station.name, "'"));
+    }
+    if (o.features.empty()) continue;
+    const Rigid3d T_car_board = T_car_station * board->T_station_board;
+    bool listed = false;
+    for (const auto& b : in.boards_seen) listed |= b.first == o.board_id;
+    if (!listed) in.boards_seen.emplace_back(o.board_id, T_car_board);
+    for (const DetectedFeature& f : o.features) {
+      in.points.push_back({T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
+      auto& [sum, n] = sums[{o.board_id, f.id}];
+      sum.p_object = in.points.back().p_object;
+      sum.uv_px += f.uv_px;
+      ++n;
+    }
+  }
+  for (const auto& [key, sum_n] : sums) {
+    in.means.push_back({sum_n.first.p_object, sum_n.first.uv_px / sum_n.second});
+  }
+  return in;
+}
+
+// What the car's software derives from the extrinsic T_camera_car (valid whatever the
+// verdict): the car axis's vanishing point, the ground homography and the ranging check.
+void SetDerived(const CameraModel& camera, const SensorModel& sensor, const Rigid3d& T_camera_car,
+                const CameraCalibrationOptions& options, CameraCalibrationResult* result) {
+  result->vanishing_point_valid =
+      CarAxisVanishingPoint(*sensor.intrinsics, T_camera_car, &result->vanishing_point_px);
+  result->ground_homography = GroundHomography(*sensor.intrinsics, T_camera_car);
+  if (result->vanishing_point_valid) {
+    result->ranging = RangingCheckOf(camera, T_camera_car, result->vanishing_point_px, options.ranging_distances_m);
+  }
+}
+
+// The seed formulas, cross-checking the extrinsic T_camera_car: the board method on the most
+// seen wide chessboard (and its disagreement with the extrinsic's vanishing point and ground
+// homography, which SetDerived gave) and the roll from the most seen vertical board; each
+// with a reason when its board was not seen.
+void SetSeedFormulas(const CameraModel& camera, const SensorModel& sensor, const StationLayout& station,
+                     const Rigid3d& T_car_station, std::span<const BoardObservation> observations,
+                     const CameraCalibrationOptions& options, const Rigid3d& T_camera_car,
+                     CameraCalibrationResult* result) {
+  const Rigid3d T_car_camera = T_camera_car.Inverse();
+  const int along = CarAxisAlong(T_camera_car);
+  const auto [chessboard_id, chessboard] = MostSeenBoard(station, observations, BoardType::kChessboard);
+  if (chessboard.empty()) {
+    result->board_method.reason = "chessboard_not_seen";
+    result->board_method.message = absl::StrCat(sensor.name, ": no wide chessboard among its observed boards");
+  } else {
+    const StationBoard& board = *station.FindBoard(chessboard_id);
+    result->board_method = SolveBoardMethod(camera, board.board, T_car_station * board.T_station_board,
+                                            T_car_camera.translation(), along, chessboard);
+    if (result->board_method.valid && result->vanishing_point_valid) {
+      result->vanishing_point_disagreement_px =
+          (result->board_method.vanishing_point_px - result->vanishing_point_px).norm();
+      result->ground_disagreement =
+          GroundDisagreement(result->ground_homography, result->board_method.ground_homography,
+                             T_car_camera.translation(), along, options.ranging_distances_m);
+      result->toolbox_ground_disagreement =
+          GroundDisagreement(result->ground_homography, result->board_method.toolbox_ground_homography,
+                             T_car_camera.translation(), along, options.ranging_distances_m);
+    }
+  }
+  const auto [vertical_id, vertical] = MostSeenBoard(station, observations, BoardType::kVertical);
+  if (vertical.empty()) {
+    result->vertical_roll.reason = "vertical_board_not_seen";
+    result->vertical_roll.message = absl::StrCat(sensor.name, ": no vertical board among its observed boards");
+  } else {
+    const StationBoard& board = *station.FindBoard(vertical_id);
+    result->vertical_roll = RollFromVerticalBoard(camera, board.board, T_car_station * board.T_station_board,
+                                                  T_camera_car.RotationMatrix().col(0), vertical);
+  }
+}
+
+// Trust checks, then the tolerance: the verdict, reason and message of a solved result.
+void Judge(const SensorModel& sensor, const CameraInputs& in, const Rigid3d& T_camera_car,
+           const CameraCalibrationOptions& options, CameraCalibrationResult* result) {
+  for (const auto& [id, T_car_board] : in.boards_seen) {
+    if (!BoardFacesCamera(T_camera_car * T_car_board)) {
+      result->reason = "board_seen_from_behind";
+      result->message = absl::StrCat(sensor.name, ": the pose puts the print of board ", id,
+                                     " facing away from the camera (mirrored or mis-identified board)");
+      return;
+    }
+  }
+  if (result->residual_rms_px > options.max_residual_rms_px) {
+    result->reason = "residual_too_high";
+    result->message = absl::StrFormat("%s: residual RMS %.3f px above %.3f px (moved board or wrong correspondence)",
+                                      sensor.name, result->residual_rms_px, options.max_residual_rms_px);
+    return;
+  }
+  const MountingJudgement judgement =
+      JudgeMounting(sensor, result->mounting, options.max_sigma_fraction_of_tolerance);
+  result->verdict = judgement.verdict;
+  result->reason = judgement.reason;
+  result->message = judgement.message;
+}
+
+}  // namespace
+
 absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& sensor, const StationLayout& station,
                                                         const Rigid3d& T_station_car,
                                                         std::span<const BoardObservation> observations,
@@ -117,36 +239,12 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
 
   CameraCalibrationResult result;
   const Rigid3d T_car_station = T_station_car.Inverse();
-  std::vector<PnpCorrespondence> points;  // every detection of every frame
-  // Per board feature, the sum of its detections over the frames and their count: frames of a
-  // still scene repeat each feature (see `on_means` below).
-  std::map<std::pair<std::string, int>, std::pair<PnpCorrespondence, int>> sums;
-  std::vector<std::pair<std::string, Rigid3d>> boards_seen;  // id, T_car_board
-  for (const BoardObservation& o : observations) {
-    const StationBoard* board = station.FindBoard(o.board_id);
-    if (board == nullptr) {
-      return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": observed board '", o.board_id,
-                                                     "' is not in station '", station.name, "'"));
-    }
-    if (o.features.empty()) continue;
-    const Rigid3d T_car_board = T_car_station * board->T_station_board;
-    bool listed = false;
-    for (const auto& b : boards_seen) listed |= b.first == o.board_id;
-    if (!listed) boards_seen.emplace_back(o.board_id, T_car_board);
-    for (const DetectedFeature& f : o.features) {
-      points.push_back({T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
-      auto& [sum, n] = sums[{o.board_id, f.id}];
-      sum.p_object = points.back().p_object;
-      sum.uv_px += f.uv_px;
-      ++n;
-    }
-  }
-  std::vector<PnpCorrespondence> means;
-  for (const auto& [key, sum_n] : sums) {
-    means.push_back({sum_n.first.p_object, sum_n.first.uv_px / sum_n.second});
-  }
+  absl::StatusOr<CameraInputs> in = CollectCorrespondences(sensor, station, T_car_station, observations);
+  if (!in.ok()) return in.status();
+  const std::vector<PnpCorrespondence>& points = in->points;
+  const std::vector<PnpCorrespondence>& means = in->means;
   result.features_used = static_cast<int>(points.size());
-  result.boards_used = static_cast<int>(boards_seen.size());
+  result.boards_used = static_cast<int>(in->boards_seen.size());
   if (points.empty()) {
     result.reason = "board_not_found";
     result.message = absl::StrCat(sensor.name, ": none of its boards was found in any frame");
@@ -180,67 +278,9 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
   const Rigid3d& T_camera_car = pnp->T_camera_object;
   result.solved = true;
   result.mounting = MountingFromSensorPose(T_camera_car, pnp->covariance, sensor);
-
-  // What the car's software derives from the extrinsic (valid whatever the verdict).
-  const Eigen::Matrix3d R_camera_car = T_camera_car.RotationMatrix();
-  const int along = CarAxisAlong(T_camera_car);
-  result.vanishing_point_valid = CarAxisVanishingPoint(*sensor.intrinsics, T_camera_car, &result.vanishing_point_px);
-  result.ground_homography = GroundHomography(*sensor.intrinsics, T_camera_car);
-  if (result.vanishing_point_valid) {
-    result.ranging = RangingCheckOf(*camera, T_camera_car, result.vanishing_point_px, options.ranging_distances_m);
-  }
-
-  // The seed formulas, cross-checking the extrinsic.
-  const Rigid3d T_car_camera = T_camera_car.Inverse();
-  const auto [chessboard_id, chessboard] = MostSeenBoard(station, observations, BoardType::kChessboard);
-  if (chessboard.empty()) {
-    result.board_method.reason = "chessboard_not_seen";
-    result.board_method.message = absl::StrCat(sensor.name, ": no wide chessboard among its observed boards");
-  } else {
-    const StationBoard& board = *station.FindBoard(chessboard_id);
-    result.board_method = SolveBoardMethod(*camera, board.board, T_car_station * board.T_station_board,
-                                           T_car_camera.translation(), along, chessboard);
-    if (result.board_method.valid && result.vanishing_point_valid) {
-      result.vanishing_point_disagreement_px =
-          (result.board_method.vanishing_point_px - result.vanishing_point_px).norm();
-      result.ground_disagreement =
-          GroundDisagreement(result.ground_homography, result.board_method.ground_homography,
-                             T_car_camera.translation(), along, options.ranging_distances_m);
-      result.toolbox_ground_disagreement =
-          GroundDisagreement(result.ground_homography, result.board_method.toolbox_ground_homography,
-                             T_car_camera.translation(), along, options.ranging_distances_m);
-    }
-  }
-  const auto [vertical_id, vertical] = MostSeenBoard(station, observations, BoardType::kVertical);
-  if (vertical.empty()) {
-    result.vertical_roll.reason = "vertical_board_not_seen";
-    result.vertical_roll.message = absl::StrCat(sensor.name, ": no vertical board among its observed boards");
-  } else {
-    const StationBoard& board = *station.FindBoard(vertical_id);
-    result.vertical_roll = RollFromVerticalBoard(*camera, board.board, T_car_station * board.T_station_board,
-                                                 R_camera_car.col(0), vertical);
-  }
-
-  // Trust checks, then the tolerance.
-  for (const auto& [id, T_car_board] : boards_seen) {
-    if (!BoardFacesCamera(T_camera_car * T_car_board)) {
-      result.reason = "board_seen_from_behind";
-      result.message = absl::StrCat(sensor.name, ": the pose puts the print of board ", id,
-                                    " facing away from the camera (mirrored or mis-identified board)");
-      return result;
-    }
-  }
-  if (result.residual_rms_px > options.max_residual_rms_px) {
-    result.reason = "residual_too_high";
-    result.message = absl::StrFormat("%s: residual RMS %.3f px above %.3f px (moved board or wrong correspondence)",
-                                     sensor.name, result.residual_rms_px, options.max_residual_rms_px);
-    return result;
-  }
-  const MountingJudgement judgement =
-      JudgeMounting(sensor, result.mounting, options.max_sigma_fraction_of_tolerance);
-  result.verdict = judgement.verdict;
-  result.reason = judgement.reason;
-  result.message = judgement.message;
+  SetDerived(*camera, sensor, T_camera_car, options, &result);
+  SetSeedFormulas(*camera, sensor, station, T_car_station, observations, options, T_camera_car, &result);
+  Judge(sensor, *in, T_camera_car, options, &result);
   return result;
 }
 

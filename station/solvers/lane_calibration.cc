@@ -155,26 +155,37 @@ double RelativeRangingError(const CameraModel& camera, const Rigid3d& T_car_came
   return (back - p_ground).norm() / (p_ground - T_car_camera_true.translation().head<2>()).norm();
 }
 
-absl::StatusOr<LaneCalibrationResult> CalibrateFromLanes(const LaneCalibrationInput& input) {
-  if (absl::Status s = Validate(input); !s.ok()) return s;
-  absl::StatusOr<CameraModel> camera = CameraModel::Create(input.intrinsics);
-  if (!camera.ok()) return absl::InvalidArgumentError(absl::StrCat("intrinsics: ", camera.status().message()));
+namespace {
 
-  LaneCalibrationResult r;
-  // Lines through the undistorted points; the vanishing point nearest to all of them.
-  std::vector<std::vector<Eigen::Vector2d>> undistorted(input.lanes_px.size());
+// The lanes' points undistorted (per lane, in input order) and the line fitted to each.
+struct LaneLines {
+  std::vector<std::vector<Eigen::Vector2d>> undistorted;
   std::vector<ImageLine> lines;
+};
+
+// Undistorts every lane point and fits a line to each lane (its RMS into r->lane_fit_rms_px);
+// InvalidArgument naming the point or lane that cannot be undistorted or fitted.
+absl::StatusOr<LaneLines> FitLanes(const CameraModel& camera, const LaneCalibrationInput& input,
+                                   LaneCalibrationResult* r) {
+  LaneLines out;
+  out.undistorted.resize(input.lanes_px.size());
   for (size_t i = 0; i < input.lanes_px.size(); ++i) {
     for (size_t j = 0; j < input.lanes_px[i].size(); ++j) {
-      absl::StatusOr<Eigen::Vector2d> q = Undistort(*camera, input.lanes_px[i][j], absl::StrCat("lanes[", i, "][", j, "]"));
+      absl::StatusOr<Eigen::Vector2d> q = Undistort(camera, input.lanes_px[i][j], absl::StrCat("lanes[", i, "][", j, "]"));
       if (!q.ok()) return q.status();
-      undistorted[i].push_back(*q);
+      out.undistorted[i].push_back(*q);
     }
-    absl::StatusOr<ImageLine> line = FitLine(undistorted[i], absl::StrCat("lanes[", i, "]"));
+    absl::StatusOr<ImageLine> line = FitLine(out.undistorted[i], absl::StrCat("lanes[", i, "]"));
     if (!line.ok()) return line.status();
-    lines.push_back(*line);
-    r.lane_fit_rms_px.push_back(line->rms_px);
+    out.lines.push_back(*line);
+    r->lane_fit_rms_px.push_back(line->rms_px);
   }
+  return out;
+}
+
+// The vanishing point nearest to all the lines, and its RMS distance from them, into *r;
+// InvalidArgument when the lines are too close to parallel to meet.
+absl::Status SetVanishingPoint(const std::vector<ImageLine>& lines, LaneCalibrationResult* r) {
   Eigen::Matrix2d a = Eigen::Matrix2d::Zero();
   Eigen::Vector2d b = Eigen::Vector2d::Zero();
   for (const ImageLine& l : lines) {
@@ -191,62 +202,67 @@ absl::StatusOr<LaneCalibrationResult> CalibrateFromLanes(const LaneCalibrationIn
         "have no vanishing point",
         spread_rad * kRadToDeg, kMinLaneAngleRad * kRadToDeg));
   }
-  r.vanishing_point_px = a.ldlt().solve(b);
+  r->vanishing_point_px = a.ldlt().solve(b);
   double sum2 = 0;
-  for (const ImageLine& l : lines) sum2 += std::pow(l.n.dot(r.vanishing_point_px) - l.d, 2);
-  r.vanishing_point_residual_px = std::sqrt(sum2 / static_cast<double>(lines.size()));
+  for (const ImageLine& l : lines) sum2 += std::pow(l.n.dot(r->vanishing_point_px) - l.d, 2);
+  r->vanishing_point_residual_px = std::sqrt(sum2 / static_cast<double>(lines.size()));
+  return absl::OkStatus();
+}
 
-  const Eigen::Matrix3d k = KMatrix(input.intrinsics);
-  const Eigen::Matrix3d k_inv = k.inverse();
-  const double along = input.looking_backward ? -1.0 : 1.0;
-  // +x_car in the camera frame.
-  const Eigen::Vector3d x_camera = along * (k_inv * r.vanishing_point_px.homogeneous()).normalized();
-
+// The camera's rotation from x_car (x_camera: +x_car in the camera frame) and the roll line,
+// and the roll line's two points undistorted.
+struct RollLineFrame {
   Eigen::Matrix3d R_car_camera;
-  std::optional<std::array<Eigen::Vector2d, 2>> roll_q;
-  if (input.roll_line_px) {
-    std::array<Eigen::Vector2d, 2> q;
-    for (int e = 0; e < 2; ++e) {
-      absl::StatusOr<Eigen::Vector2d> u = Undistort(*camera, (*input.roll_line_px)[e], absl::StrCat("roll_line[", e, "]"));
-      if (!u.ok()) return u.status();
-      q[e] = *u;
-    }
-    if ((q[0] - q[1]).norm() < kMinPointSpreadPx) {
-      return absl::InvalidArgumentError("roll_line: its two points coincide: a line needs two distinct points");
-    }
-    roll_q = q;
-    // The plane through the optical centre and the roll line contains y_car, which is also
-    // perpendicular to x_car.
-    const Eigen::Vector3d plane_normal = (k.transpose() * q[0].homogeneous().cross(q[1].homogeneous())).normalized();
-    // sin of the angle between x_car and the roll line's plane: 0 for a line through the
-    // vanishing point (one along the car), sin(depression angle) for a perpendicular one, 0.027
-    // at 50 m ahead of a camera 1.35 m high. Below 0.5 degrees a pixel of error turns the
-    // line by degrees.
-    if (std::abs(plane_normal.dot(x_camera)) < std::sin(kMinLaneAngleRad)) {
-      return absl::InvalidArgumentError(
-          "roll_line: it runs (nearly) through the vanishing point, i.e. along the car; it must be perpendicular to "
-          "the car");
-    }
-    Eigen::Vector3d y_camera = plane_normal.cross(x_camera).normalized();
-    Eigen::Vector3d z_camera = x_camera.cross(y_camera);
-    // z_car points up, i.e. about -y_camera for an upright camera.
-    if (z_camera.y() > 0) {
-      y_camera = -y_camera;
-      z_camera = -z_camera;
-    }
-    Eigen::Matrix3d R_camera_car;
-    R_camera_car << x_camera, y_camera, z_camera;
-    R_car_camera = R_camera_car.transpose();
-    r.roll_from_line = true;
-  } else {
-    R_car_camera = RotationFromForwardAndRoll(x_camera, input.assumed_roll_rad, input.looking_backward);
-  }
-  r.angles = MountingAngles(R_car_camera, CameraBaseRotation());
-  r.T_car_camera =
-      Rigid3d(R_car_camera, Eigen::Vector3d(input.longitudinal_offset_m, input.lateral_offset_m, input.camera_height_m));
-  const Rigid3d T_camera_car = r.T_car_camera.Inverse();
-  const Eigen::Vector3d up_camera = T_camera_car.RotationMatrix().col(2);
+  std::array<Eigen::Vector2d, 2> q;
+};
 
+// The rotation that input.roll_line_px (set) gives with x_camera (k: the pinhole matrix);
+// InvalidArgument when its points cannot be undistorted, coincide, or the line runs along
+// the car.
+absl::StatusOr<RollLineFrame> FrameFromRollLine(const CameraModel& camera, const LaneCalibrationInput& input,
+                                                const Eigen::Matrix3d& k, const Eigen::Vector3d& x_camera) {
+  RollLineFrame out;
+  std::array<Eigen::Vector2d, 2>& q = out.q;
+  for (int e = 0; e < 2; ++e) {
+    absl::StatusOr<Eigen::Vector2d> u = Undistort(camera, (*input.roll_line_px)[e], absl::StrCat("roll_line[", e, "]"));
+    if (!u.ok()) return u.status();
+    q[e] = *u;
+  }
+  if ((q[0] - q[1]).norm() < kMinPointSpreadPx) {
+    return absl::InvalidArgumentError("roll_line: its two points coincide: a line needs two distinct points");
+  }
+  // The plane through the optical centre and the roll line contains y_car, which is also
+  // perpendicular to x_car.
+  const Eigen::Vector3d plane_normal = (k.transpose() * q[0].homogeneous().cross(q[1].homogeneous())).normalized();
+  // sin of the angle between x_car and the roll line's plane: 0 for a line through the
+  // vanishing point (one along the car), sin(depression angle) for a perpendicular one, 0.027
+  // at 50 m ahead of a camera 1.35 m high. Below 0.5 degrees a pixel of error turns the
+  // line by degrees.
+  if (std::abs(plane_normal.dot(x_camera)) < std::sin(kMinLaneAngleRad)) {
+    return absl::InvalidArgumentError(
+        "roll_line: it runs (nearly) through the vanishing point, i.e. along the car; it must be perpendicular to "
+        "the car");
+  }
+  Eigen::Vector3d y_camera = plane_normal.cross(x_camera).normalized();
+  Eigen::Vector3d z_camera = x_camera.cross(y_camera);
+  // z_car points up, i.e. about -y_camera for an upright camera.
+  if (z_camera.y() > 0) {
+    y_camera = -y_camera;
+    z_camera = -z_camera;
+  }
+  Eigen::Matrix3d R_camera_car;
+  R_camera_car << x_camera, y_camera, z_camera;
+  out.R_car_camera = R_camera_car.transpose();
+  return out;
+}
+
+// Every lane point and roll-line point (undistorted, and as given for the message) below the
+// horizon of the camera whose up direction is up_camera; InvalidArgument naming the first
+// that is not.
+absl::Status CheckPointsBelowHorizon(const Eigen::Matrix3d& k_inv, const Eigen::Vector3d& up_camera,
+                                     const LaneCalibrationInput& input, const LaneLines& lanes,
+                                     const std::optional<std::array<Eigen::Vector2d, 2>>& roll_q) {
+  const std::vector<std::vector<Eigen::Vector2d>>& undistorted = lanes.undistorted;
   for (size_t i = 0; i < undistorted.size(); ++i) {
     for (size_t j = 0; j < undistorted[i].size(); ++j) {
       if (absl::Status s = CheckBelowHorizon(k_inv, up_camera, undistorted[i][j], input.lanes_px[i][j],
@@ -265,23 +281,74 @@ absl::StatusOr<LaneCalibrationResult> CalibrateFromLanes(const LaneCalibrationIn
       }
     }
   }
+  return absl::OkStatus();
+}
+
+// The distance check of input.marked_point (set) against the ground point the calibration
+// puts under it (along: +1 looking forward, -1 backward); InvalidArgument when the point
+// cannot be undistorted or lies above the horizon.
+absl::StatusOr<LaneDistanceCheck> CheckMarkedPoint(const CameraModel& camera, const LaneCalibrationInput& input,
+                                                   const Eigen::Matrix3d& k_inv, const Rigid3d& T_camera_car,
+                                                   double along) {
+  const Eigen::Vector3d up_camera = T_camera_car.RotationMatrix().col(2);
+  const LaneMarkedPoint& m = *input.marked_point;
+  absl::StatusOr<Eigen::Vector2d> q = Undistort(camera, m.uv_px, "marked_point");
+  if (!q.ok()) return q.status();
+  if (absl::Status s = CheckBelowHorizon(k_inv, up_camera, *q, m.uv_px, "marked_point"); !s.ok()) return s;
+  Eigen::Vector2d p_ground;
+  GroundPointOfPixel(camera, T_camera_car, m.uv_px, &p_ground);
+  LaneDistanceCheck c;
+  c.measured_distance_m = m.measured_distance_m;
+  c.computed_distance_m = along * (p_ground.x() - input.longitudinal_offset_m);
+  c.error_percent = 100 * (c.computed_distance_m - c.measured_distance_m) / c.measured_distance_m;
+  c.pass = std::abs(c.error_percent) <= input.tolerance_percent;
+  return c;
+}
+
+}  // namespace
+
+absl::StatusOr<LaneCalibrationResult> CalibrateFromLanes(const LaneCalibrationInput& input) {
+  if (absl::Status s = Validate(input); !s.ok()) return s;
+  absl::StatusOr<CameraModel> camera = CameraModel::Create(input.intrinsics);
+  if (!camera.ok()) return absl::InvalidArgumentError(absl::StrCat("intrinsics: ", camera.status().message()));
+
+  LaneCalibrationResult r;
+  // Lines through the undistorted points; the vanishing point nearest to all of them.
+  absl::StatusOr<LaneLines> lanes = FitLanes(*camera, input, &r);
+  if (!lanes.ok()) return lanes.status();
+  if (absl::Status s = SetVanishingPoint(lanes->lines, &r); !s.ok()) return s;
+
+  const Eigen::Matrix3d k = KMatrix(input.intrinsics);
+  const Eigen::Matrix3d k_inv = k.inverse();
+  const double along = input.looking_backward ? -1.0 : 1.0;
+  // +x_car in the camera frame.
+  const Eigen::Vector3d x_camera = along * (k_inv * r.vanishing_point_px.homogeneous()).normalized();
+
+  Eigen::Matrix3d R_car_camera;
+  std::optional<std::array<Eigen::Vector2d, 2>> roll_q;
+  if (input.roll_line_px) {
+    absl::StatusOr<RollLineFrame> frame = FrameFromRollLine(*camera, input, k, x_camera);
+    if (!frame.ok()) return frame.status();
+    roll_q = frame->q;
+    R_car_camera = frame->R_car_camera;
+    r.roll_from_line = true;
+  } else {
+    R_car_camera = RotationFromForwardAndRoll(x_camera, input.assumed_roll_rad, input.looking_backward);
+  }
+  r.angles = MountingAngles(R_car_camera, CameraBaseRotation());
+  r.T_car_camera =
+      Rigid3d(R_car_camera, Eigen::Vector3d(input.longitudinal_offset_m, input.lateral_offset_m, input.camera_height_m));
+  const Rigid3d T_camera_car = r.T_car_camera.Inverse();
+  const Eigen::Vector3d up_camera = T_camera_car.RotationMatrix().col(2);
+  if (absl::Status s = CheckPointsBelowHorizon(k_inv, up_camera, input, *lanes, roll_q); !s.ok()) return s;
 
   r.ground_homography = GroundHomography(input.intrinsics, T_camera_car);
   r.flat_formula = RangingCheckOf(*camera, T_camera_car, r.vanishing_point_px, input.ranging_distances_m);
 
   if (input.marked_point) {
-    const LaneMarkedPoint& m = *input.marked_point;
-    absl::StatusOr<Eigen::Vector2d> q = Undistort(*camera, m.uv_px, "marked_point");
-    if (!q.ok()) return q.status();
-    if (absl::Status s = CheckBelowHorizon(k_inv, up_camera, *q, m.uv_px, "marked_point"); !s.ok()) return s;
-    Eigen::Vector2d p_ground;
-    GroundPointOfPixel(*camera, T_camera_car, m.uv_px, &p_ground);
-    LaneDistanceCheck c;
-    c.measured_distance_m = m.measured_distance_m;
-    c.computed_distance_m = along * (p_ground.x() - input.longitudinal_offset_m);
-    c.error_percent = 100 * (c.computed_distance_m - c.measured_distance_m) / c.measured_distance_m;
-    c.pass = std::abs(c.error_percent) <= input.tolerance_percent;
-    r.distance_check = c;
+    absl::StatusOr<LaneDistanceCheck> c = CheckMarkedPoint(*camera, input, k_inv, T_camera_car, along);
+    if (!c.ok()) return c.status();
+    r.distance_check = *c;
   }
   return r;
 }

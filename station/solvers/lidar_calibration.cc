@@ -151,99 +151,113 @@ LidarBoardObservation LidarObservationFromDetection(const std::string& board_id,
   return o;
 }
 
-absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor, const StationLayout& station,
-                                                      const Rigid3d& T_station_car,
-                                                      std::span<const LidarBoardObservation> observations,
-                                                      const LidarCalibrationOptions& options) {
-  if (sensor.kind != SensorKind::kLidar) {
-    return absl::InvalidArgumentError(absl::StrCat("sensor ", sensor.name, " is not a LiDAR"));
-  }
-  if (const std::string_view bad = options.Validate(); !bad.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("LidarCalibrationOptions.", std::string(bad), " is out of range"));
-  }
-  const Rigid3d T_car_station = T_station_car.Inverse();
-  LidarCalibrationResult result;
+namespace {
+
+// What the observations give the solve: hole centres and normals against their car-frame
+// features, the boards' measured poses, and how many of each enter it.
+struct LidarInputs {
   std::vector<Pair> pairs;
   std::vector<BoardPose> poses;
-  for (const LidarBoardObservation& o : observations) {
-    const StationBoard* board = station.FindBoard(o.board_id);
-    if (board == nullptr) {
+  int features_used = 0;
+  int boards_used = 0;
+};
+
+// Adds observation o (of a board of `station`, T_car_station from the aligner) to *in; a
+// board without holes adds nothing. InvalidArgument, naming the sensor and the board, for a
+// board not in the station, a hole id that is not one of its hole centres, or a pose,
+// covariance, position or normal that is not finite or well formed.
+absl::Status AddObservation(const SensorModel& sensor, const StationLayout& station,
+                            const Rigid3d& T_car_station, const LidarBoardObservation& o,
+                            const LidarCalibrationOptions& options, LidarInputs* in) {
+  const StationBoard* board = station.FindBoard(o.board_id);
+  if (board == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(sensor.name, ": observed board '", o.board_id, "' is not in station '", station.name, "'"));
+  }
+  if (o.holes.empty()) return absl::OkStatus();
+  const Rigid3d T_car_board = T_car_station * board->T_station_board;
+  const double sigma = o.centre_sigma_m > 0 ? o.centre_sigma_m : options.centre_sigma_m;
+  const bool by_pose = o.T_lidar_board.has_value();
+  if (by_pose) {
+    const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(o.pose_covariance);
+    if (!o.T_lidar_board->Matrix().allFinite() || !o.pose_covariance.allFinite() ||
+        !o.pose_covariance.isApprox(o.pose_covariance.transpose()) || llt.info() != Eigen::Success) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          sensor.name, ": board '", o.board_id,
+          "': T_lidar_board must be finite and pose_covariance symmetric positive definite"));
+    }
+    const Eigen::Matrix<double, 6, 6> L = llt.matrixL();
+    in->poses.push_back({*o.T_lidar_board, T_car_board, L.inverse()});
+  }
+  for (const LidarHoleCentre& h : o.holes) {
+    const std::vector<BoardFeature>& features = board->board.features();
+    if (h.feature_id < 0 || h.feature_id >= static_cast<int>(features.size()) ||
+        features[h.feature_id].kind != FeatureKind::kHoleCentre) {
       return absl::InvalidArgumentError(
-          absl::StrCat(sensor.name, ": observed board '", o.board_id, "' is not in station '", station.name, "'"));
+          absl::StrCat(sensor.name, ": board '", o.board_id, "' has no hole centre with id ", h.feature_id));
     }
-    if (o.holes.empty()) continue;
-    const Rigid3d T_car_board = T_car_station * board->T_station_board;
-    const double sigma = o.centre_sigma_m > 0 ? o.centre_sigma_m : options.centre_sigma_m;
-    const bool by_pose = o.T_lidar_board.has_value();
-    if (by_pose) {
-      const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(o.pose_covariance);
-      if (!o.T_lidar_board->Matrix().allFinite() || !o.pose_covariance.allFinite() ||
-          !o.pose_covariance.isApprox(o.pose_covariance.transpose()) || llt.info() != Eigen::Success) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            sensor.name, ": board '", o.board_id,
-            "': T_lidar_board must be finite and pose_covariance symmetric positive definite"));
-      }
-      const Eigen::Matrix<double, 6, 6> L = llt.matrixL();
-      poses.push_back({*o.T_lidar_board, T_car_board, L.inverse()});
+    if (!h.p_lidar.allFinite()) {
+      return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": board '", o.board_id, "' hole ", h.feature_id,
+                                                     ": position is not finite"));
     }
-    for (const LidarHoleCentre& h : o.holes) {
-      const std::vector<BoardFeature>& features = board->board.features();
-      if (h.feature_id < 0 || h.feature_id >= static_cast<int>(features.size()) ||
-          features[h.feature_id].kind != FeatureKind::kHoleCentre) {
-        return absl::InvalidArgumentError(
-            absl::StrCat(sensor.name, ": board '", o.board_id, "' has no hole centre with id ", h.feature_id));
-      }
-      if (!h.p_lidar.allFinite()) {
-        return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": board '", o.board_id, "' hole ", h.feature_id,
-                                                       ": position is not finite"));
-      }
-      const Eigen::Vector2d& p = features[h.feature_id].p_board;
-      pairs.push_back({h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false, !by_pose});
-      ++result.features_used;
-    }
-    if (o.normal_lidar) {
-      if (!o.normal_lidar->allFinite() || std::abs(o.normal_lidar->norm() - 1) > 1e-6) {
-        return absl::InvalidArgumentError(
-            absl::StrCat(sensor.name, ": board '", o.board_id, "': normal_lidar must be a finite unit vector"));
-      }
-      const double nsigma = o.normal_sigma_rad > 0 ? o.normal_sigma_rad : options.normal_sigma_rad;
-      pairs.push_back({*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true, !by_pose});
-    }
-    ++result.boards_used;
+    const Eigen::Vector2d& p = features[h.feature_id].p_board;
+    in->pairs.push_back({h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false, !by_pose});
+    ++in->features_used;
   }
-  if (result.features_used == 0) {
-    result.reason = "board_not_found";
-    result.message = absl::StrCat(sensor.name, ": none of its boards was found");
-    return result;
+  if (o.normal_lidar) {
+    if (!o.normal_lidar->allFinite() || std::abs(o.normal_lidar->norm() - 1) > 1e-6) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(sensor.name, ": board '", o.board_id, "': normal_lidar must be a finite unit vector"));
+    }
+    const double nsigma = o.normal_sigma_rad > 0 ? o.normal_sigma_rad : options.normal_sigma_rad;
+    in->pairs.push_back({*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true, !by_pose});
   }
-  // Three hole centres not on one line fix a rigid pose.
+  ++in->boards_used;
+  return absl::OkStatus();
+}
+
+// True if the hole centres fix a rigid pose: three or more, not on one line. Needs
+// in.features_used > 0.
+bool CentresFixAPose(const LidarInputs& in) {
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const Pair& x : pairs) mean += x.direction ? Eigen::Vector3d::Zero() : x.q_car;
-  mean /= result.features_used;
+  for (const Pair& x : in.pairs) mean += x.direction ? Eigen::Vector3d::Zero() : x.q_car;
+  mean /= in.features_used;
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (const Pair& x : pairs) {
+  for (const Pair& x : in.pairs) {
     if (!x.direction) scatter += (x.q_car - mean) * (x.q_car - mean).transpose();
   }
   const Eigen::Vector3d spread = Eigen::JacobiSVD<Eigen::Matrix3d>(scatter).singularValues().cwiseSqrt();
-  if (result.features_used < 3 || !(spread(1) > kCollinearRatio * spread(0))) {
-    result.reason = "too_few_features";
-    result.message = absl::StrCat(sensor.name, ": ", result.features_used,
-                                  " hole centres, not enough off one line to fix a pose");
-    return result;
-  }
+  return in.features_used >= 3 && spread(1) > kCollinearRatio * spread(0);
+}
 
-  const Rigid3d start = KabschStart(pairs);
+// The solved LiDAR pose in the car frame, and its translation as the solver holds it.
+struct LidarSolve {
+  bool converged = false;
+  Rigid3d T_car_lidar;
+  double t[3] = {0, 0, 0};
+};
+
+// Ceres from the weighted Kabsch start: the points and normals that stand for themselves and
+// the boards' poses, the translation kept within options.translation_bound_m of nominal per
+// axis when that is > 0. Dense QR over 6 unknowns, at most 100 iterations.
+LidarSolve SolveLidarPose(const SensorModel& sensor, const LidarInputs& in,
+                          const LidarCalibrationOptions& options) {
+  const Rigid3d start = KabschStart(in.pairs);
   const Eigen::Matrix3d R0 = start.RotationMatrix();
   double omega[3] = {0, 0, 0};
-  double t[3] = {start.translation().x(), start.translation().y(), start.translation().z()};
+  LidarSolve out;
+  double* t = out.t;
+  t[0] = start.translation().x();
+  t[1] = start.translation().y();
+  t[2] = start.translation().z();
   ceres::Problem problem;
-  for (const Pair& x : pairs) {
+  for (const Pair& x : in.pairs) {
     if (!x.in_solve) continue;
     problem.AddResidualBlock(new ceres::AutoDiffCostFunction<AlignmentCost, 3, 3, 3>(
                                  new AlignmentCost(R0 * x.p_lidar, x.q_car, x.sigma, x.direction)),
                              nullptr, omega, t);
   }
-  for (const BoardPose& b : poses) {
+  for (const BoardPose& b : in.poses) {
     problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BoardPoseCost, 6, 3, 3>(
                                  new BoardPoseCost(R0, b.T_lidar_board, b.T_car_board, b.L_inv)),
                              nullptr, omega, t);
@@ -268,26 +282,20 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
   solver.num_threads = 1;
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
-  if (summary.termination_type != ceres::CONVERGENCE) {
-    result.reason = "did_not_converge";
-    result.message = absl::StrCat(sensor.name, ": the LiDAR solve did not converge");
-    return result;
-  }
+  out.converged = summary.termination_type == ceres::CONVERGENCE;
+  if (!out.converged) return out;
   Eigen::Matrix3d d_rotation;
   ceres::AngleAxisToRotationMatrix(omega, ceres::ColumnMajorAdapter3x3(d_rotation.data()));
-  const Rigid3d T_car_lidar(Eigen::Quaterniond(d_rotation * R0).normalized(), Eigen::Vector3d(t[0], t[1], t[2]));
-  for (int k = 0; k < 3 && options.translation_bound_m > 0; ++k) {
-    // Within a micrometre of the bound counts as on it.
-    result.translation_at_bound |= std::abs(std::abs(t[k] - nominal[k]) - options.translation_bound_m) < 1e-6;
-  }
+  out.T_car_lidar = Rigid3d(Eigen::Quaterniond(d_rotation * R0).normalized(), Eigen::Vector3d(t[0], t[1], t[2]));
+  return out;
+}
 
-  // Covariance of (δθ, δt) in the car frame: whitened residual Jacobians [-[R p]x, I] / σ for
-  // points and [-[R n]x, 0] / σ for normals.
-  const Eigen::Matrix3d R = T_car_lidar.RotationMatrix();
+// Information JᵀJ of (δθ, δt) in the car frame at the solution: whitened residual Jacobians
+// [-[R p]x, I] / σ for points and [-[R n]x, 0] / σ for normals, and the board poses'.
+Eigen::Matrix<double, 6, 6> PoseInformation(const LidarSolve& solve, const LidarInputs& in) {
+  const Eigen::Matrix3d R = solve.T_car_lidar.RotationMatrix();
   Eigen::Matrix<double, 6, 6> JtJ = Eigen::Matrix<double, 6, 6>::Zero();
-  double sum_sq = 0;
-  for (const Pair& x : pairs) {
-    if (!x.direction) sum_sq += (T_car_lidar * x.p_lidar - x.q_car).squaredNorm();
+  for (const Pair& x : in.pairs) {
     if (!x.in_solve) continue;
     Eigen::Matrix<double, 3, 6> J = Eigen::Matrix<double, 3, 6>::Zero();
     J.leftCols<3>() = -Skew(R * x.p_lidar) / x.sigma;
@@ -296,22 +304,80 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
   }
   // Board poses: their residual's Jacobian at the solution, re-linearised about it (omega = 0
   // there is the same left perturbation of R as the points' -[R p]x).
-  for (const BoardPose& b : poses) {
+  for (const BoardPose& b : in.poses) {
     const ceres::AutoDiffCostFunction<BoardPoseCost, 6, 3, 3> cost(
         new BoardPoseCost(R, b.T_lidar_board, b.T_car_board, b.L_inv));
     const double zero[3] = {0, 0, 0};
-    const double* parameters[2] = {zero, t};
+    const double* parameters[2] = {zero, solve.t};
     double residual[6];
-    Eigen::Matrix<double, 6, 3, Eigen::RowMajor> J_omega, J_t;
+    using RowJacobian = Eigen::Matrix<double, 6, 3, Eigen::RowMajor>;
+    // Evaluate fills both; zeroed first, as GCC does not see that through Ceres.
+    RowJacobian J_omega = RowJacobian::Zero(), J_t = RowJacobian::Zero();
     double* jacobians[2] = {J_omega.data(), J_t.data()};
     cost.Evaluate(parameters, residual, jacobians);
     Eigen::Matrix<double, 6, 6> J;
     J << J_omega, J_t;
     JtJ += J.transpose() * J;
   }
-  result.residual_rms_m = std::sqrt(sum_sq / result.features_used);
+  return JtJ;
+}
+
+// RMS distance of the hole centres, moved by T_car_lidar, from their car-frame features.
+double CentreResidualRms(const Rigid3d& T_car_lidar, const LidarInputs& in) {
+  double sum_sq = 0;
+  for (const Pair& x : in.pairs) {
+    if (!x.direction) sum_sq += (T_car_lidar * x.p_lidar - x.q_car).squaredNorm();
+  }
+  return std::sqrt(sum_sq / in.features_used);
+}
+
+}  // namespace
+
+absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor, const StationLayout& station,
+                                                      const Rigid3d& T_station_car,
+                                                      std::span<const LidarBoardObservation> observations,
+                                                      const LidarCalibrationOptions& options) {
+  if (sensor.kind != SensorKind::kLidar) {
+    return absl::InvalidArgumentError(absl::StrCat("sensor ", sensor.name, " is not a LiDAR"));
+  }
+  if (const std::string_view bad = options.Validate(); !bad.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("LidarCalibrationOptions.", std::string(bad), " is out of range"));
+  }
+  const Rigid3d T_car_station = T_station_car.Inverse();
+  LidarCalibrationResult result;
+  LidarInputs in;
+  for (const LidarBoardObservation& o : observations) {
+    if (absl::Status s = AddObservation(sensor, station, T_car_station, o, options, &in); !s.ok()) return s;
+  }
+  result.features_used = in.features_used;
+  result.boards_used = in.boards_used;
+  if (result.features_used == 0) {
+    result.reason = "board_not_found";
+    result.message = absl::StrCat(sensor.name, ": none of its boards was found");
+    return result;
+  }
+  if (!CentresFixAPose(in)) {
+    result.reason = "too_few_features";
+    result.message = absl::StrCat(sensor.name, ": ", result.features_used,
+                                  " hole centres, not enough off one line to fix a pose");
+    return result;
+  }
+
+  const LidarSolve solve = SolveLidarPose(sensor, in, options);
+  if (!solve.converged) {
+    result.reason = "did_not_converge";
+    result.message = absl::StrCat(sensor.name, ": the LiDAR solve did not converge");
+    return result;
+  }
+  const Eigen::Vector3d nominal = sensor.T_car_sensor_nominal.translation();
+  for (int k = 0; k < 3 && options.translation_bound_m > 0; ++k) {
+    // Within a micrometre of the bound counts as on it.
+    result.translation_at_bound |=
+        std::abs(std::abs(solve.t[k] - nominal[k]) - options.translation_bound_m) < 1e-6;
+  }
+  result.residual_rms_m = CentreResidualRms(solve.T_car_lidar, in);
   result.solved = true;
-  result.mounting = MountingFromCarPose(T_car_lidar, JtJ.inverse(), sensor);
+  result.mounting = MountingFromCarPose(solve.T_car_lidar, PoseInformation(solve, in).inverse(), sensor);
   if (result.residual_rms_m > options.max_residual_rms_m) {
     result.reason = "residual_too_high";
     result.message = absl::StrFormat("%s: hole centres %.1f mm RMS off the layout (limit %.1f mm): moved board or wrong match",

@@ -162,8 +162,10 @@ std::vector<double> ReprojectionErrors(const CameraModel& camera, const Rigid3d&
   return errors;
 }
 
-absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const PnpCorrespondence> points,
-                                   const PnpOptions& options) {
+namespace {
+
+// InvalidArgument for options out of range or a point that is not finite.
+absl::Status CheckPnpInput(std::span<const PnpCorrespondence> points, const PnpOptions& options) {
   if (const std::string_view bad = options.Validate(); !bad.empty()) {
     return absl::InvalidArgumentError(absl::StrCat("PnpOptions.", std::string(bad), " is out of range"));
   }
@@ -171,32 +173,37 @@ absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const Pn
     if (!points[i].p_object.allFinite()) return absl::InvalidArgumentError(absl::StrCat("points[", i, "].p_object is not finite"));
     if (!points[i].uv_px.allFinite()) return absl::InvalidArgumentError(absl::StrCat("points[", i, "].uv_px is not finite"));
   }
-  PnpResult result;
-  result.points = static_cast<int>(points.size());
-  if (points.size() < 4) {
-    result.outcome = PnpOutcome::kTooFewPoints;
-    return result;
-  }
+  return absl::OkStatus();
+}
 
-  // The object's shape: collinear, planar or general.
+// The object's shape: its centroid, principal axes (columns, by decreasing spread) and square
+// root singular values of its scatter.
+struct ObjectShape {
+  Eigen::Vector3d centroid;
+  Eigen::Matrix3d axes;
+  Eigen::Vector3d spread;
+};
+
+// The shape of the object points (one or more).
+ObjectShape ShapeOf(std::span<const PnpCorrespondence> points) {
+  ObjectShape s;
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (const PnpCorrespondence& c : points) centroid += c.p_object;
   centroid /= static_cast<double>(points.size());
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
   for (const PnpCorrespondence& c : points) scatter += (c.p_object - centroid) * (c.p_object - centroid).transpose();
   Eigen::JacobiSVD<Eigen::Matrix3d> shape(scatter, Eigen::ComputeFullU);
-  const Eigen::Vector3d spread = shape.singularValues().cwiseSqrt();
-  if (!(spread(1) > kDegenerateRatio * spread(0))) {
-    result.outcome = PnpOutcome::kCollinear;
-    return result;
-  }
-  result.planar = spread(2) <= kDegenerateRatio * spread(0);
-  if (!result.planar && points.size() < 6) {
-    result.outcome = PnpOutcome::kTooFewPoints;
-    return result;
-  }
+  s.centroid = centroid;
+  s.axes = shape.matrixU();
+  s.spread = shape.singularValues().cwiseSqrt();
+  return s;
+}
 
-  // Rays, turned into the virtual camera that looks along their mean.
+// The closed-form start T_camera_object: rays turned into the virtual camera that looks along
+// their mean, then the planar or general start on the points whose rays stay within 85
+// degrees of it (4 or 6 of them needed); nullopt without one.
+std::optional<Rigid3d> StartPose(const CameraModel& camera, std::span<const PnpCorrespondence> points,
+                                 bool planar, const ObjectShape& shape) {
   std::vector<Eigen::Vector3d> rays;
   std::vector<Eigen::Vector3d> p_start;
   rays.reserve(points.size());
@@ -219,17 +226,19 @@ absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const Pn
     p_used.push_back(p_start[i]);
   }
   std::optional<Rigid3d> T_v_object;
-  if (p_used.size() >= (result.planar ? 4u : 6u)) {
-    T_v_object = result.planar ? PlanarStart(p_used, m_v, centroid, shape.matrixU())
-                               : GeneralStart(p_used, m_v, centroid);
+  if (p_used.size() >= (planar ? 4u : 6u)) {
+    T_v_object = planar ? PlanarStart(p_used, m_v, shape.centroid, shape.axes)
+                        : GeneralStart(p_used, m_v, shape.centroid);
   }
-  if (!T_v_object) {
-    result.outcome = PnpOutcome::kNoStart;
-    return result;
-  }
-  const Rigid3d T_start = Rigid3d(Eigen::Matrix3d(R_v_camera.transpose()), Eigen::Vector3d::Zero()) * *T_v_object;
+  if (!T_v_object) return std::nullopt;
+  return Rigid3d(Eigen::Matrix3d(R_v_camera.transpose()), Eigen::Vector3d::Zero()) * *T_v_object;
+}
 
-  // Refinement: rotation vector on top of the start rotation, and the translation.
+// Refinement from T_start: rotation vector on top of the start rotation, and the translation,
+// Huber-robust reprojection errors, Ceres dense QR. Sets result->T_camera_object and its
+// outcome (kOk or kNotConverged).
+void RefinePose(const CameraModel& camera, std::span<const PnpCorrespondence> points,
+                const PnpOptions& options, const Rigid3d& T_start, PnpResult* result) {
   const Eigen::Matrix3d R0 = T_start.RotationMatrix();
   double omega[3] = {0, 0, 0};
   double t[3] = {T_start.translation().x(), T_start.translation().y(), T_start.translation().z()};
@@ -254,26 +263,31 @@ absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const Pn
 
   Eigen::Matrix3d d_rotation;
   ceres::AngleAxisToRotationMatrix(omega, ceres::ColumnMajorAdapter3x3(d_rotation.data()));
-  result.T_camera_object = Rigid3d(NearestRotation(d_rotation * R0), Eigen::Vector3d(t[0], t[1], t[2]));
-  result.outcome = summary.termination_type == ceres::CONVERGENCE ? PnpOutcome::kOk : PnpOutcome::kNotConverged;
+  result->T_camera_object = Rigid3d(NearestRotation(d_rotation * R0), Eigen::Vector3d(t[0], t[1], t[2]));
+  result->outcome = summary.termination_type == ceres::CONVERGENCE ? PnpOutcome::kOk : PnpOutcome::kNotConverged;
+}
 
-  // Residuals and the Jacobian of every reprojection at the solution, for the covariance:
-  // d uv / d(δθ, δt) = d uv / d p_camera * [-[R p]x, I].
+// Residuals and the Jacobian of every reprojection at result->T_camera_object, for the
+// covariance: d uv / d(δθ, δt) = d uv / d p_camera * [-[R p]x, I]. Sets the residuals, sigma
+// and covariance; kNotConverged (and infinite residuals) when the pose puts a point outside
+// the lens or the covariance is not finite.
+void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCorrespondence> points,
+                               const PnpOptions& options, PnpResult* result) {
   Eigen::Matrix<double, 6, 6> JtJ = Eigen::Matrix<double, 6, 6>::Zero();
   double sum_sq = 0;
   bool all_projected = true;
-  const Eigen::Matrix3d R = result.T_camera_object.RotationMatrix();
+  const Eigen::Matrix3d R = result->T_camera_object.RotationMatrix();
   for (const PnpCorrespondence& c : points) {
     const Eigen::Vector3d rp = R * c.p_object;
     Eigen::Vector2d uv;
     ProjectionPointJacobian d_uv_d_p;
-    if (!camera.Project(rp + result.T_camera_object.translation(), &uv, &d_uv_d_p)) {
+    if (!camera.Project(rp + result->T_camera_object.translation(), &uv, &d_uv_d_p)) {
       all_projected = false;  // the pose puts a point outside the lens: no fit
       continue;
     }
     const double e = (uv - c.uv_px).norm();
     sum_sq += e * e;
-    result.max_residual_px = std::max(result.max_residual_px, e);
+    result->max_residual_px = std::max(result->max_residual_px, e);
     Eigen::Matrix<double, 3, 6> d_p;
     d_p << -Skew(rp), Eigen::Matrix3d::Identity();
     const Eigen::Matrix<double, 2, 6> J = d_uv_d_p * d_p;
@@ -281,14 +295,45 @@ absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const Pn
   }
   const double n = static_cast<double>(points.size());
   if (!all_projected) {
-    result.outcome = PnpOutcome::kNotConverged;
-    result.residual_rms_px = result.max_residual_px = std::numeric_limits<double>::infinity();
+    result->outcome = PnpOutcome::kNotConverged;
+    result->residual_rms_px = result->max_residual_px = std::numeric_limits<double>::infinity();
+    return;
+  }
+  result->residual_rms_px = std::sqrt(sum_sq / n);
+  result->sigma_px = options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
+  result->covariance = result->sigma_px * result->sigma_px * JtJ.inverse();
+  if (!result->covariance.allFinite()) result->outcome = PnpOutcome::kNotConverged;
+}
+
+}  // namespace
+
+absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const PnpCorrespondence> points,
+                                   const PnpOptions& options) {
+  if (absl::Status s = CheckPnpInput(points, options); !s.ok()) return s;
+  PnpResult result;
+  result.points = static_cast<int>(points.size());
+  if (points.size() < 4) {
+    result.outcome = PnpOutcome::kTooFewPoints;
     return result;
   }
-  result.residual_rms_px = std::sqrt(sum_sq / n);
-  result.sigma_px = options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
-  result.covariance = result.sigma_px * result.sigma_px * JtJ.inverse();
-  if (!result.covariance.allFinite()) result.outcome = PnpOutcome::kNotConverged;
+  // The object's shape: collinear, planar or general.
+  const ObjectShape shape = ShapeOf(points);
+  if (!(shape.spread(1) > kDegenerateRatio * shape.spread(0))) {
+    result.outcome = PnpOutcome::kCollinear;
+    return result;
+  }
+  result.planar = shape.spread(2) <= kDegenerateRatio * shape.spread(0);
+  if (!result.planar && points.size() < 6) {
+    result.outcome = PnpOutcome::kTooFewPoints;
+    return result;
+  }
+  const std::optional<Rigid3d> T_start = StartPose(camera, points, result.planar, shape);
+  if (!T_start) {
+    result.outcome = PnpOutcome::kNoStart;
+    return result;
+  }
+  RefinePose(camera, points, options, *T_start, &result);
+  SetResidualsAndCovariance(camera, points, options, &result);
   return result;
 }
 

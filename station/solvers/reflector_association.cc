@@ -402,6 +402,135 @@ const char* ReflectorStatusName(ReflectorStatus status) {
   return "unknown";
 }
 
+namespace {
+
+// True if the gates of in-view reflector i and another in-view one overlap: detections in
+// both cannot tell them apart.
+bool GatesOverlap(std::span<const ExpectedReflector> expected, size_t i,
+                  const ReflectorAssociationOptions& options) {
+  const ExpectedReflector& e = expected[i];
+  bool overlaps = false;
+  for (size_t j = 0; j < expected.size(); ++j) {
+    if (j == i || !expected[j].in_view) continue;
+    overlaps |= std::abs(expected[j].range_m - e.range_m) <= 2 * options.range_gate_m &&
+                std::abs(WrapAngle(expected[j].azimuth_rad - e.azimuth_rad)) <=
+                    2 * options.azimuth_gate_rad;
+  }
+  return overlaps;
+}
+
+// True if a detection at range_m, azimuth_rad lies in reflector e's gate.
+bool InGate(const ExpectedReflector& e, double range_m, double azimuth_rad,
+            const ReflectorAssociationOptions& options) {
+  return std::abs(range_m - e.range_m) <= options.range_gate_m &&
+         std::abs(WrapAngle(azimuth_rad - e.azimuth_rad)) <= options.azimuth_gate_rad;
+}
+
+// Per cycle, the nearest candidate in reflector e's gate (passing the range-rate and RCS
+// filters), unless a second lies within options.ambiguity_range_m of it; counts the cycles
+// with candidates and the ambiguous ones into *obs. Ranges and azimuths in cycle order.
+void NearestCandidates(std::span<const RadarCycle> cycles, const ExpectedReflector& e,
+                       const ReflectorAssociationOptions& options, std::vector<double>* ranges,
+                       std::vector<double>* azimuths, ReflectorObservation* obs) {
+  for (const RadarCycle& cycle : cycles) {
+    std::vector<Candidate> candidates;
+    for (const RadarDetection& d : cycle.detections) {
+      if (!InGate(e, d.range_m, d.azimuth_rad, options)) continue;
+      if (std::abs(d.range_rate_mps) > options.max_abs_range_rate_mps) continue;
+      if (d.rcs_dbsm && *d.rcs_dbsm < options.min_rcs_dbsm) continue;
+      candidates.push_back({d.range_m, d.azimuth_rad});
+    }
+    if (candidates.empty()) continue;
+    ++obs->cycles_with_candidates;
+    std::sort(candidates.begin(), candidates.end(),
+              [](const Candidate& a, const Candidate& b) { return a.range_m < b.range_m; });
+    if (candidates.size() > 1 &&
+        candidates[1].range_m - candidates[0].range_m < options.ambiguity_range_m) {
+      ++obs->ambiguous_cycles;
+      continue;
+    }
+    ranges->push_back(candidates[0].range_m);
+    azimuths->push_back(candidates[0].azimuth_rad);
+  }
+}
+
+// The detections of reflector e within options.outlier_z robust scales of their medians
+// (azimuths unwrapped about the median); counts the others into obs->outliers.
+ReflectorDetections KeepInliers(const ExpectedReflector& e,
+                                const ReflectorAssociationOptions& options,
+                                const std::vector<double>& ranges,
+                                const std::vector<double>& azimuths, ReflectorObservation* obs) {
+  // Robust scales, floored by the noise and by the resolution steps (quantised values can
+  // make the MAD zero or flip between two levels one step apart).
+  const double azimuth_position_step = options.resolution.position_step_m / e.range_m;
+  const double azimuth_floor =
+      std::max({options.detection_azimuth_sigma_rad, options.resolution.azimuth_step_rad,
+                azimuth_position_step});
+  const double range_floor =
+      std::max({options.detection_range_sigma_m, options.resolution.range_step_m,
+                options.resolution.position_step_m});
+  const double azimuth_median = Median(azimuths);
+  const double range_median = Median(ranges);
+  const double azimuth_scale =
+      std::max(kMadToSigma * Mad(azimuths, azimuth_median), azimuth_floor);
+  const double range_scale = std::max(kMadToSigma * Mad(ranges, range_median), range_floor);
+  ReflectorDetections kept;
+  for (size_t k = 0; k < ranges.size(); ++k) {
+    if (std::abs(WrapAngle(azimuths[k] - azimuth_median)) > options.outlier_z * azimuth_scale ||
+        std::abs(ranges[k] - range_median) > options.outlier_z * range_scale) {
+      ++obs->outliers;
+      continue;
+    }
+    kept.range_m.push_back(ranges[k]);
+    // Unwrapped about the median, so that the mean and scatter never straddle ±π.
+    kept.azimuth_rad.push_back(azimuth_median + WrapAngle(azimuths[k] - azimuth_median));
+  }
+  return kept;
+}
+
+// What the cycles show of reflector i, without its means and standard errors (they need the
+// noise estimate over all reflectors); *kept: its used detections when found, else empty.
+ReflectorObservation ObserveReflector(std::span<const RadarCycle> cycles,
+                                      std::span<const ExpectedReflector> expected, size_t i,
+                                      const ReflectorAssociationOptions& options,
+                                      ReflectorDetections* kept) {
+  const ExpectedReflector& e = expected[i];
+  ReflectorObservation obs;
+  obs.reflector_id = e.reflector_id;
+  obs.expected_range_m = e.range_m;
+  obs.expected_azimuth_rad = e.azimuth_rad;
+  if (!e.in_view) {
+    obs.status = ReflectorStatus::kNotInView;
+    return obs;
+  }
+  // Gates of two reflectors that overlap cannot tell them apart.
+  if (GatesOverlap(expected, i, options)) {
+    obs.status = ReflectorStatus::kAmbiguous;
+    return obs;
+  }
+  std::vector<double> ranges, azimuths;
+  NearestCandidates(cycles, e, options, &ranges, &azimuths, &obs);
+  if (obs.cycles_with_candidates == 0) {
+    obs.status = ReflectorStatus::kNoDetections;
+    return obs;
+  }
+  if (2 * obs.ambiguous_cycles >= obs.cycles_with_candidates) {
+    obs.status = ReflectorStatus::kAmbiguous;
+    return obs;
+  }
+  *kept = KeepInliers(e, options, ranges, azimuths, &obs);
+  obs.n_used = static_cast<int>(kept->range_m.size());
+  if (obs.n_used < options.min_detections) {
+    obs.status = ReflectorStatus::kTooFewDetections;
+    *kept = {};
+  } else {
+    obs.status = ReflectorStatus::kFound;
+  }
+  return obs;
+}
+
+}  // namespace
+
 ReflectorAssociation AssociateReflectors(std::span<const RadarCycle> cycles,
                                          std::span<const ExpectedReflector> expected,
                                          const ReflectorAssociationOptions& options) {
@@ -411,100 +540,8 @@ ReflectorAssociation AssociateReflectors(std::span<const RadarCycle> cycles,
   // The used detections of every reflector (empty unless found), for the noise estimate and
   // the standard errors that need it.
   std::vector<ReflectorDetections> used(expected.size());
-  const auto in_gate = [&](const ExpectedReflector& e, double range_m, double azimuth_rad) {
-    return std::abs(range_m - e.range_m) <= options.range_gate_m &&
-           std::abs(WrapAngle(azimuth_rad - e.azimuth_rad)) <= options.azimuth_gate_rad;
-  };
   for (size_t i = 0; i < expected.size(); ++i) {
-    const ExpectedReflector& e = expected[i];
-    ReflectorObservation obs;
-    obs.reflector_id = e.reflector_id;
-    obs.expected_range_m = e.range_m;
-    obs.expected_azimuth_rad = e.azimuth_rad;
-    if (!e.in_view) {
-      obs.status = ReflectorStatus::kNotInView;
-      out.reflectors.push_back(obs);
-      continue;
-    }
-    // Gates of two reflectors that overlap cannot tell them apart.
-    bool overlaps = false;
-    for (size_t j = 0; j < expected.size(); ++j) {
-      if (j == i || !expected[j].in_view) continue;
-      overlaps |= std::abs(expected[j].range_m - e.range_m) <= 2 * options.range_gate_m &&
-                  std::abs(WrapAngle(expected[j].azimuth_rad - e.azimuth_rad)) <=
-                      2 * options.azimuth_gate_rad;
-    }
-    if (overlaps) {
-      obs.status = ReflectorStatus::kAmbiguous;
-      out.reflectors.push_back(obs);
-      continue;
-    }
-
-    std::vector<double> ranges, azimuths;
-    for (const RadarCycle& cycle : cycles) {
-      std::vector<Candidate> candidates;
-      for (const RadarDetection& d : cycle.detections) {
-        if (!in_gate(e, d.range_m, d.azimuth_rad)) continue;
-        if (std::abs(d.range_rate_mps) > options.max_abs_range_rate_mps) continue;
-        if (d.rcs_dbsm && *d.rcs_dbsm < options.min_rcs_dbsm) continue;
-        candidates.push_back({d.range_m, d.azimuth_rad});
-      }
-      if (candidates.empty()) continue;
-      ++obs.cycles_with_candidates;
-      std::sort(candidates.begin(), candidates.end(),
-                [](const Candidate& a, const Candidate& b) { return a.range_m < b.range_m; });
-      if (candidates.size() > 1 &&
-          candidates[1].range_m - candidates[0].range_m < options.ambiguity_range_m) {
-        ++obs.ambiguous_cycles;
-        continue;
-      }
-      ranges.push_back(candidates[0].range_m);
-      azimuths.push_back(candidates[0].azimuth_rad);
-    }
-    if (obs.cycles_with_candidates == 0) {
-      obs.status = ReflectorStatus::kNoDetections;
-      out.reflectors.push_back(obs);
-      continue;
-    }
-    if (2 * obs.ambiguous_cycles >= obs.cycles_with_candidates) {
-      obs.status = ReflectorStatus::kAmbiguous;
-      out.reflectors.push_back(obs);
-      continue;
-    }
-
-    // Robust scales, floored by the noise and by the resolution steps (quantised values can
-    // make the MAD zero or flip between two levels one step apart).
-    const double azimuth_position_step = options.resolution.position_step_m / e.range_m;
-    const double azimuth_floor =
-        std::max({options.detection_azimuth_sigma_rad, options.resolution.azimuth_step_rad,
-                  azimuth_position_step});
-    const double range_floor =
-        std::max({options.detection_range_sigma_m, options.resolution.range_step_m,
-                  options.resolution.position_step_m});
-    const double azimuth_median = Median(azimuths);
-    const double range_median = Median(ranges);
-    const double azimuth_scale =
-        std::max(kMadToSigma * Mad(azimuths, azimuth_median), azimuth_floor);
-    const double range_scale = std::max(kMadToSigma * Mad(ranges, range_median), range_floor);
-    ReflectorDetections& kept = used[i];
-    for (size_t k = 0; k < ranges.size(); ++k) {
-      if (std::abs(WrapAngle(azimuths[k] - azimuth_median)) > options.outlier_z * azimuth_scale ||
-          std::abs(ranges[k] - range_median) > options.outlier_z * range_scale) {
-        ++obs.outliers;
-        continue;
-      }
-      kept.range_m.push_back(ranges[k]);
-      // Unwrapped about the median, so that the mean and scatter never straddle ±π.
-      kept.azimuth_rad.push_back(azimuth_median + WrapAngle(azimuths[k] - azimuth_median));
-    }
-    obs.n_used = static_cast<int>(kept.range_m.size());
-    if (obs.n_used < options.min_detections) {
-      obs.status = ReflectorStatus::kTooFewDetections;
-      kept = {};
-    } else {
-      obs.status = ReflectorStatus::kFound;
-    }
-    out.reflectors.push_back(obs);
+    out.reflectors.push_back(ObserveReflector(cycles, expected, i, options, &used[i]));
   }
 
   // The azimuth not below the sensor's nominal noise, nor the ESR's range: their moments are

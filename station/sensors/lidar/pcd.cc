@@ -68,6 +68,178 @@ std::uint8_t PclType(char type, std::uint64_t size) {
   return 0;
 }
 
+// "path: not a readable PCD file (what)".
+absl::Status NotPcd(const std::filesystem::path& path, absl::string_view what) {
+  return absl::InvalidArgumentError(
+      absl::StrCat(path.string(), ": not a readable PCD file (", what, ")"));
+}
+
+// The per-field lists of a header as written (names and types view the header's text), and
+// whether it had a POINTS entry.
+struct PcdFieldLists {
+  std::vector<absl::string_view> names, types;
+  std::vector<std::uint64_t> sizes, counts;
+  bool have_points = false;
+};
+
+// The tokens as unsigned decimal numbers; false if one is not.
+bool ParseNumbers(const std::vector<absl::string_view>& tok, std::vector<std::uint64_t>* out) {
+  out->clear();
+  for (absl::string_view t : tok) {
+    std::uint64_t v = 0;
+    if (!absl::SimpleAtoi(t, &v)) return false;
+    out->push_back(v);
+  }
+  return true;
+}
+
+// The tokens as one unsigned decimal number; false unless they are exactly that.
+bool ParseSingle(const std::vector<absl::string_view>& tok, std::uint64_t* out) {
+  std::vector<std::uint64_t> one;
+  if (!ParseNumbers(tok, &one) || one.size() != 1) return false;
+  *out = one[0];
+  return true;
+}
+
+// Stores the values `tok` of header entry `key` (one of the prescribed ones; the body starts
+// at `pos` if it is DATA) in *h and *lists; NotPcd naming the entry if they are not what it
+// takes.
+absl::Status ParseEntry(const std::filesystem::path& path, absl::string_view key,
+                        const std::vector<absl::string_view>& tok, std::size_t pos,
+                        PcdHeader* h, PcdFieldLists* lists) {
+  if (key == "FIELDS") {
+    lists->names = tok;
+  } else if (key == "SIZE") {
+    if (!ParseNumbers(tok, &lists->sizes)) return NotPcd(path, "SIZE");
+  } else if (key == "TYPE") {
+    lists->types = tok;
+  } else if (key == "COUNT") {
+    if (!ParseNumbers(tok, &lists->counts)) return NotPcd(path, "COUNT");
+  } else if (key == "WIDTH") {
+    if (!ParseSingle(tok, &h->width)) return NotPcd(path, "WIDTH");
+  } else if (key == "HEIGHT") {
+    if (!ParseSingle(tok, &h->height)) return NotPcd(path, "HEIGHT");
+  } else if (key == "POINTS") {
+    if (!ParseSingle(tok, &h->points)) return NotPcd(path, "POINTS");
+    lists->have_points = true;
+  } else if (key == "VIEWPOINT") {
+    if (tok.size() != 7) return NotPcd(path, "VIEWPOINT needs 7 values");
+  } else if (key == "DATA") {
+    if (tok.size() != 1) return NotPcd(path, "DATA");
+    h->data = std::string(tok[0]);
+    h->data_offset = pos;
+  }
+  return absl::OkStatus();
+}
+
+// Reads the header's entries from `text` (the file's first bytes), in the order the format
+// prescribes, up to and including DATA (h->data_offset: where the body starts). NotPcd for an
+// unknown entry, one out of order, a malformed value or no DATA line.
+absl::Status ParseEntries(const std::filesystem::path& path, const std::string& text,
+                          PcdHeader* h, PcdFieldLists* lists) {
+  // The entries in their prescribed order (COLUMNS is FIELDS in PCD v0.6).
+  static constexpr absl::string_view kOrder[] = {"VERSION", "FIELDS", "SIZE",   "TYPE",
+                                                 "COUNT",   "WIDTH",  "HEIGHT", "VIEWPOINT",
+                                                 "POINTS",  "DATA"};
+  int last_entry = -1;
+  std::size_t pos = 0;
+  while (pos < text.size() && h->data.empty()) {
+    const std::size_t eol = text.find('\n', pos);
+    if (eol == std::string::npos) break;
+    const absl::string_view line(text.data() + pos, eol - pos);
+    pos = eol + 1;
+    std::vector<absl::string_view> tok =
+        absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
+    if (tok.empty() || tok[0][0] == '#') continue;
+    const absl::string_view key = tok[0] == "COLUMNS" ? "FIELDS" : tok[0];
+    tok.erase(tok.begin());
+    int entry = 0;
+    while (entry < static_cast<int>(std::size(kOrder)) && kOrder[entry] != key) ++entry;
+    if (entry == static_cast<int>(std::size(kOrder))) {
+      return NotPcd(path,
+                    absl::StrCat("unknown header entry ", Snippet({key.data(), key.size()})));
+    }
+    if (entry <= last_entry) {
+      return NotPcd(path, absl::StrCat("header entry ", key, " out of order"));
+    }
+    last_entry = entry;
+    if (absl::Status s = ParseEntry(path, key, tok, pos, h, lists); !s.ok()) return s;
+  }
+  if (h->data.empty()) return NotPcd(path, "no DATA line in the header");
+  return absl::OkStatus();
+}
+
+// The fields from the lists (COUNT 1 each if absent) into h->fields, h->values_per_point and
+// h->point_bytes; NotPcd when the lists differ in length or a field's size, type or count is
+// not one PCL reads.
+absl::Status SetFields(const std::filesystem::path& path, PcdFieldLists lists, PcdHeader* h) {
+  if (lists.names.empty() || lists.sizes.size() != lists.names.size() ||
+      lists.types.size() != lists.names.size()) {
+    return NotPcd(path, "FIELDS, SIZE and TYPE differ in length");
+  }
+  if (lists.counts.empty()) lists.counts.assign(lists.names.size(), 1);
+  if (lists.counts.size() != lists.names.size()) {
+    return NotPcd(path, "FIELDS and COUNT differ in length");
+  }
+  // The limits keep every product below 2^64: a point of at most 2^20 values of 8 bytes.
+  constexpr std::uint64_t kMaxValuesPerPoint = 1 << 20;
+  for (std::size_t i = 0; i < lists.names.size(); ++i) {
+    PcdHeader::Field f;
+    f.name = std::string(lists.names[i]);
+    f.size = lists.sizes[i];
+    f.count = lists.counts[i];
+    f.datatype = lists.types[i].size() == 1 ? PclType(lists.types[i][0], f.size) : 0;
+    if ((f.size != 1 && f.size != 2 && f.size != 4 && f.size != 8) || f.datatype == 0) {
+      const std::string_view type(lists.types[i].data(), lists.types[i].size());
+      return NotPcd(path, absl::StrCat("SIZE ", f.size, " TYPE ", Snippet(type), " of field ",
+                                       Snippet(f.name)));
+    }
+    if (f.count == 0 || f.count > kMaxValuesPerPoint) return NotPcd(path, "COUNT");
+    h->values_per_point += f.count;
+    h->point_bytes += f.count * f.size;
+    h->fields.push_back(std::move(f));
+  }
+  if (h->values_per_point > kMaxValuesPerPoint) return NotPcd(path, "too many values per point");
+  return absl::OkStatus();
+}
+
+// Checks the point count against WIDTH x HEIGHT (it is that without POINTS), the budget, and
+// that the file's `body_bytes` after the header can hold the points in h->data's encoding.
+absl::Status CheckPointCount(const std::filesystem::path& path, bool have_points,
+                             std::uint64_t body_bytes, const InputBudget& budget, PcdHeader* h) {
+  if (!have_points) h->points = h->width * h->height;
+  if (h->width > kMaxDataBytes || h->height > kMaxDataBytes || h->points != h->width * h->height) {
+    return NotPcd(path, absl::StrCat("POINTS ", h->points, " is not WIDTH ", h->width,
+                                     " x HEIGHT ", h->height));
+  }
+  // The budget before the body is looked at: the header's claims decide what is allocated.
+  if (h->points > static_cast<std::uint64_t>(budget.max_scan_points)) {
+    return OverBudget(path.string(), static_cast<std::int64_t>(std::min<std::uint64_t>(
+                                         h->points, std::numeric_limits<std::int64_t>::max())),
+                      "points", budget.max_scan_points, "max_scan_points");
+  }
+  const std::uint64_t data_bytes = h->points * h->point_bytes;
+  if (data_bytes > static_cast<std::uint64_t>(budget.max_file_bytes)) {
+    return OverBudget(absl::StrCat(path.string(), ": decoded point data"),
+                      static_cast<std::int64_t>(data_bytes), "bytes", budget.max_file_bytes,
+                      "max_file_bytes");
+  }
+  std::uint64_t limit = 0;
+  if (h->data == "binary") {
+    limit = body_bytes;
+  } else if (h->data == "binary_compressed") {
+    limit = body_bytes * kMaxCompressionRatio;
+  } else {
+    limit = body_bytes / kMinAsciiBytesPerValue * h->point_bytes / h->values_per_point;
+  }
+  if (data_bytes > limit || data_bytes > kMaxDataBytes) {
+    return NotPcd(path, absl::StrCat(h->points, " points of ", h->point_bytes,
+                                     " bytes do not fit the file's ", body_bytes,
+                                     " bytes of data"));
+  }
+  return absl::OkStatus();
+}
+
 // Parses and checks a header. PCL's own header parser is not used: it sizes its buffers from
 // POINTS × point size before it looks at the data, and it stops at the first line it does
 // not know and then reads the file from a wrong offset (a crash the fuzzer found). Here the
@@ -85,135 +257,16 @@ absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path,
   in.read(text.data(), static_cast<std::streamsize>(text.size()));
   text.resize(static_cast<std::size_t>(in.gcount()));
 
-  auto bad = [&](const std::string& what) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path.string(), ": not a readable PCD file (", what, ")"));
-  };
   PcdHeader h;
-  std::vector<absl::string_view> names, types;
-  std::vector<std::uint64_t> sizes, counts;
-  std::uint64_t& width = h.width;
-  std::uint64_t& height = h.height;
-  bool have_points = false;
-  // The entries in their prescribed order (COLUMNS is FIELDS in PCD v0.6).
-  static constexpr absl::string_view kOrder[] = {"VERSION", "FIELDS", "SIZE",   "TYPE",
-                                                 "COUNT",   "WIDTH",  "HEIGHT", "VIEWPOINT",
-                                                 "POINTS",  "DATA"};
-  int last_entry = -1;
-  std::size_t pos = 0;
-  while (pos < text.size() && h.data.empty()) {
-    const std::size_t eol = text.find('\n', pos);
-    if (eol == std::string::npos) break;
-    const absl::string_view line(text.data() + pos, eol - pos);
-    pos = eol + 1;
-    std::vector<absl::string_view> tok =
-        absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
-    if (tok.empty() || tok[0][0] == '#') continue;
-    const absl::string_view key = tok[0] == "COLUMNS" ? "FIELDS" : tok[0];
-    tok.erase(tok.begin());
-    int entry = 0;
-    while (entry < static_cast<int>(std::size(kOrder)) && kOrder[entry] != key) ++entry;
-    if (entry == static_cast<int>(std::size(kOrder))) {
-      return bad(absl::StrCat("unknown header entry ", Snippet({key.data(), key.size()})));
-    }
-    if (entry <= last_entry) return bad(absl::StrCat("header entry ", key, " out of order"));
-    last_entry = entry;
-    auto numbers = [&](std::vector<std::uint64_t>* out) {
-      out->clear();
-      for (absl::string_view t : tok) {
-        std::uint64_t v = 0;
-        if (!absl::SimpleAtoi(t, &v)) return false;
-        out->push_back(v);
-      }
-      return true;
-    };
-    std::vector<std::uint64_t> one;
-    auto single = [&](std::uint64_t* out) {
-      if (!numbers(&one) || one.size() != 1) return false;
-      *out = one[0];
-      return true;
-    };
-    if (key == "FIELDS") {
-      names = tok;
-    } else if (key == "SIZE") {
-      if (!numbers(&sizes)) return bad("SIZE");
-    } else if (key == "TYPE") {
-      types = tok;
-    } else if (key == "COUNT") {
-      if (!numbers(&counts)) return bad("COUNT");
-    } else if (key == "WIDTH") {
-      if (!single(&width)) return bad("WIDTH");
-    } else if (key == "HEIGHT") {
-      if (!single(&height)) return bad("HEIGHT");
-    } else if (key == "POINTS") {
-      if (!single(&h.points)) return bad("POINTS");
-      have_points = true;
-    } else if (key == "VIEWPOINT") {
-      if (tok.size() != 7) return bad("VIEWPOINT needs 7 values");
-    } else if (key == "DATA") {
-      if (tok.size() != 1) return bad("DATA");
-      h.data = std::string(tok[0]);
-      h.data_offset = pos;
-    }
-  }
-  if (h.data.empty()) return bad("no DATA line in the header");
+  PcdFieldLists lists;
+  if (absl::Status s = ParseEntries(path, text, &h, &lists); !s.ok()) return s;
   if (h.data != "ascii" && h.data != "binary" && h.data != "binary_compressed") {
-    return bad(absl::StrCat("DATA ", Snippet(h.data)));
+    return NotPcd(path, absl::StrCat("DATA ", Snippet(h.data)));
   }
-  if (names.empty() || sizes.size() != names.size() || types.size() != names.size()) {
-    return bad("FIELDS, SIZE and TYPE differ in length");
-  }
-  if (counts.empty()) counts.assign(names.size(), 1);
-  if (counts.size() != names.size()) return bad("FIELDS and COUNT differ in length");
-  // The limits keep every product below 2^64: a point of at most 2^20 values of 8 bytes.
-  constexpr std::uint64_t kMaxValuesPerPoint = 1 << 20;
-  std::uint64_t& point_bytes = h.point_bytes;
-  for (std::size_t i = 0; i < names.size(); ++i) {
-    PcdHeader::Field f;
-    f.name = std::string(names[i]);
-    f.size = sizes[i];
-    f.count = counts[i];
-    f.datatype = types[i].size() == 1 ? PclType(types[i][0], f.size) : 0;
-    if ((f.size != 1 && f.size != 2 && f.size != 4 && f.size != 8) || f.datatype == 0) {
-      const std::string_view type(types[i].data(), types[i].size());
-      return bad(
-          absl::StrCat("SIZE ", f.size, " TYPE ", Snippet(type), " of field ", Snippet(f.name)));
-    }
-    if (f.count == 0 || f.count > kMaxValuesPerPoint) return bad("COUNT");
-    h.values_per_point += f.count;
-    point_bytes += f.count * f.size;
-    h.fields.push_back(std::move(f));
-  }
-  if (h.values_per_point > kMaxValuesPerPoint) return bad("too many values per point");
-  if (!have_points) h.points = width * height;
-  if (width > kMaxDataBytes || height > kMaxDataBytes || h.points != width * height) {
-    return bad(absl::StrCat("POINTS ", h.points, " is not WIDTH ", width, " x HEIGHT ", height));
-  }
-  // The budget before the body is looked at: the header's claims decide what is allocated.
-  if (h.points > static_cast<std::uint64_t>(budget.max_scan_points)) {
-    return OverBudget(path.string(), static_cast<std::int64_t>(std::min<std::uint64_t>(
-                                         h.points, std::numeric_limits<std::int64_t>::max())),
-                      "points", budget.max_scan_points, "max_scan_points");
-  }
-  const std::uint64_t body = file_size - std::min<std::uint64_t>(file_size, pos);
-  const std::uint64_t data_bytes = h.points * point_bytes;
-  if (data_bytes > static_cast<std::uint64_t>(budget.max_file_bytes)) {
-    return OverBudget(absl::StrCat(path.string(), ": decoded point data"),
-                      static_cast<std::int64_t>(data_bytes), "bytes", budget.max_file_bytes,
-                      "max_file_bytes");
-  }
-  std::uint64_t limit = 0;
-  if (h.data == "binary") {
-    limit = body;
-  } else if (h.data == "binary_compressed") {
-    limit = body * kMaxCompressionRatio;
-  } else {
-    limit = body / kMinAsciiBytesPerValue * point_bytes / h.values_per_point;
-  }
-  if (data_bytes > limit || data_bytes > kMaxDataBytes) {
-    return bad(absl::StrCat(h.points, " points of ", point_bytes, " bytes do not fit the file's ",
-                            body, " bytes of data"));
-  }
+  const bool have_points = lists.have_points;
+  if (absl::Status s = SetFields(path, std::move(lists), &h); !s.ok()) return s;
+  const std::uint64_t body = file_size - std::min<std::uint64_t>(file_size, h.data_offset);
+  if (absl::Status s = CheckPointCount(path, have_points, body, budget, &h); !s.ok()) return s;
   return h;
 }
 
