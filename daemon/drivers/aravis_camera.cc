@@ -24,6 +24,13 @@ constexpr std::uint16_t kGvcpPort = 3956;
 // a slow conversion does not make the camera's frames miss a buffer.
 constexpr int kStreamBuffers = 4;
 
+// The stream's UDP receive buffer holds a whole frame (the kernel doubles SO_RCVBUF for its
+// bookkeeping, which covers the per-datagram overhead), so a stream thread that is not
+// scheduled for a while loses no packets; at least 1 MiB, since Aravis 0.8's own "auto" size
+// (the payload) is too small for small frames: a 64 x 48 frame's three datagrams did not fit.
+// The kernel caps it at net.core.rmem_max.
+constexpr guint kMinStreamSocketBuffer = 1u << 20;
+
 // Owns a GError.
 struct ErrorHolder {
   GError* error = nullptr;
@@ -128,6 +135,36 @@ absl::StatusOr<ArvDevice*> OpenDevice(const std::string& id) {
     return absl::UnavailableError(absl::StrCat("camera '", id, "': ", error.message()));
   }
   return reopened;
+}
+
+// Aravis 0.8 creates a device with process-wide state and no lock around it: its GenICam
+// parser keeps the document being built in one static variable (arvdomparser.c,
+// _parse_memory), so two devices created at once on two threads build their feature nodes
+// into each other's document: opens fail ("Port not found for node", "[AcquisitionStart] Not
+// ..."), the process crashes, or a camera reads and writes another camera's registers
+// (docs/sensors.md, "Several cameras at once"). Every device creation in the process holds
+// this lock; configuring, streaming and grabbing touch only the camera's own objects and run
+// in parallel.
+std::mutex& DeviceCreationMutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+
+// Opens the device (OpenDevice) and wraps it in an ArvCamera: the only steps of Open that
+// create Aravis devices, under DeviceCreationMutex. About 10 ms per fake camera on loopback
+// (two creations when OpenDevice opens it again on the routed interface). Unavailable as
+// OpenDevice gives it, or when Aravis cannot make a camera of the device.
+absl::StatusOr<ArvCamera*> CreateCamera(const std::string& id) {
+  std::lock_guard<std::mutex> lock(DeviceCreationMutex());
+  absl::StatusOr<ArvDevice*> device = OpenDevice(id);
+  if (!device.ok()) return device.status();
+  ErrorHolder error;
+  ArvCamera* camera = arv_camera_new_with_device(*device, error.out());
+  g_object_unref(*device);  // the camera holds its own reference
+  if (camera == nullptr) {
+    return absl::UnavailableError(absl::StrCat("camera '", id, "': ", error.message()));
+  }
+  return camera;
 }
 
 static_assert(kPfncMono8 == ARV_PIXEL_FORMAT_MONO_8 && kPfncMono16 == ARV_PIXEL_FORMAT_MONO_16 &&
@@ -259,21 +296,12 @@ AravisCamera::AravisCamera(AravisCameraOptions options, _ArvCamera* camera)
 
 absl::StatusOr<std::unique_ptr<AravisCamera>> AravisCamera::Open(
     const AravisCameraOptions& options) {
-  // One camera opened at a time in the process: Aravis's device discovery and GenICam parsing
-  // are not safe to run on several threads at once (five cameras of one cycle opened together
-  // failed with "Port not found for node" and cleared buffers); grabbing runs in parallel.
-  static std::mutex open_mutex;
-  std::lock_guard<std::mutex> lock(open_mutex);
   const std::string& id = options.device_id;
-  absl::StatusOr<ArvDevice*> device = OpenDevice(id);
-  if (!device.ok()) return device.status();
-  ErrorHolder error;
-  ArvCamera* camera = arv_camera_new_with_device(*device, error.out());
-  g_object_unref(*device);  // the camera holds its own reference
-  if (camera == nullptr) {
-    return absl::UnavailableError(absl::StrCat("camera '", id, "': ", error.message()));
-  }
+  absl::StatusOr<ArvCamera*> created = CreateCamera(id);
+  if (!created.ok()) return created.status();
+  ArvCamera* camera = *created;
   std::unique_ptr<AravisCamera> self(new AravisCamera(options, camera));
+  ErrorHolder error;
 
   arv_camera_set_pixel_format_from_string(camera, options.pixel_format.c_str(), error.out());
   if (error.error != nullptr) {
@@ -292,9 +320,21 @@ absl::StatusOr<std::unique_ptr<AravisCamera>> AravisCamera::Open(
   if (error.error != nullptr) {
     return absl::InternalError(absl::StrCat("camera '", id, "': payload: ", error.message()));
   }
+  // The stream on a UDP socket of its own, never on Aravis's packet socket (used when the
+  // process may open one, as root): that socket takes every packet of the host from its
+  // creation until Aravis attaches its filter, so the frames of cameras already streaming
+  // were assembled into this one's buffers (docs/sensors.md, "Several cameras at once").
+  if (arv_camera_is_gv_device(camera)) {
+    arv_camera_gv_set_stream_options(camera, ARV_GV_STREAM_OPTION_PACKET_SOCKET_DISABLED);
+  }
   self->stream_ = arv_camera_create_stream(camera, nullptr, nullptr, error.out());
   if (self->stream_ == nullptr) {
     return absl::InternalError(absl::StrCat("camera '", id, "': stream: ", error.message()));
+  }
+  if (ARV_IS_GV_STREAM(self->stream_)) {
+    const int socket_buffer = static_cast<int>(std::max<guint>(payload, kMinStreamSocketBuffer));
+    g_object_set(self->stream_, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED,
+                 "socket-buffer-size", socket_buffer, nullptr);
   }
   for (int i = 0; i < kStreamBuffers; ++i) {
     arv_stream_push_buffer(self->stream_, arv_buffer_new_allocate(payload));

@@ -188,9 +188,9 @@ SensorServer::~SensorServer() {
 nlohmann::json SensorServer::LiveSourceConfig() const {
   nlohmann::json sensors = nlohmann::json::object();
   for (const auto& [name, camera] : cameras_) {
-    // Retries: on loopback Aravis's stream sometimes returns a few cleared buffers in a row
-    // right after the stream starts while other cameras start theirs (seen with five fake
-    // cameras on two cores); a real camera's default of 3 stays for real cameras.
+    // Retries: on loopback the first frame after the stream starts arrives incomplete (the
+    // fake camera sends it in one burst before Aravis sizes the socket buffer, docs/sensors.md)
+    // and a loaded machine loses a few more; a real camera's default of 3 stays for real ones.
     sensors[name] = {{"type", "aravis"},
                      {"device_id", camera->device_id()},
                      {"pixel_format", "Mono8"},

@@ -21,7 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
-#include "daemon/drivers/fake_gige_camera.h"
+#include "daemon/simstation/fake_gige_camera.h"
 #include "station/capture/capture.h"
 
 namespace linecal {

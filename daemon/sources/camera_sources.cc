@@ -3,7 +3,6 @@
 #include <filesystem>
 #include <functional>
 #include <system_error>
-#include <mutex>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -97,13 +96,7 @@ class AravisCameraSource : public SensorSource {
     options.exposure_us = config_.exposure_us;
     options.frame_timeout = config_.frame_timeout;
     options.frame_retries = config_.frame_retries;
-    // One GigE acquisition at a time in the process. With Aravis 0.8, five cameras streaming
-    // into one process at once (the demo's fake cameras on loopback) now and then delivered
-    // one camera's frame into another's buffer ("frame of 1920 x 1080 needs 2073600 bytes,
-    // got 1228800") or cleared buffers; one after the other, 12 of 12 demo cycles were clean.
-    // It costs the cycle the cameras' sum instead of their maximum (about 0.3 s each).
-    static std::mutex acquisition_mutex;
-    std::lock_guard<std::mutex> lock(acquisition_mutex);
+    // Sources of several cameras acquire at once (docs/sensors.md, "Several cameras at once").
     absl::StatusOr<std::unique_ptr<AravisCamera>> camera = AravisCamera::Open(options);
     if (!camera.ok()) return camera.status();
     absl::StatusOr<CaptureSensor> result = RecordFrames(

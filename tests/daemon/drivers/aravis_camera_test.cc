@@ -8,7 +8,7 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/drivers/fake_gige_camera.h"
+#include "daemon/simstation/fake_gige_camera.h"
 #include "gtest/gtest.h"
 #include "tests/daemon/random_image.h"
 

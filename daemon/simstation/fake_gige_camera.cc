@@ -1,4 +1,4 @@
-#include "daemon/drivers/fake_gige_camera.h"
+#include "daemon/simstation/fake_gige_camera.h"
 
 #include <arpa/inet.h>
 #include <arv.h>
