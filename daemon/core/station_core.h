@@ -50,31 +50,19 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "daemon/core/capture_source.h"
 #include "daemon/cycle/capture_calibration.h"
 #include "daemon/plant/forwarder.h"
-#include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"
 #include "station/health/station_health.h"
 #include "station/io/input_budget.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
-#include "station/sim/simulator.h"
 
 namespace linecal {
 
 enum class CycleSource { kSimulator, kReplay, kLive };
-
-// Builds the source of a sensor from its configuration (MakeSensorSource by default).
-using SensorSourceFactory =
-    std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(const std::string& sensor, const SourceConfig& config)>;
-
-// simulator: a board that stands moved from cycle `from_cycle` on (a knocked board, for the
-// station-health alarm's tests and demos; SimulatorOptions::moved_boards).
-struct SimulatedBoardMove {
-  MovedBoard move;
-  int64_t from_cycle = 1;  // the first cycle id that sees the board moved
-};
 
 struct StationCoreConfig {
   std::string station_id = "demo";
@@ -223,7 +211,7 @@ class StationCore {
 
  private:
   StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
-              std::unique_ptr<Store> store, std::map<std::string, std::unique_ptr<SensorSource>> sources);
+              std::unique_ptr<Store> store, std::unique_ptr<CaptureSource> capture_source);
   struct PendingCalibration;
   // A cycle's end as RunCycle decided it.
   struct CycleEnd {
@@ -234,12 +222,31 @@ class StationCore {
     int64_t ended_ns = 0;
     bool event_stored = false;  // its cycle_ended event is in the store
   };
+  // An end in `state` with `reason` and verdict error (until the results decide it).
+  static CycleEnd EndOf(int64_t id, CycleState state, std::string reason);
 
+  // A cycle on the worker thread: its work, then its end decided, its capture removed unless
+  // kept, and the end stored (StoreEnd) and published (running_ cleared, watchers woken).
   void RunCycle(int64_t id, CycleRequest request);
-  // live: acquires every sensor of `car` into `dir` at once; returns the sensors acquired
-  // (car model order) and, per sensor that failed, its status message.
-  std::vector<CaptureSensor> AcquireLive(int64_t id, const CarModel& car, const std::string& dir, int frames,
-                                         std::map<std::string, std::string>* failures);
+  // The cycle's work, acquire -> read -> calibrate -> store: the end it reached (state,
+  // verdict, reason; not yet `ended_ns`). Every failing step ends it in error with a reason.
+  CycleEnd WorkCycle(int64_t id, const CycleRequest& request, const CarModel& car, const StoredCycle& stored);
+  // Acquire: the capture source makes the cycle's capture readable in `dir`
+  // (CaptureSource::Acquire, its events into the cycle's stream).
+  absl::StatusOr<AcquiredCapture> AcquireCapture(int64_t id, const CycleRequest& request, const CarModel& car,
+                                                 const StoredCycle& stored, const std::string& dir);
+  // Store: every sensor's result in the car model's order (a sensor that failed to acquire as
+  // its `error`, reason "acquisition_failed: <message>") and its sensor_verdict event; the
+  // end is done with the overall verdict and the not-passed sensors as reason, or error when
+  // a result cannot be stored.
+  CycleEnd StoreResults(int64_t id, const CarModel& car, const std::map<std::string, std::string>& failures,
+                        std::vector<SensorCalibration> calibrated);
+  // Once the work is over: a cancel accepted until now makes the cycle cancelled (CancelCycle
+  // refuses from now on); a data root or database removed meanwhile makes it an error.
+  void DecideEnd(CycleEnd* end);
+  // Stores the end (kept as unstored_end_ when it cannot be), logs what went wrong, wakes the
+  // forwarder and the watchers and clears running_.
+  void PublishEnd(const CycleEnd& end);
   // Calibrates `capture` on its own thread, waiting until it is done, the calibrate deadline
   // passed (DeadlineExceeded) or the cycle was cancelled (Cancelled).
   absl::StatusOr<CycleCalibration> CalibrateWithDeadline(Capture capture);
@@ -270,8 +277,8 @@ class StationCore {
   std::unique_ptr<Store> store_;
   // With a `plant` section; declared after store_, so destroyed (stopped) before it.
   std::unique_ptr<Forwarder> forwarder_;
-  // live: by sensor name; used by one cycle at a time.
-  std::map<std::string, std::unique_ptr<SensorSource>> sources_;
+  // What cycles calibrate from (config_.source); used by one cycle at a time.
+  std::unique_ptr<CaptureSource> capture_source_;
 
   std::mutex mutex_;
   std::condition_variable changed_;  // an event was stored or a cycle ended
