@@ -6,7 +6,6 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <numbers>
@@ -194,9 +193,7 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     forwarding.batch = config.plant->batch;
     forwarding.max_retry_interval = config.plant->max_retry_interval;
     StationCore* logger = core.get();
-    forwarding.log = [logger](const std::string& level, const std::string& message) {
-      logger->Log(level, message);
-    };
+    forwarding.log = [logger](const LogRecord& record) { logger->Log(record.level, record.message); };
     absl::StatusOr<std::unique_ptr<Forwarder>> forwarder =
         Forwarder::Start(core->store_.get(), std::move(forwarding));
     if (!forwarder.ok()) return forwarder.status();
@@ -219,17 +216,20 @@ StationCore::~StationCore() {
   if (worker_.joinable()) worker_.join();
   JoinAbandoned(/*all=*/true);
   if (StoreUnstoredEnd().ok()) return;
-  Log("error", absl::StrCat("cycle ", unstored_end_->id, " ended ",
-                            CycleStateName(unstored_end_->state), " (", unstored_end_->reason,
-                            ") but its end could not be stored; the next start stores it as "
-                            "aborted (daemon_restarted)"));
+  Log(LogLevel::kError,
+      absl::StrCat("cycle ", unstored_end_->id, " ended ", CycleStateName(unstored_end_->state), " (",
+                   unstored_end_->reason,
+                   ") but its end could not be stored; the next start stores it as "
+                   "aborted (daemon_restarted)"),
+      unstored_end_->id, unstored_end_->vin);
 }
 
-void StationCore::Log(const std::string& level, const std::string& message) const {
+void StationCore::Log(LogLevel level, const std::string& message, int64_t cycle, const std::string& vin) const {
+  const LogRecord record{level, message, cycle, vin};
   if (config_.log) {
-    config_.log(level, message);
+    config_.log(record);
   } else {
-    std::fprintf(stderr, "level=%s msg=\"%s\"\n", level.c_str(), message.c_str());
+    WriteLog(record);
   }
 }
 
@@ -289,7 +289,7 @@ void StationCore::JoinAbandoned(bool all) {
   for (std::thread& t : finished) t.join();
 }
 
-absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(Capture capture) {
+absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(int64_t id, Capture capture) {
   const auto deadline = std::chrono::steady_clock::now() + config_.calibrate_deadline;
   auto pending = std::make_shared<PendingCalibration>();
   pending->capture = std::move(capture);
@@ -336,8 +336,10 @@ absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(Capture capt
     thread.join();
     return stopped;
   }
-  Log("warning", absl::StrCat("a stopped calibration still runs after ",
-                              kCalibrationStopGrace.count(), " ms; it is left to end on its own"));
+  Log(LogLevel::kWarning,
+      absl::StrCat("a stopped calibration still runs after ", kCalibrationStopGrace.count(),
+                   " ms; it is left to end on its own"),
+      id, pending->capture.manifest.vin);
   std::lock_guard<std::mutex> lock(mutex_);
   abandoned_.emplace_back(std::move(pending), std::move(thread));
   return stopped;
@@ -425,10 +427,14 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
   return *id;
 }
 
-absl::Status StationCore::Event(int64_t id, const std::string& type, const std::string& sensor,
-                                const std::string& detail, Verdict verdict) {
+absl::Status StationCore::Event(int64_t id, const std::string& vin, const std::string& type,
+                                const std::string& sensor, const std::string& detail, Verdict verdict) {
   absl::StatusOr<int64_t> seq = store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
   changed_.notify_all();
+  Log(LogLevel::kDebug,
+      absl::StrCat("event ", type, sensor.empty() ? "" : " ", sensor, detail.empty() ? "" : ": ", detail,
+                   verdict == Verdict::kNone ? "" : absl::StrCat(" (", VerdictName(verdict), ")")),
+      id, vin);
   return seq.status();
 }
 
@@ -442,7 +448,8 @@ StationCore::CycleEnd StationCore::EndOf(int64_t id, CycleState state, std::stri
 
 void StationCore::RunCycle(int64_t id, CycleRequest request) {
   const CarModel& car = *FindCar(request.car_model_id);
-  Event(id, "started", "", car.id).IgnoreError();
+  Log(LogLevel::kInfo, absl::StrCat("cycle ", id, " started (car model ", car.id, ")"), id, request.vin);
+  Event(id, request.vin, "started", "", car.id).IgnoreError();
   const absl::StatusOr<StoredCycle> stored = store_->GetCycle(id);
   CycleEnd end = stored.ok() ? WorkCycle(id, request, car, *stored) : EndOf(id, CycleState::kDone, "store_unavailable");
   DecideEnd(&end);
@@ -453,6 +460,7 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
     fs::remove_all(fs::path(config_.data_root) / stored->capture_path, ec);
   }
   if (end.state == CycleState::kCancelled) end.verdict = Verdict::kError;
+  end.vin = request.vin;
   end.ended_ns = NowNs();
   PublishEnd(end);
 }
@@ -468,12 +476,12 @@ StationCore::CycleEnd StationCore::WorkCycle(int64_t id, const CycleRequest& req
   if (cancel_) return cancelled;
   absl::StatusOr<Capture> capture = ReadCapture(dir, config_.input_budget);
   if (!capture.ok()) return error(absl::StrCat("capture_unreadable: ", capture.status().message()));
-  absl::StatusOr<CycleCalibration> result = CalibrateWithDeadline(*std::move(capture));
+  absl::StatusOr<CycleCalibration> result = CalibrateWithDeadline(id, *std::move(capture));
   if (absl::IsCancelled(result.status())) return cancelled;
   if (absl::IsDeadlineExceeded(result.status())) return error("calibrate_deadline_exceeded");
   if (!result.ok()) return error(absl::StrCat("calibration_failed: ", result.status().message()));
   if (cancel_) return cancelled;  // asked while the sensors were computed: their results are not stored
-  return StoreResults(id, car, acquired->failures, std::move(result->sensors));
+  return StoreResults(id, request.vin, car, acquired->failures, std::move(result->sensors));
 }
 
 absl::StatusOr<AcquiredCapture> StationCore::AcquireCapture(int64_t id, const CycleRequest& request,
@@ -489,12 +497,14 @@ absl::StatusOr<AcquiredCapture> StationCore::AcquireCapture(int64_t id, const Cy
   cycle.dir = dir;
   cycle.frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
   cycle.cancel = &cancel_;
-  cycle.event = [this, id](const std::string& type, const std::string& sensor, const std::string& detail,
-                           Verdict verdict) { Event(id, type, sensor, detail, verdict).IgnoreError(); };
+  cycle.event = [this, id, vin = request.vin](const std::string& type, const std::string& sensor,
+                                              const std::string& detail, Verdict verdict) {
+    Event(id, vin, type, sensor, detail, verdict).IgnoreError();
+  };
   return capture_source_->Acquire(cycle);
 }
 
-StationCore::CycleEnd StationCore::StoreResults(int64_t id, const CarModel& car,
+StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& vin, const CarModel& car,
                                                 const std::map<std::string, std::string>& failures,
                                                 std::vector<SensorCalibration> calibrated) {
   // The sensors that failed to acquire take their place in the car model's order.
@@ -522,7 +532,7 @@ StationCore::CycleEnd StationCore::StoreResults(int64_t id, const CarModel& car,
                                                  : absl::StrCat("store_unavailable: ", st.message());
       return end;
     }
-    Event(id, "sensor_verdict", s.name, s.reason, ToStored(s.verdict)).IgnoreError();
+    Event(id, vin, "sensor_verdict", s.name, s.reason, ToStored(s.verdict)).IgnoreError();
     if (s.verdict != SensorVerdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
   }
   end.verdict = OverallVerdict(sensors);
@@ -556,13 +566,22 @@ void StationCore::PublishEnd(const CycleEnd& end) {
   CycleEnd stored_end = end;
   const absl::Status stored = StoreEnd(&stored_end);
   if (!stored.ok()) {
-    Log("error", absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), " (", end.reason,
-                              ") but its end cannot be stored: ", stored.message(),
-                              "; it is stored once the disk has room, before the next cycle"));
+    Log(LogLevel::kError,
+        absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), " (", end.reason,
+                     ") but its end cannot be stored: ", stored.message(),
+                     "; it is stored once the disk has room, before the next cycle"),
+        end.id, end.vin);
   } else if (absl::Status storage = CheckStorage(); !storage.ok()) {
-    Log("error", absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), " (", end.reason,
-                              "), stored in a database that is lost at the next start: ",
-                              storage.message()));
+    Log(LogLevel::kError,
+        absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), " (", end.reason,
+                     "), stored in a database that is lost at the next start: ", storage.message()),
+        end.id, end.vin);
+  } else {
+    Log(LogLevel::kInfo,
+        absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), ", verdict ",
+                     VerdictName(end.verdict), end.reason.empty() ? "" : " (", end.reason,
+                     end.reason.empty() ? "" : ")"),
+        end.id, end.vin);
   }
   if (stored.ok() && forwarder_) forwarder_->Notify();
   std::lock_guard<std::mutex> lock(mutex_);
@@ -588,7 +607,7 @@ absl::Status StationCore::StoreEnd(CycleEnd* end) {
   };
   if (!end->event_stored) {
     absl::Status s = until_stored([&] {
-      return Event(end->id, "cycle_ended", "", end->reason, end->verdict);
+      return Event(end->id, end->vin, "cycle_ended", "", end->reason, end->verdict);
     });
     if (!s.ok()) return s;
     end->event_stored = true;
@@ -619,7 +638,8 @@ absl::Status StationCore::StoreUnstoredEnd() {
   }
   unstored_end_.reset();
   if (forwarder_) forwarder_->Notify();
-  Log("warning", absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"));
+  Log(LogLevel::kWarning, absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"), end->id,
+      end->vin);
   changed_.notify_all();
   return absl::OkStatus();
 }
@@ -642,7 +662,7 @@ absl::Status StationCore::Health() {
   }
   const std::string now(health.message());
   if (now != last_health_) {
-    Log(health.ok() ? "warning" : "error",
+    Log(health.ok() ? LogLevel::kWarning : LogLevel::kError,
         health.ok() ? absl::StrCat("health: serving again (was: ", last_health_, ")")
                     : absl::StrCat("health: NOT_SERVING: ", now));
     last_health_ = now;

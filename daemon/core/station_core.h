@@ -52,6 +52,7 @@
 #include "absl/status/statusor.h"
 #include "daemon/core/capture_source.h"
 #include "daemon/cycle/capture_calibration.h"
+#include "daemon/log/daemon_log.h"
 #include "daemon/plant/forwarder.h"
 #include "daemon/store/store.h"
 #include "station/health/station_health.h"
@@ -93,9 +94,10 @@ struct StationCoreConfig {
   // Forwarding of every ended cycle to the plant database (daemon/plant/forwarder.h): the
   // store queues each end in its outbox and a Forwarder ships it. Absent: no forwarding.
   std::optional<PlantConfig> plant;
-  // Where the core's warnings and errors go ("warning"/"error", a message): linecald's log.
-  // Empty: stderr.
-  std::function<void(const std::string& level, const std::string& message)> log;
+  // Where the core's log records go: linecald's log. Empty: WriteLog (spdlog's default
+  // logger). A cycle logs its start and end (info) and every event (debug), each with its
+  // cycle id and VIN, as every warning or error about it.
+  LogSink log;
 };
 
 // How long a stopped calibration (deadline, cancel) is waited for before it is left to end
@@ -216,6 +218,7 @@ class StationCore {
   // A cycle's end as RunCycle decided it.
   struct CycleEnd {
     int64_t id = 0;
+    std::string vin;  // the cycle's, for the log
     CycleState state = CycleState::kDone;
     Verdict verdict = Verdict::kError;
     std::string reason;
@@ -239,7 +242,7 @@ class StationCore {
   // its `error`, reason "acquisition_failed: <message>") and its sensor_verdict event; the
   // end is done with the overall verdict and the not-passed sensors as reason, or error when
   // a result cannot be stored.
-  CycleEnd StoreResults(int64_t id, const CarModel& car, const std::map<std::string, std::string>& failures,
+  CycleEnd StoreResults(int64_t id, const std::string& vin, const CarModel& car, const std::map<std::string, std::string>& failures,
                         std::vector<SensorCalibration> calibrated);
   // Once the work is over: a cancel accepted until now makes the cycle cancelled (CancelCycle
   // refuses from now on); a data root or database removed meanwhile makes it an error.
@@ -247,9 +250,9 @@ class StationCore {
   // Stores the end (kept as unstored_end_ when it cannot be), logs what went wrong, wakes the
   // forwarder and the watchers and clears running_.
   void PublishEnd(const CycleEnd& end);
-  // Calibrates `capture` on its own thread, waiting until it is done, the calibrate deadline
-  // passed (DeadlineExceeded) or the cycle was cancelled (Cancelled).
-  absl::StatusOr<CycleCalibration> CalibrateWithDeadline(Capture capture);
+  // Calibrates `capture` of cycle `id` on its own thread, waiting until it is done, the
+  // calibrate deadline passed (DeadlineExceeded) or the cycle was cancelled (Cancelled).
+  absl::StatusOr<CycleCalibration> CalibrateWithDeadline(int64_t id, Capture capture);
   // Stores the end's event and the end, retrying while the store is locked (until the
   // destructor runs); the first other error is returned and `end` says what got stored.
   absl::Status StoreEnd(CycleEnd* end);
@@ -264,10 +267,12 @@ class StationCore {
   // (ResourceExhausted, or ENOSPC in the message), else "<what>: <message>" (no "<what>: "
   // when `what` is empty). Remembers a full disk for Health().
   std::string FailureReason(const std::string& what, const absl::Status& status);
-  void Log(const std::string& level, const std::string& message) const;
+  // One record to config_.log (else WriteLog); about cycle `cycle` (0: none) of `vin`.
+  void Log(LogLevel level, const std::string& message, int64_t cycle = 0, const std::string& vin = "") const;
   // Joins calibrations abandoned at their deadline: those done, or all when `all`.
   void JoinAbandoned(bool all);
-  absl::Status Event(int64_t id, const std::string& type, const std::string& sensor, const std::string& detail,
+  // Stores an event of cycle `id` (of `vin`), wakes the watchers and logs it (debug).
+  absl::Status Event(int64_t id, const std::string& vin, const std::string& type, const std::string& sensor, const std::string& detail,
                      Verdict verdict = Verdict::kNone);
   const CarModel* FindCar(const std::string& id) const;
 

@@ -21,7 +21,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <array>
 #include <cerrno>
 #include <chrono>
 #include <condition_variable>
@@ -35,6 +34,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "daemon/core/daemon_config.h"
+#include "daemon/log/daemon_log.h"
 #include "daemon/service/listener_watchdog.h"
 #include "daemon/service/station_service.h"
 #include "daemon/systemd/sd_notify.h"
@@ -50,25 +50,20 @@ constexpr char kUsage[] =
     "  simulated sensors, data and database in --data-dir (default ./linecald-data).\n"
     "  --web-listen: the station console there (docs/console.md), as the file's web.listen.\n";
 
-// One log line to stderr: "level=info msg=... key=value ...", for journald and people.
-void Log(const char* level, const std::string& message) {
-  std::fprintf(stderr, "level=%s msg=\"%s\"\n", level, message.c_str());
+using linecal::LogLevel;
+
+// One record of linecald's own (not about a cycle) to its log (daemon/log/daemon_log.h).
+void Log(LogLevel level, const std::string& message) { linecal::WriteLog({level, message}); }
+
+// A record of a part that names its levels in words (the listener watchdog).
+void LogWords(const std::string& level, const std::string& message) {
+  Log(linecal::ParseLogLevel(level).value_or(LogLevel::kError), message);
 }
 
 // How long a stop may take from the signal: the running cycle's end stored, calibration
 // threads joined. Under the unit's TimeoutStopSec=30, so that systemd never has to kill us;
 // a cancelled calibration stops within about a second (StationCore's kCalibrationStopGrace).
 constexpr std::chrono::seconds kDrainTime{20};
-
-// The values of --log-level and the file's log_level (daemon_config.h).
-constexpr std::array<const char*, 4> kLogLevels = {"debug", "info", "warning", "error"};
-
-bool IsLogLevel(const std::string& level) {
-  for (const char* l : kLogLevels) {
-    if (level == l) return true;
-  }
-  return false;
-}
 
 // Raises the soft RLIMIT_NOFILE to the hard limit and says what it did. Each gRPC connection
 // holds a descriptor; the default soft limit of 1024 let 1,100 idle clients exhaust it.
@@ -94,10 +89,10 @@ std::string RaiseDescriptorLimit() {
 // many open files") must reach the station's log whatever GRPC_VERBOSITY says. Nothing
 // depends on them: the ListenerWatchdog finds a dead listener by itself.
 void LogGrpc(gpr_log_func_args* args) {
-  const char* level = args->severity == GPR_LOG_SEVERITY_ERROR ? "error"
-                      : args->severity == GPR_LOG_SEVERITY_INFO ? "info"
-                                                                : "debug";
-  std::fprintf(stderr, "level=%s msg=\"grpc: %s\"\n", level, args->message);
+  const LogLevel level = args->severity == GPR_LOG_SEVERITY_ERROR  ? LogLevel::kError
+                         : args->severity == GPR_LOG_SEVERITY_INFO ? LogLevel::kInfo
+                                                                   : LogLevel::kDebug;
+  Log(level, absl::StrCat("grpc: ", args->message));
 }
 
 // HOST:PORT of `listen` with the port the server got (the same when it was not 0): where a
@@ -127,7 +122,7 @@ class Watchdog {
       while (!stop_) {
         lock.unlock();
         (void)core->Status();
-        if (absl::Status s = notifier.Notify("WATCHDOG=1"); !s.ok()) Log("warning", std::string(s.message()));
+        if (absl::Status s = notifier.Notify("WATCHDOG=1"); !s.ok()) Log(LogLevel::kWarning, std::string(s.message()));
         lock.lock();
         stopped_.wait_for(lock, period, [this] { return stop_; });
       }
@@ -212,10 +207,7 @@ absl::StatusOr<linecal::DaemonConfig> LoadConfig(const CommandLine& cl) {
     config->web->listen = cl.web_listen;
   }
   config->core.input_budget = config->input_budget;
-  config->core.log = [](const std::string& level, const std::string& message) {
-    Log(level.c_str(), message);
-  };
-  if (!IsLogLevel(config->log_level)) {
+  if (!linecal::ParseLogLevel(config->log_level)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "--log-level: must be debug, info, warning or error, got '", config->log_level, "'"));
   }
@@ -235,7 +227,7 @@ absl::StatusOr<std::unique_ptr<linecal::WebServer>> StartConsole(const linecal::
       linecal::WebServer::Start(core, std::move(options));
   if (!web.ok()) return web.status();
   const char* login = config.auth_token.empty() ? " (no login)" : " (login with the token)";
-  Log("info", absl::StrCat("console on ", config.web->tls ? "https://" : "http://",
+  Log(LogLevel::kInfo, absl::StrCat("console on ", config.web->tls ? "https://" : "http://",
                            BoundAddress(config.web->listen, (*web)->port()), "/", login,
                            ", pages from ", pages));
   return web;
@@ -253,7 +245,7 @@ int ServeUntilSignal(const linecal::DaemonConfig& config, linecal::StationCore* 
   const linecal::ListenerWatchdog listener(
       server, address,
       [&] { return linecal::StartServer(core, address, config.auth_token, LINECAL_VERSION, config.tls); },
-      [](const std::string& level, const std::string& message) { Log(level.c_str(), message); });
+      LogWords);
   sigwait(&signals, &signal);
   return signal;
 }
@@ -263,7 +255,7 @@ int ServeUntilSignal(const linecal::DaemonConfig& config, linecal::StationCore* 
 // cycle did not end in time (it is aborted at the next start).
 int Drain(int signal, std::unique_ptr<linecal::StationCore> core, linecal::RunningServer* server,
           std::unique_ptr<linecal::WebServer> web, const linecal::SystemdNotifier& notifier) {
-  Log("info", std::string("stopping on ") + SignalName(signal));
+  Log(LogLevel::kInfo, std::string("stopping on ") + SignalName(signal));
   notifier.Notify("STOPPING=1").IgnoreError();
   if (const std::optional<int64_t> running = core->Status().running_cycle) {
     // Ends as cancelled at its next step; a cycle that ended meanwhile needs nothing.
@@ -278,7 +270,7 @@ int Drain(int signal, std::unique_ptr<linecal::StationCore> core, linecal::Runni
   if (!core->WaitIdleFor(std::max(left, std::chrono::milliseconds(0)))) {
     // A cycle that does not end within the drain time is left running; the next start
     // stores it as aborted. Better than being killed by systemd with nothing said.
-    Log("error", "the running cycle did not end within the drain time of " +
+    Log(LogLevel::kError, "the running cycle did not end within the drain time of " +
                      std::to_string(kDrainTime.count()) +
                      " s; exiting, it is aborted at the next start");
     std::_Exit(1);
@@ -288,11 +280,11 @@ int Drain(int signal, std::unique_ptr<linecal::StationCore> core, linecal::Runni
   const auto forwarding_deadline =
       std::chrono::steady_clock::now() + (drain_deadline - std::chrono::system_clock::now());
   if (const int64_t queued = core->StopForwarding(forwarding_deadline); queued > 0) {
-    Log("warning", absl::StrCat(queued, " cycles stay queued for the plant database; they are "
+    Log(LogLevel::kWarning, absl::StrCat(queued, " cycles stay queued for the plant database; they are "
                                         "sent after the next start"));
   }
   core.reset();  // joins the calibrations stopped by the cancel
-  Log("info", "stopped");
+  Log(LogLevel::kInfo, "stopped");
   return 0;
 }
 
@@ -312,7 +304,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "linecald: %s\n", std::string(config.status().message()).c_str());
     return 2;
   }
-  Log("info", RaiseDescriptorLimit());
+  // Every record from here on, the core's and gRPC's too, at the configured level and above.
+  linecal::InstallDaemonLog(*linecal::ParseLogLevel(config->log_level));
+  Log(LogLevel::kInfo, RaiseDescriptorLimit());
   gpr_set_log_function(LogGrpc);
 
   // Signals are taken by a waiting thread, not by handlers: the shutdown runs in normal code.
@@ -327,10 +321,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   if ((*core)->store().aborted_at_open() > 0) {
-    Log("warning", std::to_string((*core)->store().aborted_at_open()) + " cycles interrupted by the last stop are stored as aborted");
+    Log(LogLevel::kWarning, std::to_string((*core)->store().aborted_at_open()) + " cycles interrupted by the last stop are stored as aborted");
   }
   if (config->core.plant) {
-    Log("info", absl::StrCat("forwarding cycles to the plant database as station ",
+    Log(LogLevel::kInfo, absl::StrCat("forwarding cycles to the plant database as station ",
                              config->core.plant->station_id, ", batches of ",
                              config->core.plant->batch));
   }
@@ -350,10 +344,10 @@ int main(int argc, char** argv) {
   if (!gpr_should_log(GPR_LOG_SEVERITY_ERROR)) gpr_set_log_verbosity(GPR_LOG_SEVERITY_ERROR);
   const std::string listening = "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
   const char* tls = !config->tls ? ", insecure" : config->tls->require_client_cert ? ", mutual TLS" : ", TLS";
-  Log("info", listening + ", database " + config->core.db_path + tls +
+  Log(LogLevel::kInfo, listening + ", database " + config->core.db_path + tls +
                   (config->auth_token.empty() ? ", no token" : ", token authentication"));
   const linecal::SystemdNotifier notifier = linecal::SystemdNotifier::FromEnvironment();
-  if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok()) Log("warning", std::string(s.message()));
+  if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok()) Log(LogLevel::kWarning, std::string(s.message()));
   const int signal = ServeUntilSignal(*config, core->get(), &*server, notifier, signals);
   return Drain(signal, *std::move(core), &*server, *std::move(web), notifier);
 }

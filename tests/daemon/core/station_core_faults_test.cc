@@ -61,9 +61,9 @@ class StationCoreFaultTest : public ::testing::Test {
     config_.car_model_paths = {(dir_ / "car.json").string()};
     config_.db_path = (dir_ / "station.db").string();
     config_.data_root = (dir_ / "data").string();
-    config_.log = [this](const std::string& level, const std::string& message) {
+    config_.log = [this](const LogRecord& record) {
       std::lock_guard<std::mutex> lock(log_mutex_);
-      log_.emplace_back(level, message);
+      log_.emplace_back(LogLevelName(record.level), record.message);
     };
   }
   void TearDown() override {
