@@ -37,21 +37,12 @@ std::int64_t NowNs() {
       .count();
 }
 
-Verdict ToStored(SensorVerdict v) {
-  switch (v) {
-    case SensorVerdict::kPass: return Verdict::kPass;
-    case SensorVerdict::kFail: return Verdict::kFail;
-    case SensorVerdict::kError: return Verdict::kError;
-  }
-  return Verdict::kError;
-}
-
 StoredSensorResult ToStored(const SensorCalibration& s) {
   constexpr double kDeg = kRadToDeg;
   StoredSensorResult r;
   r.sensor = s.name;
   r.kind = SensorKindName(s.kind);
-  r.verdict = ToStored(s.verdict);
+  r.verdict = s.verdict;
   r.reason = s.reason;
   r.message = s.message;
   if (s.solved) {
@@ -127,8 +118,8 @@ absl::StatusOr<std::unique_ptr<CaptureSource>> MakeCaptureSource(const StationCo
 Verdict OverallVerdict(const std::vector<SensorCalibration>& sensors) {
   bool any_error = sensors.empty(), all_pass = !sensors.empty();
   for (const SensorCalibration& s : sensors) {
-    any_error |= s.verdict == SensorVerdict::kError;
-    all_pass &= s.verdict == SensorVerdict::kPass;
+    any_error |= s.verdict == Verdict::kError;
+    all_pass &= s.verdict == Verdict::kPass;
   }
   return all_pass ? Verdict::kPass : any_error ? Verdict::kError : Verdict::kFail;
 }
@@ -428,12 +419,13 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
 }
 
 absl::Status StationCore::Event(int64_t id, const std::string& vin, const std::string& type,
-                                const std::string& sensor, const std::string& detail, Verdict verdict) {
+                                const std::string& sensor, const std::string& detail,
+                                std::optional<Verdict> verdict) {
   absl::StatusOr<int64_t> seq = store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
   changed_.notify_all();
   Log(LogLevel::kDebug,
       absl::StrCat("event ", type, sensor.empty() ? "" : " ", sensor, detail.empty() ? "" : ": ", detail,
-                   verdict == Verdict::kNone ? "" : absl::StrCat(" (", VerdictName(verdict), ")")),
+                   verdict ? absl::StrCat(" (", VerdictName(*verdict), ")") : ""),
       id, vin);
   return seq.status();
 }
@@ -498,7 +490,7 @@ absl::StatusOr<AcquiredCapture> StationCore::AcquireCapture(int64_t id, const Cy
   cycle.frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
   cycle.cancel = &cancel_;
   cycle.event = [this, id, vin = request.vin](const std::string& type, const std::string& sensor,
-                                              const std::string& detail, Verdict verdict) {
+                                              const std::string& detail, std::optional<Verdict> verdict) {
     Event(id, vin, type, sensor, detail, verdict).IgnoreError();
   };
   return capture_source_->Acquire(cycle);
@@ -514,7 +506,7 @@ StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& v
       SensorCalibration failed;
       failed.name = m.name;
       failed.kind = m.kind;
-      failed.verdict = SensorVerdict::kError;
+      failed.verdict = Verdict::kError;
       failed.reason = absl::StrCat("acquisition_failed: ", f->second);
       failed.message = f->second;
       sensors.push_back(std::move(failed));
@@ -532,8 +524,8 @@ StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& v
                                                  : absl::StrCat("store_unavailable: ", st.message());
       return end;
     }
-    Event(id, vin, "sensor_verdict", s.name, s.reason, ToStored(s.verdict)).IgnoreError();
-    if (s.verdict != SensorVerdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
+    Event(id, vin, "sensor_verdict", s.name, s.reason, s.verdict).IgnoreError();
+    if (s.verdict != Verdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
   }
   end.verdict = OverallVerdict(sensors);
   end.reason = absl::StrJoin(not_passed, ",");

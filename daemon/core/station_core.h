@@ -273,7 +273,7 @@ class StationCore {
   void JoinAbandoned(bool all);
   // Stores an event of cycle `id` (of `vin`), wakes the watchers and logs it (debug).
   absl::Status Event(int64_t id, const std::string& vin, const std::string& type, const std::string& sensor, const std::string& detail,
-                     Verdict verdict = Verdict::kNone);
+                     std::optional<Verdict> verdict = std::nullopt);
   const CarModel* FindCar(const std::string& id) const;
 
   const StationCoreConfig config_;

@@ -263,22 +263,7 @@ const char* CycleStateName(CycleState state) {
   return "running";
 }
 
-const char* VerdictName(Verdict verdict) {
-  switch (verdict) {
-    case Verdict::kNone: return "";
-    case Verdict::kPass: return "pass";
-    case Verdict::kFail: return "fail";
-    case Verdict::kError: return "error";
-  }
-  return "";
-}
-
-Verdict ParseVerdict(const std::string& s) {
-  if (s == "pass") return Verdict::kPass;
-  if (s == "fail") return Verdict::kFail;
-  if (s == "error") return Verdict::kError;
-  return Verdict::kNone;
-}
+const char* VerdictName(std::optional<Verdict> verdict) { return verdict ? VerdictName(*verdict) : ""; }
 
 CycleState ParseCycleState(const std::string& s) {
   if (s == "done") return CycleState::kDone;
@@ -578,7 +563,7 @@ absl::StatusOr<CyclePage> Store::ListCycles(const CycleFilter& filter) {
   Statement s(db_, sql.c_str());
   s.Bind(1, filter.vin).Bind(2, filter.since_ns).Bind(3, filter.until_ns)
       .Bind(4, static_cast<int64_t>(filter.verdict.has_value()))
-      .Bind(5, std::string(VerdictName(filter.verdict.value_or(Verdict::kNone))))
+      .Bind(5, std::string(VerdictName(filter.verdict)))
       .Bind(6, after_started).Bind(7, after_id)
       // One more than the page: whether it exists says if there is a next page.
       .Bind(8, static_cast<int64_t>(filter.page_size) + 1);

@@ -91,7 +91,7 @@ void ExpectSameResults(const StoredCycle& stored, const CycleCalibration& offlin
       if (x.sensor == s.name) r = &x;
     }
     ASSERT_NE(r, nullptr);
-    EXPECT_EQ(r->verdict == Verdict::kPass, s.verdict == SensorVerdict::kPass);
+    EXPECT_EQ(r->verdict == Verdict::kPass, s.verdict == Verdict::kPass);
     EXPECT_EQ(r->reason, s.reason);
     EXPECT_EQ(r->features_used, s.features_used);
     EXPECT_EQ(r->residual_rms, s.residual_rms);  // bit for bit: the same code on the same bytes
@@ -136,7 +136,7 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
   absl::StatusOr<CycleCalibration> offline = CalibrateCapture(*capture);
   ASSERT_TRUE(offline.ok());
   ExpectSameResults(*cycle, *offline);
-  EXPECT_EQ(cycle->verdict == Verdict::kPass, offline->verdict == SensorVerdict::kPass);
+  EXPECT_EQ(cycle->verdict == Verdict::kPass, offline->verdict == Verdict::kPass);
 }
 
 TEST_F(StationCoreTest, ReplaySourceGivesTheOfflineResult) {

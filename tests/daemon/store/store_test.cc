@@ -119,7 +119,7 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
   ASSERT_TRUE(id.ok()) << id.status();
   EXPECT_EQ(*store->RunningCycle(), std::optional<int64_t>(*id));
   for (int i = 0; i < 3; ++i) {
-    absl::StatusOr<int64_t> seq = store->AppendEvent({*id, 0, 1000 + i, "sensor_acquired", "front_camera", "", Verdict::kNone});
+    absl::StatusOr<int64_t> seq = store->AppendEvent({*id, 0, 1000 + i, "sensor_acquired", "front_camera", "", std::nullopt});
     ASSERT_TRUE(seq.ok()) << seq.status();
     EXPECT_EQ(*seq, i);
   }
@@ -158,7 +158,7 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
 TEST_F(StoreTest, ErrorCodesOfUnknownAndEndedCycles) {
   std::unique_ptr<Store> store = OpenOk();
   EXPECT_EQ(store->GetCycle(42).status().code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(store->AppendEvent({42, 0, 1, "started", "", "", Verdict::kNone}).status().code(),
+  EXPECT_EQ(store->AppendEvent({42, 0, 1, "started", "", "", std::nullopt}).status().code(),
             absl::StatusCode::kNotFound);
   EXPECT_EQ(store->PutSensorResult(42, CameraResult()).code(), absl::StatusCode::kNotFound);
   EXPECT_EQ(store->EndCycle(42, CycleState::kDone, Verdict::kPass, "", 1).code(), absl::StatusCode::kNotFound);
@@ -289,7 +289,7 @@ TEST_F(StoreTest, KillNineLosesNothingCommittedAndAbortsTheInterruptedCycle) {
     for (int64_t i = 0;; ++i) {
       absl::StatusOr<int64_t> id = (*store)->BeginCycle(Request("WVWZZZ1JZXW000001", i));
       if (!id.ok()) ::_exit(4);
-      (*store)->AppendEvent({*id, 0, i, "started", "", "", Verdict::kNone}).IgnoreError();
+      (*store)->AppendEvent({*id, 0, i, "started", "", "", std::nullopt}).IgnoreError();
       // Every second cycle ends: the other half are left running, as a crash leaves them.
       if (i % 2 == 0 && !(*store)->EndCycle(*id, CycleState::kDone, Verdict::kPass, "", i + 1).ok()) ::_exit(5);
       if (::write(fds[1], &*id, sizeof(*id)) != sizeof(*id)) ::_exit(6);
