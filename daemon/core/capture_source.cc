@@ -30,13 +30,14 @@ class SimulatorSource : public CaptureSource {
       if (cycle.id >= m.from_cycle) o.moved_boards.push_back(m.move);
     }
     absl::StatusOr<SimulationSummary> sim =
-        SimulateCapture(*cycle.station, *cycle.car, o, static_cast<std::uint64_t>(cycle.id), cycle.dir,
-                        [&](int, int, const std::string& sensor) {
+        SimulateCapture(*cycle.station, *cycle.car, o, static_cast<std::uint64_t>(cycle.id),
+                        cycle.dir, [&](int, int, const std::string& sensor) {
                           cycle.event("sensor_acquired", sensor, "", std::nullopt);
                         });
     if (absl::IsCancelled(sim.status())) return sim.status();
     if (!sim.ok()) {
-      return absl::Status(sim.status().code(), absl::StrCat("acquisition_failed: ", sim.status().message()));
+      return absl::Status(sim.status().code(),
+                          absl::StrCat("acquisition_failed: ", sim.status().message()));
     }
     return AcquiredCapture{};
   }
@@ -56,8 +57,9 @@ class ReplaySource : public CaptureSource {
     absl::StatusOr<fs::path> inside =
         ResolveInside(data_root_, capture_, absl::StrCat("'", capture_, "'"), "data_root");
     if (!inside.ok()) {
-      return absl::Status(inside.status().code(),
-                          absl::StrCat("capture_unreadable: source.capture: ", inside.status().message()));
+      return absl::Status(
+          inside.status().code(),
+          absl::StrCat("capture_unreadable: source.capture: ", inside.status().message()));
     }
     return AcquiredCapture{};
   }
@@ -69,7 +71,8 @@ class ReplaySource : public CaptureSource {
 
 class LiveSource : public CaptureSource {
  public:
-  LiveSource(std::map<std::string, std::unique_ptr<SensorSource>> sources, std::chrono::milliseconds deadline)
+  LiveSource(std::map<std::string, std::unique_ptr<SensorSource>> sources,
+             std::chrono::milliseconds deadline)
       : sources_(std::move(sources)), deadline_(deadline) {}
 
   absl::StatusOr<AcquiredCapture> Acquire(const CaptureCycle& cycle) override {
@@ -108,7 +111,8 @@ class LiveSource : public CaptureSource {
                                             std::map<std::string, std::string>* failures) {
     const auto deadline = std::chrono::steady_clock::now() + deadline_;
     const std::vector<SensorModel>& models = cycle.car->sensors;
-    std::vector<absl::StatusOr<CaptureSensor>> acquired(models.size(), absl::UnknownError("not acquired"));
+    std::vector<absl::StatusOr<CaptureSensor>> acquired(models.size(),
+                                                        absl::UnknownError("not acquired"));
     std::vector<std::thread> threads;
     for (size_t i = 0; i < models.size(); ++i) {
       threads.emplace_back([&, i] {
@@ -130,7 +134,8 @@ class LiveSource : public CaptureSource {
                                    got.can_log ? ", CAN log" : ""),
                       std::nullopt);
         } else {
-          cycle.event("sensor_error", sensor.name, std::string(acquired[i].status().message()), Verdict::kError);
+          cycle.event("sensor_error", sensor.name, std::string(acquired[i].status().message()),
+                      Verdict::kError);
         }
       });
     }
@@ -153,21 +158,23 @@ class LiveSource : public CaptureSource {
 
 // The error of a configured source for `name` that no car model, or one of another kind,
 // has; OK when every car model that has the sensor has it of the source's kind.
-absl::Status CheckSourceFits(const std::string& name, const SourceConfig& source, const std::vector<CarModel>& cars) {
+absl::Status CheckSourceFits(const std::string& name, const SourceConfig& source,
+                             const std::vector<CarModel>& cars) {
   bool found = false;
   for (const CarModel& car : cars) {
     const SensorModel* sensor = car.FindSensor(name);
     if (sensor == nullptr) continue;
     found = true;
     if (SourceTypeKind(source.type) != sensor->kind) {
-      return absl::InvalidArgumentError(absl::StrCat("source.sensors.", name, ".type: '", SourceTypeName(source.type),
-                                                     "' serves ", SensorKindName(SourceTypeKind(source.type)),
-                                                     "s, but '", name, "' of car model '", car.id, "' is a ",
-                                                     SensorKindName(sensor->kind)));
+      return absl::InvalidArgumentError(
+          absl::StrCat("source.sensors.", name, ".type: '", SourceTypeName(source.type),
+                       "' serves ", SensorKindName(SourceTypeKind(source.type)), "s, but '", name,
+                       "' of car model '", car.id, "' is a ", SensorKindName(sensor->kind)));
     }
   }
   if (!found) {
-    return absl::InvalidArgumentError(absl::StrCat("source.sensors.", name, ": no car model has a sensor '", name, "'"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("source.sensors.", name, ": no car model has a sensor '", name, "'"));
   }
   return absl::OkStatus();
 }
@@ -191,25 +198,26 @@ absl::StatusOr<std::unique_ptr<CaptureSource>> MakeReplaySource(const std::strin
   return std::make_unique<ReplaySource>(data_root, capture);
 }
 
-absl::StatusOr<std::unique_ptr<CaptureSource>> MakeLiveSource(const std::map<std::string, SourceConfig>& sources,
-                                                              const SensorSourceFactory& make_source,
-                                                              const std::vector<CarModel>& cars,
-                                                              std::chrono::milliseconds deadline) {
+absl::StatusOr<std::unique_ptr<CaptureSource>> MakeLiveSource(
+    const std::map<std::string, SourceConfig>& sources, const SensorSourceFactory& make_source,
+    const std::vector<CarModel>& cars, std::chrono::milliseconds deadline) {
   std::map<std::string, std::unique_ptr<SensorSource>> built_sources;
   for (const auto& [name, source] : sources) {
     if (absl::Status s = CheckSourceFits(name, source, cars); !s.ok()) return s;
     absl::StatusOr<std::unique_ptr<SensorSource>> built =
         make_source ? make_source(name, source) : MakeSensorSource(source);
     if (!built.ok()) {
-      return absl::Status(built.status().code(), absl::StrCat("source.sensors.", name, ".", built.status().message()));
+      return absl::Status(built.status().code(),
+                          absl::StrCat("source.sensors.", name, ".", built.status().message()));
     }
     built_sources[name] = std::move(*built);
   }
   for (const CarModel& car : cars) {
     for (const SensorModel& sensor : car.sensors) {
       if (!built_sources.contains(sensor.name)) {
-        return absl::InvalidArgumentError(absl::StrCat("source.sensors: no source for sensor '", sensor.name,
-                                                       "' of car model '", car.id, "'"));
+        return absl::InvalidArgumentError(absl::StrCat("source.sensors: no source for sensor '",
+                                                       sensor.name, "' of car model '", car.id,
+                                                       "'"));
       }
     }
   }

@@ -30,8 +30,8 @@
 namespace linecal {
 
 // Builds the source of a sensor from its configuration (MakeSensorSource by default).
-using SensorSourceFactory =
-    std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(const std::string& sensor, const SourceConfig& config)>;
+using SensorSourceFactory = std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(
+    const std::string& sensor, const SourceConfig& config)>;
 
 // simulator: a board that stands moved from cycle `from_cycle` on (a knocked board, for the
 // station-health alarm's tests and demos; SimulatorOptions::moved_boards).
@@ -41,8 +41,9 @@ struct SimulatedBoardMove {
 };
 
 // One event of the cycle's stream: type, sensor (empty: cycle-wide), detail, verdict.
-using CycleEventSink = std::function<void(const std::string& type, const std::string& sensor,
-                                          const std::string& detail, std::optional<Verdict> verdict)>;
+using CycleEventSink =
+    std::function<void(const std::string& type, const std::string& sensor,
+                       const std::string& detail, std::optional<Verdict> verdict)>;
 
 // One cycle as a capture source needs it; the pointers outlive Acquire.
 struct CaptureCycle {
@@ -91,9 +92,8 @@ absl::StatusOr<std::unique_ptr<CaptureSource>> MakeReplaySource(const std::strin
 // `make_source` (empty: MakeSensorSource): every configured sensor exists in a car model with
 // the kind its source serves, and every sensor of every car model has a source, else
 // InvalidArgument naming "source.sensors.<name>". All sensors together get `deadline`.
-absl::StatusOr<std::unique_ptr<CaptureSource>> MakeLiveSource(const std::map<std::string, SourceConfig>& sources,
-                                                              const SensorSourceFactory& make_source,
-                                                              const std::vector<CarModel>& cars,
-                                                              std::chrono::milliseconds deadline);
+absl::StatusOr<std::unique_ptr<CaptureSource>> MakeLiveSource(
+    const std::map<std::string, SourceConfig>& sources, const SensorSourceFactory& make_source,
+    const std::vector<CarModel>& cars, std::chrono::milliseconds deadline);
 
 }  // namespace linecal

@@ -377,7 +377,8 @@ absl::Status ReadService(const JsonField& root, DaemonConfig* c) {
   absl::StatusOr<std::string> level = root.StringOr("log_level", c->log_level);
   if (!level.ok()) return level.status();
   if (*level != "debug" && *level != "info" && *level != "warning" && *level != "error") {
-    return root.Error("log_level", absl::StrCat("must be debug, info, warning or error, got '", *level, "'"));
+    return root.Error("log_level",
+                      absl::StrCat("must be debug, info, warning or error, got '", *level, "'"));
   }
   c->log_level = *level;
   absl::StatusOr<std::string> token = root.StringOr("auth_token", "");
@@ -451,7 +452,8 @@ absl::Status ReadSource(const JsonField& root, const fs::path& base, StationCore
     }
     core->replay_capture = *capture;
   } else {
-    return source->Error("type", absl::StrCat("must be 'simulator', 'replay' or 'live', got '", *type, "'"));
+    return source->Error(
+        "type", absl::StrCat("must be 'simulator', 'replay' or 'live', got '", *type, "'"));
   }
   return absl::OkStatus();
 }
@@ -485,7 +487,8 @@ absl::Status ReadSections(const JsonField& root, const fs::path& base, DaemonCon
     absl::StatusOr<JsonField> deadlines = root.Object("deadlines_ms");
     if (!deadlines.ok()) return deadlines.status();
     if (absl::Status s = deadlines->AllowOnlyKeys({"acquire", "calibrate"}); !s.ok()) return s;
-    absl::StatusOr<std::chrono::milliseconds> acquire = Milliseconds(*deadlines, "acquire", c->core.acquire_deadline);
+    absl::StatusOr<std::chrono::milliseconds> acquire =
+        Milliseconds(*deadlines, "acquire", c->core.acquire_deadline);
     if (!acquire.ok()) return acquire.status();
     absl::StatusOr<std::chrono::milliseconds> calibrate =
         Milliseconds(*deadlines, "calibrate", c->core.calibrate_deadline);

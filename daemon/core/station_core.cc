@@ -8,9 +8,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <numbers>
-
 #include <nlohmann/json.hpp>
+#include <numbers>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -102,8 +101,8 @@ void RemoveAbortedCaptures(const std::string& data_root,
 
 // The capture source of `config.source`: its checks (a replayed capture that reads, a live
 // source for every sensor) made once here, at Create.
-absl::StatusOr<std::unique_ptr<CaptureSource>> MakeCaptureSource(const StationCoreConfig& config,
-                                                                 const std::vector<CarModel>& cars) {
+absl::StatusOr<std::unique_ptr<CaptureSource>> MakeCaptureSource(
+    const StationCoreConfig& config, const std::vector<CarModel>& cars) {
   switch (config.source) {
     case CycleSource::kReplay:
       return MakeReplaySource(config.data_root, config.replay_capture, config.input_budget);
@@ -168,9 +167,8 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     return absl::InvalidArgumentError(
         absl::StrCat("data_root: '", config.data_root, "': ", std::strerror(errno)));
   }
-  std::unique_ptr<StationCore> core(
-      new StationCore(config, std::move(*station), std::move(cars), std::move(*store),
-                      *std::move(capture_source)));
+  std::unique_ptr<StationCore> core(new StationCore(config, std::move(*station), std::move(cars),
+                                                    std::move(*store), *std::move(capture_source)));
   core->data_root_dev_ = root.st_dev;
   core->data_root_ino_ = root.st_ino;
   if (config.plant) {
@@ -184,7 +182,9 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     forwarding.batch = config.plant->batch;
     forwarding.max_retry_interval = config.plant->max_retry_interval;
     StationCore* logger = core.get();
-    forwarding.log = [logger](const LogRecord& record) { logger->Log(record.level, record.message); };
+    forwarding.log = [logger](const LogRecord& record) {
+      logger->Log(record.level, record.message);
+    };
     absl::StatusOr<std::unique_ptr<Forwarder>> forwarder =
         Forwarder::Start(core->store_.get(), std::move(forwarding));
     if (!forwarder.ok()) return forwarder.status();
@@ -193,8 +193,9 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   return core;
 }
 
-StationCore::StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
-                         std::unique_ptr<Store> store, std::unique_ptr<CaptureSource> capture_source)
+StationCore::StationCore(StationCoreConfig config, StationLayout station,
+                         std::vector<CarModel> cars, std::unique_ptr<Store> store,
+                         std::unique_ptr<CaptureSource> capture_source)
     : config_(std::move(config)),
       station_(std::move(station)),
       cars_(std::move(cars)),
@@ -208,14 +209,15 @@ StationCore::~StationCore() {
   JoinAbandoned(/*all=*/true);
   if (StoreUnstoredEnd().ok()) return;
   Log(LogLevel::kError,
-      absl::StrCat("cycle ", unstored_end_->id, " ended ", CycleStateName(unstored_end_->state), " (",
-                   unstored_end_->reason,
+      absl::StrCat("cycle ", unstored_end_->id, " ended ", CycleStateName(unstored_end_->state),
+                   " (", unstored_end_->reason,
                    ") but its end could not be stored; the next start stores it as "
                    "aborted (daemon_restarted)"),
       unstored_end_->id, unstored_end_->vin);
 }
 
-void StationCore::Log(LogLevel level, const std::string& message, int64_t cycle, const std::string& vin) const {
+void StationCore::Log(LogLevel level, const std::string& message, int64_t cycle,
+                      const std::string& vin) const {
   const LogRecord record{level, message, cycle, vin};
   if (config_.log) {
     config_.log(record);
@@ -424,8 +426,8 @@ absl::Status StationCore::Event(int64_t id, const std::string& vin, const std::s
   absl::StatusOr<int64_t> seq = store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
   changed_.notify_all();
   Log(LogLevel::kDebug,
-      absl::StrCat("event ", type, sensor.empty() ? "" : " ", sensor, detail.empty() ? "" : ": ", detail,
-                   verdict ? absl::StrCat(" (", VerdictName(*verdict), ")") : ""),
+      absl::StrCat("event ", type, sensor.empty() ? "" : " ", sensor, detail.empty() ? "" : ": ",
+                   detail, verdict ? absl::StrCat(" (", VerdictName(*verdict), ")") : ""),
       id, vin);
   return seq.status();
 }
@@ -440,12 +442,15 @@ StationCore::CycleEnd StationCore::EndOf(int64_t id, CycleState state, std::stri
 
 void StationCore::RunCycle(int64_t id, CycleRequest request) {
   const CarModel& car = *FindCar(request.car_model_id);
-  Log(LogLevel::kInfo, absl::StrCat("cycle ", id, " started (car model ", car.id, ")"), id, request.vin);
+  Log(LogLevel::kInfo, absl::StrCat("cycle ", id, " started (car model ", car.id, ")"), id,
+      request.vin);
   Event(id, request.vin, "started", "", car.id).IgnoreError();
   const absl::StatusOr<StoredCycle> stored = store_->GetCycle(id);
-  CycleEnd end = stored.ok() ? WorkCycle(id, request, car, *stored) : EndOf(id, CycleState::kDone, "store_unavailable");
+  CycleEnd end = stored.ok() ? WorkCycle(id, request, car, *stored)
+                             : EndOf(id, CycleState::kDone, "store_unavailable");
   DecideEnd(&end);
-  // The capture of a cycle that acquired it is kept only when asked (a replayed one is never removed).
+  // The capture of a cycle that acquired it is kept only when asked (a replayed one is never
+  // removed).
   if (stored.ok() && !request.record_capture && config_.source != CycleSource::kReplay &&
       !stored->capture_path.empty()) {
     std::error_code ec;
@@ -457,10 +462,12 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
   PublishEnd(end);
 }
 
-StationCore::CycleEnd StationCore::WorkCycle(int64_t id, const CycleRequest& request, const CarModel& car,
-                                             const StoredCycle& stored) {
+StationCore::CycleEnd StationCore::WorkCycle(int64_t id, const CycleRequest& request,
+                                             const CarModel& car, const StoredCycle& stored) {
   const CycleEnd cancelled = EndOf(id, CycleState::kCancelled, "cancelled");
-  const auto error = [id](std::string reason) { return EndOf(id, CycleState::kDone, std::move(reason)); };
+  const auto error = [id](std::string reason) {
+    return EndOf(id, CycleState::kDone, std::move(reason));
+  };
   const std::string dir = (fs::path(config_.data_root) / stored.capture_path).string();
   absl::StatusOr<AcquiredCapture> acquired = AcquireCapture(id, request, car, stored, dir);
   if (absl::IsCancelled(acquired.status())) return cancelled;
@@ -472,12 +479,14 @@ StationCore::CycleEnd StationCore::WorkCycle(int64_t id, const CycleRequest& req
   if (absl::IsCancelled(result.status())) return cancelled;
   if (absl::IsDeadlineExceeded(result.status())) return error("calibrate_deadline_exceeded");
   if (!result.ok()) return error(absl::StrCat("calibration_failed: ", result.status().message()));
-  if (cancel_) return cancelled;  // asked while the sensors were computed: their results are not stored
+  if (cancel_)
+    return cancelled;  // asked while the sensors were computed: their results are not stored
   return StoreResults(id, request.vin, car, acquired->failures, std::move(result->sensors));
 }
 
 absl::StatusOr<AcquiredCapture> StationCore::AcquireCapture(int64_t id, const CycleRequest& request,
-                                                            const CarModel& car, const StoredCycle& stored,
+                                                            const CarModel& car,
+                                                            const StoredCycle& stored,
                                                             const std::string& dir) {
   CaptureCycle cycle;
   cycle.id = id;
@@ -487,16 +496,19 @@ absl::StatusOr<AcquiredCapture> StationCore::AcquireCapture(int64_t id, const Cy
   cycle.aligner = request.aligner;
   cycle.started_ns = stored.started_ns;
   cycle.dir = dir;
-  cycle.frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
+  cycle.frames =
+      request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
   cycle.cancel = &cancel_;
   cycle.event = [this, id, vin = request.vin](const std::string& type, const std::string& sensor,
-                                              const std::string& detail, std::optional<Verdict> verdict) {
+                                              const std::string& detail,
+                                              std::optional<Verdict> verdict) {
     Event(id, vin, type, sensor, detail, verdict).IgnoreError();
   };
   return capture_source_->Acquire(cycle);
 }
 
-StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& vin, const CarModel& car,
+StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& vin,
+                                                const CarModel& car,
                                                 const std::map<std::string, std::string>& failures,
                                                 std::vector<SensorCalibration> calibrated) {
   // The sensors that failed to acquire take their place in the car model's order.
@@ -520,8 +532,9 @@ StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& v
   std::vector<std::string> not_passed;
   for (const SensorCalibration& s : sensors) {
     if (absl::Status st = store_->PutSensorResult(id, ToStored(s)); !st.ok()) {
-      end.reason = absl::IsResourceExhausted(st) ? FailureReason("", st)
-                                                 : absl::StrCat("store_unavailable: ", st.message());
+      end.reason = absl::IsResourceExhausted(st)
+                       ? FailureReason("", st)
+                       : absl::StrCat("store_unavailable: ", st.message());
       return end;
     }
     Event(id, vin, "sensor_verdict", s.name, s.reason, s.verdict).IgnoreError();
@@ -598,9 +611,8 @@ absl::Status StationCore::StoreEnd(CycleEnd* end) {
     return s;
   };
   if (!end->event_stored) {
-    absl::Status s = until_stored([&] {
-      return Event(end->id, end->vin, "cycle_ended", "", end->reason, end->verdict);
-    });
+    absl::Status s = until_stored(
+        [&] { return Event(end->id, end->vin, "cycle_ended", "", end->reason, end->verdict); });
     if (!s.ok()) return s;
     end->event_stored = true;
   }
@@ -630,7 +642,8 @@ absl::Status StationCore::StoreUnstoredEnd() {
   }
   unstored_end_.reset();
   if (forwarder_) forwarder_->Notify();
-  Log(LogLevel::kWarning, absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"), end->id,
+  Log(LogLevel::kWarning,
+      absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"), end->id,
       end->vin);
   changed_.notify_all();
   return absl::OkStatus();

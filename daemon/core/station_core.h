@@ -233,16 +233,19 @@ class StationCore {
   void RunCycle(int64_t id, CycleRequest request);
   // The cycle's work, acquire -> read -> calibrate -> store: the end it reached (state,
   // verdict, reason; not yet `ended_ns`). Every failing step ends it in error with a reason.
-  CycleEnd WorkCycle(int64_t id, const CycleRequest& request, const CarModel& car, const StoredCycle& stored);
+  CycleEnd WorkCycle(int64_t id, const CycleRequest& request, const CarModel& car,
+                     const StoredCycle& stored);
   // Acquire: the capture source makes the cycle's capture readable in `dir`
   // (CaptureSource::Acquire, its events into the cycle's stream).
-  absl::StatusOr<AcquiredCapture> AcquireCapture(int64_t id, const CycleRequest& request, const CarModel& car,
-                                                 const StoredCycle& stored, const std::string& dir);
+  absl::StatusOr<AcquiredCapture> AcquireCapture(int64_t id, const CycleRequest& request,
+                                                 const CarModel& car, const StoredCycle& stored,
+                                                 const std::string& dir);
   // Store: every sensor's result in the car model's order (a sensor that failed to acquire as
   // its `error`, reason "acquisition_failed: <message>") and its sensor_verdict event; the
   // end is done with the overall verdict and the not-passed sensors as reason, or error when
   // a result cannot be stored.
-  CycleEnd StoreResults(int64_t id, const std::string& vin, const CarModel& car, const std::map<std::string, std::string>& failures,
+  CycleEnd StoreResults(int64_t id, const std::string& vin, const CarModel& car,
+                        const std::map<std::string, std::string>& failures,
                         std::vector<SensorCalibration> calibrated);
   // Once the work is over: a cancel accepted until now makes the cycle cancelled (CancelCycle
   // refuses from now on); a data root or database removed meanwhile makes it an error.
@@ -268,11 +271,13 @@ class StationCore {
   // when `what` is empty). Remembers a full disk for Health().
   std::string FailureReason(const std::string& what, const absl::Status& status);
   // One record to config_.log (else WriteLog); about cycle `cycle` (0: none) of `vin`.
-  void Log(LogLevel level, const std::string& message, int64_t cycle = 0, const std::string& vin = "") const;
+  void Log(LogLevel level, const std::string& message, int64_t cycle = 0,
+           const std::string& vin = "") const;
   // Joins calibrations abandoned at their deadline: those done, or all when `all`.
   void JoinAbandoned(bool all);
   // Stores an event of cycle `id` (of `vin`), wakes the watchers and logs it (debug).
-  absl::Status Event(int64_t id, const std::string& vin, const std::string& type, const std::string& sensor, const std::string& detail,
+  absl::Status Event(int64_t id, const std::string& vin, const std::string& type,
+                     const std::string& sensor, const std::string& detail,
                      std::optional<Verdict> verdict = std::nullopt);
   const CarModel* FindCar(const std::string& id) const;
 

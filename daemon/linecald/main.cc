@@ -122,7 +122,8 @@ class Watchdog {
       while (!stop_) {
         lock.unlock();
         (void)core->Status();
-        if (absl::Status s = notifier.Notify("WATCHDOG=1"); !s.ok()) Log(LogLevel::kWarning, std::string(s.message()));
+        if (absl::Status s = notifier.Notify("WATCHDOG=1"); !s.ok())
+          Log(LogLevel::kWarning, std::string(s.message()));
         lock.lock();
         stopped_.wait_for(lock, period, [this] { return stop_; });
       }
@@ -195,9 +196,9 @@ std::optional<CommandLine> ParseCommandLine(int argc, char** argv, int* exit_cod
 // Errors as linecald prints them after "linecald: ".
 absl::StatusOr<linecal::DaemonConfig> LoadConfig(const CommandLine& cl) {
   absl::StatusOr<linecal::DaemonConfig> config =
-      cl.config_path.empty()
-          ? absl::StatusOr<linecal::DaemonConfig>(linecal::DefaultDaemonConfig(LINECAL_DEPLOY_DIR, cl.data_dir))
-          : linecal::ReadDaemonConfig(cl.config_path);
+      cl.config_path.empty() ? absl::StatusOr<linecal::DaemonConfig>(
+                                   linecal::DefaultDaemonConfig(LINECAL_DEPLOY_DIR, cl.data_dir))
+                             : linecal::ReadDaemonConfig(cl.config_path);
   if (!config.ok()) return config.status();
   if (!cl.listen.empty()) config->listen = cl.listen;
   if (!cl.db.empty()) config->core.db_path = cl.db;
@@ -216,8 +217,8 @@ absl::StatusOr<linecal::DaemonConfig> LoadConfig(const CommandLine& cl) {
 
 // The station console beside the gRPC server when the configuration has a `web` section
 // (else null); the error as linecald prints it.
-absl::StatusOr<std::unique_ptr<linecal::WebServer>> StartConsole(const linecal::DaemonConfig& config,
-                                                                 linecal::StationCore* core) {
+absl::StatusOr<std::unique_ptr<linecal::WebServer>> StartConsole(
+    const linecal::DaemonConfig& config, linecal::StationCore* core) {
   if (!config.web) return nullptr;
   const std::string pages = linecal::FindStaticDir(config.web->static_dir, LINECAL_WEB_STATIC_DIR);
   linecal::WebServerOptions options{config.web->listen, config.web->tls, pages, config.auth_token,
@@ -228,8 +229,8 @@ absl::StatusOr<std::unique_ptr<linecal::WebServer>> StartConsole(const linecal::
   if (!web.ok()) return web.status();
   const char* login = config.auth_token.empty() ? " (no login)" : " (login with the token)";
   Log(LogLevel::kInfo, absl::StrCat("console on ", config.web->tls ? "https://" : "http://",
-                           BoundAddress(config.web->listen, (*web)->port()), "/", login,
-                           ", pages from ", pages));
+                                    BoundAddress(config.web->listen, (*web)->port()), "/", login,
+                                    ", pages from ", pages));
   return web;
 }
 
@@ -244,7 +245,9 @@ int ServeUntilSignal(const linecal::DaemonConfig& config, linecal::StationCore* 
   const std::string address = BoundAddress(config.listen, server->port);
   const linecal::ListenerWatchdog listener(
       server, address,
-      [&] { return linecal::StartServer(core, address, config.auth_token, LINECAL_VERSION, config.tls); },
+      [&] {
+        return linecal::StartServer(core, address, config.auth_token, LINECAL_VERSION, config.tls);
+      },
       LogWords);
   sigwait(&signals, &signal);
   return signal;
@@ -271,8 +274,8 @@ int Drain(int signal, std::unique_ptr<linecal::StationCore> core, linecal::Runni
     // A cycle that does not end within the drain time is left running; the next start
     // stores it as aborted. Better than being killed by systemd with nothing said.
     Log(LogLevel::kError, "the running cycle did not end within the drain time of " +
-                     std::to_string(kDrainTime.count()) +
-                     " s; exiting, it is aborted at the next start");
+                              std::to_string(kDrainTime.count()) +
+                              " s; exiting, it is aborted at the next start");
     std::_Exit(1);
   }
   // Cycles not yet at the plant database are shipped while drain time is left and the plant
@@ -280,8 +283,9 @@ int Drain(int signal, std::unique_ptr<linecal::StationCore> core, linecal::Runni
   const auto forwarding_deadline =
       std::chrono::steady_clock::now() + (drain_deadline - std::chrono::system_clock::now());
   if (const int64_t queued = core->StopForwarding(forwarding_deadline); queued > 0) {
-    Log(LogLevel::kWarning, absl::StrCat(queued, " cycles stay queued for the plant database; they are "
-                                        "sent after the next start"));
+    Log(LogLevel::kWarning, absl::StrCat(queued,
+                                         " cycles stay queued for the plant database; they are "
+                                         "sent after the next start"));
   }
   core.reset();  // joins the calibrations stopped by the cancel
   Log(LogLevel::kInfo, "stopped");
@@ -321,12 +325,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   if ((*core)->store().aborted_at_open() > 0) {
-    Log(LogLevel::kWarning, std::to_string((*core)->store().aborted_at_open()) + " cycles interrupted by the last stop are stored as aborted");
+    Log(LogLevel::kWarning, std::to_string((*core)->store().aborted_at_open()) +
+                                " cycles interrupted by the last stop are stored as aborted");
   }
   if (config->core.plant) {
-    Log(LogLevel::kInfo, absl::StrCat("forwarding cycles to the plant database as station ",
-                             config->core.plant->station_id, ", batches of ",
-                             config->core.plant->batch));
+    Log(LogLevel::kInfo,
+        absl::StrCat("forwarding cycles to the plant database as station ",
+                     config->core.plant->station_id, ", batches of ", config->core.plant->batch));
   }
   absl::StatusOr<linecal::RunningServer> server =
       linecal::StartServer(core->get(), config->listen, config->auth_token, LINECAL_VERSION, config->tls);
@@ -345,9 +350,10 @@ int main(int argc, char** argv) {
   const std::string listening = "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
   const char* tls = !config->tls ? ", insecure" : config->tls->require_client_cert ? ", mutual TLS" : ", TLS";
   Log(LogLevel::kInfo, listening + ", database " + config->core.db_path + tls +
-                  (config->auth_token.empty() ? ", no token" : ", token authentication"));
+                           (config->auth_token.empty() ? ", no token" : ", token authentication"));
   const linecal::SystemdNotifier notifier = linecal::SystemdNotifier::FromEnvironment();
-  if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok()) Log(LogLevel::kWarning, std::string(s.message()));
+  if (absl::Status s = notifier.Notify("READY=1\nSTATUS=" + listening); !s.ok())
+    Log(LogLevel::kWarning, std::string(s.message()));
   const int signal = ServeUntilSignal(*config, core->get(), &*server, notifier, signals);
   return Drain(signal, *std::move(core), &*server, *std::move(web), notifier);
 }

@@ -142,9 +142,9 @@ absl::StatusOr<CycleFilter> CycleFilterFromProto(const v1::ListCyclesRequest& re
   }
   if (!f.verdict && request.verdict() != v1::VERDICT_UNSPECIFIED) {
     // proto3 keeps unknown enum numbers: ignoring one would list every cycle.
-    return absl::InvalidArgumentError(absl::StrCat(
-        "verdict = ", static_cast<int>(request.verdict()),
-        ": not a verdict (0 any, 1 pass, 2 fail, 3 error)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("verdict = ", static_cast<int>(request.verdict()),
+                     ": not a verdict (0 any, 1 pass, 2 fail, 3 error)"));
   }
   // Checked here on the uint32 the client sent, so that the message names that value; the
   // store's own check (1..1000) then holds by construction.

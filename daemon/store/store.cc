@@ -263,7 +263,9 @@ const char* CycleStateName(CycleState state) {
   return "running";
 }
 
-const char* VerdictName(std::optional<Verdict> verdict) { return verdict ? VerdictName(*verdict) : ""; }
+const char* VerdictName(std::optional<Verdict> verdict) {
+  return verdict ? VerdictName(*verdict) : "";
+}
 
 CycleState ParseCycleState(const std::string& s) {
   if (s == "done") return CycleState::kDone;

@@ -2,6 +2,7 @@
 // and every line a cycle logs carrying its cycle id and VIN.
 #include "daemon/log/daemon_log.h"
 
+#include <gtest/gtest.h>
 #include <spdlog/sinks/ostream_sink.h>
 
 #include <filesystem>
@@ -10,8 +11,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
@@ -99,10 +98,12 @@ TEST(DaemonLogTest, EveryLineOfACycleCarriesItsCycleIdAndVin) {
     EXPECT_EQ(line.rfind("level=", 0), 0u) << line;
     EXPECT_TRUE(line.ends_with(fields)) << line;
   }
-  EXPECT_EQ(lines.front(),
-            absl::StrCat("level=info msg=\"cycle ", id, " started (car model two_sensor)\"", fields));
+  EXPECT_EQ(lines.front(), absl::StrCat("level=info msg=\"cycle ", id,
+                                        " started (car model two_sensor)\"", fields));
   EXPECT_EQ(lines[1], absl::StrCat("level=debug msg=\"event started: two_sensor\"", fields));
-  EXPECT_EQ(lines.back().rfind(absl::StrCat("level=info msg=\"cycle ", id, " ended done, verdict "), 0), 0u)
+  EXPECT_EQ(
+      lines.back().rfind(absl::StrCat("level=info msg=\"cycle ", id, " ended done, verdict "), 0),
+      0u)
       << lines.back();
 }
 
