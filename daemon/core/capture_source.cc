@@ -32,7 +32,7 @@ class SimulatorSource : public CaptureSource {
     absl::StatusOr<SimulationSummary> sim =
         SimulateCapture(*cycle.station, *cycle.car, o, static_cast<std::uint64_t>(cycle.id),
                         cycle.dir, [&](int, int, const std::string& sensor) {
-                          cycle.event("sensor_acquired", sensor, "", std::nullopt);
+                          cycle.event(EventType::kSensorAcquired, sensor, "", std::nullopt);
                         });
     if (absl::IsCancelled(sim.status())) return sim.status();
     if (!sim.ok()) {
@@ -124,18 +124,18 @@ class LiveSource : public CaptureSource {
         request.deadline = deadline;
         request.cancel = cycle.cancel;
         request.progress = [&](const std::string& detail) {
-          cycle.event("sensor_progress", sensor.name, detail, std::nullopt);
+          cycle.event(EventType::kSensorProgress, sensor.name, detail, std::nullopt);
         };
         acquired[i] = sources_.at(sensor.name)->Acquire(sensor, request);
         if (acquired[i].ok()) {
           const CaptureSensor& got = *acquired[i];
-          cycle.event("sensor_acquired", sensor.name,
+          cycle.event(EventType::kSensorAcquired, sensor.name,
                       absl::StrCat(got.frames.size(), " frames", got.packets ? ", packets" : "",
                                    got.can_log ? ", CAN log" : ""),
                       std::nullopt);
         } else {
-          cycle.event("sensor_error", sensor.name, std::string(acquired[i].status().message()),
-                      Verdict::kError);
+          cycle.event(EventType::kSensorError, sensor.name,
+                      std::string(acquired[i].status().message()), Verdict::kError);
         }
       });
     }

@@ -42,8 +42,8 @@ struct SimulatedBoardMove {
 
 // One event of the cycle's stream: type, sensor (empty: cycle-wide), detail, verdict.
 using CycleEventSink =
-    std::function<void(const std::string& type, const std::string& sensor,
-                       const std::string& detail, std::optional<Verdict> verdict)>;
+    std::function<void(EventType type, const std::string& sensor, const std::string& detail,
+                       std::optional<Verdict> verdict)>;
 
 // One cycle as a capture source needs it; the pointers outlive Acquire.
 struct CaptureCycle {

@@ -420,14 +420,15 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
   return *id;
 }
 
-absl::Status StationCore::Event(int64_t id, const std::string& vin, const std::string& type,
+absl::Status StationCore::Event(int64_t id, const std::string& vin, EventType type,
                                 const std::string& sensor, const std::string& detail,
                                 std::optional<Verdict> verdict) {
   absl::StatusOr<int64_t> seq = store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
   changed_.notify_all();
   Log(LogLevel::kDebug,
-      absl::StrCat("event ", type, sensor.empty() ? "" : " ", sensor, detail.empty() ? "" : ": ",
-                   detail, verdict ? absl::StrCat(" (", VerdictName(*verdict), ")") : ""),
+      absl::StrCat("event ", EventTypeName(type), sensor.empty() ? "" : " ", sensor,
+                   detail.empty() ? "" : ": ", detail,
+                   verdict ? absl::StrCat(" (", VerdictName(*verdict), ")") : ""),
       id, vin);
   return seq.status();
 }
@@ -444,7 +445,7 @@ void StationCore::RunCycle(int64_t id, CycleRequest request) {
   const CarModel& car = *FindCar(request.car_model_id);
   Log(LogLevel::kInfo, absl::StrCat("cycle ", id, " started (car model ", car.id, ")"), id,
       request.vin);
-  Event(id, request.vin, "started", "", car.id).IgnoreError();
+  Event(id, request.vin, EventType::kStarted, "", car.id).IgnoreError();
   const absl::StatusOr<StoredCycle> stored = store_->GetCycle(id);
   CycleEnd end = stored.ok() ? WorkCycle(id, request, car, *stored)
                              : EndOf(id, CycleState::kDone, "store_unavailable");
@@ -499,7 +500,7 @@ absl::StatusOr<AcquiredCapture> StationCore::AcquireCapture(int64_t id, const Cy
   cycle.frames =
       request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
   cycle.cancel = &cancel_;
-  cycle.event = [this, id, vin = request.vin](const std::string& type, const std::string& sensor,
+  cycle.event = [this, id, vin = request.vin](EventType type, const std::string& sensor,
                                               const std::string& detail,
                                               std::optional<Verdict> verdict) {
     Event(id, vin, type, sensor, detail, verdict).IgnoreError();
@@ -537,7 +538,7 @@ StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& v
                        : absl::StrCat("store_unavailable: ", st.message());
       return end;
     }
-    Event(id, vin, "sensor_verdict", s.name, s.reason, s.verdict).IgnoreError();
+    Event(id, vin, EventType::kSensorVerdict, s.name, s.reason, s.verdict).IgnoreError();
     if (s.verdict != Verdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
   }
   end.verdict = OverallVerdict(sensors);
@@ -611,8 +612,9 @@ absl::Status StationCore::StoreEnd(CycleEnd* end) {
     return s;
   };
   if (!end->event_stored) {
-    absl::Status s = until_stored(
-        [&] { return Event(end->id, end->vin, "cycle_ended", "", end->reason, end->verdict); });
+    absl::Status s = until_stored([&] {
+      return Event(end->id, end->vin, EventType::kCycleEnded, "", end->reason, end->verdict);
+    });
     if (!s.ok()) return s;
     end->event_stored = true;
   }
@@ -786,7 +788,8 @@ absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(
         read_after_end = true;
         continue;
       }
-      if (!on_event({cycle_id, next, end.ended_ns, "cycle_ended", "", end.reason, end.verdict})) {
+      if (!on_event({cycle_id, next, end.ended_ns, EventType::kCycleEnded, "", end.reason,
+                     end.verdict})) {
         return absl::CancelledError("the watcher went away");
       }
       return absl::OkStatus();

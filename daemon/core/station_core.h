@@ -276,9 +276,8 @@ class StationCore {
   // Joins calibrations abandoned at their deadline: those done, or all when `all`.
   void JoinAbandoned(bool all);
   // Stores an event of cycle `id` (of `vin`), wakes the watchers and logs it (debug).
-  absl::Status Event(int64_t id, const std::string& vin, const std::string& type,
-                     const std::string& sensor, const std::string& detail,
-                     std::optional<Verdict> verdict = std::nullopt);
+  absl::Status Event(int64_t id, const std::string& vin, EventType type, const std::string& sensor,
+                     const std::string& detail, std::optional<Verdict> verdict = std::nullopt);
   const CarModel* FindCar(const std::string& id) const;
 
   const StationCoreConfig config_;

@@ -59,15 +59,25 @@ v1::SensorKind KindToProto(const std::string& kind) {
   return v1::SENSOR_KIND_UNSPECIFIED;
 }
 
-v1::CycleEvent::Type EventToProto(const std::string& type) {
-  if (type == "started") return v1::CycleEvent::TYPE_STARTED;
-  if (type == "sensor_acquired") return v1::CycleEvent::TYPE_SENSOR_ACQUIRED;
-  if (type == "board_found") return v1::CycleEvent::TYPE_BOARD_FOUND;
-  if (type == "sensor_solved") return v1::CycleEvent::TYPE_SENSOR_SOLVED;
-  if (type == "sensor_verdict") return v1::CycleEvent::TYPE_SENSOR_VERDICT;
-  if (type == "cycle_ended") return v1::CycleEvent::TYPE_CYCLE_ENDED;
-  if (type == "sensor_error") return v1::CycleEvent::TYPE_SENSOR_ERROR;
-  if (type == "sensor_progress") return v1::CycleEvent::TYPE_SENSOR_PROGRESS;
+v1::CycleEvent::Type EventToProto(EventType type) {
+  switch (type) {
+    case EventType::kStarted:
+      return v1::CycleEvent::TYPE_STARTED;
+    case EventType::kSensorAcquired:
+      return v1::CycleEvent::TYPE_SENSOR_ACQUIRED;
+    case EventType::kBoardFound:
+      return v1::CycleEvent::TYPE_BOARD_FOUND;
+    case EventType::kSensorSolved:
+      return v1::CycleEvent::TYPE_SENSOR_SOLVED;
+    case EventType::kSensorVerdict:
+      return v1::CycleEvent::TYPE_SENSOR_VERDICT;
+    case EventType::kCycleEnded:
+      return v1::CycleEvent::TYPE_CYCLE_ENDED;
+    case EventType::kSensorError:
+      return v1::CycleEvent::TYPE_SENSOR_ERROR;
+    case EventType::kSensorProgress:
+      return v1::CycleEvent::TYPE_SENSOR_PROGRESS;
+  }
   return v1::CycleEvent::TYPE_UNSPECIFIED;
 }
 

@@ -67,6 +67,24 @@ const char* VerdictName(std::optional<Verdict> verdict);
 // The inverse of CycleStateName; an unknown word gives kRunning.
 CycleState ParseCycleState(const std::string& name);
 
+// What happened in a cycle (docs/interfaces.md), in the order a cycle has them.
+enum class EventType {
+  kStarted,
+  kSensorAcquired,
+  kSensorProgress,
+  kBoardFound,
+  kSensorSolved,
+  kSensorError,
+  kSensorVerdict,
+  kCycleEnded,
+};
+// "started", "sensor_acquired", "sensor_progress", "board_found", "sensor_solved",
+// "sensor_error", "sensor_verdict", "cycle_ended": the words stored in the database and
+// shown by the console. Pure.
+const char* EventTypeName(EventType type);
+// The inverse of EventTypeName; nullopt for any other word. Pure.
+std::optional<EventType> ParseEventType(absl::string_view name);
+
 // Yaw/pitch/roll (degrees, docs/conventions.md) and position (metres) of a sensor in the car.
 struct MountingValues {
   double yaw_deg = 0, pitch_deg = 0, roll_deg = 0;
@@ -109,7 +127,7 @@ struct StoredEvent {
   int64_t cycle_id = 0;
   int64_t sequence = 0;  // 0, 1, 2, ... per cycle, assigned by AppendEvent
   int64_t time_ns = 0;
-  std::string type;    // "started", "sensor_acquired", ..., "cycle_ended"
+  EventType type = EventType::kStarted;
   std::string sensor;  // empty for cycle-wide events
   std::string detail;
   std::optional<Verdict> verdict;  // sensor_verdict, sensor_error and cycle_ended have one

@@ -131,7 +131,7 @@ class StationCoreLiveTest : public ::testing::Test {
                                   std::map<std::string, Clock::time_point>* arrivals = nullptr) {
     std::vector<std::string> types;
     EXPECT_TRUE(core.WatchCycle(id, [&](const StoredEvent& e) {
-                      types.push_back(e.type + (e.sensor.empty() ? "" : ":" + e.sensor));
+                      types.push_back(EventTypeName(e.type) + std::string(e.sensor.empty() ? "" : ":" + e.sensor));
                       if (arrivals != nullptr) arrivals->emplace(types.back(), Clock::now());
                       return true;
                     }).ok());

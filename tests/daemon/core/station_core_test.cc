@@ -110,7 +110,7 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
   std::vector<std::string> types;
   std::vector<int64_t> sequences;
   ASSERT_TRUE(core->WatchCycle(*id, [&](const StoredEvent& e) {
-                    types.push_back(e.type + (e.sensor.empty() ? "" : ":" + e.sensor));
+                    types.push_back(EventTypeName(e.type) + std::string(e.sensor.empty() ? "" : ":" + e.sensor));
                     sequences.push_back(e.sequence);
                     return true;
                   }).ok());
@@ -250,7 +250,7 @@ TEST_F(StationCoreTest, DatabaseLockedMidCycleEndsInErrorStoredOnceTheLockIsGone
   EXPECT_TRUE(cycle->sensors.empty());
   const std::vector<StoredEvent> events = *core->store().Events(id);
   ASSERT_FALSE(events.empty());
-  EXPECT_EQ(events.back().type, "cycle_ended");
+  EXPECT_EQ(events.back().type, EventType::kCycleEnded);
   EXPECT_EQ(events.back().detail, cycle->reason);
   EXPECT_TRUE(core->store().IntegrityCheck().ok());
 }

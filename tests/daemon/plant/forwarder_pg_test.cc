@@ -520,7 +520,7 @@ TEST_F(ForwarderPgTest, StationAnswersAndStoredResultsAreTheSameWithThePlantDown
     EXPECT_TRUE(stored.ok()) << stored.status();
     if (!stored.ok()) return out;
     for (const StoredEvent& e : *stored) {
-      out.push_back(absl::StrCat(e.type, "|", e.sensor, "|", e.detail));
+      out.push_back(absl::StrCat(EventTypeName(e.type), "|", e.sensor, "|", e.detail));
     }
     return out;
   };
