@@ -369,6 +369,161 @@ absl::StatusOr<std::vector<SimulatedBoardMove>> ParseMovedBoards(const JsonField
   return moves;
 }
 
+// listen, log_level, auth_token and station_id of the file's root.
+absl::Status ReadService(const JsonField& root, DaemonConfig* c) {
+  absl::StatusOr<std::string> listen = root.StringOr("listen", c->listen);
+  if (!listen.ok()) return listen.status();
+  c->listen = *listen;
+  absl::StatusOr<std::string> level = root.StringOr("log_level", c->log_level);
+  if (!level.ok()) return level.status();
+  if (*level != "debug" && *level != "info" && *level != "warning" && *level != "error") {
+    return root.Error("log_level",
+                      absl::StrCat("must be debug, info, warning or error, got '", *level, "'"));
+  }
+  c->log_level = *level;
+  absl::StatusOr<std::string> token = root.StringOr("auth_token", "");
+  if (!token.ok()) return token.status();
+  c->auth_token = *token;
+  absl::StatusOr<std::string> id = root.StringOr("station_id", "station");
+  if (!id.ok()) return id.status();
+  c->core.station_id = *id;
+  return absl::OkStatus();
+}
+
+// The station, car model and data files, relative to the file's folder `base`; the database
+// relative to the data root.
+absl::Status ReadPaths(const JsonField& root, const fs::path& base, StationCoreConfig* core) {
+  absl::StatusOr<std::string> station = root.String("station");
+  if (!station.ok()) return station.status();
+  core->station_path = Resolve(base, *station);
+  absl::StatusOr<std::vector<JsonField>> cars = root.Array("car_models");
+  if (!cars.ok()) return cars.status();
+  for (const JsonField& f : *cars) {
+    absl::StatusOr<std::string> car = f.AsString();
+    if (!car.ok()) return car.status();
+    core->car_model_paths.push_back(Resolve(base, *car));
+  }
+  absl::StatusOr<std::string> data_root = root.String("data_root");
+  if (!data_root.ok()) return data_root.status();
+  core->data_root = Resolve(base, *data_root);
+  absl::StatusOr<std::string> db = root.StringOr("db", "linecal.db");
+  if (!db.ok()) return db.status();
+  core->db_path = fs::path(*db).is_absolute() ? *db : (fs::path(core->data_root) / *db).string();
+  return absl::OkStatus();
+}
+
+// The `source` section (absent: the simulator).
+absl::Status ReadSource(const JsonField& root, const fs::path& base, StationCoreConfig* core) {
+  if (!root.Has("source")) return absl::OkStatus();
+  absl::StatusOr<JsonField> source = root.Object("source");
+  if (!source.ok()) return source.status();
+  absl::StatusOr<std::string> type = source->String("type");
+  if (!type.ok()) return type.status();
+  if (absl::Status s = *type == "live"        ? source->AllowOnlyKeys({"type", "sensors"})
+                       : *type == "simulator" ? source->AllowOnlyKeys({"type", "moved_boards"})
+                                              : source->AllowOnlyKeys({"type", "capture"});
+      !s.ok()) {
+    return s;
+  }
+  if (*type == "live") {
+    core->source = CycleSource::kLive;
+    absl::StatusOr<JsonField> sensors = source->Object("sensors");
+    if (!sensors.ok()) return sensors.status();
+    for (const auto& [name, value] : sensors->node().items()) {
+      absl::StatusOr<JsonField> entry = sensors->Object(name);
+      if (!entry.ok()) return entry.status();
+      absl::StatusOr<SourceConfig> sensor = ParseSensorSource(*entry, base);
+      if (!sensor.ok()) return sensor.status();
+      core->live_sources[name] = *std::move(sensor);
+    }
+  } else if (*type == "simulator") {
+    core->source = CycleSource::kSimulator;
+    if (source->Has("moved_boards")) {
+      absl::StatusOr<std::vector<SimulatedBoardMove>> moves = ParseMovedBoards(*source);
+      if (!moves.ok()) return moves.status();
+      core->simulated_moves = *std::move(moves);
+    }
+  } else if (*type == "replay") {
+    core->source = CycleSource::kReplay;
+    absl::StatusOr<std::string> capture = source->String("capture");
+    if (!capture.ok()) return capture.status();
+    if (absl::Status s = CheckReplayInside(*source, core->data_root, *capture); !s.ok()) {
+      return s;
+    }
+    core->replay_capture = *capture;
+  } else {
+    return source->Error(
+        "type", absl::StrCat("must be 'simulator', 'replay' or 'live', got '", *type, "'"));
+  }
+  return absl::OkStatus();
+}
+
+// vin_check_digit, frames_per_sensor and busy_timeout_ms.
+absl::Status ReadCycleLimits(const JsonField& root, StationCoreConfig* core) {
+  absl::StatusOr<bool> check = root.BoolOr("vin_check_digit", true);
+  if (!check.ok()) return check.status();
+  core->vin_check_digit = *check;
+  absl::StatusOr<std::int64_t> frames = root.IntegerOr("frames_per_sensor", 1);
+  if (!frames.ok()) return frames.status();
+  if (*frames < 1 || *frames > 100) return root.Error("frames_per_sensor", "must be in [1, 100]");
+  core->default_frames_per_sensor = static_cast<int>(*frames);
+  absl::StatusOr<std::int64_t> busy = root.IntegerOr("busy_timeout_ms", 5000);
+  if (!busy.ok()) return busy.status();
+  if (*busy < 0 || *busy > 600000) return root.Error("busy_timeout_ms", "must be in [0, 600000]");
+  core->busy_timeout = std::chrono::milliseconds(*busy);
+  return absl::OkStatus();
+}
+
+// The optional sections: tls, deadlines_ms, input_budget, plant and web.
+absl::Status ReadSections(const JsonField& root, const fs::path& base, DaemonConfig* c) {
+  if (root.Has("tls")) {
+    absl::StatusOr<JsonField> tls_field = root.Object("tls");
+    if (!tls_field.ok()) return tls_field.status();
+    absl::StatusOr<TlsConfig> tls = ReadTls(*tls_field, base);
+    if (!tls.ok()) return tls.status();
+    c->tls = *std::move(tls);
+  }
+  if (root.Has("deadlines_ms")) {
+    absl::StatusOr<JsonField> deadlines = root.Object("deadlines_ms");
+    if (!deadlines.ok()) return deadlines.status();
+    if (absl::Status s = deadlines->AllowOnlyKeys({"acquire", "calibrate"}); !s.ok()) return s;
+    absl::StatusOr<std::chrono::milliseconds> acquire =
+        Milliseconds(*deadlines, "acquire", c->core.acquire_deadline);
+    if (!acquire.ok()) return acquire.status();
+    absl::StatusOr<std::chrono::milliseconds> calibrate =
+        Milliseconds(*deadlines, "calibrate", c->core.calibrate_deadline);
+    if (!calibrate.ok()) return calibrate.status();
+    c->core.acquire_deadline = *acquire;
+    c->core.calibrate_deadline = *calibrate;
+  }
+  if (root.Has("input_budget")) {
+    absl::StatusOr<JsonField> budget_field = root.Object("input_budget");
+    if (!budget_field.ok()) return budget_field.status();
+    absl::StatusOr<InputBudget> budget = ReadInputBudget(*budget_field);
+    if (!budget.ok()) return budget.status();
+    c->input_budget = *budget;
+  }
+  if (root.Has("plant")) {
+    absl::StatusOr<JsonField> plant_field = root.Object("plant");
+    if (!plant_field.ok()) return plant_field.status();
+    absl::StatusOr<PlantConfig> plant = ReadPlant(*plant_field, base, c->core.station_id);
+    if (!plant.ok()) return plant.status();
+    c->core.plant = *std::move(plant);
+  }
+  if (root.Has("web")) {
+    absl::StatusOr<JsonField> web_field = root.Object("web");
+    if (!web_field.ok()) return web_field.status();
+    absl::StatusOr<WebConfig> web = ReadWeb(*web_field, base);
+    if (!web.ok()) return web.status();
+    c->web = *std::move(web);
+    // One token, one role: a login with it could not say which session it opens.
+    if (!c->web->operator_token.empty() && c->web->operator_token == c->auth_token) {
+      return web_field->Error("operator_token", "must differ from auth_token");
+    }
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
@@ -385,133 +540,11 @@ absl::StatusOr<DaemonConfig> ReadDaemonConfig(const std::string& path) {
   }
   const fs::path base = fs::path(path).parent_path();
   DaemonConfig c;
-  absl::StatusOr<std::string> listen = root->StringOr("listen", c.listen);
-  if (!listen.ok()) return listen.status();
-  c.listen = *listen;
-  absl::StatusOr<std::string> level = root->StringOr("log_level", c.log_level);
-  if (!level.ok()) return level.status();
-  if (*level != "debug" && *level != "info" && *level != "warning" && *level != "error") {
-    return root->Error("log_level", absl::StrCat("must be debug, info, warning or error, got '", *level, "'"));
-  }
-  c.log_level = *level;
-  absl::StatusOr<std::string> token = root->StringOr("auth_token", "");
-  if (!token.ok()) return token.status();
-  c.auth_token = *token;
-  absl::StatusOr<std::string> id = root->StringOr("station_id", "station");
-  if (!id.ok()) return id.status();
-  c.core.station_id = *id;
-  absl::StatusOr<std::string> station = root->String("station");
-  if (!station.ok()) return station.status();
-  c.core.station_path = Resolve(base, *station);
-  absl::StatusOr<std::vector<JsonField>> cars = root->Array("car_models");
-  if (!cars.ok()) return cars.status();
-  for (const JsonField& f : *cars) {
-    absl::StatusOr<std::string> car = f.AsString();
-    if (!car.ok()) return car.status();
-    c.core.car_model_paths.push_back(Resolve(base, *car));
-  }
-  absl::StatusOr<std::string> data_root = root->String("data_root");
-  if (!data_root.ok()) return data_root.status();
-  c.core.data_root = Resolve(base, *data_root);
-  absl::StatusOr<std::string> db = root->StringOr("db", "linecal.db");
-  if (!db.ok()) return db.status();
-  c.core.db_path = fs::path(*db).is_absolute() ? *db : (fs::path(c.core.data_root) / *db).string();
-  if (root->Has("source")) {
-    absl::StatusOr<JsonField> source = root->Object("source");
-    if (!source.ok()) return source.status();
-    absl::StatusOr<std::string> type = source->String("type");
-    if (!type.ok()) return type.status();
-    if (absl::Status s = *type == "live"        ? source->AllowOnlyKeys({"type", "sensors"})
-                         : *type == "simulator" ? source->AllowOnlyKeys({"type", "moved_boards"})
-                                                : source->AllowOnlyKeys({"type", "capture"});
-        !s.ok()) {
-      return s;
-    }
-    if (*type == "live") {
-      c.core.source = CycleSource::kLive;
-      absl::StatusOr<JsonField> sensors = source->Object("sensors");
-      if (!sensors.ok()) return sensors.status();
-      for (const auto& [name, value] : sensors->node().items()) {
-        absl::StatusOr<JsonField> entry = sensors->Object(name);
-        if (!entry.ok()) return entry.status();
-        absl::StatusOr<SourceConfig> sensor = ParseSensorSource(*entry, base);
-        if (!sensor.ok()) return sensor.status();
-        c.core.live_sources[name] = *std::move(sensor);
-      }
-    } else if (*type == "simulator") {
-      c.core.source = CycleSource::kSimulator;
-      if (source->Has("moved_boards")) {
-        absl::StatusOr<std::vector<SimulatedBoardMove>> moves = ParseMovedBoards(*source);
-        if (!moves.ok()) return moves.status();
-        c.core.simulated_moves = *std::move(moves);
-      }
-    } else if (*type == "replay") {
-      c.core.source = CycleSource::kReplay;
-      absl::StatusOr<std::string> capture = source->String("capture");
-      if (!capture.ok()) return capture.status();
-      if (absl::Status s = CheckReplayInside(*source, c.core.data_root, *capture); !s.ok()) {
-        return s;
-      }
-      c.core.replay_capture = *capture;
-    } else {
-      return source->Error("type", absl::StrCat("must be 'simulator', 'replay' or 'live', got '", *type, "'"));
-    }
-  }
-  absl::StatusOr<bool> check = root->BoolOr("vin_check_digit", true);
-  if (!check.ok()) return check.status();
-  c.core.vin_check_digit = *check;
-  absl::StatusOr<std::int64_t> frames = root->IntegerOr("frames_per_sensor", 1);
-  if (!frames.ok()) return frames.status();
-  if (*frames < 1 || *frames > 100) return root->Error("frames_per_sensor", "must be in [1, 100]");
-  c.core.default_frames_per_sensor = static_cast<int>(*frames);
-  absl::StatusOr<std::int64_t> busy = root->IntegerOr("busy_timeout_ms", 5000);
-  if (!busy.ok()) return busy.status();
-  if (*busy < 0 || *busy > 600000) return root->Error("busy_timeout_ms", "must be in [0, 600000]");
-  c.core.busy_timeout = std::chrono::milliseconds(*busy);
-  if (root->Has("tls")) {
-    absl::StatusOr<JsonField> tls_field = root->Object("tls");
-    if (!tls_field.ok()) return tls_field.status();
-    absl::StatusOr<TlsConfig> tls = ReadTls(*tls_field, base);
-    if (!tls.ok()) return tls.status();
-    c.tls = *std::move(tls);
-  }
-  if (root->Has("deadlines_ms")) {
-    absl::StatusOr<JsonField> deadlines = root->Object("deadlines_ms");
-    if (!deadlines.ok()) return deadlines.status();
-    if (absl::Status s = deadlines->AllowOnlyKeys({"acquire", "calibrate"}); !s.ok()) return s;
-    absl::StatusOr<std::chrono::milliseconds> acquire = Milliseconds(*deadlines, "acquire", c.core.acquire_deadline);
-    if (!acquire.ok()) return acquire.status();
-    absl::StatusOr<std::chrono::milliseconds> calibrate =
-        Milliseconds(*deadlines, "calibrate", c.core.calibrate_deadline);
-    if (!calibrate.ok()) return calibrate.status();
-    c.core.acquire_deadline = *acquire;
-    c.core.calibrate_deadline = *calibrate;
-  }
-  if (root->Has("input_budget")) {
-    absl::StatusOr<JsonField> budget_field = root->Object("input_budget");
-    if (!budget_field.ok()) return budget_field.status();
-    absl::StatusOr<InputBudget> budget = ReadInputBudget(*budget_field);
-    if (!budget.ok()) return budget.status();
-    c.input_budget = *budget;
-  }
-  if (root->Has("plant")) {
-    absl::StatusOr<JsonField> plant_field = root->Object("plant");
-    if (!plant_field.ok()) return plant_field.status();
-    absl::StatusOr<PlantConfig> plant = ReadPlant(*plant_field, base, c.core.station_id);
-    if (!plant.ok()) return plant.status();
-    c.core.plant = *std::move(plant);
-  }
-  if (root->Has("web")) {
-    absl::StatusOr<JsonField> web_field = root->Object("web");
-    if (!web_field.ok()) return web_field.status();
-    absl::StatusOr<WebConfig> web = ReadWeb(*web_field, base);
-    if (!web.ok()) return web.status();
-    c.web = *std::move(web);
-    // One token, one role: a login with it could not say which session it opens.
-    if (!c.web->operator_token.empty() && c.web->operator_token == c.auth_token) {
-      return web_field->Error("operator_token", "must differ from auth_token");
-    }
-  }
+  if (absl::Status s = ReadService(*root, &c); !s.ok()) return s;
+  if (absl::Status s = ReadPaths(*root, base, &c.core); !s.ok()) return s;
+  if (absl::Status s = ReadSource(*root, base, &c.core); !s.ok()) return s;
+  if (absl::Status s = ReadCycleLimits(*root, &c.core); !s.ok()) return s;
+  if (absl::Status s = ReadSections(*root, base, &c); !s.ok()) return s;
   return c;
 }
 

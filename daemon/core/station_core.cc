@@ -6,12 +6,10 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <numbers>
-
 #include <nlohmann/json.hpp>
+#include <numbers>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -38,21 +36,12 @@ std::int64_t NowNs() {
       .count();
 }
 
-Verdict ToStored(SensorVerdict v) {
-  switch (v) {
-    case SensorVerdict::kPass: return Verdict::kPass;
-    case SensorVerdict::kFail: return Verdict::kFail;
-    case SensorVerdict::kError: return Verdict::kError;
-  }
-  return Verdict::kError;
-}
-
 StoredSensorResult ToStored(const SensorCalibration& s) {
   constexpr double kDeg = kRadToDeg;
   StoredSensorResult r;
   r.sensor = s.name;
   r.kind = SensorKindName(s.kind);
-  r.verdict = ToStored(s.verdict);
+  r.verdict = s.verdict;
   r.reason = s.reason;
   r.message = s.message;
   if (s.solved) {
@@ -92,45 +81,6 @@ StoredSensorResult ToStored(const SensorCalibration& s) {
   return r;
 }
 
-// The live sources of `config`, built once: every configured sensor exists in a car model
-// with the kind its source serves, and every sensor of every car model has a source.
-absl::StatusOr<std::map<std::string, std::unique_ptr<SensorSource>>> BuildLiveSources(const StationCoreConfig& config,
-                                                                                      const std::vector<CarModel>& cars) {
-  std::map<std::string, std::unique_ptr<SensorSource>> sources;
-  for (const auto& [name, source] : config.live_sources) {
-    bool found = false;
-    for (const CarModel& car : cars) {
-      const SensorModel* sensor = car.FindSensor(name);
-      if (sensor == nullptr) continue;
-      found = true;
-      if (SourceTypeKind(source.type) != sensor->kind) {
-        return absl::InvalidArgumentError(absl::StrCat("source.sensors.", name, ".type: '", SourceTypeName(source.type),
-                                                       "' serves ", SensorKindName(SourceTypeKind(source.type)),
-                                                       "s, but '", name, "' of car model '", car.id, "' is a ",
-                                                       SensorKindName(sensor->kind)));
-      }
-    }
-    if (!found) {
-      return absl::InvalidArgumentError(absl::StrCat("source.sensors.", name, ": no car model has a sensor '", name, "'"));
-    }
-    absl::StatusOr<std::unique_ptr<SensorSource>> built =
-        config.make_source ? config.make_source(name, source) : MakeSensorSource(source);
-    if (!built.ok()) {
-      return absl::Status(built.status().code(), absl::StrCat("source.sensors.", name, ".", built.status().message()));
-    }
-    sources[name] = std::move(*built);
-  }
-  for (const CarModel& car : cars) {
-    for (const SensorModel& sensor : car.sensors) {
-      if (!sources.contains(sensor.name)) {
-        return absl::InvalidArgumentError(absl::StrCat("source.sensors: no source for sensor '", sensor.name,
-                                                       "' of car model '", car.id, "'"));
-      }
-    }
-  }
-  return sources;
-}
-
 // After a kill the captures of the cycles that were acquiring are partial, and nothing
 // else removes them (RunCycle removes a capture at the cycle's end): each is removed unless
 // its request asked to record it (then it stays, its cycle stored aborted). Only a cycle's
@@ -149,11 +99,26 @@ void RemoveAbortedCaptures(const std::string& data_root,
   }
 }
 
+// The capture source of `config.source`: its checks (a replayed capture that reads, a live
+// source for every sensor) made once here, at Create.
+absl::StatusOr<std::unique_ptr<CaptureSource>> MakeCaptureSource(
+    const StationCoreConfig& config, const std::vector<CarModel>& cars) {
+  switch (config.source) {
+    case CycleSource::kReplay:
+      return MakeReplaySource(config.data_root, config.replay_capture, config.input_budget);
+    case CycleSource::kLive:
+      return MakeLiveSource(config.live_sources, config.make_source, cars, config.acquire_deadline);
+    case CycleSource::kSimulator:
+      break;
+  }
+  return MakeSimulatorSource(config.simulated_moves);
+}
+
 Verdict OverallVerdict(const std::vector<SensorCalibration>& sensors) {
   bool any_error = sensors.empty(), all_pass = !sensors.empty();
   for (const SensorCalibration& s : sensors) {
-    any_error |= s.verdict == SensorVerdict::kError;
-    all_pass &= s.verdict == SensorVerdict::kPass;
+    any_error |= s.verdict == Verdict::kError;
+    all_pass &= s.verdict == Verdict::kPass;
   }
   return all_pass ? Verdict::kPass : any_error ? Verdict::kError : Verdict::kFail;
 }
@@ -183,23 +148,8 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   std::error_code ec;
   fs::create_directories(config.data_root, ec);
   if (ec) return absl::InvalidArgumentError(absl::StrCat("data_root: cannot create '", config.data_root, "': ", ec.message()));
-  if (config.source == CycleSource::kReplay) {
-    const fs::path rel(config.replay_capture);
-    if (rel.empty() || rel.is_absolute() || rel.lexically_normal().string().rfind("..", 0) == 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("source.capture: '", config.replay_capture,
-                       "' must be a path inside data_root"));
-    }
-    absl::StatusOr<Capture> capture =
-        ReadCapture((fs::path(config.data_root) / rel).string(), config.input_budget);
-    if (!capture.ok()) return capture.status();
-  }
-  std::map<std::string, std::unique_ptr<SensorSource>> sources;
-  if (config.source == CycleSource::kLive) {
-    absl::StatusOr<std::map<std::string, std::unique_ptr<SensorSource>>> built = BuildLiveSources(config, cars);
-    if (!built.ok()) return built.status();
-    sources = std::move(*built);
-  }
+  absl::StatusOr<std::unique_ptr<CaptureSource>> capture_source = MakeCaptureSource(config, cars);
+  if (!capture_source.ok()) return capture_source.status();
   if (config.acquire_deadline <= std::chrono::milliseconds(0) || config.calibrate_deadline <= std::chrono::milliseconds(0)) {
     return absl::InvalidArgumentError("deadlines_ms: acquire and calibrate must be > 0");
   }
@@ -217,8 +167,8 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     return absl::InvalidArgumentError(
         absl::StrCat("data_root: '", config.data_root, "': ", std::strerror(errno)));
   }
-  std::unique_ptr<StationCore> core(
-      new StationCore(config, std::move(*station), std::move(cars), std::move(*store), std::move(sources)));
+  std::unique_ptr<StationCore> core(new StationCore(config, std::move(*station), std::move(cars),
+                                                    std::move(*store), *std::move(capture_source)));
   core->data_root_dev_ = root.st_dev;
   core->data_root_ino_ = root.st_ino;
   if (config.plant) {
@@ -232,8 +182,8 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     forwarding.batch = config.plant->batch;
     forwarding.max_retry_interval = config.plant->max_retry_interval;
     StationCore* logger = core.get();
-    forwarding.log = [logger](const std::string& level, const std::string& message) {
-      logger->Log(level, message);
+    forwarding.log = [logger](const LogRecord& record) {
+      logger->Log(record.level, record.message);
     };
     absl::StatusOr<std::unique_ptr<Forwarder>> forwarder =
         Forwarder::Start(core->store_.get(), std::move(forwarding));
@@ -243,13 +193,14 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
   return core;
 }
 
-StationCore::StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
-                         std::unique_ptr<Store> store, std::map<std::string, std::unique_ptr<SensorSource>> sources)
+StationCore::StationCore(StationCoreConfig config, StationLayout station,
+                         std::vector<CarModel> cars, std::unique_ptr<Store> store,
+                         std::unique_ptr<CaptureSource> capture_source)
     : config_(std::move(config)),
       station_(std::move(station)),
       cars_(std::move(cars)),
       store_(std::move(store)),
-      sources_(std::move(sources)) {}
+      capture_source_(std::move(capture_source)) {}
 
 StationCore::~StationCore() {
   stopping_ = true;
@@ -257,17 +208,21 @@ StationCore::~StationCore() {
   if (worker_.joinable()) worker_.join();
   JoinAbandoned(/*all=*/true);
   if (StoreUnstoredEnd().ok()) return;
-  Log("error", absl::StrCat("cycle ", unstored_end_->id, " ended ",
-                            CycleStateName(unstored_end_->state), " (", unstored_end_->reason,
-                            ") but its end could not be stored; the next start stores it as "
-                            "aborted (daemon_restarted)"));
+  Log(LogLevel::kError,
+      absl::StrCat("cycle ", unstored_end_->id, " ended ", CycleStateName(unstored_end_->state),
+                   " (", unstored_end_->reason,
+                   ") but its end could not be stored; the next start stores it as "
+                   "aborted (daemon_restarted)"),
+      unstored_end_->id, unstored_end_->vin);
 }
 
-void StationCore::Log(const std::string& level, const std::string& message) const {
+void StationCore::Log(LogLevel level, const std::string& message, int64_t cycle,
+                      const std::string& vin) const {
+  const LogRecord record{level, message, cycle, vin};
   if (config_.log) {
-    config_.log(level, message);
+    config_.log(record);
   } else {
-    std::fprintf(stderr, "level=%s msg=\"%s\"\n", level.c_str(), message.c_str());
+    WriteLog(record);
   }
 }
 
@@ -327,7 +282,7 @@ void StationCore::JoinAbandoned(bool all) {
   for (std::thread& t : finished) t.join();
 }
 
-absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(Capture capture) {
+absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(int64_t id, Capture capture) {
   const auto deadline = std::chrono::steady_clock::now() + config_.calibrate_deadline;
   auto pending = std::make_shared<PendingCalibration>();
   pending->capture = std::move(capture);
@@ -374,8 +329,10 @@ absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(Capture capt
     thread.join();
     return stopped;
   }
-  Log("warning", absl::StrCat("a stopped calibration still runs after ",
-                              kCalibrationStopGrace.count(), " ms; it is left to end on its own"));
+  Log(LogLevel::kWarning,
+      absl::StrCat("a stopped calibration still runs after ", kCalibrationStopGrace.count(),
+                   " ms; it is left to end on its own"),
+      id, pending->capture.manifest.vin);
   std::lock_guard<std::mutex> lock(mutex_);
   abandoned_.emplace_back(std::move(pending), std::move(thread));
   return stopped;
@@ -463,197 +420,178 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
   return *id;
 }
 
-absl::Status StationCore::Event(int64_t id, const std::string& type, const std::string& sensor,
-                                const std::string& detail, Verdict verdict) {
+absl::Status StationCore::Event(int64_t id, const std::string& vin, EventType type,
+                                const std::string& sensor, const std::string& detail,
+                                std::optional<Verdict> verdict) {
   absl::StatusOr<int64_t> seq = store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
   changed_.notify_all();
+  Log(LogLevel::kDebug,
+      absl::StrCat("event ", EventTypeName(type), sensor.empty() ? "" : " ", sensor,
+                   detail.empty() ? "" : ": ", detail,
+                   verdict ? absl::StrCat(" (", VerdictName(*verdict), ")") : ""),
+      id, vin);
   return seq.status();
+}
+
+StationCore::CycleEnd StationCore::EndOf(int64_t id, CycleState state, std::string reason) {
+  CycleEnd end;
+  end.id = id;
+  end.state = state;
+  end.reason = std::move(reason);
+  return end;
 }
 
 void StationCore::RunCycle(int64_t id, CycleRequest request) {
   const CarModel& car = *FindCar(request.car_model_id);
-  std::string capture_rel;
-  std::string end_reason;
-  CycleState end_state = CycleState::kDone;
-  Verdict end_verdict = Verdict::kError;
-  // Every step that fails ends the cycle with error and a reason; nothing here stops the
-  // cycle from being stored as ended.
-  [&] {
-    Event(id, "started", "", car.id).IgnoreError();
-    absl::StatusOr<StoredCycle> stored = store_->GetCycle(id);
-    if (!stored.ok()) {
-      end_reason = "store_unavailable";
-      return;
+  Log(LogLevel::kInfo, absl::StrCat("cycle ", id, " started (car model ", car.id, ")"), id,
+      request.vin);
+  Event(id, request.vin, EventType::kStarted, "", car.id).IgnoreError();
+  const absl::StatusOr<StoredCycle> stored = store_->GetCycle(id);
+  CycleEnd end = stored.ok() ? WorkCycle(id, request, car, *stored)
+                             : EndOf(id, CycleState::kDone, "store_unavailable");
+  DecideEnd(&end);
+  // The capture of a cycle that acquired it is kept only when asked (a replayed one is never
+  // removed).
+  if (stored.ok() && !request.record_capture && config_.source != CycleSource::kReplay &&
+      !stored->capture_path.empty()) {
+    std::error_code ec;
+    fs::remove_all(fs::path(config_.data_root) / stored->capture_path, ec);
+  }
+  if (end.state == CycleState::kCancelled) end.verdict = Verdict::kError;
+  end.vin = request.vin;
+  end.ended_ns = NowNs();
+  PublishEnd(end);
+}
+
+StationCore::CycleEnd StationCore::WorkCycle(int64_t id, const CycleRequest& request,
+                                             const CarModel& car, const StoredCycle& stored) {
+  const CycleEnd cancelled = EndOf(id, CycleState::kCancelled, "cancelled");
+  const auto error = [id](std::string reason) {
+    return EndOf(id, CycleState::kDone, std::move(reason));
+  };
+  const std::string dir = (fs::path(config_.data_root) / stored.capture_path).string();
+  absl::StatusOr<AcquiredCapture> acquired = AcquireCapture(id, request, car, stored, dir);
+  if (absl::IsCancelled(acquired.status())) return cancelled;
+  if (!acquired.ok()) return error(FailureReason("", acquired.status()));
+  if (cancel_) return cancelled;
+  absl::StatusOr<Capture> capture = ReadCapture(dir, config_.input_budget);
+  if (!capture.ok()) return error(absl::StrCat("capture_unreadable: ", capture.status().message()));
+  absl::StatusOr<CycleCalibration> result = CalibrateWithDeadline(id, *std::move(capture));
+  if (absl::IsCancelled(result.status())) return cancelled;
+  if (absl::IsDeadlineExceeded(result.status())) return error("calibrate_deadline_exceeded");
+  if (!result.ok()) return error(absl::StrCat("calibration_failed: ", result.status().message()));
+  if (cancel_)
+    return cancelled;  // asked while the sensors were computed: their results are not stored
+  return StoreResults(id, request.vin, car, acquired->failures, std::move(result->sensors));
+}
+
+absl::StatusOr<AcquiredCapture> StationCore::AcquireCapture(int64_t id, const CycleRequest& request,
+                                                            const CarModel& car,
+                                                            const StoredCycle& stored,
+                                                            const std::string& dir) {
+  CaptureCycle cycle;
+  cycle.id = id;
+  cycle.station = &station_;
+  cycle.car = &car;
+  cycle.vin = request.vin;
+  cycle.aligner = request.aligner;
+  cycle.started_ns = stored.started_ns;
+  cycle.dir = dir;
+  cycle.frames =
+      request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
+  cycle.cancel = &cancel_;
+  cycle.event = [this, id, vin = request.vin](EventType type, const std::string& sensor,
+                                              const std::string& detail,
+                                              std::optional<Verdict> verdict) {
+    Event(id, vin, type, sensor, detail, verdict).IgnoreError();
+  };
+  return capture_source_->Acquire(cycle);
+}
+
+StationCore::CycleEnd StationCore::StoreResults(int64_t id, const std::string& vin,
+                                                const CarModel& car,
+                                                const std::map<std::string, std::string>& failures,
+                                                std::vector<SensorCalibration> calibrated) {
+  // The sensors that failed to acquire take their place in the car model's order.
+  std::vector<SensorCalibration> sensors;
+  for (const SensorModel& m : car.sensors) {
+    if (auto f = failures.find(m.name); f != failures.end()) {
+      SensorCalibration failed;
+      failed.name = m.name;
+      failed.kind = m.kind;
+      failed.verdict = Verdict::kError;
+      failed.reason = absl::StrCat("acquisition_failed: ", f->second);
+      failed.message = f->second;
+      sensors.push_back(std::move(failed));
+      continue;
     }
-    capture_rel = stored->capture_path;
-    const fs::path dir = fs::path(config_.data_root) / capture_rel;
-    const int frames = request.frames_per_sensor > 0 ? request.frames_per_sensor : config_.default_frames_per_sensor;
-    std::map<std::string, std::string> failures;  // live: sensors whose source failed
-    if (config_.source == CycleSource::kSimulator) {
-      SimulatorOptions o;
-      o.vin = request.vin;
-      o.aligner = request.aligner;
-      o.time_ns = stored->started_ns;
-      // Frames per sensor: camera frames and LiDAR rotations alike.
-      o.camera_frames = frames;
-      o.lidar.rotations = o.camera_frames;
-      o.cancel = &cancel_;  // a cancel or a drain stops before the next sensor
-      for (const SimulatedBoardMove& m : config_.simulated_moves) {
-        if (id >= m.from_cycle) o.moved_boards.push_back(m.move);
-      }
-      absl::StatusOr<SimulationSummary> sim = SimulateCapture(
-          station_, car, o, static_cast<std::uint64_t>(id), dir.string(),
-          [&](int, int, const std::string& sensor) { Event(id, "sensor_acquired", sensor, "").IgnoreError(); });
-      if (absl::IsCancelled(sim.status())) {
-        end_state = CycleState::kCancelled;
-        end_reason = "cancelled";
-        return;
-      }
-      if (!sim.ok()) {
-        end_reason = FailureReason("acquisition_failed", sim.status());
-        return;
-      }
-    } else if (config_.source == CycleSource::kLive) {
-      std::error_code ec;
-      fs::create_directories(dir, ec);
-      if (ec) {
-        end_reason = FailureReason("acquisition_failed",
-                                   absl::InternalError(absl::StrCat(
-                                       "cannot create '", dir.string(), "': ", ec.message())));
-        return;
-      }
-      CaptureManifest manifest;
-      manifest.vin = request.vin;
-      manifest.car_model = car.id;
-      manifest.time_ns = stored->started_ns;
-      manifest.origin = "station";
-      manifest.aligner = request.aligner;
-      manifest.sensors = AcquireLive(id, car, dir.string(), frames, &failures);
-      if (cancel_) {
-        end_state = CycleState::kCancelled;
-        end_reason = "cancelled";
-        return;
-      }
-      if (absl::Status s = WriteCapture(dir.string(), manifest, station_, car); !s.ok()) {
-        end_reason = FailureReason("capture_unwritable", s);
-        return;
-      }
+    for (SensorCalibration& c : calibrated) {
+      if (c.name == m.name) sensors.push_back(std::move(c));
     }
-    if (cancel_) {
-      end_state = CycleState::kCancelled;
-      end_reason = "cancelled";
-      return;
+  }
+  CycleEnd end = EndOf(id, CycleState::kDone, "");
+  std::vector<std::string> not_passed;
+  for (const SensorCalibration& s : sensors) {
+    if (absl::Status st = store_->PutSensorResult(id, ToStored(s)); !st.ok()) {
+      end.reason = absl::IsResourceExhausted(st)
+                       ? FailureReason("", st)
+                       : absl::StrCat("store_unavailable: ", st.message());
+      return end;
     }
-    if (config_.source == CycleSource::kReplay) {
-      // The folder may have become a link out of data_root since the start (Create checked
-      // it then): checked again before every replayed cycle reads it.
-      absl::StatusOr<fs::path> inside =
-          ResolveInside(config_.data_root, config_.replay_capture,
-                        absl::StrCat("'", config_.replay_capture, "'"), "data_root");
-      if (!inside.ok()) {
-        end_reason =
-            absl::StrCat("capture_unreadable: source.capture: ", inside.status().message());
-        return;
-      }
-    }
-    absl::StatusOr<Capture> capture = ReadCapture(dir.string(), config_.input_budget);
-    if (!capture.ok()) {
-      end_reason = absl::StrCat("capture_unreadable: ", capture.status().message());
-      return;
-    }
-    absl::StatusOr<CycleCalibration> result = CalibrateWithDeadline(*std::move(capture));
-    if (absl::IsCancelled(result.status())) {
-      end_state = CycleState::kCancelled;
-      end_reason = "cancelled";
-      return;
-    }
-    if (absl::IsDeadlineExceeded(result.status())) {
-      end_reason = "calibrate_deadline_exceeded";
-      return;
-    }
-    if (!result.ok()) {
-      end_reason = absl::StrCat("calibration_failed: ", result.status().message());
-      return;
-    }
-    if (cancel_) {  // asked while the sensors were computed: their results are not stored
-      end_state = CycleState::kCancelled;
-      end_reason = "cancelled";
-      return;
-    }
-    // The sensors that failed to acquire take their place in the car model's order.
-    std::vector<SensorCalibration> sensors;
-    for (const SensorModel& m : car.sensors) {
-      if (auto f = failures.find(m.name); f != failures.end()) {
-        SensorCalibration failed;
-        failed.name = m.name;
-        failed.kind = m.kind;
-        failed.verdict = SensorVerdict::kError;
-        failed.reason = absl::StrCat("acquisition_failed: ", f->second);
-        failed.message = f->second;
-        sensors.push_back(std::move(failed));
-        continue;
-      }
-      for (SensorCalibration& c : result->sensors) {
-        if (c.name == m.name) sensors.push_back(std::move(c));
-      }
-    }
-    std::vector<std::string> not_passed;
-    for (const SensorCalibration& s : sensors) {
-      if (absl::Status st = store_->PutSensorResult(id, ToStored(s)); !st.ok()) {
-        end_reason = absl::IsResourceExhausted(st)
-                         ? FailureReason("", st)
-                         : absl::StrCat("store_unavailable: ", st.message());
-        return;
-      }
-      Event(id, "sensor_verdict", s.name, s.reason, ToStored(s.verdict)).IgnoreError();
-      if (s.verdict != SensorVerdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
-    }
-    end_verdict = OverallVerdict(sensors);
-    end_reason = absl::StrJoin(not_passed, ",");
-  }();
+    Event(id, vin, EventType::kSensorVerdict, s.name, s.reason, s.verdict).IgnoreError();
+    if (s.verdict != Verdict::kPass) not_passed.push_back(absl::StrCat(s.name, ":", s.reason));
+  }
+  end.verdict = OverallVerdict(sensors);
+  end.reason = absl::StrJoin(not_passed, ",");
+  return end;
+}
+
+void StationCore::DecideEnd(CycleEnd* end) {
   {
     // The end is decided here: a cancel accepted until now makes the cycle cancelled whatever
     // it stored; CancelCycle refuses from now on, as for an ended cycle.
     std::lock_guard<std::mutex> lock(mutex_);
     ending_ = true;
-    if (cancel_ && end_state == CycleState::kDone) {
-      end_state = CycleState::kCancelled;
-      end_reason = "cancelled";
+    if (cancel_ && end->state == CycleState::kDone) {
+      end->state = CycleState::kCancelled;
+      end->reason = "cancelled";
     }
   }
   // A data root or database removed meanwhile: whatever the cycle found, its results went to
   // a file that no longer exists (or were written into a new data root): not a pass.
-  if (absl::Status storage = CheckStorage(); !storage.ok() && end_state == CycleState::kDone) {
-    end_verdict = Verdict::kError;
-    end_reason = absl::StrCat("data_root_removed: ", storage.message());
+  if (absl::Status storage = CheckStorage(); !storage.ok() && end->state == CycleState::kDone) {
+    end->verdict = Verdict::kError;
+    end->reason = absl::StrCat("data_root_removed: ", storage.message());
   }
-  // The capture of a cycle that acquired it is kept only when asked (a replayed one is never removed).
-  if (!request.record_capture && config_.source != CycleSource::kReplay && !capture_rel.empty()) {
-    std::error_code ec;
-    fs::remove_all(fs::path(config_.data_root) / capture_rel, ec);
-  }
-  CycleEnd end;
-  end.id = id;
-  end.state = end_state;
-  end.verdict = end_state == CycleState::kCancelled ? Verdict::kError : end_verdict;
-  end.reason = end_reason;
-  end.ended_ns = NowNs();
+}
+
+void StationCore::PublishEnd(const CycleEnd& end) {
   // The last event, then the end in the store, then the station idle: a watcher returns only
   // once the station no longer runs this cycle (WatchCycle), and WaitIdle once it is stored
   // as ended (or kept as unstored_end_), so whoever sees the end sees all of it.
-  const absl::Status stored = StoreEnd(&end);
+  CycleEnd stored_end = end;
+  const absl::Status stored = StoreEnd(&stored_end);
   if (!stored.ok()) {
-    Log("error", absl::StrCat("cycle ", id, " ended ", CycleStateName(end.state), " (", end.reason,
-                              ") but its end cannot be stored: ", stored.message(),
-                              "; it is stored once the disk has room, before the next cycle"));
+    Log(LogLevel::kError,
+        absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), " (", end.reason,
+                     ") but its end cannot be stored: ", stored.message(),
+                     "; it is stored once the disk has room, before the next cycle"),
+        end.id, end.vin);
   } else if (absl::Status storage = CheckStorage(); !storage.ok()) {
-    Log("error", absl::StrCat("cycle ", id, " ended ", CycleStateName(end.state), " (", end.reason,
-                              "), stored in a database that is lost at the next start: ",
-                              storage.message()));
+    Log(LogLevel::kError,
+        absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), " (", end.reason,
+                     "), stored in a database that is lost at the next start: ", storage.message()),
+        end.id, end.vin);
+  } else {
+    Log(LogLevel::kInfo,
+        absl::StrCat("cycle ", end.id, " ended ", CycleStateName(end.state), ", verdict ",
+                     VerdictName(end.verdict), end.reason.empty() ? "" : " (", end.reason,
+                     end.reason.empty() ? "" : ")"),
+        end.id, end.vin);
   }
   if (stored.ok() && forwarder_) forwarder_->Notify();
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!stored.ok()) unstored_end_ = end;
+  if (!stored.ok()) unstored_end_ = stored_end;
   running_.reset();
   changed_.notify_all();
 }
@@ -675,7 +613,7 @@ absl::Status StationCore::StoreEnd(CycleEnd* end) {
   };
   if (!end->event_stored) {
     absl::Status s = until_stored([&] {
-      return Event(end->id, "cycle_ended", "", end->reason, end->verdict);
+      return Event(end->id, end->vin, EventType::kCycleEnded, "", end->reason, end->verdict);
     });
     if (!s.ok()) return s;
     end->event_stored = true;
@@ -706,7 +644,9 @@ absl::Status StationCore::StoreUnstoredEnd() {
   }
   unstored_end_.reset();
   if (forwarder_) forwarder_->Notify();
-  Log("warning", absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"));
+  Log(LogLevel::kWarning,
+      absl::StrCat("cycle ", end->id, "'s end (", end->reason, ") is stored now"), end->id,
+      end->vin);
   changed_.notify_all();
   return absl::OkStatus();
 }
@@ -729,7 +669,7 @@ absl::Status StationCore::Health() {
   }
   const std::string now(health.message());
   if (now != last_health_) {
-    Log(health.ok() ? "warning" : "error",
+    Log(health.ok() ? LogLevel::kWarning : LogLevel::kError,
         health.ok() ? absl::StrCat("health: serving again (was: ", last_health_, ")")
                     : absl::StrCat("health: NOT_SERVING: ", now));
     last_health_ = now;
@@ -750,47 +690,6 @@ absl::Status StationCore::CheckPlantBacklog() {
 
 int64_t StationCore::StopForwarding(std::chrono::steady_clock::time_point deadline) {
   return forwarder_ ? forwarder_->Stop(deadline) : 0;
-}
-
-std::vector<CaptureSensor> StationCore::AcquireLive(int64_t id, const CarModel& car, const std::string& dir,
-                                                    int frames, std::map<std::string, std::string>* failures) {
-  const auto deadline = std::chrono::steady_clock::now() + config_.acquire_deadline;
-  std::vector<absl::StatusOr<CaptureSensor>> acquired(car.sensors.size(), absl::UnknownError("not acquired"));
-  std::vector<std::thread> threads;
-  for (size_t i = 0; i < car.sensors.size(); ++i) {
-    threads.emplace_back([&, i] {
-      const SensorModel& sensor = car.sensors[i];
-      AcquireRequest request;
-      request.capture_dir = dir;
-      request.sensor_dir = sensor.name;
-      request.frames = frames;
-      request.deadline = deadline;
-      request.cancel = &cancel_;
-      request.progress = [&](const std::string& detail) {
-        Event(id, "sensor_progress", sensor.name, detail).IgnoreError();
-      };
-      acquired[i] = sources_.at(sensor.name)->Acquire(sensor, request);
-      if (acquired[i].ok()) {
-        const CaptureSensor& got = *acquired[i];
-        Event(id, "sensor_acquired", sensor.name,
-              absl::StrCat(got.frames.size(), " frames", got.packets ? ", packets" : "", got.can_log ? ", CAN log" : ""))
-            .IgnoreError();
-      } else {
-        Event(id, "sensor_error", sensor.name, std::string(acquired[i].status().message()), Verdict::kError)
-            .IgnoreError();
-      }
-    });
-  }
-  for (std::thread& t : threads) t.join();
-  std::vector<CaptureSensor> sensors;
-  for (size_t i = 0; i < car.sensors.size(); ++i) {
-    if (acquired[i].ok()) {
-      sensors.push_back(*std::move(acquired[i]));
-    } else {
-      (*failures)[car.sensors[i].name] = std::string(acquired[i].status().message());
-    }
-  }
-  return sensors;
 }
 
 absl::Status StationCore::CancelCycle(int64_t cycle_id) {
@@ -889,7 +788,8 @@ absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(
         read_after_end = true;
         continue;
       }
-      if (!on_event({cycle_id, next, end.ended_ns, "cycle_ended", "", end.reason, end.verdict})) {
+      if (!on_event({cycle_id, next, end.ended_ns, EventType::kCycleEnded, "", end.reason,
+                     end.verdict})) {
         return absl::CancelledError("the watcher went away");
       }
       return absl::OkStatus();
@@ -911,7 +811,7 @@ StationStatusInfo StationCore::Status() {
   s.source = config_.source == CycleSource::kSimulator ? "simulator"
              : config_.source == CycleSource::kReplay  ? "replay"
                                                        : "live";
-  for (const auto& [name, source] : sources_) s.sensor_sources[name] = source->Describe();
+  s.sensor_sources = capture_source_->SensorSources();
   for (const CarModel& c : cars_) {
     for (const SensorModel& sensor : c.sensors) {
       bool listed = false;

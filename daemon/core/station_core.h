@@ -1,6 +1,6 @@
 #pragma once
 // The station's core, without gRPC: validates cycle requests, runs one cycle at a time on a
-// worker thread (acquire -> detect -> solve -> verdict through daemon/cycle), stores every
+// worker thread (acquire -> detect -> solve -> verdict through station/pipeline), stores every
 // attempt and its events in the SQLite store, and serves reads and event streams. The gRPC
 // handlers (daemon/service) only translate to and from this.
 //
@@ -50,31 +50,20 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "daemon/core/capture_source.h"
+#include "daemon/log/daemon_log.h"
 #include "station/pipeline/capture_calibration.h"
 #include "daemon/plant/forwarder.h"
-#include "daemon/sources/source_config.h"
 #include "daemon/store/store.h"
 #include "station/health/station_health.h"
 #include "station/io/input_budget.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
-#include "station/sim/simulator.h"
 
 namespace linecal {
 
 enum class CycleSource { kSimulator, kReplay, kLive };
-
-// Builds the source of a sensor from its configuration (MakeSensorSource by default).
-using SensorSourceFactory =
-    std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(const std::string& sensor, const SourceConfig& config)>;
-
-// simulator: a board that stands moved from cycle `from_cycle` on (a knocked board, for the
-// station-health alarm's tests and demos; SimulatorOptions::moved_boards).
-struct SimulatedBoardMove {
-  MovedBoard move;
-  int64_t from_cycle = 1;  // the first cycle id that sees the board moved
-};
 
 struct StationCoreConfig {
   std::string station_id = "demo";
@@ -105,9 +94,10 @@ struct StationCoreConfig {
   // Forwarding of every ended cycle to the plant database (daemon/plant/forwarder.h): the
   // store queues each end in its outbox and a Forwarder ships it. Absent: no forwarding.
   std::optional<PlantConfig> plant;
-  // Where the core's warnings and errors go ("warning"/"error", a message): linecald's log.
-  // Empty: stderr.
-  std::function<void(const std::string& level, const std::string& message)> log;
+  // Where the core's log records go: linecald's log. Empty: WriteLog (spdlog's default
+  // logger). A cycle logs its start and end (info) and every event (debug), each with its
+  // cycle id and VIN, as every warning or error about it.
+  LogSink log;
 };
 
 // How long a stopped calibration (deadline, cancel) is waited for before it is left to end
@@ -223,26 +213,49 @@ class StationCore {
 
  private:
   StationCore(StationCoreConfig config, StationLayout station, std::vector<CarModel> cars,
-              std::unique_ptr<Store> store, std::map<std::string, std::unique_ptr<SensorSource>> sources);
+              std::unique_ptr<Store> store, std::unique_ptr<CaptureSource> capture_source);
   struct PendingCalibration;
   // A cycle's end as RunCycle decided it.
   struct CycleEnd {
     int64_t id = 0;
+    std::string vin;  // the cycle's, for the log
     CycleState state = CycleState::kDone;
     Verdict verdict = Verdict::kError;
     std::string reason;
     int64_t ended_ns = 0;
     bool event_stored = false;  // its cycle_ended event is in the store
   };
+  // An end in `state` with `reason` and verdict error (until the results decide it).
+  static CycleEnd EndOf(int64_t id, CycleState state, std::string reason);
 
+  // A cycle on the worker thread: its work, then its end decided, its capture removed unless
+  // kept, and the end stored (StoreEnd) and published (running_ cleared, watchers woken).
   void RunCycle(int64_t id, CycleRequest request);
-  // live: acquires every sensor of `car` into `dir` at once; returns the sensors acquired
-  // (car model order) and, per sensor that failed, its status message.
-  std::vector<CaptureSensor> AcquireLive(int64_t id, const CarModel& car, const std::string& dir, int frames,
-                                         std::map<std::string, std::string>* failures);
-  // Calibrates `capture` on its own thread, waiting until it is done, the calibrate deadline
-  // passed (DeadlineExceeded) or the cycle was cancelled (Cancelled).
-  absl::StatusOr<CycleCalibration> CalibrateWithDeadline(Capture capture);
+  // The cycle's work, acquire -> read -> calibrate -> store: the end it reached (state,
+  // verdict, reason; not yet `ended_ns`). Every failing step ends it in error with a reason.
+  CycleEnd WorkCycle(int64_t id, const CycleRequest& request, const CarModel& car,
+                     const StoredCycle& stored);
+  // Acquire: the capture source makes the cycle's capture readable in `dir`
+  // (CaptureSource::Acquire, its events into the cycle's stream).
+  absl::StatusOr<AcquiredCapture> AcquireCapture(int64_t id, const CycleRequest& request,
+                                                 const CarModel& car, const StoredCycle& stored,
+                                                 const std::string& dir);
+  // Store: every sensor's result in the car model's order (a sensor that failed to acquire as
+  // its `error`, reason "acquisition_failed: <message>") and its sensor_verdict event; the
+  // end is done with the overall verdict and the not-passed sensors as reason, or error when
+  // a result cannot be stored.
+  CycleEnd StoreResults(int64_t id, const std::string& vin, const CarModel& car,
+                        const std::map<std::string, std::string>& failures,
+                        std::vector<SensorCalibration> calibrated);
+  // Once the work is over: a cancel accepted until now makes the cycle cancelled (CancelCycle
+  // refuses from now on); a data root or database removed meanwhile makes it an error.
+  void DecideEnd(CycleEnd* end);
+  // Stores the end (kept as unstored_end_ when it cannot be), logs what went wrong, wakes the
+  // forwarder and the watchers and clears running_.
+  void PublishEnd(const CycleEnd& end);
+  // Calibrates `capture` of cycle `id` on its own thread, waiting until it is done, the
+  // calibrate deadline passed (DeadlineExceeded) or the cycle was cancelled (Cancelled).
+  absl::StatusOr<CycleCalibration> CalibrateWithDeadline(int64_t id, Capture capture);
   // Stores the end's event and the end, retrying while the store is locked (until the
   // destructor runs); the first other error is returned and `end` says what got stored.
   absl::Status StoreEnd(CycleEnd* end);
@@ -257,11 +270,14 @@ class StationCore {
   // (ResourceExhausted, or ENOSPC in the message), else "<what>: <message>" (no "<what>: "
   // when `what` is empty). Remembers a full disk for Health().
   std::string FailureReason(const std::string& what, const absl::Status& status);
-  void Log(const std::string& level, const std::string& message) const;
+  // One record to config_.log (else WriteLog); about cycle `cycle` (0: none) of `vin`.
+  void Log(LogLevel level, const std::string& message, int64_t cycle = 0,
+           const std::string& vin = "") const;
   // Joins calibrations abandoned at their deadline: those done, or all when `all`.
   void JoinAbandoned(bool all);
-  absl::Status Event(int64_t id, const std::string& type, const std::string& sensor, const std::string& detail,
-                     Verdict verdict = Verdict::kNone);
+  // Stores an event of cycle `id` (of `vin`), wakes the watchers and logs it (debug).
+  absl::Status Event(int64_t id, const std::string& vin, EventType type, const std::string& sensor,
+                     const std::string& detail, std::optional<Verdict> verdict = std::nullopt);
   const CarModel* FindCar(const std::string& id) const;
 
   const StationCoreConfig config_;
@@ -270,8 +286,8 @@ class StationCore {
   std::unique_ptr<Store> store_;
   // With a `plant` section; declared after store_, so destroyed (stopped) before it.
   std::unique_ptr<Forwarder> forwarder_;
-  // live: by sensor name; used by one cycle at a time.
-  std::map<std::string, std::unique_ptr<SensorSource>> sources_;
+  // What cycles calibrate from (config_.source); used by one cycle at a time.
+  std::unique_ptr<CaptureSource> capture_source_;
 
   std::mutex mutex_;
   std::condition_variable changed_;  // an event was stored or a cycle ended

@@ -122,9 +122,9 @@ struct Forwarder::Shared {
   // Connects and checks the schema when there is no connection.
   absl::Status EnsureConnected(std::unique_ptr<PlantDb>* db);
   // Under store_mutex: once abandoned, the log (the daemon's, possibly gone) is not used.
-  void Log(const std::string& level, const std::string& message) {
+  void Log(LogLevel level, const std::string& message) {
     std::lock_guard<std::mutex> lock(store_mutex);
-    if (!abandoned && options.log) options.log(level, message);
+    if (!abandoned && options.log) options.log({level, message});
   }
 };
 
@@ -197,10 +197,10 @@ void Forwarder::Run(std::shared_ptr<Shared> s) {
     std::unique_lock<std::mutex> lock(s->mutex);
     if (!absl::IsCancelled(result)) {
       if (!result.ok() && result.message() != s->last_error.message()) {
-        s->Log("warning", absl::StrCat("plant database: ", result.message(),
-                                       "; the cycles stay queued and are sent again"));
+        s->Log(LogLevel::kWarning, absl::StrCat("plant database: ", result.message(),
+                                                "; the cycles stay queued and are sent again"));
       } else if (result.ok() && failures > 0) {
-        s->Log("info", "plant database: reachable again, the queue is shipped");
+        s->Log(LogLevel::kInfo, "plant database: reachable again, the queue is shipped");
       }
       s->last_error = result;
     }
@@ -269,7 +269,7 @@ int64_t Forwarder::Stop(std::chrono::steady_clock::time_point deadline) {
     if (exited) {
       s.thread.join();
     } else {
-      s.Log("warning",
+      s.Log(LogLevel::kWarning,
             "plant database: a call did not return by the stop's deadline; left to "
             "end on its own, its cycles stay queued");
       std::lock_guard<std::mutex> lock(s.store_mutex);

@@ -23,6 +23,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "daemon/log/daemon_log.h"
 #include "daemon/plant/plant_db.h"
 #include "daemon/store/store.h"
 
@@ -68,9 +69,9 @@ struct ForwarderOptions {
   // that the stations of a plant do not retry in step after an outage).
   std::chrono::milliseconds first_retry_interval{200};
   std::chrono::milliseconds max_retry_interval{30000};
-  // Where the forwarder says that the plant failed or answers again ("warning"/"info", a
-  // message without the password): linecald's log. Empty: nowhere.
-  std::function<void(const std::string& level, const std::string& message)> log;
+  // Where the forwarder says that the plant failed or answers again (warning/info records
+  // without a cycle, messages without the password): linecald's log. Empty: nowhere.
+  LogSink log;
 };
 
 // The wait before the retry after `failures` (>= 1) failures in a row, for `jitter` in

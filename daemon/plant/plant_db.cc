@@ -286,8 +286,8 @@ std::string SensorValues(const pqxx::work& tx, const std::string& station, int64
 std::string EventValues(const pqxx::work& tx, const std::string& station, const StoredEvent& e,
                         int64_t cycle_id) {
   return absl::StrCat("(", tx.quote(station), ", ", cycle_id, ", ", e.sequence, ", ", e.time_ns,
-                      ", ", tx.quote(e.type), ", ", tx.quote(e.sensor), ", ",
-                      tx.quote(e.detail), ", ", tx.quote(VerdictName(e.verdict)), ")");
+                      ", ", tx.quote(std::string(EventTypeName(e.type))), ", ", tx.quote(e.sensor),
+                      ", ", tx.quote(e.detail), ", ", tx.quote(VerdictName(e.verdict)), ")");
 }
 
 constexpr const char* kSensorColumns =

@@ -30,9 +30,11 @@ grpc::Status ToGrpc(const absl::Status& s) {
   return grpc::Status(code, std::string(s.message()));
 }
 
-v1::Verdict ToProto(Verdict v) {
-  switch (v) {
-    case Verdict::kNone: return v1::VERDICT_UNSPECIFIED;
+// The one mapping of the station's verdict (station/model/verdict.h) to the API's, both ways
+// (CycleFilterFromProto inverts it); none (a running cycle) is VERDICT_UNSPECIFIED.
+v1::Verdict ToProto(std::optional<Verdict> v) {
+  if (!v) return v1::VERDICT_UNSPECIFIED;
+  switch (*v) {
     case Verdict::kPass: return v1::VERDICT_PASS;
     case Verdict::kFail: return v1::VERDICT_FAIL;
     case Verdict::kError: return v1::VERDICT_ERROR;
@@ -57,15 +59,25 @@ v1::SensorKind KindToProto(const std::string& kind) {
   return v1::SENSOR_KIND_UNSPECIFIED;
 }
 
-v1::CycleEvent::Type EventToProto(const std::string& type) {
-  if (type == "started") return v1::CycleEvent::TYPE_STARTED;
-  if (type == "sensor_acquired") return v1::CycleEvent::TYPE_SENSOR_ACQUIRED;
-  if (type == "board_found") return v1::CycleEvent::TYPE_BOARD_FOUND;
-  if (type == "sensor_solved") return v1::CycleEvent::TYPE_SENSOR_SOLVED;
-  if (type == "sensor_verdict") return v1::CycleEvent::TYPE_SENSOR_VERDICT;
-  if (type == "cycle_ended") return v1::CycleEvent::TYPE_CYCLE_ENDED;
-  if (type == "sensor_error") return v1::CycleEvent::TYPE_SENSOR_ERROR;
-  if (type == "sensor_progress") return v1::CycleEvent::TYPE_SENSOR_PROGRESS;
+v1::CycleEvent::Type EventToProto(EventType type) {
+  switch (type) {
+    case EventType::kStarted:
+      return v1::CycleEvent::TYPE_STARTED;
+    case EventType::kSensorAcquired:
+      return v1::CycleEvent::TYPE_SENSOR_ACQUIRED;
+    case EventType::kBoardFound:
+      return v1::CycleEvent::TYPE_BOARD_FOUND;
+    case EventType::kSensorSolved:
+      return v1::CycleEvent::TYPE_SENSOR_SOLVED;
+    case EventType::kSensorVerdict:
+      return v1::CycleEvent::TYPE_SENSOR_VERDICT;
+    case EventType::kCycleEnded:
+      return v1::CycleEvent::TYPE_CYCLE_ENDED;
+    case EventType::kSensorError:
+      return v1::CycleEvent::TYPE_SENSOR_ERROR;
+    case EventType::kSensorProgress:
+      return v1::CycleEvent::TYPE_SENSOR_PROGRESS;
+  }
   return v1::CycleEvent::TYPE_UNSPECIFIED;
 }
 
@@ -135,16 +147,14 @@ absl::StatusOr<CycleFilter> CycleFilterFromProto(const v1::ListCyclesRequest& re
   f.vin = request.vin();
   f.since_ns = request.since_ns();
   f.until_ns = request.until_ns();
-  switch (request.verdict()) {
-    case v1::VERDICT_UNSPECIFIED: break;
-    case v1::VERDICT_PASS: f.verdict = Verdict::kPass; break;
-    case v1::VERDICT_FAIL: f.verdict = Verdict::kFail; break;
-    case v1::VERDICT_ERROR: f.verdict = Verdict::kError; break;
-    default:
-      // proto3 keeps unknown enum numbers: ignoring one would list every cycle.
-      return absl::InvalidArgumentError(absl::StrCat(
-          "verdict = ", static_cast<int>(request.verdict()),
-          ": not a verdict (0 any, 1 pass, 2 fail, 3 error)"));
+  for (Verdict v : {Verdict::kPass, Verdict::kFail, Verdict::kError}) {
+    if (ToProto(v) == request.verdict()) f.verdict = v;
+  }
+  if (!f.verdict && request.verdict() != v1::VERDICT_UNSPECIFIED) {
+    // proto3 keeps unknown enum numbers: ignoring one would list every cycle.
+    return absl::InvalidArgumentError(
+        absl::StrCat("verdict = ", static_cast<int>(request.verdict()),
+                     ": not a verdict (0 any, 1 pass, 2 fail, 3 error)"));
   }
   // Checked here on the uint32 the client sent, so that the message names that value; the
   // store's own check (1..1000) then holds by construction.

@@ -263,21 +263,37 @@ const char* CycleStateName(CycleState state) {
   return "running";
 }
 
-const char* VerdictName(Verdict verdict) {
-  switch (verdict) {
-    case Verdict::kNone: return "";
-    case Verdict::kPass: return "pass";
-    case Verdict::kFail: return "fail";
-    case Verdict::kError: return "error";
-  }
-  return "";
+const char* VerdictName(std::optional<Verdict> verdict) {
+  return verdict ? VerdictName(*verdict) : "";
 }
 
-Verdict ParseVerdict(const std::string& s) {
-  if (s == "pass") return Verdict::kPass;
-  if (s == "fail") return Verdict::kFail;
-  if (s == "error") return Verdict::kError;
-  return Verdict::kNone;
+const char* EventTypeName(EventType type) {
+  switch (type) {
+    case EventType::kStarted:
+      return "started";
+    case EventType::kSensorAcquired:
+      return "sensor_acquired";
+    case EventType::kSensorProgress:
+      return "sensor_progress";
+    case EventType::kBoardFound:
+      return "board_found";
+    case EventType::kSensorSolved:
+      return "sensor_solved";
+    case EventType::kSensorError:
+      return "sensor_error";
+    case EventType::kSensorVerdict:
+      return "sensor_verdict";
+    case EventType::kCycleEnded:
+      return "cycle_ended";
+  }
+  return "started";
+}
+
+std::optional<EventType> ParseEventType(absl::string_view name) {
+  for (int i = 0; i <= static_cast<int>(EventType::kCycleEnded); ++i) {
+    if (name == EventTypeName(static_cast<EventType>(i))) return static_cast<EventType>(i);
+  }
+  return std::nullopt;
 }
 
 CycleState ParseCycleState(const std::string& s) {
@@ -421,8 +437,13 @@ absl::StatusOr<int64_t> Store::AppendEvent(const StoredEvent& event) {
   Statement insert(db_,
                    "INSERT INTO events (cycle_id, sequence, time_ns, type, sensor, detail, verdict) "
                    "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)");
-  insert.Bind(1, event.cycle_id).Bind(2, sequence).Bind(3, event.time_ns).Bind(4, event.type)
-      .Bind(5, event.sensor).Bind(6, event.detail).Bind(7, std::string(VerdictName(event.verdict)));
+  insert.Bind(1, event.cycle_id)
+      .Bind(2, sequence)
+      .Bind(3, event.time_ns)
+      .Bind(4, std::string(EventTypeName(event.type)))
+      .Bind(5, event.sensor)
+      .Bind(6, event.detail)
+      .Bind(7, std::string(VerdictName(event.verdict)));
   if (const int rc = insert.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "append event", rc);
   if (absl::Status s = tx.Commit(); !s.ok()) return s;
   return sequence;
@@ -547,7 +568,14 @@ absl::StatusOr<std::vector<StoredEvent>> Store::ReadEventsLocked(int64_t cycle_i
   std::vector<StoredEvent> events;
   int rc;
   while ((rc = s.Step()) == SQLITE_ROW) {
-    events.push_back({cycle_id, s.Int(0), s.Int(1), s.Text(2), s.Text(3), s.Text(4), ParseVerdict(s.Text(5))});
+    const std::optional<EventType> type = ParseEventType(s.Text(2));
+    // Only AppendEvent writes the column: another word is a damaged or foreign file.
+    if (!type) {
+      return absl::DataLossError(absl::StrCat(
+          path_, ": cycle ", cycle_id, " has an event of unknown type ", QuoteInput(s.Text(2))));
+    }
+    events.push_back(
+        {cycle_id, s.Int(0), s.Int(1), *type, s.Text(3), s.Text(4), ParseVerdict(s.Text(5))});
   }
   if (rc != SQLITE_DONE) return SqliteError(db_, path_, "read events", rc);
   return events;
@@ -578,7 +606,7 @@ absl::StatusOr<CyclePage> Store::ListCycles(const CycleFilter& filter) {
   Statement s(db_, sql.c_str());
   s.Bind(1, filter.vin).Bind(2, filter.since_ns).Bind(3, filter.until_ns)
       .Bind(4, static_cast<int64_t>(filter.verdict.has_value()))
-      .Bind(5, std::string(VerdictName(filter.verdict.value_or(Verdict::kNone))))
+      .Bind(5, std::string(VerdictName(filter.verdict)))
       .Bind(6, after_started).Bind(7, after_id)
       // One more than the page: whether it exists says if there is a next page.
       .Bind(8, static_cast<int64_t>(filter.page_size) + 1);

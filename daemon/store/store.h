@@ -41,13 +41,13 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
+#include "station/model/verdict.h"
 
 struct sqlite3;
 
 namespace linecal {
 
 enum class CycleState { kRunning, kDone, kCancelled, kAborted };
-enum class Verdict { kNone, kPass, kFail, kError };
 
 // A value from a request as an error message quotes it: 'value' when it has at most
 // kMaxQuotedBytes bytes, else its first kMaxQuotedBytes bytes, "…" and its size
@@ -60,11 +60,30 @@ std::string QuoteInput(absl::string_view value);
 
 // "running", "done", "cancelled", "aborted" — the words stored in the database.
 const char* CycleStateName(CycleState state);
-// "", "pass", "fail", "error" — the words of docs/interfaces.md's results.
-const char* VerdictName(Verdict verdict);
-// The inverses of CycleStateName and VerdictName; an unknown word gives kRunning / kNone.
+// A stored verdict's word: VerdictName's (station/model/verdict.h), "" for none (a running
+// cycle, an event without one) — the words of docs/interfaces.md's results. The inverse is
+// ParseVerdict, nullopt for "".
+const char* VerdictName(std::optional<Verdict> verdict);
+// The inverse of CycleStateName; an unknown word gives kRunning.
 CycleState ParseCycleState(const std::string& name);
-Verdict ParseVerdict(const std::string& name);
+
+// What happened in a cycle (docs/interfaces.md), in the order a cycle has them.
+enum class EventType {
+  kStarted,
+  kSensorAcquired,
+  kSensorProgress,
+  kBoardFound,
+  kSensorSolved,
+  kSensorError,
+  kSensorVerdict,
+  kCycleEnded,
+};
+// "started", "sensor_acquired", "sensor_progress", "board_found", "sensor_solved",
+// "sensor_error", "sensor_verdict", "cycle_ended": the words stored in the database and
+// shown by the console. Pure.
+const char* EventTypeName(EventType type);
+// The inverse of EventTypeName; nullopt for any other word. Pure.
+std::optional<EventType> ParseEventType(absl::string_view name);
 
 // Yaw/pitch/roll (degrees, docs/conventions.md) and position (metres) of a sensor in the car.
 struct MountingValues {
@@ -76,7 +95,7 @@ struct MountingValues {
 struct StoredSensorResult {
   std::string sensor;  // the car model's sensor name
   std::string kind;    // "camera", "lidar", "radar"
-  Verdict verdict = Verdict::kNone;
+  std::optional<Verdict> verdict;
   std::string reason;   // a code ("yaw_out_of_tolerance"); empty on pass
   std::string message;  // the same for a person
   std::vector<double> T_car_sensor;  // 16 values, row-major; empty when not solved
@@ -95,7 +114,7 @@ struct StoredCycle {
   std::string vin;
   std::string car_model_id;
   CycleState state = CycleState::kRunning;
-  Verdict verdict = Verdict::kNone;
+  std::optional<Verdict> verdict;  // none while running
   std::string reason;
   int64_t started_ns = 0;  // Unix epoch
   int64_t ended_ns = 0;    // 0 while running
@@ -108,10 +127,10 @@ struct StoredEvent {
   int64_t cycle_id = 0;
   int64_t sequence = 0;  // 0, 1, 2, ... per cycle, assigned by AppendEvent
   int64_t time_ns = 0;
-  std::string type;    // "started", "sensor_acquired", ..., "cycle_ended"
+  EventType type = EventType::kStarted;
   std::string sensor;  // empty for cycle-wide events
   std::string detail;
-  Verdict verdict = Verdict::kNone;
+  std::optional<Verdict> verdict;  // sensor_verdict, sensor_error and cycle_ended have one
 };
 
 struct CycleFilter {

@@ -53,13 +53,10 @@ nlohmann::json CycleJson(const StoredCycle& c, bool with_sensors) {
 }
 
 nlohmann::json EventJson(const StoredEvent& e) {
-  return {{"cycle_id", std::to_string(e.cycle_id)},
-          {"sequence", e.sequence},
-          {"time_ns", e.time_ns},
-          {"type", e.type},
-          {"sensor", e.sensor},
-          {"detail", e.detail},
-          {"verdict", VerdictName(e.verdict)}};
+  return {
+      {"cycle_id", std::to_string(e.cycle_id)}, {"sequence", e.sequence}, {"time_ns", e.time_ns},
+      {"type", EventTypeName(e.type)},          {"sensor", e.sensor},     {"detail", e.detail},
+      {"verdict", VerdictName(e.verdict)}};
 }
 
 nlohmann::json StatusJson(const StationStatusInfo& s, const std::string& version) {

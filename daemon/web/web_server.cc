@@ -455,8 +455,8 @@ void WebServer::ListCycles(const httplib::Request& req, httplib::Response& res) 
   filter.vin = req.get_param_value("vin");
   if (req.has_param("verdict")) {
     const std::string word = req.get_param_value("verdict");
-    const Verdict v = ParseVerdict(word);
-    if (v == Verdict::kNone) {
+    const std::optional<Verdict> v = ParseVerdict(word);
+    if (!v) {
       return SendError(res, absl::InvalidArgumentError(absl::StrCat(
                                 "verdict = ", QuoteInput(word), ": must be pass, fail or error")));
     }

@@ -147,9 +147,7 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
     return out;
   }
   const RadarCalibrationResult& r = run->result;
-  out.verdict = r.verdict == RadarVerdict::kPass   ? SensorVerdict::kPass
-                : r.verdict == RadarVerdict::kFail ? SensorVerdict::kFail
-                                                   : SensorVerdict::kError;
+  out.verdict = r.verdict;
   out.reason = r.reason;
   out.features_used = r.reflectors_used;
   out.solved = r.reflectors_used > 0;
@@ -166,7 +164,7 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
     for (const RadarReflectorResidual& res : r.residuals) sum_sq += res.residual_rad * res.residual_rad;
     out.residual_rms = r.residuals.empty() ? 0 : std::sqrt(sum_sq / r.residuals.size()) * kDegPerRad;
   }
-  out.message = out.verdict == SensorVerdict::kPass
+  out.message = out.verdict == Verdict::kPass
                     ? ""
                     : absl::StrCat(sensor.name, ": ", r.reason, " (yaw deviation ", r.yaw_deviation_rad * kDegPerRad,
                                    " deg, tolerance ", r.yaw_tolerance_rad * kDegPerRad, " deg)");
@@ -219,10 +217,10 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
 
   bool any_error = cycle.sensors.empty(), all_pass = !cycle.sensors.empty();
   for (const SensorCalibration& s : cycle.sensors) {
-    any_error |= s.verdict == SensorVerdict::kError;
-    all_pass &= s.verdict == SensorVerdict::kPass;
+    any_error |= s.verdict == Verdict::kError;
+    all_pass &= s.verdict == Verdict::kPass;
   }
-  cycle.verdict = all_pass ? SensorVerdict::kPass : any_error ? SensorVerdict::kError : SensorVerdict::kFail;
+  cycle.verdict = all_pass ? Verdict::kPass : any_error ? Verdict::kError : Verdict::kFail;
   cycle.elapsed_ns = NowNs() - start;
   return cycle;
 }

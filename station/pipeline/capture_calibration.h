@@ -39,7 +39,7 @@ struct BoardDetectionSummary {
 struct SensorCalibration {
   std::string name;
   SensorKind kind = SensorKind::kCamera;
-  SensorVerdict verdict = SensorVerdict::kError;
+  Verdict verdict = Verdict::kError;
   std::string reason;
   std::string message;
   bool solved = false;
@@ -65,7 +65,7 @@ struct SensorCalibration {
 };
 
 struct CycleCalibration {
-  SensorVerdict verdict = SensorVerdict::kError;
+  Verdict verdict = Verdict::kError;
   std::vector<SensorCalibration> sensors;  // in the car model's order
   std::int64_t elapsed_ns = 0;
 };

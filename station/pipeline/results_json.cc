@@ -88,7 +88,7 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
   for (const SensorCalibration& s : cycle.sensors) {
     nlohmann::json j = {{"name", s.name},
                         {"kind", SensorKindName(s.kind)},
-                        {"verdict", SensorVerdictName(s.verdict)},
+                        {"verdict", VerdictName(s.verdict)},
                         {"reason", s.reason},
                         {"message", s.message},
                         {"features_used", s.features_used},
@@ -120,7 +120,7 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
   }
   return {{"vin", capture.manifest.vin},
           {"car_model", capture.manifest.car_model},
-          {"verdict", SensorVerdictName(cycle.verdict)},
+          {"verdict", VerdictName(cycle.verdict)},
           {"elapsed_ms", cycle.elapsed_ns * 1e-6},
           {"sensors", sensors}};
 }

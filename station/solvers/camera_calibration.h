@@ -68,7 +68,7 @@ struct CameraCalibrationOptions {
 };
 
 struct CameraCalibrationResult {
-  SensorVerdict verdict = SensorVerdict::kError;
+  Verdict verdict = Verdict::kError;
   std::string reason;   // a code, empty on pass
   std::string message;  // for a person
   bool solved = false;  // the pose below is meaningful

@@ -86,7 +86,7 @@ struct LidarCalibrationOptions {
 };
 
 struct LidarCalibrationResult {
-  SensorVerdict verdict = SensorVerdict::kError;
+  Verdict verdict = Verdict::kError;
   std::string reason;
   std::string message;
   bool solved = false;

@@ -19,15 +19,6 @@ Eigen::Vector3d AnglesVector(const YawPitchRoll& a) { return {a.yaw, a.pitch, a.
 
 }  // namespace
 
-const char* SensorVerdictName(SensorVerdict verdict) {
-  switch (verdict) {
-    case SensorVerdict::kPass: return "pass";
-    case SensorVerdict::kFail: return "fail";
-    case SensorVerdict::kError: return "error";
-  }
-  return "error";
-}
-
 MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::Matrix<double, 6, 6>& covariance,
                                      const SensorModel& sensor) {
   const Eigen::Matrix3d r_base = SensorBaseRotation(sensor.kind);
@@ -101,11 +92,11 @@ MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimat
                           names[i], shown(i, deviations[i]), units[i], shown(i, tolerances[i]));
   }
   if (!j.reason.empty()) {
-    j.verdict = SensorVerdict::kFail;
+    j.verdict = Verdict::kFail;
     j.message = absl::StrCat(sensor.name, ": out of tolerance: ", out_of_tolerance);
     return j;
   }
-  j.verdict = SensorVerdict::kPass;
+  j.verdict = Verdict::kPass;
   return j;
 }
 

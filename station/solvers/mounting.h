@@ -13,13 +13,9 @@
 
 #include "detectors/core/pose.h"
 #include "station/model/car_model.h"
+#include "station/model/verdict.h"
 
 namespace linecal {
-
-enum class SensorVerdict { kPass, kFail, kError };
-
-// "pass", "fail", "error" (docs/interfaces.md).
-const char* SensorVerdictName(SensorVerdict verdict);
 
 // A sensor's mounting in the car: angles (radians) and position (metres) with their 1-sigma,
 // and the deviation from the nominal mounting.
@@ -56,7 +52,7 @@ MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::M
                                      const SensorModel& sensor);
 
 struct MountingJudgement {
-  SensorVerdict verdict = SensorVerdict::kError;
+  Verdict verdict = Verdict::kError;
   std::string reason;   // "", "uncertainty_too_high", "<yaw|pitch|roll|x|y|z>_out_of_tolerance"
   std::string message;  // for a person; empty on pass
 };

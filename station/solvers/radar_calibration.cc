@@ -200,18 +200,6 @@ absl::Status RadarCalibrationOptions::Validate() const {
   return absl::OkStatus();
 }
 
-const char* RadarVerdictName(RadarVerdict verdict) {
-  switch (verdict) {
-    case RadarVerdict::kPass:
-      return "pass";
-    case RadarVerdict::kFail:
-      return "fail";
-    case RadarVerdict::kError:
-      return "error";
-  }
-  return "unknown";
-}
-
 double PredictedAzimuth(const YawPitchRoll& angles, const Eigen::Vector3d& t_car_radar,
                         const Eigen::Vector3d& p_car) {
   const Eigen::Vector3d p =
@@ -525,13 +513,13 @@ void AddResiduals(const YawFit& fit, RadarCalibrationResult* out) {
 void SetVerdict(const SensorModel& sensor, const RadarCalibrationOptions& options,
                 RadarCalibrationResult* out) {
   if (out->yaw_sigma_rad > options.max_sigma_fraction_of_tolerance * sensor.tolerance.yaw_rad) {
-    out->verdict = RadarVerdict::kError;
+    out->verdict = Verdict::kError;
     out->reason = "uncertainty_too_high";
   } else if (std::abs(out->yaw_deviation_rad) > sensor.tolerance.yaw_rad) {
-    out->verdict = RadarVerdict::kFail;
+    out->verdict = Verdict::kFail;
     out->reason = "yaw_out_of_tolerance";
   } else {
-    out->verdict = RadarVerdict::kPass;
+    out->verdict = Verdict::kPass;
     out->reason = "";
   }
 }
@@ -556,7 +544,7 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
   const std::vector<UsedReflector> used = UsableReflectors(expected, association);
   out.reflectors_used = static_cast<int>(used.size());
   if (out.reflectors_used < options.min_reflectors || used.empty()) {
-    out.verdict = RadarVerdict::kError;
+    out.verdict = Verdict::kError;
     out.reason = "too_few_reflectors";
     return out;
   }

@@ -34,6 +34,7 @@
 
 #include "detectors/core/pose.h"
 #include "station/model/car_model.h"
+#include "station/model/verdict.h"
 #include "station/solvers/reflector_association.h"
 
 namespace linecal {
@@ -50,11 +51,6 @@ struct RadarCalibrationOptions {
   absl::Status Validate() const;
 };
 
-enum class RadarVerdict { kPass, kFail, kError };
-
-// "pass", "fail", "error".
-const char* RadarVerdictName(RadarVerdict verdict);
-
 // One reflector's part in the fit.
 struct RadarReflectorResidual {
   std::string reflector_id;
@@ -65,7 +61,7 @@ struct RadarReflectorResidual {
 };
 
 struct RadarCalibrationResult {
-  RadarVerdict verdict = RadarVerdict::kError;
+  Verdict verdict = Verdict::kError;
   // "" for pass; "yaw_out_of_tolerance" for fail; "too_few_reflectors" or
   // "uncertainty_too_high" for error.
   std::string reason;

@@ -169,7 +169,7 @@ void BM_CalibrateCapture(benchmark::State& state) {
   // threads on 2 cores they overlap, so they add up to more than the cycle).
   for (const SensorCalibration& s : last.sensors) state.counters["ms_" + s.name] = s.elapsed_ns * 1e-6;
   int passed = 0;
-  for (const SensorCalibration& s : last.sensors) passed += s.verdict == SensorVerdict::kPass;
+  for (const SensorCalibration& s : last.sensors) passed += s.verdict == Verdict::kPass;
   state.counters["sensors_passed"] = passed;
 }
 // 8 threads: CaptureCalibrationOptions' default, what the daemon runs.

@@ -28,9 +28,9 @@ inline int64_t EndCycleInStore(Store& store, int64_t started_ns, int64_t ended_n
   r.T_car_sensor = {1, 0, 0, 3.7, 0, 1, 0, 0, 0, 0, 1, 0.5, 0, 0, 0, 1};
   r.sigma.yaw_deg = 0.01;
   const bool stored =
-      store.AppendEvent({*id, 0, started_ns, "started", "", "", Verdict::kNone}).ok() &&
+      store.AppendEvent({*id, 0, started_ns, EventType::kStarted, "", "", std::nullopt}).ok() &&
       store.PutSensorResult(*id, r).ok() &&
-      store.AppendEvent({*id, 0, ended_ns, "cycle_ended", "", "", Verdict::kPass}).ok() &&
+      store.AppendEvent({*id, 0, ended_ns, EventType::kCycleEnded, "", "", Verdict::kPass}).ok() &&
       store.EndCycle(*id, CycleState::kDone, Verdict::kPass, "", ended_ns).ok();
   return stored ? *id : 0;
 }

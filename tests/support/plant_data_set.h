@@ -61,8 +61,8 @@ inline PlantCycle MakePlantCycle(int64_t id, const std::string& vin, const std::
   c.request_json = "{\"vin\": \"" + vin + "\", \"aligner\": {\"ok\": true}}";
   c.capture_path = "captures/" + vin + "/" + std::to_string(id);
   c.sensors = std::move(sensors);
-  p.events = {{id, 0, started_ns, "started", "", "aligner ok", Verdict::kNone},
-              {id, 1, c.ended_ns, "cycle_ended", "", c.reason, c.verdict}};
+  p.events = {{id, 0, started_ns, EventType::kStarted, "", "aligner ok", std::nullopt},
+              {id, 1, c.ended_ns, EventType::kCycleEnded, "", c.reason, c.verdict}};
   return p;
 }
 

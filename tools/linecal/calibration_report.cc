@@ -125,7 +125,7 @@ RgbImage DrawCalibrationReport(const ImageView8& image, const Capture& capture, 
 
   // The legend, top left.
   std::vector<std::string> lines;
-  lines.push_back(absl::StrFormat("%s: %s %s", result.name, SensorVerdictName(result.verdict), result.reason));
+  lines.push_back(absl::StrFormat("%s: %s %s", result.name, VerdictName(result.verdict), result.reason));
   if (result.solved) {
     const MountingEstimate& m = result.mounting;
     lines.push_back(absl::StrFormat("yaw %+.3f pitch %+.3f roll %+.3f deg (deviation %+.3f %+.3f %+.3f)",

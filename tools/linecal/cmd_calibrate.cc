@@ -24,7 +24,7 @@ constexpr double kDegPerRad = 180.0 / std::numbers::pi;
 
 void PrintTable(const Capture& capture, const CycleCalibration& cycle) {
   std::printf("VIN %s, car model %s: %s (%.0f ms)\n", capture.manifest.vin.c_str(),
-              capture.manifest.car_model.c_str(), SensorVerdictName(cycle.verdict), cycle.elapsed_ns * 1e-6);
+              capture.manifest.car_model.c_str(), VerdictName(cycle.verdict), cycle.elapsed_ns * 1e-6);
   std::printf("  %-20s %-7s %-7s %-26s %9s %9s %9s %8s %8s %8s %6s %9s\n", "sensor", "kind", "verdict", "reason",
               "dyaw_deg", "dpitch_deg", "droll_deg", "dx_mm", "dy_mm", "dz_mm", "feat", "rms");
   for (const SensorCalibration& s : cycle.sensors) {
@@ -40,7 +40,7 @@ void PrintTable(const Capture& capture, const CycleCalibration& cycle) {
                                            : absl::StrFormat(" %*s", width, "-");
     }
     std::printf("  %-20s %-7s %-7s %-26s%s %6d %9.3f\n", s.name.c_str(), SensorKindName(s.kind),
-                SensorVerdictName(s.verdict), s.reason.empty() ? "-" : s.reason.c_str(), numbers.c_str(),
+                VerdictName(s.verdict), s.reason.empty() ? "-" : s.reason.c_str(), numbers.c_str(),
                 s.features_used, s.residual_rms);
   }
   for (const SensorCalibration& s : cycle.sensors) {
@@ -138,7 +138,7 @@ int RunCalibrate(const Args& args) {
   } else {
     PrintTable(*capture, *cycle);
   }
-  return cycle->verdict == SensorVerdict::kPass ? cli::kExitOk : cli::kExitNegative;
+  return cycle->verdict == Verdict::kPass ? cli::kExitOk : cli::kExitNegative;
 }
 
 }  // namespace linecal::tools

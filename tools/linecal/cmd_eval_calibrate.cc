@@ -95,7 +95,7 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
       ++samples.reasons[r.ok() ? r->reason : "invalid_input"];
       continue;
     }
-    if (r->verdict == SensorVerdict::kError) ++samples.reasons[r->reason];
+    if (r->verdict == Verdict::kError) ++samples.reasons[r->reason];
     samples.mounting.Add(r->mounting, truth, r->verdict);
     const MountingEstimate& m = r->mounting;
     if (r->vertical_roll.valid) {

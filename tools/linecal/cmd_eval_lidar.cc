@@ -132,7 +132,7 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, const std::m
       ++samples.reasons[r.reason.empty() ? "not_solved" : r.reason];
       continue;
     }
-    if (r.verdict == SensorVerdict::kError) ++samples.reasons[r.reason];
+    if (r.verdict == Verdict::kError) ++samples.reasons[r.reason];
     samples.mounting.Add(r.mounting, truth, r.verdict);
   }
 }

@@ -192,12 +192,12 @@ absl::Status EvaluateCar(const EvalInputs& in, const RadarSimOptions& sim, doubl
     ++g.cars;
     const RadarCalibrationResult& r = run->result;
     ++g.reasons[r.reason.empty() ? "pass" : r.reason];
-    if (r.verdict == RadarVerdict::kError) continue;
+    if (r.verdict == Verdict::kError) continue;
     ++g.calibrated;
     const double true_deviation = truth.yaw - nominal.yaw;
     const bool truly_in = std::abs(true_deviation) <= sensor.tolerance.yaw_rad;
     g.samples.push_back({(r.yaw_rad - truth.yaw) * kRadToDeg, r.yaw_sigma_rad * kRadToDeg,
-                         r.yaw_ci95_rad * kRadToDeg, truly_in == (r.verdict == RadarVerdict::kPass),
+                         r.yaw_ci95_rad * kRadToDeg, truly_in == (r.verdict == Verdict::kPass),
                          (std::abs(true_deviation) - sensor.tolerance.yaw_rad) / r.yaw_sigma_rad});
   }
   return absl::OkStatus();

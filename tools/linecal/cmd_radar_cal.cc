@@ -52,7 +52,7 @@ nlohmann::json ResultJson(const SensorModel& sensor, const RadarCalibrationRun& 
   }
   return {{"sensor", sensor.name},
           {"model", sensor.model},
-          {"verdict", RadarVerdictName(r.verdict)},
+          {"verdict", VerdictName(r.verdict)},
           {"reason", r.reason},
           {"cycles", run.association.cycles},
           {"reflectors_used", r.reflectors_used},
@@ -75,7 +75,7 @@ nlohmann::json ResultJson(const SensorModel& sensor, const RadarCalibrationRun& 
 void PrintTable(const SensorModel& sensor, const RadarCalibrationRun& run) {
   const RadarCalibrationResult& r = run.result;
   std::printf("radar %s (%s): %s%s%s\n", sensor.name.c_str(), sensor.model.c_str(),
-              RadarVerdictName(r.verdict), r.reason.empty() ? "" : " ", r.reason.c_str());
+              VerdictName(r.verdict), r.reason.empty() ? "" : " ", r.reason.c_str());
   if (r.reflectors_used > 0) {
     std::printf(
         "  yaw %.4f deg (1-sigma %.4f deg, 95%% +-%.4f deg), nominal %.4f deg, deviation %+.4f "
@@ -158,7 +158,7 @@ int RunRadarCalibrate(const Args& args) {
   } else {
     PrintTable(*sensor, *run);
   }
-  return run->result.verdict == RadarVerdict::kPass ? cli::kExitOk : cli::kExitNegative;
+  return run->result.verdict == Verdict::kPass ? cli::kExitOk : cli::kExitNegative;
 }
 
 }  // namespace linecal::tools

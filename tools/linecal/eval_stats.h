@@ -103,7 +103,7 @@ struct MountingSamples {
   std::vector<double> errors[6], sigmas[6];
   int verdicts_judged = 0, verdicts_agree = 0;
 
-  void Add(const MountingEstimate& m, const TrueMounting& truth, SensorVerdict verdict) {
+  void Add(const MountingEstimate& m, const TrueMounting& truth, Verdict verdict) {
     const Eigen::Matrix<double, 6, 1> estimate = m.Deviation();
     bool judgeable = true, truly_in = true;
     for (int i = 0; i < 6; ++i) {
@@ -112,9 +112,9 @@ struct MountingSamples {
       judgeable &= std::abs(std::abs(truth.truth[i]) - truth.tolerances[i]) > 2 * m.sigma[i];
       truly_in &= std::abs(truth.truth[i]) <= truth.tolerances[i];
     }
-    if (judgeable && verdict != SensorVerdict::kError) {
+    if (judgeable && verdict != Verdict::kError) {
       ++verdicts_judged;
-      verdicts_agree += (verdict == SensorVerdict::kPass) == truly_in;
+      verdicts_agree += (verdict == Verdict::kPass) == truly_in;
     }
   }
 };

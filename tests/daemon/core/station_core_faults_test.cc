@@ -61,9 +61,9 @@ class StationCoreFaultTest : public ::testing::Test {
     config_.car_model_paths = {(dir_ / "car.json").string()};
     config_.db_path = (dir_ / "station.db").string();
     config_.data_root = (dir_ / "data").string();
-    config_.log = [this](const std::string& level, const std::string& message) {
+    config_.log = [this](const LogRecord& record) {
       std::lock_guard<std::mutex> lock(log_mutex_);
-      log_.emplace_back(level, message);
+      log_.emplace_back(LogLevelName(record.level), record.message);
     };
   }
   void TearDown() override {
@@ -118,7 +118,7 @@ class StationCoreFaultTest : public ::testing::Test {
     return std::async(std::launch::async, [&core, id] {
       std::string last;
       const absl::Status s = core.WatchCycle(id, [&](const StoredEvent& e) {
-        last = e.type + "/" + e.detail;
+        last = EventTypeName(e.type) + std::string("/") + e.detail;
         return true;
       });
       return std::make_pair(s, last);
@@ -245,7 +245,7 @@ TEST_F(StationCoreFaultTest, DiskFullMidCycleEndsInErrorAndRecoversWhenSpaceRetu
   EXPECT_EQ(stored.ended_ns, shown.ended_ns);
   const std::vector<StoredEvent> events = *core->store().Events(*id);
   ASSERT_FALSE(events.empty());
-  EXPECT_EQ(events.back().type, "cycle_ended");
+  EXPECT_EQ(events.back().type, EventType::kCycleEnded);
   EXPECT_EQ(events.back().detail, shown.reason);
   EXPECT_EQ(*core->store().RunningCycle(), std::nullopt);
   EXPECT_TRUE(core->store().IntegrityCheck().ok());

@@ -131,7 +131,7 @@ class StationCoreLiveTest : public ::testing::Test {
                                   std::map<std::string, Clock::time_point>* arrivals = nullptr) {
     std::vector<std::string> types;
     EXPECT_TRUE(core.WatchCycle(id, [&](const StoredEvent& e) {
-                      types.push_back(e.type + (e.sensor.empty() ? "" : ":" + e.sensor));
+                      types.push_back(EventTypeName(e.type) + std::string(e.sensor.empty() ? "" : ":" + e.sensor));
                       if (arrivals != nullptr) arrivals->emplace(types.back(), Clock::now());
                       return true;
                     }).ok());
@@ -159,8 +159,8 @@ void ExpectStoredEqualsOffline(const StoredCycle& stored, const CycleCalibration
     }
     ASSERT_NE(r, nullptr);
     EXPECT_EQ(r->kind, SensorKindName(s.kind));
-    EXPECT_EQ(r->verdict, s.verdict == SensorVerdict::kPass   ? Verdict::kPass
-                          : s.verdict == SensorVerdict::kFail ? Verdict::kFail
+    EXPECT_EQ(r->verdict, s.verdict == Verdict::kPass   ? Verdict::kPass
+                          : s.verdict == Verdict::kFail ? Verdict::kFail
                                                               : Verdict::kError);
     EXPECT_EQ(r->reason, s.reason);
     EXPECT_EQ(r->message, s.message);
@@ -225,8 +225,8 @@ TEST_F(StationCoreLiveTest, LiveCycleEqualsTheOfflineCalibrationOfItsRecording) 
   absl::StatusOr<CycleCalibration> offline = CalibrateCapture(*capture);
   ASSERT_TRUE(offline.ok());
   ExpectStoredEqualsOffline(*cycle, *offline);
-  EXPECT_EQ(cycle->verdict, offline->verdict == SensorVerdict::kPass   ? Verdict::kPass
-                            : offline->verdict == SensorVerdict::kFail ? Verdict::kFail
+  EXPECT_EQ(cycle->verdict, offline->verdict == Verdict::kPass   ? Verdict::kPass
+                            : offline->verdict == Verdict::kFail ? Verdict::kFail
                                                                        : Verdict::kError);
   // The simulated car is within tolerance: every sensor passes through the live path.
   for (const StoredSensorResult& r : cycle->sensors) EXPECT_EQ(r.verdict, Verdict::kPass) << r.sensor << " " << r.reason;
@@ -272,7 +272,7 @@ TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVer
   ASSERT_TRUE(offline.ok());
   ASSERT_EQ(offline->sensors.size(), 2u);
   ExpectStoredEqualsOffline(*cycle, *offline);
-  for (const SensorCalibration& s : offline->sensors) EXPECT_EQ(s.verdict, SensorVerdict::kPass) << s.name;
+  for (const SensorCalibration& s : offline->sensors) EXPECT_EQ(s.verdict, Verdict::kPass) << s.name;
 }
 
 TEST_F(StationCoreLiveTest, CancelDuringAcquisitionEndsTheCycleWithinASecond) {

@@ -91,7 +91,7 @@ void ExpectSameResults(const StoredCycle& stored, const CycleCalibration& offlin
       if (x.sensor == s.name) r = &x;
     }
     ASSERT_NE(r, nullptr);
-    EXPECT_EQ(r->verdict == Verdict::kPass, s.verdict == SensorVerdict::kPass);
+    EXPECT_EQ(r->verdict == Verdict::kPass, s.verdict == Verdict::kPass);
     EXPECT_EQ(r->reason, s.reason);
     EXPECT_EQ(r->features_used, s.features_used);
     EXPECT_EQ(r->residual_rms, s.residual_rms);  // bit for bit: the same code on the same bytes
@@ -110,7 +110,7 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
   std::vector<std::string> types;
   std::vector<int64_t> sequences;
   ASSERT_TRUE(core->WatchCycle(*id, [&](const StoredEvent& e) {
-                    types.push_back(e.type + (e.sensor.empty() ? "" : ":" + e.sensor));
+                    types.push_back(EventTypeName(e.type) + std::string(e.sensor.empty() ? "" : ":" + e.sensor));
                     sequences.push_back(e.sequence);
                     return true;
                   }).ok());
@@ -136,7 +136,7 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
   absl::StatusOr<CycleCalibration> offline = CalibrateCapture(*capture);
   ASSERT_TRUE(offline.ok());
   ExpectSameResults(*cycle, *offline);
-  EXPECT_EQ(cycle->verdict == Verdict::kPass, offline->verdict == SensorVerdict::kPass);
+  EXPECT_EQ(cycle->verdict == Verdict::kPass, offline->verdict == Verdict::kPass);
 }
 
 TEST_F(StationCoreTest, ReplaySourceGivesTheOfflineResult) {
@@ -250,7 +250,7 @@ TEST_F(StationCoreTest, DatabaseLockedMidCycleEndsInErrorStoredOnceTheLockIsGone
   EXPECT_TRUE(cycle->sensors.empty());
   const std::vector<StoredEvent> events = *core->store().Events(id);
   ASSERT_FALSE(events.empty());
-  EXPECT_EQ(events.back().type, "cycle_ended");
+  EXPECT_EQ(events.back().type, EventType::kCycleEnded);
   EXPECT_EQ(events.back().detail, cycle->reason);
   EXPECT_TRUE(core->store().IntegrityCheck().ok());
 }

@@ -82,9 +82,9 @@ class ForwarderPgTest : public ::testing::Test {
     o.batch = 20;
     o.first_retry_interval = milliseconds(20);
     o.max_retry_interval = milliseconds(200);
-    o.log = [this](const std::string& level, const std::string& message) {
+    o.log = [this](const LogRecord& record) {
       std::lock_guard<std::mutex> lock(log_mutex_);
-      log_.push_back(level + ": " + message);
+      log_.push_back(LogLevelName(record.level) + std::string(": ") + record.message);
     };
     return o;
   }
@@ -520,7 +520,7 @@ TEST_F(ForwarderPgTest, StationAnswersAndStoredResultsAreTheSameWithThePlantDown
     EXPECT_TRUE(stored.ok()) << stored.status();
     if (!stored.ok()) return out;
     for (const StoredEvent& e : *stored) {
-      out.push_back(absl::StrCat(e.type, "|", e.sensor, "|", e.detail));
+      out.push_back(absl::StrCat(EventTypeName(e.type), "|", e.sensor, "|", e.detail));
     }
     return out;
   };

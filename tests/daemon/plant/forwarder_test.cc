@@ -117,9 +117,9 @@ TEST(ForwarderTest, RefusedConnectionsKeepTheBacklogReportTheErrorAndStopAtOnce)
   o.max_retry_interval = milliseconds(100);
   std::vector<std::string> log;
   std::mutex log_mutex;
-  o.log = [&](const std::string& level, const std::string& message) {
+  o.log = [&](const LogRecord& record) {
     std::lock_guard<std::mutex> lock(log_mutex);
-    log.push_back(level + ": " + message);
+    log.push_back(LogLevelName(record.level) + std::string(": ") + record.message);
   };
   absl::StatusOr<std::unique_ptr<Forwarder>> forwarder = Forwarder::Start(store.get(), o);
   ASSERT_TRUE(forwarder.ok()) << forwarder.status();

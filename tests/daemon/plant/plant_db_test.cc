@@ -186,7 +186,7 @@ TEST_F(PlantDbTest, ReapplyingChangesNothing) {
   PlantCycle changed = Simple(2, "B-changed", kPlantT0Ns + 99);
   changed.cycle.sensors.push_back(testing_support::FullSensor("extra", "radar", Verdict::kFail,
                                                               "why"));
-  changed.events.push_back({2, 2, kPlantT0Ns + 100, "late", "", "", Verdict::kNone});
+  changed.events.push_back({2, 2, kPlantT0Ns + 100, EventType::kSensorProgress, "", "late", std::nullopt});
   ASSERT_TRUE(db->ApplyBatch("eol-1", {changed, Simple(4, "D", kPlantT0Ns + 3),
                                        Simple(4, "D-again", kPlantT0Ns + 4)})
                   .ok());

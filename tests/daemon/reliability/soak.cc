@@ -513,7 +513,7 @@ absl::StatusOr<std::unique_ptr<StationCore>> ScratchCore(const Soak& s, const fs
   StationCoreConfig config = s.config;
   config.data_root = data_root.string();
   config.db_path = (data_root / "station.db").string();
-  config.log = [](const std::string&, const std::string&) {};
+  config.log = [](const LogRecord&) {};
   absl::StatusOr<std::unique_ptr<StationCore>> core = StationCore::Create(config);
   if (!core.ok()) return Violation(absl::StrCat("scratch core: ", core.status().ToString()));
   return core;

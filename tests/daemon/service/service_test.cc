@@ -427,7 +427,7 @@ TEST_F(ServiceTest, HealthIsNotServingOnceTheDataRootIsGone) {
   config.data_root = (dir_ / "data").string();
   config.db_path = (dir_ / "data" / "station.db").string();
   fs::create_directories(config.data_root);
-  config.log = [](const std::string&, const std::string&) {};
+  config.log = [](const LogRecord&) {};
   core_ = std::move(*StationCore::Create(config));
   absl::StatusOr<RunningServer> server = StartServer(core_.get(), "127.0.0.1:0", "", "test");
   ASSERT_TRUE(server.ok()) << server.status();

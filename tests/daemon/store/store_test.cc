@@ -119,7 +119,7 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
   ASSERT_TRUE(id.ok()) << id.status();
   EXPECT_EQ(*store->RunningCycle(), std::optional<int64_t>(*id));
   for (int i = 0; i < 3; ++i) {
-    absl::StatusOr<int64_t> seq = store->AppendEvent({*id, 0, 1000 + i, "sensor_acquired", "front_camera", "", Verdict::kNone});
+    absl::StatusOr<int64_t> seq = store->AppendEvent({*id, 0, 1000 + i, EventType::kSensorAcquired, "front_camera", "", std::nullopt});
     ASSERT_TRUE(seq.ok()) << seq.status();
     EXPECT_EQ(*seq, i);
   }
@@ -158,7 +158,7 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
 TEST_F(StoreTest, ErrorCodesOfUnknownAndEndedCycles) {
   std::unique_ptr<Store> store = OpenOk();
   EXPECT_EQ(store->GetCycle(42).status().code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(store->AppendEvent({42, 0, 1, "started", "", "", Verdict::kNone}).status().code(),
+  EXPECT_EQ(store->AppendEvent({42, 0, 1, EventType::kStarted, "", "", std::nullopt}).status().code(),
             absl::StatusCode::kNotFound);
   EXPECT_EQ(store->PutSensorResult(42, CameraResult()).code(), absl::StatusCode::kNotFound);
   EXPECT_EQ(store->EndCycle(42, CycleState::kDone, Verdict::kPass, "", 1).code(), absl::StatusCode::kNotFound);
@@ -289,7 +289,7 @@ TEST_F(StoreTest, KillNineLosesNothingCommittedAndAbortsTheInterruptedCycle) {
     for (int64_t i = 0;; ++i) {
       absl::StatusOr<int64_t> id = (*store)->BeginCycle(Request("WVWZZZ1JZXW000001", i));
       if (!id.ok()) ::_exit(4);
-      (*store)->AppendEvent({*id, 0, i, "started", "", "", Verdict::kNone}).IgnoreError();
+      (*store)->AppendEvent({*id, 0, i, EventType::kStarted, "", "", std::nullopt}).IgnoreError();
       // Every second cycle ends: the other half are left running, as a crash leaves them.
       if (i % 2 == 0 && !(*store)->EndCycle(*id, CycleState::kDone, Verdict::kPass, "", i + 1).ok()) ::_exit(5);
       if (::write(fds[1], &*id, sizeof(*id)) != sizeof(*id)) ::_exit(6);
@@ -363,7 +363,7 @@ TEST_F(StoreTest, FullDiskIsResourceExhaustedAndTheWriteWorksOnceSpaceReturns) {
   const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
   ASSERT_GT(reliability::FillFileSystem((at / "filler").string()), 0u);
 
-  const absl::StatusOr<int64_t> event = store->AppendEvent({id, 0, 2, "cycle_ended", "", "x",
+  const absl::StatusOr<int64_t> event = store->AppendEvent({id, 0, 2, EventType::kCycleEnded, "", "x",
                                                             Verdict::kError});
   EXPECT_EQ(event.status().code(), absl::StatusCode::kResourceExhausted) << event.status();
   EXPECT_NE(event.status().message().find("database " + path_), std::string::npos);
@@ -373,7 +373,7 @@ TEST_F(StoreTest, FullDiskIsResourceExhaustedAndTheWriteWorksOnceSpaceReturns) {
   EXPECT_EQ(store->GetCycle(id)->state, CycleState::kRunning);  // nothing of it stored
 
   fs::remove(at / "filler");
-  EXPECT_TRUE(store->AppendEvent({id, 0, 2, "cycle_ended", "", "x", Verdict::kError}).ok());
+  EXPECT_TRUE(store->AppendEvent({id, 0, 2, EventType::kCycleEnded, "", "x", Verdict::kError}).ok());
   ASSERT_TRUE(store->EndCycle(id, CycleState::kDone, Verdict::kError, "disk_full", 3).ok());
   EXPECT_EQ(store->GetCycle(id)->reason, "disk_full");
   EXPECT_EQ(store->Events(id)->size(), 1u);
@@ -454,8 +454,8 @@ TEST_F(StoreTest, OutboxEndedCyclesAreReadInOrderWithSensorsAndEventsAndRemovedO
     EXPECT_EQ(e.cycle.sensors, stored.sensors);
     ASSERT_EQ(e.cycle.sensors.size(), 1u);
     ASSERT_EQ(e.events.size(), 2u);
-    EXPECT_EQ(e.events[0].type, "started");
-    EXPECT_EQ(e.events[1].type, "cycle_ended");
+    EXPECT_EQ(e.events[0].type, EventType::kStarted);
+    EXPECT_EQ(e.events[1].type, EventType::kCycleEnded);
     EXPECT_EQ(e.events[1].sequence, 1);
   }
   EXPECT_LT((*first)[0].seq, (*first)[1].seq);

@@ -416,7 +416,7 @@ TEST_F(WebServerTest, EventStreamsDeliverACycleInOrder) {
       EXPECT_EQ(m.id, std::to_string(id) + "." + std::to_string(e.sequence));
       EXPECT_EQ(m.data, EventJson(e));
     }
-    EXPECT_EQ(stored->back().type, "cycle_ended");
+    EXPECT_EQ(stored->back().type, EventType::kCycleEnded);
   }
   EXPECT_EQ(next, messages.size());
   // Each event's delay from its stored time to its arrival here.

@@ -90,7 +90,7 @@ TEST_F(CameraCalibrationTest, FrontCameraIsRecoveredWithinItsSigmaAndPasses) {
 
   absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), obs);
   ASSERT_TRUE(r.ok()) << r.status();
-  EXPECT_EQ(r->verdict, SensorVerdict::kPass) << r->reason << ": " << r->message;
+  EXPECT_EQ(r->verdict, Verdict::kPass) << r->reason << ": " << r->message;
   EXPECT_TRUE(r->reason.empty());
   ASSERT_TRUE(r->solved);
   const MountingEstimate& m = r->mounting;
@@ -238,7 +238,7 @@ TEST_F(CameraCalibrationTest, YawBeyondToleranceFailsWithTheReason) {
   absl::StatusOr<CameraCalibrationResult> r =
       CalibrateCamera(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.2, rng));
   ASSERT_TRUE(r.ok());
-  EXPECT_EQ(r->verdict, SensorVerdict::kFail);
+  EXPECT_EQ(r->verdict, Verdict::kFail);
   EXPECT_EQ(r->reason, "yaw_out_of_tolerance");
   EXPECT_NEAR(r->mounting.angles_deviation.yaw, 1.6 * kDeg, 0.01 * kDeg);
   // The message names the measured deviation as MountingEstimate reports it (3 decimals).
@@ -254,7 +254,7 @@ TEST_F(CameraCalibrationTest, FisheyeSurroundCameraOnTheFloorGrid) {
   absl::StatusOr<CameraCalibrationResult> r =
       CalibrateCamera(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.2, rng));
   ASSERT_TRUE(r.ok());
-  EXPECT_EQ(r->verdict, SensorVerdict::kPass) << r->reason << ": " << r->message;
+  EXPECT_EQ(r->verdict, Verdict::kPass) << r->reason << ": " << r->message;
   EXPECT_NEAR(r->mounting.angles_deviation.yaw, error.yaw, 4 * r->mounting.sigma[0]);
   EXPECT_NEAR(r->mounting.angles_deviation.pitch, error.pitch, 4 * r->mounting.sigma[1]);
   EXPECT_NEAR(r->mounting.angles_deviation.roll, error.roll, 4 * r->mounting.sigma[2]);
@@ -287,7 +287,7 @@ TEST_F(CameraCalibrationTest, MirroredOrMisidentifiedBoardFailsTheResidualTest) 
     ASSERT_TRUE(changed);
     absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), bad);
     ASSERT_TRUE(r.ok());
-    EXPECT_EQ(r->verdict, SensorVerdict::kError);
+    EXPECT_EQ(r->verdict, Verdict::kError);
     // Either the fit is refused by its residual, or the bad board pulls the solve to a pose
     // that leaves points outside the lens and there is no pose at all (what happens here).
     EXPECT_TRUE(r->reason == "residual_too_high" || r->reason == "did_not_converge") << r->reason;
@@ -309,7 +309,7 @@ TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
   std::vector<BoardObservation> none = {{"front_chessboard", {}}};
   absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), none);
   ASSERT_TRUE(r.ok());
-  EXPECT_EQ(r->verdict, SensorVerdict::kError);
+  EXPECT_EQ(r->verdict, Verdict::kError);
   EXPECT_EQ(r->reason, "board_not_found");
 
   // Too few features.
@@ -329,7 +329,7 @@ TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
   std::swap(swapped[0].board_id, swapped[1].board_id);
   absl::StatusOr<CameraCalibrationResult> wrong = CalibrateCamera(s, station_, aligner_.T_station_car(), swapped);
   ASSERT_TRUE(wrong.ok());
-  EXPECT_EQ(wrong->verdict, SensorVerdict::kError);
+  EXPECT_EQ(wrong->verdict, Verdict::kError);
   EXPECT_TRUE(wrong->reason == "residual_too_high" || wrong->reason == "board_seen_from_behind" ||
               wrong->reason == "did_not_converge")
       << wrong->reason;

@@ -83,7 +83,7 @@ TEST_F(LidarCalibrationTest, BothLidarsRecoveredWithinSigma) {
     absl::StatusOr<LidarCalibrationResult> r =
         CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.005, 0.1 * kDeg, rng));
     ASSERT_TRUE(r.ok()) << r.status();
-    EXPECT_EQ(r->verdict, SensorVerdict::kPass) << r->reason << " " << r->message;
+    EXPECT_EQ(r->verdict, Verdict::kPass) << r->reason << " " << r->message;
     EXPECT_EQ(r->features_used, 10);
     EXPECT_EQ(r->boards_used, 2);
     const MountingEstimate& m = r->mounting;
@@ -175,7 +175,7 @@ TEST_F(LidarCalibrationTest, VerdictsAndRefusals) {
   absl::StatusOr<LidarCalibrationResult> fail =
       CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, off, 0.003, 0.05 * kDeg, rng));
   ASSERT_TRUE(fail.ok());
-  EXPECT_EQ(fail->verdict, SensorVerdict::kFail);
+  EXPECT_EQ(fail->verdict, Verdict::kFail);
   EXPECT_EQ(fail->reason, "yaw_out_of_tolerance");
 
   const Rigid3d truth = TrueMounting(s, {}, Eigen::Vector3d::Zero());
@@ -187,7 +187,7 @@ TEST_F(LidarCalibrationTest, VerdictsAndRefusals) {
   for (size_t i = 0; i < holes.size(); ++i) holes[i].feature_id = obs[0].holes[i].feature_id;
   absl::StatusOr<LidarCalibrationResult> mismatched = CalibrateLidar(s, station_, aligner_.T_station_car(), wrong);
   ASSERT_TRUE(mismatched.ok());
-  EXPECT_EQ(mismatched->verdict, SensorVerdict::kError);
+  EXPECT_EQ(mismatched->verdict, Verdict::kError);
   EXPECT_EQ(mismatched->reason, "residual_too_high") << mismatched->message;
 
   // A translation bound around the nominal: a 5 cm error cannot be reached with 2 cm.

@@ -87,7 +87,7 @@ TEST(RadarCalibrationTest, ClosedLoopRecoversAKnownYawError) {
       s, layout, T_station_car, radar_test::TrueMounting(s, error), AcceptanceSim(), 3);
   const RadarCalibrationRun run = Calibrate(s, layout, T_station_car, cycles);
   const RadarCalibrationResult& r = run.result;
-  ASSERT_EQ(r.verdict, RadarVerdict::kPass) << r.reason;
+  ASSERT_EQ(r.verdict, Verdict::kPass) << r.reason;
   EXPECT_EQ(r.reflectors_used, 3);
   int n = 0;
   for (const ReflectorObservation& o : run.association.reflectors) n += o.n_used;
@@ -132,8 +132,8 @@ MonteCarloSpread SpreadOverCars(const SensorModel& s, const StationLayout& layou
     const std::vector<RadarCycle> cycles = radar_test::SimulatedCycles(
         s, layout, T_station_car, radar_test::TrueMounting(s, error, offset), sim, rng());
     const RadarCalibrationResult r = Calibrate(s, layout, T_station_car, cycles).result;
-    EXPECT_NE(r.verdict, RadarVerdict::kError) << i << ": " << r.reason;
-    if (r.verdict == RadarVerdict::kError) return {};
+    EXPECT_NE(r.verdict, Verdict::kError) << i << ": " << r.reason;
+    if (r.verdict == Verdict::kError) return {};
     const double e = r.yaw_deviation_rad - error.yaw;
     sum_e2 += e * e;
     sum_s2 += r.yaw_sigma_rad * r.yaw_sigma_rad;
@@ -198,10 +198,10 @@ TEST(RadarCalibrationTest, VerdictAroundTheTolerance) {
   const SensorModel s = WithKnownPosition(radar_test::TestRadar("esr"));
   // 0.8° and 1.2° against a 1° tolerance: 0.2° from the edge is ~15 σ.
   for (const auto& [yaw_error, verdict, reason] :
-       {std::tuple{0.8 * kDeg, RadarVerdict::kPass, ""},
-        std::tuple{-0.8 * kDeg, RadarVerdict::kPass, ""},
-        std::tuple{1.2 * kDeg, RadarVerdict::kFail, "yaw_out_of_tolerance"},
-        std::tuple{-1.2 * kDeg, RadarVerdict::kFail, "yaw_out_of_tolerance"}}) {
+       {std::tuple{0.8 * kDeg, Verdict::kPass, ""},
+        std::tuple{-0.8 * kDeg, Verdict::kPass, ""},
+        std::tuple{1.2 * kDeg, Verdict::kFail, "yaw_out_of_tolerance"},
+        std::tuple{-1.2 * kDeg, Verdict::kFail, "yaw_out_of_tolerance"}}) {
     SCOPED_TRACE(yaw_error / kDeg);
     const std::vector<RadarCycle> cycles = radar_test::SimulatedCycles(
         s, layout, Rigid3d(), radar_test::TrueMounting(s, {yaw_error, 0, 0}), AcceptanceSim(), 5);
@@ -221,7 +221,7 @@ TEST(RadarCalibrationTest, ErrorReasons) {
   // Only one target in view: too few reflectors to calibrate.
   s.targets = {"centre", "behind"};
   RadarCalibrationRun run = Calibrate(s, layout, Rigid3d(), cycles);
-  EXPECT_EQ(run.result.verdict, RadarVerdict::kError);
+  EXPECT_EQ(run.result.verdict, Verdict::kError);
   EXPECT_EQ(run.result.reason, "too_few_reflectors");
   EXPECT_EQ(run.result.reflectors_used, 1);
   EXPECT_EQ(run.association.reflectors[1].status, ReflectorStatus::kNotInView);
@@ -235,9 +235,9 @@ TEST(RadarCalibrationTest, ErrorReasons) {
   // A tolerance of 0.02°: the ~0.008° 1-σ cannot decide against it.
   s.tolerance.yaw_rad = 0.02 * kDeg;
   run = Calibrate(s, layout, Rigid3d(), cycles);
-  EXPECT_EQ(run.result.verdict, RadarVerdict::kError);
+  EXPECT_EQ(run.result.verdict, Verdict::kError);
   EXPECT_EQ(run.result.reason, "uncertainty_too_high");
-  EXPECT_STREQ(RadarVerdictName(run.result.verdict), "error");
+  EXPECT_STREQ(VerdictName(run.result.verdict), "error");
 
   // Not a radar, bad options.
   s.kind = SensorKind::kCamera;
@@ -262,7 +262,7 @@ TEST(RadarCalibrationTest, RecoversALateralOffsetWithReflectorsAtDifferentRanges
   const std::vector<RadarCycle> cycles = radar_test::SimulatedCycles(
       s, layout, Rigid3d(), radar_test::TrueMounting(s, error, offset), AcceptanceSim(), 21);
   const RadarCalibrationResult r = Calibrate(s, layout, Rigid3d(), cycles).result;
-  ASSERT_EQ(r.verdict, RadarVerdict::kPass) << r.reason;
+  ASSERT_EQ(r.verdict, Verdict::kPass) << r.reason;
   EXPECT_EQ(r.reflectors_used, 3);
   EXPECT_NEAR(r.yaw_deviation_rad, error.yaw, 4 * r.yaw_sigma_rad);
   EXPECT_LT(r.yaw_sigma_rad, 0.03 * kDeg);
