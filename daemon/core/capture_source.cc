@@ -13,39 +13,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class SimulatorSource : public CaptureSource {
- public:
-  explicit SimulatorSource(std::vector<SimulatedBoardMove> moves) : moves_(std::move(moves)) {}
-
-  absl::StatusOr<AcquiredCapture> Acquire(const CaptureCycle& cycle) override {
-    SimulatorOptions o;
-    o.vin = cycle.vin;
-    o.aligner = cycle.aligner;
-    o.time_ns = cycle.started_ns;
-    // Frames per sensor: camera frames and LiDAR rotations alike.
-    o.camera_frames = cycle.frames;
-    o.lidar.rotations = o.camera_frames;
-    o.cancel = cycle.cancel;  // a cancel or a drain stops before the next sensor
-    for (const SimulatedBoardMove& m : moves_) {
-      if (cycle.id >= m.from_cycle) o.moved_boards.push_back(m.move);
-    }
-    absl::StatusOr<SimulationSummary> sim =
-        SimulateCapture(*cycle.station, *cycle.car, o, static_cast<std::uint64_t>(cycle.id),
-                        cycle.dir, [&](int, int, const std::string& sensor) {
-                          cycle.event(EventType::kSensorAcquired, sensor, "", std::nullopt);
-                        });
-    if (absl::IsCancelled(sim.status())) return sim.status();
-    if (!sim.ok()) {
-      return absl::Status(sim.status().code(),
-                          absl::StrCat("acquisition_failed: ", sim.status().message()));
-    }
-    return AcquiredCapture{};
-  }
-
- private:
-  const std::vector<SimulatedBoardMove> moves_;
-};
-
 class ReplaySource : public CaptureSource {
  public:
   ReplaySource(std::string data_root, std::string capture)
@@ -180,10 +147,6 @@ absl::Status CheckSourceFits(const std::string& name, const SourceConfig& source
 }
 
 }  // namespace
-
-std::unique_ptr<CaptureSource> MakeSimulatorSource(std::vector<SimulatedBoardMove> moves) {
-  return std::make_unique<SimulatorSource>(std::move(moves));
-}
 
 absl::StatusOr<std::unique_ptr<CaptureSource>> MakeReplaySource(const std::string& data_root,
                                                                 const std::string& capture,

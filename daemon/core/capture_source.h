@@ -2,7 +2,8 @@
 // What a cycle calibrates from: the capture source puts (or finds) the cycle's capture in its
 // capture directory before the station core reads and calibrates it (daemon/core/
 // station_core.h). One implementation per CycleSource of the station configuration:
-//   simulator  simulates the car in the station (station/sim) into the directory;
+//   simulator  simulates the car in the station into the directory (daemon/simstation/
+//              simulator_source.h: only the simulated station includes the simulator);
 //   replay     a recorded capture below the data root, calibrated as it is;
 //   live       every sensor from its own SensorSource (daemon/sources), all at once, one
 //              thread per sensor, then written as a capture (origin "station").
@@ -25,20 +26,12 @@
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
-#include "station/sim/simulator.h"
 
 namespace linecal {
 
 // Builds the source of a sensor from its configuration (MakeSensorSource by default).
 using SensorSourceFactory = std::function<absl::StatusOr<std::unique_ptr<SensorSource>>(
     const std::string& sensor, const SourceConfig& config)>;
-
-// simulator: a board that stands moved from cycle `from_cycle` on (a knocked board, for the
-// station-health alarm's tests and demos; SimulatorOptions::moved_boards).
-struct SimulatedBoardMove {
-  MovedBoard move;
-  int64_t from_cycle = 1;  // the first cycle id that sees the board moved
-};
 
 // One event of the cycle's stream: type, sensor (empty: cycle-wide), detail, verdict.
 using CycleEventSink =
@@ -77,9 +70,6 @@ class CaptureSource {
   // live: sensor name -> what serves it (SensorSource::Describe); else empty.
   virtual std::map<std::string, std::string> SensorSources() const { return {}; }
 };
-
-// Simulates the car into the directory with the cycle id as seed.
-std::unique_ptr<CaptureSource> MakeSimulatorSource(std::vector<SimulatedBoardMove> moves);
 
 // Calibrates `data_root/capture` as it is. InvalidArgument when `capture` is not a relative
 // path inside the data root or does not read (ReadCapture under `budget`): checked once here,

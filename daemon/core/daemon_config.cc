@@ -334,41 +334,6 @@ absl::Status CheckListenAddress(const std::string& address, const std::string& k
 
 namespace {
 
-// source.moved_boards: [{board, ypr_deg [3], xyz_m [3] (default 0), from_cycle (>= 1,
-// default 1)}], the bounds of SimulatorOptions::Validate.
-absl::StatusOr<std::vector<SimulatedBoardMove>> ParseMovedBoards(const JsonField& source) {
-  absl::StatusOr<std::vector<JsonField>> entries = source.Array("moved_boards");
-  if (!entries.ok()) return entries.status();
-  std::vector<SimulatedBoardMove> moves;
-  SimulatorOptions check;
-  for (const JsonField& e : *entries) {
-    if (absl::Status s = e.AllowOnlyKeys({"board", "ypr_deg", "xyz_m", "from_cycle"}); !s.ok())
-      return s;
-    SimulatedBoardMove m;
-    absl::StatusOr<std::string> board = e.String("board");
-    if (!board.ok()) return board.status();
-    m.move.board_id = *board;
-    absl::StatusOr<std::vector<double>> ypr = e.Numbers("ypr_deg", 3);
-    if (!ypr.ok()) return ypr.status();
-    m.move.yaw_deg = (*ypr)[0];
-    m.move.pitch_deg = (*ypr)[1];
-    m.move.roll_deg = (*ypr)[2];
-    if (e.Has("xyz_m")) {
-      absl::StatusOr<std::vector<double>> xyz = e.Numbers("xyz_m", 3);
-      if (!xyz.ok()) return xyz.status();
-      m.move.offset_m = Eigen::Vector3d((*xyz)[0], (*xyz)[1], (*xyz)[2]);
-    }
-    absl::StatusOr<std::int64_t> from = e.IntegerOr("from_cycle", 1);
-    if (!from.ok()) return from.status();
-    if (*from < 1) return e.Error("from_cycle", "must be >= 1");
-    m.from_cycle = *from;
-    check.moved_boards.push_back(m.move);
-    if (absl::Status s = check.Validate(); !s.ok()) return e.Error(std::string(s.message()));
-    moves.push_back(std::move(m));
-  }
-  return moves;
-}
-
 // listen, log_level, auth_token and station_id of the file's root.
 absl::Status ReadService(const JsonField& root, DaemonConfig* c) {
   absl::StatusOr<std::string> listen = root.StringOr("listen", c->listen);
@@ -439,7 +404,7 @@ absl::Status ReadSource(const JsonField& root, const fs::path& base, StationCore
   } else if (*type == "simulator") {
     core->source = CycleSource::kSimulator;
     if (source->Has("moved_boards")) {
-      absl::StatusOr<std::vector<SimulatedBoardMove>> moves = ParseMovedBoards(*source);
+      absl::StatusOr<std::vector<SimulatedBoardMove>> moves = ParseSimulatedMoves(*source);
       if (!moves.ok()) return moves.status();
       core->simulated_moves = *std::move(moves);
     }

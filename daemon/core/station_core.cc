@@ -17,7 +17,6 @@
 #include "station/pipeline/capture_calibration.h"
 #include "station/capture/capture.h"
 #include "station/model/vin.h"
-#include "station/sim/simulator.h"
 
 namespace linecal {
 namespace {

@@ -54,6 +54,7 @@
 #include "daemon/log/daemon_log.h"
 #include "station/pipeline/capture_calibration.h"
 #include "daemon/plant/forwarder.h"
+#include "daemon/simstation/simulator_source.h"
 #include "daemon/store/store.h"
 #include "station/health/station_health.h"
 #include "station/io/input_budget.h"
