@@ -17,16 +17,25 @@ namespace linecal {
 
 std::optional<Detection> DetectBoard(const ImageView8& image, const Board& board) {
   switch (board.type()) {
-    case BoardType::kChecker: return DetectChecker(image, board);
-    case BoardType::kCircle: return DetectCircleBoard(image, board);
-    case BoardType::kCircleGrid: return DetectCircleGrid(image, board);
-    case BoardType::kChessboard: return DetectChessboard(image, board);
-    case BoardType::kVertical: return DetectVertical(image, board);
+    case BoardType::kChecker:
+      return DetectChecker(image, board);
+    case BoardType::kCircle:
+      return DetectCircleBoard(image, board);
+    case BoardType::kCircleGrid:
+      return DetectCircleGrid(image, board);
+    case BoardType::kChessboard:
+      return DetectChessboard(image, board);
+    case BoardType::kVertical:
+      return DetectVertical(image, board);
     case BoardType::kAruco:
-    case BoardType::kRoundHole: return DetectAruco(image, board);
-    case BoardType::kApriltag: return DetectApriltag(image, board);
-    case BoardType::kSquareGrid: return DetectSquareGrid(image, board);
-    case BoardType::kCharuco: return DetectCharuco(image, board);
+    case BoardType::kRoundHole:
+      return DetectAruco(image, board);
+    case BoardType::kApriltag:
+      return DetectApriltag(image, board);
+    case BoardType::kSquareGrid:
+      return DetectSquareGrid(image, board);
+    case BoardType::kCharuco:
+      return DetectCharuco(image, board);
   }
   return std::nullopt;
 }

@@ -5,10 +5,9 @@
 // or reports found = false with a reason and, only when they are certain, the features of a
 // partly seen board (occlusion, a vertical board cut by the image border).
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "detectors/boards/board.h"
 #include "detectors/core/image_view.h"
@@ -32,10 +31,10 @@ enum class DetectReason : std::uint8_t {
 const char* DetectReasonName(DetectReason reason);
 
 struct DetectedFeature {
-  int id = 0;                                   // BoardFeature::id
-  Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();  // sub-pixel, pixel-centre convention
+  int id = 0;                                         // BoardFeature::id
+  Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();    // sub-pixel, pixel-centre convention
   Eigen::Vector2d p_board = Eigen::Vector2d::Zero();  // BoardFeature::p_board, metres
-  int marker = -1;                              // BoardFeature::marker
+  int marker = -1;                                    // BoardFeature::marker
 };
 
 struct Detection {
@@ -51,6 +50,7 @@ inline constexpr int kMinDetectImageSide = 16;
 // The checks every image detector opens with: kWrongBoard when `board` is not of `type`;
 // kBadImage for an invalid view, one under kMinDetectImageSide a side, or invalid options
 // (`options_valid` false); kNone to go on. O(1).
-DetectReason CheckDetectorInput(const ImageView8& image, const Board& board, BoardType type, bool options_valid);
+DetectReason CheckDetectorInput(const ImageView8& image, const Board& board, BoardType type,
+                                bool options_valid);
 
 }  // namespace linecal

@@ -19,10 +19,13 @@ std::string Resolve(const fs::path& base, const std::string& p) {
 }
 
 absl::StatusOr<TlsConfig> ReadTls(const JsonField& tls, const fs::path& base) {
-  if (absl::Status s = tls.AllowOnlyKeys({"cert", "key", "client_ca", "require_client_cert"}); !s.ok()) return s;
+  if (absl::Status s = tls.AllowOnlyKeys({"cert", "key", "client_ca", "require_client_cert"});
+      !s.ok())
+    return s;
   TlsConfig c;
   // One PEM file: a path key, resolved against the configuration's directory, and its text.
-  auto read = [&](const char* key, bool required, std::string* path, std::string* pem) -> absl::Status {
+  auto read = [&](const char* key, bool required, std::string* path,
+                  std::string* pem) -> absl::Status {
     absl::StatusOr<std::string> value = required ? tls.String(key) : tls.StringOr(key, "");
     if (!value.ok()) return value.status();
     if (value->empty()) return absl::OkStatus();
@@ -34,12 +37,15 @@ absl::StatusOr<TlsConfig> ReadTls(const JsonField& tls, const fs::path& base) {
   };
   if (absl::Status s = read("cert", true, &c.cert_path, &c.cert_pem); !s.ok()) return s;
   if (absl::Status s = read("key", true, &c.key_path, &c.key_pem); !s.ok()) return s;
-  if (absl::Status s = read("client_ca", false, &c.client_ca_path, &c.client_ca_pem); !s.ok()) return s;
+  if (absl::Status s = read("client_ca", false, &c.client_ca_path, &c.client_ca_pem); !s.ok())
+    return s;
   absl::StatusOr<bool> require = tls.BoolOr("require_client_cert", true);
   if (!require.ok()) return require.status();
   c.require_client_cert = *require;
   if (c.require_client_cert && c.client_ca_path.empty()) {
-    return tls.Error("client_ca", "required when require_client_cert is true (the CA of the clients' certificates)");
+    return tls.Error(
+        "client_ca",
+        "required when require_client_cert is true (the CA of the clients' certificates)");
   }
   return c;
 }
@@ -47,10 +53,11 @@ absl::StatusOr<TlsConfig> ReadTls(const JsonField& tls, const fs::path& base) {
 // A duration key: integer milliseconds in [1, 600000]; ten minutes is beyond any step of a
 // cycle, so a larger number is a unit mistake.
 absl::StatusOr<std::chrono::milliseconds> Milliseconds(const JsonField& f, const std::string& key,
-                                                      std::chrono::milliseconds fallback) {
+                                                       std::chrono::milliseconds fallback) {
   absl::StatusOr<std::int64_t> ms = f.IntegerOr(key, fallback.count());
   if (!ms.ok()) return ms.status();
-  if (*ms <= 0 || *ms > 600000) return f.Error(key, absl::StrCat("must be in [1, 600000], got ", *ms));
+  if (*ms <= 0 || *ms > 600000)
+    return f.Error(key, absl::StrCat("must be in [1, 600000], got ", *ms));
   return std::chrono::milliseconds(*ms);
 }
 
@@ -63,12 +70,14 @@ absl::StatusOr<SourceConfig> ParseSensorSource(const JsonField& f, const fs::pat
   if (*type == "aravis" || *type == "v4l2") {
     const bool aravis = *type == "aravis";
     c.type = aravis ? SourceType::kAravis : SourceType::kV4l2;
-    absl::Status keys = aravis ? f.AllowOnlyKeys({"type", "device_id", "pixel_format", "exposure_us",
-                                                  "frame_timeout_ms", "frame_retries"})
-                               : f.AllowOnlyKeys({"type", "device", "pixel_format", "width", "height",
-                                                  "frame_timeout_ms", "frame_retries"});
+    absl::Status keys = aravis
+                            ? f.AllowOnlyKeys({"type", "device_id", "pixel_format", "exposure_us",
+                                               "frame_timeout_ms", "frame_retries"})
+                            : f.AllowOnlyKeys({"type", "device", "pixel_format", "width", "height",
+                                               "frame_timeout_ms", "frame_retries"});
     if (!keys.ok()) return keys;
-    absl::StatusOr<std::chrono::milliseconds> timeout = Milliseconds(f, "frame_timeout_ms", c.aravis.frame_timeout);
+    absl::StatusOr<std::chrono::milliseconds> timeout =
+        Milliseconds(f, "frame_timeout_ms", c.aravis.frame_timeout);
     if (!timeout.ok()) return timeout.status();
     absl::StatusOr<std::int64_t> retries = f.IntegerOr("frame_retries", c.aravis.frame_retries);
     if (!retries.ok()) return retries.status();
@@ -95,27 +104,36 @@ absl::StatusOr<SourceConfig> ParseSensorSource(const JsonField& f, const fs::pat
       // 16384: beyond any V4L2 camera's sensor; 0 keeps the device's format.
       if (*width < 0 || *width > 16384) return f.Error("width", "must be in [0, 16384]");
       if (*height < 0 || *height > 16384) return f.Error("height", "must be in [0, 16384]");
-      c.v4l2 = {*device, *format, static_cast<int>(*width), static_cast<int>(*height), *timeout,
+      c.v4l2 = {*device,
+                *format,
+                static_cast<int>(*width),
+                static_cast<int>(*height),
+                *timeout,
                 static_cast<int>(*retries)};
     }
     return c;
   }
   if (*type == "udp") {
     c.type = SourceType::kUdp;
-    if (absl::Status s = f.AllowOnlyKeys({"type", "bind", "port", "multicast_group", "receive_buffer_bytes"}); !s.ok()) {
+    if (absl::Status s =
+            f.AllowOnlyKeys({"type", "bind", "port", "multicast_group", "receive_buffer_bytes"});
+        !s.ok()) {
       return s;
     }
     absl::StatusOr<std::string> bind = f.StringOr("bind", c.udp.bind_address);
     if (!bind.ok()) return bind.status();
     absl::StatusOr<std::int64_t> port = f.IntegerOr("port", c.udp.port);
     if (!port.ok()) return port.status();
-    if (*port < 1 || *port > 65535) return f.Error("port", absl::StrCat("must be in [1, 65535], got ", *port));
+    if (*port < 1 || *port > 65535)
+      return f.Error("port", absl::StrCat("must be in [1, 65535], got ", *port));
     absl::StatusOr<std::string> group = f.StringOr("multicast_group", "");
     if (!group.ok()) return group.status();
-    absl::StatusOr<std::int64_t> buffer = f.IntegerOr("receive_buffer_bytes", c.udp.receive_buffer_bytes);
+    absl::StatusOr<std::int64_t> buffer =
+        f.IntegerOr("receive_buffer_bytes", c.udp.receive_buffer_bytes);
     if (!buffer.ok()) return buffer.status();
     // 1 GiB: more than any kernel grants; a larger number is a unit mistake.
-    if (*buffer < 1 || *buffer > (1 << 30)) return f.Error("receive_buffer_bytes", "must be in [1, 2^30]");
+    if (*buffer < 1 || *buffer > (1 << 30))
+      return f.Error("receive_buffer_bytes", "must be in [1, 2^30]");
     c.udp = {*bind, static_cast<std::uint16_t>(*port), *group, static_cast<int>(*buffer)};
     if (absl::Status s = c.udp.Validate(); !s.ok()) return f.Error(std::string(s.message()));
     return c;
@@ -123,11 +141,13 @@ absl::StatusOr<SourceConfig> ParseSensorSource(const JsonField& f, const fs::pat
   if (*type == "socketcan" || *type == "candump") {
     const bool log = *type == "candump";
     c.type = log ? SourceType::kCandump : SourceType::kSocketCan;
-    c.can.input = log ? CanRadarSourceConfig::Input::kCandumpLog : CanRadarSourceConfig::Input::kSocketCan;
+    c.can.input =
+        log ? CanRadarSourceConfig::Input::kCandumpLog : CanRadarSourceConfig::Input::kSocketCan;
     absl::Status keys = log ? f.AllowOnlyKeys({"type", "log", "interface", "record_ms"})
                             : f.AllowOnlyKeys({"type", "interface", "record_ms"});
     if (!keys.ok()) return keys;
-    absl::StatusOr<std::string> interface = log ? f.StringOr("interface", "") : f.String("interface");
+    absl::StatusOr<std::string> interface =
+        log ? f.StringOr("interface", "") : f.String("interface");
     if (!interface.ok()) return interface.status();
     c.can.interface = *interface;
     if (log) {
@@ -141,15 +161,18 @@ absl::StatusOr<SourceConfig> ParseSensorSource(const JsonField& f, const fs::pat
     if (absl::Status s = c.can.Validate(); !s.ok()) return f.Error(std::string(s.message()));
     return c;
   }
-  return f.Error("type", absl::StrCat("must be aravis, v4l2, udp, socketcan or candump, got '", *type, "'"));
+  return f.Error(
+      "type", absl::StrCat("must be aravis, v4l2, udp, socketcan or candump, got '", *type, "'"));
 }
 
 // The `input_budget` object: each key optional, an integer >= 1 (InputBudget::Validate).
 absl::StatusOr<InputBudget> ReadInputBudget(const JsonField& f) {
   InputBudget b;
   const std::pair<const char*, std::int64_t*> keys[] = {
-      {"max_file_bytes", &b.max_file_bytes},   {"max_image_pixels", &b.max_image_pixels},
-      {"max_scan_points", &b.max_scan_points}, {"max_can_lines", &b.max_can_lines},
+      {"max_file_bytes", &b.max_file_bytes},
+      {"max_image_pixels", &b.max_image_pixels},
+      {"max_scan_points", &b.max_scan_points},
+      {"max_can_lines", &b.max_can_lines},
       {"max_manifest_frames", &b.max_manifest_frames}};
   if (absl::Status s = f.AllowOnlyKeys({"max_file_bytes", "max_image_pixels", "max_scan_points",
                                         "max_can_lines", "max_manifest_frames"});
@@ -286,7 +309,8 @@ bool IsListenAddress(const std::string& address) {
 // The `web` object (docs/daemon.md, "Console"): where the console listens, its TLS (the
 // shape of the top-level tls) and its pages' folder.
 absl::StatusOr<WebConfig> ReadWeb(const JsonField& f, const fs::path& base) {
-  if (absl::Status s = f.AllowOnlyKeys({"listen", "tls", "static_dir", "operator_token"}); !s.ok()) return s;
+  if (absl::Status s = f.AllowOnlyKeys({"listen", "tls", "static_dir", "operator_token"}); !s.ok())
+    return s;
   WebConfig c;
   absl::StatusOr<std::string> listen = f.String("listen");
   if (!listen.ok()) return listen.status();

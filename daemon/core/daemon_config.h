@@ -1,7 +1,7 @@
 #pragma once
 // linecald's configuration file (docs/daemon.md): JSON, every key checked, errors naming the
-// file and the key ("linecald.json: source.type: must be 'simulator', 'replay' or 'live', got 'usb'").
-// Relative paths in the file are relative to the file's directory.
+// file and the key ("linecald.json: source.type: must be 'simulator', 'replay' or 'live', got
+// 'usb'"). Relative paths in the file are relative to the file's directory.
 
 #include <optional>
 #include <string>

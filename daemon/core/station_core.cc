@@ -14,9 +14,9 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "station/pipeline/capture_calibration.h"
 #include "station/capture/capture.h"
 #include "station/model/vin.h"
+#include "station/pipeline/capture_calibration.h"
 
 namespace linecal {
 namespace {
@@ -31,7 +31,8 @@ constexpr double kMaxThrustDeg = 10.0;
 constexpr int kMaxFramesPerSensor = 100;
 
 std::int64_t NowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -51,9 +52,11 @@ StoredSensorResult ToStored(const SensorCalibration& s) {
     }
     r.measured = {m.angles.yaw * kDeg, m.angles.pitch * kDeg, m.angles.roll * kDeg,
                   m.position_m.x(),    m.position_m.y(),      m.position_m.z()};
-    r.deviation = {m.angles_deviation.yaw * kDeg, m.angles_deviation.pitch * kDeg, m.angles_deviation.roll * kDeg,
-                   m.position_deviation_m.x(),    m.position_deviation_m.y(),      m.position_deviation_m.z()};
-    r.sigma = {m.sigma[0] * kDeg, m.sigma[1] * kDeg, m.sigma[2] * kDeg, m.sigma[3], m.sigma[4], m.sigma[5]};
+    r.deviation = {m.angles_deviation.yaw * kDeg,  m.angles_deviation.pitch * kDeg,
+                   m.angles_deviation.roll * kDeg, m.position_deviation_m.x(),
+                   m.position_deviation_m.y(),     m.position_deviation_m.z()};
+    r.sigma = {m.sigma[0] * kDeg, m.sigma[1] * kDeg, m.sigma[2] * kDeg,
+               m.sigma[3],        m.sigma[4],        m.sigma[5]};
   }
   r.residual_rms = s.residual_rms;
   r.features_used = s.features_used;
@@ -84,8 +87,7 @@ StoredSensorResult ToStored(const SensorCalibration& s) {
 // else removes them (RunCycle removes a capture at the cycle's end): each is removed unless
 // its request asked to record it (then it stays, its cycle stored aborted). Only a cycle's
 // own captures/<VIN>-<start ns> is touched, never a replayed capture.
-void RemoveAbortedCaptures(const std::string& data_root,
-                           const std::vector<StoredCycle>& aborted) {
+void RemoveAbortedCaptures(const std::string& data_root, const std::vector<StoredCycle>& aborted) {
   for (const StoredCycle& c : aborted) {
     if (c.capture_path != absl::StrCat("captures/", c.vin, "-", c.started_ns)) continue;
     const nlohmann::json request =
@@ -132,7 +134,9 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
     absl::StatusOr<CarModel> car = ReadCarModel(path);
     if (!car.ok()) return car.status();
     for (const CarModel& c : cars) {
-      if (c.id == car->id) return absl::InvalidArgumentError(absl::StrCat(path, ": car model id '", car->id, "' twice"));
+      if (c.id == car->id)
+        return absl::InvalidArgumentError(
+            absl::StrCat(path, ": car model id '", car->id, "' twice"));
     }
     if (absl::Status s = CheckTargetsExist(*car, *station); !s.ok()) return s;
     cars.push_back(std::move(*car));
@@ -143,16 +147,21 @@ absl::StatusOr<std::unique_ptr<StationCore>> StationCore::Create(const StationCo
                                                      m.move.board_id, "' (source.moved_boards)"));
     }
   }
-  if (cars.empty()) return absl::InvalidArgumentError("car_models: at least one car model is needed");
+  if (cars.empty())
+    return absl::InvalidArgumentError("car_models: at least one car model is needed");
   std::error_code ec;
   fs::create_directories(config.data_root, ec);
-  if (ec) return absl::InvalidArgumentError(absl::StrCat("data_root: cannot create '", config.data_root, "': ", ec.message()));
+  if (ec)
+    return absl::InvalidArgumentError(
+        absl::StrCat("data_root: cannot create '", config.data_root, "': ", ec.message()));
   absl::StatusOr<std::unique_ptr<CaptureSource>> capture_source = MakeCaptureSource(config, cars);
   if (!capture_source.ok()) return capture_source.status();
-  if (config.acquire_deadline <= std::chrono::milliseconds(0) || config.calibrate_deadline <= std::chrono::milliseconds(0)) {
+  if (config.acquire_deadline <= std::chrono::milliseconds(0) ||
+      config.calibrate_deadline <= std::chrono::milliseconds(0)) {
     return absl::InvalidArgumentError("deadlines_ms: acquire and calibrate must be > 0");
   }
-  if (config.default_frames_per_sensor < 1 || config.default_frames_per_sensor > kMaxFramesPerSensor) {
+  if (config.default_frames_per_sensor < 1 ||
+      config.default_frames_per_sensor > kMaxFramesPerSensor) {
     return absl::InvalidArgumentError("default_frames_per_sensor: must be in [1, 100]");
   }
   StoreOptions store_options;
@@ -228,9 +237,9 @@ void StationCore::Log(LogLevel level, const std::string& message, int64_t cycle,
 absl::Status StationCore::CheckStorage() const {
   struct stat root {};
   if (::stat(config_.data_root.c_str(), &root) != 0) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "data_root '", config_.data_root, "' was removed while linecald ran (",
-        std::strerror(errno), ")"));
+    return absl::FailedPreconditionError(absl::StrCat("data_root '", config_.data_root,
+                                                      "' was removed while linecald ran (",
+                                                      std::strerror(errno), ")"));
   }
   if (root.st_dev != data_root_dev_ || root.st_ino != data_root_ino_) {
     return absl::FailedPreconditionError(absl::StrCat(
@@ -303,8 +312,8 @@ absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(int64_t id, 
         break;
       }
       if (std::chrono::steady_clock::now() >= deadline) {
-        stopped = absl::DeadlineExceededError(
-            absl::StrCat("calibration still running after ", config_.calibrate_deadline.count(), " ms"));
+        stopped = absl::DeadlineExceededError(absl::StrCat(
+            "calibration still running after ", config_.calibrate_deadline.count(), " ms"));
         break;
       }
       // 50 ms: how late a cancel is noticed while the calibration runs.
@@ -321,8 +330,8 @@ absl::StatusOr<CycleCalibration> StationCore::CalibrateWithDeadline(int64_t id, 
   bool done = false;
   {
     std::unique_lock<std::mutex> lock(pending->mutex);
-    done = pending->done_changed.wait_for(lock, kCalibrationStopGrace,
-                                          [&] { return pending->done; });
+    done =
+        pending->done_changed.wait_for(lock, kCalibrationStopGrace, [&] { return pending->done; });
   }
   if (done) {
     thread.join();
@@ -367,33 +376,38 @@ absl::Status ValidateCycleRequest(const CycleRequest& request, const std::vector
                                                    "; known: ", absl::StrJoin(known, ", ")));
   }
   const AlignerMeasurement& a = request.aligner;
-  const std::pair<const char*, double> offsets[] = {{"aligner.longitudinal_offset_m", a.longitudinal_offset_m},
-                                                    {"aligner.lateral_offset_m", a.lateral_offset_m}};
+  const std::pair<const char*, double> offsets[] = {
+      {"aligner.longitudinal_offset_m", a.longitudinal_offset_m},
+      {"aligner.lateral_offset_m", a.lateral_offset_m}};
   for (const auto& [field, v] : offsets) {
     if (!(std::abs(v) <= kMaxAlignerOffsetM)) {
-      return absl::InvalidArgumentError(absl::StrCat(field, " = ", v, ": must be within +-", kMaxAlignerOffsetM, " m"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(field, " = ", v, ": must be within +-", kMaxAlignerOffsetM, " m"));
     }
   }
   if (!(std::abs(a.thrust_angle_rad * kRadToDeg) <= kMaxThrustDeg)) {
-    return absl::InvalidArgumentError(absl::StrCat("aligner.thrust_angle_deg = ", a.thrust_angle_rad * kRadToDeg,
-                                                   ": must be within +-", kMaxThrustDeg, " deg"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("aligner.thrust_angle_deg = ", a.thrust_angle_rad * kRadToDeg,
+                     ": must be within +-", kMaxThrustDeg, " deg"));
   }
   if (request.frames_per_sensor < 0 || request.frames_per_sensor > kMaxFramesPerSensor) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("options.frames_per_sensor = ", request.frames_per_sensor, ": must be in [0, 100]"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.frames_per_sensor = ", request.frames_per_sensor, ": must be in [0, 100]"));
   }
   return absl::OkStatus();
 }
 
 absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
-  if (absl::Status s = ValidateCycleRequest(request, cars_, config_.vin_check_digit); !s.ok()) return s;
+  if (absl::Status s = ValidateCycleRequest(request, cars_, config_.vin_check_digit); !s.ok())
+    return s;
   JoinAbandoned(/*all=*/false);
   // Nothing stored now would outlive the process, and the last cycle's end comes first.
   if (absl::Status s = CheckStorage(); !s.ok()) return s;
   if (absl::Status s = StoreUnstoredEnd(); !s.ok()) return s;
 
   std::lock_guard<std::mutex> lock(mutex_);
-  if (running_) return absl::FailedPreconditionError(absl::StrCat("cycle ", *running_, " is running"));
+  if (running_)
+    return absl::FailedPreconditionError(absl::StrCat("cycle ", *running_, " is running"));
   if (worker_.joinable()) worker_.join();  // the previous cycle's thread has finished its work
   StoredCycle cycle;
   cycle.vin = request.vin;
@@ -422,7 +436,8 @@ absl::StatusOr<int64_t> StationCore::StartCycle(const CycleRequest& request) {
 absl::Status StationCore::Event(int64_t id, const std::string& vin, EventType type,
                                 const std::string& sensor, const std::string& detail,
                                 std::optional<Verdict> verdict) {
-  absl::StatusOr<int64_t> seq = store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
+  absl::StatusOr<int64_t> seq =
+      store_->AppendEvent({id, 0, NowNs(), type, sensor, detail, verdict});
   changed_.notify_all();
   Log(LogLevel::kDebug,
       absl::StrCat("event ", EventTypeName(type), sensor.empty() ? "" : " ", sensor,
@@ -638,8 +653,8 @@ absl::Status StationCore::StoreUnstoredEnd() {
   if (!s.ok()) {
     unstored_end_ = end;  // with event_stored as far as it got
     if (absl::IsResourceExhausted(s)) disk_full_ = true;
-    return absl::Status(s.code(), absl::StrCat("cycle ", end->id, "'s end is not stored yet: ",
-                                               s.message()));
+    return absl::Status(s.code(),
+                        absl::StrCat("cycle ", end->id, "'s end is not stored yet: ", s.message()));
   }
   unstored_end_.reset();
   if (forwarder_) forwarder_->Notify();
@@ -661,9 +676,9 @@ absl::Status StationCore::Health() {
     if (!ec && space.available >= kFreeBytesToServe) {
       disk_full_ = false;
     } else {
-      health = absl::ResourceExhaustedError(absl::StrCat(
-          "disk full: ", ec ? 0 : space.available, " bytes free below the database, ",
-          kFreeBytesToServe, " needed"));
+      health = absl::ResourceExhaustedError(absl::StrCat("disk full: ", ec ? 0 : space.available,
+                                                         " bytes free below the database, ",
+                                                         kFreeBytesToServe, " needed"));
     }
   }
   const std::string now(health.message());
@@ -741,15 +756,15 @@ absl::StatusOr<Capture> StationCore::CycleCapture(int64_t cycle_id) {
   std::error_code ec;
   if (cycle->capture_path.empty() ||
       !fs::is_directory(fs::path(config_.data_root) / cycle->capture_path, ec)) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "capture_not_kept: cycle ", cycle_id,
-        "'s capture was not kept (the cycle was started without record_capture)"));
+    return absl::FailedPreconditionError(
+        absl::StrCat("capture_not_kept: cycle ", cycle_id,
+                     "'s capture was not kept (the cycle was started without record_capture)"));
   }
   // The store's path is the core's own, but a folder below the data root may have been
   // replaced by a link since: checked as a replay capture is.
-  absl::StatusOr<fs::path> dir = ResolveInside(config_.data_root, cycle->capture_path,
-                                               absl::StrCat("'", cycle->capture_path, "'"),
-                                               "data_root");
+  absl::StatusOr<fs::path> dir =
+      ResolveInside(config_.data_root, cycle->capture_path,
+                    absl::StrCat("'", cycle->capture_path, "'"), "data_root");
   if (!dir.ok()) return dir.status();
   absl::StatusOr<Capture> capture = ReadCapture(dir->string(), config_.input_budget);
   if (!capture.ok()) {
@@ -759,7 +774,8 @@ absl::StatusOr<Capture> StationCore::CycleCapture(int64_t cycle_id) {
   return capture;
 }
 
-absl::Status StationCore::WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event) {
+absl::Status StationCore::WatchCycle(int64_t cycle_id,
+                                     const std::function<bool(const StoredEvent&)>& on_event) {
   if (absl::StatusOr<StoredCycle> c = store_->GetCycle(cycle_id); !c.ok()) return c.status();
   int64_t next = 0;
   bool read_after_end = false;

@@ -52,7 +52,6 @@
 #include "absl/status/statusor.h"
 #include "daemon/core/capture_source.h"
 #include "daemon/log/daemon_log.h"
-#include "station/pipeline/capture_calibration.h"
 #include "daemon/plant/forwarder.h"
 #include "daemon/simstation/simulator_source.h"
 #include "daemon/store/store.h"
@@ -61,6 +60,7 @@
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
+#include "station/pipeline/capture_calibration.h"
 
 namespace linecal {
 
@@ -68,12 +68,12 @@ enum class CycleSource { kSimulator, kReplay, kLive };
 
 struct StationCoreConfig {
   std::string station_id = "demo";
-  std::string station_path;                // linecal.station file
+  std::string station_path;                  // linecal.station file
   std::vector<std::string> car_model_paths;  // linecal.car files; ids must be unique
-  std::string db_path;                     // SQLite file (its directory must exist)
-  std::string data_root;                   // captures are written and read below it
+  std::string db_path;                       // SQLite file (its directory must exist)
+  std::string data_root;                     // captures are written and read below it
   CycleSource source = CycleSource::kSimulator;
-  std::string replay_capture;              // replay: a capture directory relative to data_root
+  std::string replay_capture;  // replay: a capture directory relative to data_root
   std::vector<SimulatedBoardMove> simulated_moves;  // simulator: boards moved from a cycle on
   // live: the source of every sensor of every car model, by sensor name (a name shared by
   // several car models has one source). Create checks that each sensor has one of its kind.
@@ -87,8 +87,8 @@ struct StationCoreConfig {
   // How long detection and solving of all sensors may take: 20 s is twenty times the
   // acceptance bar of 1 s per cycle, so only a stuck calibration reaches it.
   std::chrono::milliseconds calibrate_deadline{20000};
-  bool vin_check_digit = true;             // ISO 3779 check digit (markets that use it)
-  int default_frames_per_sensor = 1;       // camera frames and LiDAR rotations when the request gives 0
+  bool vin_check_digit = true;        // ISO 3779 check digit (markets that use it)
+  int default_frames_per_sensor = 1;  // camera frames and LiDAR rotations when the request gives 0
   std::chrono::milliseconds busy_timeout{5000};
   // What one file of a capture may claim (the `input_budget` key), for every ReadCapture.
   InputBudget input_budget;
@@ -117,7 +117,8 @@ struct CycleRequest {
   std::string car_model_id;
   AlignerMeasurement aligner;
   bool record_capture = false;  // keep the cycle's capture (simulator source) after the cycle
-  int frames_per_sensor = 0;    // camera frames and LiDAR rotations; 0: the configured default; at most 100
+  int frames_per_sensor =
+      0;  // camera frames and LiDAR rotations; 0: the configured default; at most 100
 };
 
 // The checks StartCycle makes before it touches the store: the VIN (ISO 3779, the check digit
@@ -183,7 +184,8 @@ class StationCore {
   // Calls on_event for every event of the cycle in order, those already stored first, then
   // as they come, until the cycle has ended and all its events were delivered (OK), or
   // on_event returns false (Cancelled: the watcher went away). NotFound for unknown ids.
-  absl::Status WatchCycle(int64_t cycle_id, const std::function<bool(const StoredEvent&)>& on_event);
+  absl::Status WatchCycle(int64_t cycle_id,
+                          const std::function<bool(const StoredEvent&)>& on_event);
   StationStatusInfo Status();
   // Trends, alarms and per-target counts over the newest `cycles` (1..100000) cycles that
   // ended done (ComputeStationHealth). InvalidArgument for the count or options; the store's
@@ -301,8 +303,8 @@ class StationCore {
   // cycle starts and by Health(); guarded by mutex_.
   std::optional<CycleEnd> unstored_end_;
   std::mutex unstored_end_mutex_;  // held by StoreUnstoredEnd, before mutex_
-  bool disk_full_ = false;    // a store write was refused for want of space; under mutex_
-  std::string last_health_;   // Health()'s last answer ("" = OK), to log changes; under mutex_
+  bool disk_full_ = false;         // a store write was refused for want of space; under mutex_
+  std::string last_health_;        // Health()'s last answer ("" = OK), to log changes; under mutex_
   // The data root's identity (st_dev, st_ino) when the core was created.
   std::uint64_t data_root_dev_ = 0, data_root_ino_ = 0;
   // Calibrations abandoned at their deadline, still running or done; guarded by mutex_.

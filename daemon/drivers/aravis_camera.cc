@@ -233,8 +233,8 @@ absl::StatusOr<Image8> GigeFrameToGrey(std::uint32_t pixel_format, const std::ui
   const bool bayer = pixel_format == kPfncBayerGr8 || pixel_format == kPfncBayerRg8 ||
                      pixel_format == kPfncBayerGb8 || pixel_format == kPfncBayerBg8;
   if (bayer && (width < 2 || height < 2)) {
-    return absl::InvalidArgumentError(absl::StrCat("Bayer frame of ", width, " x ", height,
-                                                   ": needs at least 2 x 2 pixels"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("Bayer frame of ", width, " x ", height, ": needs at least 2 x 2 pixels"));
   }
   std::size_t bytes_per_pixel = 0;
   switch (pixel_format) {
@@ -253,9 +253,9 @@ absl::StatusOr<Image8> GigeFrameToGrey(std::uint32_t pixel_format, const std::ui
       bytes_per_pixel = 3;
       break;
     default:
-      return absl::InvalidArgumentError(
-          absl::StrCat("pixel format 0x", absl::Hex(pixel_format),
-                       " cannot be converted to grey (Mono8, Mono16, RGB8, BGR8, Bayer 8-bit can)"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "pixel format 0x", absl::Hex(pixel_format),
+          " cannot be converted to grey (Mono8, Mono16, RGB8, BGR8, Bayer 8-bit can)"));
   }
   const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   if (data == nullptr || size < pixels * bytes_per_pixel) {
@@ -311,9 +311,8 @@ absl::StatusOr<std::unique_ptr<AravisCamera>> AravisCamera::Open(
   if (options.exposure_us > 0) {
     arv_camera_set_exposure_time(camera, options.exposure_us, error.out());
     if (error.error != nullptr) {
-      return absl::InvalidArgumentError(absl::StrCat("camera '", id, "': exposure ",
-                                                     options.exposure_us,
-                                                     " us: ", error.message()));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "camera '", id, "': exposure ", options.exposure_us, " us: ", error.message()));
     }
   }
   const guint payload = arv_camera_get_payload(camera, error.out());
@@ -377,9 +376,8 @@ absl::StatusOr<CameraFrame> AravisCamera::Grab(std::chrono::steady_clock::time_p
     }
     if (now >= frame_deadline) {
       silent_ = true;
-      return absl::DeadlineExceededError(
-          absl::StrCat("camera '", id, "': no frame within ", options_.frame_timeout.count(),
-                       " ms"));
+      return absl::DeadlineExceededError(absl::StrCat("camera '", id, "': no frame within ",
+                                                      options_.frame_timeout.count(), " ms"));
     }
     const auto wait = std::min(kPollInterval, std::chrono::ceil<std::chrono::milliseconds>(
                                                   std::min(deadline, frame_deadline) - now));
@@ -408,7 +406,8 @@ absl::StatusOr<CameraFrame> AravisCamera::Grab(std::chrono::steady_clock::time_p
         arv_buffer_get_image_width(buffer), arv_buffer_get_image_height(buffer));
     arv_stream_push_buffer(stream_, buffer);
     if (!image.ok()) {
-      return absl::InvalidArgumentError(absl::StrCat("camera '", id, "': ", image.status().message()));
+      return absl::InvalidArgumentError(
+          absl::StrCat("camera '", id, "': ", image.status().message()));
     }
     frame.image = *std::move(image);
     return frame;

@@ -55,8 +55,8 @@ absl::StatusOr<Image8> V4l2FrameToGrey(std::uint32_t fourcc, const std::uint8_t*
                                        std::size_t size, int width, int height,
                                        std::size_t bytes_per_line) {
   if (fourcc != V4L2_PIX_FMT_GREY && fourcc != V4L2_PIX_FMT_YUYV) {
-    return absl::InvalidArgumentError(absl::StrCat("pixel format '", FourccName(fourcc),
-                                                   "' cannot be converted to grey"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("pixel format '", FourccName(fourcc), "' cannot be converted to grey"));
   }
   if (width <= 0 || height <= 0 || width > kMaxImageSide || height > kMaxImageSide) {
     return absl::InvalidArgumentError(absl::StrCat("frame size ", width, " x ", height,
@@ -65,8 +65,8 @@ absl::StatusOr<Image8> V4l2FrameToGrey(std::uint32_t fourcc, const std::uint8_t*
   const std::size_t bytes_per_pixel = fourcc == V4L2_PIX_FMT_YUYV ? 2 : 1;
   const std::size_t row_bytes = static_cast<std::size_t>(width) * bytes_per_pixel;
   if (bytes_per_line < row_bytes) {
-    return absl::InvalidArgumentError(absl::StrCat("bytes per line ", bytes_per_line,
-                                                   " below the row's ", row_bytes));
+    return absl::InvalidArgumentError(
+        absl::StrCat("bytes per line ", bytes_per_line, " below the row's ", row_bytes));
   }
   const std::size_t needed = static_cast<std::size_t>(height - 1) * bytes_per_line + row_bytes;
   if (data == nullptr || size < needed) {
@@ -90,7 +90,8 @@ absl::StatusOr<Image8> V4l2FrameToGrey(std::uint32_t fourcc, const std::uint8_t*
 absl::StatusOr<std::unique_ptr<V4l2Camera>> V4l2Camera::Open(const V4l2CameraOptions& options) {
   const std::string& dev = options.device;
   absl::StatusOr<std::uint32_t> fourcc = V4l2PixelFormat(options.pixel_format);
-  if (!fourcc.ok()) return absl::InvalidArgumentError(absl::StrCat(dev, ": ", fourcc.status().message()));
+  if (!fourcc.ok())
+    return absl::InvalidArgumentError(absl::StrCat(dev, ": ", fourcc.status().message()));
 
   struct stat st {};
   if (::stat(dev.c_str(), &st) != 0) {
@@ -151,10 +152,9 @@ absl::StatusOr<std::unique_ptr<V4l2Camera>> V4l2Camera::Open(const V4l2CameraOpt
   }
   if (options.width > 0 && (static_cast<int>(format.fmt.pix.width) != options.width ||
                             static_cast<int>(format.fmt.pix.height) != options.height)) {
-    return absl::InvalidArgumentError(absl::StrCat(dev, ": does not deliver ", options.width, " x ",
-                                                   options.height, " (offers ",
-                                                   format.fmt.pix.width, " x ",
-                                                   format.fmt.pix.height, ")"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(dev, ": does not deliver ", options.width, " x ", options.height, " (offers ",
+                     format.fmt.pix.width, " x ", format.fmt.pix.height, ")"));
   }
   if (format.fmt.pix.width == 0 || format.fmt.pix.height == 0 ||
       format.fmt.pix.width > static_cast<std::uint32_t>(kMaxImageSide) ||
@@ -246,16 +246,15 @@ absl::StatusOr<CameraFrame> V4l2Camera::Grab(std::chrono::steady_clock::time_poi
       return SyscallError(dev, "VIDIOC_DQBUF", errno);
     }
     ++frame.attempts;
-    const bool complete =
-        (buffer.flags & V4L2_BUF_FLAG_ERROR) == 0 && buffer.bytesused >= frame_bytes_ &&
-        buffer.index < mappings_.size();
+    const bool complete = (buffer.flags & V4L2_BUF_FLAG_ERROR) == 0 &&
+                          buffer.bytesused >= frame_bytes_ && buffer.index < mappings_.size();
     if (!complete) {
       const std::uint32_t used = buffer.bytesused;
       if (Ioctl(fd_, VIDIOC_QBUF, &buffer) < 0) return SyscallError(dev, "VIDIOC_QBUF", errno);
       if (frame.attempts > options_.frame_retries) {
         return absl::DataLossError(absl::StrCat(dev, ": ", frame.attempts,
-                                                " frames in a row incomplete (last ", used,
-                                                " of ", frame_bytes_, " bytes)"));
+                                                " frames in a row incomplete (last ", used, " of ",
+                                                frame_bytes_, " bytes)"));
       }
       frame_deadline = std::chrono::steady_clock::now() + options_.frame_timeout;
       continue;

@@ -43,7 +43,8 @@
 namespace {
 
 constexpr char kUsage[] =
-    "usage: linecald [--config FILE] [--listen HOST:PORT] [--db PATH] [--log-level LEVEL] [--data-dir DIR]\n"
+    "usage: linecald [--config FILE] [--listen HOST:PORT] [--db PATH] [--log-level LEVEL] "
+    "[--data-dir DIR]\n"
     "                [--web-listen HOST:PORT]\n"
     "  Serves the linecal.v1.Station gRPC API (proto/linecal/v1/station.proto), the gRPC health\n"
     "  service and server reflection. Without --config: the demo station of deploy/ with\n"
@@ -103,9 +104,12 @@ std::string BoundAddress(const std::string& listen, int port) {
 
 const char* SignalName(int signal) {
   switch (signal) {
-    case SIGTERM: return "SIGTERM";
-    case SIGINT: return "SIGINT";
-    case SIGHUP: return "SIGHUP";
+    case SIGTERM:
+      return "SIGTERM";
+    case SIGINT:
+      return "SIGINT";
+    case SIGHUP:
+      return "SIGHUP";
   }
   return "a signal";
 }
@@ -319,7 +323,8 @@ int main(int argc, char** argv) {
   for (int s : {SIGTERM, SIGINT, SIGHUP}) sigaddset(&signals, s);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
-  absl::StatusOr<std::unique_ptr<linecal::StationCore>> core = linecal::StationCore::Create(config->core);
+  absl::StatusOr<std::unique_ptr<linecal::StationCore>> core =
+      linecal::StationCore::Create(config->core);
   if (!core.ok()) {
     std::fprintf(stderr, "linecald: %s\n", std::string(core.status().message()).c_str());
     return 2;
@@ -333,8 +338,8 @@ int main(int argc, char** argv) {
         absl::StrCat("forwarding cycles to the plant database as station ",
                      config->core.plant->station_id, ", batches of ", config->core.plant->batch));
   }
-  absl::StatusOr<linecal::RunningServer> server =
-      linecal::StartServer(core->get(), config->listen, config->auth_token, LINECAL_VERSION, config->tls);
+  absl::StatusOr<linecal::RunningServer> server = linecal::StartServer(
+      core->get(), config->listen, config->auth_token, LINECAL_VERSION, config->tls);
   if (!server.ok()) {
     std::fprintf(stderr, "linecald: %s\n", std::string(server.status().message()).c_str());
     return 1;
@@ -347,8 +352,11 @@ int main(int argc, char** argv) {
   // gRPC's errors belong in the log: GRPC_VERBOSITY=NONE (read by gRPC's first init, which
   // StartServer did) would hide them, so errors are let through.
   if (!gpr_should_log(GPR_LOG_SEVERITY_ERROR)) gpr_set_log_verbosity(GPR_LOG_SEVERITY_ERROR);
-  const std::string listening = "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
-  const char* tls = !config->tls ? ", insecure" : config->tls->require_client_cert ? ", mutual TLS" : ", TLS";
+  const std::string listening =
+      "listening on " + config->listen + " (port " + std::to_string(server->port) + ")";
+  const char* tls = !config->tls                       ? ", insecure"
+                    : config->tls->require_client_cert ? ", mutual TLS"
+                                                       : ", TLS";
   Log(LogLevel::kInfo, listening + ", database " + config->core.db_path + tls +
                            (config->auth_token.empty() ? ", no token" : ", token authentication"));
   const linecal::SystemdNotifier notifier = linecal::SystemdNotifier::FromEnvironment();

@@ -8,12 +8,11 @@
 #include <condition_variable>
 #include <cstdlib>
 #include <map>
+#include <nlohmann/json.hpp>
+#include <pqxx/pqxx>
 #include <set>
 #include <thread>
 #include <utility>
-
-#include <nlohmann/json.hpp>
-#include <pqxx/pqxx>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
@@ -141,8 +140,8 @@ absl::StatusOr<ConnOptions> ParseDsn(const std::string& dsn) {
     if (absl::StrContains(absl::AsciiStrToLower(dsn), "password") || absl::StrContains(dsn, "@")) {
       why = "libpq could not parse it (details withheld: it holds a password)";
     }
-    return absl::InvalidArgumentError(absl::StrCat("malformed plant database connection string: ",
-                                                   why));
+    return absl::InvalidArgumentError(
+        absl::StrCat("malformed plant database connection string: ", why));
   }
   ConnOptions options;
   for (const PQconninfoOption* o = parsed; o->keyword != nullptr; ++o) {
@@ -179,8 +178,8 @@ std::string Conninfo(ConnOptions o, const PlantDbOptions& options) {
   }
   std::vector<std::string> parts;
   for (const auto& [key, value] : o) {
-    parts.push_back(absl::StrCat(
-        key, "='", absl::StrReplaceAll(value, {{"\\", "\\\\"}, {"'", "\\'"}}), "'"));
+    parts.push_back(
+        absl::StrCat(key, "='", absl::StrReplaceAll(value, {{"\\", "\\\\"}, {"'", "\\'"}}), "'"));
   }
   return absl::StrJoin(parts, " ");
 }
@@ -214,7 +213,7 @@ absl::Status ConnectError(const std::string& what, const std::string& server) {
 absl::Status SqlError(const pqxx::sql_error& e, const std::string& message) {
   // libpqxx 6 leaves the SQLSTATE empty on some paths (exec_params0); the server's wording
   // for a missing privilege is fixed, so fall back to it there.
-  const std::string state = !e.sqlstate().empty()                           ? e.sqlstate()
+  const std::string state = !e.sqlstate().empty()                             ? e.sqlstate()
                             : absl::StrContains(message, "permission denied") ? "42501"
                                                                               : "";
   const std::string cls = state.substr(0, 2);
@@ -273,14 +272,14 @@ std::string CycleValues(const pqxx::work& tx, const std::string& station, const 
 std::string SensorValues(const pqxx::work& tx, const std::string& station, int64_t cycle_id,
                          const StoredSensorResult& s) {
   auto optional = [](const std::optional<double>& v) { return v ? Float(*v) : "NULL"; };
-  return absl::StrCat(
-      "(", tx.quote(station), ", ", cycle_id, ", ", tx.quote(s.sensor), ", ", tx.quote(s.kind),
-      ", ", tx.quote(VerdictName(s.verdict)), ", ", tx.quote(s.reason), ", ",
-      tx.quote(s.message), ", ", FloatArray(tx, s.T_car_sensor), ", ", Mounting(s.measured),
-      ", ", Mounting(s.deviation), ", ", Mounting(s.sigma), ", ", Float(s.residual_rms), ", ",
-      s.features_used, ", ", optional(s.vanishing_point_u_px), ", ",
-      optional(s.vanishing_point_v_px), ", ", FloatArray(tx, s.ground_homography), ", ",
-      Jsonb(tx, s.ranging_json), ", ", s.elapsed_ns, ")");
+  return absl::StrCat("(", tx.quote(station), ", ", cycle_id, ", ", tx.quote(s.sensor), ", ",
+                      tx.quote(s.kind), ", ", tx.quote(VerdictName(s.verdict)), ", ",
+                      tx.quote(s.reason), ", ", tx.quote(s.message), ", ",
+                      FloatArray(tx, s.T_car_sensor), ", ", Mounting(s.measured), ", ",
+                      Mounting(s.deviation), ", ", Mounting(s.sigma), ", ", Float(s.residual_rms),
+                      ", ", s.features_used, ", ", optional(s.vanishing_point_u_px), ", ",
+                      optional(s.vanishing_point_v_px), ", ", FloatArray(tx, s.ground_homography),
+                      ", ", Jsonb(tx, s.ranging_json), ", ", s.elapsed_ns, ")");
 }
 
 std::string EventValues(const pqxx::work& tx, const std::string& station, const StoredEvent& e,
@@ -377,12 +376,12 @@ std::vector<PlantCycleRecord> ReadCycles(pqxx::work& tx, const std::string& wher
     records.push_back(std::move(record));
   }
   if (records.empty()) return records;
-  const pqxx::result sensors = tx.exec_params(
-      absl::StrCat("SELECT s.station_id, s.cycle_id, ", kSensorColumns,
-                   " FROM sensor_results s WHERE (s.station_id, s.cycle_id) IN "
-                   "(SELECT c.station_id, c.cycle_id FROM cycles c WHERE ",
-                   where, ") ORDER BY s.station_id, s.cycle_id, s.sensor"),
-      args...);
+  const pqxx::result sensors =
+      tx.exec_params(absl::StrCat("SELECT s.station_id, s.cycle_id, ", kSensorColumns,
+                                  " FROM sensor_results s WHERE (s.station_id, s.cycle_id) IN "
+                                  "(SELECT c.station_id, c.cycle_id FROM cycles c WHERE ",
+                                  where, ") ORDER BY s.station_id, s.cycle_id, s.sensor"),
+                     args...);
   for (const pqxx::row& r : sensors) {
     auto it = index.find({Text(r[0]), r[1].as<int64_t>()});
     if (it != index.end()) records[it->second].cycle.sensors.push_back(ParseSensor(r, 2));
@@ -414,9 +413,9 @@ int ReadVersion(pqxx::work& tx) {
 }
 
 absl::Status NewerSchema(const std::string& server, int version) {
-  return absl::FailedPreconditionError(
-      absl::StrCat("plant database ", server, ": schema version ", version,
-                   " is newer than this linecal's ", PlantDb::kSchemaVersion, ": upgrade linecal"));
+  return absl::FailedPreconditionError(absl::StrCat("plant database ", server, ": schema version ",
+                                                    version, " is newer than this linecal's ",
+                                                    PlantDb::kSchemaVersion, ": upgrade linecal"));
 }
 
 // Cuts a connection's socket when a call outlives its limit. statement_timeout is enforced
@@ -482,13 +481,12 @@ absl::Status PlantDb::EnsureConnected() {
   if (conn_ != nullptr) return absl::OkStatus();
   try {
     auto conn = std::make_unique<Connection>(conninfo_);
-    conn->conn.set_variable("statement_timeout",
-                            absl::StrCat(options_.statement_timeout.count()));
+    conn->conn.set_variable("statement_timeout", absl::StrCat(options_.statement_timeout.count()));
     conn_ = std::move(conn);
     return absl::OkStatus();
   } catch (const pqxx::sql_error& e) {
-    return SqlError(e, absl::StrCat("plant database ", server_, ": ",
-                                    CleanMessage(e.what(), password_)));
+    return SqlError(
+        e, absl::StrCat("plant database ", server_, ": ", CleanMessage(e.what(), password_)));
   } catch (const std::exception& e) {
     return ConnectError(CleanMessage(e.what(), password_), server_);
   }
@@ -530,7 +528,8 @@ absl::Status PlantDb::Run(const Body& body) {
   if (cut || absl::IsUnavailable(status) || absl::IsInternal(status)) conn_.reset();
   if (cut && !status.ok()) {
     return absl::UnavailableError(absl::StrCat("plant database ", server_, ": no answer within ",
-                                               limit.count(), " ms (twice statement_timeout): "
+                                               limit.count(),
+                                               " ms (twice statement_timeout): "
                                                "connection dropped"));
   }
   return status;
@@ -619,9 +618,10 @@ absl::Status PlantDb::ApplyBatch(const std::string& station_id,
                             ") VALUES ", absl::StrJoin(sensors, ", "), " ON CONFLICT DO NOTHING"));
     }
     if (!events.empty()) {
-      tx.exec0(absl::StrCat("INSERT INTO events (station_id, cycle_id, sequence, time_ns, type, "
-                            "sensor, detail, verdict) VALUES ",
-                            absl::StrJoin(events, ", "), " ON CONFLICT DO NOTHING"));
+      tx.exec0(
+          absl::StrCat("INSERT INTO events (station_id, cycle_id, sequence, time_ns, type, "
+                       "sensor, detail, verdict) VALUES ",
+                       absl::StrJoin(events, ", "), " ON CONFLICT DO NOTHING"));
     }
   });
 }
@@ -630,8 +630,8 @@ absl::StatusOr<std::vector<PlantCycleRecord>> PlantDb::CyclesByVin(const std::st
   std::lock_guard<std::mutex> lock(mutex_);
   std::vector<PlantCycleRecord> records;
   absl::Status s = Run([&](pqxx::work& tx) {
-    records = ReadCycles(tx, "c.vin = $1",
-                         "c.started_ns DESC, c.station_id DESC, c.cycle_id DESC", vin);
+    records =
+        ReadCycles(tx, "c.vin = $1", "c.started_ns DESC, c.station_id DESC, c.cycle_id DESC", vin);
   });
   if (!s.ok()) return s;
   return records;
@@ -664,21 +664,21 @@ absl::StatusOr<YieldReport> PlantDb::Yield(const YieldFilter& filter) {
   std::lock_guard<std::mutex> lock(mutex_);
   YieldReport report;
   absl::Status s = Run([&](pqxx::work& tx) {
-    const pqxx::result rows = tx.exec_params(
-        absl::StrCat(kFirstAttempts, R"sql(
+    const pqxx::result rows =
+        tx.exec_params(absl::StrCat(kFirstAttempts, R"sql(
 SELECT station_id, car_model, '' AS sensor, count(*), count(*) FILTER (WHERE verdict = 'pass')
   FROM first GROUP BY 1, 2
 UNION ALL
 SELECT f.station_id, f.car_model, s.sensor, count(*), count(*) FILTER (WHERE s.verdict = 'pass')
   FROM first f JOIN sensor_results s USING (station_id, cycle_id) GROUP BY 1, 2, 3
 ORDER BY 1, 2, 3)sql"),
-        filter.since_ns, filter.station_id, filter.car_model_id);
+                       filter.since_ns, filter.station_id, filter.car_model_id);
     for (const pqxx::row& r : rows) {
-      report.rows.push_back({Text(r[0]), Text(r[1]), Text(r[2]), r[3].as<int64_t>(),
-                             r[4].as<int64_t>()});
+      report.rows.push_back(
+          {Text(r[0]), Text(r[1]), Text(r[2]), r[3].as<int64_t>(), r[4].as<int64_t>()});
     }
-    const pqxx::result reasons = tx.exec_params(
-        absl::StrCat(kFirstAttempts, R"sql(,
+    const pqxx::result reasons =
+        tx.exec_params(absl::StrCat(kFirstAttempts, R"sql(,
 failed AS (
   SELECT s.sensor, s.reason, count(*) AS n FROM first f
     JOIN sensor_results s USING (station_id, cycle_id)
@@ -687,7 +687,7 @@ ranked AS (
   SELECT sensor, reason, n, row_number() OVER (PARTITION BY sensor ORDER BY n DESC, reason) AS k
   FROM failed)
 SELECT sensor, reason, n FROM ranked WHERE k <= $4 ORDER BY sensor, n DESC, reason)sql"),
-        filter.since_ns, filter.station_id, filter.car_model_id, filter.top_reasons);
+                       filter.since_ns, filter.station_id, filter.car_model_id, filter.top_reasons);
     for (const pqxx::row& r : reasons) {
       report.reasons.push_back({Text(r[0]), Text(r[1]), r[2].as<int64_t>()});
     }

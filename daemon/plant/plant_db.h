@@ -7,9 +7,9 @@
 // Errors (absl::Status; messages name the server as host:port and never hold the password):
 //   Unavailable         the server is down, refuses connections, timed out, dropped the
 //                       connection, cancelled a statement past statement_timeout or did not
-//                       answer within twice that; or a transaction conflicted. Retryable: nothing of the call was committed,
-//                       except that a batch whose COMMIT was sent when the connection dropped
-//                       may be committed; applying it again changes nothing.
+//                       answer within twice that; or a transaction conflicted. Retryable: nothing
+//                       of the call was committed, except that a batch whose COMMIT was sent when
+//                       the connection dropped may be committed; applying it again changes nothing.
 //   PermissionDenied    authentication failed, or the role lacks a privilege the call needs
 //   InvalidArgument     a malformed connection string, or a query's bad argument
 //   NotFound            the database named by the connection string does not exist
@@ -48,15 +48,15 @@ struct PlantDbOptions {
 // One attempt at one station, as the plant holds it.
 struct PlantCycleRecord {
   std::string station_id;
-  StoredCycle cycle;         // with its sensors, by sensor name
-  int64_t received_ns = 0;   // when the plant database stored it (Unix epoch)
+  StoredCycle cycle;        // with its sensors, by sensor name
+  int64_t received_ns = 0;  // when the plant database stored it (Unix epoch)
 };
 
 struct YieldFilter {
-  int64_t since_ns = 0;       // first attempts started at or after this time (Unix epoch)
-  std::string station_id;     // empty: every station
-  std::string car_model_id;   // empty: every car model
-  int top_reasons = 3;        // failure reasons kept per sensor, 1..100
+  int64_t since_ns = 0;      // first attempts started at or after this time (Unix epoch)
+  std::string station_id;    // empty: every station
+  std::string car_model_id;  // empty: every car model
+  int top_reasons = 3;       // failure reasons kept per sensor, 1..100
 };
 
 // First-pass yield of one station, car model and sensor: among the cars whose first attempt
@@ -64,7 +64,7 @@ struct YieldFilter {
 struct YieldRow {
   std::string station_id;
   std::string car_model_id;
-  std::string sensor;        // empty: the whole cycle (its overall verdict)
+  std::string sensor;  // empty: the whole cycle (its overall verdict)
   int64_t first_attempts = 0;
   int64_t passed = 0;
 };
@@ -77,8 +77,8 @@ struct FailureReason {
 };
 
 struct YieldReport {
-  std::vector<YieldRow> rows;            // by station, car model, sensor ("" first)
-  std::vector<FailureReason> reasons;    // by sensor, then count (highest first), reason
+  std::vector<YieldRow> rows;          // by station, car model, sensor ("" first)
+  std::vector<FailureReason> reasons;  // by sensor, then count (highest first), reason
 };
 
 class PlantDb {
@@ -126,8 +126,7 @@ class PlantDb {
   absl::StatusOr<std::vector<PlantCycleRecord>> CyclesSince(int64_t since_ns, int limit);
 
  private:
-  PlantDb(std::string conninfo, std::string password, PlantDbOptions options,
-          std::string server);
+  PlantDb(std::string conninfo, std::string password, PlantDbOptions options, std::string server);
   // Connects when not connected (mutex_ held).
   absl::Status EnsureConnected();
   // Runs `body(pqxx::work&)` in a transaction and commits; maps failures to the statuses
@@ -140,7 +139,7 @@ class PlantDb {
   const std::string password_;  // masked in messages, should a server ever echo it
   const PlantDbOptions options_;
   const std::string server_;
-  struct Connection;  // the libpqxx connection (plant_db.cc)
+  struct Connection;                  // the libpqxx connection (plant_db.cc)
   std::unique_ptr<Connection> conn_;  // null after a lost connection
 };
 

@@ -106,7 +106,10 @@ void DescriptorReserve::Release() {
 
 ListenerWatchdog::ListenerWatchdog(RunningServer* server, std::string address, StartFn start,
                                    LogFn log)
-    : server_(server), address_(std::move(address)), start_(std::move(start)), log_(std::move(log)) {
+    : server_(server),
+      address_(std::move(address)),
+      start_(std::move(start)),
+      log_(std::move(log)) {
   thread_ = std::thread([this] { Loop(); });
 }
 
@@ -154,13 +157,14 @@ bool ListenerWatchdog::ListenerStuck() {
 
 bool ListenerWatchdog::Restart(int queued) {
   reserve_.Release();  // before DescriptorUse, which needs one
-  log_("error", absl::StrCat(
-                    "gRPC's listener on ", address_, " stopped accepting (", queued,
-                    " connections waiting unaccepted for ", kStuckSamples - 1,
-                    " s or more; gRPC 1.51 stops listening after an accept error such as "
-                    "EMFILE); ",
-                    DescriptorUse(), "; restarting the gRPC server on the same address (calls in "
-                    "flight get ", kRestartGrace.count(), " ms, then clients reconnect)"));
+  log_("error", absl::StrCat("gRPC's listener on ", address_, " stopped accepting (", queued,
+                             " connections waiting unaccepted for ", kStuckSamples - 1,
+                             " s or more; gRPC 1.51 stops listening after an accept error such as "
+                             "EMFILE); ",
+                             DescriptorUse(),
+                             "; restarting the gRPC server on the same address (calls in "
+                             "flight get ",
+                             kRestartGrace.count(), " ms, then clients reconnect)"));
   if (server_->server) {
     server_->server->Shutdown(std::chrono::system_clock::now() + kRestartGrace);
   }

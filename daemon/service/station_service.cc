@@ -17,15 +17,30 @@ grpc::Status ToGrpc(const absl::Status& s) {
   if (s.ok()) return grpc::Status::OK;
   grpc::StatusCode code = grpc::StatusCode::INTERNAL;
   switch (s.code()) {
-    case absl::StatusCode::kInvalidArgument: code = grpc::StatusCode::INVALID_ARGUMENT; break;
-    case absl::StatusCode::kNotFound: code = grpc::StatusCode::NOT_FOUND; break;
-    case absl::StatusCode::kFailedPrecondition: code = grpc::StatusCode::FAILED_PRECONDITION; break;
-    case absl::StatusCode::kUnavailable: code = grpc::StatusCode::UNAVAILABLE; break;
-    case absl::StatusCode::kCancelled: code = grpc::StatusCode::CANCELLED; break;
-    case absl::StatusCode::kDataLoss: code = grpc::StatusCode::DATA_LOSS; break;
+    case absl::StatusCode::kInvalidArgument:
+      code = grpc::StatusCode::INVALID_ARGUMENT;
+      break;
+    case absl::StatusCode::kNotFound:
+      code = grpc::StatusCode::NOT_FOUND;
+      break;
+    case absl::StatusCode::kFailedPrecondition:
+      code = grpc::StatusCode::FAILED_PRECONDITION;
+      break;
+    case absl::StatusCode::kUnavailable:
+      code = grpc::StatusCode::UNAVAILABLE;
+      break;
+    case absl::StatusCode::kCancelled:
+      code = grpc::StatusCode::CANCELLED;
+      break;
+    case absl::StatusCode::kDataLoss:
+      code = grpc::StatusCode::DATA_LOSS;
+      break;
     // The disk is full: StartCycle works again once space returns.
-    case absl::StatusCode::kResourceExhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
-    default: break;
+    case absl::StatusCode::kResourceExhausted:
+      code = grpc::StatusCode::RESOURCE_EXHAUSTED;
+      break;
+    default:
+      break;
   }
   return grpc::Status(code, std::string(s.message()));
 }
@@ -35,19 +50,26 @@ grpc::Status ToGrpc(const absl::Status& s) {
 v1::Verdict ToProto(std::optional<Verdict> v) {
   if (!v) return v1::VERDICT_UNSPECIFIED;
   switch (*v) {
-    case Verdict::kPass: return v1::VERDICT_PASS;
-    case Verdict::kFail: return v1::VERDICT_FAIL;
-    case Verdict::kError: return v1::VERDICT_ERROR;
+    case Verdict::kPass:
+      return v1::VERDICT_PASS;
+    case Verdict::kFail:
+      return v1::VERDICT_FAIL;
+    case Verdict::kError:
+      return v1::VERDICT_ERROR;
   }
   return v1::VERDICT_UNSPECIFIED;
 }
 
 v1::CycleState ToProto(CycleState s) {
   switch (s) {
-    case CycleState::kRunning: return v1::CYCLE_STATE_RUNNING;
-    case CycleState::kDone: return v1::CYCLE_STATE_DONE;
-    case CycleState::kCancelled: return v1::CYCLE_STATE_CANCELLED;
-    case CycleState::kAborted: return v1::CYCLE_STATE_ABORTED;
+    case CycleState::kRunning:
+      return v1::CYCLE_STATE_RUNNING;
+    case CycleState::kDone:
+      return v1::CYCLE_STATE_DONE;
+    case CycleState::kCancelled:
+      return v1::CYCLE_STATE_CANCELLED;
+    case CycleState::kAborted:
+      return v1::CYCLE_STATE_ABORTED;
   }
   return v1::CYCLE_STATE_UNSPECIFIED;
 }
@@ -134,9 +156,9 @@ absl::StatusOr<CycleRequest> CycleRequestFromProto(const v1::StartCycleRequest& 
   r.record_capture = request.options().record_capture();
   // The core checks the range; a uint32 beyond it must not wrap into one that passes.
   if (request.options().frames_per_sensor() > 1000) {
-    return absl::InvalidArgumentError(absl::StrCat("options.frames_per_sensor = ",
-                                                   request.options().frames_per_sensor(),
-                                                   ": must be in [0, 100]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.frames_per_sensor = ", request.options().frames_per_sensor(),
+                     ": must be in [0, 100]"));
   }
   r.frames_per_sensor = static_cast<int>(request.options().frames_per_sensor());
   return r;
@@ -175,13 +197,16 @@ grpc::Status StationService::Authorize(const grpc::ServerContext& context) const
   if (auth_token_.empty()) return grpc::Status::OK;
   const auto& metadata = context.client_metadata();
   const auto it = metadata.find("authorization");
-  if (it == metadata.end() || std::string(it->second.data(), it->second.size()) != "Bearer " + auth_token_) {
-    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "authorization: a valid bearer token is required");
+  if (it == metadata.end() ||
+      std::string(it->second.data(), it->second.size()) != "Bearer " + auth_token_) {
+    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                        "authorization: a valid bearer token is required");
   }
   return grpc::Status::OK;
 }
 
-grpc::Status StationService::StartCycle(grpc::ServerContext* context, const v1::StartCycleRequest* request,
+grpc::Status StationService::StartCycle(grpc::ServerContext* context,
+                                        const v1::StartCycleRequest* request,
                                         v1::StartCycleResponse* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
   absl::StatusOr<CycleRequest> r = CycleRequestFromProto(*request);
@@ -192,7 +217,8 @@ grpc::Status StationService::StartCycle(grpc::ServerContext* context, const v1::
   return grpc::Status::OK;
 }
 
-grpc::Status StationService::WatchCycle(grpc::ServerContext* context, const v1::WatchCycleRequest* request,
+grpc::Status StationService::WatchCycle(grpc::ServerContext* context,
+                                        const v1::WatchCycleRequest* request,
                                         grpc::ServerWriter<v1::CycleEvent>* writer) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
   absl::StatusOr<int64_t> id = ParseCycleId(request->cycle_id());
@@ -211,8 +237,8 @@ grpc::Status StationService::WatchCycle(grpc::ServerContext* context, const v1::
   }));
 }
 
-grpc::Status StationService::GetCycle(grpc::ServerContext* context, const v1::GetCycleRequest* request,
-                                      v1::Cycle* response) {
+grpc::Status StationService::GetCycle(grpc::ServerContext* context,
+                                      const v1::GetCycleRequest* request, v1::Cycle* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
   absl::StatusOr<int64_t> id = ParseCycleId(request->cycle_id());
   if (!id.ok()) return ToGrpc(id.status());
@@ -222,7 +248,8 @@ grpc::Status StationService::GetCycle(grpc::ServerContext* context, const v1::Ge
   return grpc::Status::OK;
 }
 
-grpc::Status StationService::ListCycles(grpc::ServerContext* context, const v1::ListCyclesRequest* request,
+grpc::Status StationService::ListCycles(grpc::ServerContext* context,
+                                        const v1::ListCyclesRequest* request,
                                         v1::ListCyclesResponse* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
   absl::StatusOr<CycleFilter> filter = CycleFilterFromProto(*request);
@@ -234,7 +261,8 @@ grpc::Status StationService::ListCycles(grpc::ServerContext* context, const v1::
   return grpc::Status::OK;
 }
 
-grpc::Status StationService::CancelCycle(grpc::ServerContext* context, const v1::CancelCycleRequest* request,
+grpc::Status StationService::CancelCycle(grpc::ServerContext* context,
+                                         const v1::CancelCycleRequest* request,
                                          v1::CancelCycleResponse* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
   absl::StatusOr<int64_t> id = ParseCycleId(request->cycle_id());
@@ -244,7 +272,8 @@ grpc::Status StationService::CancelCycle(grpc::ServerContext* context, const v1:
   return grpc::Status::OK;
 }
 
-grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, const v1::GetStationStatusRequest*,
+grpc::Status StationService::GetStationStatus(grpc::ServerContext* context,
+                                              const v1::GetStationStatusRequest*,
                                               v1::StationStatus* response) {
   if (grpc::Status auth = Authorize(*context); !auth.ok()) return auth;
   const StationStatusInfo s = core_->Status();
@@ -291,8 +320,9 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context, cons
   return grpc::Status::OK;
 }
 
-absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,
-                                          const std::string& version, const std::optional<TlsConfig>& tls) {
+absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address,
+                                          const std::string& auth_token, const std::string& version,
+                                          const std::optional<TlsConfig>& tls) {
   if (absl::Status s = CheckListenAddress(address); !s.ok()) return s;
   std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
   if (tls) {

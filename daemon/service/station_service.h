@@ -3,10 +3,13 @@
 // check credentials, translate messages and map absl::Status codes to gRPC's; the work is in
 // StationCore.
 //
-// Authentication: the port may be mutual TLS (StartServer); with a non-empty token, every call must carry the metadata
-// "authorization: Bearer <token>", else UNAUTHENTICATED. Cycle ids are the store's integer
-// ids in decimal; a malformed one is INVALID_ARGUMENT naming cycle_id, an unknown one
-// NOT_FOUND.
+// Authentication: the port may be mutual TLS (StartServer); with a non-empty token, every call must
+// carry the metadata "authorization: Bearer <token>", else UNAUTHENTICATED. Cycle ids are the
+// store's integer ids in decimal; a malformed one is INVALID_ARGUMENT naming cycle_id, an unknown
+// one NOT_FOUND.
+
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
 
 #include <chrono>
 #include <condition_variable>
@@ -15,9 +18,6 @@
 #include <optional>
 #include <string>
 #include <thread>
-
-#include <grpcpp/grpcpp.h>
-#include <grpcpp/health_check_service_interface.h>
 
 #include "daemon/core/daemon_config.h"
 #include "daemon/core/station_core.h"
@@ -53,7 +53,8 @@ class StationService final : public v1::Station::Service {
                           v1::ListCyclesResponse* response) override;
   grpc::Status CancelCycle(grpc::ServerContext* context, const v1::CancelCycleRequest* request,
                            v1::CancelCycleResponse* response) override;
-  grpc::Status GetStationStatus(grpc::ServerContext* context, const v1::GetStationStatusRequest* request,
+  grpc::Status GetStationStatus(grpc::ServerContext* context,
+                                const v1::GetStationStatusRequest* request,
                                 v1::StationStatus* response) override;
 
   // OK when the call carries the token (or none is configured), else UNAUTHENTICATED; the
@@ -71,12 +72,11 @@ class StationService final : public v1::Station::Service {
 // every Station call) on the same port. Without `tls` the port is insecure; with it, TLS
 // with the credentials of ServerTlsCredentials (tls_credentials.h),
 // whose errors (a bad file, a key that does not match the certificate) are returned as they
-// are; the token, when set, is required on top. An address CheckListenAddress (daemon_config.h) refuses is its
-// InvalidArgument.
-// The health service's answer follows StationCore::Health: SERVING while the station can run
-// and store cycles, NOT_SERVING (for every service name) while the disk is full or the data
-// root is gone. Polled every kHealthPollInterval on its own thread, which also stores a
-// cycle's end that a full disk held back as soon as space returns.
+// are; the token, when set, is required on top. An address CheckListenAddress (daemon_config.h)
+// refuses is its InvalidArgument. The health service's answer follows StationCore::Health: SERVING
+// while the station can run and store cycles, NOT_SERVING (for every service name) while the disk
+// is full or the data root is gone. Polled every kHealthPollInterval on its own thread, which also
+// stores a cycle's end that a full disk held back as soon as space returns.
 inline constexpr std::chrono::milliseconds kHealthPollInterval{250};
 class HealthMonitor {
  public:
@@ -114,8 +114,8 @@ struct RunningServer {
   std::unique_ptr<HealthMonitor> health;          // destroyed first: it sets the server's health
   int port = 0;
 };
-absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address, const std::string& auth_token,
-                                          const std::string& version,
+absl::StatusOr<RunningServer> StartServer(StationCore* core, const std::string& address,
+                                          const std::string& auth_token, const std::string& version,
                                           const std::optional<TlsConfig>& tls = std::nullopt);
 
 }  // namespace linecal

@@ -1,9 +1,9 @@
 #pragma once
 // gRPC server credentials from the configuration's `tls` (daemon/core/daemon_config.h).
 
-#include <memory>
-
 #include <grpcpp/security/server_credentials.h>
+
+#include <memory>
 
 #include "absl/status/statusor.h"
 #include "daemon/core/daemon_config.h"

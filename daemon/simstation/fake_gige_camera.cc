@@ -7,7 +7,6 @@
 #include <unistd.h>
 
 #include <cerrno>
-
 #include <cmath>
 #include <cstring>
 #include <utility>
@@ -99,8 +98,8 @@ absl::StatusOr<std::unique_ptr<FakeGigeCamera>> FakeGigeCamera::Start(const std:
         absl::StrCat("fake camera gvsp-lost-ratio ", lost_ratio, ": must be in 0..1"));
   }
   if (!(frames_per_second >= 0.1 && frames_per_second <= 100.0)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("fake camera frame rate ", frames_per_second, ": must be in 0.1..100 frames/s"));
+    return absl::InvalidArgumentError(absl::StrCat("fake camera frame rate ", frames_per_second,
+                                                   ": must be in 0.1..100 frames/s"));
   }
   if (absl::Status s = CheckImage(initial); !s.ok()) return s;
   if (absl::Status s = CheckControlPortFree(address); !s.ok()) return s;
@@ -111,8 +110,8 @@ absl::StatusOr<std::unique_ptr<FakeGigeCamera>> FakeGigeCamera::Start(const std:
   // found the address among the machine's interfaces and could bind there.
   fake->camera_ = arv_gv_fake_camera_new(address.c_str(), serial.c_str());
   if (fake->camera_ == nullptr || !arv_gv_fake_camera_is_running(fake->camera_)) {
-    return absl::UnavailableError(absl::StrCat(
-        "fake camera: cannot listen on ", address, ":3956: no interface has that address"));
+    return absl::UnavailableError(absl::StrCat("fake camera: cannot listen on ", address,
+                                               ":3956: no interface has that address"));
   }
   g_object_set(fake->camera_, "gvsp-lost-ratio", lost_ratio, nullptr);
   ArvFakeCamera* camera = arv_gv_fake_camera_get_fake_camera(fake->camera_);

@@ -12,9 +12,9 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/io/image_io.h"
 #include "station/io/pcap.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 
 namespace linecal {
 namespace {
@@ -49,7 +49,8 @@ absl::StatusOr<std::vector<Datagram>> ReadDatagrams(const std::string& path) {
     if (out.empty()) t0 = record.time_ns;
     out.push_back({record.time_ns - t0, {frame.payload.begin(), frame.payload.end()}});
   }
-  if (out.empty()) return absl::InvalidArgumentError(absl::StrCat(path, ": no UDP datagram to replay"));
+  if (out.empty())
+    return absl::InvalidArgumentError(absl::StrCat(path, ": no UDP datagram to replay"));
   return out;
 }
 
@@ -58,7 +59,8 @@ absl::StatusOr<std::vector<Datagram>> ReadDatagrams(const std::string& path) {
 // would otherwise show a receiver a short rotation at every seam (the azimuth falls back
 // there as it does when passing 0°). InvalidArgument when fewer than one whole rotation is in
 // the recording.
-absl::StatusOr<std::vector<Datagram>> WholeRotations(std::vector<Datagram> datagrams, const SensorModel& sensor,
+absl::StatusOr<std::vector<Datagram>> WholeRotations(std::vector<Datagram> datagrams,
+                                                     const SensorModel& sensor,
                                                      const std::string& name) {
   absl::StatusOr<LidarBeamTable> table = LidarBeamTableOf(sensor);
   if (!table.ok()) return table.status();
@@ -72,7 +74,8 @@ absl::StatusOr<std::vector<Datagram>> WholeRotations(std::vector<Datagram> datag
     if (!completed.empty()) ends.push_back(i);
   }
   if (ends.size() < 2) {
-    return absl::InvalidArgumentError(absl::StrCat(name, ": the recording holds no whole rotation to replay"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(name, ": the recording holds no whole rotation to replay"));
   }
   std::vector<Datagram> whole(std::make_move_iterator(datagrams.begin() + ends.front()),
                               std::make_move_iterator(datagrams.begin() + ends.back()));
@@ -86,52 +89,63 @@ absl::StatusOr<std::vector<Datagram>> WholeRotations(std::vector<Datagram> datag
 absl::Status SensorServerOptions::Validate() const {
   if (capture_dir.empty()) return absl::InvalidArgumentError("capture_dir: empty");
   if (!(camera_lost_ratio >= 0 && camera_lost_ratio < 1)) {
-    return absl::InvalidArgumentError(absl::StrCat("camera_lost_ratio = ", camera_lost_ratio, ": must be in [0, 1)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("camera_lost_ratio = ", camera_lost_ratio, ": must be in [0, 1)"));
   }
   in_addr a{};
   if (inet_pton(AF_INET, lidar_address.c_str(), &a) != 1) {
-    return absl::InvalidArgumentError(absl::StrCat("lidar_address '", lidar_address, "': not an IPv4 address"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("lidar_address '", lidar_address, "': not an IPv4 address"));
   }
   for (const std::string& c : camera_addresses) {
     if (inet_pton(AF_INET, c.c_str(), &a) != 1) {
-      return absl::InvalidArgumentError(absl::StrCat("camera_addresses: '", c, "' is not an IPv4 address"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("camera_addresses: '", c, "' is not an IPv4 address"));
     }
   }
-  if (!(lidar_speed >= 0)) return absl::InvalidArgumentError(absl::StrCat("lidar_speed = ", lidar_speed, ": must be >= 0"));
-  if (lidar_first_port == 0) return absl::InvalidArgumentError("lidar_first_port: must be a port, not 0");
+  if (!(lidar_speed >= 0))
+    return absl::InvalidArgumentError(
+        absl::StrCat("lidar_speed = ", lidar_speed, ": must be >= 0"));
+  if (lidar_first_port == 0)
+    return absl::InvalidArgumentError("lidar_first_port: must be a port, not 0");
   return absl::OkStatus();
 }
 
 SensorServer::SensorServer(SensorServerOptions options, Capture capture)
     : options_(std::move(options)), capture_(std::move(capture)) {}
 
-absl::StatusOr<std::unique_ptr<SensorServer>> SensorServer::Start(const SensorServerOptions& options) {
+absl::StatusOr<std::unique_ptr<SensorServer>> SensorServer::Start(
+    const SensorServerOptions& options) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   absl::StatusOr<Capture> capture = ReadCapture(options.capture_dir);
   if (!capture.ok()) return capture.status();
-  const auto cameras = std::count_if(capture->manifest.sensors.begin(), capture->manifest.sensors.end(),
-                                     [](const CaptureSensor& s) { return s.kind == SensorKind::kCamera; });
+  const auto cameras =
+      std::count_if(capture->manifest.sensors.begin(), capture->manifest.sensors.end(),
+                    [](const CaptureSensor& s) { return s.kind == SensorKind::kCamera; });
   if (static_cast<std::size_t>(cameras) > options.camera_addresses.size()) {
-    return absl::InvalidArgumentError(absl::StrCat("camera_addresses: ", options.camera_addresses.size(),
-                                                   " given for the capture's ", cameras, " cameras (one address each)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("camera_addresses: ", options.camera_addresses.size(),
+                     " given for the capture's ", cameras, " cameras (one address each)"));
   }
   std::unique_ptr<SensorServer> server(new SensorServer(options, *std::move(capture)));
   std::size_t next_address = 0;
   std::uint16_t next_port = options.lidar_first_port;
   for (const CaptureSensor& sensor : server->capture_.manifest.sensors) {
     if (sensor.kind == SensorKind::kCamera) {
-      if (sensor.frames.empty()) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": no frame to serve"));
+      if (sensor.frames.empty())
+        return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": no frame to serve"));
       absl::StatusOr<Image8> image = ReadCaptureImage(server->capture_, sensor.frames.front());
       if (!image.ok()) return image.status();
       const std::string& address = options.camera_addresses[next_address++];
       // The serial becomes the device id "Aravis-Fake-<serial>": the sensor name makes it
       // readable in linecald's status and logs.
-      absl::StatusOr<std::unique_ptr<FakeGigeCamera>> camera =
-          FakeGigeCamera::Start(address, sensor.name, *std::move(image), options.camera_lost_ratio, options.camera_fps);
+      absl::StatusOr<std::unique_ptr<FakeGigeCamera>> camera = FakeGigeCamera::Start(
+          address, sensor.name, *std::move(image), options.camera_lost_ratio, options.camera_fps);
       if (!camera.ok()) return camera.status();
       server->cameras_.emplace_back(sensor.name, *std::move(camera));
     } else if (sensor.kind == SensorKind::kLidar) {
-      if (!sensor.packets) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": no packets to replay"));
+      if (!sensor.packets)
+        return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": no packets to replay"));
       if (absl::Status s = server->StartLidar(sensor, next_port); !s.ok()) return s;
       ++next_port;
     }
@@ -139,12 +153,13 @@ absl::StatusOr<std::unique_ptr<SensorServer>> SensorServer::Start(const SensorSe
   return server;
 }
 
-
 absl::Status SensorServer::StartLidar(const CaptureSensor& sensor, std::uint16_t port) {
   absl::StatusOr<std::vector<Datagram>> datagrams = ReadDatagrams(capture_.PathOf(*sensor.packets));
   if (!datagrams.ok()) return datagrams.status();
   const SensorModel* model = capture_.car.FindSensor(sensor.name);
-  if (model == nullptr) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": not in the capture's car model"));
+  if (model == nullptr)
+    return absl::InvalidArgumentError(
+        absl::StrCat(sensor.name, ": not in the capture's car model"));
   datagrams = WholeRotations(*std::move(datagrams), *model, sensor.name);
   if (!datagrams.ok()) return datagrams.status();
   const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
@@ -157,20 +172,26 @@ absl::Status SensorServer::StartLidar(const CaptureSensor& sensor, std::uint16_t
   // One loop of the recording lasts its span plus one mean packet interval, so that the
   // next loop's first packet keeps the recorded rate.
   const std::vector<Datagram>& d = *datagrams;
-  const std::int64_t span_ns = d.back().offset_ns + (d.size() > 1 ? d.back().offset_ns / static_cast<std::int64_t>(d.size() - 1) : 0);
+  const std::int64_t span_ns =
+      d.back().offset_ns +
+      (d.size() > 1 ? d.back().offset_ns / static_cast<std::int64_t>(d.size() - 1) : 0);
   senders_.emplace_back([this, fd, to, d = *std::move(datagrams), span_ns] {
     const Clock::time_point start = Clock::now();
     for (std::int64_t loop = 0; !stop_; ++loop) {
       for (const Datagram& g : d) {
         if (options_.lidar_speed > 0) {
-          const auto due = start + std::chrono::nanoseconds(static_cast<std::int64_t>(
-                                       static_cast<double>(loop * span_ns + g.offset_ns) / options_.lidar_speed));
-          while (!stop_ && Clock::now() < due) std::this_thread::sleep_until(std::min(due, Clock::now() + kSenderPoll));
+          const auto due =
+              start +
+              std::chrono::nanoseconds(static_cast<std::int64_t>(
+                  static_cast<double>(loop * span_ns + g.offset_ns) / options_.lidar_speed));
+          while (!stop_ && Clock::now() < due)
+            std::this_thread::sleep_until(std::min(due, Clock::now() + kSenderPoll));
         }
         if (stop_) break;
         // Nobody listening is normal (linecald listens only while it acquires): the datagram
         // is dropped by the kernel, as a real LiDAR's would be.
-        if (sendto(fd, g.payload.data(), g.payload.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to) >= 0) {
+        if (sendto(fd, g.payload.data(), g.payload.size(), 0,
+                   reinterpret_cast<const sockaddr*>(&to), sizeof to) >= 0) {
           datagrams_sent_.fetch_add(1);
         }
       }
@@ -201,7 +222,9 @@ nlohmann::json SensorServer::LiveSourceConfig() const {
   }
   for (const CaptureSensor& s : capture_.manifest.sensors) {
     if (s.kind == SensorKind::kRadar && s.can_log) {
-      sensors[s.name] = {{"type", "candump"}, {"log", fs::absolute(capture_.PathOf(*s.can_log)).lexically_normal().string()}};
+      sensors[s.name] = {
+          {"type", "candump"},
+          {"log", fs::absolute(capture_.PathOf(*s.can_log)).lexically_normal().string()}};
     }
   }
   return {{"type", "live"}, {"sensors", sensors}};

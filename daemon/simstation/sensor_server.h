@@ -14,11 +14,10 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "daemon/simstation/fake_gige_camera.h"
@@ -71,8 +70,9 @@ class SensorServer {
 
   const SensorServerOptions options_;
   const Capture capture_;
-  std::vector<std::pair<std::string, std::unique_ptr<FakeGigeCamera>>> cameras_;  // sensor name, camera
-  std::vector<std::pair<std::string, std::uint16_t>> lidar_ports_;               // sensor name, port
+  std::vector<std::pair<std::string, std::unique_ptr<FakeGigeCamera>>>
+      cameras_;                                                     // sensor name, camera
+  std::vector<std::pair<std::string, std::uint16_t>> lidar_ports_;  // sensor name, port
   std::vector<std::thread> senders_;
   std::atomic<bool> stop_{false};
   std::atomic<std::int64_t> datagrams_sent_{0};

@@ -50,10 +50,9 @@ using GrabFn = std::function<absl::StatusOr<CameraFrame>(
     std::chrono::steady_clock::time_point deadline, const std::atomic<bool>* cancel)>;
 
 // Grabs request.frames frames and writes each as <sensor_dir>/frame_<k>.png.
-absl::StatusOr<CaptureSensor> RecordFrames(const SensorModel& sensor,
-                                           const AcquireRequest& request, const GrabFn& grab) {
-  const std::filesystem::path dir =
-      std::filesystem::path(request.capture_dir) / request.sensor_dir;
+absl::StatusOr<CaptureSensor> RecordFrames(const SensorModel& sensor, const AcquireRequest& request,
+                                           const GrabFn& grab) {
+  const std::filesystem::path dir = std::filesystem::path(request.capture_dir) / request.sensor_dir;
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) {
@@ -65,9 +64,8 @@ absl::StatusOr<CaptureSensor> RecordFrames(const SensorModel& sensor,
   for (int k = 0; k < request.frames; ++k) {
     absl::StatusOr<CameraFrame> frame = grab(request.deadline, request.cancel);
     if (!frame.ok()) {
-      return absl::Status(frame.status().code(),
-                          absl::StrCat(frame.status().message(), " (frame ", k + 1, "/",
-                                       request.frames, ")"));
+      return absl::Status(frame.status().code(), absl::StrCat(frame.status().message(), " (frame ",
+                                                              k + 1, "/", request.frames, ")"));
     }
     const std::string name = absl::StrCat("frame_", k, ".png");
     const std::string relative = (std::filesystem::path(request.sensor_dir) / name).string();
@@ -99,8 +97,9 @@ class AravisCameraSource : public SensorSource {
     // Sources of several cameras acquire at once (docs/sensors.md, "Several cameras at once").
     absl::StatusOr<std::unique_ptr<AravisCamera>> camera = AravisCamera::Open(options);
     if (!camera.ok()) return camera.status();
-    absl::StatusOr<CaptureSensor> result = RecordFrames(
-        sensor, request, [&](auto deadline, auto cancel) { return (*camera)->Grab(deadline, cancel); });
+    absl::StatusOr<CaptureSensor> result =
+        RecordFrames(sensor, request,
+                     [&](auto deadline, auto cancel) { return (*camera)->Grab(deadline, cancel); });
     if (result.status().code() == absl::StatusCode::kDeadlineExceeded) {
       // The camera may have vanished, and releasing it then waits seconds for control
       // requests nobody answers (AravisCamera's destructor): not on the cycle's time.
@@ -167,9 +166,9 @@ absl::Status V4l2CameraSourceConfig::Validate() const {
   }
   if (width < 0 || height < 0 || width > kMaxImageSide || height > kMaxImageSide ||
       (width == 0) != (height == 0)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "width, height: both 0 (the device's size) or both 1..", kMaxImageSide, ", got ", width,
-        " x ", height));
+    return absl::InvalidArgumentError(
+        absl::StrCat("width, height: both 0 (the device's size) or both 1..", kMaxImageSide,
+                     ", got ", width, " x ", height));
   }
   return ValidateCommon(frame_timeout, frame_retries);
 }

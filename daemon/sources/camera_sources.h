@@ -13,7 +13,8 @@
 namespace linecal {
 
 struct AravisCameraSourceConfig {
-  std::string device_id;               // Aravis device id ("Basler-21234567", "Aravis-Fake-TEST01") or IP address
+  std::string
+      device_id;  // Aravis device id ("Basler-21234567", "Aravis-Fake-TEST01") or IP address
   std::string pixel_format = "Mono8";  // GenICam PixelFormat name the camera is set to
   double exposure_us = 0;              // 0: leave the camera's exposure as it is
   // How long one frame may take to arrive before it counts as missing.

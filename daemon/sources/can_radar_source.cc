@@ -5,8 +5,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "station/sensors/radar/radar_decoder.h"
 #include "station/io/candump.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/sensors/radar/radar_format.h"
 
 namespace linecal {
@@ -27,11 +27,13 @@ bool BelongsTo(const CanFrame& f, RadarModel model, int sensor_id) {
     return id.has_value() && id->sensor_id == sensor_id;
   }
   return f.id == esr::kStatusId ||
-         (f.id >= esr::kFirstTrackId && f.id < esr::kFirstTrackId + static_cast<uint32_t>(esr::kTrackCount));
+         (f.id >= esr::kFirstTrackId &&
+          f.id < esr::kFirstTrackId + static_cast<uint32_t>(esr::kTrackCount));
 }
 
 std::string RadarName(const SensorModel& sensor, RadarModel model) {
-  return model == RadarModel::kArs408 ? absl::StrCat("ars408 sensor id ", sensor.radar_sensor_id) : "esr";
+  return model == RadarModel::kArs408 ? absl::StrCat("ars408 sensor id ", sensor.radar_sensor_id)
+                                      : "esr";
 }
 
 std::string Seconds(std::chrono::nanoseconds d) {
@@ -41,20 +43,24 @@ std::string Seconds(std::chrono::nanoseconds d) {
 }  // namespace
 
 absl::Status CanRadarSourceConfig::Validate() const {
-  if (input == Input::kSocketCan && (interface.empty() || interface.size() > kCanMaxInterfaceName)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("interface: '", interface, "' must have 1..", kCanMaxInterfaceName, " characters"));
+  if (input == Input::kSocketCan &&
+      (interface.empty() || interface.size() > kCanMaxInterfaceName)) {
+    return absl::InvalidArgumentError(absl::StrCat("interface: '", interface, "' must have 1..",
+                                                   kCanMaxInterfaceName, " characters"));
   }
-  if (input == Input::kCandumpLog && log_path.empty()) return absl::InvalidArgumentError("log: empty");
+  if (input == Input::kCandumpLog && log_path.empty())
+    return absl::InvalidArgumentError("log: empty");
   if (record < std::chrono::milliseconds(1) || record > kMaxRecord) {
-    return absl::InvalidArgumentError(absl::StrCat("record_ms: ", record.count(), " must be in [1, 60000]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("record_ms: ", record.count(), " must be in [1, 60000]"));
   }
   return absl::OkStatus();
 }
 
 std::string CanRadarSource::Describe() const {
-  return config_.input == CanRadarSourceConfig::Input::kSocketCan ? absl::StrCat("socketcan ", config_.interface)
-                                                                  : absl::StrCat("candump ", config_.log_path);
+  return config_.input == CanRadarSourceConfig::Input::kSocketCan
+             ? absl::StrCat("socketcan ", config_.interface)
+             : absl::StrCat("candump ", config_.log_path);
 }
 
 absl::StatusOr<std::vector<CanFrame>> CanRadarSource::ReadLog(const SensorModel& sensor,
@@ -64,20 +70,23 @@ absl::StatusOr<std::vector<CanFrame>> CanRadarSource::ReadLog(const SensorModel&
   if (absl::IsNotFound(all.status())) {
     return absl::UnavailableError(absl::StrCat(sensor.name, ": ", all.status().message()));
   }
-  if (!all.ok()) return absl::DataLossError(absl::StrCat(sensor.name, ": ", all.status().message()));
+  if (!all.ok())
+    return absl::DataLossError(absl::StrCat(sensor.name, ": ", all.status().message()));
   std::vector<CanFrame> kept;
   for (const CanFrame& f : *all) {
-    if (request.cancelled()) return absl::CancelledError(absl::StrCat(sensor.name, ": cancelled reading the log"));
+    if (request.cancelled())
+      return absl::CancelledError(absl::StrCat(sensor.name, ": cancelled reading the log"));
     if (!config_.interface.empty() && f.interface != config_.interface) continue;
     if (!BelongsTo(f, model, sensor.radar_sensor_id)) continue;
     if (!kept.empty() && f.time - kept.front().time >= config_.record) break;
     kept.push_back(f);
   }
   if (kept.empty()) {
-    return absl::DataLossError(absl::StrCat(sensor.name, ": candump log '", config_.log_path, "' has no frame of ",
-                                            RadarName(sensor, model),
-                                            config_.interface.empty() ? "" : absl::StrCat(" on ", config_.interface),
-                                            " (", all->size(), " frames in all): the radar was silent"));
+    return absl::DataLossError(
+        absl::StrCat(sensor.name, ": candump log '", config_.log_path, "' has no frame of ",
+                     RadarName(sensor, model),
+                     config_.interface.empty() ? "" : absl::StrCat(" on ", config_.interface), " (",
+                     all->size(), " frames in all): the radar was silent"));
   }
   return kept;
 }
@@ -100,24 +109,25 @@ absl::StatusOr<std::vector<CanFrame>> CanRadarSource::ReadBus(const SensorModel&
   std::optional<std::chrono::steady_clock::time_point> record_end;
   while (!record_end || std::chrono::steady_clock::now() < *record_end) {
     if (request.cancelled()) {
-      return absl::CancelledError(absl::StrCat(sensor.name, ": cancelled after ", kept.size(), " frames on ",
-                                               config_.interface));
+      return absl::CancelledError(absl::StrCat(sensor.name, ": cancelled after ", kept.size(),
+                                               " frames on ", config_.interface));
     }
     const auto now = std::chrono::steady_clock::now();
     if (now >= request.deadline) {
       if (kept.empty()) {
-        return absl::DeadlineExceededError(absl::StrCat(sensor.name, ": no frame of ", RadarName(sensor, model),
-                                                        " on ", config_.interface, " in ",
-                                                        Seconds(request.deadline - start), " (", other_frames,
-                                                        " other frames): the radar is silent"));
+        return absl::DeadlineExceededError(
+            absl::StrCat(sensor.name, ": no frame of ", RadarName(sensor, model), " on ",
+                         config_.interface, " in ", Seconds(request.deadline - start), " (",
+                         other_frames, " other frames): the radar is silent"));
       }
-      return absl::DeadlineExceededError(absl::StrCat(sensor.name, ": the deadline came after ",
-                                                      Seconds(now - start), " on ", config_.interface,
-                                                      ", before the record time of ",
-                                                      Seconds(config_.record), " was over"));
+      return absl::DeadlineExceededError(absl::StrCat(
+          sensor.name, ": the deadline came after ", Seconds(now - start), " on ",
+          config_.interface, ", before the record time of ", Seconds(config_.record), " was over"));
     }
     absl::StatusOr<std::optional<CanFrame>> frame = reader->Read(kPollInterval);
-    if (!frame.ok()) return absl::Status(frame.status().code(), absl::StrCat(sensor.name, ": ", frame.status().message()));
+    if (!frame.ok())
+      return absl::Status(frame.status().code(),
+                          absl::StrCat(sensor.name, ": ", frame.status().message()));
     if (!frame->has_value()) continue;
     if (!BelongsTo(**frame, model, sensor.radar_sensor_id)) {
       ++other_frames;
@@ -132,35 +142,43 @@ absl::StatusOr<std::vector<CanFrame>> CanRadarSource::ReadBus(const SensorModel&
   return kept;
 }
 
-absl::StatusOr<CaptureSensor> CanRadarSource::Acquire(const SensorModel& sensor, const AcquireRequest& request) {
+absl::StatusOr<CaptureSensor> CanRadarSource::Acquire(const SensorModel& sensor,
+                                                      const AcquireRequest& request) {
   if (sensor.kind != SensorKind::kRadar) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(sensor.name, ": a CAN radar source cannot serve a ", SensorKindName(sensor.kind)));
+    return absl::InvalidArgumentError(absl::StrCat(
+        sensor.name, ": a CAN radar source cannot serve a ", SensorKindName(sensor.kind)));
   }
   if (!ParseRadarModel(sensor.model)) {
-    return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": no CAN layout for radar model '", sensor.model, "'"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(sensor.name, ": no CAN layout for radar model '", sensor.model, "'"));
   }
-  absl::StatusOr<std::vector<CanFrame>> frames = config_.input == CanRadarSourceConfig::Input::kSocketCan
-                                                     ? ReadBus(sensor, request)
-                                                     : ReadLog(sensor, request);
+  absl::StatusOr<std::vector<CanFrame>> frames =
+      config_.input == CanRadarSourceConfig::Input::kSocketCan ? ReadBus(sensor, request)
+                                                               : ReadLog(sensor, request);
   if (!frames.ok()) return frames.status();
 
   const fs::path dir = fs::path(request.capture_dir) / request.sensor_dir;
   std::error_code ec;
   fs::create_directories(dir, ec);
-  if (ec) return absl::InternalError(absl::StrCat(sensor.name, ": cannot create '", dir.string(), "': ", ec.message()));
+  if (ec)
+    return absl::InternalError(
+        absl::StrCat(sensor.name, ": cannot create '", dir.string(), "': ", ec.message()));
   const std::string rel = (fs::path(request.sensor_dir) / "can.log").string();
-  if (absl::Status s = WriteCandumpLog(fs::path(request.capture_dir) / rel, *frames); !s.ok()) return s;
-  const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *ParseRadarModel(sensor.model), RadarConventions{});
+  if (absl::Status s = WriteCandumpLog(fs::path(request.capture_dir) / rel, *frames); !s.ok())
+    return s;
+  const RadarDecodeResult decoded =
+      DecodeRadarFrames(*frames, *ParseRadarModel(sensor.model), RadarConventions{});
   if (request.progress) {
-    request.progress(absl::StrCat(frames->size(), " frames, ", decoded.stats.cycles, " radar cycles (",
-                                  decoded.stats.incomplete_cycles, " incomplete)"));
+    request.progress(absl::StrCat(frames->size(), " frames, ", decoded.stats.cycles,
+                                  " radar cycles (", decoded.stats.incomplete_cycles,
+                                  " incomplete)"));
   }
   CaptureSensor out;
   out.name = sensor.name;
   out.kind = SensorKind::kRadar;
-  out.can_log = CaptureFile{
-      rel, std::chrono::duration_cast<std::chrono::nanoseconds>(frames->front().time.time_since_epoch()).count()};
+  out.can_log = CaptureFile{rel, std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                     frames->front().time.time_since_epoch())
+                                     .count()};
   return out;
 }
 

@@ -38,7 +38,8 @@ struct CanRadarSourceConfig {
 class CanRadarSource : public SensorSource {
  public:
   // `syscalls`: how the SocketCAN interface is opened (tests replace it, socketcan.h).
-  explicit CanRadarSource(CanRadarSourceConfig config, SocketCanSyscalls syscalls = SocketCanSyscalls::Real())
+  explicit CanRadarSource(CanRadarSourceConfig config,
+                          SocketCanSyscalls syscalls = SocketCanSyscalls::Real())
       : config_(std::move(config)), syscalls_(syscalls) {}
 
   // SensorSource. Errors beyond the interface's, each naming the sensor and the interface or
@@ -50,13 +51,16 @@ class CanRadarSource : public SensorSource {
   //   DataLoss            log: unparsable, or no frame of this radar in it (a silent log)
   //   InvalidArgument     not a radar, or a radar model without a CAN layout here
   // Cost: live, the record time; log, one read of the file.
-  absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor, const AcquireRequest& request) override;
+  absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor,
+                                        const AcquireRequest& request) override;
   // "socketcan can0" or "candump /path/radar.log".
   std::string Describe() const override;
 
  private:
-  absl::StatusOr<std::vector<CanFrame>> ReadLog(const SensorModel& sensor, const AcquireRequest& request) const;
-  absl::StatusOr<std::vector<CanFrame>> ReadBus(const SensorModel& sensor, const AcquireRequest& request) const;
+  absl::StatusOr<std::vector<CanFrame>> ReadLog(const SensorModel& sensor,
+                                                const AcquireRequest& request) const;
+  absl::StatusOr<std::vector<CanFrame>> ReadBus(const SensorModel& sensor,
+                                                const AcquireRequest& request) const;
 
   const CanRadarSourceConfig config_;
   const SocketCanSyscalls syscalls_;

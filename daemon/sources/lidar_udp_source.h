@@ -15,9 +15,9 @@
 #include <string>
 
 #include "absl/status/status.h"
-#include "station/sensors/lidar/lidar_decoder.h"
 #include "daemon/drivers/udp_receiver.h"
 #include "daemon/sources/sensor_source.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 
 namespace linecal {
 
@@ -51,7 +51,8 @@ class LidarUdpSource : public SensorSource {
   //   InvalidArgument   not a LiDAR, or its beam table cannot be loaded
   //   Internal          a socket or file error
   // Cost: the decoder's, plus one PCD write per rotation.
-  absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor, const AcquireRequest& request) override;
+  absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor,
+                                        const AcquireRequest& request) override;
   // "udp 127.0.0.1:2368" (plus " group 239.1.1.1").
   std::string Describe() const override;
 

@@ -27,8 +27,9 @@ namespace linecal {
 
 struct AcquireRequest {
   std::string capture_dir;  // the cycle's capture directory; it exists
-  std::string sensor_dir;   // relative to capture_dir, where this sensor's files go; the source creates it
-  int frames = 1;           // camera frames, LiDAR rotations; radars record their configured time
+  std::string
+      sensor_dir;  // relative to capture_dir, where this sensor's files go; the source creates it
+  int frames = 1;  // camera frames, LiDAR rotations; radars record their configured time
   // Acquire returns by then (plus the time one blocking call may still take, at most the
   // source's own poll interval), with DeadlineExceeded if the data was not complete.
   std::chrono::steady_clock::time_point deadline;
@@ -51,7 +52,8 @@ class SensorSource {
   //   Cancelled         request.cancel was set
   //   InvalidArgument   the sensor's kind does not fit this source
   // Thread safety: one Acquire at a time per source object; different sources run at once.
-  virtual absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor, const AcquireRequest& request) = 0;
+  virtual absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor,
+                                                const AcquireRequest& request) = 0;
   // What serves the sensor, for the station status and logs: "aravis Aravis-Fake-TEST01".
   virtual std::string Describe() const = 0;
 };

@@ -6,11 +6,16 @@ namespace linecal {
 
 const char* SourceTypeName(SourceType type) {
   switch (type) {
-    case SourceType::kAravis: return "aravis";
-    case SourceType::kV4l2: return "v4l2";
-    case SourceType::kUdp: return "udp";
-    case SourceType::kSocketCan: return "socketcan";
-    case SourceType::kCandump: return "candump";
+    case SourceType::kAravis:
+      return "aravis";
+    case SourceType::kV4l2:
+      return "v4l2";
+    case SourceType::kUdp:
+      return "udp";
+    case SourceType::kSocketCan:
+      return "socketcan";
+    case SourceType::kCandump:
+      return "candump";
   }
   return "?";
 }
@@ -18,10 +23,13 @@ const char* SourceTypeName(SourceType type) {
 SensorKind SourceTypeKind(SourceType type) {
   switch (type) {
     case SourceType::kAravis:
-    case SourceType::kV4l2: return SensorKind::kCamera;
-    case SourceType::kUdp: return SensorKind::kLidar;
+    case SourceType::kV4l2:
+      return SensorKind::kCamera;
+    case SourceType::kUdp:
+      return SensorKind::kLidar;
     case SourceType::kSocketCan:
-    case SourceType::kCandump: return SensorKind::kRadar;
+    case SourceType::kCandump:
+      return SensorKind::kRadar;
   }
   return SensorKind::kCamera;
 }

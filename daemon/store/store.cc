@@ -98,8 +98,14 @@ class Statement {
   Statement& operator=(const Statement&) = delete;
 
   bool ok() const { return rc_ == SQLITE_OK; }
-  Statement& Bind(int i, int64_t v) { Keep(sqlite3_bind_int64(stmt_, i, v)); return *this; }
-  Statement& Bind(int i, double v) { Keep(sqlite3_bind_double(stmt_, i, v)); return *this; }
+  Statement& Bind(int i, int64_t v) {
+    Keep(sqlite3_bind_int64(stmt_, i, v));
+    return *this;
+  }
+  Statement& Bind(int i, double v) {
+    Keep(sqlite3_bind_double(stmt_, i, v));
+    return *this;
+  }
   Statement& Bind(int i, const std::string& v) {
     Keep(sqlite3_bind_text(stmt_, i, v.data(), static_cast<int>(v.size()), SQLITE_TRANSIENT));
     return *this;
@@ -131,9 +137,9 @@ class Statement {
 };
 
 absl::Status SqliteError(sqlite3* db, const std::string& path, const char* what, int rc) {
-  const std::string message =
-      absl::StrCat("database ", path, ": ", what, ": ", sqlite3_errstr(rc),
-                   db && sqlite3_errcode(db) == rc ? absl::StrCat(" (", sqlite3_errmsg(db), ")") : "");
+  const std::string message = absl::StrCat(
+      "database ", path, ": ", what, ": ", sqlite3_errstr(rc),
+      db && sqlite3_errcode(db) == rc ? absl::StrCat(" (", sqlite3_errmsg(db), ")") : "");
   if (rc == SQLITE_BUSY || rc == SQLITE_LOCKED) return absl::UnavailableError(message);
   // SQLITE_FULL: the file system has no room (or the file hit its size limit); the write
   // works again once space is freed, so the caller may keep what it meant to store.
@@ -255,10 +261,14 @@ std::string QuoteInput(absl::string_view value) {
 
 const char* CycleStateName(CycleState state) {
   switch (state) {
-    case CycleState::kRunning: return "running";
-    case CycleState::kDone: return "done";
-    case CycleState::kCancelled: return "cancelled";
-    case CycleState::kAborted: return "aborted";
+    case CycleState::kRunning:
+      return "running";
+    case CycleState::kDone:
+      return "done";
+    case CycleState::kCancelled:
+      return "cancelled";
+    case CycleState::kAborted:
+      return "aborted";
   }
   return "running";
 }
@@ -308,9 +318,9 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
   absl::StatusOr<int> lock_fd = LockDatabase(path);
   if (!lock_fd.ok()) return lock_fd.status();
   sqlite3* db = nullptr;
-  const int rc = sqlite3_open_v2(path.c_str(), &db,
-                                 SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
-                                 nullptr);
+  const int rc =
+      sqlite3_open_v2(path.c_str(), &db,
+                      SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, nullptr);
   if (rc != SQLITE_OK) {
     absl::Status s = SqliteError(db, path, "open", rc);
     sqlite3_close(db);
@@ -326,9 +336,12 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path,
   }
   sqlite3_busy_timeout(db, static_cast<int>(options.busy_timeout.count()));
   // WAL: readers never block the writer; FULL: every commit is fsynced before it returns.
-  if (absl::Status s = Exec(db, path, "set journal mode", "PRAGMA journal_mode=WAL"); !s.ok()) return s;
-  if (absl::Status s = Exec(db, path, "set synchronous", "PRAGMA synchronous=FULL"); !s.ok()) return s;
-  if (absl::Status s = Exec(db, path, "enable foreign keys", "PRAGMA foreign_keys=ON"); !s.ok()) return s;
+  if (absl::Status s = Exec(db, path, "set journal mode", "PRAGMA journal_mode=WAL"); !s.ok())
+    return s;
+  if (absl::Status s = Exec(db, path, "set synchronous", "PRAGMA synchronous=FULL"); !s.ok())
+    return s;
+  if (absl::Status s = Exec(db, path, "enable foreign keys", "PRAGMA foreign_keys=ON"); !s.ok())
+    return s;
   if (absl::Status s = store->Migrate(); !s.ok()) return s;
   if (absl::Status s = store->AbortRunning(); !s.ok()) return s;
   return store;
@@ -342,9 +355,10 @@ absl::Status Store::CheckFile() const {
         "); what is stored from now on is lost at the next start"));
   }
   if (now.st_dev != file_dev_ || now.st_ino != file_ino_) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "database ", path_, ": the file was replaced while linecald ran; what is stored from now "
-        "on goes to the old, unlinked file"));
+    return absl::FailedPreconditionError(
+        absl::StrCat("database ", path_,
+                     ": the file was replaced while linecald ran; what is stored from now "
+                     "on goes to the old, unlinked file"));
   }
   return absl::OkStatus();
 }
@@ -358,12 +372,13 @@ absl::Status Store::Migrate() {
   Transaction tx(db_, path_);
   if (!tx.status().ok()) return tx.status();
   Statement version(db_, "PRAGMA user_version");
-  if (const int rc = version.Step(); rc != SQLITE_ROW) return SqliteError(db_, path_, "read schema version", rc);
+  if (const int rc = version.Step(); rc != SQLITE_ROW)
+    return SqliteError(db_, path_, "read schema version", rc);
   const int64_t from = version.Int(0);
   if (from > kSchemaVersion) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "database ", path_, ": schema version ", from, " is newer than this linecald's (",
-        kSchemaVersion, "); refusing to open it"));
+    return absl::FailedPreconditionError(absl::StrCat("database ", path_, ": schema version ", from,
+                                                      " is newer than this linecald's (",
+                                                      kSchemaVersion, "); refusing to open it"));
   }
   for (int64_t v = from; v < kSchemaVersion; ++v) {
     if (absl::Status s = Exec(db_, path_, "migrate schema", kMigrations[v]); !s.ok()) return s;
@@ -392,7 +407,8 @@ absl::Status Store::AbortRunning() {
   s.Bind(1, static_cast<int64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
                                      std::chrono::system_clock::now().time_since_epoch())
                                      .count()));
-  if (const int rc = s.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "abort running cycles", rc);
+  if (const int rc = s.Step(); rc != SQLITE_DONE)
+    return SqliteError(db_, path_, "abort running cycles", rc);
   for (const StoredCycle& c : aborted) {
     if (absl::Status q = Enqueue(c.id); !q.ok()) return q;
   }
@@ -410,16 +426,22 @@ absl::StatusOr<int64_t> Store::BeginCycle(const StoredCycle& cycle) {
                 "ON CONFLICT (vin) DO UPDATE SET car_model_id = excluded.car_model_id");
   car.Bind(1, cycle.vin).Bind(2, cycle.car_model_id).Bind(3, cycle.started_ns);
   if (const int rc = car.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "store car", rc);
-  Statement insert(db_,
-                   "INSERT INTO cycles (vin, car_model_id, state, verdict, started_ns, request_json, "
-                   "capture_path) VALUES (?1, ?2, 'running', '', ?3, ?4, ?5)");
-  insert.Bind(1, cycle.vin).Bind(2, cycle.car_model_id).Bind(3, cycle.started_ns)
-      .Bind(4, cycle.request_json).Bind(5, cycle.capture_path);
-  if (const int rc = insert.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "store cycle", rc);
+  Statement insert(
+      db_,
+      "INSERT INTO cycles (vin, car_model_id, state, verdict, started_ns, request_json, "
+      "capture_path) VALUES (?1, ?2, 'running', '', ?3, ?4, ?5)");
+  insert.Bind(1, cycle.vin)
+      .Bind(2, cycle.car_model_id)
+      .Bind(3, cycle.started_ns)
+      .Bind(4, cycle.request_json)
+      .Bind(5, cycle.capture_path);
+  if (const int rc = insert.Step(); rc != SQLITE_DONE)
+    return SqliteError(db_, path_, "store cycle", rc);
   const int64_t id = sqlite3_last_insert_rowid(db_);
   Statement last(db_, "UPDATE cars SET last_cycle_id = ?1 WHERE vin = ?2");
   last.Bind(1, id).Bind(2, cycle.vin);
-  if (const int rc = last.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "store car", rc);
+  if (const int rc = last.Step(); rc != SQLITE_DONE)
+    return SqliteError(db_, path_, "store car", rc);
   if (absl::Status s = tx.Commit(); !s.ok()) return s;
   return id;
 }
@@ -428,15 +450,19 @@ absl::StatusOr<int64_t> Store::AppendEvent(const StoredEvent& event) {
   std::lock_guard<std::mutex> lock(mutex_);
   Transaction tx(db_, path_);
   if (!tx.status().ok()) return tx.status();
-  Statement exists(db_, "SELECT COALESCE((SELECT MAX(sequence) + 1 FROM events WHERE cycle_id = ?1), 0), "
-                        "EXISTS (SELECT 1 FROM cycles WHERE id = ?1)");
+  Statement exists(
+      db_,
+      "SELECT COALESCE((SELECT MAX(sequence) + 1 FROM events WHERE cycle_id = ?1), 0), "
+      "EXISTS (SELECT 1 FROM cycles WHERE id = ?1)");
   exists.Bind(1, event.cycle_id);
-  if (const int rc = exists.Step(); rc != SQLITE_ROW) return SqliteError(db_, path_, "append event", rc);
+  if (const int rc = exists.Step(); rc != SQLITE_ROW)
+    return SqliteError(db_, path_, "append event", rc);
   if (exists.Int(1) == 0) return absl::NotFoundError(absl::StrCat("no cycle ", event.cycle_id));
   const int64_t sequence = exists.Int(0);
-  Statement insert(db_,
-                   "INSERT INTO events (cycle_id, sequence, time_ns, type, sensor, detail, verdict) "
-                   "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)");
+  Statement insert(
+      db_,
+      "INSERT INTO events (cycle_id, sequence, time_ns, type, sensor, detail, verdict) "
+      "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)");
   insert.Bind(1, event.cycle_id)
       .Bind(2, sequence)
       .Bind(3, event.time_ns)
@@ -444,7 +470,8 @@ absl::StatusOr<int64_t> Store::AppendEvent(const StoredEvent& event) {
       .Bind(5, event.sensor)
       .Bind(6, event.detail)
       .Bind(7, std::string(VerdictName(event.verdict)));
-  if (const int rc = insert.Step(); rc != SQLITE_DONE) return SqliteError(db_, path_, "append event", rc);
+  if (const int rc = insert.Step(); rc != SQLITE_DONE)
+    return SqliteError(db_, path_, "append event", rc);
   if (absl::Status s = tx.Commit(); !s.ok()) return s;
   return sequence;
 }
@@ -459,23 +486,33 @@ absl::Status Store::PutSensorResult(int64_t cycle_id, const StoredSensorResult& 
   if (rc == SQLITE_DONE) return absl::NotFoundError(absl::StrCat("no cycle ", cycle_id));
   if (rc != SQLITE_ROW) return SqliteError(db_, path_, "store sensor result", rc);
   if (state.Text(0) != "running") {
-    return absl::FailedPreconditionError(
-        absl::StrCat("cycle ", cycle_id, " has ended (", state.Text(0), "); its results are final"));
+    return absl::FailedPreconditionError(absl::StrCat("cycle ", cycle_id, " has ended (",
+                                                      state.Text(0), "); its results are final"));
   }
   Statement s(db_,
               "INSERT OR REPLACE INTO sensor_results VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, "
               "?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18, ?19, ?20, ?21, ?22, ?23, ?24, "
               "?25, ?26, ?27, ?28, ?29, ?30, ?31, ?32)");
-  s.Bind(1, cycle_id).Bind(2, r.sensor).Bind(3, r.kind).Bind(4, std::string(VerdictName(r.verdict)))
-      .Bind(5, r.reason).Bind(6, r.message).Bind(7, Numbers(r.T_car_sensor));
+  s.Bind(1, cycle_id)
+      .Bind(2, r.sensor)
+      .Bind(3, r.kind)
+      .Bind(4, std::string(VerdictName(r.verdict)))
+      .Bind(5, r.reason)
+      .Bind(6, r.message)
+      .Bind(7, Numbers(r.T_car_sensor));
   int i = 8;
   for (const MountingValues* m : {&r.measured, &r.deviation, &r.sigma}) {
     for (double v : {m->yaw_deg, m->pitch_deg, m->roll_deg, m->x_m, m->y_m, m->z_m}) s.Bind(i++, v);
   }
-  s.Bind(26, r.residual_rms).Bind(27, static_cast<int64_t>(r.features_used))
-      .Bind(28, r.vanishing_point_u_px).Bind(29, r.vanishing_point_v_px)
-      .Bind(30, Numbers(r.ground_homography)).Bind(31, r.ranging_json).Bind(32, r.elapsed_ns);
-  if (const int step = s.Step(); step != SQLITE_DONE) return SqliteError(db_, path_, "store sensor result", step);
+  s.Bind(26, r.residual_rms)
+      .Bind(27, static_cast<int64_t>(r.features_used))
+      .Bind(28, r.vanishing_point_u_px)
+      .Bind(29, r.vanishing_point_v_px)
+      .Bind(30, Numbers(r.ground_homography))
+      .Bind(31, r.ranging_json)
+      .Bind(32, r.elapsed_ns);
+  if (const int step = s.Step(); step != SQLITE_DONE)
+    return SqliteError(db_, path_, "store sensor result", step);
   return tx.Commit();
 }
 
@@ -493,12 +530,18 @@ absl::Status Store::EndCycle(int64_t cycle_id, CycleState state, Verdict verdict
   if (rc == SQLITE_DONE) return absl::NotFoundError(absl::StrCat("no cycle ", cycle_id));
   if (rc != SQLITE_ROW) return SqliteError(db_, path_, "end cycle", rc);
   if (current.Text(0) != "running") {
-    return absl::FailedPreconditionError(absl::StrCat("cycle ", cycle_id, " already ended (", current.Text(0), ")"));
+    return absl::FailedPreconditionError(
+        absl::StrCat("cycle ", cycle_id, " already ended (", current.Text(0), ")"));
   }
-  Statement s(db_, "UPDATE cycles SET state = ?2, verdict = ?3, reason = ?4, ended_ns = ?5 WHERE id = ?1");
-  s.Bind(1, cycle_id).Bind(2, std::string(CycleStateName(state))).Bind(3, std::string(VerdictName(verdict)))
-      .Bind(4, reason).Bind(5, ended_ns);
-  if (const int step = s.Step(); step != SQLITE_DONE) return SqliteError(db_, path_, "end cycle", step);
+  Statement s(
+      db_, "UPDATE cycles SET state = ?2, verdict = ?3, reason = ?4, ended_ns = ?5 WHERE id = ?1");
+  s.Bind(1, cycle_id)
+      .Bind(2, std::string(CycleStateName(state)))
+      .Bind(3, std::string(VerdictName(verdict)))
+      .Bind(4, reason)
+      .Bind(5, ended_ns);
+  if (const int step = s.Step(); step != SQLITE_DONE)
+    return SqliteError(db_, path_, "end cycle", step);
   if (absl::Status q = Enqueue(cycle_id); !q.ok()) return q;
   return tx.Commit();
 }
@@ -540,7 +583,8 @@ absl::StatusOr<StoredCycle> Store::ReadCycleLocked(int64_t cycle_id) {
     x.T_car_sensor = ParseNumbers(r.Text(6));
     int col = 7;
     for (MountingValues* m : {&x.measured, &x.deviation, &x.sigma}) {
-      for (double* v : {&m->yaw_deg, &m->pitch_deg, &m->roll_deg, &m->x_m, &m->y_m, &m->z_m}) *v = r.Real(col++);
+      for (double* v : {&m->yaw_deg, &m->pitch_deg, &m->roll_deg, &m->x_m, &m->y_m, &m->z_m})
+        *v = r.Real(col++);
     }
     x.residual_rms = r.Real(25);
     x.features_used = static_cast<int>(r.Int(26));
@@ -561,9 +605,10 @@ absl::StatusOr<std::vector<StoredEvent>> Store::Events(int64_t cycle_id) {
 }
 
 absl::StatusOr<std::vector<StoredEvent>> Store::ReadEventsLocked(int64_t cycle_id) {
-  Statement s(db_,
-              "SELECT sequence, time_ns, type, sensor, detail, verdict FROM events WHERE cycle_id = ?1 "
-              "ORDER BY sequence");
+  Statement s(
+      db_,
+      "SELECT sequence, time_ns, type, sensor, detail, verdict FROM events WHERE cycle_id = ?1 "
+      "ORDER BY sequence");
   s.Bind(1, cycle_id);
   std::vector<StoredEvent> events;
   int rc;
@@ -584,7 +629,8 @@ absl::StatusOr<std::vector<StoredEvent>> Store::ReadEventsLocked(int64_t cycle_i
 absl::StatusOr<CyclePage> Store::ListCycles(const CycleFilter& filter) {
   // 1000: a page stays a few hundred kilobytes; the client asks for the next one.
   if (filter.page_size < 1 || filter.page_size > 1000) {
-    return absl::InvalidArgumentError(absl::StrCat("page_size ", filter.page_size, " is outside 1..1000"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("page_size ", filter.page_size, " is outside 1..1000"));
   }
   // The token is the (started_ns, id) of the page's last cycle: the next page starts strictly
   // after it in the newest-first order, so inserts between pages never repeat or skip a row.
@@ -604,10 +650,13 @@ absl::StatusOr<CyclePage> Store::ListCycles(const CycleFilter& filter) {
       "AND (started_ns < ?6 OR (started_ns = ?6 AND id < ?7)) ",
       "ORDER BY started_ns DESC, id DESC LIMIT ?8");
   Statement s(db_, sql.c_str());
-  s.Bind(1, filter.vin).Bind(2, filter.since_ns).Bind(3, filter.until_ns)
+  s.Bind(1, filter.vin)
+      .Bind(2, filter.since_ns)
+      .Bind(3, filter.until_ns)
       .Bind(4, static_cast<int64_t>(filter.verdict.has_value()))
       .Bind(5, std::string(VerdictName(filter.verdict)))
-      .Bind(6, after_started).Bind(7, after_id)
+      .Bind(6, after_started)
+      .Bind(7, after_id)
       // One more than the page: whether it exists says if there is a next page.
       .Bind(8, static_cast<int64_t>(filter.page_size) + 1);
   CyclePage page;
@@ -726,7 +775,8 @@ absl::Status Store::IntegrityCheck() {
   const int rc = s.Step();
   if (rc != SQLITE_ROW) return SqliteError(db_, path_, "integrity check", rc);
   const std::string result = s.Text(0);
-  if (result != "ok") return absl::DataLossError(absl::StrCat("database ", path_, ": integrity check: ", result));
+  if (result != "ok")
+    return absl::DataLossError(absl::StrCat("database ", path_, ": integrity check: ", result));
   return absl::OkStatus();
 }
 

@@ -96,16 +96,16 @@ struct StoredSensorResult {
   std::string sensor;  // the car model's sensor name
   std::string kind;    // "camera", "lidar", "radar"
   std::optional<Verdict> verdict;
-  std::string reason;   // a code ("yaw_out_of_tolerance"); empty on pass
-  std::string message;  // the same for a person
+  std::string reason;                // a code ("yaw_out_of_tolerance"); empty on pass
+  std::string message;               // the same for a person
   std::vector<double> T_car_sensor;  // 16 values, row-major; empty when not solved
   MountingValues measured, deviation, sigma;
   double residual_rms = 0;  // pixels (cameras), metres (LiDARs), degrees (radars)
   int features_used = 0;
   std::optional<double> vanishing_point_u_px, vanishing_point_v_px;  // cameras
   std::vector<double> ground_homography;  // cameras: 9 values, row-major; else empty
-  std::string ranging_json;  // cameras: the ranging check as JSON; else empty
-  int64_t elapsed_ns = 0;    // acquire to verdict
+  std::string ranging_json;               // cameras: the ranging check as JSON; else empty
+  int64_t elapsed_ns = 0;                 // acquire to verdict
   bool operator==(const StoredSensorResult&) const = default;
 };
 
@@ -116,10 +116,10 @@ struct StoredCycle {
   CycleState state = CycleState::kRunning;
   std::optional<Verdict> verdict;  // none while running
   std::string reason;
-  int64_t started_ns = 0;  // Unix epoch
-  int64_t ended_ns = 0;    // 0 while running
-  std::string request_json;  // the request as received (VIN, aligner, options)
-  std::string capture_path;  // relative to the data root, when recorded
+  int64_t started_ns = 0;                   // Unix epoch
+  int64_t ended_ns = 0;                     // 0 while running
+  std::string request_json;                 // the request as received (VIN, aligner, options)
+  std::string capture_path;                 // relative to the data root, when recorded
   std::vector<StoredSensorResult> sensors;  // by sensor name; filled by GetCycle only
 };
 
@@ -261,7 +261,7 @@ class Store {
   std::mutex mutex_;
   sqlite3* db_;
   std::string path_;
-  int lock_fd_;  // holds the flock on <path>.lock
+  int lock_fd_;        // holds the flock on <path>.lock
   const bool outbox_;  // StoreOptions::outbox
   // The identity (st_dev, st_ino) of the database file when it was opened.
   dev_t file_dev_ = 0;

@@ -13,7 +13,8 @@
 
 namespace linecal {
 
-SystemdNotifier::SystemdNotifier(std::string socket, std::optional<std::chrono::microseconds> watchdog)
+SystemdNotifier::SystemdNotifier(std::string socket,
+                                 std::optional<std::chrono::microseconds> watchdog)
     : socket_(std::move(socket)), watchdog_(watchdog) {}
 
 SystemdNotifier SystemdNotifier::FromEnvironment() {
@@ -35,20 +36,23 @@ absl::Status SystemdNotifier::Notify(std::string_view state) const {
   sockaddr_un address{};
   address.sun_family = AF_UNIX;
   if (socket_.size() >= sizeof(address.sun_path) || (socket_[0] != '/' && socket_[0] != '@')) {
-    return absl::InvalidArgumentError(absl::StrCat("NOTIFY_SOCKET '", socket_, "': not a socket path"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("NOTIFY_SOCKET '", socket_, "': not a socket path"));
   }
   std::memcpy(address.sun_path, socket_.data(), socket_.size());
   // "@name" is Linux's abstract namespace: a leading NUL, and the length counts exactly.
   if (socket_[0] == '@') address.sun_path[0] = '\0';
   const socklen_t length = static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + socket_.size());
   const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) return absl::UnavailableError(absl::StrCat("NOTIFY_SOCKET: socket(): ", std::strerror(errno)));
+  if (fd < 0)
+    return absl::UnavailableError(absl::StrCat("NOTIFY_SOCKET: socket(): ", std::strerror(errno)));
   const ssize_t sent = ::sendto(fd, state.data(), state.size(), MSG_NOSIGNAL,
                                 reinterpret_cast<const sockaddr*>(&address), length);
   const int error = errno;
   ::close(fd);
   if (sent != static_cast<ssize_t>(state.size())) {
-    return absl::UnavailableError(absl::StrCat("NOTIFY_SOCKET '", socket_, "': ", std::strerror(error)));
+    return absl::UnavailableError(
+        absl::StrCat("NOTIFY_SOCKET '", socket_, "': ", std::strerror(error)));
   }
   return absl::OkStatus();
 }

@@ -2,9 +2,9 @@
 
 #include <filesystem>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/ascii.h"
 #include "station/pipeline/cycle_views.h"
 
 namespace linecal {

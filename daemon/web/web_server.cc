@@ -100,13 +100,15 @@ void ServeBoundedPost(const httplib::Request& req, httplib::Response& res,
   std::string body;
   if (!ReadBoundedBody(req, read, max_bytes, &body)) {
     if (req.is_multipart_form_data()) {
-      return SendError(res, absl::InvalidArgumentError(absl::StrCat(
-                                what, ": send the file's bytes as the body, not a form")),
+      return SendError(res,
+                       absl::InvalidArgumentError(
+                           absl::StrCat(what, ": send the file's bytes as the body, not a form")),
                        415);
     }
-    return SendError(res, absl::ResourceExhaustedError(
-                              absl::StrCat(what, ": larger than ", max_bytes, " bytes")),
-                     413);
+    return SendError(
+        res,
+        absl::ResourceExhaustedError(absl::StrCat(what, ": larger than ", max_bytes, " bytes")),
+        413);
   }
   absl::StatusOr<nlohmann::json> j = answer(body);
   if (!j.ok()) return SendError(res, j.status());
@@ -338,11 +340,12 @@ void WebServer::Route() {
     SendJson(res, nlohmann::json::object());
   });
   s.Get("/api/session", [this](const httplib::Request& req, httplib::Response& res) {
-    SendJson(res, {{"login_required", sessions_.login_required()},
-                   {"operator_login", !options_.operator_token.empty()},
-                   {"logged_in", Authorized(req)},
-                   {"role", RoleName(sessions_.RoleOf(
-                                CookieValue(req.get_header_value("Cookie"), kCookie)))}});
+    SendJson(res,
+             {{"login_required", sessions_.login_required()},
+              {"operator_login", !options_.operator_token.empty()},
+              {"logged_in", Authorized(req)},
+              {"role",
+               RoleName(sessions_.RoleOf(CookieValue(req.get_header_value("Cookie"), kCookie)))}});
   });
   // The API below needs a session: checked before routing.
   s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
@@ -567,53 +570,53 @@ void WebServer::FollowStation(httplib::DataSink& sink) {
 
 void WebServer::RouteCycleViews() {
   httplib::Server& s = *server_;
-  s.Get(R"(/api/cycles/([^/]+)/capture)", [this](const httplib::Request& req,
-                                                 httplib::Response& res) {
-    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
-    if (!id.ok()) return SendError(res, id.status());
-    absl::StatusOr<nlohmann::json> files = views_.Files(*id);
-    if (!files.ok()) return SendError(res, files.status());
-    SendJson(res, *files);
-  });
-  s.Get(R"(/api/cycles/([^/]+)/capture/([^/]+))", [this](const httplib::Request& req,
-                                                         httplib::Response& res) {
-    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
-    if (!id.ok()) return SendError(res, id.status());
-    absl::StatusOr<CaptureFileToSend> file = views_.File(*id, req.matches[2]);
-    if (!file.ok()) return SendError(res, file.status());
-    auto in = std::make_shared<std::ifstream>(file->path, std::ios::binary);
-    if (!*in) return SendError(res, absl::NotFoundError("file: cannot open it"));
-    // The capture's files are up to input_budget.max_file_bytes: sent in pieces, never whole
-    // in memory. A finished cycle's capture does not change, so the browser may keep it.
-    res.set_header("Cache-Control", "private, max-age=3600");
-    res.set_header("Content-Disposition",
-                   absl::StrCat("attachment; filename=\"", file->download_name, "\""));
-    res.set_content_provider(
-        file->bytes, file->content_type,
-        [in](size_t offset, size_t length, httplib::DataSink& sink) {
-          std::vector<char> buffer(std::min<size_t>(length, 1 << 16));
-          in->seekg(static_cast<std::streamoff>(offset));
-          in->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-          const std::streamsize got = in->gcount();
-          return got > 0 && sink.write(buffer.data(), static_cast<size_t>(got));
+  s.Get(R"(/api/cycles/([^/]+)/capture)",
+        [this](const httplib::Request& req, httplib::Response& res) {
+          absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+          if (!id.ok()) return SendError(res, id.status());
+          absl::StatusOr<nlohmann::json> files = views_.Files(*id);
+          if (!files.ok()) return SendError(res, files.status());
+          SendJson(res, *files);
         });
-  });
-  s.Get(R"(/api/cycles/([^/]+)/views/([^/]+))", [this](const httplib::Request& req,
-                                                       httplib::Response& res) {
-    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
-    if (!id.ok()) return SendError(res, id.status());
-    absl::StatusOr<std::string> view =
-        views_.View(*id, req.matches[2], req.get_param_value("frame"));
-    if (!view.ok()) return SendError(res, view.status());
-    res.set_header("Cache-Control", "no-store");
-    res.set_content(*view, kJson);
-  });
+  s.Get(R"(/api/cycles/([^/]+)/capture/([^/]+))",
+        [this](const httplib::Request& req, httplib::Response& res) {
+          absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+          if (!id.ok()) return SendError(res, id.status());
+          absl::StatusOr<CaptureFileToSend> file = views_.File(*id, req.matches[2]);
+          if (!file.ok()) return SendError(res, file.status());
+          auto in = std::make_shared<std::ifstream>(file->path, std::ios::binary);
+          if (!*in) return SendError(res, absl::NotFoundError("file: cannot open it"));
+          // The capture's files are up to input_budget.max_file_bytes: sent in pieces, never whole
+          // in memory. A finished cycle's capture does not change, so the browser may keep it.
+          res.set_header("Cache-Control", "private, max-age=3600");
+          res.set_header("Content-Disposition",
+                         absl::StrCat("attachment; filename=\"", file->download_name, "\""));
+          res.set_content_provider(
+              file->bytes, file->content_type,
+              [in](size_t offset, size_t length, httplib::DataSink& sink) {
+                std::vector<char> buffer(std::min<size_t>(length, 1 << 16));
+                in->seekg(static_cast<std::streamoff>(offset));
+                in->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+                const std::streamsize got = in->gcount();
+                return got > 0 && sink.write(buffer.data(), static_cast<size_t>(got));
+              });
+        });
+  s.Get(R"(/api/cycles/([^/]+)/views/([^/]+))",
+        [this](const httplib::Request& req, httplib::Response& res) {
+          absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+          if (!id.ok()) return SendError(res, id.status());
+          absl::StatusOr<std::string> view =
+              views_.View(*id, req.matches[2], req.get_param_value("frame"));
+          if (!view.ok()) return SendError(res, view.status());
+          res.set_header("Cache-Control", "no-store");
+          res.set_content(*view, kJson);
+        });
 }
 
 bool WebServer::OperatorAllowed(const httplib::Request& req, httplib::Response& res) {
-  if (absl::Status s = CheckSameSiteAction(req.get_header_value(kActionHeader),
-                                           req.get_header_value("Origin"),
-                                           req.get_header_value("Host"), options_.tls.has_value());
+  if (absl::Status s =
+          CheckSameSiteAction(req.get_header_value(kActionHeader), req.get_header_value("Origin"),
+                              req.get_header_value("Host"), options_.tls.has_value());
       !s.ok()) {
     SendError(res, s, 403);
     return false;
@@ -643,14 +646,14 @@ void WebServer::RouteOperator() {
     if (!id.ok()) return SendError(res, id.status());
     SendJson(res, {{"cycle_id", std::to_string(*id)}});
   });
-  s.Post(R"(/api/cycles/([^/]+)/cancel)", [this](const httplib::Request& req,
-                                                 httplib::Response& res) {
-    if (!OperatorAllowed(req, res)) return;
-    absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
-    if (!id.ok()) return SendError(res, id.status());
-    if (absl::Status c = core_->CancelCycle(*id); !c.ok()) return SendError(res, c);
-    SendJson(res, {{"cycle_id", std::to_string(*id)}, {"cancel", "accepted"}});
-  });
+  s.Post(R"(/api/cycles/([^/]+)/cancel)",
+         [this](const httplib::Request& req, httplib::Response& res) {
+           if (!OperatorAllowed(req, res)) return;
+           absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+           if (!id.ok()) return SendError(res, id.status());
+           if (absl::Status c = core_->CancelCycle(*id); !c.ok()) return SendError(res, c);
+           SendJson(res, {{"cycle_id", std::to_string(*id)}, {"cancel", "accepted"}});
+         });
 }
 
 }  // namespace linecal

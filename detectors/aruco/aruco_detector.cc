@@ -18,7 +18,8 @@ Detection DetectAruco(const ImageView8& image, const Board& board, const ArucoOp
   const MarkerFamily family = Aruco4x4_50Family();
   // The other board with these four markers, at the same scale: what this board must be told from.
   BoardParams sibling_params = board.params();
-  sibling_params.type = board.type() == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco;
+  sibling_params.type =
+      board.type() == BoardType::kAruco ? BoardType::kRoundHole : BoardType::kAruco;
   const std::optional<Board> sibling = Board::Create(sibling_params);
   // Once the board's markers are read, the scan's later passes have nothing to find.
   const int board_markers = static_cast<int>(

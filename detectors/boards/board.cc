@@ -239,7 +239,7 @@ void DrawApriltagBoard(Drawing& d, const BoardParams& p) {
   const int cols = p.apriltag_cols, rows = p.apriltag_rows;
   const double kTag = kAprilTagMm;
   const double kSpacing = p.apriltag_spacing * kTag;  // 26.4 mm on the PDF
-  const double kPitch = kTag + kSpacing;             // 114.4 mm on the PDF
+  const double kPitch = kTag + kSpacing;              // 114.4 mm on the PDF
   // The PDF's grid is not centred on the A0 page: its centre, in board-frame millimetres, as
   // measured from april_board.pdf (tag 0's black square starts at x = 280.517 pt,
   // y = 1176.265 pt from the page's bottom-left; all 36 tags agree to 0.0002 mm). Any other

@@ -115,18 +115,18 @@ struct BoardParams {
 
 enum class BoardParamsError {
   kOk = 0,
-  kBadScale,       // not finite or outside [kMinBoardScale, kMaxBoardScale]
-  kBadCols,        // outside [kMinCheckerCorners (kMinHexagonalSide), kMaxCheckerCorners]
-  kBadRows,        // outside [kMinCheckerCorners (kMinHexagonalSide), kMaxCheckerCorners]
-  kBadSquare,      // not finite or outside (0, kMaxCheckerSquareM]
-  kBadBorderBits,  // neither 1 nor 2
-  kBadSpacing,     // not finite or outside (0, kMaxCircleSpacingM]
-  kBadDiameter,    // not finite, not > 0, or not below the nearest neighbours' distance
-  kBadTagGrid,     // apriltag_cols or _rows outside [1, kMaxAprilGridTags], or one tag only
-  kBadTagSpacing,  // not finite or outside [kMinAprilGridSpacing, kMaxAprilGridSpacing]
-  kBadStartId,     // negative, or the grid's last id beyond tag36h11's kTag36h11Codes - 1
-  kBadLayout,      // hexagonal and asymmetric both set: two layouts at once
-  kBadGap,         // not finite or outside (0, kMaxSquareGridGapM]
+  kBadScale,        // not finite or outside [kMinBoardScale, kMaxBoardScale]
+  kBadCols,         // outside [kMinCheckerCorners (kMinHexagonalSide), kMaxCheckerCorners]
+  kBadRows,         // outside [kMinCheckerCorners (kMinHexagonalSide), kMaxCheckerCorners]
+  kBadSquare,       // not finite or outside (0, kMaxCheckerSquareM]
+  kBadBorderBits,   // neither 1 nor 2
+  kBadSpacing,      // not finite or outside (0, kMaxCircleSpacingM]
+  kBadDiameter,     // not finite, not > 0, or not below the nearest neighbours' distance
+  kBadTagGrid,      // apriltag_cols or _rows outside [1, kMaxAprilGridTags], or one tag only
+  kBadTagSpacing,   // not finite or outside [kMinAprilGridSpacing, kMaxAprilGridSpacing]
+  kBadStartId,      // negative, or the grid's last id beyond tag36h11's kTag36h11Codes - 1
+  kBadLayout,       // hexagonal and asymmetric both set: two layouts at once
+  kBadGap,          // not finite or outside (0, kMaxSquareGridGapM]
   kBadMarker,       // kCharuco: marker_m not finite, not > 0, or not below square_m
   kBadMarkerCount,  // kCharuco: more white squares than charuco_dictionary has markers
 };

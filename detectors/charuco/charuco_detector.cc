@@ -387,8 +387,8 @@ std::optional<Eigen::Vector2d> InterpolatedCorner(
 // and 2 pixels beyond it (one more for the pixel the start falls in). Near the image border a
 // smaller window still fits a corner there.
 double BorderRoomPx(const ImageView8& image, const Eigen::Vector2d& uv_px, double blur_sigma_px) {
-  const double room = std::min({uv_px.x(), uv_px.y(), image.width - 1.0 - uv_px.x(),
-                                image.height - 1.0 - uv_px.y()});
+  const double room = std::min(
+      {uv_px.x(), uv_px.y(), image.width - 1.0 - uv_px.x(), image.height - 1.0 - uv_px.y()});
   return room - std::ceil(3.0 * blur_sigma_px) - 4.0;
 }
 

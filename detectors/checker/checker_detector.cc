@@ -1,5 +1,6 @@
 #include "detectors/checker/checker_detector.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -10,8 +11,6 @@
 #include <optional>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Cholesky>
 
 #include "detectors/common/homography.h"
 #include "detectors/common/image_filters.h"
@@ -66,7 +65,8 @@ std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
         const Eigen::Vector2d v = XCornerDirection(corners[c], rotation[c] + g);
         int m_best = 0;
         for (int m = 1; m < 4; ++m) {
-          if (XCornerDirection(corners[j], m).dot(v) > XCornerDirection(corners[j], m_best).dot(v)) {
+          if (XCornerDirection(corners[j], m).dot(v) >
+              XCornerDirection(corners[j], m_best).dot(v)) {
             m_best = m;
           }
         }
@@ -263,7 +263,7 @@ Paint CheckPaint(const ImageF& blurred, Window& window) {
   int count[2] = {0, 0};
   for (int sj = 0; sj <= h; ++sj) {
     for (int si = 0; si <= w; ++si) {
-      const bool inner_i = si > 0 && si < w, inner_j = sj > 0 && sj < h;
+      const bool inner_i = si > 0 && si<w, inner_j = sj> 0 && sj < h;
       std::optional<double>& v = value[sj * nc + si];
       v = SquareValue(blurred, window, SquareCoordinate(si, w), SquareCoordinate(sj, h), inner_i,
                       inner_j);
@@ -338,7 +338,7 @@ struct GridHypothesis {
   std::vector<std::pair<int, Eigen::Vector2d>> id_uv;  // feature id, image position
   std::vector<double> side_px;                         // local square side at each, as id_uv
   bool standard_colours = true;  // the board's top-left square dark, as docs/boards.md draws it
-  double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
+  double x_axis_u = 0.0;         // image u component of the board's +x direction at the centre
 };
 
 // The outcome of the search on one pyramid level: reason kNone and the chosen grid (its
@@ -371,10 +371,22 @@ void AddRotations(Window& window, const Paint& paint, int cols, int rows,
       for (int i = 0; i < w; ++i) {
         int c = 0, r = 0;
         switch (k) {
-          case 0: c = i; r = j; break;
-          case 1: c = j; r = w - 1 - i; break;
-          case 2: c = w - 1 - i; r = h - 1 - j; break;
-          default: c = h - 1 - j; r = i; break;
+          case 0:
+            c = i;
+            r = j;
+            break;
+          case 1:
+            c = j;
+            r = w - 1 - i;
+            break;
+          case 2:
+            c = w - 1 - i;
+            r = h - 1 - j;
+            break;
+          default:
+            c = h - 1 - j;
+            r = i;
+            break;
         }
         hyp.id_uv.emplace_back(cols * r + c, window.uv(i, j));
         hyp.side_px.push_back(window.SideAt(i, j));

@@ -21,7 +21,6 @@
 namespace linecal {
 namespace {
 
-
 // ---- The board model, derived from Board (so a scaled board works unchanged) -------------
 
 // One side of a black square on a board edge line.
@@ -722,8 +721,8 @@ std::vector<Refined> SearchBoards(const ImageView8& image, int level, const Boar
         tolerance.resize(image_pts.size(), (1 << level) * CoarseTolerancePx(options, t.side_px));
       }
       for (Eigen::Vector2d& p : image_pts) p = LevelToImage(p, level);
-      std::optional<Refined> refined = FitAndRefineBoard(image, board, model, board_pts, image_pts,
-                                                         tolerance, options, failure);
+      std::optional<Refined> refined =
+          FitAndRefineBoard(image, board, model, board_pts, image_pts, tolerance, options, failure);
       if (refined) found.push_back(*std::move(refined));
     }
   }
@@ -932,9 +931,8 @@ bool OnOneLine(const std::vector<XCorner>& corners, const PairGroup& a, const Pa
 // round) through FitAndRefineBoard, which refines and verifies on the full-resolution
 // `image` (its coarse tolerance scaled to it with the points).
 std::vector<Refined> SearchPairBoards(const ImageView8& image, const ImageView8& view, int level,
-                                      const Board& board, const ChessModel& model,
-                                      int min_contrast, const ChessboardOptions& options,
-                                      DetectReason* failure) {
+                                      const Board& board, const ChessModel& model, int min_contrast,
+                                      const ChessboardOptions& options, DetectReason* failure) {
   std::vector<Refined> found;
   XCornerOptions corner_options;
   // The ring's contrast floor rises with the image's noise like the binarisation's (halving
@@ -990,8 +988,8 @@ std::vector<Refined> SearchPairBoards(const ImageView8& image, const ImageView8&
           }
         }
         ++fits;
-        std::optional<Refined> refined = FitAndRefineBoard(
-            image, board, model, board_pts, image_pts, tolerance, options, failure);
+        std::optional<Refined> refined = FitAndRefineBoard(image, board, model, board_pts,
+                                                           image_pts, tolerance, options, failure);
         if (refined) {
           found.push_back(*std::move(refined));
           break;
@@ -1066,7 +1064,8 @@ std::string_view ChessboardOptions::Validate() const {
 
 Detection DetectChessboard(const ImageView8& image, const Board& board,
                            const ChessboardOptions& options) {
-  if (const DetectReason r = CheckDetectorInput(image, board, BoardType::kChessboard, options.Validate().empty());
+  if (const DetectReason r =
+          CheckDetectorInput(image, board, BoardType::kChessboard, options.Validate().empty());
       r != DetectReason::kNone) {
     return Fail(r);
   }
@@ -1090,8 +1089,8 @@ Detection DetectChessboard(const ImageView8& image, const Board& board,
   DetectReason failure = DetectReason::kNoCandidates;
   for (int level = static_cast<int>(pyramid.size()); level >= 0; --level) {
     failure = DetectReason::kNoCandidates;
-    found = SearchLevel(image, level == 0 ? image : pyramid[level - 1].view(), level, board,
-                        *model, min_contrast, options, &failure);
+    found = SearchLevel(image, level == 0 ? image : pyramid[level - 1].view(), level, board, *model,
+                        min_contrast, options, &failure);
     if (!found.empty() && OneBoard(found)) break;
   }
   if (found.empty()) return Fail(failure);

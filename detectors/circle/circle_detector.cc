@@ -430,7 +430,8 @@ std::string_view CircleOptions::Validate() const {
 
 Detection DetectCircleBoard(const ImageView8& image, const Board& board,
                             const CircleOptions& options) {
-  if (const DetectReason r = CheckDetectorInput(image, board, BoardType::kCircle, options.Validate().empty());
+  if (const DetectReason r =
+          CheckDetectorInput(image, board, BoardType::kCircle, options.Validate().empty());
       r != DetectReason::kNone) {
     return NotFound(r);
   }

@@ -17,7 +17,6 @@ constexpr int kTile = 4;
 // board filling 80% of a 2448 px image (ArUco border cell: 71 px wide).
 constexpr int kThresholdPropagationPasses = 16;
 
-
 // Per tile of kTile x kTile pixels, the darkest and brightest of its 2 x 2 pixel means.
 struct TileExtremes {
   int tw = 0;  // tiles across

@@ -8,11 +8,10 @@
 // contour point is the centre of a boundary pixel (docs/conventions.md: pixel centres are
 // integers).
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "detectors/core/image_view.h"
 
@@ -20,10 +19,10 @@ namespace linecal {
 
 // One connected component of set pixels.
 struct Component {
-  int area_px = 0;                    // number of pixels
-  int min_x = 0, min_y = 0;           // bounding box, inclusive
+  int area_px = 0;           // number of pixels
+  int min_x = 0, min_y = 0;  // bounding box, inclusive
   int max_x = 0, max_y = 0;
-  int first_x = 0, first_y = 0;       // its first pixel in raster order (topmost, then leftmost)
+  int first_x = 0, first_y = 0;  // its first pixel in raster order (topmost, then leftmost)
 };
 
 struct ComponentLabels {

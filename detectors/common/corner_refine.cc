@@ -1,9 +1,8 @@
 #include "detectors/common/corner_refine.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-
-#include <Eigen/Dense>
 
 namespace linecal {
 
@@ -41,8 +40,7 @@ std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::
     const int y0 = static_cast<int>(std::floor(p.y()));
     const double fx = p.x() - x0;
     const double fy = p.y() - y0;
-    const double w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy,
-                 w11 = fx * fy;
+    const double w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
     double m_x = 0, m_y = 0, m_xy = 0, m_xx = 0, m_yy = 0, m_1 = 0;
     for (int j = -w; j <= w; ++j) {
       const float* r0 = blurred.Row(y0 + j);
@@ -76,15 +74,14 @@ std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::
 }
 
 std::optional<Eigen::Vector2d> RefineXCornerOnPatch(const ImageView8& image,
-                                                    const Eigen::Vector2d& start_px,
-                                                    double side_px, double blur_sigma_px) {
+                                                    const Eigen::Vector2d& start_px, double side_px,
+                                                    double blur_sigma_px) {
   SaddleFitOptions saddle;
   // Clamped as a double: a huge side would overflow the cast.
   saddle.half_window = static_cast<int>(std::clamp(side_px / 3.0, 2.0, 7.0));
   // The patch holds the window, a pixel of movement and the blur kernel (3 sigma) clear of
   // its clamped border, plus two pixels for the saddle fit's own border rule.
-  const int radius =
-      saddle.half_window + 1 + static_cast<int>(std::ceil(3.0 * blur_sigma_px)) + 2;
+  const int radius = saddle.half_window + 1 + static_cast<int>(std::ceil(3.0 * blur_sigma_px)) + 2;
   // Also keeps the casts below defined: a start far off the image would overflow them.
   if (!start_px.allFinite() || start_px.x() < 0.0 || start_px.y() < 0.0 ||
       start_px.x() >= image.width || start_px.y() >= image.height) {

@@ -10,9 +10,8 @@
 // (bilinear samples), until the step is tiny. With the window centred on the vertex the odd
 // terms vanish by symmetry, so the fixed point is the vertex whatever the window size.
 
-#include <optional>
-
 #include <Eigen/Core>
+#include <optional>
 
 #include "detectors/common/image_filters.h"
 
@@ -46,7 +45,7 @@ std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::
 // costs far less. nullopt when the patch leaves the image, the fit fails, or it ends more
 // than a pixel from start_px. Cost: O((half_window + 3 sigma)^2 * sigma) for the blur.
 std::optional<Eigen::Vector2d> RefineXCornerOnPatch(const ImageView8& image,
-                                                    const Eigen::Vector2d& start_px,
-                                                    double side_px, double blur_sigma_px);
+                                                    const Eigen::Vector2d& start_px, double side_px,
+                                                    double blur_sigma_px);
 
 }  // namespace linecal

@@ -8,8 +8,7 @@
 namespace linecal {
 
 bool InsideForBilinearGrey(const ImageView8& image, const Eigen::Vector2d& p) {
-  return p.x() >= 0.0 && p.y() >= 0.0 && p.x() < image.width - 1.0 &&
-         p.y() < image.height - 1.0;
+  return p.x() >= 0.0 && p.y() >= 0.0 && p.x() < image.width - 1.0 && p.y() < image.height - 1.0;
 }
 
 double BilinearGrey(const ImageView8& image, double u, double v) {
@@ -25,7 +24,7 @@ double BilinearGrey(const ImageView8& image, double u, double v) {
 }
 
 std::optional<EdgePoint> MeasureEdgePoint(const ImageView8& image, const Eigen::Vector2d& q,
-                                        const Eigen::Vector2d& n, double half_window_px) {
+                                          const Eigen::Vector2d& n, double half_window_px) {
   if (!InsideForBilinearGrey(image, q + (half_window_px + 1.0) * n) ||
       !InsideForBilinearGrey(image, q - (half_window_px + 1.0) * n)) {
     return std::nullopt;
@@ -40,8 +39,7 @@ std::optional<EdgePoint> MeasureEdgePoint(const ImageView8& image, const Eigen::
   const Eigen::Vector2d p_first = q + (-half_window_px - 0.5 * step) * n;
   double before = BilinearGrey(image, p_first.x(), p_first.y());
   int m = 0;
-  for (double o = -half_window_px; o <= half_window_px + 1e-9 && m < kMaxSamples;
-       o += step, ++m) {
+  for (double o = -half_window_px; o <= half_window_px + 1e-9 && m < kMaxSamples; o += step, ++m) {
     const Eigen::Vector2d p1 = q + (o + 0.5 * step) * n;
     const double after = BilinearGrey(image, p1.x(), p1.y());
     g[m] = after - before;

@@ -7,10 +7,9 @@
 //
 // Image coordinates: pixels, pixel-centre convention (docs/conventions.md). Pure functions.
 
+#include <Eigen/Core>
 #include <optional>
 #include <span>
-
-#include <Eigen/Core>
 
 #include "detectors/core/image_view.h"
 
@@ -36,7 +35,7 @@ struct EdgePoint {
 // image or the grey level never rises along n. At most 24 samples (half_window_px up to
 // 5.75 px). Cost: O(half_window_px) samples.
 std::optional<EdgePoint> MeasureEdgePoint(const ImageView8& image, const Eigen::Vector2d& q,
-                                        const Eigen::Vector2d& n, double half_window_px);
+                                          const Eigen::Vector2d& n, double half_window_px);
 
 struct Line2d {
   Eigen::Vector2d point = Eigen::Vector2d::Zero();  // a point of the line, pixels

@@ -1,10 +1,9 @@
 #include "detectors/common/homography.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <Eigen/Dense>
 
 namespace linecal {
 namespace {

@@ -12,11 +12,10 @@
 // (one-sided) reprojection error, which is the maximum-likelihood fit when the source points
 // are exact (board coordinates) and only the image points are noisy.
 
+#include <Eigen/Core>
 #include <optional>
 #include <span>
 #include <vector>
-
-#include <Eigen/Core>
 
 namespace linecal {
 

@@ -101,7 +101,8 @@ Image8 HalveImage(const ImageView8& image) {
     std::uint8_t* __restrict dst = out.pixels.data() + static_cast<std::size_t>(y) * w;
     // +2 rounds the mean of four to nearest; the sum fits 10 bits.
     for (int x = 0; x < w; ++x) {
-      dst[x] = static_cast<std::uint8_t>((r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1] + 2) >> 2);
+      dst[x] = static_cast<std::uint8_t>(
+          (r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1] + 2) >> 2);
     }
   }
   return out;

@@ -3,9 +3,8 @@
 // bilinear sampling. Pixel (x, y) has its centre at image coordinate (u, v) = (x, y)
 // (docs/conventions.md); borders are handled by clamping (replicating the edge pixel).
 
-#include <vector>
-
 #include <Eigen/Core>
+#include <vector>
 
 #include "detectors/core/image_view.h"
 

@@ -106,12 +106,14 @@ PaintVotes VotePaint(const Board& board, const BoardToImage& to_image, const Ima
       const std::optional<Eigen::Vector2d> mapped = to_image(p);
       if (!mapped.has_value()) continue;
       const Eigen::Vector2d uv = *mapped;
-      if (!(uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= image.width - 1.0 && uv.y() <= image.height - 1.0)) {
+      if (!(uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= image.width - 1.0 &&
+            uv.y() <= image.height - 1.0)) {
         continue;
       }
       const int i = iy * kPaintProbesPerSide + ix;
       votes.paint[i] = here;
-      grey[i] = image.At(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
+      grey[i] =
+          image.At(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
     }
   }
   const int reach = static_cast<int>(std::ceil(kPaintNeighbourReach * kPaintProbesPerSide));
@@ -201,8 +203,9 @@ bool VisiblePaintAgrees(const Board& board, const BoardToImage& to_image, const 
   return VotesAgree(votes, min_agreement);
 }
 
-bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::Matrix3d& H_image_board,
-                          const ImageView8& image, double px_per_m, double min_share) {
+bool PaintContrastPrefers(const Board& board, const Board& other,
+                          const Eigen::Matrix3d& H_image_board, const ImageView8& image,
+                          double px_per_m, double min_share) {
   return PaintContrastPrefers(board, other, ThroughHomography(H_image_board), image, px_per_m,
                               min_share);
 }
@@ -233,17 +236,22 @@ bool PaintContrastPrefers(const Board& board, const Board& other, const BoardToI
   std::vector<double> differing_grey;
   for (int iy = 0; iy < kProbes; ++iy) {
     for (int ix = 0; ix < kProbes; ++ix) {
-      const Eigen::Vector2d p(page.x() * ((ix + 0.5) / kProbes - 0.5), page.y() * ((iy + 0.5) / kProbes - 0.5));
+      const Eigen::Vector2d p(page.x() * ((ix + 0.5) / kProbes - 0.5),
+                              page.y() * ((iy + 0.5) / kProbes - 0.5));
       const Paint a = clear_paint(board, p);
       const Paint b = clear_paint(other, p);
       const bool both_white = a == Paint::kWhite && b == Paint::kWhite;
-      const bool differ = (a == Paint::kBlack && b == Paint::kWhite) || (a == Paint::kWhite && b == Paint::kBlack);
+      const bool differ =
+          (a == Paint::kBlack && b == Paint::kWhite) || (a == Paint::kWhite && b == Paint::kBlack);
       if (!both_white && !differ) continue;
       const std::optional<Eigen::Vector2d> mapped = to_image(p);
       if (!mapped.has_value()) continue;
       const Eigen::Vector2d uv = *mapped;
-      if (!(uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= image.width - 1.0 && uv.y() <= image.height - 1.0)) continue;
-      const double grey = image.At(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
+      if (!(uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= image.width - 1.0 &&
+            uv.y() <= image.height - 1.0))
+        continue;
+      const double grey =
+          image.At(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
       if (both_white) {
         white_grey[iy * kProbes + ix] = grey;
       } else {
@@ -257,8 +265,8 @@ bool PaintContrastPrefers(const Board& board, const Board& other, const BoardToI
   int votes = 0;
   int for_board = 0;
   for (std::size_t i = 0; i < differing.size(); ++i) {
-    const std::vector<int> near =
-        NearestProbes(kProbes, differing[i].first, reach, 1, [&](int k) { return white_grey[k] >= 0.0; });
+    const std::vector<int> near = NearestProbes(kProbes, differing[i].first, reach, 1,
+                                                [&](int k) { return white_grey[k] >= 0.0; });
     if (near.empty()) continue;
     const bool dark = differing_grey[i] < kBlackToWhiteMax * white_grey[near[0]];
     ++votes;

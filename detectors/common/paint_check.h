@@ -59,8 +59,9 @@ bool VisiblePaintAgrees(const Board& board, const BoardToImage& to_image, const 
 // True when at least `min_share` of at least 8 votes go to `board`; false when `other` wins
 // or when there are fewer votes (the boards cannot be told apart at this size). Cost: about
 // 40k paint look-ups, under a millisecond.
-bool PaintContrastPrefers(const Board& board, const Board& other, const Eigen::Matrix3d& H_image_board,
-                          const ImageView8& image, double px_per_m, double min_share);
+bool PaintContrastPrefers(const Board& board, const Board& other,
+                          const Eigen::Matrix3d& H_image_board, const ImageView8& image,
+                          double px_per_m, double min_share);
 // PaintContrastPrefers through any mapping of the board into the image.
 bool PaintContrastPrefers(const Board& board, const Board& other, const BoardToImage& to_image,
                           const ImageView8& image, double px_per_m, double min_share);

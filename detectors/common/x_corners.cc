@@ -124,7 +124,6 @@ RingResult TestRing(const ImageF& blurred, const Eigen::Vector2d& centre,
   return result;
 }
 
-
 // The saddle response R = Ixy^2 - Ixx Iyy, from central differences, computed row by row into
 // a ring of kRingRows rows, enough for the 5 x 5 non-maximum suppression (an image-sized buffer
 // would cost more in fresh pages than the arithmetic), with each row's maximum over 5 columns
@@ -171,8 +170,8 @@ class ResponseRows {
     }
     // Columns 0, 1, w - 2, w - 1 are never a maximum's centre (margin >= 2).
     for (int x = 2; x < w - 2; ++x) {
-      out_max[x] = std::max(std::max(std::max(out[x - 2], out[x - 1]), std::max(out[x], out[x + 1])),
-                            out[x + 2]);
+      out_max[x] = std::max(
+          std::max(std::max(out[x - 2], out[x - 1]), std::max(out[x], out[x + 1])), out[x + 2]);
     }
   }
 
@@ -307,10 +306,14 @@ std::vector<XCorner> FindXCorners(const ImageF& blurred, const XCornerOptions& o
 
 Eigen::Vector2d XCornerDirection(const XCorner& c, int k) {
   switch (k & 3) {
-    case 0: return c.line_a;
-    case 1: return c.line_b;
-    case 2: return -c.line_a;
-    default: return -c.line_b;
+    case 0:
+      return c.line_a;
+    case 1:
+      return c.line_b;
+    case 2:
+      return -c.line_a;
+    default:
+      return -c.line_b;
   }
 }
 

@@ -11,11 +11,10 @@
 // peak whose ring fails is tested again at its saddle. The ring also gives the directions
 // of the two edge lines through the vertex and the axis of the dark sectors.
 
+#include <Eigen/Core>
 #include <array>
 #include <string_view>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "detectors/common/corner_refine.h"
 #include "detectors/common/image_filters.h"

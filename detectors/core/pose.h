@@ -9,10 +9,9 @@
 // Header-only so that detectors/ (which may use only the standard library and Eigen) and
 // everything above it share one type. All functions are O(1) and allocate nothing.
 
-#include <cmath>
-
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cmath>
 
 namespace linecal {
 
@@ -32,7 +31,8 @@ class Rigid3d {
 
   // From a 4x4 homogeneous matrix [R t; 0 0 0 1]. The last row is not checked.
   static Rigid3d FromMatrix(const Eigen::Matrix4d& m) {
-    return Rigid3d(Eigen::Matrix3d(m.topLeftCorner<3, 3>()), Eigen::Vector3d(m.topRightCorner<3, 1>()));
+    return Rigid3d(Eigen::Matrix3d(m.topLeftCorner<3, 3>()),
+                   Eigen::Vector3d(m.topRightCorner<3, 1>()));
   }
 
   static Rigid3d Translation(const Eigen::Vector3d& t) {
@@ -117,8 +117,8 @@ inline YawPitchRoll YawPitchRollFromRotation(const Eigen::Matrix3d& r) {
 inline Eigen::Matrix3d CameraBaseRotation() {
   Eigen::Matrix3d r;
   // Columns are the camera axes expressed in the car frame.
-  r << 0, 0, 1,   //
-      -1, 0, 0,   //
+  r << 0, 0, 1,  //
+      -1, 0, 0,  //
       0, -1, 0;
   return r;
 }

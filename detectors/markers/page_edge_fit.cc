@@ -243,10 +243,10 @@ double Evaluate(std::span<const Profile> profiles, const Params& x,
   return cost;
 }
 
-// Levenberg-Marquardt from delta = theta = 0, sigma = sigma_start, and the light and dark levels that
-// fit best at those. nullopt when the fit leaves the plausible range.
-std::optional<Params> FitSide(std::span<const Profile> profiles, double sigma_start, double max_shift_px,
-                              double min_contrast) {
+// Levenberg-Marquardt from delta = theta = 0, sigma = sigma_start, and the light and dark levels
+// that fit best at those. nullopt when the fit leaves the plausible range.
+std::optional<Params> FitSide(std::span<const Profile> profiles, double sigma_start,
+                              double max_shift_px, double min_contrast) {
   Params x;
   x << 0.0, 0.0, sigma_start, 0.0, 0.0;
   {

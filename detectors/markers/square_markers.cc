@@ -717,9 +717,9 @@ using BoardMarkers = std::map<int, std::vector<const BoardFeature*>>;
 
 // The board's model in the image, as the checks after the fit and the report need it.
 struct BoardInImage {
-  BoardToImage to_image;                  // the paint checks' mapping
-  Eigen::Matrix3d H_image_board;          // whole-board homography, for markers of other ids
-  double px_per_m = 0.0;                  // the board's scale in the image
+  BoardToImage to_image;          // the paint checks' mapping
+  Eigen::Matrix3d H_image_board;  // whole-board homography, for markers of other ids
+  double px_per_m = 0.0;          // the board's scale in the image
   // A detected corner corrected to where the printed corner is (corner_px, p_board, the
   // corner's outward diagonal).
   std::function<Eigen::Vector2d(const Eigen::Vector2d&, const Eigen::Vector2d&,
@@ -732,7 +732,8 @@ struct BoardInImage {
 // sibling's), and the corners of `on_board` as features, sorted by id. found = true only when
 // every marker of the board is in `on_board`, else kPartial. Cost: the paint checks (under a
 // millisecond) plus O(markers).
-Detection CheckAndReport(const BoardInImage& model, const std::vector<const DecodedMarker*>& on_board,
+Detection CheckAndReport(const BoardInImage& model,
+                         const std::vector<const DecodedMarker*>& on_board,
                          const BoardMarkers& board_markers,
                          const std::vector<const DecodedMarker*>& others, const Board& board,
                          const Board* sibling, const ImageView8& image,
@@ -776,9 +777,8 @@ Detection CheckAndReport(const BoardInImage& model, const std::vector<const Deco
                           read)) {
     return Fail(DetectReason::kWrongBoard);
   }
-  if (sibling != nullptr &&
-      !PaintContrastPrefers(board, *sibling, model.to_image, image, model.px_per_m,
-                            options.min_paint_agreement)) {
+  if (sibling != nullptr && !PaintContrastPrefers(board, *sibling, model.to_image, image,
+                                                  model.px_per_m, options.min_paint_agreement)) {
     return Fail(PaintContrastPrefers(*sibling, board, model.to_image, image, model.px_per_m,
                                      options.min_paint_agreement)
                     ? DetectReason::kWrongBoard
@@ -815,8 +815,8 @@ Detection CheckAndReport(const BoardInImage& model, const std::vector<const Deco
 // id puts it whole pitches away, while the lens bends a pitch's carry by a few pixels, and at
 // the rim of a 190-degree fisheye by up to a fifth of a side (11.5 px at 53 px sides, measured
 // on the AprilGrid): half of the neighbours must agree, and the nearer ones do. Then the finer
-// check (PairPrediction). Everything after (markers the scan missed, the paint, the report) uses the
-// nearest marker's homography; the dilation of the dark print (BoardFit) is not taken out.
+// check (PairPrediction). Everything after (markers the scan missed, the paint, the report) uses
+// the nearest marker's homography; the dilation of the dark print (BoardFit) is not taken out.
 
 // How far a neighbour's homography may put a marker's corners, in the marker's sides.
 constexpr double kBentNeighbourFraction = 0.2;
@@ -900,7 +900,8 @@ NeighbourVote VoteOfNeighbours(const LocalMarker& m, const std::vector<LocalMark
     ++near;
     const std::array<Eigen::Vector2d, 4> predicted = CornersThrough(n.H_image_board, f);
     double worst = 0.0;
-    for (int c = 0; c < 4; ++c) worst = std::max(worst, (predicted[c] - m.marker.corners_px[c]).norm());
+    for (int c = 0; c < 4; ++c)
+      worst = std::max(worst, (predicted[c] - m.marker.corners_px[c]).norm());
     agree += worst <= kBentNeighbourFraction * m.side_px ? 1 : 0;
   }
   if (near == 0) return NeighbourVote::kNoNeighbours;
@@ -1007,8 +1008,8 @@ void PlaceMissingBentMarkers(const BentBoardInputs& in, double pitch_m,
       continue;
     }
     const std::optional<LocalMarker> local = MakeLocal(*read, f);
-    if (local.has_value() && VoteOfNeighbours(*local, *locals, in.board_markers, pitch_m) ==
-                                 NeighbourVote::kAgree) {
+    if (local.has_value() &&
+        VoteOfNeighbours(*local, *locals, in.board_markers, pitch_m) == NeighbourVote::kAgree) {
       locals->push_back(*local);
     }
   }
@@ -1102,10 +1103,9 @@ Detection VerifyBentBoard(const BentBoardInputs& in, int min_contrast) {
                      const Eigen::Vector2d&) -> Eigen::Vector2d { return corner_px; };
   std::vector<const DecodedMarker*> markers;
   for (const LocalMarker& m : locals) markers.push_back(&m.marker);
-  return CheckAndReport(model, markers, in.board_markers, in.others, in.board, in.sibling,
-                        in.image, in.options);
+  return CheckAndReport(model, markers, in.board_markers, in.others, in.board, in.sibling, in.image,
+                        in.options);
 }
-
 
 // What VerifyMarkerBoard's steps share: the board, the scan's image and options, and the
 // board's markers.
@@ -1241,8 +1241,8 @@ bool PlaceMissingMarkers(const MarkerBoardContext& ctx,
       const std::array<Eigen::Vector2d, 4> d = OutwardDiagonals(f);
       std::array<Eigen::Vector2d, 4> corners;
       for (int c = 0; c < 4; ++c) {
-        corners[c] = ApplyHomography((*board_fit)->fit.H,
-                                     f[c]->p_board + (*board_fit)->dilation_m * d[c]);
+        corners[c] =
+            ApplyHomography((*board_fit)->fit.H, f[c]->p_board + (*board_fit)->dilation_m * d[c]);
       }
       std::optional<DecodedMarker> marker =
           ReadPredictedMarker(ctx.image, ctx.family, id, corners, ctx.min_contrast);
@@ -1273,10 +1273,9 @@ bool PlaceMissingMarkers(const MarkerBoardContext& ctx,
 // Needs the final board fit, the board's scale in the image and every marker of the board
 // found or placed; gives the detection (CheckAndReport) with the fit's homography as the
 // board's model and its dilation taken out of the corners.
-Detection ReportFittedBoard(const MarkerBoardContext& ctx, const BoardFit& fitted,
-                            double px_per_m, const std::vector<const DecodedMarker*>& on_board,
-                            const std::vector<const DecodedMarker*>& others,
-                            const Board* sibling) {
+Detection ReportFittedBoard(const MarkerBoardContext& ctx, const BoardFit& fitted, double px_per_m,
+                            const std::vector<const DecodedMarker*>& on_board,
+                            const std::vector<const DecodedMarker*>& others, const Board* sibling) {
   BoardInImage model;
   model.to_image = [&fitted](const Eigen::Vector2d& p) -> std::optional<Eigen::Vector2d> {
     return ApplyHomography(fitted.fit.H, p);
@@ -1323,7 +1322,7 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
       FitBoard(corr.p_board, corr.diagonal, corr.uv, on_board.size());
   if (!board_fit.has_value() || board_fit->fit.max_residual > max_residual_px) {
     // No one homography holds the markers: a wrong board, or the board bent by a lens.
-    const BentBoardInputs bent{on_board, board_markers, split.others, board,   family,
+    const BentBoardInputs bent{on_board, board_markers, split.others, board,           family,
                                options,  image,         sibling,      side.px / side.m};
     return VerifyBentBoard(bent, scan.min_contrast);
   }

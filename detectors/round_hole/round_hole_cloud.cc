@@ -403,7 +403,6 @@ double ProfileVariance(const std::vector<Edge>& edges, const std::vector<double>
   return farthest * farthest;
 }
 
-
 // Two passes: the second fits the plane to the points the first pass's board pose puts on
 // paper, clear of the edges: the region also holds the board's stand, a post touching its
 // back below the page, whose points tilt the plane by a few tenths of a degree.
@@ -482,8 +481,7 @@ Roi CollectRoi(std::span<const std::span<const RoundHoleCloudPoint>> frames,
 // ring across it is a line, which determines no plane, let alone the holes (a board far or
 // small for the ring spacing). A ring crosses the page when its points span half the page's
 // width, which a board's stand (a 6 cm post) never does.
-std::ptrdiff_t RingsAcrossPage(const std::vector<RoiPoint>& roi,
-                               const Rigid3d& T_board_lidar_prior,
+std::ptrdiff_t RingsAcrossPage(const std::vector<RoiPoint>& roi, const Rigid3d& T_board_lidar_prior,
                                const Eigen::Vector2d& half_page) {
   std::map<int, std::pair<double, double>> ring_span_m;
   for (const RoiPoint& p : roi) {
@@ -491,9 +489,9 @@ std::ptrdiff_t RingsAcrossPage(const std::vector<RoiPoint>& roi,
     std::pair<double, double>& span = ring_span_m.try_emplace(p.ring, x, x).first->second;
     span = {std::min(span.first, x), std::max(span.second, x)};
   }
-  return std::count_if(
-      ring_span_m.begin(), ring_span_m.end(),
-      [&](const auto& span) { return span.second.second - span.second.first > half_page.x(); });
+  return std::count_if(ring_span_m.begin(), ring_span_m.end(), [&](const auto& span) {
+    return span.second.second - span.second.first > half_page.x();
+  });
 }
 
 // Plane coordinates: origin o at the expected page centre's foot on the fitted plane, ex
@@ -570,8 +568,8 @@ PlaneInliers ProjectInliers(const std::vector<RoiPoint>& roi, const PlaneFit& pl
     if (!(std::abs(r) < plane.cutoff_m)) continue;
     inliers.sum_r2 += r * r;
     const Eigen::Vector3d q = (plane.d_m / along) * p.p_lidar - frame.o;
-    const double azimuth = std::remainder(std::atan2(p.p_lidar.y(), p.p_lidar.x()) - azimuth0,
-                                          2.0 * std::numbers::pi);
+    const double azimuth =
+        std::remainder(std::atan2(p.p_lidar.y(), p.p_lidar.x()) - azimuth0, 2.0 * std::numbers::pi);
     inliers.points.push_back(
         {Eigen::Vector2d(q.dot(frame.ex), q.dot(frame.ey)), azimuth, p.frame * 65536 + p.ring});
     plane_rings.insert(p.ring);
@@ -815,8 +813,8 @@ void AccumulateEdges(const std::vector<Edge>& edges, const HoleModel& model,
                               : Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
     // Where the fitted boundary crosses the ring, in steps: the edge moved by the residual
     // along the ring (at most the half step it can be off by).
-    fit->true_steps[k] = edges[k].steps_along -
-                         (std::abs(along) > 0.0 ? std::clamp(r / along, -0.5, 0.5) : 0.0);
+    fit->true_steps[k] =
+        edges[k].steps_along - (std::abs(along) > 0.0 ? std::clamp(r / along, -0.5, 0.5) : 0.0);
     // A ray meets the plane w . p = 1 at p = ray / (w . ray): dp / dw = -p p^T; the edge
     // residual sees the in-plane part of that through the boundary's normal.
     const Eigen::Vector3d p_edge =
@@ -949,8 +947,8 @@ bool FitPlaneAndEdges(const Board& board, const HoleModel& model, const Roi& roi
     // 5b. Robust Gauss-Newton of all edges to the outline and the hole circles, from the pose.
     FitEdges(state->rings.edges, model, state->frame, &state->fit);
     if (state->fit.degenerate || pass + 1 == kPasses) break;
-    plane_points = PointsOnPaper(roi.points, board, model, plane, state->frame,
-                                 state->rings.edges, state->fit.pose);
+    plane_points = PointsOnPaper(roi.points, board, model, plane, state->frame, state->rings.edges,
+                                 state->fit.pose);
   }
   return true;
 }
@@ -1036,8 +1034,7 @@ void PoseCovariance(const BoardFitState& state, const Rigid3d& T_lidar_board,
     M_w.row(in_index[a]) = in_from_w.row(a);
     M_w.row(out_index[a]) = G.row(a);
   }
-  *pose_covariance =
-      M_q * cov_quantisation * M_q.transpose() + M_w * plane.cov_w * M_w.transpose();
+  *pose_covariance = M_q * cov_quantisation * M_q.transpose() + M_w * plane.cov_w * M_w.transpose();
 }
 
 // With kFewRingsThroughHoles or fewer rings through the holes: widens the board's y and
@@ -1059,9 +1056,9 @@ void WidenByProfiles(const std::vector<Edge>& edges, const EdgeFit& fit, const H
   const Eigen::Vector3d with_theta = H_inv.col(2) / H_inv(2, 2);
   double outer = 0.0;
   for (const Circle& c : model.holes) outer = std::max(outer, c.centre_board.norm());
-  const double theta_profile = ProfileVariance(edges, fit.weight, model.holes, model.half_page,
-                                               pose, fit.last_gate, with_theta, 5e-4,
-                                               reach / outer);
+  const double theta_profile =
+      ProfileVariance(edges, fit.weight, model.holes, model.half_page, pose, fit.last_gate,
+                      with_theta, 5e-4, reach / outer);
   (*pose_covariance)(2, 2) = std::max((*pose_covariance)(2, 2), theta_profile);
 }
 }  // namespace
@@ -1117,8 +1114,7 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
 
   // 2-5b. Plane, inliers on it, edges, coarse search and edge fit.
   BoardFitState state;
-  if (!FitPlaneAndEdges(board, model, roi, T_lidar_board_prior, options, &state, &out))
-    return out;
+  if (!FitPlaneAndEdges(board, model, roi, T_lidar_board_prior, options, &state, &out)) return out;
   const EdgeFit& fit = state.fit;
   out.edges = fit.kept;
   out.edge_rms_m = fit.rms;

@@ -261,7 +261,6 @@ std::vector<RoundHoleBoardFit> RankFits(const std::vector<RoundHoleCloudDetectio
   return ranked;
 }
 
-
 using CellMap = std::unordered_map<CellKey, Cell, CellKeyHash>;
 
 // The points the search looks at: every stride-th point of one frame, in range.
@@ -431,8 +430,7 @@ std::map<int, RingOnPlane> GatherRings(const PatchFrame& f, const SearchPoints& 
     if (OnAnotherPlane(cells, KeyOf(pts[i], cell_m), pts[i], f.n)) continue;
     const double x = d.dot(f.ex), y = d.dot(f.ey);
     if (std::abs(d.dot(f.n)) > kGatherDepthM || x < f.lo_x - kGatherMarginM ||
-        x > f.hi_x + kGatherMarginM || y < f.lo_y - kGatherMarginM ||
-        y > f.hi_y + kGatherMarginM) {
+        x > f.hi_x + kGatherMarginM || y < f.lo_y - kGatherMarginM || y > f.hi_y + kGatherMarginM) {
       continue;
     }
     RingOnPlane& ring = ring_points[points.rings[i]];

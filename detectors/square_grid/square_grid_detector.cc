@@ -530,11 +530,16 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
           const auto [i, j] = entry.first;
           const bool in_i = i >= wi && i < wi + w, in_j = j >= wj && j < wj + h;
           std::pair<int, int> inside = {i, j};
-          if (in_i && j == wj - 1) inside.second = wj;
-          else if (in_i && j == wj + h) inside.second = wj + h - 1;
-          else if (in_j && i == wi - 1) inside.first = wi;
-          else if (in_j && i == wi + w) inside.first = wi + w - 1;
-          else return false;
+          if (in_i && j == wj - 1)
+            inside.second = wj;
+          else if (in_i && j == wj + h)
+            inside.second = wj + h - 1;
+          else if (in_j && i == wi - 1)
+            inside.first = wi;
+          else if (in_j && i == wi + w)
+            inside.first = wi + w - 1;
+          else
+            return false;
           return PairConsistent(squares, group.at(inside), inside, entry.second, entry.first,
                                 pitch_ratio - 1.0, options.max_residual_side_fraction);
         });
@@ -574,8 +579,7 @@ struct Prediction {
 // each carries its homography one pitch over (a neighbour on each side averages a lens's
 // bending out; near a fisheye's rim one neighbour alone can miss by a third of a side).
 // nullopt with fewer than two neighbours or a sample off the image.
-std::optional<Prediction> PredictSquare(const ImageView8& image,
-                                        const std::vector<Square>& squares,
+std::optional<Prediction> PredictSquare(const ImageView8& image, const std::vector<Square>& squares,
                                         const std::map<std::pair<int, int>, GridSquare>& group,
                                         std::pair<int, int> point, double gap_ratio) {
   constexpr std::array<int, 4> kDi = {1, 0, -1, 0};
@@ -754,8 +758,8 @@ Detection DetectSquareGrid(const ImageView8& image, const Board& board,
     // check again with them among the others.
     std::vector<Square> recovered;
     for (const auto& group : groups) {
-      for (const Square& s : RecoverSquares(image, squares, group, board, min_contrast,
-                                            options.min_square_side_px)) {
+      for (const Square& s :
+           RecoverSquares(image, squares, group, board, min_contrast, options.min_square_side_px)) {
         recovered.push_back(s);
       }
     }

@@ -1,5 +1,6 @@
 #include "detectors/vertical/vertical_detector.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -10,8 +11,6 @@
 #include <tuple>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "detectors/common/corner_refine.h"
 #include "detectors/common/edge_lines.h"
@@ -502,10 +501,8 @@ std::optional<Eigen::Vector2d> RefineFeature(const Frame& frame, const Eigen::Ma
     saddle.half_window = std::clamp(static_cast<int>(side / 3.0), 2, 7);
     refined = RefineSaddle(frame.blurred, predicted, saddle);
   } else {
-    const std::vector<EdgePoint> a =
-        LinePoints(segments, f.gx, f.gy, /*vertical=*/false);
-    const std::vector<EdgePoint> b =
-        LinePoints(segments, f.gx, f.gy, /*vertical=*/true);
+    const std::vector<EdgePoint> a = LinePoints(segments, f.gx, f.gy, /*vertical=*/false);
+    const std::vector<EdgePoint> b = LinePoints(segments, f.gx, f.gy, /*vertical=*/true);
     // Three points fix a line and show an outlier; fewer means the edge is not there.
     if (a.size() < 3 || b.size() < 3) return std::nullopt;
     const std::optional<Line2d> la = FitWeightedLine(a, Map(H, f.gx + 1, f.gy) - predicted);
@@ -807,8 +804,7 @@ LevelSearch SearchLevel(const ImageView8& view, const Layout& layout,
 // the page reaches that, so every cell, edge and window FitBoard looks at is as on the
 // whole image. A fit that fails at full resolution is returned with ok = false.
 BoardFit RefineAtFullResolution(const ImageView8& image, const Layout& layout,
-                                const BoardFit& coarse, int level,
-                                const VerticalOptions& options) {
+                                const BoardFit& coarse, int level, const VerticalOptions& options) {
   BoardFit failed;
   Placement seed;
   seed.gy_min = kPageRows;
@@ -828,10 +824,14 @@ BoardFit RefineAtFullResolution(const ImageView8& image, const Layout& layout,
   // The blur kernel (3 sigma) and two pixels of rounding clear of the page.
   const double pad = std::ceil(3.0 * options.blur_sigma_px) + 2.0;
   if (!page.min().allFinite() || !page.max().allFinite()) return failed;
-  const int x0 = static_cast<int>(std::clamp(std::floor(page.min().x() - pad), 0.0, image.width - 1.0));
-  const int y0 = static_cast<int>(std::clamp(std::floor(page.min().y() - pad), 0.0, image.height - 1.0));
-  const int x1 = static_cast<int>(std::clamp(std::ceil(page.max().x() + pad), 0.0, image.width - 1.0));
-  const int y1 = static_cast<int>(std::clamp(std::ceil(page.max().y() + pad), 0.0, image.height - 1.0));
+  const int x0 =
+      static_cast<int>(std::clamp(std::floor(page.min().x() - pad), 0.0, image.width - 1.0));
+  const int y0 =
+      static_cast<int>(std::clamp(std::floor(page.min().y() - pad), 0.0, image.height - 1.0));
+  const int x1 =
+      static_cast<int>(std::clamp(std::ceil(page.max().x() + pad), 0.0, image.width - 1.0));
+  const int y1 =
+      static_cast<int>(std::clamp(std::ceil(page.max().y() + pad), 0.0, image.height - 1.0));
   // FitBoard's smallest use: a saddle window and its border rule.
   constexpr int kMinCropPx = 16;
   if (x1 - x0 + 1 < kMinCropPx || y1 - y0 + 1 < kMinCropPx) return failed;
@@ -867,7 +867,8 @@ std::string_view VerticalOptions::Validate() const {
 Detection DetectVertical(const ImageView8& image, const Board& board,
                          const VerticalOptions& options) {
   Detection result;
-  result.reason = CheckDetectorInput(image, board, BoardType::kVertical, options.Validate().empty());
+  result.reason =
+      CheckDetectorInput(image, board, BoardType::kVertical, options.Validate().empty());
   if (result.reason != DetectReason::kNone) return result;
   // The raw range bounds the blurred one: an image without min_contrast anywhere has no
   // corner.

@@ -1,11 +1,10 @@
 #include "station/camera/board_view.h"
 
+#include <Eigen/SVD>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <vector>
-
-#include <Eigen/SVD>
 
 #include "absl/strings/str_cat.h"
 #include "detectors/common/edge_lines.h"
@@ -29,24 +28,30 @@ constexpr int kMapStep = 4;
 }  // namespace
 
 absl::Status BoardViewOptions::Validate() const {
-  if (!(margin >= 0 && margin <= 2)) return absl::InvalidArgumentError(absl::StrCat("margin = ", margin, ": must be in [0, 2]"));
-  if (!(scale > 0.1 && scale <= 4)) return absl::InvalidArgumentError(absl::StrCat("scale = ", scale, ": must be in (0.1, 4]"));
+  if (!(margin >= 0 && margin <= 2))
+    return absl::InvalidArgumentError(absl::StrCat("margin = ", margin, ": must be in [0, 2]"));
+  if (!(scale > 0.1 && scale <= 4))
+    return absl::InvalidArgumentError(absl::StrCat("scale = ", scale, ": must be in (0.1, 4]"));
   if (max_side_px < 64 || max_side_px > kMaxImageSide) {
-    return absl::InvalidArgumentError(absl::StrCat("max_side_px = ", max_side_px, ": must be in [64, ", kMaxImageSide, "]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("max_side_px = ", max_side_px, ": must be in [64, ", kMaxImageSide, "]"));
   }
   return absl::OkStatus();
 }
 
 absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const ImageView8& raw,
-                                            const Rigid3d& T_camera_board, const Eigen::Vector2d& page_size_m,
+                                            const Rigid3d& T_camera_board,
+                                            const Eigen::Vector2d& page_size_m,
                                             const BoardViewOptions& options) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
-  if (raw.Validate() != ImageViewError::kOk) return absl::InvalidArgumentError("raw image: invalid view");
+  if (raw.Validate() != ImageViewError::kOk)
+    return absl::InvalidArgumentError("raw image: invalid view");
   const Eigen::Vector3d p_centre = T_camera_board.translation();
   Eigen::Vector2d uv_centre;
   ProjectionPointJacobian J;
   if (!camera.Project(p_centre, &uv_centre, &J)) {
-    return absl::InvalidArgumentError("the expected board centre is outside the camera's valid region");
+    return absl::InvalidArgumentError(
+        "the expected board centre is outside the camera's valid region");
   }
   BoardView view;
   const Eigen::Vector3d z = p_centre.normalized();
@@ -54,7 +59,8 @@ absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const Ima
     return absl::InvalidArgumentError("the board is expected edge-on: no perspective view");
   }
   Eigen::Vector3d x = Eigen::Vector3d::UnitX() - z.x() * z;
-  if (x.norm() < 1e-6) x = Eigen::Vector3d::UnitY() - z.y() * z;  // looking along the camera's x axis
+  if (x.norm() < 1e-6)
+    x = Eigen::Vector3d::UnitY() - z.y() * z;  // looking along the camera's x axis
   x.normalize();
   view.R_camera_view_.col(0) = x;
   view.R_camera_view_.col(1) = z.cross(x);
@@ -71,9 +77,11 @@ absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const Ima
   int k = 0;
   for (double sx : {-1.0, 1.0}) {
     for (double sy : {-1.0, 1.0}) {
-      const Eigen::Vector3d p_view = view.R_camera_view_.transpose() * (T_camera_board * Eigen::Vector3d(sx * hx, sy * hy, 0));
+      const Eigen::Vector3d p_view =
+          view.R_camera_view_.transpose() * (T_camera_board * Eigen::Vector3d(sx * hx, sy * hy, 0));
       if (p_view.z() < kMinCornerDepth * p_view.norm()) {
-        return absl::InvalidArgumentError("the board is expected edge-on or behind the view: no perspective view");
+        return absl::InvalidArgumentError(
+            "the board is expected edge-on or behind the view: no perspective view");
       }
       corners_view[k++] = p_view;
     }
@@ -113,20 +121,24 @@ absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const Ima
       const std::optional<Eigen::Vector2d>* n = &nodes[static_cast<std::size_t>(j) * nodes_u + i];
       std::optional<Eigen::Vector2d> uv;
       if (n[0] && n[1] && n[nodes_u] && n[nodes_u + 1]) {
-        uv = (1 - fv) * ((1 - fu) * *n[0] + fu * *n[1]) + fv * ((1 - fu) * *n[nodes_u] + fu * *n[nodes_u + 1]);
+        uv = (1 - fv) * ((1 - fu) * *n[0] + fu * *n[1]) +
+             fv * ((1 - fu) * *n[nodes_u] + fu * *n[nodes_u + 1]);
       } else {
         uv = view.ToRaw(camera, Eigen::Vector2d(u, v));
       }
       if (uv && InsideForBilinearGrey(raw, *uv)) {
-        view.image_.at(u, v) = static_cast<std::uint8_t>(std::lround(BilinearGrey(raw, uv->x(), uv->y())));
+        view.image_.at(u, v) =
+            static_cast<std::uint8_t>(std::lround(BilinearGrey(raw, uv->x(), uv->y())));
       }
     }
   }
   return view;
 }
 
-std::optional<Eigen::Vector2d> BoardView::ToRaw(const CameraModel& camera, const Eigen::Vector2d& uv_view_px) const {
-  const Eigen::Vector3d ray_view((uv_view_px.x() - c_px_.x()) / f_px_, (uv_view_px.y() - c_px_.y()) / f_px_, 1.0);
+std::optional<Eigen::Vector2d> BoardView::ToRaw(const CameraModel& camera,
+                                                const Eigen::Vector2d& uv_view_px) const {
+  const Eigen::Vector3d ray_view((uv_view_px.x() - c_px_.x()) / f_px_,
+                                 (uv_view_px.y() - c_px_.y()) / f_px_, 1.0);
   Eigen::Vector2d uv;
   if (!camera.Project(R_camera_view_ * ray_view, &uv)) return std::nullopt;
   return uv;
@@ -135,7 +147,8 @@ std::optional<Eigen::Vector2d> BoardView::ToRaw(const CameraModel& camera, const
 std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
                                            const Rigid3d& T_camera_board, const Board& board,
                                            const BoardViewOptions& options) {
-  absl::StatusOr<BoardView> view = BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), options);
+  absl::StatusOr<BoardView> view =
+      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), options);
   if (!view.ok()) return std::nullopt;
   std::optional<Detection> d = DetectBoard(view->image().view(), board);
   if (!d) return std::nullopt;

@@ -10,14 +10,13 @@
 // Frames: the view frame has the camera's optical centre, z toward the expected board centre,
 // x and y as close to the camera's as that allows. Units: pixels, metres.
 
-#include <optional>
-
 #include <Eigen/Core>
+#include <optional>
 
 #include "absl/status/statusor.h"
 #include "detectors/core/image_view.h"
-#include "detectors/detection.h"
 #include "detectors/core/pose.h"
+#include "detectors/detection.h"
 #include "station/camera/camera_model.h"
 
 namespace linecal {
@@ -47,13 +46,15 @@ class BoardView {
   // board not in front of the camera's valid region; the reason names what. Cost: one
   // projection and a bilinear sample per view pixel, about 30 ms for a 1000 x 800 view.
   static absl::StatusOr<BoardView> Render(const CameraModel& camera, const ImageView8& raw,
-                                          const Rigid3d& T_camera_board, const Eigen::Vector2d& page_size_m,
+                                          const Rigid3d& T_camera_board,
+                                          const Eigen::Vector2d& page_size_m,
                                           const BoardViewOptions& options = {});
 
   const Image8& image() const { return image_; }
   // The raw image pixel of a view pixel; nullopt when it falls outside the camera's valid
   // region. O(1) (one projection).
-  std::optional<Eigen::Vector2d> ToRaw(const CameraModel& camera, const Eigen::Vector2d& uv_view_px) const;
+  std::optional<Eigen::Vector2d> ToRaw(const CameraModel& camera,
+                                       const Eigen::Vector2d& uv_view_px) const;
 
  private:
   Image8 image_;

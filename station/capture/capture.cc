@@ -35,7 +35,8 @@ absl::StatusOr<CaptureFile> ReadFileEntry(const JsonField& f, const EntryContext
   absl::StatusOr<std::string> path = f.String("path");
   if (!path.ok()) return path.status();
   if (!IsContainedRelativePath(*path)) {
-    return f.Error("path", absl::StrCat("'", *path, "' must be a relative path inside the capture"));
+    return f.Error("path",
+                   absl::StrCat("'", *path, "' must be a relative path inside the capture"));
   }
   if (absl::StatusOr<fs::path> r =
           ResolveInside(ctx.resolved_dir, *path, absl::StrCat("'", *path, "'"), "the capture");
@@ -44,14 +45,15 @@ absl::StatusOr<CaptureFile> ReadFileEntry(const JsonField& f, const EntryContext
   }
   std::error_code ec;
   const fs::path full = ctx.dir / *path;
-  if (!fs::is_regular_file(full, ec)) return f.Error("path", absl::StrCat("no such file '", *path, "'"));
+  if (!fs::is_regular_file(full, ec))
+    return f.Error("path", absl::StrCat("no such file '", *path, "'"));
   const std::uintmax_t size = fs::file_size(full, ec);
   if (size == 0) return f.Error("path", absl::StrCat("file '", *path, "' is empty"));
   if (size > static_cast<std::uintmax_t>(ctx.budget->max_file_bytes)) {
-    return f.Error("path", absl::StrCat("'", *path, "': ",
-                                        OverBudgetText(static_cast<std::int64_t>(size), "bytes",
-                                                       ctx.budget->max_file_bytes,
-                                                       "max_file_bytes")));
+    return f.Error("path",
+                   absl::StrCat("'", *path, "': ",
+                                OverBudgetText(static_cast<std::int64_t>(size), "bytes",
+                                               ctx.budget->max_file_bytes, "max_file_bytes")));
   }
   absl::StatusOr<std::int64_t> t = f.Integer("t_ns");
   if (!t.ok()) return t.status();
@@ -95,7 +97,8 @@ absl::StatusOr<CaptureSensor> ReadSensorEntry(const JsonField& f, EntryContext& 
       c.frames.push_back(*file);
     }
   }
-  for (const auto& [key, slot] : {std::pair{"packets", &c.packets}, std::pair{"can_log", &c.can_log}}) {
+  for (const auto& [key, slot] :
+       {std::pair{"packets", &c.packets}, std::pair{"can_log", &c.can_log}}) {
     if (!f.Has(key)) continue;
     absl::StatusOr<JsonField> entry = f.Object(key);
     if (!entry.ok()) return entry.status();
@@ -133,8 +136,8 @@ absl::Status CheckAngleFiles(const fs::path& resolved_dir, const fs::path& dir,
   for (const SensorModel& s : car.sensors) {
     if (s.angles_file.empty()) continue;
     const absl::StatusOr<fs::path> r = ResolveInside(
-        resolved_dir, s.angles_file, absl::StrCat((dir / kCaptureCarFile).string(), ": sensor '",
-                                                  s.name, "': angles_file"),
+        resolved_dir, s.angles_file,
+        absl::StrCat((dir / kCaptureCarFile).string(), ": sensor '", s.name, "': angles_file"),
         "the capture");
     if (!r.ok()) return r.status();
   }
@@ -204,14 +207,13 @@ absl::Status CheckCaptureData(const Capture& c) {
       const CameraIntrinsics& in = *model->intrinsics;
       if (img->width != in.width || img->height != in.height) {
         return Located(c, i, key,
-                       absl::InvalidArgumentError(absl::StrCat(
-                           "image is ", img->width, "x", img->height, ", the car model says ",
-                           in.width, "x", in.height)));
+                       absl::InvalidArgumentError(absl::StrCat("image is ", img->width, "x",
+                                                               img->height, ", the car model says ",
+                                                               in.width, "x", in.height)));
       }
     }
     if (s.can_log) {
-      const absl::Status e =
-          Located(c, i, "can_log", ReadCaptureCanLog(c, *s.can_log).status());
+      const absl::Status e = Located(c, i, "can_log", ReadCaptureCanLog(c, *s.can_log).status());
       if (!e.ok()) return e;
     }
   }
@@ -225,12 +227,15 @@ const CaptureSensor* CaptureManifest::FindSensor(const std::string& name) const 
   return nullptr;
 }
 
-std::string Capture::PathOf(const CaptureFile& f) const { return (fs::path(dir) / f.path).string(); }
+std::string Capture::PathOf(const CaptureFile& f) const {
+  return (fs::path(dir) / f.path).string();
+}
 
 absl::StatusOr<Capture> ReadCapture(const std::string& dir, const InputBudget& budget) {
   if (absl::Status s = budget.Validate(); !s.ok()) return s;
   std::error_code ec;
-  if (!fs::is_directory(dir, ec)) return absl::NotFoundError(absl::StrCat(dir, ": not a capture directory"));
+  if (!fs::is_directory(dir, ec))
+    return absl::NotFoundError(absl::StrCat(dir, ": not a capture directory"));
   const fs::path root_dir(dir);
   const fs::path resolved_dir = fs::canonical(root_dir, ec);
   if (ec) return absl::NotFoundError(absl::StrCat(dir, ": cannot resolve: ", ec.message()));
@@ -245,15 +250,17 @@ absl::StatusOr<Capture> ReadCapture(const std::string& dir, const InputBudget& b
   absl::StatusOr<std::string> format = root->String("format");
   if (!format.ok()) return format.status();
   if (*format != kCaptureFormat) {
-    return root->Error("format", absl::StrCat("expected '", kCaptureFormat, "', got '", *format, "'"));
+    return root->Error("format",
+                       absl::StrCat("expected '", kCaptureFormat, "', got '", *format, "'"));
   }
   absl::StatusOr<std::int64_t> version = root->Integer("version");
   if (!version.ok()) return version.status();
   if (*version < 1 || *version > kCaptureVersion) {
-    return root->Error("version", absl::StrCat("unsupported version ", *version, " (this build reads 1..",
-                                               kCaptureVersion, ")"));
+    return root->Error("version", absl::StrCat("unsupported version ", *version,
+                                               " (this build reads 1..", kCaptureVersion, ")"));
   }
-  if (auto s = root->AllowOnlyKeys({"format", "version", "vin", "car_model", "time_ns", "origin", "aligner", "sensors"});
+  if (auto s = root->AllowOnlyKeys(
+          {"format", "version", "vin", "car_model", "time_ns", "origin", "aligner", "sensors"});
       !s.ok()) {
     return s;
   }
@@ -264,7 +271,8 @@ absl::StatusOr<Capture> ReadCapture(const std::string& dir, const InputBudget& b
   m.version = static_cast<int>(*version);
   absl::StatusOr<std::string> vin = root->String("vin");
   if (!vin.ok()) return vin.status();
-  if (absl::Status s = ValidateVin(*vin, /*check_digit=*/false); !s.ok()) return root->Error("vin", std::string(s.message()));
+  if (absl::Status s = ValidateVin(*vin, /*check_digit=*/false); !s.ok())
+    return root->Error("vin", std::string(s.message()));
   m.vin = *vin;
   absl::StatusOr<std::string> car_model = root->String("car_model");
   if (!car_model.ok()) return car_model.status();
@@ -275,25 +283,29 @@ absl::StatusOr<Capture> ReadCapture(const std::string& dir, const InputBudget& b
   absl::StatusOr<std::string> origin = root->String("origin");
   if (!origin.ok()) return origin.status();
   if (*origin != "station" && *origin != "simulator") {
-    return root->Error("origin", absl::StrCat("must be 'station' or 'simulator', got '", *origin, "'"));
+    return root->Error("origin",
+                       absl::StrCat("must be 'station' or 'simulator', got '", *origin, "'"));
   }
   m.origin = *origin;
   absl::StatusOr<AlignerMeasurement> aligner = ReadAligner(*root, "aligner");
   if (!aligner.ok()) return aligner.status();
   m.aligner = *aligner;
 
-  absl::StatusOr<StationLayout> station = ReadStationLayout((root_dir / kCaptureStationFile).string());
+  absl::StatusOr<StationLayout> station =
+      ReadStationLayout((root_dir / kCaptureStationFile).string());
   if (!station.ok()) return station.status();
   c.station = std::move(*station);
   absl::StatusOr<CarModel> car = ReadCarModel((root_dir / kCaptureCarFile).string());
   if (!car.ok()) return car.status();
   c.car = std::move(*car);
   if (c.car.id != m.car_model) {
-    return root->Error("car_model", absl::StrCat("'", m.car_model, "' but ", kCaptureCarFile, " is car model '", c.car.id, "'"));
+    return root->Error("car_model", absl::StrCat("'", m.car_model, "' but ", kCaptureCarFile,
+                                                 " is car model '", c.car.id, "'"));
   }
   if (absl::Status s = CheckAngleFiles(resolved_dir, root_dir, c.car); !s.ok()) return s;
   if (absl::Status s = CheckTargetsExist(c.car, c.station); !s.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat((root_dir / kCaptureCarFile).string(), ": ", s.message()));
+    return absl::InvalidArgumentError(
+        absl::StrCat((root_dir / kCaptureCarFile).string(), ": ", s.message()));
   }
 
   absl::StatusOr<std::vector<JsonField>> sensors = root->Array("sensors");
@@ -303,14 +315,17 @@ absl::StatusOr<Capture> ReadCapture(const std::string& dir, const InputBudget& b
   for (const JsonField& f : *sensors) {
     absl::StatusOr<CaptureSensor> s = ReadSensorEntry(f, ctx, c.car);
     if (!s.ok()) return s.status();
-    if (!names.insert(s->name).second) return f.Error("name", absl::StrCat("sensor '", s->name, "' listed twice"));
+    if (!names.insert(s->name).second)
+      return f.Error("name", absl::StrCat("sensor '", s->name, "' listed twice"));
     m.sensors.push_back(std::move(*s));
   }
   return c;
 }
 
 nlohmann::json CaptureManifestToJson(const CaptureManifest& m) {
-  const auto file_json = [](const CaptureFile& f) { return nlohmann::json{{"path", f.path}, {"t_ns", f.t_ns}}; };
+  const auto file_json = [](const CaptureFile& f) {
+    return nlohmann::json{{"path", f.path}, {"t_ns", f.t_ns}};
+  };
   nlohmann::json sensors = nlohmann::json::array();
   for (const CaptureSensor& s : m.sensors) {
     nlohmann::json j = {{"name", s.name}, {"kind", SensorKindName(s.kind)}};
@@ -323,29 +338,42 @@ nlohmann::json CaptureManifestToJson(const CaptureManifest& m) {
     if (s.can_log) j["can_log"] = file_json(*s.can_log);
     sensors.push_back(std::move(j));
   }
-  return {{"format", kCaptureFormat}, {"version", m.version},         {"vin", m.vin},
-          {"car_model", m.car_model}, {"time_ns", m.time_ns},         {"origin", m.origin},
-          {"aligner", AlignerToJson(m.aligner)}, {"sensors", sensors}};
+  return {{"format", kCaptureFormat},
+          {"version", m.version},
+          {"vin", m.vin},
+          {"car_model", m.car_model},
+          {"time_ns", m.time_ns},
+          {"origin", m.origin},
+          {"aligner", AlignerToJson(m.aligner)},
+          {"sensors", sensors}};
 }
 
 absl::Status WriteCapture(const std::string& dir, const CaptureManifest& manifest,
                           const StationLayout& station, const CarModel& car) {
   const fs::path root_dir(dir);
   std::error_code ec;
-  if (!fs::is_directory(root_dir, ec)) return absl::NotFoundError(absl::StrCat(dir, ": no such directory"));
+  if (!fs::is_directory(root_dir, ec))
+    return absl::NotFoundError(absl::StrCat(dir, ": no such directory"));
   // Angle files travel with the capture so that it stays self-contained.
   CarModel copy = car;
   for (SensorModel& s : copy.sensors) {
     if (s.angles_file.empty()) continue;
-    const std::string name = absl::StrCat(s.name, "-angles", fs::path(s.angles_file).extension().string());
+    const std::string name =
+        absl::StrCat(s.name, "-angles", fs::path(s.angles_file).extension().string());
     fs::copy_file(s.angles_file, root_dir / name, fs::copy_options::overwrite_existing, ec);
-    if (ec) return absl::InternalError(absl::StrCat(s.angles_file, ": cannot copy into ", dir, ": ", ec.message()));
+    if (ec)
+      return absl::InternalError(
+          absl::StrCat(s.angles_file, ": cannot copy into ", dir, ": ", ec.message()));
     s.angles_file = name;
   }
-  if (absl::Status st = WriteJsonFile((root_dir / kCaptureStationFile).string(), StationLayoutToJson(station)); !st.ok()) {
+  if (absl::Status st =
+          WriteJsonFile((root_dir / kCaptureStationFile).string(), StationLayoutToJson(station));
+      !st.ok()) {
     return st;
   }
-  if (absl::Status st = WriteJsonFile((root_dir / kCaptureCarFile).string(), CarModelToJson(copy)); !st.ok()) return st;
+  if (absl::Status st = WriteJsonFile((root_dir / kCaptureCarFile).string(), CarModelToJson(copy));
+      !st.ok())
+    return st;
   // The manifest last: a capture without one is visibly incomplete.
   return WriteJsonFile((root_dir / kCaptureManifestFile).string(), CaptureManifestToJson(manifest));
 }

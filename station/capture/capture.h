@@ -13,20 +13,19 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
 #include "station/io/input_budget.h"
-#include "station/sensors/lidar/pcd.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
+#include "station/sensors/lidar/pcd.h"
 
 namespace linecal {
 

@@ -243,8 +243,8 @@ absl::StatusOr<CanFrame> ParseCandumpLine(std::string_view line) {
   }
   if (count < 3) {
     // The line itself is not shown: a file with fewer than 3 fields is probably no log at all.
-    return absl::InvalidArgumentError(absl::StrCat(
-        "expected '(seconds.micros) interface ID#DATA', got ", count, " field(s)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("expected '(seconds.micros) interface ID#DATA', got ", count, " field(s)"));
   }
   if (count == kMaxFields && fields[3] != "R" && fields[3] != "T") {
     return absl::InvalidArgumentError(
@@ -269,8 +269,8 @@ absl::StatusOr<CanFrame> ParseCandumpLine(std::string_view line) {
 namespace {
 
 // One line of a log (line_number counts from 1) appended to `frames`; blank lines are skipped.
-absl::Status ParseLogLine(std::string_view line, std::string_view source_name,
-                          size_t line_number, std::vector<CanFrame>* frames) {
+absl::Status ParseLogLine(std::string_view line, std::string_view source_name, size_t line_number,
+                          std::vector<CanFrame>* frames) {
   if (std::all_of(line.begin(), line.end(), [](char c) { return IsBlank(c) || c == '\r'; })) {
     return absl::OkStatus();
   }

@@ -395,8 +395,8 @@ absl::StatusOr<Image8> ReadImage8(const std::string& path, const InputBudget& bu
 absl::StatusOr<Image8> DecodeImage8(std::string_view bytes, const std::string& name,
                                     const InputBudget& budget) {
   if (static_cast<std::int64_t>(bytes.size()) > budget.max_file_bytes) {
-    return OverBudget(name, static_cast<std::int64_t>(bytes.size()), "bytes",
-                      budget.max_file_bytes, "max_file_bytes");
+    return OverBudget(name, static_cast<std::int64_t>(bytes.size()), "bytes", budget.max_file_bytes,
+                      "max_file_bytes");
   }
   if (bytes.empty()) return absl::InvalidArgumentError(absl::StrCat(name, ": empty"));
   // fmemopen only reads the buffer ("rb"), whatever its non-const parameter says.

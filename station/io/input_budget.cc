@@ -15,13 +15,15 @@ InputBudget InputBudget::Unlimited() {
 
 absl::Status InputBudget::Validate() const {
   const std::pair<const char*, std::int64_t> limits[] = {
-      {"max_file_bytes", max_file_bytes},   {"max_image_pixels", max_image_pixels},
-      {"max_scan_points", max_scan_points}, {"max_can_lines", max_can_lines},
+      {"max_file_bytes", max_file_bytes},
+      {"max_image_pixels", max_image_pixels},
+      {"max_scan_points", max_scan_points},
+      {"max_can_lines", max_can_lines},
       {"max_manifest_frames", max_manifest_frames}};
   for (const auto& [key, value] : limits) {
     if (value < 1) {
-      return absl::InvalidArgumentError(absl::StrCat("input_budget.", key, ": must be >= 1, got ",
-                                                     value));
+      return absl::InvalidArgumentError(
+          absl::StrCat("input_budget.", key, ": must be >= 1, got ", value));
     }
   }
   return absl::OkStatus();

@@ -102,7 +102,8 @@ absl::StatusOr<bool> JsonField::Bool(const std::string& key) const {
 absl::StatusOr<std::vector<double>> JsonField::Numbers(const std::string& key, size_t n) const {
   if (!Has(key)) return Error(key, "missing");
   const nlohmann::json& v = (*node_)[key];
-  if (!v.is_array()) return Error(key, absl::StrCat("expected an array of numbers, got ", Shorten(v)));
+  if (!v.is_array())
+    return Error(key, absl::StrCat("expected an array of numbers, got ", Shorten(v)));
   if (n != 0 && v.size() != n) {
     return Error(key, absl::StrCat("expected ", n, " numbers, got ", v.size()));
   }
@@ -110,20 +111,23 @@ absl::StatusOr<std::vector<double>> JsonField::Numbers(const std::string& key, s
   out.reserve(v.size());
   for (size_t i = 0; i < v.size(); ++i) {
     if (!v[i].is_number() || !std::isfinite(v[i].get<double>())) {
-      return Error(absl::StrCat(key, "[", i, "]"), absl::StrCat("expected a finite number, got ", Shorten(v[i])));
+      return Error(absl::StrCat(key, "[", i, "]"),
+                   absl::StrCat("expected a finite number, got ", Shorten(v[i])));
     }
     out.push_back(v[i].get<double>());
   }
   return out;
 }
 
-absl::StatusOr<std::string> JsonField::StringOr(const std::string& key, const std::string& fallback) const {
+absl::StatusOr<std::string> JsonField::StringOr(const std::string& key,
+                                                const std::string& fallback) const {
   return Has(key) ? String(key) : fallback;
 }
 absl::StatusOr<double> JsonField::NumberOr(const std::string& key, double fallback) const {
   return Has(key) ? Number(key) : fallback;
 }
-absl::StatusOr<std::int64_t> JsonField::IntegerOr(const std::string& key, std::int64_t fallback) const {
+absl::StatusOr<std::int64_t> JsonField::IntegerOr(const std::string& key,
+                                                  std::int64_t fallback) const {
   return Has(key) ? Integer(key) : fallback;
 }
 absl::StatusOr<bool> JsonField::BoolOr(const std::string& key, bool fallback) const {
@@ -161,7 +165,8 @@ absl::StatusOr<std::string> ReadTextFile(const std::string& path) {
   const auto size = std::filesystem::file_size(path, ec);
   if (ec) return absl::NotFoundError(absl::StrCat(path, ": cannot read: ", ec.message()));
   constexpr std::uintmax_t kMaxTextFile = 64u << 20;
-  if (size > kMaxTextFile) return absl::InvalidArgumentError(absl::StrCat(path, ": too large (", size, " bytes)"));
+  if (size > kMaxTextFile)
+    return absl::InvalidArgumentError(absl::StrCat(path, ": too large (", size, " bytes)"));
   std::ifstream in(path, std::ios::binary);
   if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open: ", std::strerror(errno)));
   std::ostringstream text;
@@ -176,7 +181,8 @@ absl::StatusOr<JsonDocument> JsonDocument::FromFile(const std::string& path) {
   return FromText(*text, path);
 }
 
-absl::StatusOr<JsonDocument> JsonDocument::FromText(const std::string& text, const std::string& source) {
+absl::StatusOr<JsonDocument> JsonDocument::FromText(const std::string& text,
+                                                    const std::string& source) {
   JsonDocument doc;
   doc.source_ = std::make_shared<const std::string>(source);
   // The non-throwing parse: request and file data must never reach an exception.
@@ -197,7 +203,8 @@ absl::StatusOr<JsonDocument> JsonDocument::FromText(const std::string& text, con
       bool end_object() override { return true; }
       bool start_array(std::size_t) override { return true; }
       bool end_array() override { return true; }
-      bool parse_error(std::size_t pos, const std::string&, const nlohmann::detail::exception&) override {
+      bool parse_error(std::size_t pos, const std::string&,
+                       const nlohmann::detail::exception&) override {
         position = pos;
         return false;
       }
@@ -231,7 +238,8 @@ absl::Status WriteJsonFile(const std::string& path, const nlohmann::json& j) {
   const std::string tmp = path + ".tmp";
   const std::string text = JsonFileText(j);
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return absl::InternalError(absl::StrCat(tmp, ": cannot create: ", std::strerror(errno)));
+  if (fd < 0)
+    return absl::InternalError(absl::StrCat(tmp, ": cannot create: ", std::strerror(errno)));
   size_t done = 0;
   while (done < text.size()) {
     const ssize_t n = ::write(fd, text.data() + done, text.size() - done);

@@ -10,10 +10,9 @@
 #include <cstdint>
 #include <initializer_list>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -24,7 +23,8 @@ class JsonField {
  public:
   // `source` names the document in messages (usually its file path); `path` is this node's
   // path from the root ("" for the root).
-  JsonField(const nlohmann::json* node, std::shared_ptr<const std::string> source, std::string path);
+  JsonField(const nlohmann::json* node, std::shared_ptr<const std::string> source,
+            std::string path);
 
   const nlohmann::json& node() const { return *node_; }
   const std::string& path() const { return path_; }

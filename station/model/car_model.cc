@@ -24,13 +24,15 @@ absl::StatusOr<CameraIntrinsics> ReadIntrinsics(const JsonField& parent, const s
   CameraIntrinsics in;
   if (model == "pinhole") {
     in.type = CameraModelType::kPinhole;
-    if (auto s = f->AllowOnlyKeys({"width", "height", "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"});
+    if (auto s = f->AllowOnlyKeys(
+            {"width", "height", "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"});
         !s.ok()) {
       return s;
     }
   } else {
     in.type = CameraModelType::kFisheye;
-    if (auto s = f->AllowOnlyKeys({"width", "height", "fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"});
+    if (auto s =
+            f->AllowOnlyKeys({"width", "height", "fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"});
         !s.ok()) {
       return s;
     }
@@ -49,9 +51,9 @@ absl::StatusOr<CameraIntrinsics> ReadIntrinsics(const JsonField& parent, const s
     if (!v.ok()) return v.status();
     *slot = *v;
   }
-  for (const auto& [key, slot] : {std::pair{"k1", &in.k1}, std::pair{"k2", &in.k2},
-                                  std::pair{"k3", &in.k3}, std::pair{"k4", &in.k4},
-                                  std::pair{"p1", &in.p1}, std::pair{"p2", &in.p2}}) {
+  for (const auto& [key, slot] :
+       {std::pair{"k1", &in.k1}, std::pair{"k2", &in.k2}, std::pair{"k3", &in.k3},
+        std::pair{"k4", &in.k4}, std::pair{"p1", &in.p1}, std::pair{"p2", &in.p2}}) {
     if (!f->Has(key)) continue;
     absl::StatusOr<double> v = f->Number(key);
     if (!v.ok()) return v.status();
@@ -74,10 +76,12 @@ absl::StatusOr<MountingTolerance> ReadTolerance(const JsonField& parent) {
     // A tolerance is a half-width: it must be positive, and beyond 45 degrees or 1 m it
     // checks nothing and is surely a unit mistake.
     if ((*ypr)[i] <= 0 || (*ypr)[i] > 45) {
-      return f->Error(absl::StrCat("ypr_deg[", i, "]"), absl::StrCat("must be within (0, 45], got ", (*ypr)[i]));
+      return f->Error(absl::StrCat("ypr_deg[", i, "]"),
+                      absl::StrCat("must be within (0, 45], got ", (*ypr)[i]));
     }
     if ((*xyz)[i] <= 0 || (*xyz)[i] > 1) {
-      return f->Error(absl::StrCat("xyz_m[", i, "]"), absl::StrCat("must be within (0, 1], got ", (*xyz)[i]));
+      return f->Error(absl::StrCat("xyz_m[", i, "]"),
+                      absl::StrCat("must be within (0, 1], got ", (*xyz)[i]));
     }
   }
   MountingTolerance t;
@@ -107,7 +111,8 @@ absl::StatusOr<SensorModel> ReadSensor(const JsonField& f, const std::filesystem
   if (*kind == "camera") {
     m.kind = SensorKind::kCamera;
     if (*model != "pinhole" && *model != "fisheye") {
-      return f.Error("model", absl::StrCat("camera model must be pinhole or fisheye, got '", *model, "'"));
+      return f.Error("model",
+                     absl::StrCat("camera model must be pinhole or fisheye, got '", *model, "'"));
     }
     absl::StatusOr<CameraIntrinsics> in = ReadIntrinsics(f, *model);
     if (!in.ok()) return in.status();
@@ -115,7 +120,9 @@ absl::StatusOr<SensorModel> ReadSensor(const JsonField& f, const std::filesystem
   } else if (*kind == "lidar") {
     m.kind = SensorKind::kLidar;
     if (*model != "vlp16" && *model != "pandar64" && *model != "pandarxt32") {
-      return f.Error("model", absl::StrCat("lidar model must be vlp16, pandar64 or pandarxt32, got '", *model, "'"));
+      return f.Error(
+          "model",
+          absl::StrCat("lidar model must be vlp16, pandar64 or pandarxt32, got '", *model, "'"));
     }
     absl::StatusOr<std::string> angles = f.StringOr("angles_file", "");
     if (!angles.ok()) return angles.status();
@@ -130,19 +137,24 @@ absl::StatusOr<SensorModel> ReadSensor(const JsonField& f, const std::filesystem
   } else if (*kind == "radar") {
     m.kind = SensorKind::kRadar;
     if (*model != "ars408" && *model != "esr") {
-      return f.Error("model", absl::StrCat("radar model must be ars408 or esr, got '", *model, "'"));
+      return f.Error("model",
+                     absl::StrCat("radar model must be ars408 or esr, got '", *model, "'"));
     }
     absl::StatusOr<std::int64_t> id = f.IntegerOr("radar_sensor_id", 0);
     if (!id.ok()) return id.status();
     // ARS408 sensor ids are 3 bits (CAN id offset n * 0x10).
-    if (*id < 0 || *id > 7) return f.Error("radar_sensor_id", absl::StrCat("must be within 0..7, got ", *id));
+    if (*id < 0 || *id > 7)
+      return f.Error("radar_sensor_id", absl::StrCat("must be within 0..7, got ", *id));
     m.radar_sensor_id = static_cast<int>(*id);
   } else {
     return f.Error("kind", absl::StrCat("must be camera, lidar or radar, got '", *kind, "'"));
   }
-  if (m.kind != SensorKind::kCamera && f.Has("intrinsics")) return f.Error("intrinsics", "only cameras have intrinsics");
-  if (m.kind != SensorKind::kLidar && f.Has("angles_file")) return f.Error("angles_file", "only LiDARs have angle files");
-  if (m.kind != SensorKind::kRadar && f.Has("radar_sensor_id")) return f.Error("radar_sensor_id", "only radars have a sensor id");
+  if (m.kind != SensorKind::kCamera && f.Has("intrinsics"))
+    return f.Error("intrinsics", "only cameras have intrinsics");
+  if (m.kind != SensorKind::kLidar && f.Has("angles_file"))
+    return f.Error("angles_file", "only LiDARs have angle files");
+  if (m.kind != SensorKind::kRadar && f.Has("radar_sensor_id"))
+    return f.Error("radar_sensor_id", "only radars have a sensor id");
   absl::StatusOr<Rigid3d> nominal = ReadPose(f, "nominal", SensorBaseRotation(m.kind));
   if (!nominal.ok()) return nominal.status();
   m.T_car_sensor_nominal = *nominal;
@@ -164,18 +176,24 @@ absl::StatusOr<SensorModel> ReadSensor(const JsonField& f, const std::filesystem
 
 const char* SensorKindName(SensorKind kind) {
   switch (kind) {
-    case SensorKind::kCamera: return "camera";
-    case SensorKind::kLidar: return "lidar";
-    case SensorKind::kRadar: return "radar";
+    case SensorKind::kCamera:
+      return "camera";
+    case SensorKind::kLidar:
+      return "lidar";
+    case SensorKind::kRadar:
+      return "radar";
   }
   return "unknown";
 }
 
 Eigen::Matrix3d SensorBaseRotation(SensorKind kind) {
   switch (kind) {
-    case SensorKind::kCamera: return CameraBaseRotation();
-    case SensorKind::kLidar: return LidarBaseRotation();
-    case SensorKind::kRadar: return Eigen::Matrix3d::Identity();
+    case SensorKind::kCamera:
+      return CameraBaseRotation();
+    case SensorKind::kLidar:
+      return LidarBaseRotation();
+    case SensorKind::kRadar:
+      return Eigen::Matrix3d::Identity();
   }
   return Eigen::Matrix3d::Identity();
 }
@@ -192,14 +210,17 @@ absl::StatusOr<CarModel> ParseCarModel(const std::string& text, const std::strin
   if (!doc.ok()) return doc.status();
   absl::StatusOr<JsonField> root = doc->Root();
   if (!root.ok()) return root.status();
-  if (auto s = root->AllowOnlyKeys({"format", "version", "id", "description", "sensors"}); !s.ok()) return s;
+  if (auto s = root->AllowOnlyKeys({"format", "version", "id", "description", "sensors"}); !s.ok())
+    return s;
   absl::StatusOr<std::string> format = root->String("format");
   if (!format.ok()) return format.status();
-  if (*format != kFormat) return root->Error("format", absl::StrCat("expected '", kFormat, "', got '", *format, "'"));
+  if (*format != kFormat)
+    return root->Error("format", absl::StrCat("expected '", kFormat, "', got '", *format, "'"));
   absl::StatusOr<std::int64_t> version = root->Integer("version");
   if (!version.ok()) return version.status();
   if (*version != kVersion) {
-    return root->Error("version", absl::StrCat("unsupported version ", *version, " (this build reads ", kVersion, ")"));
+    return root->Error("version", absl::StrCat("unsupported version ", *version,
+                                               " (this build reads ", kVersion, ")"));
   }
   CarModel car;
   absl::StatusOr<std::string> id = root->String("id");
@@ -215,7 +236,8 @@ absl::StatusOr<CarModel> ParseCarModel(const std::string& text, const std::strin
   for (const JsonField& f : *sensors) {
     absl::StatusOr<SensorModel> m = ReadSensor(f, base_dir);
     if (!m.ok()) return m.status();
-    if (!names.insert(m->name).second) return f.Error("name", absl::StrCat("duplicate sensor name '", m->name, "'"));
+    if (!names.insert(m->name).second)
+      return f.Error("name", absl::StrCat("duplicate sensor name '", m->name, "'"));
     car.sensors.push_back(std::move(*m));
   }
   return car;
@@ -233,8 +255,9 @@ nlohmann::json CarModelToJson(const CarModel& car) {
     nlohmann::json j = {{"name", s.name}, {"kind", SensorKindName(s.kind)}, {"model", s.model}};
     j["nominal"] = PoseToJson(s.T_car_sensor_nominal, SensorBaseRotation(s.kind));
     const MountingTolerance& t = s.tolerance;
-    j["tolerance"] = {{"ypr_deg", {t.yaw_rad / kDegToRad, t.pitch_rad / kDegToRad, t.roll_rad / kDegToRad}},
-                      {"xyz_m", {t.xyz_m.x(), t.xyz_m.y(), t.xyz_m.z()}}};
+    j["tolerance"] = {
+        {"ypr_deg", {t.yaw_rad / kDegToRad, t.pitch_rad / kDegToRad, t.roll_rad / kDegToRad}},
+        {"xyz_m", {t.xyz_m.x(), t.xyz_m.y(), t.xyz_m.z()}}};
     if (s.intrinsics) {
       const CameraIntrinsics& in = *s.intrinsics;
       nlohmann::json k = {{"width", in.width}, {"height", in.height}, {"fx", in.fx},
@@ -253,14 +276,19 @@ nlohmann::json CarModelToJson(const CarModel& car) {
     j["targets"] = s.targets;
     sensors.push_back(std::move(j));
   }
-  return {{"format", kFormat}, {"version", kVersion}, {"id", car.id},
-          {"description", car.description}, {"sensors", sensors}};
+  return {{"format", kFormat},
+          {"version", kVersion},
+          {"id", car.id},
+          {"description", car.description},
+          {"sensors", sensors}};
 }
 
 absl::StatusOr<LidarBeamTable> LidarBeamTableOf(const SensorModel& sensor) {
   const std::optional<LidarModel> model = LidarModelFromName(sensor.model);
-  if (!model) return absl::InvalidArgumentError(absl::StrCat("unknown LiDAR model '", sensor.model, "'"));
-  return sensor.angles_file.empty() ? DefaultBeamTable(*model) : ReadAngleCorrectionCsv(*model, sensor.angles_file);
+  if (!model)
+    return absl::InvalidArgumentError(absl::StrCat("unknown LiDAR model '", sensor.model, "'"));
+  return sensor.angles_file.empty() ? DefaultBeamTable(*model)
+                                    : ReadAngleCorrectionCsv(*model, sensor.angles_file);
 }
 
 absl::Status CheckTargetsExist(const CarModel& car, const StationLayout& layout) {
@@ -269,9 +297,10 @@ absl::Status CheckTargetsExist(const CarModel& car, const StationLayout& layout)
       const bool found = s.kind == SensorKind::kRadar ? layout.FindReflector(t) != nullptr
                                                       : layout.FindBoard(t) != nullptr;
       if (!found) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "station '", layout.name, "' has no ", s.kind == SensorKind::kRadar ? "reflector" : "board",
-            " '", t, "' (sensor '", s.name, "' of car '", car.id, "' targets it)"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("station '", layout.name, "' has no ",
+                         s.kind == SensorKind::kRadar ? "reflector" : "board", " '", t,
+                         "' (sensor '", s.name, "' of car '", car.id, "' targets it)"));
       }
     }
   }

@@ -2,11 +2,10 @@
 // The car model: its sensors, their nominal mounting, tolerances and what they calibrate
 // against (docs/station-and-car.md documents the file).
 
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"

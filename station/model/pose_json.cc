@@ -52,7 +52,8 @@ absl::StatusOr<Rigid3d> ReadPose(const JsonField& parent, const std::string& key
   for (int i = 0; i < 3; ++i) {
     // Mounting angles beyond a full turn are typing errors, not poses.
     if (std::abs((*ypr)[i]) > 360.0) {
-      return pose->Error(absl::StrCat("ypr_deg[", i, "]"), absl::StrCat("must be within +-360, got ", (*ypr)[i]));
+      return pose->Error(absl::StrCat("ypr_deg[", i, "]"),
+                         absl::StrCat("must be within +-360, got ", (*ypr)[i]));
     }
   }
   const YawPitchRoll a{(*ypr)[0] * kDegToRad, (*ypr)[1] * kDegToRad, (*ypr)[2] * kDegToRad};

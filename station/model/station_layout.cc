@@ -75,10 +75,12 @@ const char* KeyOfBoardError(BoardParamsError error) {
 }
 
 absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
-  if (auto s = f.AllowOnlyKeys({"id", "type", "scale", "cols", "rows", "square_m", "spacing_m",
-                                "diameter_m", "asymmetric", "light_circles", "border_bits",
-                                "tag_cols", "tag_rows", "tag_spacing", "start_id", "gap_m",
-                                "marker_m", "legacy_pattern", "dictionary", "pose", "hexagonal"});
+  if (auto s = f.AllowOnlyKeys({"id",         "type",           "scale",       "cols",
+                                "rows",       "square_m",       "spacing_m",   "diameter_m",
+                                "asymmetric", "light_circles",  "border_bits", "tag_cols",
+                                "tag_rows",   "tag_spacing",    "start_id",    "gap_m",
+                                "marker_m",   "legacy_pattern", "dictionary",  "pose",
+                                "hexagonal"});
       !s.ok()) {
     return s;
   }
@@ -91,8 +93,8 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (!board_type) {
     std::vector<std::string> names;
     for (BoardType t : kAllBoardTypes) names.push_back(BoardTypeName(t));
-    return f.Error("type", absl::StrCat("unknown board type '", *type, "'; known: ",
-                                        absl::StrJoin(names, ", ")));
+    return f.Error("type", absl::StrCat("unknown board type '", *type,
+                                        "'; known: ", absl::StrJoin(names, ", ")));
   }
   params.type = *board_type;
   absl::StatusOr<double> scale = f.NumberOr("scale", 1.0);
@@ -161,7 +163,8 @@ absl::StatusOr<CornerReflector> ReadReflector(const JsonField& f) {
   absl::StatusOr<double> rcs = f.NumberOr("rcs_dbsm", r.rcs_dbsm);
   if (!rcs.ok()) return rcs.status();
   // Physical trihedral reflectors span roughly -10..50 dBm²; beyond that it is a typo.
-  if (*rcs < -20 || *rcs > 60) return f.Error("rcs_dbsm", absl::StrCat("must be within -20..60, got ", *rcs));
+  if (*rcs < -20 || *rcs > 60)
+    return f.Error("rcs_dbsm", absl::StrCat("must be within -20..60, got ", *rcs));
   r.rcs_dbsm = *rcs;
   return r;
 }
@@ -178,7 +181,8 @@ absl::StatusOr<StationSurface> ReadSurface(const JsonField& f) {
   w.size_m = Eigen::Vector2d((*size)[0], (*size)[1]);
   absl::StatusOr<double> refl = f.NumberOr("reflectivity", w.reflectivity);
   if (!refl.ok()) return refl.status();
-  if (*refl < 0 || *refl > 1) return f.Error("reflectivity", absl::StrCat("must be within 0..1, got ", *refl));
+  if (*refl < 0 || *refl > 1)
+    return f.Error("reflectivity", absl::StrCat("must be within 0..1, got ", *refl));
   w.reflectivity = *refl;
   // A surface is placed like a board: at zero angles it faces the car (its z along -x).
   absl::StatusOr<Rigid3d> pose = ReadPose(f, "pose", BoardBaseRotation());
@@ -196,7 +200,8 @@ absl::Status ReadList(const JsonField& root, const char* key, ReadFn read, std::
   for (const JsonField& item : *items) {
     absl::StatusOr<T> v = read(item);
     if (!v.ok()) return v.status();
-    if (!ids->insert(v->id).second) return item.Error("id", absl::StrCat("duplicate id '", v->id, "'"));
+    if (!ids->insert(v->id).second)
+      return item.Error("id", absl::StrCat("duplicate id '", v->id, "'"));
     out->push_back(std::move(*v));
   }
   return absl::OkStatus();
@@ -218,23 +223,26 @@ const CornerReflector* StationLayout::FindReflector(const std::string& id) const
   return nullptr;
 }
 
-absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text, const std::string& source) {
+absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text,
+                                                 const std::string& source) {
   absl::StatusOr<JsonDocument> doc = JsonDocument::FromText(text, source);
   if (!doc.ok()) return doc.status();
   absl::StatusOr<JsonField> root = doc->Root();
   if (!root.ok()) return root.status();
-  if (auto s = root->AllowOnlyKeys({"format", "version", "name", "boards", "reflectors",
-                                    "floor_reflectivity", "surfaces"});
+  if (auto s = root->AllowOnlyKeys(
+          {"format", "version", "name", "boards", "reflectors", "floor_reflectivity", "surfaces"});
       !s.ok()) {
     return s;
   }
   absl::StatusOr<std::string> format = root->String("format");
   if (!format.ok()) return format.status();
-  if (*format != kFormat) return root->Error("format", absl::StrCat("expected '", kFormat, "', got '", *format, "'"));
+  if (*format != kFormat)
+    return root->Error("format", absl::StrCat("expected '", kFormat, "', got '", *format, "'"));
   absl::StatusOr<std::int64_t> version = root->Integer("version");
   if (!version.ok()) return version.status();
   if (*version != kVersion) {
-    return root->Error("version", absl::StrCat("unsupported version ", *version, " (this build reads ", kVersion, ")"));
+    return root->Error("version", absl::StrCat("unsupported version ", *version,
+                                               " (this build reads ", kVersion, ")"));
   }
   StationLayout layout;
   absl::StatusOr<std::string> name = root->String("name");
@@ -247,7 +255,8 @@ absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text, const 
   // Boards, reflectors and surfaces share one id space so that a sensor's targets are unambiguous.
   std::set<std::string> ids;
   if (auto s = ReadList(*root, "boards", ReadBoard, &layout.boards, &ids); !s.ok()) return s;
-  if (auto s = ReadList(*root, "reflectors", ReadReflector, &layout.reflectors, &ids); !s.ok()) return s;
+  if (auto s = ReadList(*root, "reflectors", ReadReflector, &layout.reflectors, &ids); !s.ok())
+    return s;
   if (auto s = ReadList(*root, "surfaces", ReadSurface, &layout.surfaces, &ids); !s.ok()) return s;
   return layout;
 }
@@ -319,9 +328,9 @@ nlohmann::json StationLayoutToJson(const StationLayout& layout) {
                         {"reflectivity", w.reflectivity},
                         {"pose", PoseToJson(w.T_station_surface, BoardBaseRotation())}});
   }
-  return {{"format", kFormat},     {"version", kVersion},
-          {"name", layout.name},   {"floor_reflectivity", layout.floor_reflectivity},
-          {"boards", boards},      {"reflectors", reflectors},
+  return {{"format", kFormat},   {"version", kVersion},
+          {"name", layout.name}, {"floor_reflectivity", layout.floor_reflectivity},
+          {"boards", boards},    {"reflectors", reflectors},
           {"surfaces", surfaces}};
 }
 

@@ -2,12 +2,11 @@
 // The station layout: what stands around the car, surveyed in the station frame
 // (docs/station-and-car.md documents the file).
 
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "detectors/boards/board.h"
@@ -53,7 +52,8 @@ struct StationLayout {
 // board type 'chess'; known: chessboard, ..."). Ids must be unique.
 absl::StatusOr<StationLayout> ReadStationLayout(const std::string& path);
 // The same from text already in memory; `source` names it in messages.
-absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text, const std::string& source);
+absl::StatusOr<StationLayout> ParseStationLayout(const std::string& text,
+                                                 const std::string& source);
 nlohmann::json StationLayoutToJson(const StationLayout& layout);
 
 // A board's parameters as the station file writes them: "scale" and the keys of its type

@@ -9,16 +9,40 @@ namespace {
 int VinValue(char c) {
   if (c >= '0' && c <= '9') return c - '0';
   switch (c) {
-    case 'A': case 'J': return 1;
-    case 'B': case 'K': case 'S': return 2;
-    case 'C': case 'L': case 'T': return 3;
-    case 'D': case 'M': case 'U': return 4;
-    case 'E': case 'N': case 'V': return 5;
-    case 'F': case 'W': return 6;
-    case 'G': case 'P': case 'X': return 7;
-    case 'H': case 'Y': return 8;
-    case 'R': case 'Z': return 9;
-    default: return -1;
+    case 'A':
+    case 'J':
+      return 1;
+    case 'B':
+    case 'K':
+    case 'S':
+      return 2;
+    case 'C':
+    case 'L':
+    case 'T':
+      return 3;
+    case 'D':
+    case 'M':
+    case 'U':
+      return 4;
+    case 'E':
+    case 'N':
+    case 'V':
+      return 5;
+    case 'F':
+    case 'W':
+      return 6;
+    case 'G':
+    case 'P':
+    case 'X':
+      return 7;
+    case 'H':
+    case 'Y':
+      return 8;
+    case 'R':
+    case 'Z':
+      return 9;
+    default:
+      return -1;
   }
 }
 
@@ -42,17 +66,20 @@ absl::Status ValidateVin(const std::string& vin, bool check_digit) {
   for (size_t i = 0; i < vin.size(); ++i) {
     const char c = vin[i];
     if (c == 'I' || c == 'O' || c == 'Q') {
-      return absl::InvalidArgumentError(absl::StrCat("character ", i + 1, " '", std::string(1, c),
-                                                     "' is not allowed (I, O, Q never appear in a VIN)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("character ", i + 1, " '", std::string(1, c),
+                       "' is not allowed (I, O, Q never appear in a VIN)"));
     }
     if (VinValue(c) < 0) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "character ", i + 1, " is not an upper-case letter or digit (0x", absl::Hex(static_cast<unsigned char>(c)), ")"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("character ", i + 1, " is not an upper-case letter or digit (0x",
+                       absl::Hex(static_cast<unsigned char>(c)), ")"));
     }
   }
   if (check_digit && vin[8] != VinCheckDigit(vin)) {
-    return absl::InvalidArgumentError(absl::StrCat("check digit (character 9) is '", std::string(1, vin[8]),
-                                                   "', expected '", std::string(1, VinCheckDigit(vin)), "'"));
+    return absl::InvalidArgumentError(absl::StrCat("check digit (character 9) is '",
+                                                   std::string(1, vin[8]), "', expected '",
+                                                   std::string(1, VinCheckDigit(vin)), "'"));
   }
   return absl::OkStatus();
 }

@@ -7,15 +7,15 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
-#include "station/sensors/radar/radar_decoder.h"
 #include "detectors/detect.h"
 #include "detectors/round_hole/round_hole_cloud.h"
 #include "station/camera/board_view.h"
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
 #include "station/sensors/lidar/pcd.h"
-#include "station/solvers/radar_calibration.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/solvers/lidar_calibration.h"
+#include "station/solvers/radar_calibration.h"
 
 namespace linecal {
 namespace {
@@ -23,7 +23,8 @@ namespace {
 constexpr double kDegPerRad = 180.0 / std::numbers::pi;
 
 std::int64_t NowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
 
@@ -54,7 +55,8 @@ bool TakeResult(const absl::StatusOr<Result>& r, SensorCalibration* out) {
 }
 
 SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorModel& sensor,
-                                        const CaptureSensor& recorded, const CaptureCalibrationOptions& capture_options) {
+                                        const CaptureSensor& recorded,
+                                        const CaptureCalibrationOptions& capture_options) {
   const CameraCalibrationOptions& options = capture_options.camera;
   SensorCalibration out;
   for (const std::string& id : sensor.targets) out.boards.push_back({id, 0, 0, ""});
@@ -77,8 +79,8 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
     for (BoardObservation& o : found) observations.push_back(std::move(o));
   }
   if (capture_options.stop.stop_requested()) return Stopped();
-  absl::StatusOr<CameraCalibrationResult> r =
-      CalibrateCamera(sensor, capture.station, capture.manifest.aligner.T_station_car(), observations, options);
+  absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(
+      sensor, capture.station, capture.manifest.aligner.T_station_car(), observations, options);
   if (!TakeResult(r, &out)) return out;
   out.residual_rms = r->residual_rms_px;
   if (r->solved) {
@@ -118,7 +120,8 @@ SensorCalibration CalibrateLidarSensor(const Capture& capture, const SensorModel
   }
   if (stop.stop_requested()) return Stopped();
   const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
-  return CalibrateLidarFrames(capture.station, capture.manifest.aligner.T_station_car(), sensor, views);
+  return CalibrateLidarFrames(capture.station, capture.manifest.aligner.T_station_car(), sensor,
+                              views);
 }
 
 SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel& sensor,
@@ -127,7 +130,8 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
   const std::optional<RadarModel> model = ParseRadarModel(sensor.model);
   if (!model || !recorded.can_log) {
     out.reason = "data_unreadable";
-    out.message = absl::StrCat(sensor.name, ": no CAN log or unknown radar model '", sensor.model, "'");
+    out.message =
+        absl::StrCat(sensor.name, ": no CAN log or unknown radar model '", sensor.model, "'");
     return out;
   }
   const absl::StatusOr<std::vector<CanFrame>> frames =
@@ -139,8 +143,9 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
   }
   if (stop.stop_requested()) return Stopped();
   const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *model, RadarConventions{});
-  const absl::StatusOr<RadarCalibrationRun> run = CalibrateRadar(
-      sensor, capture.station, capture.manifest.aligner.T_station_car(), decoded.cycles, RadarCalibrationOptions{});
+  const absl::StatusOr<RadarCalibrationRun> run =
+      CalibrateRadar(sensor, capture.station, capture.manifest.aligner.T_station_car(),
+                     decoded.cycles, RadarCalibrationOptions{});
   if (!run.ok()) {
     out.reason = "invalid_input";
     out.message = std::string(run.status().message());
@@ -161,21 +166,26 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
     out.mounting.sigma[0] = r.yaw_sigma_rad;
     out.mounting.observed = {true, false, false, false, false, false};
     double sum_sq = 0;
-    for (const RadarReflectorResidual& res : r.residuals) sum_sq += res.residual_rad * res.residual_rad;
-    out.residual_rms = r.residuals.empty() ? 0 : std::sqrt(sum_sq / r.residuals.size()) * kDegPerRad;
+    for (const RadarReflectorResidual& res : r.residuals)
+      sum_sq += res.residual_rad * res.residual_rad;
+    out.residual_rms =
+        r.residuals.empty() ? 0 : std::sqrt(sum_sq / r.residuals.size()) * kDegPerRad;
   }
   out.message = out.verdict == Verdict::kPass
                     ? ""
-                    : absl::StrCat(sensor.name, ": ", r.reason, " (yaw deviation ", r.yaw_deviation_rad * kDegPerRad,
-                                   " deg, tolerance ", r.yaw_tolerance_rad * kDegPerRad, " deg)");
+                    : absl::StrCat(sensor.name, ": ", r.reason, " (yaw deviation ",
+                                   r.yaw_deviation_rad * kDegPerRad, " deg, tolerance ",
+                                   r.yaw_tolerance_rad * kDegPerRad, " deg)");
   return out;
 }
 
 }  // namespace
 
-absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const CaptureCalibrationOptions& options) {
+absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture,
+                                                  const CaptureCalibrationOptions& options) {
   if (options.threads < 1 || options.threads > 64) {
-    return absl::InvalidArgumentError(absl::StrCat("threads = ", options.threads, ": must be in [1, 64]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("threads = ", options.threads, ": must be in [1, 64]"));
   }
   if (absl::Status s = options.camera.Validate(); !s.ok()) return s;
   const std::int64_t start = NowNs();
@@ -194,7 +204,9 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
       const std::int64_t t0 = NowNs();
       SensorCalibration r;
       switch (s.kind) {
-        case SensorKind::kCamera: r = CalibrateCameraSensor(capture, s, recorded, options); break;
+        case SensorKind::kCamera:
+          r = CalibrateCameraSensor(capture, s, recorded, options);
+          break;
         case SensorKind::kRadar:
           r = CalibrateRadarSensor(capture, s, recorded, options.stop);
           break;
@@ -225,7 +237,6 @@ absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture, const 
   return cycle;
 }
 
-
 SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid3d& T_station_car,
                                        const SensorModel& sensor,
                                        std::span<const std::span<const RoundHoleCloudPoint>> frames,
@@ -252,7 +263,8 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
     summary.frames_found = static_cast<int>(frames.size());
     observations.push_back(LidarObservationFromDetection(id, d));
   }
-  absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, station, T_station_car, observations);
+  absl::StatusOr<LidarCalibrationResult> r =
+      CalibrateLidar(sensor, station, T_station_car, observations);
   if (TakeResult(r, &out)) out.residual_rms = r->residual_rms_m;
   return out;
 }
@@ -283,8 +295,7 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
       // (station/camera/board_view.h); where the view does not show the whole board, the raw
       // detection stands.
       const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
-      std::optional<Detection> v =
-          DetectInBoardView(*camera, image, T_camera_board, board->board);
+      std::optional<Detection> v = DetectInBoardView(*camera, image, T_camera_board, board->board);
       if (v && v->found) {
         d = std::move(v);
       }

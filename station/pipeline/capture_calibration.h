@@ -21,7 +21,6 @@
 #include <string>
 #include <vector>
 
-
 #include "absl/status/statusor.h"
 #include "detectors/round_hole/round_hole_cloud.h"
 #include "station/capture/capture.h"
@@ -31,8 +30,8 @@ namespace linecal {
 
 struct BoardDetectionSummary {
   std::string board_id;
-  int frames_found = 0;  // frames in which the whole board was identified
-  int frames_partial = 0;  // frames with certain features of a partly seen board
+  int frames_found = 0;     // frames in which the whole board was identified
+  int frames_partial = 0;   // frames with certain features of a partly seen board
   std::string last_reason;  // the detector's reason in the last frame without the board
 };
 
@@ -45,7 +44,7 @@ struct SensorCalibration {
   bool solved = false;
   MountingEstimate mounting;  // when solved
   double residual_rms = 0;    // pixels (cameras), metres (LiDARs), degrees (radars)
-  int features_used = 0;      // board features (cameras), hole centres (LiDARs), reflectors (radars)
+  int features_used = 0;  // board features (cameras), hole centres (LiDARs), reflectors (radars)
   std::vector<BoardDetectionSummary> boards;  // cameras and LiDARs
   // Cameras, when solved: see CameraCalibrationResult.
   std::optional<Eigen::Vector2d> vanishing_point_px;

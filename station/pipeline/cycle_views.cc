@@ -7,9 +7,9 @@
 #include <span>
 
 #include "absl/strings/str_cat.h"
+#include "station/camera/camera_model.h"
 #include "station/pipeline/capture_calibration.h"
 #include "station/sensors/radar/radar_decoder.h"
-#include "station/camera/camera_model.h"
 #include "station/solvers/radar_calibration.h"
 
 namespace linecal {

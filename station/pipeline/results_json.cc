@@ -13,11 +13,13 @@ constexpr double kDegPerRad = 180.0 / std::numbers::pi;
 // Measured values, deviations from nominal and 1-sigma; components the sensor cannot
 // observe keep their nominal value, and their deviation and sigma are null.
 nlohmann::json MountingJson(const MountingEstimate& m) {
-  const double values[6] = {m.angles.yaw * kDegPerRad, m.angles.pitch * kDegPerRad, m.angles.roll * kDegPerRad,
-                            m.position_m.x(), m.position_m.y(), m.position_m.z()};
-  const double deviations[6] = {m.angles_deviation.yaw * kDegPerRad, m.angles_deviation.pitch * kDegPerRad,
-                                m.angles_deviation.roll * kDegPerRad, m.position_deviation_m.x(),
-                                m.position_deviation_m.y(), m.position_deviation_m.z()};
+  const double values[6] = {m.angles.yaw * kDegPerRad,  m.angles.pitch * kDegPerRad,
+                            m.angles.roll * kDegPerRad, m.position_m.x(),
+                            m.position_m.y(),           m.position_m.z()};
+  const double deviations[6] = {
+      m.angles_deviation.yaw * kDegPerRad,  m.angles_deviation.pitch * kDegPerRad,
+      m.angles_deviation.roll * kDegPerRad, m.position_deviation_m.x(),
+      m.position_deviation_m.y(),           m.position_deviation_m.z()};
   const char* names[6] = {"yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m"};
   nlohmann::json measured, deviation, sigma;
   for (int i = 0; i < 6; ++i) {
@@ -40,7 +42,9 @@ nlohmann::json Matrix3Json(const Eigen::Matrix3d& m) {
   return h;
 }
 
-nlohmann::json FiniteOrNull(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+nlohmann::json FiniteOrNull(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
 
 // "board_method" and "roll_from_vertical_board" of a solved camera (docs/solvers.md).
 nlohmann::json SeedFormulasJson(const SensorCalibration& s) {
@@ -52,7 +56,8 @@ nlohmann::json SeedFormulasJson(const SensorCalibration& s) {
     for (size_t i = 0; i < b.ground_points_px.size(); ++i) {
       points_px.push_back({b.ground_points_px[i].x(), b.ground_points_px[i].y()});
       points_car.push_back({b.ground_points_car_m[i].x(), b.ground_points_car_m[i].y()});
-      points_toolbox.push_back({b.toolbox_ground_points_car_m[i].x(), b.toolbox_ground_points_car_m[i].y()});
+      points_toolbox.push_back(
+          {b.toolbox_ground_points_car_m[i].x(), b.toolbox_ground_points_car_m[i].y()});
     }
     board["vanishing_point_px"] = {b.vanishing_point_px.x(), b.vanishing_point_px.y()};
     board["homography_rms_px"] = b.homography_rms_px;
@@ -61,7 +66,8 @@ nlohmann::json SeedFormulasJson(const SensorCalibration& s) {
     board["ground_homography"] = Matrix3Json(b.ground_homography);
     board["toolbox_ground_points_car_m"] = points_toolbox;
     board["toolbox_ground_homography"] = Matrix3Json(b.toolbox_ground_homography);
-    if (s.vanishing_point_px) board["vanishing_point_disagreement_px"] = s.vanishing_point_disagreement_px;
+    if (s.vanishing_point_px)
+      board["vanishing_point_disagreement_px"] = s.vanishing_point_disagreement_px;
     nlohmann::json ranging = nlohmann::json::array();
     for (size_t i = 0; i < s.ground_disagreement.size() && i < s.ranging.size(); ++i) {
       ranging.push_back({{"distance_m", s.ranging[i].true_distance_m},
@@ -106,7 +112,8 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
       j["boards"] = boards;
     }
     if (s.kind == SensorKind::kCamera) {
-      if (s.vanishing_point_px) j["vanishing_point_px"] = {s.vanishing_point_px->x(), s.vanishing_point_px->y()};
+      if (s.vanishing_point_px)
+        j["vanishing_point_px"] = {s.vanishing_point_px->x(), s.vanishing_point_px->y()};
       if (s.ground_homography) j["ground_homography"] = Matrix3Json(*s.ground_homography);
       nlohmann::json ranging = nlohmann::json::array();
       for (const RangingCheck& c : s.ranging) {

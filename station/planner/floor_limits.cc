@@ -12,7 +12,8 @@ namespace {
 absl::StatusOr<FloorPolygon> ReadPolygon(const JsonField& parent, const std::string& key) {
   absl::StatusOr<std::vector<JsonField>> items = parent.Array(key);
   if (!items.ok()) return items.status();
-  if (items->size() < 3) return parent.Error(key, absl::StrCat("needs at least 3 vertices, got ", items->size()));
+  if (items->size() < 3)
+    return parent.Error(key, absl::StrCat("needs at least 3 vertices, got ", items->size()));
   FloorPolygon polygon;
   for (const JsonField& item : *items) {
     if (!item.node().is_array() || item.node().size() != 2 || !item.node()[0].is_number() ||
@@ -32,7 +33,9 @@ absl::StatusOr<Eigen::Vector2d> ReadPoint(const JsonField& parent, const std::st
   return Eigen::Vector2d((*xy)[0], (*xy)[1]);
 }
 
-double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
+double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return a.x() * b.y() - a.y() * b.x();
+}
 
 bool OnSegment(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& p) {
   return std::min(a.x(), b.x()) - 1e-12 <= p.x() && p.x() <= std::max(a.x(), b.x()) + 1e-12 &&
@@ -46,21 +49,22 @@ absl::StatusOr<FloorLimits> ParseFloorLimits(const std::string& text, const std:
   if (!doc.ok()) return doc.status();
   absl::StatusOr<JsonField> root = doc->Root();
   if (!root.ok()) return root.status();
-  if (auto s = root->AllowOnlyKeys({"format", "version", "name", "usable_area_m", "walls", "height_limits_m",
-                                    "keep_out", "car_outline_m"});
+  if (auto s = root->AllowOnlyKeys({"format", "version", "name", "usable_area_m", "walls",
+                                    "height_limits_m", "keep_out", "car_outline_m"});
       !s.ok()) {
     return s;
   }
   absl::StatusOr<std::string> format = root->String("format");
   if (!format.ok()) return format.status();
   if (*format != kFloorLimitsFormat) {
-    return root->Error("format", absl::StrCat("expected '", kFloorLimitsFormat, "', got '", *format, "'"));
+    return root->Error("format",
+                       absl::StrCat("expected '", kFloorLimitsFormat, "', got '", *format, "'"));
   }
   absl::StatusOr<std::int64_t> version = root->Integer("version");
   if (!version.ok()) return version.status();
   if (*version != kFloorLimitsVersion) {
-    return root->Error("version", absl::StrCat("unsupported version ", *version, " (this build reads ",
-                                               kFloorLimitsVersion, ")"));
+    return root->Error("version", absl::StrCat("unsupported version ", *version,
+                                               " (this build reads ", kFloorLimitsVersion, ")"));
   }
   FloorLimits f;
   absl::StatusOr<std::string> name = root->String("name");
@@ -151,7 +155,8 @@ bool SegmentsIntersect(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const
   const double d2 = Cross(b - a, d - a);
   const double d3 = Cross(d - c, a - c);
   const double d4 = Cross(d - c, b - c);
-  if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return true;
+  if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0)))
+    return true;
   // Touching and collinear cases.
   if (d1 == 0 && OnSegment(a, b, c)) return true;
   if (d2 == 0 && OnSegment(a, b, d)) return true;

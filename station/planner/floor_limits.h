@@ -3,10 +3,9 @@
 // boards and reflectors may stand. Station frame (docs/conventions.md), metres; polygons lie in
 // the floor plane z = 0 and are given as [x, y] vertices in order (either orientation).
 
+#include <Eigen/Core>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 

@@ -15,13 +15,13 @@
 #include "detectors/round_hole/round_hole_cloud.h"
 #include "station/camera/camera_model.h"
 #include "station/model/pose_json.h"
-#include "station/solvers/radar_calibration.h"
-#include "station/solvers/reflector_association.h"
 #include "station/sensors/lidar/lidar_format.h"
-#include "station/sim/lidar_sim.h"
 #include "station/sensors/radar/field_of_view.h"
+#include "station/sim/lidar_sim.h"
 #include "station/solvers/camera_calibration.h"
 #include "station/solvers/lidar_calibration.h"
+#include "station/solvers/radar_calibration.h"
+#include "station/solvers/reflector_association.h"
 
 namespace linecal {
 namespace {
@@ -54,8 +54,8 @@ Eigen::Vector3d FeaturePoint(const StationBoard& b, const Eigen::Vector2d& p_boa
 
 std::array<Eigen::Vector3d, 4> PageCorners(const StationBoard& b) {
   const Eigen::Vector2d h = 0.5 * b.board.page_size_m();
-  return {FeaturePoint(b, {-h.x(), -h.y()}), FeaturePoint(b, {h.x(), -h.y()}), FeaturePoint(b, {h.x(), h.y()}),
-          FeaturePoint(b, {-h.x(), h.y()})};
+  return {FeaturePoint(b, {-h.x(), -h.y()}), FeaturePoint(b, {h.x(), -h.y()}),
+          FeaturePoint(b, {h.x(), h.y()}), FeaturePoint(b, {-h.x(), h.y()})};
 }
 
 // True when the segment a-b passes through the rectangle of size `size` centred in the x-y
@@ -150,7 +150,8 @@ void CheckFloor(const FloorLimits* floor, const FloorPolygon& footprint, double 
     }
   }
   bool outside = false;
-  for (const Eigen::Vector2d& p : footprint) outside = outside || !PointInPolygon(p, floor->usable_area);
+  for (const Eigen::Vector2d& p : footprint)
+    outside = outside || !PointInPolygon(p, floor->usable_area);
   for (const FloorWall& w : floor->walls) {
     for (size_t i = 0; i + 1 < footprint.size() || (i == 0 && footprint.size() == 1); ++i) {
       const Eigen::Vector2d& a = footprint[i];
@@ -174,10 +175,11 @@ void CheckBoardFloor(const FloorLimits* floor, const StationBoard& b, TargetAsse
   CheckFloor(floor, BoardFootprint(b), z_min, z_max, t);
 }
 
-double RatioOf(const SensorModel& sensor, const Eigen::Matrix<double, 6, 1>& sigma, const std::array<bool, 6>& observed,
-               double fraction) {
-  const double tol[6] = {sensor.tolerance.yaw_rad,  sensor.tolerance.pitch_rad, sensor.tolerance.roll_rad,
-                         sensor.tolerance.xyz_m.x(), sensor.tolerance.xyz_m.y(), sensor.tolerance.xyz_m.z()};
+double RatioOf(const SensorModel& sensor, const Eigen::Matrix<double, 6, 1>& sigma,
+               const std::array<bool, 6>& observed, double fraction) {
+  const double tol[6] = {sensor.tolerance.yaw_rad,   sensor.tolerance.pitch_rad,
+                         sensor.tolerance.roll_rad,  sensor.tolerance.xyz_m.x(),
+                         sensor.tolerance.xyz_m.y(), sensor.tolerance.xyz_m.z()};
   double ratio = 0;
   for (int i = 0; i < 6; ++i) {
     if (observed[i] && tol[i] > 0) ratio = std::max(ratio, sigma[i] / (fraction * tol[i]));
@@ -187,16 +189,18 @@ double RatioOf(const SensorModel& sensor, const Eigen::Matrix<double, 6, 1>& sig
 
 // The board a camera or LiDAR names as target `id`; null (with the reason) when there is
 // none.
-const StationBoard* TargetBoard(const StationLayout& layout, const std::string& id, TargetAssessment* t) {
+const StationBoard* TargetBoard(const StationLayout& layout, const std::string& id,
+                                TargetAssessment* t) {
   t->target = id;
   const StationBoard* b = layout.FindBoard(id);
-  if (b == nullptr) AddReason(&t->reasons, layout.FindReflector(id) ? "wrong_target_type" : "unknown_target");
+  if (b == nullptr)
+    AddReason(&t->reasons, layout.FindReflector(id) ? "wrong_target_type" : "unknown_target");
   return b;
 }
 
 // The predicted sigma of a solver's mounting estimate and its verdict against the bar.
-void TakeMounting(bool solved, const MountingEstimate& m, const SensorModel& sensor, const PlannerOptions& o,
-                  SensorAssessment* a) {
+void TakeMounting(bool solved, const MountingEstimate& m, const SensorModel& sensor,
+                  const PlannerOptions& o, SensorAssessment* a) {
   if (!solved) {
     AddReason(&a->reasons, "too_few_features");
     return;
@@ -210,7 +214,8 @@ void TakeMounting(bool solved, const MountingEstimate& m, const SensorModel& sen
 
 absl::StatusOr<std::vector<double>> BeamElevations(const SensorModel& sensor) {
   absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
-  if (!beams.ok()) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": ", beams.status().message()));
+  if (!beams.ok())
+    return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": ", beams.status().message()));
   std::vector<double> e;
   for (const LidarBeam& b : beams->beams) e.push_back(b.elevation_rad);
   return e;
@@ -243,11 +248,13 @@ void CollectTargetReasons(SensorAssessment* a) {
 }
 
 // A round-hole board's exact hole centres and normal in the LiDAR frame, at `sigma_m`.
-LidarBoardObservation ExactHoles(const StationBoard& b, const Rigid3d& T_lidar_station, double sigma_m) {
+LidarBoardObservation ExactHoles(const StationBoard& b, const Rigid3d& T_lidar_station,
+                                 double sigma_m) {
   LidarBoardObservation obs;
   obs.board_id = b.id;
   for (const BoardFeature& f : b.board.features()) {
-    if (f.kind == FeatureKind::kHoleCentre) obs.holes.push_back({f.id, T_lidar_station * FeaturePoint(b, f.p_board)});
+    if (f.kind == FeatureKind::kHoleCentre)
+      obs.holes.push_back({f.id, T_lidar_station * FeaturePoint(b, f.p_board)});
   }
   obs.normal_lidar = T_lidar_station.RotationMatrix() * b.T_station_board.RotationMatrix().col(2);
   obs.centre_sigma_m = sigma_m;
@@ -256,9 +263,11 @@ LidarBoardObservation ExactHoles(const StationBoard& b, const Rigid3d& T_lidar_s
 
 // --- cameras --------------------------------------------------------------------------
 
-absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const StationLayout& layout,
-                                              const FloorLimits* floor, const PlannerOptions& o, bool predict) {
-  if (!sensor.intrinsics) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": camera without intrinsics"));
+absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor,
+                                              const StationLayout& layout, const FloorLimits* floor,
+                                              const PlannerOptions& o, bool predict) {
+  if (!sensor.intrinsics)
+    return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": camera without intrinsics"));
   absl::StatusOr<CameraModel> camera = CameraModel::Create(*sensor.intrinsics);
   if (!camera.ok()) return camera.status();
   SensorAssessment a;
@@ -281,8 +290,8 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
       if (f.kind == FeatureKind::kHoleCentre) continue;  // LiDAR features, no image
       Eigen::Vector2d uv;
       const Eigen::Vector3d p = FeaturePoint(*b, f.p_board);
-      if (!camera->Project(T_camera_station * p, &uv) || uv.x() < m || uv.y() < m || uv.x() > w - 1 - m ||
-          uv.y() > h - 1 - m) {
+      if (!camera->Project(T_camera_station * p, &uv) || uv.x() < m || uv.y() < m ||
+          uv.x() > w - 1 - m || uv.y() > h - 1 - m) {
         inside = false;
         continue;
       }
@@ -294,7 +303,8 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
     t.smallest_feature_px = SmallestCellPx(*camera, T_camera_board, b->board);
     if (t.smallest_feature_px < o.min_feature_px) {
       AddReason(&t.reasons, "features_too_small");
-      t.detail += absl::StrFormat(" smallest cell %.1f px < %.1f px;", t.smallest_feature_px, o.min_feature_px);
+      t.detail += absl::StrFormat(" smallest cell %.1f px < %.1f px;", t.smallest_feature_px,
+                                  o.min_feature_px);
     }
     NoteOccluder(occluder, &t);
     NoteHiddenPage(HiddenPageOf(eye, *b, layout,
@@ -313,10 +323,11 @@ absl::StatusOr<SensorAssessment> AssessCamera(const SensorModel& sensor, const S
   CollectTargetReasons(&a);
   if (predict) {
     CameraCalibrationOptions co;
-    co.pnp.feature_sigma_px =
-        sensor.intrinsics && sensor.intrinsics->type == CameraModelType::kFisheye && o.fisheye_corner_noise_px > 0
-            ? o.fisheye_corner_noise_px
-            : o.corner_noise_px;
+    co.pnp.feature_sigma_px = sensor.intrinsics &&
+                                      sensor.intrinsics->type == CameraModelType::kFisheye &&
+                                      o.fisheye_corner_noise_px > 0
+                                  ? o.fisheye_corner_noise_px
+                                  : o.corner_noise_px;
     co.max_sigma_fraction_of_tolerance = o.max_sigma_fraction_of_tolerance;
     absl::StatusOr<CameraCalibrationResult> r =
         observations.empty() ? absl::StatusOr<CameraCalibrationResult>(CameraCalibrationResult{})
@@ -367,18 +378,21 @@ const StationBoard* AssessLidarTarget(const std::string& id, const StationLayout
     if (f.kind != FeatureKind::kHoleCentre) continue;
     ++t->features;
     const Eigen::Vector3d c = FeaturePoint(*b, f.p_board);
-    t->fewest_rings = std::min(t->fewest_rings, RingsThroughHole(elevations, T_lidar_station * c, normal_lidar, radius));
+    t->fewest_rings = std::min(
+        t->fewest_rings, RingsThroughHole(elevations, T_lidar_station * c, normal_lidar, radius));
     // The hole's rim, where the rings' edges are measured, must be in sight.
     for (int k = 0; k < 8 && !occluder; ++k) {
       const double phi = 2 * kPi * k / 8;
-      const Eigen::Vector2d rim = f.p_board + radius * Eigen::Vector2d(std::cos(phi), std::sin(phi));
+      const Eigen::Vector2d rim =
+          f.p_board + radius * Eigen::Vector2d(std::cos(phi), std::sin(phi));
       occluder = Occluder(eye, FeaturePoint(*b, rim), layout, id);
     }
   }
   if (t->features == 0) t->fewest_rings = 0;
   if (t->fewest_rings < o.min_rings_per_hole) {
     AddReason(&t->reasons, "too_few_rings");
-    t->detail += absl::StrFormat(" %d ring(s) through the worst hole < %d;", t->fewest_rings, o.min_rings_per_hole);
+    t->detail += absl::StrFormat(" %d ring(s) through the worst hole < %d;", t->fewest_rings,
+                                 o.min_rings_per_hole);
   }
   NoteOccluder(occluder, t);
   NoteHiddenPage(HiddenPageOf(eye, *b, layout, [](const Eigen::Vector3d&) { return true; }),
@@ -401,13 +415,15 @@ struct DetectorSpread {
 // 1.6x between cars for two rings per hole): the prediction is its RMS over the nominal
 // mounting and pitch or roll half a tolerance either way. Five simulated rotations, each
 // searched for every usable board.
-absl::StatusOr<DetectorSpread> SimulateDetectorSpread(const SensorModel& sensor, const StationLayout& layout,
-                                                      const std::vector<const StationBoard*>& usable) {
+absl::StatusOr<DetectorSpread> SimulateDetectorSpread(
+    const SensorModel& sensor, const StationLayout& layout,
+    const std::vector<const StationBoard*>& usable) {
   const Rigid3d& T_station_lidar = sensor.T_car_sensor_nominal;
   const Rigid3d T_lidar_station = T_station_lidar.Inverse();
   absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
   if (!beams.ok()) return beams.status();
-  const YawPitchRoll nominal = MountingAngles(T_station_lidar.RotationMatrix(), LidarBaseRotation());
+  const YawPitchRoll nominal =
+      MountingAngles(T_station_lidar.RotationMatrix(), LidarBaseRotation());
   const double dp = 0.5 * sensor.tolerance.pitch_rad, dr = 0.5 * sensor.tolerance.roll_rad;
   const double offsets[5][2] = {{0, 0}, {dp, 0}, {-dp, 0}, {0, dr}, {0, -dr}};
   DetectorSpread s;
@@ -420,8 +436,10 @@ absl::StatusOr<DetectorSpread> SimulateDetectorSpread(const SensorModel& sensor,
     YawPitchRoll ypr = nominal;
     ypr.pitch += offsets[k][0];
     ypr.roll += offsets[k][1];
-    const Rigid3d T_station_true(MountingRotation(ypr, LidarBaseRotation()), T_station_lidar.translation());
-    absl::StatusOr<LidarSimResult> sim = SimulateLidar(*beams, T_station_true, layout, LidarSimOptions{}, 0, 1);
+    const Rigid3d T_station_true(MountingRotation(ypr, LidarBaseRotation()),
+                                 T_station_lidar.translation());
+    absl::StatusOr<LidarSimResult> sim =
+        SimulateLidar(*beams, T_station_true, layout, LidarSimOptions{}, 0, 1);
     if (!sim.ok()) return sim.status();
     std::vector<std::vector<RoundHoleCloudPoint>> frames;
     for (const LidarScan& scan : sim->scans) {
@@ -430,8 +448,8 @@ absl::StatusOr<DetectorSpread> SimulateDetectorSpread(const SensorModel& sensor,
     }
     const std::vector<std::span<const RoundHoleCloudPoint>> views(frames.begin(), frames.end());
     for (size_t i = 0; i < usable.size(); ++i) {
-      const RoundHoleCloudDetection d =
-          DetectRoundHoleBoardInCloud(usable[i]->board, views, T_lidar_station * usable[i]->T_station_board);
+      const RoundHoleCloudDetection d = DetectRoundHoleBoardInCloud(
+          usable[i]->board, views, T_lidar_station * usable[i]->T_station_board);
       if (k == 0) s.nominal_reason[i] = d.reason;
       if (!d.found) continue;
       const LidarBoardObservation o = LidarObservationFromDetection(usable[i]->id, d);
@@ -447,10 +465,9 @@ absl::StatusOr<DetectorSpread> SimulateDetectorSpread(const SensorModel& sensor,
 // The exact observations of the usable boards with the detector's mean sigmas and pose
 // covariance (the prediction, not the measurement); a board the detector missed at the
 // nominal mounting or at all gets "board_not_detected" in a's targets instead.
-std::vector<LidarBoardObservation> PredictedObservations(const std::vector<const StationBoard*>& usable,
-                                                         const DetectorSpread& s,
-                                                         const Rigid3d& T_lidar_station,
-                                                         SensorAssessment* a) {
+std::vector<LidarBoardObservation> PredictedObservations(
+    const std::vector<const StationBoard*>& usable, const DetectorSpread& s,
+    const Rigid3d& T_lidar_station, SensorAssessment* a) {
   std::vector<LidarBoardObservation> observations;
   for (size_t i = 0; i < usable.size(); ++i) {
     const StationBoard* b = usable[i];
@@ -462,7 +479,8 @@ std::vector<LidarBoardObservation> PredictedObservations(const std::vector<const
       }
       continue;
     }
-    LidarBoardObservation obs = ExactHoles(*b, T_lidar_station, std::sqrt(s.centre_var[i] / s.found[i]));
+    LidarBoardObservation obs =
+        ExactHoles(*b, T_lidar_station, std::sqrt(s.centre_var[i] / s.found[i]));
     obs.normal_sigma_rad = std::sqrt(s.normal_var[i] / s.found[i]);
     obs.T_lidar_board = T_lidar_station * b->T_station_board;
     obs.pose_covariance = s.pose_covariance[i] / s.found[i];
@@ -481,7 +499,8 @@ absl::Status PredictLidarMounting(const SensorModel& sensor, const StationLayout
   int holes = 0;
   for (const LidarBoardObservation& ob : observations) holes += static_cast<int>(ob.holes.size());
   if (holes >= 3) {
-    absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(sensor, layout, Rigid3d(), observations, lo);
+    absl::StatusOr<LidarCalibrationResult> r =
+        CalibrateLidar(sensor, layout, Rigid3d(), observations, lo);
     if (!r.ok()) return r.status();
     TakeMounting(r->solved, r->mounting, sensor, o, a);
   } else {
@@ -491,8 +510,8 @@ absl::Status PredictLidarMounting(const SensorModel& sensor, const StationLayout
 }
 
 absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const StationLayout& layout,
-                                             const FloorLimits* floor, const PlannerOptions& o, bool predict,
-                                             bool simulate) {
+                                             const FloorLimits* floor, const PlannerOptions& o,
+                                             bool predict, bool simulate) {
   absl::StatusOr<std::vector<double>> elevations = BeamElevations(sensor);
   if (!elevations.ok()) return elevations.status();
   SensorAssessment a;
@@ -503,7 +522,8 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
   std::vector<const StationBoard*> usable;
   for (const std::string& id : sensor.targets) {
     TargetAssessment& t = a.targets.emplace_back();
-    const StationBoard* b = AssessLidarTarget(id, layout, floor, o, *elevations, T_station_lidar, &t);
+    const StationBoard* b =
+        AssessLidarTarget(id, layout, floor, o, *elevations, T_station_lidar, &t);
     if (b != nullptr) usable.push_back(b);
   }
   std::vector<LidarBoardObservation> observations;
@@ -512,11 +532,13 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
     if (!spread.ok()) return spread.status();
     observations = PredictedObservations(usable, *spread, T_lidar_station, &a);
   } else if (predict) {
-    for (const StationBoard* b : usable) observations.push_back(ExactHoles(*b, T_lidar_station, kProxyCentreSigmaM));
+    for (const StationBoard* b : usable)
+      observations.push_back(ExactHoles(*b, T_lidar_station, kProxyCentreSigmaM));
   }
   CollectTargetReasons(&a);
   if (predict) {
-    if (absl::Status s = PredictLidarMounting(sensor, layout, observations, o, &a); !s.ok()) return s;
+    if (absl::Status s = PredictLidarMounting(sensor, layout, observations, o, &a); !s.ok())
+      return s;
   }
   Finish(&a);
   return a;
@@ -525,9 +547,12 @@ absl::StatusOr<SensorAssessment> AssessLidar(const SensorModel& sensor, const St
 // --- radars ---------------------------------------------------------------------------
 
 absl::StatusOr<SensorAssessment> AssessRadar(const SensorModel& sensor, const StationLayout& layout,
-                                             const FloorLimits* floor, const PlannerOptions& o, bool predict) {
+                                             const FloorLimits* floor, const PlannerOptions& o,
+                                             bool predict) {
   const std::optional<RadarFieldOfView> fov = RadarFieldOfViewOf(sensor.model);
-  if (!fov) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": unknown radar model '", sensor.model, "'"));
+  if (!fov)
+    return absl::InvalidArgumentError(
+        absl::StrCat(sensor.name, ": unknown radar model '", sensor.model, "'"));
   SensorAssessment a;
   a.sensor = sensor.name;
   a.kind = sensor.kind;
@@ -619,8 +644,9 @@ absl::StatusOr<SensorAssessment> AssessRadar(const SensorModel& sensor, const St
   return a;
 }
 
-absl::StatusOr<SensorAssessment> Assess(const SensorModel& sensor, const StationLayout& layout, const FloorLimits* floor,
-                                        const PlannerOptions& o, bool predict, bool simulate) {
+absl::StatusOr<SensorAssessment> Assess(const SensorModel& sensor, const StationLayout& layout,
+                                        const FloorLimits* floor, const PlannerOptions& o,
+                                        bool predict, bool simulate) {
   switch (sensor.kind) {
     case SensorKind::kCamera:
       return AssessCamera(sensor, layout, floor, o, predict);
@@ -655,9 +681,15 @@ double HeadingOf(const SensorModel& sensor) {
   const Eigen::Matrix3d R = sensor.T_car_sensor_nominal.RotationMatrix();
   Eigen::Vector3d forward;
   switch (sensor.kind) {
-    case SensorKind::kCamera: forward = R.col(2); break;  // optical axis
-    case SensorKind::kLidar: forward = R.col(1); break;   // azimuth 0 (vendor +y)
-    case SensorKind::kRadar: forward = R.col(0); break;   // boresight
+    case SensorKind::kCamera:
+      forward = R.col(2);
+      break;  // optical axis
+    case SensorKind::kLidar:
+      forward = R.col(1);
+      break;  // azimuth 0 (vendor +y)
+    case SensorKind::kRadar:
+      forward = R.col(0);
+      break;  // boresight
   }
   return std::atan2(forward.y(), forward.x());
 }
@@ -668,13 +700,15 @@ double PitchDownOf(const SensorModel& sensor) {
 }
 
 bool HasSensor(const std::vector<SensorModel>& placed, const std::string& name) {
-  return std::any_of(placed.begin(), placed.end(), [&](const SensorModel& s) { return s.name == name; });
+  return std::any_of(placed.begin(), placed.end(),
+                     [&](const SensorModel& s) { return s.name == name; });
 }
 
 // True when adding the candidate targets to `layout` leaves every sensor already placed
 // as calibratable, geometrically, as it was.
-absl::StatusOr<bool> KeepsOthers(const std::vector<SensorModel>& placed, const StationLayout& layout,
-                                 const FloorLimits& floor, const PlannerOptions& o) {
+absl::StatusOr<bool> KeepsOthers(const std::vector<SensorModel>& placed,
+                                 const StationLayout& layout, const FloorLimits& floor,
+                                 const PlannerOptions& o) {
   for (const SensorModel& s : placed) {
     absl::StatusOr<SensorAssessment> a = Assess(s, layout, &floor, o, false, false);
     if (!a.ok()) return a.status();
@@ -692,11 +726,10 @@ struct Candidate {
 // disturbing the others, lowest predicted uncertainty ratio (LiDARs: ranked by the proxy,
 // the simulated detector decides among the best few). When none is, the least bad one
 // (fewest reasons, then lowest ratio), so that the plan says why.
-absl::StatusOr<std::optional<Candidate>> BestCandidate(const SensorModel& sensor, const std::vector<Candidate>& candidates,
-                                                       const std::vector<std::string>& existing,
-                                                       const std::vector<SensorModel>& placed,
-                                                       const StationLayout& layout, const FloorLimits& floor,
-                                                       const PlannerOptions& o) {
+absl::StatusOr<std::optional<Candidate>> BestCandidate(
+    const SensorModel& sensor, const std::vector<Candidate>& candidates,
+    const std::vector<std::string>& existing, const std::vector<SensorModel>& placed,
+    const StationLayout& layout, const FloorLimits& floor, const PlannerOptions& o) {
   const auto trial_of = [&](const Candidate& c, StationLayout* trial, SensorModel* s) {
     *trial = layout;
     *s = sensor;
@@ -727,7 +760,8 @@ absl::StatusOr<std::optional<Candidate>> BestCandidate(const SensorModel& sensor
       keeps = *k;
     }
     // Never spoil a sensor already planned if it can be helped.
-    const std::tuple<int, size_t, double> badness = {keeps ? 0 : 1, a->reasons.size(), a->uncertainty_ratio};
+    const std::tuple<int, size_t, double> badness = {keeps ? 0 : 1, a->reasons.size(),
+                                                     a->uncertainty_ratio};
     if (!least_bad || badness < least_bad->first) least_bad = {{badness, i}};
     if (a->calibratable && keeps) ranked.push_back({a->uncertainty_ratio, i});
   }
@@ -758,14 +792,16 @@ std::vector<Candidate> LidarCandidates(const SensorModel& sensor, const FloorLim
     for (double d = 3.0; d <= 12.0; d += 1.0) {
       for (double theta_deg : {10.0, 15.0, 20.0, 30.0}) {
         // The board centre at the LiDAR's height, within the height limits.
-        const double z = std::clamp(eye.z(), floor.min_height_m + half + 0.1, floor.max_height_m - half);
+        const double z =
+            std::clamp(eye.z(), floor.min_height_m + half + 0.1, floor.max_height_m - half);
         Candidate c;
         for (int side : {+1, -1}) {
           const double az = heading + side * theta_deg * kDeg;
           const Eigen::Vector3d xyz = eye + d * Eigen::Vector3d(std::cos(az), std::sin(az), 0) +
                                       Eigen::Vector3d(0, 0, z - eye.z());
-          c.boards.push_back(MakeBoard(absl::StrCat(sensor.name, side > 0 ? "_board_left" : "_board_right"), p, xyz,
-                                       {FacingYawDeg(xyz, eye) * kDeg, 0, 0}));
+          c.boards.push_back(
+              MakeBoard(absl::StrCat(sensor.name, side > 0 ? "_board_left" : "_board_right"), p,
+                        xyz, {FacingYawDeg(xyz, eye) * kDeg, 0, 0}));
         }
         out.push_back(std::move(c));
       }
@@ -780,8 +816,8 @@ std::vector<Candidate> CameraCandidates(const SensorModel& sensor, const FloorLi
   const double heading = HeadingOf(sensor);
   const double pitch_down = PitchDownOf(sensor);
   const std::string id = sensor.name + "_board";
-  for (BoardType type : {BoardType::kChessboard, BoardType::kCircle, BoardType::kVertical, BoardType::kAruco,
-                         BoardType::kApriltag}) {
+  for (BoardType type : {BoardType::kChessboard, BoardType::kCircle, BoardType::kVertical,
+                         BoardType::kAruco, BoardType::kApriltag}) {
     for (double scale : {1.0, 2.0}) {
       // The chessboard is 2.6 m wide already.
       if (type == BoardType::kChessboard && scale > 1) continue;
@@ -797,7 +833,8 @@ std::vector<Candidate> CameraCandidates(const SensorModel& sensor, const FloorLi
           const Eigen::Vector3d dir(std::cos(az), std::sin(az), 0);
           // Upright, centred on the optical axis's height at that distance.
           const double z_axis = eye.z() - d * std::tan(pitch_down);
-          const double z = std::clamp(z_axis, floor.min_height_m + half_h + 0.1, floor.max_height_m - half_h);
+          const double z =
+              std::clamp(z_axis, floor.min_height_m + half_h + 0.1, floor.max_height_m - half_h);
           const Eigen::Vector3d xyz = eye + d * dir + Eigen::Vector3d(0, 0, z - eye.z());
           out.push_back({{MakeBoard(id, p, xyz, {FacingYawDeg(xyz, eye) * kDeg, 0, 0})}, {}});
           // Lying on the floor, its top away from the camera, for cameras looking down.
@@ -854,33 +891,41 @@ absl::Status PlannerOptions::Validate() const {
   const auto bad = [](const char* field, double v, const char* range) {
     return absl::InvalidArgumentError(absl::StrCat(field, " = ", v, ": must be in ", range));
   };
-  if (!(min_feature_px > 0 && min_feature_px <= 1000)) return bad("min_feature_px", min_feature_px, "(0, 1000]");
-  if (!(corner_noise_px > 0 && corner_noise_px <= 10)) return bad("corner_noise_px", corner_noise_px, "(0, 10]");
+  if (!(min_feature_px > 0 && min_feature_px <= 1000))
+    return bad("min_feature_px", min_feature_px, "(0, 1000]");
+  if (!(corner_noise_px > 0 && corner_noise_px <= 10))
+    return bad("corner_noise_px", corner_noise_px, "(0, 10]");
   if (!(fisheye_corner_noise_px >= 0 && fisheye_corner_noise_px <= 10)) {
     return bad("fisheye_corner_noise_px", fisheye_corner_noise_px, "[0, 10]");
   }
-  if (camera_frames < 1 || camera_frames > 100) return bad("camera_frames", camera_frames, "1..100");
-  if (!(image_margin_px >= 0 && image_margin_px <= 500)) return bad("image_margin_px", image_margin_px, "[0, 500]");
-  if (!(min_fill_share > 0 && min_fill_share <= 1)) return bad("min_fill_share", min_fill_share, "(0, 1]");
+  if (camera_frames < 1 || camera_frames > 100)
+    return bad("camera_frames", camera_frames, "1..100");
+  if (!(image_margin_px >= 0 && image_margin_px <= 500))
+    return bad("image_margin_px", image_margin_px, "[0, 500]");
+  if (!(min_fill_share > 0 && min_fill_share <= 1))
+    return bad("min_fill_share", min_fill_share, "(0, 1]");
   if (!(max_fill_share >= min_fill_share && max_fill_share <= 1)) {
     return bad("max_fill_share", max_fill_share, "[min_fill_share, 1]");
   }
-  if (min_rings_per_hole < 1 || min_rings_per_hole > 64) return bad("min_rings_per_hole", min_rings_per_hole, "1..64");
-  if (radar_cycles < 10 || radar_cycles > 10000) return bad("radar_cycles", radar_cycles, "10..10000");
+  if (min_rings_per_hole < 1 || min_rings_per_hole > 64)
+    return bad("min_rings_per_hole", min_rings_per_hole, "1..64");
+  if (radar_cycles < 10 || radar_cycles > 10000)
+    return bad("radar_cycles", radar_cycles, "10..10000");
   if (!(max_sigma_fraction_of_tolerance > 0 && max_sigma_fraction_of_tolerance <= 10)) {
     return bad("max_sigma_fraction_of_tolerance", max_sigma_fraction_of_tolerance, "(0, 10]");
   }
   return absl::OkStatus();
 }
 
-absl::StatusOr<SensorAssessment> AssessSensor(const SensorModel& sensor, const StationLayout& layout,
-                                              const FloorLimits* floor, const PlannerOptions& options,
-                                              bool predict_sigma) {
+absl::StatusOr<SensorAssessment> AssessSensor(const SensorModel& sensor,
+                                              const StationLayout& layout, const FloorLimits* floor,
+                                              const PlannerOptions& options, bool predict_sigma) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   return Assess(sensor, layout, floor, options, predict_sigma, true);
 }
 
-absl::StatusOr<std::vector<SensorAssessment>> AssessLayout(const CarModel& car, const StationLayout& layout,
+absl::StatusOr<std::vector<SensorAssessment>> AssessLayout(const CarModel& car,
+                                                           const StationLayout& layout,
                                                            const FloorLimits* floor,
                                                            const PlannerOptions& options) {
   std::vector<SensorAssessment> out;
@@ -892,7 +937,8 @@ absl::StatusOr<std::vector<SensorAssessment>> AssessLayout(const CarModel& car, 
   return out;
 }
 
-absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& floor, const PlannerOptions& options) {
+absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& floor,
+                                       const PlannerOptions& options) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   StationPlan plan;
   plan.car = car;
@@ -906,7 +952,8 @@ absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& f
     const Eigen::Vector2d along = w.to - w.from;
     s.size_m = {along.norm(), floor.max_height_m + 1.0};
     double yaw = std::atan2(along.y(), along.x()) - kPi / 2;  // normal to the segment
-    if (Eigen::Vector2d(std::cos(yaw), std::sin(yaw)).dot(mid) < 0) yaw += kPi;  // print side faces the origin
+    if (Eigen::Vector2d(std::cos(yaw), std::sin(yaw)).dot(mid) < 0)
+      yaw += kPi;  // print side faces the origin
     s.T_station_surface = Rigid3d(MountingRotation({yaw, 0, 0}, BoardBaseRotation()),
                                   Eigen::Vector3d(mid.x(), mid.y(), 0.5 * s.size_m.y()));
     s.reflectivity = 0.5;
@@ -914,8 +961,9 @@ absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& f
   }
   std::vector<size_t> order(car.sensors.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(),
-                   [&](size_t a, size_t b) { return PlanOrder(car.sensors[a]) < PlanOrder(car.sensors[b]); });
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return PlanOrder(car.sensors[a]) < PlanOrder(car.sensors[b]);
+  });
   std::vector<SensorModel> placed;
   for (size_t i : order) {
     SensorModel sensor = car.sensors[i];
@@ -925,7 +973,8 @@ absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& f
       for (const StationBoard& b : plan.layout.boards) {
         SensorModel probe = sensor;
         probe.targets = {b.id};
-        absl::StatusOr<SensorAssessment> a = Assess(probe, plan.layout, &floor, options, false, false);
+        absl::StatusOr<SensorAssessment> a =
+            Assess(probe, plan.layout, &floor, options, false, false);
         if (!a.ok()) return a.status();
         if (a->calibratable) existing.push_back(b.id);
       }
@@ -938,9 +987,10 @@ absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& f
       done = a->calibratable;
     }
     if (!done) {
-      const std::vector<Candidate> candidates = sensor.kind == SensorKind::kLidar    ? LidarCandidates(sensor, floor)
-                                                : sensor.kind == SensorKind::kCamera ? CameraCandidates(sensor, floor)
-                                                                                     : RadarCandidates(sensor);
+      const std::vector<Candidate> candidates =
+          sensor.kind == SensorKind::kLidar    ? LidarCandidates(sensor, floor)
+          : sensor.kind == SensorKind::kCamera ? CameraCandidates(sensor, floor)
+                                               : RadarCandidates(sensor);
       std::vector<Candidate> filtered;
       if (sensor.kind == SensorKind::kCamera) {
         // Fill share: the new board's image bounding box within the configured share.
@@ -955,7 +1005,8 @@ absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& f
             if (camera->Project(T_camera_station * p, &uv)) box.extend(uv);
           }
           const double share = box.isEmpty() ? 0 : box.volume() / area;
-          if (share >= options.min_fill_share && share <= options.max_fill_share) filtered.push_back(c);
+          if (share >= options.min_fill_share && share <= options.max_fill_share)
+            filtered.push_back(c);
         }
       } else {
         filtered = candidates;
@@ -977,7 +1028,8 @@ absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& f
     plan.car.sensors[i].targets = sensor.targets;
     if (!HasSensor(placed, sensor.name)) placed.push_back(sensor);
   }
-  absl::StatusOr<std::vector<SensorAssessment>> assessed = AssessLayout(plan.car, plan.layout, &floor, options);
+  absl::StatusOr<std::vector<SensorAssessment>> assessed =
+      AssessLayout(plan.car, plan.layout, &floor, options);
   if (!assessed.ok()) return assessed.status();
   plan.sensors = *std::move(assessed);
   if (options.regions) {
@@ -998,27 +1050,33 @@ absl::StatusOr<ValidRegion> ValidRegionOf(const SensorModel& sensor, const std::
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   const StationBoard* board = layout.FindBoard(target);
   const CornerReflector* reflector = layout.FindReflector(target);
-  if (board == nullptr && reflector == nullptr) return absl::NotFoundError(absl::StrCat("no target '", target, "'"));
+  if (board == nullptr && reflector == nullptr)
+    return absl::NotFoundError(absl::StrCat("no target '", target, "'"));
   const Eigen::Vector3d eye = sensor.T_car_sensor_nominal.translation();
-  const Eigen::Vector3d planned = board ? board->T_station_board.translation() : reflector->p_station;
+  const Eigen::Vector3d planned =
+      board ? board->T_station_board.translation() : reflector->p_station;
   const bool on_floor = board && std::abs(board->T_station_board.RotationMatrix().col(2).z()) > 0.9;
   const Eigen::Vector2d ray = (planned - eye).head<2>();
   const double distance = ray.norm();
   const double azimuth = std::atan2(ray.y(), ray.x());
   const YawPitchRoll planned_ypr =
-      board ? YawPitchRollFromRotation(board->T_station_board.RotationMatrix() * BoardBaseRotation().transpose())
+      board ? YawPitchRollFromRotation(board->T_station_board.RotationMatrix() *
+                                       BoardBaseRotation().transpose())
             : YawPitchRoll{};
   // Is the target at (centre, heading offset from facing the sensor) usable?
-  const auto works = [&](const Eigen::Vector3d& centre, double heading_offset_rad) -> absl::StatusOr<bool> {
+  const auto works = [&](const Eigen::Vector3d& centre,
+                         double heading_offset_rad) -> absl::StatusOr<bool> {
     StationLayout trial = layout;
     if (board) {
-      StationBoard& b = *std::find_if(trial.boards.begin(), trial.boards.end(), [&](const StationBoard& x) { return x.id == target; });
+      StationBoard& b = *std::find_if(trial.boards.begin(), trial.boards.end(),
+                                      [&](const StationBoard& x) { return x.id == target; });
       YawPitchRoll ypr = planned_ypr;
       if (!on_floor) ypr.yaw = FacingYawDeg(centre, eye) * kDeg + heading_offset_rad;
       b.T_station_board = Rigid3d(MountingRotation(ypr, BoardBaseRotation()), centre);
     } else {
-      std::find_if(trial.reflectors.begin(), trial.reflectors.end(), [&](const CornerReflector& x) { return x.id == target; })
-          ->p_station = centre;
+      std::find_if(trial.reflectors.begin(), trial.reflectors.end(), [&](const CornerReflector& x) {
+        return x.id == target;
+      })->p_station = centre;
     }
     absl::StatusOr<SensorAssessment> geo = Assess(sensor, trial, floor, options, false, false);
     if (!geo.ok()) return geo.status();
@@ -1031,7 +1089,8 @@ absl::StatusOr<ValidRegion> ValidRegionOf(const SensorModel& sensor, const std::
     return Eigen::Vector3d(eye.x() + d * std::cos(az), eye.y() + d * std::sin(az), z);
   };
   // The contiguous interval of `step`s around 0 along a parameter where `f` works.
-  const auto interval = [&](auto f, double step, int max_steps, double* lo, double* hi) -> absl::Status {
+  const auto interval = [&](auto f, double step, int max_steps, double* lo,
+                            double* hi) -> absl::Status {
     *lo = *hi = 0;
     for (int dir : {-1, +1}) {
       for (int k = 1; k <= max_steps; ++k) {
@@ -1047,20 +1106,24 @@ absl::StatusOr<ValidRegion> ValidRegionOf(const SensorModel& sensor, const std::
   r.sensor = sensor.name;
   r.target = target;
   double lo, hi;
-  if (auto s = interval([&](double v) { return works(at(azimuth, distance + v, planned.z()), 0); }, 0.25, 60, &lo, &hi);
+  if (auto s = interval([&](double v) { return works(at(azimuth, distance + v, planned.z()), 0); },
+                        0.25, 60, &lo, &hi);
       !s.ok()) {
     return s;
   }
   r.distance_min_m = distance + lo;
   r.distance_max_m = distance + hi;
   const Eigen::Vector3d left(-std::sin(azimuth), std::cos(azimuth), 0);
-  if (auto s = interval([&](double v) { return works(planned + v * left, 0); }, 0.1, 80, &lo, &hi); !s.ok()) return s;
+  if (auto s = interval([&](double v) { return works(planned + v * left, 0); }, 0.1, 80, &lo, &hi);
+      !s.ok())
+    return s;
   r.lateral_min_m = lo;
   r.lateral_max_m = hi;
   if (on_floor) {
     r.height_min_m = r.height_max_m = planned.z();
   } else {
-    if (auto s = interval([&](double v) { return works(planned + Eigen::Vector3d(0, 0, v), 0); }, 0.05, 60, &lo, &hi);
+    if (auto s = interval([&](double v) { return works(planned + Eigen::Vector3d(0, 0, v), 0); },
+                          0.05, 60, &lo, &hi);
         !s.ok()) {
       return s;
     }
@@ -1068,7 +1131,9 @@ absl::StatusOr<ValidRegion> ValidRegionOf(const SensorModel& sensor, const std::
     r.height_max_m = planned.z() + hi;
   }
   if (board && !on_floor) {
-    if (auto s = interval([&](double v) { return works(planned, v * kDeg); }, 2.0, 45, &lo, &hi); !s.ok()) return s;
+    if (auto s = interval([&](double v) { return works(planned, v * kDeg); }, 2.0, 45, &lo, &hi);
+        !s.ok())
+      return s;
     r.heading_min_deg = lo;
     r.heading_max_deg = hi;
   }
@@ -1109,7 +1174,8 @@ double SmallestCellM(const Board& board) {
   return smallest;
 }
 
-double SmallestCellPx(const CameraModel& camera, const Rigid3d& T_camera_board, const Board& board) {
+double SmallestCellPx(const CameraModel& camera, const Rigid3d& T_camera_board,
+                      const Board& board) {
   const double cell = SmallestCellM(board);
   double smallest = std::numeric_limits<double>::infinity();
   for (const BoardFeature& f : board.features()) {
@@ -1127,7 +1193,8 @@ double SmallestCellPx(const CameraModel& camera, const Rigid3d& T_camera_board, 
   return smallest;
 }
 
-bool SegmentHitsBoard(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const StationBoard& board) {
+bool SegmentHitsBoard(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                      const StationBoard& board) {
   return SegmentHitsRectangle(a, b, board.T_station_board, board.board.page_size_m());
 }
 
@@ -1135,12 +1202,14 @@ FloorPolygon BoardFootprint(const StationBoard& board) {
   FloorPolygon corners;
   for (const Eigen::Vector3d& c : PageCorners(board)) corners.push_back(c.head<2>());
   // An upright board projects to a segment: its two ends.
-  if ((corners[0] - corners[3]).norm() < 1e-6 && (corners[1] - corners[2]).norm() < 1e-6) return {corners[0], corners[1]};
+  if ((corners[0] - corners[3]).norm() < 1e-6 && (corners[1] - corners[2]).norm() < 1e-6)
+    return {corners[0], corners[1]};
   return corners;
 }
 
-int RingsThroughHole(const std::vector<double>& beam_elevations_rad, const Eigen::Vector3d& centre_lidar,
-                     const Eigen::Vector3d& normal_lidar, double radius_m) {
+int RingsThroughHole(const std::vector<double>& beam_elevations_rad,
+                     const Eigen::Vector3d& centre_lidar, const Eigen::Vector3d& normal_lidar,
+                     double radius_m) {
   // In-plane axes of the hole.
   Eigen::Vector3d u = normal_lidar.cross(Eigen::Vector3d::UnitZ());
   if (u.norm() < 1e-9) u = Eigen::Vector3d::UnitX();

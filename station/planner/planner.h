@@ -40,11 +40,10 @@
 //                          when a target failed one of the checks above: that is the reason)
 //   uncertainty_above_tolerance  predicted 1-sigma above the fraction of a tolerance
 
+#include <Eigen/Core>
 #include <array>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "station/model/car_model.h"
@@ -54,21 +53,21 @@
 namespace linecal {
 
 struct PlannerOptions {
-  double min_feature_px = 15;        // smallest imaged square / marker cell, (0, 1000]
-  double corner_noise_px = 0.1;      // camera feature noise of the prediction, (0, 10]
+  double min_feature_px = 15;    // smallest imaged square / marker cell, (0, 1000]
+  double corner_noise_px = 0.1;  // camera feature noise of the prediction, (0, 10]
   // The same for fisheye cameras, whose boards are found in resampled perspective views
   // (station/camera/board_view.h) and so have their own noise; 0: corner_noise_px. [0, 10]
   double fisheye_corner_noise_px = 0;
-  int camera_frames = 1;             // frames per camera the calibration will use, 1..100
-  double image_margin_px = 8;        // features this far inside the image, [0, 500]
+  int camera_frames = 1;       // frames per camera the calibration will use, 1..100
+  double image_margin_px = 8;  // features this far inside the image, [0, 500]
   // Plan only: a new camera board's image bounding box covers at least / at most this
   // share of the image. (0, 1].
   // The default keeps a camera's board to a tenth of its view, leaving the rest for the
   // other sensors' targets.
   double min_fill_share = 0.005;
   double max_fill_share = 0.1;
-  int min_rings_per_hole = 2;        // [1, 64]
-  int radar_cycles = 20;             // [10, 10000]: what the simulator and a cycle record
+  int min_rings_per_hole = 2;  // [1, 64]
+  int radar_cycles = 20;       // [10, 10000]: what the simulator and a cycle record
   double max_sigma_fraction_of_tolerance = 1.0 / 3.0;  // (0, 10]
   // Plan only: compute the valid regions (the slow part).
   bool regions = true;
@@ -111,11 +110,13 @@ struct SensorAssessment {
 // keep-out, area or height checks). predict_sigma = false skips the uncertainty (geometry
 // only, fast). Errors (InvalidArgument): bad options, a camera without intrinsics, a LiDAR
 // whose beam table cannot be read.
-absl::StatusOr<SensorAssessment> AssessSensor(const SensorModel& sensor, const StationLayout& layout,
-                                              const FloorLimits* floor, const PlannerOptions& options,
+absl::StatusOr<SensorAssessment> AssessSensor(const SensorModel& sensor,
+                                              const StationLayout& layout, const FloorLimits* floor,
+                                              const PlannerOptions& options,
                                               bool predict_sigma = true);
 // Every sensor of the car, in its order.
-absl::StatusOr<std::vector<SensorAssessment>> AssessLayout(const CarModel& car, const StationLayout& layout,
+absl::StatusOr<std::vector<SensorAssessment>> AssessLayout(const CarModel& car,
+                                                           const StationLayout& layout,
                                                            const FloorLimits* floor,
                                                            const PlannerOptions& options);
 
@@ -170,13 +171,15 @@ double SmallestCellM(const Board& board);
 double SmallestCellPx(const CameraModel& camera, const Rigid3d& T_camera_board, const Board& board);
 // True when the segment a-b passes through the printed page of `board` (holes included:
 // the planner does not count on seeing through them). Endpoints on the page do not count.
-bool SegmentHitsBoard(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const StationBoard& board);
+bool SegmentHitsBoard(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                      const StationBoard& board);
 // The board's footprint on the floor: its page corners projected to z = 0 (a segment for
 // an upright board, which is where its stand goes). O(1).
 FloorPolygon BoardFootprint(const StationBoard& board);
 // Distinct rings (beams) of `beams` whose elevation crosses the hole of radius radius_m
 // centred at p_lidar on a board with normal n_lidar (both LiDAR frame). O(beams).
-int RingsThroughHole(const std::vector<double>& beam_elevations_rad, const Eigen::Vector3d& centre_lidar,
-                     const Eigen::Vector3d& normal_lidar, double radius_m);
+int RingsThroughHole(const std::vector<double>& beam_elevations_rad,
+                     const Eigen::Vector3d& centre_lidar, const Eigen::Vector3d& normal_lidar,
+                     double radius_m);
 
 }  // namespace linecal

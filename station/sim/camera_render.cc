@@ -77,9 +77,8 @@ absl::Status CheckLayout(const StationLayout& layout) {
       return absl::InvalidArgumentError(absl::StrCat(name, ": pose is not finite"));
     }
     if (!(s.size_m.allFinite() && s.size_m.minCoeff() > 0.0)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(name, ": size_m = [", s.size_m.x(), ", ", s.size_m.y(),
-                       "]: must be finite and > 0"));
+      return absl::InvalidArgumentError(absl::StrCat(name, ": size_m = [", s.size_m.x(), ", ",
+                                                     s.size_m.y(), "]: must be finite and > 0"));
     }
     const absl::Status r = CheckClosed(absl::StrCat(name, ".reflectivity"), s.reflectivity, 0, 1);
     if (!r.ok()) return r;
@@ -117,9 +116,9 @@ absl::Status CameraRenderOptions::Validate() const {
     return OutOfRange("illumination", illumination, absl::StrCat("(0, ", kMaxIllumination, "]"));
   }
   if (!std::isfinite(illumination_gradient_direction_deg)) {
-    return absl::InvalidArgumentError(absl::StrCat("illumination_gradient_direction_deg = ",
-                                                   illumination_gradient_direction_deg,
-                                                   ": must be finite"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("illumination_gradient_direction_deg = ", illumination_gradient_direction_deg,
+                     ": must be finite"));
   }
   if (vignetting >= 1.0) return OutOfRange("vignetting", vignetting, "[0, 1)");
   if (jpeg_quality != 0 && (jpeg_quality < kMinJpegQuality || jpeg_quality > kMaxJpegQuality)) {
@@ -194,7 +193,8 @@ absl::StatusOr<CameraFrame> RenderCameraFrame(const CameraModel& camera,
   std::vector<float> image = RenderLinearImage(camera, scene, options);
   const int width = camera.intrinsics().width, height = camera.intrinsics().height;
   Illuminate(camera, options, &image);
-  if (options.blur_sigma_px > 0.0) Blur(width, height, options.blur_sigma_px, options.threads, &image);
+  if (options.blur_sigma_px > 0.0)
+    Blur(width, height, options.blur_sigma_px, options.threads, &image);
   Encode(width, height, options, seed, &image, &frame);
   return frame;
 }

@@ -31,11 +31,10 @@
 // z along the optical axis) into the station frame; metres; image coordinates as in
 // camera_model.h (centre of the top-left pixel at (0, 0)).
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"

@@ -1,5 +1,3 @@
-#include "station/sim/camera_render_internal.h"
-
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -8,6 +6,8 @@
 #include <thread>
 #include <utility>
 #include <vector>
+
+#include "station/sim/camera_render_internal.h"
 
 namespace linecal::camera_render_internal {
 namespace {
@@ -90,10 +90,10 @@ class LinearRenderer {
     if (s >= 0) {
       const double error_px =
           std::max({c[0]->error_px, c[1]->error_px, c[2]->error_px, c[3]->error_px});
-      if (!scene_.UniformOver(scene_.surfaces()[s],
-                              {c[0]->hit.p_surface, c[1]->hit.p_surface, c[2]->hit.p_surface,
-                               c[3]->hit.p_surface},
-                              error_px)) {
+      if (!scene_.UniformOver(
+              scene_.surfaces()[s],
+              {c[0]->hit.p_surface, c[1]->hit.p_surface, c[2]->hit.p_surface, c[3]->hit.p_surface},
+              error_px)) {
         return std::nullopt;
       }
     }
@@ -112,7 +112,8 @@ class LinearRenderer {
     if (c[0]->valid && c[1]->valid && c[2]->valid && c[3]->valid) {
       if (const std::optional<double> flat = Flat(c, candidates, n)) return *flat;
       // An edge pixel: exact corner rays (kept for the neighbours that share them).
-      const std::array<std::array<int, 2>, 4> xy = {{{x, y}, {x + 1, y}, {x, y + 1}, {x + 1, y + 1}}};
+      const std::array<std::array<int, 2>, 4> xy = {
+          {{x, y}, {x + 1, y}, {x, y + 1}, {x + 1, y + 1}}};
       bool refined = false;
       for (int k = 0; k < 4; ++k) {
         if (c[k]->error_px == 0.0) continue;

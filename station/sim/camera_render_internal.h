@@ -10,6 +10,7 @@
 //   camera_render_image.cc      the linear image, pixel by pixel, over threads
 //   camera_render_response.cc   the camera response: illumination, blur, gamma, noise, JPEG
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -18,8 +19,6 @@
 #include <optional>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "detectors/boards/board.h"
 #include "detectors/core/pose.h"
@@ -213,8 +212,7 @@ class RayGrid {
   // The node rays at the corners of the block of cells [i0, i1) x [j0, j1): top-left,
   // top-right, bottom-left, bottom-right; false unless interpolation serves in every cell
   // of the block (so its rays are valid and the lens mapping is smooth over it).
-  bool BlockRays(int i0, int j0, int i1, int j1,
-                 std::array<const Eigen::Vector3d*, 4>* rays) const;
+  bool BlockRays(int i0, int j0, int i1, int j1, std::array<const Eigen::Vector3d*, 4>* rays) const;
 
   // The ray of pixel corner (x - 0.5, y - 0.5), 0 <= x <= width, 0 <= y <= height (not
   // unit length), and an upper bound of its error in pixels (0 when exact). Rays of
@@ -338,8 +336,7 @@ class PixelIntegrator {
   // Position of loop sample k of the cell at `origin` with side `size`, `per_side` samples
   // per side, starting at the top-left corner and running through top-right, bottom-right
   // and bottom-left: positively oriented in (s, t).
-  static Eigen::Vector2d LoopPoint(const Eigen::Vector2d& origin, double size, int per_side,
-                                   int k);
+  static Eigen::Vector2d LoopPoint(const Eigen::Vector2d& origin, double size, int per_side, int k);
 
   // Shrinks [a, b] (labels la != lb) around the label change; false if a third label shows.
   bool Bisect(Eigen::Vector2d a, std::uint64_t la, Eigen::Vector2d b, std::uint64_t lb,
@@ -364,7 +361,7 @@ class PixelIntegrator {
   const std::uint32_t* candidates_ = nullptr;
   int n_candidates_ = 0;
   const SceneSurface* front_ = nullptr;
-  std::array<Eigen::Vector2d, 4> q_;     // the corners' hits on *front_
+  std::array<Eigen::Vector2d, 4> q_;   // the corners' hits on *front_
   std::array<double, 4> inverse_t_{};  // 1 / their depths along the corner rays
 };
 

@@ -1,5 +1,4 @@
-#include "station/sim/camera_render_internal.h"
-
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -7,9 +6,8 @@
 #include <random>
 #include <vector>
 
-#include <Eigen/Geometry>
-
 #include "absl/strings/str_cat.h"
+#include "station/sim/camera_render_internal.h"
 
 namespace linecal::camera_render_internal {
 namespace {
@@ -47,8 +45,8 @@ std::vector<StationSurface> PlaceOccluders(const CameraModel& camera,
   for (int i = 0; i < o.occluder_count; ++i) {
     Eigen::Vector3d centre_camera;
     if (!visible.empty()) {
-      const RenderedFeature& f = visible[static_cast<std::size_t>(unit(rng) * visible.size()) %
-                                         visible.size()];
+      const RenderedFeature& f =
+          visible[static_cast<std::size_t>(unit(rng) * visible.size()) % visible.size()];
       const StationBoard& b = layout.boards[f.board_index];
       const Eigen::Vector2d& p_board = b.board.features()[f.feature_id].p_board;
       const Eigen::Vector3d p_camera =
@@ -69,7 +67,8 @@ std::vector<StationSurface> PlaceOccluders(const CameraModel& camera,
     const double aspect = std::exp(std::log(kOccluderMaxAspect) * (2 * unit(rng) - 1));
     // Facing the camera, turned by a random angle about the line of sight.
     const Eigen::Vector3d z = -centre_camera.normalized();
-    const Eigen::Vector3d any = std::abs(z.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    const Eigen::Vector3d any =
+        std::abs(z.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
     const Eigen::Vector3d x0 = z.cross(any).normalized();
     const double spin = 2 * std::numbers::pi * unit(rng);
     const Eigen::Vector3d x = std::cos(spin) * x0 + std::sin(spin) * z.cross(x0);

@@ -1,10 +1,10 @@
-#include "station/sim/camera_render_internal.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
 #include <optional>
+
+#include "station/sim/camera_render_internal.h"
 
 namespace linecal::camera_render_internal {
 
@@ -36,8 +36,7 @@ double PixelIntegrator::Integrate(const std::array<CornerSample*, 4>& c,
               {c[0]->hit.look, c[1]->hit.look, c[3]->hit.look, c[2]->hit.look});
 }
 
-const SceneSurface* PixelIntegrator::FrontSurface(
-    const std::array<CornerSample*, 4>& c) const {
+const SceneSurface* PixelIntegrator::FrontSurface(const std::array<CornerSample*, 4>& c) const {
   if (!InFrontOverPixel(scene_, c, candidates_, n_candidates_)) return nullptr;
   return &scene_.surfaces()[c[0]->hit.surface];
 }
@@ -59,12 +58,13 @@ Look PixelIntegrator::Eval(const Eigen::Vector2d& st) const {
       if (const std::optional<Look> look = scene_.LookAt(*front_, p)) return *look;
     }
   }
-  const Eigen::Vector3d d = w[0] * *rays_[0] + w[1] * *rays_[1] + w[2] * *rays_[2] + w[3] * *rays_[3];
+  const Eigen::Vector3d d =
+      w[0] * *rays_[0] + w[1] * *rays_[1] + w[2] * *rays_[2] + w[3] * *rays_[3];
   return scene_.Trace(d, candidates_, n_candidates_).look;
 }
 
-Eigen::Vector2d PixelIntegrator::LoopPoint(const Eigen::Vector2d& origin, double size,
-                                           int per_side, int k) {
+Eigen::Vector2d PixelIntegrator::LoopPoint(const Eigen::Vector2d& origin, double size, int per_side,
+                                           int k) {
   const int side = k / per_side;
   const double f = size * (k % per_side) / per_side;
   switch (side) {
@@ -102,8 +102,8 @@ double PixelIntegrator::Cell(const Eigen::Vector2d& origin, double size, int dep
   const int n = 4 * per_side;
   std::array<Look, kMaxLoop> loop;
   for (int k = 0; k < n; ++k) {
-    loop[k] = k % per_side == 0 ? corners[k / per_side]
-                                : Eval(LoopPoint(origin, size, per_side, k));
+    loop[k] =
+        k % per_side == 0 ? corners[k / per_side] : Eval(LoopPoint(origin, size, per_side, k));
   }
   std::array<int, 3> changes;
   int n_changes = 0;

@@ -1,10 +1,10 @@
-#include "station/sim/camera_render_internal.h"
-
 #include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
+
+#include "station/sim/camera_render_internal.h"
 
 namespace linecal::camera_render_internal {
 namespace {
@@ -98,8 +98,7 @@ bool RayGrid::BlockRays(int i0, int j0, int i1, int j1,
   return true;
 }
 
-void RayGrid::CornerRay(int x, int y, Eigen::Vector3d* ray, double* error_px,
-                        bool* valid) const {
+void RayGrid::CornerRay(int x, int y, Eigen::Vector3d* ray, double* error_px, bool* valid) const {
   const int i = CellX(x), j = CellY(y);
   const double error = error_px_[static_cast<std::size_t>(j) * cols_ + i];
   if (error <= kMaxInterpolationErrorPx) {
@@ -135,10 +134,9 @@ TileCandidates::TileCandidates(const RayGrid& grid, const Scene& scene)
   for (int ty = 0; ty < rows_; ++ty) {
     for (int tx = 0; tx < cols_; ++tx) {
       std::array<const Eigen::Vector3d*, 4> rays;
-      const bool smooth = grid.BlockRays(
-          tx * cells_per_tile_, ty * cells_per_tile_,
-          std::min(grid.cols(), (tx + 1) * cells_per_tile_),
-          std::min(grid.rows(), (ty + 1) * cells_per_tile_), &rays);
+      const bool smooth = grid.BlockRays(tx * cells_per_tile_, ty * cells_per_tile_,
+                                         std::min(grid.cols(), (tx + 1) * cells_per_tile_),
+                                         std::min(grid.rows(), (ty + 1) * cells_per_tile_), &rays);
       for (int s = 0; s < scene.surface_count(); ++s) {
         if (!smooth || MayShow(scene.surfaces()[s], rays)) {
           list_.push_back(static_cast<std::uint32_t>(s));

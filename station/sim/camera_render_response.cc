@@ -1,5 +1,3 @@
-#include "station/sim/camera_render_internal.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -8,6 +6,8 @@
 #include <random>
 #include <thread>
 #include <vector>
+
+#include "station/sim/camera_render_internal.h"
 
 namespace linecal::camera_render_internal {
 namespace {
@@ -20,7 +20,9 @@ template <typename Fn>
 void ParallelFor(int n, int threads, const Fn& fn) {
   threads = std::max(1, std::min(threads, n));
   std::vector<std::thread> pool;
-  const auto begin = [&](int i) { return static_cast<int>(static_cast<long long>(n) * i / threads); };
+  const auto begin = [&](int i) {
+    return static_cast<int>(static_cast<long long>(n) * i / threads);
+  };
   for (int i = 1; i < threads; ++i) pool.emplace_back([&, i] { fn(begin(i), begin(i + 1)); });
   fn(0, begin(1));
   for (std::thread& t : pool) t.join();
@@ -44,7 +46,8 @@ void JpegQuantise(int width, int height, int quality, int threads, std::vector<f
   std::array<std::array<double, 8>, 8> c;
   for (int k = 0; k < 8; ++k) {
     for (int x = 0; x < 8; ++x) {
-      c[k][x] = (k == 0 ? std::sqrt(0.125) : 0.5) * std::cos((2 * x + 1) * k * std::numbers::pi / 16);
+      c[k][x] =
+          (k == 0 ? std::sqrt(0.125) : 0.5) * std::cos((2 * x + 1) * k * std::numbers::pi / 16);
     }
   }
   const int block_rows = (height + 7) / 8, block_cols = (width + 7) / 8;
@@ -97,16 +100,17 @@ void JpegQuantise(int width, int height, int quality, int threads, std::vector<f
 }  // namespace
 
 // Illumination x gradient x vignetting, per pixel.
-void Illuminate(const CameraModel& camera, const CameraRenderOptions& o, std::vector<float>* image) {
+void Illuminate(const CameraModel& camera, const CameraRenderOptions& o,
+                std::vector<float>* image) {
   const int width = camera.intrinsics().width, height = camera.intrinsics().height;
   const double angle = o.illumination_gradient_direction_deg * std::numbers::pi / 180.0;
   const Eigen::Vector2d dir(std::cos(angle), std::sin(angle));
   // The gradient runs between the extreme pixel centres along dir, so that the brightest
   // and the darkest pixel differ by exactly the ratio.
   double lo = kInf, hi = -kInf;
-  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(0, 0), Eigen::Vector2d(width - 1, 0),
-                                       Eigen::Vector2d(0, height - 1),
-                                       Eigen::Vector2d(width - 1, height - 1)}) {
+  for (const Eigen::Vector2d& corner :
+       {Eigen::Vector2d(0, 0), Eigen::Vector2d(width - 1, 0), Eigen::Vector2d(0, height - 1),
+        Eigen::Vector2d(width - 1, height - 1)}) {
     lo = std::min(lo, corner.dot(dir));
     hi = std::max(hi, corner.dot(dir));
   }
@@ -120,9 +124,9 @@ void Illuminate(const CameraModel& camera, const CameraRenderOptions& o, std::ve
   }
   const Eigen::Vector2d principal(camera.intrinsics().cx, camera.intrinsics().cy);
   double r2_max = 0.0;
-  for (const Eigen::Vector2d& corner : {Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(width - 0.5, -0.5),
-                                        Eigen::Vector2d(-0.5, height - 0.5),
-                                        Eigen::Vector2d(width - 0.5, height - 0.5)}) {
+  for (const Eigen::Vector2d& corner :
+       {Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(width - 0.5, -0.5),
+        Eigen::Vector2d(-0.5, height - 0.5), Eigen::Vector2d(width - 0.5, height - 0.5)}) {
     r2_max = std::max(r2_max, (corner - principal).squaredNorm());
   }
   ParallelFor(height, o.threads, [&](int y0, int y1) {
@@ -172,7 +176,8 @@ void Blur(int width, int height, double sigma, int threads, std::vector<float>* 
     for (int y = y0; y < y1; ++y) {
       std::fill(sum.begin(), sum.end(), 0.0);
       for (int k = -radius; k <= radius; ++k) {
-        const float* src = tmp.data() + static_cast<std::size_t>(std::clamp(y + k, 0, height - 1)) * width;
+        const float* src =
+            tmp.data() + static_cast<std::size_t>(std::clamp(y + k, 0, height - 1)) * width;
         const double w = kernel[k + radius];
         for (int x = 0; x < width; ++x) sum[x] += w * src[x];
       }

@@ -1,5 +1,4 @@
-#include "station/sim/camera_render_internal.h"
-
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -8,7 +7,7 @@
 #include <optional>
 #include <vector>
 
-#include <Eigen/Geometry>
+#include "station/sim/camera_render_internal.h"
 
 namespace linecal::camera_render_internal {
 namespace {
@@ -67,7 +66,9 @@ std::optional<ClutterObject> ClutterInCell(const ClutterGrid& grid, std::int64_t
   // The object's six parameters from 10-bit fields of one more hash: sizes and greys in
   // steps of 1/1024 of their range are as random as any.
   const std::uint64_t fields = Mix(h);
-  const auto u = [&](int i) { return (static_cast<double>((fields >> (10 * i)) & 1023) + 0.5) / 1024; };
+  const auto u = [&](int i) {
+    return (static_cast<double>((fields >> (10 * i)) & 1023) + 0.5) / 1024;
+  };
   const auto fraction = [&](int i) {
     return kClutterMinFraction + (kClutterMaxFraction - kClutterMinFraction) * u(i);
   };
@@ -102,8 +103,8 @@ std::uint64_t ClutterCode(std::int64_t cx, std::int64_t cy) {
 
 Scene::Scene(const Rigid3d& T_station_camera, const StationLayout& layout,
              const std::vector<StationSurface>& occluders, const CameraRenderOptions& options)
-    : looks_{options.white_reflectance, options.black_reflectance,
-             options.board_back_reflectance, options.background_reflectance} {
+    : looks_{options.white_reflectance, options.black_reflectance, options.board_back_reflectance,
+             options.background_reflectance} {
   const Rigid3d T_camera_station = T_station_camera.Inverse();
   const auto add = [&](SurfaceKind kind, const Rigid3d& T_station_surface,
                        const Eigen::Vector2d& size_m, double reflectance) -> SceneSurface& {
@@ -138,21 +139,21 @@ Scene::Scene(const Rigid3d& T_station_camera, const StationLayout& layout,
       g.offset_m = kClutterCellM * Eigen::Vector2d(Unit(Mix(g.key, 2)), Unit(Mix(g.key, 3)));
     }
   }
-  add(SurfaceKind::kFloor, Rigid3d(), Eigen::Vector2d::Constant(kInf),
-      layout.floor_reflectivity);
+  add(SurfaceKind::kFloor, Rigid3d(), Eigen::Vector2d::Constant(kInf), layout.floor_reflectivity);
 }
 
-std::optional<Look> Scene::LookAt(const SceneSurface& s,
-                                  const Eigen::Vector2d& p_surface) const {
+std::optional<Look> Scene::LookAt(const SceneSurface& s, const Eigen::Vector2d& p_surface) const {
   switch (s.kind) {
     case SurfaceKind::kBoard:
       return BoardLook(s, s.board->PaintAt(p_surface));
     case SurfaceKind::kWall:
       if (s.clutter) {
-        const Eigen::Vector2d g = s.clutter_grid.R_grid_surface * p_surface + s.clutter_grid.offset_m;
+        const Eigen::Vector2d g =
+            s.clutter_grid.R_grid_surface * p_surface + s.clutter_grid.offset_m;
         const auto [cx, cy] = ClutterCell(g);
         const std::optional<ClutterObject> o = ClutterInCell(s.clutter_grid, cx, cy);
-        if (o.has_value() && o->Contains(g)) return Look{s.label_base | ClutterCode(cx, cy), o->grey};
+        if (o.has_value() && o->Contains(g))
+          return Look{s.label_base | ClutterCode(cx, cy), o->grey};
       }
       return Look{s.label_base | kCodePlain, s.reflectance};
     case SurfaceKind::kOccluder:
@@ -172,8 +173,9 @@ bool Scene::UniformOver(const SceneSurface& s, const std::array<Eigen::Vector2d,
   Eigen::Vector2d lo = Eigen::Vector2d::Constant(kInf), hi = -lo;
   for (const Eigen::Vector2d& p_surface : p) {
     const Eigen::Vector2d q =
-        clutter ? Eigen::Vector2d(s.clutter_grid.R_grid_surface * p_surface + s.clutter_grid.offset_m)
-                : p_surface;
+        clutter
+            ? Eigen::Vector2d(s.clutter_grid.R_grid_surface * p_surface + s.clutter_grid.offset_m)
+            : p_surface;
     lo = lo.cwiseMin(q);
     hi = hi.cwiseMax(q);
   }

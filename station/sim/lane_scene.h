@@ -10,11 +10,10 @@
 // measured ahead of the camera (along +x_car, or -x_car for a camera looking backward) from
 // the point on the ground under it.
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"

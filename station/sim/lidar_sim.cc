@@ -1,9 +1,9 @@
 #include "station/sim/lidar_sim.h"
 
 #include <cmath>
-#include <optional>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <random>
 
 #include "absl/strings/str_cat.h"
@@ -16,7 +16,8 @@ constexpr int kCentidegPerTurn = 36000;
 
 absl::Status CheckRange(const char* field, double v, double lo, double hi) {
   if (!(v >= lo && v <= hi)) {
-    return absl::InvalidArgumentError(absl::StrCat(field, " = ", v, ": must be in [", lo, ", ", hi, "]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " = ", v, ": must be in [", lo, ", ", hi, "]"));
   }
   return absl::OkStatus();
 }
@@ -49,7 +50,8 @@ class Scene {
  public:
   Scene(const StationLayout& layout, const LidarSimOptions& o) : layout_(layout), o_(o) {
     for (const StationBoard& b : layout.boards) {
-      BoardTarget t{&b, b.T_station_board.Inverse(), b.T_station_board.rotation() * Eigen::Vector3d::UnitZ(), 0};
+      BoardTarget t{&b, b.T_station_board.Inverse(),
+                    b.T_station_board.rotation() * Eigen::Vector3d::UnitZ(), 0};
       t.d = t.n_station.dot(b.T_station_board.translation());
       // Upright boards (normal within 60 degrees of horizontal) stand on a post; boards lying
       // on the floor need none.
@@ -59,13 +61,15 @@ class Scene {
         const Eigen::Vector2d half = 0.5 * b.board.page_size_m();
         for (int sx : {-1, 1}) {
           for (int sy : {-1, 1}) {
-            lowest = std::min(lowest, (b.T_station_board * Eigen::Vector3d(sx * half.x(), sy * half.y(), 0)).z());
+            lowest = std::min(
+                lowest, (b.T_station_board * Eigen::Vector3d(sx * half.x(), sy * half.y(), 0)).z());
           }
         }
         if (lowest > 0) {
           t.has_stand = true;
           // The post stands behind the print, touching the board's back.
-          const Eigen::Vector3d axis = b.T_station_board.translation() - o.stand_radius_m * t.n_station;
+          const Eigen::Vector3d axis =
+              b.T_station_board.translation() - o.stand_radius_m * t.n_station;
           t.stand_xy = axis.head<2>();
           t.stand_top_z = lowest;
         }
@@ -73,8 +77,9 @@ class Scene {
       boards_.push_back(t);
     }
     for (const StationSurface& s : layout.surfaces) {
-      SurfaceTarget t{s.T_station_surface.Inverse(), s.T_station_surface.rotation() * Eigen::Vector3d::UnitZ(), 0,
-                      0.5 * s.size_m, s.reflectivity};
+      SurfaceTarget t{s.T_station_surface.Inverse(),
+                      s.T_station_surface.rotation() * Eigen::Vector3d::UnitZ(), 0, 0.5 * s.size_m,
+                      s.reflectivity};
       t.d = t.n_station.dot(s.T_station_surface.translation());
       surfaces_.push_back(t);
     }
@@ -92,8 +97,9 @@ class Scene {
       if (paint == Paint::kHole || paint == Paint::kOffBoard) continue;
       // denom < 0: the ray meets the printed face.
       best.range = t;
-      best.reflectivity = denom < 0 ? (paint == Paint::kBlack ? o_.black_reflectivity : o_.white_reflectivity)
-                                    : o_.board_back_reflectivity;
+      best.reflectivity =
+          denom < 0 ? (paint == Paint::kBlack ? o_.black_reflectivity : o_.white_reflectivity)
+                    : o_.board_back_reflectivity;
     }
     for (const BoardTarget& b : boards_) {
       if (!b.has_stand) continue;
@@ -144,11 +150,13 @@ class Scene {
 
 absl::Status LidarSimOptions::Validate() const {
   if (rotations < 1 || rotations > 100) {
-    return absl::InvalidArgumentError(absl::StrCat("rotations = ", rotations, ": must be in [1, 100]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("rotations = ", rotations, ": must be in [1, 100]"));
   }
   if (auto s = CheckRange("range_sigma_m", range_sigma_m, 0, 1); !s.ok()) return s;
   if (!(dropout_probability >= 0 && dropout_probability < 1)) {
-    return absl::InvalidArgumentError(absl::StrCat("dropout_probability = ", dropout_probability, ": must be in [0, 1)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("dropout_probability = ", dropout_probability, ": must be in [0, 1)"));
   }
   if (auto s = CheckRange("min_range_m", min_range_m, 0, 10); !s.ok()) return s;
   if (auto s = CheckRange("max_range_m", max_range_m, min_range_m, 500); !s.ok()) return s;
@@ -161,10 +169,14 @@ absl::Status LidarSimOptions::Validate() const {
   return CheckRange("stand_radius_m", stand_radius_m, 0.001, 0.5);
 }
 
-int SimulatedColumnStepCentideg(LidarModel model) { return model == LidarModel::kPandarXt32 ? 18 : 20; }
+int SimulatedColumnStepCentideg(LidarModel model) {
+  return model == LidarModel::kPandarXt32 ? 18 : 20;
+}
 
-absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const Rigid3d& T_station_lidar,
-                                             const StationLayout& layout, const LidarSimOptions& options,
+absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams,
+                                             const Rigid3d& T_station_lidar,
+                                             const StationLayout& layout,
+                                             const LidarSimOptions& options,
                                              std::int64_t start_time_ns, std::uint64_t seed) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   if (absl::Status s = ValidateBeamTable(beams); !s.ok()) return s;
@@ -175,7 +187,8 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
   const int channels = info.channels;
 
   const int per_packet = ColumnsPerPacket(beams.model, 1);
-  const int lead_packets = static_cast<int>(std::ceil(kLidarLeadDeg / (step_rad / kCentidegToRad / 100.0) / per_packet));
+  const int lead_packets =
+      static_cast<int>(std::ceil(kLidarLeadDeg / (step_rad / kCentidegToRad / 100.0) / per_packet));
   const int lead = lead_packets * per_packet;
 
   LidarSimResult result;
@@ -184,8 +197,8 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
   result.encode.first_column_time_ns = start_time_ns - lead * info.column_period_ns;
   // The motor speed these column periods and steps make (VLP-16: 603 rpm, Hesai: 600 rpm).
   constexpr double kNsPerMinute = 60e9;
-  result.encode.motor_rpm = static_cast<std::uint16_t>(
-      std::lround(kNsPerMinute / (static_cast<double>(columns_per_rotation) * info.column_period_ns)));
+  result.encode.motor_rpm = static_cast<std::uint16_t>(std::lround(
+      kNsPerMinute / (static_cast<double>(columns_per_rotation) * info.column_period_ns)));
 
   const Scene scene(layout, options);
   std::mt19937_64 rng(seed);
@@ -207,7 +220,8 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
     const std::int64_t c = k - lead;
     const std::int64_t column_time = start_time_ns + c * info.column_period_ns;
     LidarColumn& col = result.columns[k];
-    const std::int64_t az_centideg = ((c * step) % kCentidegPerTurn + kCentidegPerTurn) % kCentidegPerTurn;
+    const std::int64_t az_centideg =
+        ((c * step) % kCentidegPerTurn + kCentidegPerTurn) % kCentidegPerTurn;
     col.azimuth_centideg = static_cast<std::uint16_t>(az_centideg);
     col.echoes.resize(channels);
     const double column_az = static_cast<double>(c) * step_rad;  // unwrapped
@@ -223,14 +237,17 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
       // The packet carries whole distance units; the point must be what the decoder sees.
       range = std::round(range / info.distance_unit_m) * info.distance_unit_m;
       constexpr double kReflectivityScale = 255.0;
-      const auto intensity = static_cast<std::uint8_t>(std::lround(hit.reflectivity * kReflectivityScale));
+      const auto intensity =
+          static_cast<std::uint8_t>(std::lround(hit.reflectivity * kReflectivityScale));
       col.echoes[ch] = LidarEcho{range, intensity};
       // The rotation the point's own azimuth falls in, decided in centidegrees as the decoders
       // do (a beam exactly at 360 degrees starts the next rotation); lead-in and lead-out points
       // of other rotations go to the packets only.
-      const double az_centideg_total =
-          static_cast<double>(c * step) + beam.azimuth_offset_rad / kCentidegToRad + beam.firing_fraction * step;
-      const auto rotation = static_cast<std::int64_t>(std::floor(az_centideg_total / kCentidegPerTurn));
+      const double az_centideg_total = static_cast<double>(c * step) +
+                                       beam.azimuth_offset_rad / kCentidegToRad +
+                                       beam.firing_fraction * step;
+      const auto rotation =
+          static_cast<std::int64_t>(std::floor(az_centideg_total / kCentidegPerTurn));
       if (rotation < 0 || rotation >= options.rotations) continue;
       const Eigen::Vector3d p = LidarPointFromPolar(range, az, beam.elevation_rad);
       LidarPoint pt;
@@ -249,6 +266,5 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const 
   }
   return result;
 }
-
 
 }  // namespace linecal

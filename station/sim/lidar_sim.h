@@ -28,11 +28,11 @@
 namespace linecal {
 
 struct LidarSimOptions {
-  int rotations = 1;             // full rotations to simulate, 1..100
-  double range_sigma_m = 0.02;   // Gaussian range noise, [0, 1] (docs/acceptance.md: 1-3 cm)
+  int rotations = 1;                 // full rotations to simulate, 1..100
+  double range_sigma_m = 0.02;       // Gaussian range noise, [0, 1] (docs/acceptance.md: 1-3 cm)
   double dropout_probability = 0.0;  // a return is lost with this probability, [0, 1)
-  double min_range_m = 0.3;      // the sensors see nothing nearer (their own window)
-  double max_range_m = 120.0;    // and nothing beyond (station walls are far closer)
+  double min_range_m = 0.3;          // the sensors see nothing nearer (their own window)
+  double max_range_m = 120.0;        // and nothing beyond (station walls are far closer)
   // Board print reflectivity (0..1): white paper and black ink as the LiDAR sees them.
   double white_reflectivity = 0.8;
   double black_reflectivity = 0.08;
@@ -56,8 +56,8 @@ struct LidarSimResult {
 };
 
 // The lead-in and lead-out around the simulated rotations, degrees: more than the largest
-// Hesai azimuth offset (5.2 degrees in the reference Pandar64 file), so that every beam of the first and last rotation is
-// fired, and whole packets.
+// Hesai azimuth offset (5.2 degrees in the reference Pandar64 file), so that every beam of the
+// first and last rotation is fired, and whole packets.
 inline constexpr double kLidarLeadDeg = 10.0;
 
 // The azimuth step between columns used by the simulator, in 0.01 degree: 0.2° for the
@@ -70,8 +70,10 @@ int SimulatedColumnStepCentideg(LidarModel model);
 // Deterministic for a seed. Errors: InvalidArgument for invalid options or beam table.
 // Cost: rotations · columns · beams ray casts against every board, surface and stand
 // (about 40 ms for a Pandar64 rotation in the reference station).
-absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams, const Rigid3d& T_station_lidar,
-                                             const StationLayout& layout, const LidarSimOptions& options,
+absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams,
+                                             const Rigid3d& T_station_lidar,
+                                             const StationLayout& layout,
+                                             const LidarSimOptions& options,
                                              std::int64_t start_time_ns, std::uint64_t seed);
 
 }  // namespace linecal

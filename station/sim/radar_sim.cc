@@ -29,7 +29,8 @@ constexpr size_t kArs408MaxClusters = 250;
 
 absl::Status CheckRange(const char* field, double v, double lo, double hi) {
   if (!(v >= lo && v <= hi)) {
-    return absl::InvalidArgumentError(absl::StrCat(field, " = ", v, ": must be in [", lo, ", ", hi, "]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " = ", v, ": must be in [", lo, ", ", hi, "]"));
   }
   return absl::OkStatus();
 }
@@ -49,7 +50,8 @@ absl::Status RadarSimOptions::Validate() const {
         absl::StrCat("detection_probability = ", detection_probability, ": must be in (0, 1]"));
   }
   if (clutter_per_cycle < 0 || clutter_per_cycle > 200) {
-    return absl::InvalidArgumentError(absl::StrCat("clutter_per_cycle = ", clutter_per_cycle, ": must be in [0, 200]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("clutter_per_cycle = ", clutter_per_cycle, ": must be in [0, 200]"));
   }
   return absl::OkStatus();
 }
@@ -58,7 +60,8 @@ absl::StatusOr<std::vector<CanFrame>> SimulateRadar(const std::string& model, in
                                                     const StationLayout& layout,
                                                     const Rigid3d& T_station_radar, CanTime start,
                                                     const std::string& interface,
-                                                    const RadarSimOptions& options, std::uint64_t seed) {
+                                                    const RadarSimOptions& options,
+                                                    std::uint64_t seed) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   const std::optional<RadarFieldOfView> fov = RadarFieldOfViewOf(model);
   if (!fov) return absl::InvalidArgumentError(absl::StrCat("unknown radar model '", model, "'"));
@@ -72,8 +75,9 @@ absl::StatusOr<std::vector<CanFrame>> SimulateRadar(const std::string& model, in
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   const RadarConventions conventions;
   std::vector<CanFrame> frames;
-  const auto cycle_time = esr ? std::chrono::duration_cast<std::chrono::nanoseconds>(kEsrCycleTime)
-                              : std::chrono::duration_cast<std::chrono::nanoseconds>(kArs408CycleTime);
+  const auto cycle_time =
+      esr ? std::chrono::duration_cast<std::chrono::nanoseconds>(kEsrCycleTime)
+          : std::chrono::duration_cast<std::chrono::nanoseconds>(kArs408CycleTime);
   for (int c = 0; c < options.cycles; ++c) {
     RadarCycle cycle;
     cycle.time = start + c * cycle_time;
@@ -81,7 +85,8 @@ absl::StatusOr<std::vector<CanFrame>> SimulateRadar(const std::string& model, in
     cycle.kind = esr ? RadarDetectionKind::kTrack : RadarDetectionKind::kCluster;
     cycle.counter = static_cast<std::uint32_t>(c);
     std::vector<RadarDetection> dets;
-    const auto add = [&](double range, double azimuth, double rate, std::optional<double> rcs_dbsm) {
+    const auto add = [&](double range, double azimuth, double rate,
+                         std::optional<double> rcs_dbsm) {
       RadarDetection d;
       d.kind = cycle.kind;
       d.range_m = range;
@@ -105,8 +110,10 @@ absl::StatusOr<std::vector<CanFrame>> SimulateRadar(const std::string& model, in
         if (ghost_range <= fov->max_range_m) {
           const double ghost_azimuth_noise = options.azimuth_sigma_deg * kDegToRad * normal(rng);
           const double ghost_rate_noise = options.range_rate_sigma_mps * normal(rng);
-          const double ghost_loss_db = kGhostLossMinDb + (kGhostLossMaxDb - kGhostLossMinDb) * uniform(rng);
-          add(ghost_range, t.azimuth_rad + ghost_azimuth_noise, ghost_rate_noise, rcs[i] - ghost_loss_db);
+          const double ghost_loss_db =
+              kGhostLossMinDb + (kGhostLossMaxDb - kGhostLossMinDb) * uniform(rng);
+          add(ghost_range, t.azimuth_rad + ghost_azimuth_noise, ghost_rate_noise,
+              rcs[i] - ghost_loss_db);
         }
       }
     }
@@ -115,19 +122,24 @@ absl::StatusOr<std::vector<CanFrame>> SimulateRadar(const std::string& model, in
       // to the station's far end.
       constexpr double kClutterMinRangeM = 1.0;
       constexpr double kClutterMaxRangeM = 30.0;
-      const double range = kClutterMinRangeM + (kClutterMaxRangeM - kClutterMinRangeM) * uniform(rng);
+      const double range =
+          kClutterMinRangeM + (kClutterMaxRangeM - kClutterMinRangeM) * uniform(rng);
       const double azimuth = (2 * uniform(rng) - 1) * fov->half_fov_rad;
-      const double rate =
-          uniform(rng) < kMovingClutterShare ? (2 * uniform(rng) - 1) * kMaxClutterSpeedMps : options.range_rate_sigma_mps * normal(rng);
-      add(range, azimuth, rate, kClutterRcsMinDbsm + (kClutterRcsMaxDbsm - kClutterRcsMinDbsm) * uniform(rng));
+      const double rate = uniform(rng) < kMovingClutterShare
+                              ? (2 * uniform(rng) - 1) * kMaxClutterSpeedMps
+                              : options.range_rate_sigma_mps * normal(rng);
+      add(range, azimuth, rate,
+          kClutterRcsMinDbsm + (kClutterRcsMaxDbsm - kClutterRcsMinDbsm) * uniform(rng));
     }
     // A sensor's list holds at most this many entries; the reflectors come first.
     dets.resize(std::min(dets.size(), esr ? kEsrMaxTracks : kArs408MaxClusters));
-    for (size_t i = 0; i < dets.size(); ++i) dets[i].id = esr ? static_cast<int>(i) + 1 : static_cast<int>(i);
+    for (size_t i = 0; i < dets.size(); ++i)
+      dets[i].id = esr ? static_cast<int>(i) + 1 : static_cast<int>(i);
     cycle.detections = std::move(dets);
     cycle.messages_expected = static_cast<int>(cycle.detections.size());
     absl::StatusOr<std::vector<CanFrame>> encoded =
-        esr ? EncodeEsrScan(cycle, interface, conventions) : EncodeArs408Cycle(cycle, interface, conventions);
+        esr ? EncodeEsrScan(cycle, interface, conventions)
+            : EncodeArs408Cycle(cycle, interface, conventions);
     if (!encoded.ok()) return encoded.status();
     frames.insert(frames.end(), encoded->begin(), encoded->end());
   }

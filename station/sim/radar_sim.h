@@ -23,14 +23,14 @@
 namespace linecal {
 
 struct RadarSimOptions {
-  int cycles = 20;                  // measurement cycles to simulate, 1..10000
-  double range_sigma_m = 0.05;      // per-detection range noise, [0, 5]
-  double azimuth_sigma_deg = 0.1;   // per-detection azimuth noise, [0, 10] (docs/acceptance.md)
-  double rcs_sigma_db = 1.0;        // per-detection RCS noise, [0, 20]
-  double range_rate_sigma_mps = 0.03;  // noise on the (zero) range rate of static targets, [0, 5]
+  int cycles = 20;                      // measurement cycles to simulate, 1..10000
+  double range_sigma_m = 0.05;          // per-detection range noise, [0, 5]
+  double azimuth_sigma_deg = 0.1;       // per-detection azimuth noise, [0, 10] (docs/acceptance.md)
+  double rcs_sigma_db = 1.0;            // per-detection RCS noise, [0, 20]
+  double range_rate_sigma_mps = 0.03;   // noise on the (zero) range rate of static targets, [0, 5]
   double detection_probability = 0.98;  // a reflector is reported in a cycle with this, (0, 1]
-  int clutter_per_cycle = 6;        // weak random detections per cycle, 0..200
-  bool multipath = true;            // a ghost of each reflector at 1.3..1.8 x its range
+  int clutter_per_cycle = 6;            // weak random detections per cycle, 0..200
+  bool multipath = true;                // a ghost of each reflector at 1.3..1.8 x its range
   // OK or InvalidArgument naming the first bad field. O(1).
   absl::Status Validate() const;
 };
@@ -43,6 +43,7 @@ absl::StatusOr<std::vector<CanFrame>> SimulateRadar(const std::string& model, in
                                                     const StationLayout& layout,
                                                     const Rigid3d& T_station_radar, CanTime start,
                                                     const std::string& interface,
-                                                    const RadarSimOptions& options, std::uint64_t seed);
+                                                    const RadarSimOptions& options,
+                                                    std::uint64_t seed);
 
 }  // namespace linecal

@@ -12,9 +12,9 @@
 #include "station/io/image_io.h"
 #include "station/io/json_reader.h"
 #include "station/io/pcap.h"
-#include "station/sensors/lidar/pcd.h"
 #include "station/model/pose_json.h"
 #include "station/model/vin.h"
+#include "station/sensors/lidar/pcd.h"
 
 namespace linecal {
 namespace {
@@ -48,7 +48,8 @@ struct SensorOutput {
   nlohmann::json truth;
 };
 
-absl::StatusOr<SensorOutput> SimulateCamera(const SensorModel& sensor, const Rigid3d& T_station_sensor,
+absl::StatusOr<SensorOutput> SimulateCamera(const SensorModel& sensor,
+                                            const Rigid3d& T_station_sensor,
                                             const StationLayout& station, const SimulatorOptions& o,
                                             std::uint64_t stream, const fs::path& dir) {
   absl::StatusOr<CameraModel> camera = CameraModel::Create(*sensor.intrinsics);
@@ -59,30 +60,39 @@ absl::StatusOr<SensorOutput> SimulateCamera(const SensorModel& sensor, const Rig
   out.entry.kind = SensorKind::kCamera;
   nlohmann::json frames = nlohmann::json::array();
   for (int f = 0; f < o.camera_frames; ++f) {
-    absl::StatusOr<CameraFrame> frame = RenderCameraFrame(*camera, T_station_sensor, station, o.camera, StreamSeed(stream, f));
+    absl::StatusOr<CameraFrame> frame =
+        RenderCameraFrame(*camera, T_station_sensor, station, o.camera, StreamSeed(stream, f));
     if (!frame.ok()) return Prefix(sensor.name, frame.status());
     const std::string rel = absl::StrFormat("%s/frame-%06d.png", sensor.name, f);
-    const absl::Status written = frame->bit_depth == 16 ? WritePng16((dir / rel).string(), frame->image16.view())
-                                                        : WritePng8((dir / rel).string(), frame->image8.view());
+    const absl::Status written = frame->bit_depth == 16
+                                     ? WritePng16((dir / rel).string(), frame->image16.view())
+                                     : WritePng8((dir / rel).string(), frame->image8.view());
     if (!written.ok()) return written;
     out.entry.frames.push_back({rel, o.time_ns + f * kFramePeriodNs});
     nlohmann::json features = nlohmann::json::array();
     for (const RenderedFeature& rf : frame->features) {
-      features.push_back({{"board", rf.board_id}, {"id", rf.feature_id}, {"u", rf.uv_px.x()}, {"v", rf.uv_px.y()}});
+      features.push_back({{"board", rf.board_id},
+                          {"id", rf.feature_id},
+                          {"u", rf.uv_px.x()},
+                          {"v", rf.uv_px.y()}});
     }
-    frames.push_back({{"path", rel}, {"occluders", frame->occluders.size()}, {"features", std::move(features)}});
+    frames.push_back(
+        {{"path", rel}, {"occluders", frame->occluders.size()}, {"features", std::move(features)}});
   }
   out.truth["frames"] = std::move(frames);
   return out;
 }
 
-absl::StatusOr<SensorOutput> SimulateLidarSensor(const SensorModel& sensor, const Rigid3d& T_station_sensor,
-                                                 const StationLayout& station, const SimulatorOptions& o,
-                                                 std::uint64_t stream, const fs::path& dir) {
+absl::StatusOr<SensorOutput> SimulateLidarSensor(const SensorModel& sensor,
+                                                 const Rigid3d& T_station_sensor,
+                                                 const StationLayout& station,
+                                                 const SimulatorOptions& o, std::uint64_t stream,
+                                                 const fs::path& dir) {
   absl::StatusOr<LidarBeamTable> beams = LidarBeamTableOf(sensor);
   if (!beams.ok()) return Prefix(sensor.name, beams.status());
   const LidarModel model = beams->model;
-  absl::StatusOr<LidarSimResult> sim = SimulateLidar(*beams, T_station_sensor, station, o.lidar, o.time_ns, stream);
+  absl::StatusOr<LidarSimResult> sim =
+      SimulateLidar(*beams, T_station_sensor, station, o.lidar, o.time_ns, stream);
   if (!sim.ok()) return Prefix(sensor.name, sim.status());
   fs::create_directories(dir / sensor.name);
   SensorOutput out;
@@ -103,13 +113,15 @@ absl::StatusOr<SensorOutput> SimulateLidarSensor(const SensorModel& sensor, cons
     UdpEndpoints endpoints;
     endpoints.dst_port = info.default_udp_port;
     endpoints.src_port = info.default_udp_port;
-    absl::StatusOr<std::vector<std::vector<std::uint8_t>>> packets = EncodeLidarPackets(sim->encode, sim->columns);
+    absl::StatusOr<std::vector<std::vector<std::uint8_t>>> packets =
+        EncodeLidarPackets(sim->encode, sim->columns);
     if (!packets.ok()) return Prefix(sensor.name, packets.status());
     const int per_packet = ColumnsPerPacket(model, 1);
     for (size_t p = 0; p < packets->size(); ++p) {
       // A packet leaves the sensor when its last column has fired.
-      const std::int64_t t = sim->encode.first_column_time_ns +
-                             static_cast<std::int64_t>((p + 1) * per_packet - 1) * info.column_period_ns;
+      const std::int64_t t =
+          sim->encode.first_column_time_ns +
+          static_cast<std::int64_t>((p + 1) * per_packet - 1) * info.column_period_ns;
       if (absl::Status s = writer->WriteUdp(t, endpoints, (*packets)[p]); !s.ok()) return s;
     }
     if (absl::Status s = writer->Close(); !s.ok()) return s;
@@ -127,18 +139,23 @@ absl::StatusOr<SensorOutput> SimulateLidarSensor(const SensorModel& sensor, cons
       const Eigen::Vector3d p = T_lidar_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0);
       features.push_back({{"id", f.id}, {"p", {p.x(), p.y(), p.z()}}});
     }
-    boards.push_back({{"board", id}, {"T_lidar_board", MatrixToJson(T_lidar_board.Matrix())}, {"holes", features}});
+    boards.push_back({{"board", id},
+                      {"T_lidar_board", MatrixToJson(T_lidar_board.Matrix())},
+                      {"holes", features}});
   }
   out.truth["boards"] = std::move(boards);
   return out;
 }
 
-absl::StatusOr<SensorOutput> SimulateRadarSensor(const SensorModel& sensor, const Rigid3d& T_station_sensor,
-                                                 const StationLayout& station, const SimulatorOptions& o,
-                                                 std::uint64_t stream, const fs::path& dir) {
+absl::StatusOr<SensorOutput> SimulateRadarSensor(const SensorModel& sensor,
+                                                 const Rigid3d& T_station_sensor,
+                                                 const StationLayout& station,
+                                                 const SimulatorOptions& o, std::uint64_t stream,
+                                                 const fs::path& dir) {
   const CanTime start{std::chrono::nanoseconds(o.time_ns)};
   absl::StatusOr<std::vector<CanFrame>> frames =
-      SimulateRadar(sensor.model, sensor.radar_sensor_id, station, T_station_sensor, start, "can0", o.radar, stream);
+      SimulateRadar(sensor.model, sensor.radar_sensor_id, station, T_station_sensor, start, "can0",
+                    o.radar, stream);
   if (!frames.ok()) return Prefix(sensor.name, frames.status());
   fs::create_directories(dir / sensor.name);
   const std::string rel = sensor.name + "/can.log";
@@ -148,7 +165,8 @@ absl::StatusOr<SensorOutput> SimulateRadarSensor(const SensorModel& sensor, cons
   out.entry.kind = SensorKind::kRadar;
   out.entry.can_log = CaptureFile{rel, o.time_ns};
   nlohmann::json reflectors = nlohmann::json::array();
-  for (const RadarTruth& t : RadarReflectorTruth(station, T_station_sensor, *RadarFieldOfViewOf(sensor.model))) {
+  for (const RadarTruth& t :
+       RadarReflectorTruth(station, T_station_sensor, *RadarFieldOfViewOf(sensor.model))) {
     reflectors.push_back({{"id", t.reflector_id},
                           {"range_m", t.range_m},
                           {"azimuth_deg", t.azimuth_rad / kDegToRad},
@@ -161,7 +179,8 @@ absl::StatusOr<SensorOutput> SimulateRadarSensor(const SensorModel& sensor, cons
 }  // namespace
 
 absl::Status SimulatorOptions::Validate() const {
-  if (absl::Status s = ValidateVin(vin, false); !s.ok()) return absl::InvalidArgumentError(absl::StrCat("vin: ", s.message()));
+  if (absl::Status s = ValidateVin(vin, false); !s.ok())
+    return absl::InvalidArgumentError(absl::StrCat("vin: ", s.message()));
   if (time_ns < 0) return absl::InvalidArgumentError("time_ns: must be >= 0");
   // Mounting errors beyond 10 degrees or 0.5 m are not mounting errors but another car.
   if (auto s = CheckBound("perturb_angle_deg", perturb_angle_deg, 10); !s.ok()) return s;
@@ -170,14 +189,22 @@ absl::Status SimulatorOptions::Validate() const {
   if (auto s = CheckBound("aligner_offset_m", aligner_offset_m, 1.0); !s.ok()) return s;
   if (auto s = CheckBound("aligner_thrust_deg", aligner_thrust_deg, 10); !s.ok()) return s;
   if (aligner) {
-    if (auto s = CheckBound("aligner.longitudinal_offset_m", std::abs(aligner->longitudinal_offset_m), 1.0); !s.ok()) return s;
-    if (auto s = CheckBound("aligner.lateral_offset_m", std::abs(aligner->lateral_offset_m), 1.0); !s.ok()) return s;
-    if (auto s = CheckBound("aligner.thrust_angle_deg", std::abs(aligner->thrust_angle_rad) / kDegToRad, 10); !s.ok()) {
+    if (auto s = CheckBound("aligner.longitudinal_offset_m",
+                            std::abs(aligner->longitudinal_offset_m), 1.0);
+        !s.ok())
+      return s;
+    if (auto s = CheckBound("aligner.lateral_offset_m", std::abs(aligner->lateral_offset_m), 1.0);
+        !s.ok())
+      return s;
+    if (auto s = CheckBound("aligner.thrust_angle_deg",
+                            std::abs(aligner->thrust_angle_rad) / kDegToRad, 10);
+        !s.ok()) {
       return s;
     }
   }
   if (camera_frames < 1 || camera_frames > 100) {
-    return absl::InvalidArgumentError(absl::StrCat("camera_frames = ", camera_frames, ": must be in [1, 100]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("camera_frames = ", camera_frames, ": must be in [1, 100]"));
   }
   for (size_t i = 0; i < moved_boards.size(); ++i) {
     const MovedBoard& b = moved_boards[i];
@@ -195,10 +222,14 @@ absl::Status SimulatorOptions::Validate() const {
       return absl::InvalidArgumentError(absl::StrCat(field, ".xyz_m: each must be in [-0.5, 0.5]"));
     }
   }
-  if (!lidar_pcd && !lidar_pcap) return absl::InvalidArgumentError("lidar_pcd, lidar_pcap: at least one must be on");
-  if (auto s = camera.Validate(); !s.ok()) return absl::InvalidArgumentError(absl::StrCat("camera.", s.message()));
-  if (auto s = lidar.Validate(); !s.ok()) return absl::InvalidArgumentError(absl::StrCat("lidar.", s.message()));
-  if (auto s = radar.Validate(); !s.ok()) return absl::InvalidArgumentError(absl::StrCat("radar.", s.message()));
+  if (!lidar_pcd && !lidar_pcap)
+    return absl::InvalidArgumentError("lidar_pcd, lidar_pcap: at least one must be on");
+  if (auto s = camera.Validate(); !s.ok())
+    return absl::InvalidArgumentError(absl::StrCat("camera.", s.message()));
+  if (auto s = lidar.Validate(); !s.ok())
+    return absl::InvalidArgumentError(absl::StrCat("lidar.", s.message()));
+  if (auto s = radar.Validate(); !s.ok())
+    return absl::InvalidArgumentError(absl::StrCat("radar.", s.message()));
   return absl::OkStatus();
 }
 
@@ -242,7 +273,9 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
   } else {
     for (const std::string& name : options.sensors) {
       const SensorModel* s = car.FindSensor(name);
-      if (s == nullptr) return absl::InvalidArgumentError(absl::StrCat("car model '", car.id, "' has no sensor '", name, "'"));
+      if (s == nullptr)
+        return absl::InvalidArgumentError(
+            absl::StrCat("car model '", car.id, "' has no sensor '", name, "'"));
       sensors.push_back(s);
     }
   }
@@ -279,23 +312,33 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
     std::mt19937_64 srng(StreamSeed(seed, index + 1));
     // The true mounting: nominal mounting angles and position plus the random error.
     const Eigen::Matrix3d r_base = SensorBaseRotation(sensor->kind);
-    const YawPitchRoll nominal = MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
+    const YawPitchRoll nominal =
+        MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
     const double a = options.perturb_angle_deg * kDegToRad;
     const YawPitchRoll error{a * u(srng), a * u(srng), a * u(srng)};
     // Braced lists evaluate in order (a constructor's parenthesised arguments do not), so the
     // same seed gives the same pose whatever the compiler.
-    const Eigen::Vector3d offset{options.perturb_offset_m * u(srng), options.perturb_offset_m * u(srng),
+    const Eigen::Vector3d offset{options.perturb_offset_m * u(srng),
+                                 options.perturb_offset_m * u(srng),
                                  options.perturb_offset_m * u(srng)};
-    const YawPitchRoll truth_angles{nominal.yaw + error.yaw, nominal.pitch + error.pitch, nominal.roll + error.roll};
-    const Rigid3d T_car_sensor(MountingRotation(truth_angles, r_base), sensor->T_car_sensor_nominal.translation() + offset);
+    const YawPitchRoll truth_angles{nominal.yaw + error.yaw, nominal.pitch + error.pitch,
+                                    nominal.roll + error.roll};
+    const Rigid3d T_car_sensor(MountingRotation(truth_angles, r_base),
+                               sensor->T_car_sensor_nominal.translation() + offset);
     const Rigid3d T_station_sensor = T_station_car * T_car_sensor;
     const std::uint64_t stream = srng();
 
     absl::StatusOr<SensorOutput> result;
     switch (sensor->kind) {
-      case SensorKind::kCamera: result = SimulateCamera(*sensor, T_station_sensor, station, options, stream, dir); break;
-      case SensorKind::kLidar: result = SimulateLidarSensor(*sensor, T_station_sensor, station, options, stream, dir); break;
-      case SensorKind::kRadar: result = SimulateRadarSensor(*sensor, T_station_sensor, station, options, stream, dir); break;
+      case SensorKind::kCamera:
+        result = SimulateCamera(*sensor, T_station_sensor, station, options, stream, dir);
+        break;
+      case SensorKind::kLidar:
+        result = SimulateLidarSensor(*sensor, T_station_sensor, station, options, stream, dir);
+        break;
+      case SensorKind::kRadar:
+        result = SimulateRadarSensor(*sensor, T_station_sensor, station, options, stream, dir);
+        break;
     }
     if (!result.ok()) return result.status();
     m.sensors.push_back(result->entry);
@@ -303,8 +346,9 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
     t["name"] = sensor->name;
     t["kind"] = SensorKindName(sensor->kind);
     t["T_car_sensor"] = PoseToJson(T_car_sensor, r_base);
-    t["mounting_error"] = {{"ypr_deg", {error.yaw / kDegToRad, error.pitch / kDegToRad, error.roll / kDegToRad}},
-                           {"xyz_m", {offset.x(), offset.y(), offset.z()}}};
+    t["mounting_error"] = {
+        {"ypr_deg", {error.yaw / kDegToRad, error.pitch / kDegToRad, error.roll / kDegToRad}},
+        {"xyz_m", {offset.x(), offset.y(), offset.z()}}};
     truth_sensors.push_back(std::move(t));
     if (progress) progress(++done, static_cast<int>(sensors.size()), sensor->name);
   }
@@ -322,7 +366,9 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
     }
     out.ground_truth["moved_boards"] = std::move(moved);
   }
-  if (absl::Status s = WriteJsonFile((dir / kCaptureGroundTruthFile).string(), out.ground_truth); !s.ok()) return s;
+  if (absl::Status s = WriteJsonFile((dir / kCaptureGroundTruthFile).string(), out.ground_truth);
+      !s.ok())
+    return s;
   if (absl::Status s = WriteCapture(out_dir, m, surveyed, car); !s.ok()) return s;
   return out;
 }

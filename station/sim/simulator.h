@@ -12,11 +12,10 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "station/capture/capture.h"
@@ -88,8 +87,8 @@ struct SimulationSummary {
 // them); Cancelled once options.cancel is true (checked before each sensor). Cost: dominated by the
 // camera renders (about 0.2 s per 1920x1080 frame) and LiDAR rotations.
 absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& station, const CarModel& car,
-                                                  const SimulatorOptions& options, std::uint64_t seed,
-                                                  const std::string& out_dir,
+                                                  const SimulatorOptions& options,
+                                                  std::uint64_t seed, const std::string& out_dir,
                                                   const SimulatorProgress& progress = nullptr);
 
 }  // namespace linecal

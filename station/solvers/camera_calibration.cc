@@ -1,11 +1,10 @@
 #include "station/solvers/camera_calibration.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <numbers>
-
-#include <Eigen/Geometry>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -22,9 +21,8 @@ double Rms(const std::vector<double>& values) {
 
 // All features of the observed board of `type` with the most of them, frames pooled, and
 // that board's id; empty when none was seen.
-std::pair<std::string, std::vector<DetectedFeature>> MostSeenBoard(const StationLayout& station,
-                                                                  std::span<const BoardObservation> observations,
-                                                                  BoardType type) {
+std::pair<std::string, std::vector<DetectedFeature>> MostSeenBoard(
+    const StationLayout& station, std::span<const BoardObservation> observations, BoardType type) {
   std::map<std::string, std::vector<DetectedFeature>> pooled;
   for (const BoardObservation& o : observations) {
     const StationBoard* board = station.FindBoard(o.board_id);
@@ -45,7 +43,8 @@ absl::Status CameraCalibrationOptions::Validate() const {
   if (const std::string_view bad = pnp.Validate(); !bad.empty()) {
     return absl::InvalidArgumentError(absl::StrCat("pnp.", std::string(bad), " is out of range"));
   }
-  if (min_features < 4 || min_features > 10000) return absl::InvalidArgumentError("min_features is outside [4, 10000]");
+  if (min_features < 4 || min_features > 10000)
+    return absl::InvalidArgumentError("min_features is outside [4, 10000]");
   if (!(max_residual_rms_px > 0 && max_residual_rms_px <= 100)) {
     return absl::InvalidArgumentError("max_residual_rms_px is outside (0, 100]");
   }
@@ -53,7 +52,9 @@ absl::Status CameraCalibrationOptions::Validate() const {
     return absl::InvalidArgumentError("max_sigma_fraction_of_tolerance is outside (0, 10]");
   }
   for (double d : ranging_distances_m) {
-    if (!(d > 0 && d < 1e4)) return absl::InvalidArgumentError("ranging_distances_m: every distance must be in (0, 10000)");
+    if (!(d > 0 && d < 1e4))
+      return absl::InvalidArgumentError(
+          "ranging_distances_m: every distance must be in (0, 10000)");
   }
   return absl::OkStatus();
 }
@@ -92,7 +93,8 @@ bool CarAxisVanishingPoint(const CameraIntrinsics& intrinsics, const Rigid3d& T_
                            Eigen::Vector2d* vanishing_point_px) {
   const int along = CarAxisAlong(T_camera_car);
   if (along == 0) return false;
-  *vanishing_point_px = (PinholeMatrix(intrinsics) * (along * T_camera_car.RotationMatrix().col(0))).hnormalized();
+  *vanishing_point_px =
+      (PinholeMatrix(intrinsics) * (along * T_camera_car.RotationMatrix().col(0))).hnormalized();
   return true;
 }
 
@@ -116,9 +118,9 @@ struct CameraInputs {
 
 // The correspondences of `observations` (boards of `station`, T_car_station from the
 // aligner); InvalidArgument naming the sensor for a board not in the station.
-absl::StatusOr<CameraInputs> CollectCorrespondences(const SensorModel& sensor, const StationLayout& station,
-                                                    const Rigid3d& T_car_station,
-                                                    std::span<const BoardObservation> observations) {
+absl::StatusOr<CameraInputs> CollectCorrespondences(
+    const SensorModel& sensor, const StationLayout& station, const Rigid3d& T_car_station,
+    std::span<const BoardObservation> observations) {
   CameraInputs in;
   // Per board feature, the sum of its detections over the frames and their count: frames of a
   // still scene repeat each feature (see `on_means` in CalibrateCamera).
@@ -135,7 +137,8 @@ absl::StatusOr<CameraInputs> CollectCorrespondences(const SensorModel& sensor, c
     for (const auto& b : in.boards_seen) listed |= b.first == o.board_id;
     if (!listed) in.boards_seen.emplace_back(o.board_id, T_car_board);
     for (const DetectedFeature& f : o.features) {
-      in.points.push_back({T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
+      in.points.push_back(
+          {T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
       auto& [sum, n] = sums[{o.board_id, f.id}];
       sum.p_object = in.points.back().p_object;
       sum.uv_px += f.uv_px;
@@ -156,7 +159,8 @@ void SetDerived(const CameraModel& camera, const SensorModel& sensor, const Rigi
       CarAxisVanishingPoint(*sensor.intrinsics, T_camera_car, &result->vanishing_point_px);
   result->ground_homography = GroundHomography(*sensor.intrinsics, T_camera_car);
   if (result->vanishing_point_valid) {
-    result->ranging = RangingCheckOf(camera, T_camera_car, result->vanishing_point_px, options.ranging_distances_m);
+    result->ranging = RangingCheckOf(camera, T_camera_car, result->vanishing_point_px,
+                                     options.ranging_distances_m);
   }
 }
 
@@ -164,39 +168,45 @@ void SetDerived(const CameraModel& camera, const SensorModel& sensor, const Rigi
 // seen wide chessboard (and its disagreement with the extrinsic's vanishing point and ground
 // homography, which SetDerived gave) and the roll from the most seen vertical board; each
 // with a reason when its board was not seen.
-void SetSeedFormulas(const CameraModel& camera, const SensorModel& sensor, const StationLayout& station,
-                     const Rigid3d& T_car_station, std::span<const BoardObservation> observations,
+void SetSeedFormulas(const CameraModel& camera, const SensorModel& sensor,
+                     const StationLayout& station, const Rigid3d& T_car_station,
+                     std::span<const BoardObservation> observations,
                      const CameraCalibrationOptions& options, const Rigid3d& T_camera_car,
                      CameraCalibrationResult* result) {
   const Rigid3d T_car_camera = T_camera_car.Inverse();
   const int along = CarAxisAlong(T_camera_car);
-  const auto [chessboard_id, chessboard] = MostSeenBoard(station, observations, BoardType::kChessboard);
+  const auto [chessboard_id, chessboard] =
+      MostSeenBoard(station, observations, BoardType::kChessboard);
   if (chessboard.empty()) {
     result->board_method.reason = "chessboard_not_seen";
-    result->board_method.message = absl::StrCat(sensor.name, ": no wide chessboard among its observed boards");
+    result->board_method.message =
+        absl::StrCat(sensor.name, ": no wide chessboard among its observed boards");
   } else {
     const StationBoard& board = *station.FindBoard(chessboard_id);
-    result->board_method = SolveBoardMethod(camera, board.board, T_car_station * board.T_station_board,
-                                            T_car_camera.translation(), along, chessboard);
+    result->board_method =
+        SolveBoardMethod(camera, board.board, T_car_station * board.T_station_board,
+                         T_car_camera.translation(), along, chessboard);
     if (result->board_method.valid && result->vanishing_point_valid) {
       result->vanishing_point_disagreement_px =
           (result->board_method.vanishing_point_px - result->vanishing_point_px).norm();
       result->ground_disagreement =
           GroundDisagreement(result->ground_homography, result->board_method.ground_homography,
                              T_car_camera.translation(), along, options.ranging_distances_m);
-      result->toolbox_ground_disagreement =
-          GroundDisagreement(result->ground_homography, result->board_method.toolbox_ground_homography,
-                             T_car_camera.translation(), along, options.ranging_distances_m);
+      result->toolbox_ground_disagreement = GroundDisagreement(
+          result->ground_homography, result->board_method.toolbox_ground_homography,
+          T_car_camera.translation(), along, options.ranging_distances_m);
     }
   }
   const auto [vertical_id, vertical] = MostSeenBoard(station, observations, BoardType::kVertical);
   if (vertical.empty()) {
     result->vertical_roll.reason = "vertical_board_not_seen";
-    result->vertical_roll.message = absl::StrCat(sensor.name, ": no vertical board among its observed boards");
+    result->vertical_roll.message =
+        absl::StrCat(sensor.name, ": no vertical board among its observed boards");
   } else {
     const StationBoard& board = *station.FindBoard(vertical_id);
-    result->vertical_roll = RollFromVerticalBoard(camera, board.board, T_car_station * board.T_station_board,
-                                                  T_camera_car.RotationMatrix().col(0), vertical);
+    result->vertical_roll =
+        RollFromVerticalBoard(camera, board.board, T_car_station * board.T_station_board,
+                              T_camera_car.RotationMatrix().col(0), vertical);
   }
 }
 
@@ -206,15 +216,17 @@ void Judge(const SensorModel& sensor, const CameraInputs& in, const Rigid3d& T_c
   for (const auto& [id, T_car_board] : in.boards_seen) {
     if (!BoardFacesCamera(T_camera_car * T_car_board)) {
       result->reason = "board_seen_from_behind";
-      result->message = absl::StrCat(sensor.name, ": the pose puts the print of board ", id,
-                                     " facing away from the camera (mirrored or mis-identified board)");
+      result->message =
+          absl::StrCat(sensor.name, ": the pose puts the print of board ", id,
+                       " facing away from the camera (mirrored or mis-identified board)");
       return;
     }
   }
   if (result->residual_rms_px > options.max_residual_rms_px) {
     result->reason = "residual_too_high";
-    result->message = absl::StrFormat("%s: residual RMS %.3f px above %.3f px (moved board or wrong correspondence)",
-                                      sensor.name, result->residual_rms_px, options.max_residual_rms_px);
+    result->message = absl::StrFormat(
+        "%s: residual RMS %.3f px above %.3f px (moved board or wrong correspondence)", sensor.name,
+        result->residual_rms_px, options.max_residual_rms_px);
     return;
   }
   const MountingJudgement judgement =
@@ -226,20 +238,23 @@ void Judge(const SensorModel& sensor, const CameraInputs& in, const Rigid3d& T_c
 
 }  // namespace
 
-absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& sensor, const StationLayout& station,
-                                                        const Rigid3d& T_station_car,
-                                                        std::span<const BoardObservation> observations,
-                                                        const CameraCalibrationOptions& options) {
+absl::StatusOr<CameraCalibrationResult> CalibrateCamera(
+    const SensorModel& sensor, const StationLayout& station, const Rigid3d& T_station_car,
+    std::span<const BoardObservation> observations, const CameraCalibrationOptions& options) {
   if (sensor.kind != SensorKind::kCamera || !sensor.intrinsics) {
-    return absl::InvalidArgumentError(absl::StrCat("sensor ", sensor.name, " is not a camera with intrinsics"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("sensor ", sensor.name, " is not a camera with intrinsics"));
   }
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   absl::StatusOr<CameraModel> camera = CameraModel::Create(*sensor.intrinsics);
-  if (!camera.ok()) return absl::InvalidArgumentError(absl::StrCat(sensor.name, ".intrinsics: ", camera.status().message()));
+  if (!camera.ok())
+    return absl::InvalidArgumentError(
+        absl::StrCat(sensor.name, ".intrinsics: ", camera.status().message()));
 
   CameraCalibrationResult result;
   const Rigid3d T_car_station = T_station_car.Inverse();
-  absl::StatusOr<CameraInputs> in = CollectCorrespondences(sensor, station, T_car_station, observations);
+  absl::StatusOr<CameraInputs> in =
+      CollectCorrespondences(sensor, station, T_car_station, observations);
   if (!in.ok()) return in.status();
   const std::vector<PnpCorrespondence>& points = in->points;
   const std::vector<PnpCorrespondence>& means = in->means;
@@ -252,9 +267,9 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
   }
   if (static_cast<int>(means.size()) < options.min_features) {
     result.reason = "too_few_features";
-    result.message = absl::StrCat(sensor.name, ": ", means.size(), " distinct features (",
-                                  result.features_used, " detections), at least ",
-                                  options.min_features, " needed");
+    result.message =
+        absl::StrCat(sensor.name, ": ", means.size(), " distinct features (", result.features_used,
+                     " detections), at least ", options.min_features, " needed");
     return result;
   }
   // Frames of a still scene share the detector's systematic error (blur, lens, print): a
@@ -279,7 +294,8 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& senso
   result.solved = true;
   result.mounting = MountingFromSensorPose(T_camera_car, pnp->covariance, sensor);
   SetDerived(*camera, sensor, T_camera_car, options, &result);
-  SetSeedFormulas(*camera, sensor, station, T_car_station, observations, options, T_camera_car, &result);
+  SetSeedFormulas(*camera, sensor, station, T_car_station, observations, options, T_camera_car,
+                  &result);
   Judge(sensor, *in, T_camera_car, options, &result);
   return result;
 }

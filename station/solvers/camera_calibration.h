@@ -18,12 +18,11 @@
 // "board_seen_from_behind", "residual_too_high", "uncertainty_too_high" or a PnP outcome
 // ("collinear_features", "no_initial_pose", "did_not_converge").
 
+#include <Eigen/Core>
 #include <array>
 #include <span>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
@@ -108,22 +107,21 @@ struct CameraCalibrationResult {
 // Errors (InvalidArgument): not a camera, invalid intrinsics or options, an observation of a
 // board that is not in `station`. Everything else is an outcome in the result. Cost: one PnP
 // solve over all features (about 1 ms for 150).
-absl::StatusOr<CameraCalibrationResult> CalibrateCamera(const SensorModel& sensor, const StationLayout& station,
-                                                        const Rigid3d& T_station_car,
-                                                        std::span<const BoardObservation> observations,
-                                                        const CameraCalibrationOptions& options = {});
+absl::StatusOr<CameraCalibrationResult> CalibrateCamera(
+    const SensorModel& sensor, const StationLayout& station, const Rigid3d& T_station_car,
+    std::span<const BoardObservation> observations, const CameraCalibrationOptions& options = {});
 
 // +1 when the camera's optical axis is within 45 degrees of +x_car (it looks forward), -1
 // within 45 degrees of -x_car (backward), 0 otherwise (sideways). O(1).
 int CarAxisAlong(const Rigid3d& T_camera_car);
 
 // The ground points at `distances_m` straight ahead of the camera (along ±x_car, the way it
-// looks (CarAxisAlong), from the camera's footprint) imaged through T_camera_car and the full lens model, and the distance
-// the flat-ground formula of the reference toolbox recovers from each pixel: D_lon = h fy /
-// (v_u - vp_v), with h the camera height, v_u the undistorted row and vp the vanishing point.
-// Its error measures how well (h, vp) stand in for the full extrinsic. A distance whose
-// point the camera cannot see, or any distance for a side camera, gives
-// measured_distance_m = NaN. O(n).
+// looks (CarAxisAlong), from the camera's footprint) imaged through T_camera_car and the full lens
+// model, and the distance the flat-ground formula of the reference toolbox recovers from each
+// pixel: D_lon = h fy / (v_u - vp_v), with h the camera height, v_u the undistorted row and vp the
+// vanishing point. Its error measures how well (h, vp) stand in for the full extrinsic. A distance
+// whose point the camera cannot see, or any distance for a side camera, gives measured_distance_m =
+// NaN. O(n).
 std::vector<RangingCheck> RangingCheckOf(const CameraModel& camera, const Rigid3d& T_camera_car,
                                          const Eigen::Vector2d& vanishing_point_px,
                                          std::span<const double> distances_m);

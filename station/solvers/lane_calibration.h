@@ -19,11 +19,10 @@
 // Image points are distorted pixels as stored in the image; the vanishing point and the
 // homography are in the undistorted image of K = (fx, fy, cx, cy).
 
+#include <Eigen/Core>
 #include <array>
 #include <optional>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
@@ -97,8 +96,8 @@ absl::StatusOr<LaneCalibrationResult> CalibrateFromLanes(const LaneCalibrationIn
 // The ground point (x, y) in the car frame that the distorted pixel uv_px sees, through the
 // ground homography of T_camera_car (GroundHomography); false when the pixel has no ray or is
 // not below the horizon (its ray does not go down to the ground). O(1).
-bool GroundPointOfPixel(const CameraModel& camera, const Rigid3d& T_camera_car, const Eigen::Vector2d& uv_px,
-                        Eigen::Vector2d* p_ground);
+bool GroundPointOfPixel(const CameraModel& camera, const Rigid3d& T_camera_car,
+                        const Eigen::Vector2d& uv_px, Eigen::Vector2d* p_ground);
 
 // The ranging error of an estimated mounting at ground point p_ground (car frame, z = 0): the
 // point imaged through the true mounting and the lens, taken back to the ground through the

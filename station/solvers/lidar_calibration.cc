@@ -3,12 +3,11 @@
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
-#include <algorithm>
-#include <cmath>
-
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -171,8 +170,8 @@ absl::Status AddObservation(const SensorModel& sensor, const StationLayout& stat
                             const LidarCalibrationOptions& options, LidarInputs* in) {
   const StationBoard* board = station.FindBoard(o.board_id);
   if (board == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(sensor.name, ": observed board '", o.board_id, "' is not in station '", station.name, "'"));
+    return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": observed board '", o.board_id,
+                                                   "' is not in station '", station.name, "'"));
   }
   if (o.holes.empty()) return absl::OkStatus();
   const Rigid3d T_car_board = T_car_station * board->T_station_board;
@@ -181,7 +180,8 @@ absl::Status AddObservation(const SensorModel& sensor, const StationLayout& stat
   if (by_pose) {
     const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(o.pose_covariance);
     if (!o.T_lidar_board->Matrix().allFinite() || !o.pose_covariance.allFinite() ||
-        !o.pose_covariance.isApprox(o.pose_covariance.transpose()) || llt.info() != Eigen::Success) {
+        !o.pose_covariance.isApprox(o.pose_covariance.transpose()) ||
+        llt.info() != Eigen::Success) {
       return absl::InvalidArgumentError(absl::StrCat(
           sensor.name, ": board '", o.board_id,
           "': T_lidar_board must be finite and pose_covariance symmetric positive definite"));
@@ -193,24 +193,27 @@ absl::Status AddObservation(const SensorModel& sensor, const StationLayout& stat
     const std::vector<BoardFeature>& features = board->board.features();
     if (h.feature_id < 0 || h.feature_id >= static_cast<int>(features.size()) ||
         features[h.feature_id].kind != FeatureKind::kHoleCentre) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(sensor.name, ": board '", o.board_id, "' has no hole centre with id ", h.feature_id));
+      return absl::InvalidArgumentError(absl::StrCat(
+          sensor.name, ": board '", o.board_id, "' has no hole centre with id ", h.feature_id));
     }
     if (!h.p_lidar.allFinite()) {
-      return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": board '", o.board_id, "' hole ", h.feature_id,
+      return absl::InvalidArgumentError(absl::StrCat(sensor.name, ": board '", o.board_id,
+                                                     "' hole ", h.feature_id,
                                                      ": position is not finite"));
     }
     const Eigen::Vector2d& p = features[h.feature_id].p_board;
-    in->pairs.push_back({h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false, !by_pose});
+    in->pairs.push_back(
+        {h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false, !by_pose});
     ++in->features_used;
   }
   if (o.normal_lidar) {
     if (!o.normal_lidar->allFinite() || std::abs(o.normal_lidar->norm() - 1) > 1e-6) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(sensor.name, ": board '", o.board_id, "': normal_lidar must be a finite unit vector"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          sensor.name, ": board '", o.board_id, "': normal_lidar must be a finite unit vector"));
     }
     const double nsigma = o.normal_sigma_rad > 0 ? o.normal_sigma_rad : options.normal_sigma_rad;
-    in->pairs.push_back({*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true, !by_pose});
+    in->pairs.push_back(
+        {*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true, !by_pose});
   }
   ++in->boards_used;
   return absl::OkStatus();
@@ -226,7 +229,8 @@ bool CentresFixAPose(const LidarInputs& in) {
   for (const Pair& x : in.pairs) {
     if (!x.direction) scatter += (x.q_car - mean) * (x.q_car - mean).transpose();
   }
-  const Eigen::Vector3d spread = Eigen::JacobiSVD<Eigen::Matrix3d>(scatter).singularValues().cwiseSqrt();
+  const Eigen::Vector3d spread =
+      Eigen::JacobiSVD<Eigen::Matrix3d>(scatter).singularValues().cwiseSqrt();
   return in.features_used >= 3 && spread(1) > kCollinearRatio * spread(0);
 }
 
@@ -266,7 +270,8 @@ LidarSolve SolveLidarPose(const SensorModel& sensor, const LidarInputs& in,
   if (options.translation_bound_m > 0) {
     for (int k = 0; k < 3; ++k) {
       // Start inside the box, so the bounded solver begins from a feasible point.
-      t[k] = std::clamp(t[k], nominal[k] - options.translation_bound_m, nominal[k] + options.translation_bound_m);
+      t[k] = std::clamp(t[k], nominal[k] - options.translation_bound_m,
+                        nominal[k] + options.translation_bound_m);
       problem.SetParameterLowerBound(t, k, nominal[k] - options.translation_bound_m);
       problem.SetParameterUpperBound(t, k, nominal[k] + options.translation_bound_m);
     }
@@ -286,7 +291,8 @@ LidarSolve SolveLidarPose(const SensorModel& sensor, const LidarInputs& in,
   if (!out.converged) return out;
   Eigen::Matrix3d d_rotation;
   ceres::AngleAxisToRotationMatrix(omega, ceres::ColumnMajorAdapter3x3(d_rotation.data()));
-  out.T_car_lidar = Rigid3d(Eigen::Quaterniond(d_rotation * R0).normalized(), Eigen::Vector3d(t[0], t[1], t[2]));
+  out.T_car_lidar =
+      Rigid3d(Eigen::Quaterniond(d_rotation * R0).normalized(), Eigen::Vector3d(t[0], t[1], t[2]));
   return out;
 }
 
@@ -333,21 +339,22 @@ double CentreResidualRms(const Rigid3d& T_car_lidar, const LidarInputs& in) {
 
 }  // namespace
 
-absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor, const StationLayout& station,
-                                                      const Rigid3d& T_station_car,
-                                                      std::span<const LidarBoardObservation> observations,
-                                                      const LidarCalibrationOptions& options) {
+absl::StatusOr<LidarCalibrationResult> CalibrateLidar(
+    const SensorModel& sensor, const StationLayout& station, const Rigid3d& T_station_car,
+    std::span<const LidarBoardObservation> observations, const LidarCalibrationOptions& options) {
   if (sensor.kind != SensorKind::kLidar) {
     return absl::InvalidArgumentError(absl::StrCat("sensor ", sensor.name, " is not a LiDAR"));
   }
   if (const std::string_view bad = options.Validate(); !bad.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("LidarCalibrationOptions.", std::string(bad), " is out of range"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("LidarCalibrationOptions.", std::string(bad), " is out of range"));
   }
   const Rigid3d T_car_station = T_station_car.Inverse();
   LidarCalibrationResult result;
   LidarInputs in;
   for (const LidarBoardObservation& o : observations) {
-    if (absl::Status s = AddObservation(sensor, station, T_car_station, o, options, &in); !s.ok()) return s;
+    if (absl::Status s = AddObservation(sensor, station, T_car_station, o, options, &in); !s.ok())
+      return s;
   }
   result.features_used = in.features_used;
   result.boards_used = in.boards_used;
@@ -377,14 +384,17 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor,
   }
   result.residual_rms_m = CentreResidualRms(solve.T_car_lidar, in);
   result.solved = true;
-  result.mounting = MountingFromCarPose(solve.T_car_lidar, PoseInformation(solve, in).inverse(), sensor);
+  result.mounting =
+      MountingFromCarPose(solve.T_car_lidar, PoseInformation(solve, in).inverse(), sensor);
   if (result.residual_rms_m > options.max_residual_rms_m) {
     result.reason = "residual_too_high";
-    result.message = absl::StrFormat("%s: hole centres %.1f mm RMS off the layout (limit %.1f mm): moved board or wrong match",
-                                     sensor.name, result.residual_rms_m * 1e3, options.max_residual_rms_m * 1e3);
+    result.message = absl::StrFormat(
+        "%s: hole centres %.1f mm RMS off the layout (limit %.1f mm): moved board or wrong match",
+        sensor.name, result.residual_rms_m * 1e3, options.max_residual_rms_m * 1e3);
     return result;
   }
-  const MountingJudgement judgement = JudgeMounting(sensor, result.mounting, options.max_sigma_fraction_of_tolerance);
+  const MountingJudgement judgement =
+      JudgeMounting(sensor, result.mounting, options.max_sigma_fraction_of_tolerance);
   result.verdict = judgement.verdict;
   result.reason = judgement.reason;
   result.message = judgement.message;

@@ -14,13 +14,12 @@
 // than 3 hole centres, or all on one line), "residual_too_high" (hole centres that no rigid
 // motion brings onto the layout: a moved board or a wrong match), "uncertainty_too_high".
 
+#include <Eigen/Core>
 #include <optional>
 #include <span>
 #include <string>
 #include <string_view>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
@@ -101,9 +100,9 @@ struct LidarCalibrationResult {
 // invalid options, an observation of a board not in `station`, an unknown hole feature id,
 // non-finite input. Everything else is an outcome in the result. Cost: one small Ceres solve
 // (about 0.1 ms for 10 hole centres).
-absl::StatusOr<LidarCalibrationResult> CalibrateLidar(const SensorModel& sensor, const StationLayout& station,
-                                                      const Rigid3d& T_station_car,
-                                                      std::span<const LidarBoardObservation> observations,
-                                                      const LidarCalibrationOptions& options = {});
+absl::StatusOr<LidarCalibrationResult> CalibrateLidar(
+    const SensorModel& sensor, const StationLayout& station, const Rigid3d& T_station_car,
+    std::span<const LidarBoardObservation> observations,
+    const LidarCalibrationOptions& options = {});
 
 }  // namespace linecal

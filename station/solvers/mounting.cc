@@ -1,9 +1,8 @@
 #include "station/solvers/mounting.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <numbers>
-
-#include <Eigen/Geometry>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -19,7 +18,8 @@ Eigen::Vector3d AnglesVector(const YawPitchRoll& a) { return {a.yaw, a.pitch, a.
 
 }  // namespace
 
-MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::Matrix<double, 6, 6>& covariance,
+MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor,
+                                     const Eigen::Matrix<double, 6, 6>& covariance,
                                      const SensorModel& sensor) {
   const Eigen::Matrix3d r_base = SensorBaseRotation(sensor.kind);
   MountingEstimate m;
@@ -28,7 +28,8 @@ MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::M
   m.angles = MountingAngles(R, r_base);
   m.position_m = T_car_sensor.translation();
   const YawPitchRoll nominal = MountingAngles(sensor.T_car_sensor_nominal.RotationMatrix(), r_base);
-  m.angles_deviation = {WrapAngle(m.angles.yaw - nominal.yaw), WrapAngle(m.angles.pitch - nominal.pitch),
+  m.angles_deviation = {WrapAngle(m.angles.yaw - nominal.yaw),
+                        WrapAngle(m.angles.pitch - nominal.pitch),
                         WrapAngle(m.angles.roll - nominal.roll)};
   m.position_deviation_m = m.position_m - sensor.T_car_sensor_nominal.translation();
   // Yaw/pitch/roll as functions of the car-frame rotation vector, by central differences:
@@ -37,8 +38,10 @@ MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::M
   constexpr double kStep = 1e-6;
   Eigen::Matrix3d d_angles;
   for (int k = 0; k < 3; ++k) {
-    const Eigen::Matrix3d plus = Eigen::AngleAxisd(kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
-    const Eigen::Matrix3d minus = Eigen::AngleAxisd(-kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
+    const Eigen::Matrix3d plus =
+        Eigen::AngleAxisd(kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
+    const Eigen::Matrix3d minus =
+        Eigen::AngleAxisd(-kStep, Eigen::Vector3d::Unit(k)).toRotationMatrix() * R;
     const Eigen::Vector3d a = AnglesVector(MountingAngles(plus, r_base));
     const Eigen::Vector3d b = AnglesVector(MountingAngles(minus, r_base));
     for (int i = 0; i < 3; ++i) d_angles(i, k) = WrapAngle(a[i] - b[i]) / (2 * kStep);
@@ -49,7 +52,8 @@ MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::M
   return m;
 }
 
-MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen::Matrix<double, 6, 6>& covariance,
+MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car,
+                                        const Eigen::Matrix<double, 6, 6>& covariance,
                                         const SensorModel& sensor) {
   // Covariance of T_car_sensor = T_sensor_car^-1 with R_sc = exp(δθ) R̂_sc, t_sc = t̂ + δt:
   //   R_cs = R̂_scᵀ exp(-δθ) = exp(-R̂_cs δθ) R̂_cs             =>  δθ_car = -R̂_cs δθ
@@ -66,7 +70,8 @@ MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen
 MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimate& m,
                                 double max_sigma_fraction_of_tolerance) {
   const MountingTolerance& tol = sensor.tolerance;
-  const double tolerances[6] = {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
+  const double tolerances[6] = {tol.yaw_rad,   tol.pitch_rad, tol.roll_rad,
+                                tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
   const Eigen::Matrix<double, 6, 1> deviations = m.Deviation();
   const char* names[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
   // Angles are shown in degrees, positions in millimetres.
@@ -78,18 +83,21 @@ MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimat
     if (!m.observed[i] || !(tolerances[i] > 0)) continue;
     if (m.sigma[i] > max_sigma_fraction_of_tolerance * tolerances[i]) {
       j.reason = "uncertainty_too_high";
-      j.message = absl::StrFormat("%s: %s 1-sigma %.4f %s is above %.2f of its tolerance %.4f %s", sensor.name,
-                                  names[i], shown(i, m.sigma[i]), units[i], max_sigma_fraction_of_tolerance,
-                                  shown(i, tolerances[i]), units[i]);
+      j.message =
+          absl::StrFormat("%s: %s 1-sigma %.4f %s is above %.2f of its tolerance %.4f %s",
+                          sensor.name, names[i], shown(i, m.sigma[i]), units[i],
+                          max_sigma_fraction_of_tolerance, shown(i, tolerances[i]), units[i]);
       return j;
     }
   }
   std::string out_of_tolerance;
   for (int i = 0; i < 6; ++i) {
-    if (!m.observed[i] || !(tolerances[i] > 0) || std::abs(deviations[i]) <= tolerances[i]) continue;
+    if (!m.observed[i] || !(tolerances[i] > 0) || std::abs(deviations[i]) <= tolerances[i])
+      continue;
     if (j.reason.empty()) j.reason = absl::StrCat(names[i], "_out_of_tolerance");
-    absl::StrAppendFormat(&out_of_tolerance, "%s%s %+.3f %s (tolerance %.3f)", out_of_tolerance.empty() ? "" : ", ",
-                          names[i], shown(i, deviations[i]), units[i], shown(i, tolerances[i]));
+    absl::StrAppendFormat(&out_of_tolerance, "%s%s %+.3f %s (tolerance %.3f)",
+                          out_of_tolerance.empty() ? "" : ", ", names[i], shown(i, deviations[i]),
+                          units[i], shown(i, tolerances[i]));
   }
   if (!j.reason.empty()) {
     j.verdict = Verdict::kFail;

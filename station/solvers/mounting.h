@@ -6,10 +6,9 @@
 // Angles per docs/conventions.md: R_car_sensor = Rz(yaw) Ry(pitch) Rx(roll) R_base, R_base by the
 // sensor kind (SensorBaseRotation).
 
+#include <Eigen/Core>
 #include <array>
 #include <string>
-
-#include <Eigen/Core>
 
 #include "detectors/core/pose.h"
 #include "station/model/car_model.h"
@@ -43,12 +42,14 @@ struct MountingEstimate {
 // PnpResult gives it: (δθ, δt), the left rotation vector and the translation, both in the
 // sensor frame. Propagates the covariance to yaw/pitch/roll and the position in the car
 // frame. O(1).
-MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car, const Eigen::Matrix<double, 6, 6>& covariance,
+MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car,
+                                        const Eigen::Matrix<double, 6, 6>& covariance,
                                         const SensorModel& sensor);
 
 // The same from T_car_sensor and the covariance of (δθ, δt) in the car frame (R_car_sensor =
 // exp(δθ) R̂, t = t̂ + δt), as a solver in the car frame gives it. O(1).
-MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor, const Eigen::Matrix<double, 6, 6>& covariance,
+MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor,
+                                     const Eigen::Matrix<double, 6, 6>& covariance,
                                      const SensorModel& sensor);
 
 struct MountingJudgement {

@@ -3,13 +3,12 @@
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <cmath>
 #include <limits>
 #include <optional>
 #include <vector>
-
-#include <Eigen/Geometry>
-#include <Eigen/SVD>
 
 #include "absl/strings/str_cat.h"
 #include "detectors/common/homography.h"
@@ -35,7 +34,8 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m) {
 
 // The closed-form start in the virtual camera `v` (normalised coordinates m_v of the rays):
 // T_v_object, or nullopt when degenerate.
-std::optional<Rigid3d> PlanarStart(std::span<const Eigen::Vector3d> p_object, std::span<const Eigen::Vector2d> m_v,
+std::optional<Rigid3d> PlanarStart(std::span<const Eigen::Vector3d> p_object,
+                                   std::span<const Eigen::Vector2d> m_v,
                                    const Eigen::Vector3d& centroid, Eigen::Matrix3d basis) {
   // basis: columns e1, e2 in the plane and the normal; a proper rotation (det +1).
   if (basis.determinant() < 0) basis.col(2) = -basis.col(2);
@@ -60,7 +60,8 @@ std::optional<Rigid3d> PlanarStart(std::span<const Eigen::Vector3d> p_object, st
   return T_v_plane * T_plane_object;
 }
 
-std::optional<Rigid3d> GeneralStart(std::span<const Eigen::Vector3d> p_object, std::span<const Eigen::Vector2d> m_v,
+std::optional<Rigid3d> GeneralStart(std::span<const Eigen::Vector3d> p_object,
+                                    std::span<const Eigen::Vector2d> m_v,
                                     const Eigen::Vector3d& centroid) {
   // Normalised DLT: object points centred and scaled to unit mean distance; the normalised
   // image coordinates are already of order one.
@@ -69,7 +70,8 @@ std::optional<Rigid3d> GeneralStart(std::span<const Eigen::Vector3d> p_object, s
   scale /= static_cast<double>(p_object.size());
   Eigen::MatrixXd A(2 * p_object.size(), 12);
   for (size_t i = 0; i < p_object.size(); ++i) {
-    const Eigen::Vector4d X((p_object[i] - centroid).x() / scale, (p_object[i] - centroid).y() / scale,
+    const Eigen::Vector4d X((p_object[i] - centroid).x() / scale,
+                            (p_object[i] - centroid).y() / scale,
                             (p_object[i] - centroid).z() / scale, 1.0);
     const double u = m_v[i].x(), v = m_v[i].y();
     A.row(2 * i) << X.transpose(), Eigen::RowVector4d::Zero(), -u * X.transpose();
@@ -94,7 +96,8 @@ std::optional<Rigid3d> GeneralStart(std::span<const Eigen::Vector3d> p_object, s
 // Reprojection residual of one point, with the rotation as a rotation vector applied on top
 // of the start: p_camera = exp(omega) (R0 p_object) + t.
 struct ReprojectionCost {
-  ReprojectionCost(const CameraModel* camera, const Eigen::Vector3d& r0_p, const Eigen::Vector2d& uv)
+  ReprojectionCost(const CameraModel* camera, const Eigen::Vector3d& r0_p,
+                   const Eigen::Vector2d& uv)
       : camera(camera), r0_p(r0_p), uv(uv) {}
 
   template <typename T>
@@ -112,7 +115,8 @@ struct ReprojectionCost {
       ProjectPinhole(params, p_camera, projected);
     } else {
       // The fisheye folds on the negative optical axis; reject steps that reach it.
-      if (!(p_camera[2] > T(0)) && p_camera[0] * p_camera[0] + p_camera[1] * p_camera[1] == T(0)) return false;
+      if (!(p_camera[2] > T(0)) && p_camera[0] * p_camera[0] + p_camera[1] * p_camera[1] == T(0))
+        return false;
       ProjectFisheye(params, p_camera, projected);
     }
     residual[0] = projected[0] - T(uv.x());
@@ -129,11 +133,16 @@ struct ReprojectionCost {
 
 const char* PnpOutcomeName(PnpOutcome outcome) {
   switch (outcome) {
-    case PnpOutcome::kOk: return "";
-    case PnpOutcome::kTooFewPoints: return "too_few_features";
-    case PnpOutcome::kCollinear: return "collinear_features";
-    case PnpOutcome::kNoStart: return "no_initial_pose";
-    case PnpOutcome::kNotConverged: return "did_not_converge";
+    case PnpOutcome::kOk:
+      return "";
+    case PnpOutcome::kTooFewPoints:
+      return "too_few_features";
+    case PnpOutcome::kCollinear:
+      return "collinear_features";
+    case PnpOutcome::kNoStart:
+      return "no_initial_pose";
+    case PnpOutcome::kNotConverged:
+      return "did_not_converge";
   }
   return "no_initial_pose";
 }
@@ -157,7 +166,8 @@ std::vector<double> ReprojectionErrors(const CameraModel& camera, const Rigid3d&
   std::vector<double> errors(points.size(), std::numeric_limits<double>::infinity());
   for (size_t i = 0; i < points.size(); ++i) {
     Eigen::Vector2d uv;
-    if (camera.Project(T_camera_object * points[i].p_object, &uv)) errors[i] = (uv - points[i].uv_px).norm();
+    if (camera.Project(T_camera_object * points[i].p_object, &uv))
+      errors[i] = (uv - points[i].uv_px).norm();
   }
   return errors;
 }
@@ -167,11 +177,14 @@ namespace {
 // InvalidArgument for options out of range or a point that is not finite.
 absl::Status CheckPnpInput(std::span<const PnpCorrespondence> points, const PnpOptions& options) {
   if (const std::string_view bad = options.Validate(); !bad.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("PnpOptions.", std::string(bad), " is out of range"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("PnpOptions.", std::string(bad), " is out of range"));
   }
   for (size_t i = 0; i < points.size(); ++i) {
-    if (!points[i].p_object.allFinite()) return absl::InvalidArgumentError(absl::StrCat("points[", i, "].p_object is not finite"));
-    if (!points[i].uv_px.allFinite()) return absl::InvalidArgumentError(absl::StrCat("points[", i, "].uv_px is not finite"));
+    if (!points[i].p_object.allFinite())
+      return absl::InvalidArgumentError(absl::StrCat("points[", i, "].p_object is not finite"));
+    if (!points[i].uv_px.allFinite())
+      return absl::InvalidArgumentError(absl::StrCat("points[", i, "].uv_px is not finite"));
   }
   return absl::OkStatus();
 }
@@ -191,7 +204,8 @@ ObjectShape ShapeOf(std::span<const PnpCorrespondence> points) {
   for (const PnpCorrespondence& c : points) centroid += c.p_object;
   centroid /= static_cast<double>(points.size());
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (const PnpCorrespondence& c : points) scatter += (c.p_object - centroid) * (c.p_object - centroid).transpose();
+  for (const PnpCorrespondence& c : points)
+    scatter += (c.p_object - centroid) * (c.p_object - centroid).transpose();
   Eigen::JacobiSVD<Eigen::Matrix3d> shape(scatter, Eigen::ComputeFullU);
   s.centroid = centroid;
   s.axes = shape.matrixU();
@@ -202,8 +216,9 @@ ObjectShape ShapeOf(std::span<const PnpCorrespondence> points) {
 // The closed-form start T_camera_object: rays turned into the virtual camera that looks along
 // their mean, then the planar or general start on the points whose rays stay within 85
 // degrees of it (4 or 6 of them needed); nullopt without one.
-std::optional<Rigid3d> StartPose(const CameraModel& camera, std::span<const PnpCorrespondence> points,
-                                 bool planar, const ObjectShape& shape) {
+std::optional<Rigid3d> StartPose(const CameraModel& camera,
+                                 std::span<const PnpCorrespondence> points, bool planar,
+                                 const ObjectShape& shape) {
   std::vector<Eigen::Vector3d> rays;
   std::vector<Eigen::Vector3d> p_start;
   rays.reserve(points.size());
@@ -263,8 +278,10 @@ void RefinePose(const CameraModel& camera, std::span<const PnpCorrespondence> po
 
   Eigen::Matrix3d d_rotation;
   ceres::AngleAxisToRotationMatrix(omega, ceres::ColumnMajorAdapter3x3(d_rotation.data()));
-  result->T_camera_object = Rigid3d(NearestRotation(d_rotation * R0), Eigen::Vector3d(t[0], t[1], t[2]));
-  result->outcome = summary.termination_type == ceres::CONVERGENCE ? PnpOutcome::kOk : PnpOutcome::kNotConverged;
+  result->T_camera_object =
+      Rigid3d(NearestRotation(d_rotation * R0), Eigen::Vector3d(t[0], t[1], t[2]));
+  result->outcome =
+      summary.termination_type == ceres::CONVERGENCE ? PnpOutcome::kOk : PnpOutcome::kNotConverged;
 }
 
 // Residuals and the Jacobian of every reprojection at result->T_camera_object, for the
@@ -300,14 +317,16 @@ void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCor
     return;
   }
   result->residual_rms_px = std::sqrt(sum_sq / n);
-  result->sigma_px = options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
+  result->sigma_px =
+      options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
   result->covariance = result->sigma_px * result->sigma_px * JtJ.inverse();
   if (!result->covariance.allFinite()) result->outcome = PnpOutcome::kNotConverged;
 }
 
 }  // namespace
 
-absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const PnpCorrespondence> points,
+absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera,
+                                   std::span<const PnpCorrespondence> points,
                                    const PnpOptions& options) {
   if (absl::Status s = CheckPnpInput(points, options); !s.ok()) return s;
   PnpResult result;

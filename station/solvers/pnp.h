@@ -21,11 +21,10 @@
 // converged — each a reason code for verdicts. Errors: InvalidArgument for non-finite input
 // or invalid options.
 
+#include <Eigen/Core>
 #include <span>
 #include <string_view>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "detectors/core/pose.h"
@@ -72,14 +71,15 @@ struct PnpResult {
   // kNotConverged) when the pose leaves a point outside the lens.
   double residual_rms_px = 0.0;
   double max_residual_px = 0.0;
-  double sigma_px = 0.0;         // the feature noise the covariance uses
+  double sigma_px = 0.0;  // the feature noise the covariance uses
   // (δθ [rad], δt [m]), camera frame; see the top of this file.
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
 // Solves for T_camera_object. The spans are only read. Cost: about 0.1 ms for 20 points,
 // 1 ms for 150 (one Ceres solve, dense QR); allocates O(n).
-absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera, std::span<const PnpCorrespondence> points,
+absl::StatusOr<PnpResult> SolvePnp(const CameraModel& camera,
+                                   std::span<const PnpCorrespondence> points,
                                    const PnpOptions& options = {});
 
 // True when a board's printed face (its +z, docs/boards.md) is turned towards the camera, i.e.

@@ -1,13 +1,12 @@
 #include "station/solvers/radar_calibration.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <span>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Eigenvalues>
 
 #include "absl/strings/str_cat.h"
 
@@ -224,7 +223,8 @@ Eigen::Vector3d PredictedAzimuthPositionDerivative(const YawPitchRoll& angles,
   const Eigen::Matrix3d m = PitchRollTransposed(angles);
   const Eigen::Vector3d p = m * YawFramePoint(angles.yaw, t_car_radar, p_car);
   // p = M Rz(−yaw) (p_car − t): ∂p/∂t = −M Rz(−yaw); ∂atan2(y, x)/∂p = (−y, x, 0) / (x² + y²).
-  const Eigen::Vector3d d_azimuth_d_p = Eigen::Vector3d(-p.y(), p.x(), 0) / p.head<2>().squaredNorm();
+  const Eigen::Vector3d d_azimuth_d_p =
+      Eigen::Vector3d(-p.y(), p.x(), 0) / p.head<2>().squaredNorm();
   const Eigen::Matrix3d d_p_d_t =
       -m * Eigen::AngleAxisd(-angles.yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   return d_p_d_t.transpose() * d_azimuth_d_p;
@@ -356,8 +356,7 @@ double MeasurementSigma(std::span<const UsedReflector> used, std::span<const dou
 // from the solution towards azimuths predicted with them (the shift is far below a degree,
 // where one step is exact to well below the noise). Its root mean square over dp, dr uniform
 // in ±tolerance uses the 3-point Gauss-Legendre rule per axis (exact for the quartic terms).
-double PitchRollSigma(const SensorModel& sensor, const YawFit& fit,
-                      std::span<const double> gain) {
+double PitchRollSigma(const SensorModel& sensor, const YawFit& fit, std::span<const double> gain) {
   constexpr double kNodes[3] = {-0.7745966692414834, 0.0, 0.7745966692414834};  // ±√(3/5)
   constexpr double kWeights[3] = {5.0 / 18, 8.0 / 18, 5.0 / 18};  // Legendre weights / 2
   double mean_square_shift = 0;
@@ -430,8 +429,8 @@ struct GridErrors {
 // The yaw error at each x offset node (kPositionNodes, over ±x_spread: where the row sits
 // along the line of sight is known only that well) and lateral shift of the grid
 // (kGridShifts). Needs the grid `step` > 0 metres.
-GridErrors PositionGridErrors(const ReflectorAssociation& association, double step,
-                              double x_spread, const YawFit& fit, std::span<const double> gain) {
+GridErrors PositionGridErrors(const ReflectorAssociation& association, double step, double x_spread,
+                              const YawFit& fit, std::span<const double> gain) {
   GridErrors out;
   const std::vector<GridLever> levers = GridLevers(association, step, fit, gain);
   // The radar moved along the car's x moves the reflectors the other way in its frame.
@@ -582,9 +581,10 @@ RadarCalibrationResult CalibrateRadarYaw(const SensorModel& sensor,
       GridAndOffsetErrors(grid_errors, yaw_per_offset, offset_variance);
   const double gaussian_sigma =
       std::hypot(out.yaw_sigma_measurement_rad, out.yaw_sigma_pitch_roll_rad);
-  out.yaw_sigma_rad = std::sqrt(gaussian_sigma * gaussian_sigma +
-                                out.yaw_sigma_position_steps_rad * out.yaw_sigma_position_steps_rad +
-                                out.yaw_sigma_position_rad * out.yaw_sigma_position_rad);
+  out.yaw_sigma_rad =
+      std::sqrt(gaussian_sigma * gaussian_sigma +
+                out.yaw_sigma_position_steps_rad * out.yaw_sigma_position_steps_rad +
+                out.yaw_sigma_position_rad * out.yaw_sigma_position_rad);
   out.yaw_ci95_rad = HalfWidth95(offset_errors, gaussian_sigma);
   out.yaw_deviation_rad = std::remainder(fit.angles.yaw - nominal.yaw, 2 * std::numbers::pi);
   out.T_car_radar = Rigid3d(MountingRotation(fit.angles, r_base), fit.t);

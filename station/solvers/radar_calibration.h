@@ -20,10 +20,10 @@
 // and the yaw is the yaw-only fit). The yaw's 1-σ combines, in quadrature, the
 // measurement part (each reflector's standard error through the fit's yaw gain), the part of
 // the true offset that the prior's pull towards nominal leaves in the yaw (offset uniform within
-// ±tolerance), the part that pitch and roll errors within their tolerance alias into yaw (Ry(pitch)·Rx(roll)
-// turns the boresight about the vertical by about pitch·roll/2, and pitch moves off-axis
-// azimuths to second order: the RMS over pitch and roll uniform in ±tolerance of the yaw shift
-// they cause, 3x3-point Gauss-Legendre quadrature), and, for radars that report Cartesian
+// ±tolerance), the part that pitch and roll errors within their tolerance alias into yaw
+// (Ry(pitch)·Rx(roll) turns the boresight about the vertical by about pitch·roll/2, and pitch moves
+// off-axis azimuths to second order: the RMS over pitch and roll uniform in ±tolerance of the yaw
+// shift they cause, 3x3-point Gauss-Legendre quadrature), and, for radars that report Cartesian
 // positions in a grid (ARS408), the part the grid's rounding leaves: the reflectors' rounding
 // errors are modelled jointly, as the RMS over every lateral place of the reflector set in the
 // grid of the yaw error they cause together.

@@ -88,8 +88,8 @@ double SampleVariance(std::span<const double> v) {
 double NoiseOfRoundedReadings(double pooled_variance, double step) {
   if (step <= 0) return std::sqrt(pooled_variance);
   const double v = pooled_variance / (step * step);
-  return step * IncreasingRoot([&](double r) { return WithinVarianceOfRounded(r) - v; },
-                               std::sqrt(v) + 1);
+  return step *
+         IncreasingRoot([&](double r) { return WithinVarianceOfRounded(r) - v; }, std::sqrt(v) + 1);
 }
 
 // The largest range noise the grid's estimate may report: beyond it a detection would leave
@@ -214,9 +214,9 @@ DetectionNoise NoiseOfGrid(std::span<const ReflectorDetections> reflectors, doub
     return sum;
   };
   out.azimuth_sigma_rad = azimuth_sigma_rad;
-  out.range_sigma_m = std::exp(
-      GoldenMax([&](double x) { return log_likelihood(std::exp(x), azimuth_sigma_rad); },
-                std::log(kMinRangeSigmaM), std::log(kMaxRangeSigmaM)));
+  out.range_sigma_m =
+      std::exp(GoldenMax([&](double x) { return log_likelihood(std::exp(x), azimuth_sigma_rad); },
+                         std::log(kMinRangeSigmaM), std::log(kMaxRangeSigmaM)));
   return out;
 }
 
@@ -237,7 +237,8 @@ void SetMeansAndStandardErrors(const ReflectorDetections& d, const DetectionNois
     obs.range_m += d.range_m[k] / n;
     obs.azimuth_rad += d.azimuth_rad[k] / n;
   }
-  const double sigma_a = std::max(std::sqrt(SampleVariance(d.azimuth_rad)), noise.azimuth_sigma_rad);
+  const double sigma_a =
+      std::max(std::sqrt(SampleVariance(d.azimuth_rad)), noise.azimuth_sigma_rad);
   const double sigma_r = std::max(std::sqrt(SampleVariance(d.range_m)), noise.range_sigma_m);
   obs.azimuth_rad = WrapAngle(obs.azimuth_rad);
   // Resolution steps the noise does not dither: the ESR's polar steps directly; the ARS408's
@@ -471,8 +472,7 @@ ReflectorDetections KeepInliers(const ExpectedReflector& e,
                 options.resolution.position_step_m});
   const double azimuth_median = Median(azimuths);
   const double range_median = Median(ranges);
-  const double azimuth_scale =
-      std::max(kMadToSigma * Mad(azimuths, azimuth_median), azimuth_floor);
+  const double azimuth_scale = std::max(kMadToSigma * Mad(azimuths, azimuth_median), azimuth_floor);
   const double range_scale = std::max(kMadToSigma * Mad(ranges, range_median), range_floor);
   ReflectorDetections kept;
   for (size_t k = 0; k < ranges.size(); ++k) {
@@ -550,8 +550,7 @@ ReflectorAssociation AssociateReflectors(std::span<const RadarCycle> cycles,
   // is taken as estimated: the grid's dither falls as exp(−2π²r²), so a floor of 5 cm over a
   // true 2 cm read the grid as dithered and cut the grid's part of the σ (coverage 0.91 with
   // the position known to ±1 cm); an estimate that is too low errs towards a larger σ.
-  out.noise =
-      EstimateDetectionNoise(used, options.resolution, options.detection_azimuth_sigma_rad);
+  out.noise = EstimateDetectionNoise(used, options.resolution, options.detection_azimuth_sigma_rad);
   if (options.resolution.position_step_m <= 0 || out.noise.dof == 0) {
     out.noise.range_sigma_m = std::max(out.noise.range_sigma_m, options.detection_range_sigma_m);
   }

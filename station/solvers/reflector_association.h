@@ -21,15 +21,15 @@
 #include "detectors/core/pose.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
-#include "station/sensors/radar/radar_format.h"
 #include "station/sensors/radar/field_of_view.h"
+#include "station/sensors/radar/radar_format.h"
 
 namespace linecal {
 
 // The resolution of what a radar model reports, as its CAN messages quantise it. A step that
 // the detection noise does not dither leaves a bias that averaging over cycles cannot remove.
 struct RadarResolution {
-  double position_step_m = 0;   // Cartesian x and y steps (ARS408 clusters: DistLong/DistLat)
+  double position_step_m = 0;      // Cartesian x and y steps (ARS408 clusters: DistLong/DistLat)
   double position_x_origin_m = 0;  // an x value the grid holds (ARS408: DistLong's offset)
   double range_step_m = 0;         // polar range step (ESR)
   double azimuth_step_rad = 0;     // polar azimuth step (ESR)
@@ -161,9 +161,9 @@ struct ReflectorDetections {
 //   cell across the line of sight at 6–14 m, which no capture separates from the range noise.
 // Reflectors with fewer than two detections are skipped. Cost: O(detections + reflectors · 10³)
 // polar; O(reflectors · 10⁵) on the grid (≈ 10 ms for 6 reflectors).
-DetectionNoise EstimateDetectionNoise(
-    std::span<const ReflectorDetections> reflectors, const RadarResolution& resolution,
-    double grid_azimuth_sigma_rad = 0.1 * std::numbers::pi / 180);
+DetectionNoise EstimateDetectionNoise(std::span<const ReflectorDetections> reflectors,
+                                      const RadarResolution& resolution,
+                                      double grid_azimuth_sigma_rad = 0.1 * std::numbers::pi / 180);
 
 struct ReflectorAssociation {
   int cycles = 0;                                // cycles examined

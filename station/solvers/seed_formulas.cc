@@ -1,11 +1,10 @@
 #include "station/solvers/seed_formulas.h"
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
 #include <map>
-
-#include <Eigen/Eigenvalues>
-#include <Eigen/Geometry>
 
 #include "absl/strings/str_cat.h"
 #include "detectors/common/homography.h"
@@ -49,7 +48,8 @@ Eigen::Matrix3d PinholeMatrix(const CameraIntrinsics& k) {
   return m;
 }
 
-bool UndistortedPixel(const CameraModel& camera, const Eigen::Vector2d& uv_px, Eigen::Vector2d* undistorted_px) {
+bool UndistortedPixel(const CameraModel& camera, const Eigen::Vector2d& uv_px,
+                      Eigen::Vector2d* undistorted_px) {
   Eigen::Vector3d ray;
   // Rays at or beyond 90 degrees (fisheye) have no point in the undistorted image.
   if (!camera.Unproject(uv_px, &ray) || !(ray.z() > 1e-9)) return false;
@@ -65,14 +65,17 @@ Eigen::Vector2d FlatGroundRange(const CameraIntrinsics& k, const Eigen::Vector2d
   return {d_lon, d_lon * (vp.x() - uv.x()) / k.fx};
 }
 
-BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board, const Rigid3d& T_car_board,
-                                   const Eigen::Vector3d& c, int along, std::span<const DetectedFeature> features) {
+BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board,
+                                   const Rigid3d& T_car_board, const Eigen::Vector3d& c, int along,
+                                   std::span<const DetectedFeature> features) {
   BoardMethodResult r;
   if (board.type() != BoardType::kChessboard) {
-    return Refuse(r, "not_a_chessboard", absl::StrCat("the board method needs the wide chessboard, not a ", board.name()));
+    return Refuse(r, "not_a_chessboard",
+                  absl::StrCat("the board method needs the wide chessboard, not a ", board.name()));
   }
   if (along != 1 && along != -1) {
-    return Refuse(r, "not_looking_along_car", "the board method needs a camera looking along the car");
+    return Refuse(r, "not_looking_along_car",
+                  "the board method needs a camera looking along the car");
   }
   std::vector<Eigen::Vector2d> src, dst;
   int left = 0, right = 0;
@@ -85,11 +88,13 @@ BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board
   }
   if (left < kMinFeaturesPerGroup || right < kMinFeaturesPerGroup) {
     return Refuse(r, "too_few_features",
-                  absl::StrCat(left, " corners of the left pattern group and ", right, " of the right one, ",
-                               kMinFeaturesPerGroup, " of each needed"));
+                  absl::StrCat(left, " corners of the left pattern group and ", right,
+                               " of the right one, ", kMinFeaturesPerGroup, " of each needed"));
   }
   const std::optional<HomographyFit> fit = FitHomography(src, dst);
-  if (!fit) return Refuse(r, "homography_failed", "no board-to-image homography through the chessboard's corners");
+  if (!fit)
+    return Refuse(r, "homography_failed",
+                  "no board-to-image homography through the chessboard's corners");
   r.H_image_board = fit->H;
   r.homography_rms_px = fit->rms_residual;
 
@@ -100,15 +105,19 @@ BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board
   const Eigen::Vector3d n = R.col(2);
   const double cross = n.dot(axis);
   if (std::abs(cross) < kMinAxisDotNormal) {
-    return Refuse(r, "axis_parallel_to_board", "the car axis through the camera runs nearly in the board plane");
+    return Refuse(r, "axis_parallel_to_board",
+                  "the car axis through the camera runs nearly in the board plane");
   }
   const double s = n.dot(b - c) / cross;
-  if (!(s > 0)) return Refuse(r, "board_behind_camera", "the board is not ahead of the camera along the car axis");
+  if (!(s > 0))
+    return Refuse(r, "board_behind_camera",
+                  "the board is not ahead of the camera along the car axis");
   r.board_point_ahead_m = (T_car_board.Inverse() * (c + s * axis)).head<2>();
   r.vanishing_point_px = ApplyHomography(r.H_image_board, r.board_point_ahead_m);
 
   // A and B: on the ground straight below the centres of the two pattern groups.
-  if (R(2, 1) < kMinBoardUpZ) return Refuse(r, "board_not_upright", "the chessboard's y axis does not point up");
+  if (R(2, 1) < kMinBoardUpZ)
+    return Refuse(r, "board_not_upright", "the chessboard's y axis does not point up");
   Eigen::Vector2d centre[2] = {Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};
   int count[2] = {0, 0};
   for (const BoardFeature& f : board.features()) {
@@ -122,7 +131,8 @@ BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board
     const Eigen::Vector2d foot(gx, -(b.z() + R(2, 0) * gx) / R(2, 1));
     r.ground_points_px.push_back(ApplyHomography(r.H_image_board, foot));
   }
-  for (int g = 0; g < 2; ++g) r.ground_points_px.push_back(0.5 * (r.ground_points_px[g] + r.vanishing_point_px));
+  for (int g = 0; g < 2; ++g)
+    r.ground_points_px.push_back(0.5 * (r.ground_points_px[g] + r.vanishing_point_px));
 
   // The levelled frame: the horizon through vp and the image of the board's x axis (a
   // horizontal direction: the board stands upright), the ground normal N = K^T horizon (up:
@@ -130,13 +140,15 @@ BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board
   const Eigen::Matrix3d K = PinholeMatrix(camera.intrinsics());
   const Eigen::Matrix3d K_inv = K.inverse();
   const Eigen::Vector3d board_x_image = r.H_image_board.col(0);
-  Eigen::Vector3d N = (K.transpose() * r.vanishing_point_px.homogeneous().cross(board_x_image)).normalized();
+  Eigen::Vector3d N =
+      (K.transpose() * r.vanishing_point_px.homogeneous().cross(board_x_image)).normalized();
   if (N.dot(K_inv * r.ground_points_px[0].homogeneous()) > 0) N = -N;
   const Eigen::Vector3d F_raw = K_inv * r.vanishing_point_px.homogeneous();
   const Eigen::Vector3d F = (F_raw - F_raw.dot(N) * N).normalized();
   const Eigen::Vector3d L = N.cross(F);
   for (const Eigen::Vector2d& p : r.ground_points_px) {
-    const Eigen::Vector2d toolbox = FlatGroundRange(camera.intrinsics(), r.vanishing_point_px, h, p);
+    const Eigen::Vector2d toolbox =
+        FlatGroundRange(camera.intrinsics(), r.vanishing_point_px, h, p);
     const Eigen::Vector3d ray = K_inv * p.homogeneous();
     const double down = -N.dot(ray);
     if (!std::isfinite(toolbox.x()) || !(down > 0)) {
@@ -144,14 +156,18 @@ BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board
                     "a ground point below the chessboard images on or above the horizon");
     }
     const Eigen::Vector3d on_ground = h / down * ray;
-    r.ground_points_car_m.push_back(c.head<2>() + along * Eigen::Vector2d(on_ground.dot(F), on_ground.dot(L)));
+    r.ground_points_car_m.push_back(c.head<2>() +
+                                    along * Eigen::Vector2d(on_ground.dot(F), on_ground.dot(L)));
     r.toolbox_ground_points_car_m.push_back(c.head<2>() + along * toolbox);
   }
   HomographyFitOptions exact;
   exact.refine = false;  // four points: the DLT is exact
-  const std::optional<HomographyFit> ground = FitHomography(r.ground_points_car_m, r.ground_points_px, exact);
-  const std::optional<HomographyFit> toolbox = FitHomography(r.toolbox_ground_points_car_m, r.ground_points_px, exact);
-  if (!ground || !toolbox || std::abs(ground->H(2, 2)) < 1e-12 || std::abs(toolbox->H(2, 2)) < 1e-12) {
+  const std::optional<HomographyFit> ground =
+      FitHomography(r.ground_points_car_m, r.ground_points_px, exact);
+  const std::optional<HomographyFit> toolbox =
+      FitHomography(r.toolbox_ground_points_car_m, r.ground_points_px, exact);
+  if (!ground || !toolbox || std::abs(ground->H(2, 2)) < 1e-12 ||
+      std::abs(toolbox->H(2, 2)) < 1e-12) {
     return Refuse(r, "ground_homography_failed", "the four ground points give no homography");
   }
   r.ground_homography = ground->H / ground->H(2, 2);
@@ -160,8 +176,9 @@ BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board
   return r;
 }
 
-std::vector<double> GroundDisagreement(const Eigen::Matrix3d& H_reference, const Eigen::Matrix3d& H_other,
-                                       const Eigen::Vector3d& c, int along, std::span<const double> distances_m) {
+std::vector<double> GroundDisagreement(const Eigen::Matrix3d& H_reference,
+                                       const Eigen::Matrix3d& H_other, const Eigen::Vector3d& c,
+                                       int along, std::span<const double> distances_m) {
   std::vector<double> out;
   const Eigen::Matrix3d H_other_inv = H_other.inverse();
   for (double d : distances_m) {
@@ -173,15 +190,18 @@ std::vector<double> GroundDisagreement(const Eigen::Matrix3d& H_reference, const
   return out;
 }
 
-VerticalBoardRoll RollFromVerticalBoard(const CameraModel& camera, const Board& board, const Rigid3d& T_car_board,
+VerticalBoardRoll RollFromVerticalBoard(const CameraModel& camera, const Board& board,
+                                        const Rigid3d& T_car_board,
                                         const Eigen::Vector3d& car_x_in_camera,
                                         std::span<const DetectedFeature> features) {
   if (board.type() != BoardType::kVertical) {
-    return RefuseRoll("not_a_vertical_board", absl::StrCat("roll needs the vertical board, not a ", board.name()));
+    return RefuseRoll("not_a_vertical_board",
+                      absl::StrCat("roll needs the vertical board, not a ", board.name()));
   }
   const Eigen::Vector3d up = T_car_board.RotationMatrix().col(1);
   if (std::atan2(up.head<2>().norm(), up.z()) > kMaxVerticalTiltRad) {
-    return RefuseRoll("board_not_upright", "the vertical board's columns are not vertical in the car frame");
+    return RefuseRoll("board_not_upright",
+                      "the vertical board's columns are not vertical in the car frame");
   }
   // The corners of each column (one board x), as normalised undistorted image coordinates.
   std::map<long, std::vector<Eigen::Vector2d>> columns;
@@ -219,11 +239,13 @@ VerticalBoardRoll RollFromVerticalBoard(const CameraModel& camera, const Board& 
     ++r.lines_used;
   }
   if (r.lines_used < kMinLines) {
-    return RefuseRoll("too_few_lines", absl::StrCat(r.lines_used, " corner columns with ", kMinCornersPerLine,
-                                                    " corners, ", kMinLines, " needed"));
+    return RefuseRoll("too_few_lines",
+                      absl::StrCat(r.lines_used, " corner columns with ", kMinCornersPerLine,
+                                   " corners, ", kMinLines, " needed"));
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(M);
-  if (!(eig.eigenvalues()(1) > 0)) return RefuseRoll("degenerate_lines", "the corner columns have no direction");
+  if (!(eig.eigenvalues()(1) > 0))
+    return RefuseRoll("degenerate_lines", "the corner columns have no direction");
   const Eigen::Vector2d phi = eig.eigenvectors().col(0);
   Eigen::Vector3d V = phi.x() * e1 + phi.y() * e2;
   if (V.y() > 0) V = -V;  // the image of up (-y_camera) for |roll| < 90 deg

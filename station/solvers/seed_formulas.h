@@ -60,11 +60,10 @@
 // direction perpendicular to F closest to every line (a 2x2 eigenproblem, each line
 // weighted by its length and the square root of its corner count).
 
+#include <Eigen/Core>
 #include <span>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "detectors/boards/board.h"
 #include "detectors/core/pose.h"
@@ -78,14 +77,16 @@ Eigen::Matrix3d PinholeMatrix(const CameraIntrinsics& intrinsics);
 
 // The undistorted pixel K ray / ray_z of an observed pixel; false when the pixel is outside
 // the lens model or its ray does not point forward (z <= 0). O(1) (a lens unprojection).
-bool UndistortedPixel(const CameraModel& camera, const Eigen::Vector2d& uv_px, Eigen::Vector2d* undistorted_px);
+bool UndistortedPixel(const CameraModel& camera, const Eigen::Vector2d& uv_px,
+                      Eigen::Vector2d* undistorted_px);
 
 // The flat-ground ranging formula of the reference toolbox for an undistorted pixel:
 // (D_lon, D_lat) = (h fy / (v - vp_v), D_lon (vp_u - u) / fx), metres ahead of and to the left
 // of the camera's footprint as the camera sees it. NaN for a pixel on or above the horizon
 // (v <= vp_v). O(1).
-Eigen::Vector2d FlatGroundRange(const CameraIntrinsics& intrinsics, const Eigen::Vector2d& vanishing_point_px,
-                                double camera_height_m, const Eigen::Vector2d& undistorted_px);
+Eigen::Vector2d FlatGroundRange(const CameraIntrinsics& intrinsics,
+                                const Eigen::Vector2d& vanishing_point_px, double camera_height_m,
+                                const Eigen::Vector2d& undistorted_px);
 
 struct BoardMethodResult {
   bool valid = false;
@@ -94,15 +95,17 @@ struct BoardMethodResult {
   // "board_not_upright", "ground_point_above_horizon", "ground_homography_failed".
   std::string reason;
   std::string message;  // for a person
-  Eigen::Matrix3d H_image_board = Eigen::Matrix3d::Identity();  // board plane (m) -> undistorted image
+  Eigen::Matrix3d H_image_board =
+      Eigen::Matrix3d::Identity();  // board plane (m) -> undistorted image
   double homography_rms_px = 0;
   Eigen::Vector2d board_point_ahead_m = Eigen::Vector2d::Zero();  // (x_f, y_f) above
   Eigen::Vector2d vanishing_point_px = Eigen::Vector2d::Zero();
   // A, B, A', B' in the undistorted image and their ground positions (car frame x, y) by the
   // ranging formula.
   std::vector<Eigen::Vector2d> ground_points_px;
-  std::vector<Eigen::Vector2d> ground_points_car_m;                  // levelled frame
-  Eigen::Matrix3d ground_homography = Eigen::Matrix3d::Identity();  // ground (x, y) -> image, levelled
+  std::vector<Eigen::Vector2d> ground_points_car_m;  // levelled frame
+  Eigen::Matrix3d ground_homography =
+      Eigen::Matrix3d::Identity();  // ground (x, y) -> image, levelled
   // The same by the toolbox's small-angle ranging formula (biased when pitched, above).
   std::vector<Eigen::Vector2d> toolbox_ground_points_car_m;
   Eigen::Matrix3d toolbox_ground_homography = Eigen::Matrix3d::Identity();
@@ -112,16 +115,17 @@ struct BoardMethodResult {
 // by `camera` centred at p_car_camera, looking along +x_car (along = +1) or -x_car (-1),
 // from the chessboard's detected `features` (several frames may be pooled). Needs 4 features
 // in each pattern group. Refusals are results with a reason (above), never errors. O(n).
-BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board, const Rigid3d& T_car_board,
-                                   const Eigen::Vector3d& p_car_camera, int along,
-                                   std::span<const DetectedFeature> features);
+BoardMethodResult SolveBoardMethod(const CameraModel& camera, const Board& board,
+                                   const Rigid3d& T_car_board, const Eigen::Vector3d& p_car_camera,
+                                   int along, std::span<const DetectedFeature> features);
 
 // How far two ground homographies (ground (x, y) -> undistorted image) disagree on the
 // ground: for each distance d, the ground point d ahead of the camera centred at p_car_camera
 // (along +-x_car as `along` says) imaged by H_reference and mapped back to the ground by
 // H_other, |moved| / d. NaN for a point behind the camera (its image through H_reference
 // has w <= 0). O(n).
-std::vector<double> GroundDisagreement(const Eigen::Matrix3d& H_reference, const Eigen::Matrix3d& H_other,
+std::vector<double> GroundDisagreement(const Eigen::Matrix3d& H_reference,
+                                       const Eigen::Matrix3d& H_other,
                                        const Eigen::Vector3d& p_car_camera, int along,
                                        std::span<const double> distances_m);
 
@@ -139,7 +143,8 @@ struct VerticalBoardRoll {
 // kVertical) at T_car_board, given F, the car axis +x_car in the camera frame (from the pose,
 // or K^-1 of a vanishing point). Needs 2 columns of 3 corners; the board's y axis must be
 // vertical in the car frame within 1e-4 rad (its columns are the vertical lines). O(n).
-VerticalBoardRoll RollFromVerticalBoard(const CameraModel& camera, const Board& board, const Rigid3d& T_car_board,
+VerticalBoardRoll RollFromVerticalBoard(const CameraModel& camera, const Board& board,
+                                        const Rigid3d& T_car_board,
                                         const Eigen::Vector3d& car_x_in_camera,
                                         std::span<const DetectedFeature> features);
 

@@ -23,6 +23,7 @@
 //                          included (the demo's cycle, not a station's)
 // The capture is simulated once (seed 1) into a scratch directory, removed at exit.
 #include <benchmark/benchmark.h>
+#include <grpcpp/grpcpp.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -35,15 +36,13 @@
 #include <string>
 #include <vector>
 
-#include <grpcpp/grpcpp.h>
-
 #include "daemon/core/station_core.h"
-#include "station/pipeline/capture_calibration.h"
 #include "daemon/service/station_service.h"
 #include "linecal/v1/station.grpc.pb.h"
 #include "station/capture/capture.h"
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
+#include "station/pipeline/capture_calibration.h"
 #include "station/sensors/lidar/pcd.h"
 #include "station/sim/simulator.h"
 #include "tests/daemon/bench_stats.h"
@@ -91,11 +90,13 @@ const Setup& Reference() {
     fs::create_directories(capture_dir);
     absl::StatusOr<StationLayout> station = ReadStationLayout(kDeploy + "/stations/reference.json");
     absl::StatusOr<CarModel> car = ReadCarModel(kDeploy + "/cars/reference.json");
-    if (!station.ok() || !car.ok()) Fail(station.status().ToString() + " " + car.status().ToString());
+    if (!station.ok() || !car.ok())
+      Fail(station.status().ToString() + " " + car.status().ToString());
     SimulatorOptions o;
     o.camera_frames = 1;  // the daemon's default frames per sensor
     o.lidar.rotations = 1;
-    if (absl::Status st = SimulateCapture(*station, *car, o, 1, capture_dir.string()).status(); !st.ok()) {
+    if (absl::Status st = SimulateCapture(*station, *car, o, 1, capture_dir.string()).status();
+        !st.ok()) {
       Fail(st.ToString());
     }
     absl::StatusOr<Capture> capture = ReadCapture(capture_dir.string());
@@ -148,8 +149,8 @@ void BM_ReadCaptureData(benchmark::State& state) {
     }
   }
 }
-const auto* const kReadCaptureData =
-    Cycles(benchmark::RegisterBenchmark("ReadCaptureData", BM_ReadCaptureData), kComputeRepetitions);
+const auto* const kReadCaptureData = Cycles(
+    benchmark::RegisterBenchmark("ReadCaptureData", BM_ReadCaptureData), kComputeRepetitions);
 
 void BM_CalibrateCapture(benchmark::State& state) {
   const Setup& setup = Reference();
@@ -167,21 +168,30 @@ void BM_CalibrateCapture(benchmark::State& state) {
   state.counters["cpu_ms"] = (ProcessCpuSeconds() - cpu_before_s) * 1e3;
   // Where the time goes: each sensor's detection and solve, wall milliseconds (with 8
   // threads on 2 cores they overlap, so they add up to more than the cycle).
-  for (const SensorCalibration& s : last.sensors) state.counters["ms_" + s.name] = s.elapsed_ns * 1e-6;
+  for (const SensorCalibration& s : last.sensors)
+    state.counters["ms_" + s.name] = s.elapsed_ns * 1e-6;
   int passed = 0;
   for (const SensorCalibration& s : last.sensors) passed += s.verdict == Verdict::kPass;
   state.counters["sensors_passed"] = passed;
 }
 // 8 threads: CaptureCalibrationOptions' default, what the daemon runs.
-const auto* const kCalibrateCapture8 = Cycles(
-    benchmark::RegisterBenchmark("CalibrateCapture", BM_CalibrateCapture)->ArgName("threads")->Arg(8),
-    kComputeRepetitions);
+const auto* const kCalibrateCapture8 =
+    Cycles(benchmark::RegisterBenchmark("CalibrateCapture", BM_CalibrateCapture)
+               ->ArgName("threads")
+               ->Arg(8),
+           kComputeRepetitions);
 // One thread per core of this machine, and one in all: how the default compares. 10
 // repetitions each: no bar on them.
 const auto* const kCalibrateCapture2 =
-    Cycles(benchmark::RegisterBenchmark("CalibrateCapture", BM_CalibrateCapture)->ArgName("threads")->Arg(2), 10);
+    Cycles(benchmark::RegisterBenchmark("CalibrateCapture", BM_CalibrateCapture)
+               ->ArgName("threads")
+               ->Arg(2),
+           10);
 const auto* const kCalibrateCapture1 =
-    Cycles(benchmark::RegisterBenchmark("CalibrateCapture", BM_CalibrateCapture)->ArgName("threads")->Arg(1), 10);
+    Cycles(benchmark::RegisterBenchmark("CalibrateCapture", BM_CalibrateCapture)
+               ->ArgName("threads")
+               ->Arg(1),
+           10);
 
 void RunCoreCycles(benchmark::State& state, StationCore& core) {
   for (auto _ : state) {
@@ -189,7 +199,8 @@ void RunCoreCycles(benchmark::State& state, StationCore& core) {
     if (!id.ok()) Fail(id.status().ToString());
     core.WaitIdle();
     absl::StatusOr<StoredCycle> cycle = core.GetCycle(*id);
-    if (!cycle.ok() || cycle->state != CycleState::kDone) Fail("cycle did not end done: " + cycle->reason);
+    if (!cycle.ok() || cycle->state != CycleState::kDone)
+      Fail("cycle did not end done: " + cycle->reason);
   }
 }
 
@@ -218,8 +229,8 @@ void BM_CoreCycleReplay(benchmark::State& state) {
   if (!g_replay_core) g_replay_core = MakeCore("core_replay", CycleSource::kReplay);
   RunCoreCycles(state, *g_replay_core);
 }
-const auto* const kCoreCycleReplay =
-    Cycles(benchmark::RegisterBenchmark("CoreCycle/replay", BM_CoreCycleReplay), kEndToEndRepetitions);
+const auto* const kCoreCycleReplay = Cycles(
+    benchmark::RegisterBenchmark("CoreCycle/replay", BM_CoreCycleReplay), kEndToEndRepetitions);
 
 // The same with a `plant` section, the plant database up: each end also queues the cycle in
 // the outbox (same transaction) and the forwarder ships it while the next cycle runs.
@@ -257,11 +268,12 @@ void BM_GrpcCycleReplay(benchmark::State& state) {
   if (!g_served) {
     g_served = std::make_unique<Served>();
     g_served->core = MakeCore("grpc_replay", CycleSource::kReplay);
-    absl::StatusOr<RunningServer> server = StartServer(g_served->core.get(), "127.0.0.1:0", "", "bench");
+    absl::StatusOr<RunningServer> server =
+        StartServer(g_served->core.get(), "127.0.0.1:0", "", "bench");
     if (!server.ok()) Fail(server.status().ToString());
     g_served->server = *std::move(server);
-    g_served->stub = v1::Station::NewStub(
-        grpc::CreateChannel("127.0.0.1:" + std::to_string(g_served->server.port), grpc::InsecureChannelCredentials()));
+    g_served->stub = v1::Station::NewStub(grpc::CreateChannel(
+        "127.0.0.1:" + std::to_string(g_served->server.port), grpc::InsecureChannelCredentials()));
   }
   Served* served = g_served.get();
   for (auto _ : state) {
@@ -270,11 +282,13 @@ void BM_GrpcCycleReplay(benchmark::State& state) {
     request.set_car_model_id("reference");
     v1::StartCycleResponse started;
     grpc::ClientContext start_context;
-    if (grpc::Status s = served->stub->StartCycle(&start_context, request, &started); !s.ok()) Fail(s.error_message());
+    if (grpc::Status s = served->stub->StartCycle(&start_context, request, &started); !s.ok())
+      Fail(s.error_message());
     v1::WatchCycleRequest watch;
     watch.set_cycle_id(started.cycle_id());
     grpc::ClientContext watch_context;
-    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = served->stub->WatchCycle(&watch_context, watch);
+    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader =
+        served->stub->WatchCycle(&watch_context, watch);
     v1::CycleEvent event;
     bool ended = false;
     while (reader->Read(&event)) ended |= event.type() == v1::CycleEvent::TYPE_CYCLE_ENDED;
@@ -283,12 +297,14 @@ void BM_GrpcCycleReplay(benchmark::State& state) {
     get.set_cycle_id(started.cycle_id());
     v1::Cycle cycle;
     grpc::ClientContext get_context;
-    if (grpc::Status s = served->stub->GetCycle(&get_context, get, &cycle); !s.ok()) Fail(s.error_message());
-    if (cycle.state() != v1::CYCLE_STATE_DONE || cycle.sensors_size() != 10) Fail("cycle did not end done");
+    if (grpc::Status s = served->stub->GetCycle(&get_context, get, &cycle); !s.ok())
+      Fail(s.error_message());
+    if (cycle.state() != v1::CYCLE_STATE_DONE || cycle.sensors_size() != 10)
+      Fail("cycle did not end done");
   }
 }
-const auto* const kGrpcCycleReplay =
-    Cycles(benchmark::RegisterBenchmark("GrpcCycle/replay", BM_GrpcCycleReplay), kEndToEndRepetitions);
+const auto* const kGrpcCycleReplay = Cycles(
+    benchmark::RegisterBenchmark("GrpcCycle/replay", BM_GrpcCycleReplay), kEndToEndRepetitions);
 
 void BM_CoreCycleSimulator(benchmark::State& state) {
   if (!g_simulator_core) g_simulator_core = MakeCore("core_simulator", CycleSource::kSimulator);
@@ -308,7 +324,8 @@ int main(int argc, char** argv) {
   benchmark::Shutdown();
   linecal::Teardown();
   std::error_code ec;
-  std::filesystem::remove_all(
-      std::filesystem::temp_directory_path() / ("linecal_cycle_bench_" + std::to_string(::getpid())), ec);
+  std::filesystem::remove_all(std::filesystem::temp_directory_path() /
+                                  ("linecal_cycle_bench_" + std::to_string(::getpid())),
+                              ec);
   return 0;
 }

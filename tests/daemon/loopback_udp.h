@@ -3,6 +3,7 @@
 // payloads, and a thread that sends them to the port, looped, at a LiDAR's pace.
 
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -15,8 +16,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "station/io/pcap.h"
 
@@ -70,7 +69,8 @@ enum class SendStart { kNow, kWhenBound };
 // a socket is bound to the port, so the receiver gets the recording from its first packet.
 class LoopingSender {
  public:
-  LoopingSender(std::uint16_t port, std::vector<Payload> payloads, SendStart start = SendStart::kNow)
+  LoopingSender(std::uint16_t port, std::vector<Payload> payloads,
+                SendStart start = SendStart::kNow)
       : payloads_(std::move(payloads)), thread_([this, port, start] { Run(port, start); }) {}
   ~LoopingSender() {
     stop_ = true;
@@ -90,7 +90,8 @@ class LoopingSender {
     to.sin_port = htons(port);
     to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
     for (size_t i = 0; !stop_ && !payloads_.empty(); i = (i + 1) % payloads_.size()) {
-      sendto(fd, payloads_[i].data(), payloads_[i].size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof(to));
+      sendto(fd, payloads_[i].data(), payloads_[i].size(), 0,
+             reinterpret_cast<const sockaddr*>(&to), sizeof(to));
       std::this_thread::sleep_for(std::chrono::microseconds(100));
     }
     close(fd);

@@ -18,14 +18,16 @@ inline void WriteCutDownCar(const std::string& path, const std::vector<std::stri
   nlohmann::json car = nlohmann::json::parse(in);
   nlohmann::json kept = nlohmann::json::array();
   for (const nlohmann::json& s : car["sensors"]) {
-    if (std::find(names.begin(), names.end(), s["name"].get<std::string>()) != names.end()) kept.push_back(s);
+    if (std::find(names.begin(), names.end(), s["name"].get<std::string>()) != names.end())
+      kept.push_back(s);
   }
   car["sensors"] = kept;
   car["id"] = id;
   // Angle files are named relative to the car file: point them at the reference's.
   for (nlohmann::json& s : car["sensors"]) {
     if (s.contains("angles_file")) {
-      s["angles_file"] = std::string(LINECAL_SOURCE_DIR) + "/deploy/cars/" + s["angles_file"].get<std::string>();
+      s["angles_file"] =
+          std::string(LINECAL_SOURCE_DIR) + "/deploy/cars/" + s["angles_file"].get<std::string>();
     }
   }
   std::ofstream(path) << car.dump(2);

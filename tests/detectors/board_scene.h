@@ -2,14 +2,14 @@
 // Test scenes for the board detectors: one board in front of a 1280 x 720 pinhole camera,
 // rendered by the station simulator's camera renderer with exact ground truth.
 
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
 #include <algorithm>
 #include <cstdint>
 #include <ctime>
 #include <numbers>
 #include <vector>
-
-#include <Eigen/Core>
-#include <gtest/gtest.h>
 
 #include "detectors/boards/board.h"
 #include "detectors/core/image_view.h"

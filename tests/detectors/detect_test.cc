@@ -17,7 +17,7 @@ TEST(DetectBoardTest, RangeTo8BitStretchesTheImagesOwnRange) {
   EXPECT_EQ(out.pixels[0], 0);
   EXPECT_EQ(out.pixels[1], 128);  // 127.5 rounds up
   EXPECT_EQ(out.pixels[2], 255);
-  EXPECT_EQ(out.pixels[3], 64);   // 63.75
+  EXPECT_EQ(out.pixels[3], 64);  // 63.75
   EXPECT_EQ(RangeTo8Bit(Image16(3, 3, 777).view()).pixels, std::vector<std::uint8_t>(9, 0));
   EXPECT_EQ(RangeTo8Bit(ImageView16{}).width, 0);
 }
@@ -63,7 +63,8 @@ TEST(DetectBoardTest, BadInputGivesAReasonForEveryBoard) {
   const Image8 noise = test_scene::UniformNoiseImage(640, 480);
   const Image16 noise16 = [&] {
     Image16 n(640, 480);
-    for (std::size_t i = 0; i < n.pixels.size(); ++i) n.pixels[i] = static_cast<std::uint16_t>(noise.pixels[i] * 257);
+    for (std::size_t i = 0; i < n.pixels.size(); ++i)
+      n.pixels[i] = static_cast<std::uint16_t>(noise.pixels[i] * 257);
     return n;
   }();
   for (BoardType type : kAllBoardTypes) {
@@ -81,14 +82,19 @@ TEST(DetectBoardTest, BadInputGivesAReasonForEveryBoard) {
     };
     EXPECT_EQ(reason(ImageView8{}), DetectReason::kBadImage) << "empty";
     EXPECT_EQ(reason(ImageView8{&one_byte, 1, 1, 1}), DetectReason::kBadImage) << "1x1";
-    EXPECT_EQ(reason(ImageView8{&one_byte, 20000, 20000, 20000}), DetectReason::kBadImage) << "20000x20000";
-    EXPECT_EQ(reason(ImageView8{black.pixels.data(), 640, 480, 320}), DetectReason::kBadImage) << "short stride";
-    EXPECT_EQ(reason(ImageView16{&one_word, 20000, 20000, 40000}), DetectReason::kBadImage) << "16-bit 20000x20000";
-    EXPECT_EQ(reason(ImageView16{&one_word, 2, 2, 3}), DetectReason::kBadImage) << "16-bit odd stride";
+    EXPECT_EQ(reason(ImageView8{&one_byte, 20000, 20000, 20000}), DetectReason::kBadImage)
+        << "20000x20000";
+    EXPECT_EQ(reason(ImageView8{black.pixels.data(), 640, 480, 320}), DetectReason::kBadImage)
+        << "short stride";
+    EXPECT_EQ(reason(ImageView16{&one_word, 20000, 20000, 40000}), DetectReason::kBadImage)
+        << "16-bit 20000x20000";
+    EXPECT_EQ(reason(ImageView16{&one_word, 2, 2, 3}), DetectReason::kBadImage)
+        << "16-bit odd stride";
     // Nothing printed: no contrast, or no candidates of the board's kind.
     for (const Image8* flat : {&black, &white}) {
       const DetectReason r = reason(flat->view());
-      EXPECT_TRUE(r == DetectReason::kLowContrast || r == DetectReason::kNoCandidates) << DetectReasonName(r);
+      EXPECT_TRUE(r == DetectReason::kLowContrast || r == DetectReason::kNoCandidates)
+          << DetectReasonName(r);
     }
     EXPECT_NE(reason(noise.view()), DetectReason::kNone) << "noise";
     EXPECT_NE(reason(noise16.view()), DetectReason::kNone) << "16-bit noise";

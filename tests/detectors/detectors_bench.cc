@@ -13,12 +13,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
-#include <string>
 #include <opencv2/aruco.hpp>
 #include <opencv2/aruco/charuco.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>
+#include <string>
 #include <tuple>
 #include <vector>
 
@@ -95,7 +95,8 @@ const Image8& Frame(BoardType type, int width, int height, int cell_px = 0) {
 }
 
 cv::Mat MatOf(const Image8& image) {
-  return cv::Mat(image.height, image.width, CV_8UC1, const_cast<std::uint8_t*>(image.pixels.data()));
+  return cv::Mat(image.height, image.width, CV_8UC1,
+                 const_cast<std::uint8_t*>(image.pixels.data()));
 }
 
 // Args: board (ParamsOf), width, height, the smallest cell in pixels (Frame; 0: the usual
@@ -141,7 +142,8 @@ void BM_OpenCvDetectMarkers(benchmark::State& state) {
       Frame(apriltag ? BoardType::kApriltag : BoardType::kAruco, static_cast<int>(state.range(1)),
             static_cast<int>(state.range(2)), static_cast<int>(state.range(3)));
   const cv::Mat mat = MatOf(image);
-  const cv::Ptr<cv::aruco::Dictionary> dictionary = cv::aruco::getPredefinedDictionary(dictionary_id);
+  const cv::Ptr<cv::aruco::Dictionary> dictionary =
+      cv::aruco::getPredefinedDictionary(dictionary_id);
   const cv::Ptr<cv::aruco::DetectorParameters> params = cv::aruco::DetectorParameters::create();
   if (apriltag) params->markerBorderBits = 2;
   state.SetLabel(apriltag ? "apriltag 36h11, border 2" : "4x4_50");

@@ -95,8 +95,9 @@ const Board& BoardOf(BoardType type) {
 }
 
 int CameraFeatureCount(const Board& board) {
-  return static_cast<int>(std::count_if(board.features().begin(), board.features().end(),
-                                        [](const BoardFeature& f) { return f.kind != FeatureKind::kHoleCentre; }));
+  return static_cast<int>(
+      std::count_if(board.features().begin(), board.features().end(),
+                    [](const BoardFeature& f) { return f.kind != FeatureKind::kHoleCentre; }));
 }
 
 CameraRenderOptions EffectsOf(const EffectSet& set, std::uint64_t seed) {
@@ -237,9 +238,10 @@ bool PrintResults(const Options& options,
 int Run(const Options& options) {
   const CameraModel camera = circle_scene::Camera(options.width, options.height);
   std::array<BoardResult, kAllBoardTypes.size()> results;
-  const std::vector<double> rolls = options.reduced ? std::vector<double>{-30.0, 30.0}
-                                                    : std::vector<double>{-30.0, 0.0, 30.0};
-  std::vector<std::array<double, 2>> yaw_pitch = {{0, 0}, {50, 0}, {-50, 0}, {0, 50}, {0, -50}, {35, 35}, {-35, -35}};
+  const std::vector<double> rolls =
+      options.reduced ? std::vector<double>{-30.0, 30.0} : std::vector<double>{-30.0, 0.0, 30.0};
+  std::vector<std::array<double, 2>> yaw_pitch = {{0, 0},   {50, 0},  {-50, 0},  {0, 50},
+                                                  {0, -50}, {35, 35}, {-35, -35}};
   if (options.reduced) yaw_pitch = {{0, 0}, {45, 0}, {-30, -30}};
   std::uint64_t seed = options.seed;
   for (int pass = 0; pass < options.repeat; ++pass) {

@@ -22,7 +22,8 @@ namespace fs = std::filesystem;
 // a scratch directory per process, with a copy of it.
 const fs::path& Scratch() {
   static const fs::path path = [] {
-    const fs::path base = fs::is_directory("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
+    const fs::path base =
+        fs::is_directory("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
     const fs::path dir = base / ("linecal_config_fuzz_" + std::to_string(getpid()));
     fs::create_directories(dir);
     fs::copy_file(LINECAL_SOURCE_DIR "/deploy/cars/Pandar64.csv", dir / "Pandar64.csv",
@@ -36,7 +37,8 @@ template <typename T>
 void Check(const absl::StatusOr<T>& result) {
   if (result.ok()) return;
   const absl::StatusCode code = result.status().code();
-  if (code != absl::StatusCode::kInvalidArgument && code != absl::StatusCode::kNotFound) __builtin_trap();
+  if (code != absl::StatusCode::kInvalidArgument && code != absl::StatusCode::kNotFound)
+    __builtin_trap();
   if (!absl::StrContains(result.status().message(), "input.json")) __builtin_trap();
 }
 

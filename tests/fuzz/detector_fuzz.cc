@@ -10,13 +10,12 @@
 //         flat and noisy images.
 // Invariants: no crash; a found board has every feature a camera sees; features are ordered by id,
 // of this board, finite and inside the image; the reason is kNone exactly when found.
+#include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "detectors/boards/board.h"
 #include "detectors/core/image_view.h"
@@ -88,8 +87,9 @@ void Check(const linecal::Detection& d, int width, int height) {
   if (d.found != (d.reason == linecal::DetectReason::kNone)) __builtin_trap();
   // A found board has every feature a camera sees (the round-hole board's hole centres are
   // the LiDAR's).
-  const auto seen = std::count_if(board.features().begin(), board.features().end(),
-                                  [](const linecal::BoardFeature& f) { return f.kind != linecal::FeatureKind::kHoleCentre; });
+  const auto seen = std::count_if(
+      board.features().begin(), board.features().end(),
+      [](const linecal::BoardFeature& f) { return f.kind != linecal::FeatureKind::kHoleCentre; });
   if (d.found && static_cast<std::ptrdiff_t>(d.features.size()) != seen) __builtin_trap();
   int last_id = -1;
   for (const linecal::DetectedFeature& f : d.features) {

@@ -19,7 +19,8 @@ namespace fs = std::filesystem;
 
 const fs::path& Dir() {
   static const fs::path dir = [] {
-    const fs::path base = fs::is_directory("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
+    const fs::path base =
+        fs::is_directory("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
     const fs::path d = base / ("linecal_manifest_fuzz_" + std::to_string(getpid()));
     fs::create_directories(d);
     const fs::path deploy = LINECAL_SOURCE_DIR "/deploy";
@@ -49,7 +50,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const absl::StatusOr<linecal::Capture> capture = linecal::ReadCapture(Dir().string());
   if (!capture.ok()) {
     const absl::StatusCode code = capture.status().code();
-    if (code != absl::StatusCode::kInvalidArgument && code != absl::StatusCode::kNotFound) __builtin_trap();
+    if (code != absl::StatusCode::kInvalidArgument && code != absl::StatusCode::kNotFound)
+      __builtin_trap();
     if (!absl::StrContains(capture.status().message(), ".json")) __builtin_trap();
     return 0;
   }

@@ -83,7 +83,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return b;
   }();
   const absl::StatusOr<linecal::PcdCloud> budgeted = linecal::ReadPcd(path, budget);
-  if (budgeted.ok() && static_cast<std::int64_t>(budgeted->points.size()) > budget.max_scan_points) {
+  if (budgeted.ok() &&
+      static_cast<std::int64_t>(budgeted->points.size()) > budget.max_scan_points) {
     __builtin_trap();
   }
   return 0;

@@ -4,6 +4,7 @@
 // rest is its protobuf wire encoding: 0 StartCycleRequest (bit 4 of byte 0: check digit on),
 // 1 ListCyclesRequest, 2 GetCycleRequest. Invariants: no crash; every refusal is
 // InvalidArgument (NotFound for an unknown id) and names the field it refuses.
+#include <google/protobuf/stubs/logging.h>
 #include <unistd.h>
 
 #include <cstdint>
@@ -11,8 +12,6 @@
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <google/protobuf/stubs/logging.h>
 
 #include "absl/strings/match.h"
 #include "daemon/core/station_core.h"
@@ -34,7 +33,8 @@ const std::vector<linecal::CarModel>& Cars() {
 // A store with two ended cycles, on a scratch file of this process.
 linecal::Store& TheStore() {
   static const std::unique_ptr<linecal::Store> store = [] {
-    const fs::path dir = fs::is_directory("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
+    const fs::path dir =
+        fs::is_directory("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
     const fs::path path = dir / ("linecal_request_fuzz_" + std::to_string(getpid()) + ".db");
     fs::remove(path);
     std::unique_ptr<linecal::Store> s = *linecal::Store::Open(path.string());
@@ -44,7 +44,8 @@ linecal::Store& TheStore() {
       c.car_model_id = "reference";
       c.started_ns = 1'700'000'000'000'000'000 + i;
       const int64_t id = *s->BeginCycle(c);
-      (void)s->EndCycle(id, linecal::CycleState::kDone, linecal::Verdict::kPass, "", c.started_ns + 1);
+      (void)s->EndCycle(id, linecal::CycleState::kDone, linecal::Verdict::kPass, "",
+                        c.started_ns + 1);
     }
     return s;
   }();

@@ -1,9 +1,9 @@
 // The gRPC API as station integrators rely on it (docs/interfaces.md): the service and its methods,
 // which of them stream, and the house rule that units live in field names (docs/conventions.md).
+#include <gtest/gtest.h>
+
 #include <set>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "linecal/v1/station.grpc.pb.h"
 
@@ -60,18 +60,18 @@ TEST(ProtoApiTest, StartCycleRequestRoundTripsOnTheWire) {
 }
 
 bool EndsWith(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 // Every floating-point field carries its unit in its name, and every time is int64 _ns.
 // The exceptions are unitless by nature: matrix entries and residuals whose unit is the
 // sensor kind's (documented on the field). Multiples of a standard deviation end in _sigmas.
 TEST(ProtoApiTest, UnitsAreInTheFieldNames) {
-  const std::set<std::string> unitless = {"linecal.v1.Transform.m",
-                                          "linecal.v1.SensorResult.ground_homography",
-                                          "linecal.v1.SensorResult.residual_rms",
-                                          "linecal.v1.ShiftedSensor.baseline_residual",
-                                          "linecal.v1.ShiftedSensor.recent_residual"};
+  const std::set<std::string> unitless = {
+      "linecal.v1.Transform.m", "linecal.v1.SensorResult.ground_homography",
+      "linecal.v1.SensorResult.residual_rms", "linecal.v1.ShiftedSensor.baseline_residual",
+      "linecal.v1.ShiftedSensor.recent_residual"};
   const FileDescriptor* file = ApiFile();
   int checked = 0;
   for (int i = 0; i < file->message_type_count(); ++i) {
@@ -82,7 +82,8 @@ TEST(ProtoApiTest, UnitsAreInTheFieldNames) {
       if (EndsWith(name, "_ns")) {
         EXPECT_EQ(field->type(), FieldDescriptor::TYPE_INT64) << field->full_name();
       }
-      if (field->type() != FieldDescriptor::TYPE_DOUBLE || unitless.count(field->full_name())) continue;
+      if (field->type() != FieldDescriptor::TYPE_DOUBLE || unitless.count(field->full_name()))
+        continue;
       ++checked;
       EXPECT_TRUE(EndsWith(name, "_m") || EndsWith(name, "_deg") || EndsWith(name, "_px") ||
                   EndsWith(name, "_sigmas"))

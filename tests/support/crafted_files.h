@@ -23,8 +23,7 @@ inline std::string Be32(std::uint32_t v) {
 }
 
 inline std::string PngChunk(const std::string& type, const std::string& data) {
-  return Be32(static_cast<std::uint32_t>(data.size())) + type + data +
-         Be32(PngCrc32(type + data));
+  return Be32(static_cast<std::uint32_t>(data.size())) + type + data + Be32(PngCrc32(type + data));
 }
 
 // A 74-byte PNG claiming 16384 x 16384 RGB, 16 bits a sample (1.6 GB decoded, 268435456

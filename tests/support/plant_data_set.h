@@ -112,11 +112,9 @@ inline std::vector<StationBatch> PlantDataSet() {
 // worked out by hand from the data set above, the expectation of both the client's and the
 // command line's yield tests.
 inline std::vector<std::string> PlantDataSetYieldRows() {
-  return {"eol-1 model-a  1/3",          "eol-1 model-a front_camera 1/3",
-          "eol-1 model-a roof_lidar 2/3", "eol-2 model-a  1/1",
-          "eol-2 model-a front_camera 1/1", "eol-2 model-a roof_lidar 1/1",
-          "eol-2 model-b  0/1",          "eol-2 model-b front_camera 0/1",
-          "eol-2 model-b roof_lidar 1/1"};
+  return {"eol-1 model-a  1/3", "eol-1 model-a front_camera 1/3", "eol-1 model-a roof_lidar 2/3",
+          "eol-2 model-a  1/1", "eol-2 model-a front_camera 1/1", "eol-2 model-a roof_lidar 1/1",
+          "eol-2 model-b  0/1", "eol-2 model-b front_camera 0/1", "eol-2 model-b roof_lidar 1/1"};
 }
 
 }  // namespace linecal::testing_support

@@ -1,6 +1,7 @@
 #include "tests/support/postgres_cluster.h"
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <netinet/in.h>
 #include <pwd.h>
 #include <signal.h>
@@ -8,8 +9,6 @@
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
-
-#include <fcntl.h>
 
 #include <cerrno>
 #include <chrono>
@@ -51,8 +50,7 @@ std::string Tail(const std::string& text, size_t n = 1500) {
 int Spawn(const std::vector<std::string>& argv, const std::string& output) {
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, output.c_str(), O_WRONLY | O_CREAT | O_TRUNC,
-                                   0644);
+  posix_spawn_file_actions_addopen(&actions, 1, output.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, 1, 2);
   std::vector<char*> args;
   for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
@@ -120,7 +118,8 @@ std::vector<pid_t> Children(pid_t parent) {
 std::string PostgresCluster::MissingReason() {
   for (const char* tool : {"initdb", "pg_ctl", "postgres", "psql"}) {
     if (!fs::exists(Bin(tool))) {
-      return absl::StrCat(Bin(tool), " is not installed (Debian package postgresql-15): "
+      return absl::StrCat(Bin(tool),
+                          " is not installed (Debian package postgresql-15): "
                           "skipping the tests against a real PostgreSQL");
     }
   }
@@ -134,8 +133,8 @@ absl::Status PostgresCluster::RunAsServerUser(const std::vector<std::string>& ar
   command.insert(command.end(), argv.begin(), argv.end());
   const int code = Spawn(command, log);
   if (code == 0) return absl::OkStatus();
-  return absl::InternalError(absl::StrCat(absl::StrJoin(argv, " "), " exited with ", code, ": ",
-                                          Tail(ReadFile(log))));
+  return absl::InternalError(
+      absl::StrCat(absl::StrJoin(argv, " "), " exited with ", code, ": ", Tail(ReadFile(log))));
 }
 
 absl::StatusOr<std::unique_ptr<PostgresCluster>> PostgresCluster::Create() {
@@ -162,8 +161,8 @@ absl::StatusOr<std::unique_ptr<PostgresCluster>> PostgresCluster::Create() {
   }
   const std::string data = absl::StrCat(dir, "/data");
   absl::Status s = cluster->RunAsServerUser(
-      {Bin("initdb"), "-D", data, "-U", kSuperuser, "--pwfile", password_file,
-       "--auth-local=trust", "--auth-host=scram-sha-256", "-E", "UTF8", "--locale=C", "-N"},
+      {Bin("initdb"), "-D", data, "-U", kSuperuser, "--pwfile", password_file, "--auth-local=trust",
+       "--auth-host=scram-sha-256", "-E", "UTF8", "--locale=C", "-N"},
       absl::StrCat(dir, "/initdb.log"));
   if (!s.ok()) return s;
   // Throwaway data: no fsync (the OS's cache survives a killed server, not a power cut),
@@ -180,9 +179,9 @@ absl::StatusOr<std::unique_ptr<PostgresCluster>> PostgresCluster::Create() {
 PostgresCluster::~PostgresCluster() {
   if (running_) {
     (void)Resume();  // a paused server would not see pg_ctl's signal
-    (void)RunAsServerUser({Bin("pg_ctl"), "-D", absl::StrCat(dir_, "/data"), "-m", "immediate",
-                           "-w", "stop"},
-                          absl::StrCat(dir_, "/pg_ctl.log"));
+    (void)RunAsServerUser(
+        {Bin("pg_ctl"), "-D", absl::StrCat(dir_, "/data"), "-m", "immediate", "-w", "stop"},
+        absl::StrCat(dir_, "/pg_ctl.log"));
   }
   std::error_code ignored;
   fs::remove_all(dir_, ignored);
@@ -194,8 +193,8 @@ absl::Status PostgresCluster::Start() {
                                     absl::StrCat(dir_, "/server.log"), "-w", "-t", "60", "start"},
                                    absl::StrCat(dir_, "/pg_ctl.log"));
   if (!s.ok()) {
-    return absl::InternalError(absl::StrCat(s.message(), "\nserver log: ",
-                                            Tail(ReadFile(absl::StrCat(dir_, "/server.log")))));
+    return absl::InternalError(absl::StrCat(
+        s.message(), "\nserver log: ", Tail(ReadFile(absl::StrCat(dir_, "/server.log")))));
   }
   running_ = true;
   return absl::OkStatus();
@@ -263,13 +262,11 @@ absl::Status PostgresCluster::CreateDatabase(const std::string& name) {
   return Psql(Dsn("postgres"), absl::StrCat("CREATE DATABASE \"", name, "\"")).status();
 }
 
-absl::StatusOr<std::string> PostgresCluster::Psql(const std::string& dsn,
-                                                  const std::string& sql) {
+absl::StatusOr<std::string> PostgresCluster::Psql(const std::string& dsn, const std::string& sql) {
   // psql runs as whoever we are: a client needs no privilege.
   const std::string output = absl::StrCat(dir_, "/psql_", getpid(), ".out");
-  const int code = Spawn({Bin("psql"), "-X", "-At", "-v", "ON_ERROR_STOP=1", "-d", dsn,
-                          "-c", sql},
-                         output);
+  const int code =
+      Spawn({Bin("psql"), "-X", "-At", "-v", "ON_ERROR_STOP=1", "-d", dsn, "-c", sql}, output);
   std::string text = ReadFile(output);
   fs::remove(output);
   if (code != 0) {

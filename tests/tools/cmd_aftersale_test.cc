@@ -3,14 +3,14 @@
 // looking backward) at known mountings is calibrated from its input file or the same values as
 // flags; the JSON fields, the PNGs and the exported toolbox files are checked against the
 // truth, and bad input ends with exit 2 and a message naming the problem.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <string>
-
-#include <gtest/gtest.h>
-#include <unistd.h>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "station/io/image_io.h"
 #include "tests/tools/run_linecal.h"
@@ -21,22 +21,29 @@ namespace {
 namespace fs = std::filesystem;
 using testing_tools::RunLinecal;
 
-const std::string kCar = std::string(" --car ") + LINECAL_SOURCE_DIR + "/deploy/cars/reference.json";
+const std::string kCar =
+    std::string(" --car ") + LINECAL_SOURCE_DIR + "/deploy/cars/reference.json";
 
 nlohmann::json ReadJson(const fs::path& p) {
   std::ifstream in(p);
   return nlohmann::json::parse(in);
 }
 
-std::string Pair(const nlohmann::json& uv) { return std::to_string(uv[0].get<double>()) + "," + std::to_string(uv[1].get<double>()); }
+std::string Pair(const nlohmann::json& uv) {
+  return std::to_string(uv[0].get<double>()) + "," + std::to_string(uv[1].get<double>());
+}
 
 class AftersaleCliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::path(testing::TempDir()) / ("cli_aftersale_" + std::to_string(::getpid())));
+    dir_ = new fs::path(fs::path(testing::TempDir()) /
+                        ("cli_aftersale_" + std::to_string(::getpid())));
     fs::remove_all(*dir_);
-    const auto run = RunLinecal("sim lanes" + kCar + " --camera front_camera --ypr-deg 0.8,2.1,-0.6 --xyz-m 1.9,0.05,1.35 "
-                                "--noise 2 --json --out " + (*dir_ / "front").string());
+    const auto run =
+        RunLinecal("sim lanes" + kCar +
+                   " --camera front_camera --ypr-deg 0.8,2.1,-0.6 --xyz-m 1.9,0.05,1.35 "
+                   "--noise 2 --json --out " +
+                   (*dir_ / "front").string());
     ASSERT_EQ(run.exit_code, 0) << run.err;
     ASSERT_EQ(nlohmann::json::parse(run.out)["truth"]["camera"], "front_camera");
   }
@@ -54,20 +61,27 @@ class AftersaleCliTest : public ::testing::Test {
       if (!d.empty()) d += ",";
       d += std::to_string(v.get<double>());
     }
-    return " --image " + (Front() / "front_camera.png").string() + " --lane " + Pair(in["lanes"][0][0]) + "," +
-           Pair(in["lanes"][0][1]) + " --lane " + Pair(in["lanes"][1][0]) + "," + Pair(in["lanes"][1][1]) +
-           " --roll-line " + Pair(in["roll_line"][0]) + "," + Pair(in["roll_line"][1]) + " --camera-height-m 1.35" +
-           " --longitudinal-offset-m 1.9 --lateral-offset-m 0.05 --fx " + std::to_string(k["fx"].get<double>()) +
-           " --fy " + std::to_string(k["fy"].get<double>()) + " --cx " + std::to_string(k["cx"].get<double>()) +
-           " --cy " + std::to_string(k["cy"].get<double>()) + " --distortion " + d;
+    return " --image " + (Front() / "front_camera.png").string() + " --lane " +
+           Pair(in["lanes"][0][0]) + "," + Pair(in["lanes"][0][1]) + " --lane " +
+           Pair(in["lanes"][1][0]) + "," + Pair(in["lanes"][1][1]) + " --roll-line " +
+           Pair(in["roll_line"][0]) + "," + Pair(in["roll_line"][1]) + " --camera-height-m 1.35" +
+           " --longitudinal-offset-m 1.9 --lateral-offset-m 0.05 --fx " +
+           std::to_string(k["fx"].get<double>()) + " --fy " +
+           std::to_string(k["fy"].get<double>()) + " --cx " +
+           std::to_string(k["cx"].get<double>()) + " --cy " +
+           std::to_string(k["cy"].get<double>()) + " --distortion " + d;
   }
   static void ExpectTruth(const nlohmann::json& j, const fs::path& scene) {
     const nlohmann::json truth = ReadJson(scene / "ground_truth.json");
-    EXPECT_LT(std::hypot(j["vanishing_point_px"][0].get<double>() - truth["vanishing_point_px"][0].get<double>(),
-                         j["vanishing_point_px"][1].get<double>() - truth["vanishing_point_px"][1].get<double>()),
+    EXPECT_LT(std::hypot(j["vanishing_point_px"][0].get<double>() -
+                             truth["vanishing_point_px"][0].get<double>(),
+                         j["vanishing_point_px"][1].get<double>() -
+                             truth["vanishing_point_px"][1].get<double>()),
               0.5);
     for (int i = 0; i < 3; ++i) {
-      EXPECT_NEAR(std::remainder(j["ypr_deg"][i].get<double>() - truth["ypr_deg"][i].get<double>(), 360.0), 0.0, 0.05)
+      EXPECT_NEAR(
+          std::remainder(j["ypr_deg"][i].get<double>() - truth["ypr_deg"][i].get<double>(), 360.0),
+          0.0, 0.05)
           << i;
     }
   }
@@ -77,8 +91,8 @@ fs::path* AftersaleCliTest::dir_ = nullptr;
 
 TEST_F(AftersaleCliTest, InputFileGivesTheTrueMountingPicturesAndExport) {
   const fs::path out = *dir_ / "out", exp = *dir_ / "export";
-  const auto run = RunLinecal("aftersale --input " + (Front() / "aftersale.json").string() + " --json --out " +
-                              out.string() + " --export " + exp.string());
+  const auto run = RunLinecal("aftersale --input " + (Front() / "aftersale.json").string() +
+                              " --json --out " + out.string() + " --export " + exp.string());
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const nlohmann::json j = nlohmann::json::parse(run.out);
   ExpectTruth(j, Front());
@@ -111,7 +125,8 @@ TEST_F(AftersaleCliTest, InputFileGivesTheTrueMountingPicturesAndExport) {
 
   // The toolbox's files, with the real values.
   ASSERT_EQ(j["export"].size(), 3u);
-  const nlohmann::json cal = ReadJson(exp / "front_camera-calibration.json")["front_camera_calibration"];
+  const nlohmann::json cal =
+      ReadJson(exp / "front_camera-calibration.json")["front_camera_calibration"];
   EXPECT_EQ(cal["param"]["vanishing_point"]["vanishing_pt_x"], j["vanishing_point_px"][0]);
   EXPECT_EQ(cal["param"]["vanishing_point"]["vanishing_pt_y"], j["vanishing_point_px"][1]);
   EXPECT_EQ(cal["param"]["h_matrix"]["data"], j["h_matrix"]);
@@ -122,15 +137,18 @@ TEST_F(AftersaleCliTest, InputFileGivesTheTrueMountingPicturesAndExport) {
   const double u = j["vanishing_point_px"][0], v = j["vanishing_point_px"][1];
   const double w = h[2][0].get<double>() * u + h[2][1].get<double>() * v + h[2][2].get<double>();
   EXPECT_NEAR(w, 0, 1e-9);
-  const nlohmann::json intr = ReadJson(exp / "front_camera-intrinsic.json")["front_camera_calib"]["param"];
-  EXPECT_EQ(intr["cam_K"]["data"], nlohmann::json({{1400.0, 0, 962.3}, {0, 1400.0, 541.8}, {0, 0, 1}}));
+  const nlohmann::json intr =
+      ReadJson(exp / "front_camera-intrinsic.json")["front_camera_calib"]["param"];
+  EXPECT_EQ(intr["cam_K"]["data"],
+            nlohmann::json({{1400.0, 0, 962.3}, {0, 1400.0, 541.8}, {0, 0, 1}}));
   EXPECT_EQ(intr["cam_dist"]["data"], nlohmann::json({{-0.12, 0.05, 0.0004, -0.0002, 0.0}}));
   EXPECT_EQ(intr["img_dist_w"], 1920);
-  const nlohmann::json ext = ReadJson(exp / "front_camera-to-car_center-extrinsic.json")["front_camera_car_center_calib"];
+  const nlohmann::json ext =
+      ReadJson(exp / "front_camera-to-car_center-extrinsic.json")["front_camera_car_center_calib"];
   EXPECT_EQ(ext["target_sensor_name"], "car_center");
   const nlohmann::json& t = ext["param"]["sensor_calib"]["data"];
   for (int i = 0; i < 16; ++i) EXPECT_EQ(t[i / 4][i % 4], j["T_car_camera"]["matrix"][i]) << i;
-  EXPECT_NEAR(t[0][2].get<double>(), 1.0, 1e-3);   // the optical axis along x_car: not identity
+  EXPECT_NEAR(t[0][2].get<double>(), 1.0, 1e-3);  // the optical axis along x_car: not identity
   EXPECT_NEAR(t[2][3].get<double>(), 1.35, 1e-12);
 }
 
@@ -140,7 +158,8 @@ TEST_F(AftersaleCliTest, FlagsGiveTheSameResultAsTheFile) {
   ASSERT_EQ(file.exit_code, 0) << file.err;
   ASSERT_EQ(flags.exit_code, 0) << flags.err;
   const nlohmann::json a = nlohmann::json::parse(file.out), b = nlohmann::json::parse(flags.out);
-  for (int i = 0; i < 3; ++i) EXPECT_NEAR(a["ypr_deg"][i].get<double>(), b["ypr_deg"][i].get<double>(), 1e-6);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(a["ypr_deg"][i].get<double>(), b["ypr_deg"][i].get<double>(), 1e-6);
   ExpectTruth(b, Front());
   EXPECT_FALSE(b.contains("distance_check"));
 }
@@ -155,16 +174,25 @@ TEST_F(AftersaleCliTest, DistanceBeyondTheToleranceFails) {
 
 TEST_F(AftersaleCliTest, FourMarkersAndARearFisheye) {
   const fs::path markers = *dir_ / "markers";
-  ASSERT_EQ(RunLinecal("sim lanes" + kCar + " --camera front_camera --ypr-deg -0.4,1.2,0.3 --markers-m 7,22 "
-                       "--no-lane-lines --out " + markers.string()).exit_code, 0);
+  ASSERT_EQ(RunLinecal("sim lanes" + kCar +
+                       " --camera front_camera --ypr-deg -0.4,1.2,0.3 --markers-m 7,22 "
+                       "--no-lane-lines --out " +
+                       markers.string())
+                .exit_code,
+            0);
   auto run = RunLinecal("aftersale --json --input " + (markers / "aftersale.json").string());
   ASSERT_EQ(run.exit_code, 0) << run.err;
   ExpectTruth(nlohmann::json::parse(run.out), markers);
 
   const fs::path rear = *dir_ / "rear";
-  ASSERT_EQ(RunLinecal("sim lanes" + kCar + " --camera surround_rear --ypr-deg 179.2,18.5,-0.7 --points-m 3,10 "
-                       "--roll-line-m 4 --marked-point-m 6 --out " + rear.string()).exit_code, 0);
-  run = RunLinecal("aftersale --json --out " + (rear / "out").string() + " --input " + (rear / "aftersale.json").string());
+  ASSERT_EQ(RunLinecal("sim lanes" + kCar +
+                       " --camera surround_rear --ypr-deg 179.2,18.5,-0.7 --points-m 3,10 "
+                       "--roll-line-m 4 --marked-point-m 6 --out " +
+                       rear.string())
+                .exit_code,
+            0);
+  run = RunLinecal("aftersale --json --out " + (rear / "out").string() + " --input " +
+                   (rear / "aftersale.json").string());
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const nlohmann::json j = nlohmann::json::parse(run.out);
   ExpectTruth(j, rear);
@@ -173,20 +201,29 @@ TEST_F(AftersaleCliTest, FourMarkersAndARearFisheye) {
 }
 
 TEST_F(AftersaleCliTest, BadInputIsRefusedByName) {
-  const std::string base = " --image " + (Front() / "front_camera.png").string() + " --camera-height-m 1.35 --fx 1400 --fy 1400";
+  const std::string base = " --image " + (Front() / "front_camera.png").string() +
+                           " --camera-height-m 1.35 --fx 1400 --fy 1400";
   struct Case {
     std::string args, message;
   };
   const Case cases[] = {
-      {base + " --lane 500,900,600,300 --lane 900,900,1000.5,300", "parallel lines: the lane lines are parallel"},
-      {base + " --lane 580,200,880,420 --lane 1380,200,1080,420", "lanes[0][0] (580.0, 200.0) is above the horizon"},
-      {" --image " + (Front() / "front_camera.png").string() + " --fx 1400 --fy 1400 --lane 580,795,884,565 --lane "
-       "1380,805,1079,567", "camera_height_m: missing (--camera-height-m or the input file's camera_height_m)"},
-      {" --image " + (Front() / "front_camera.png").string() + " --camera-height-m 1.35 --fy 1400 --lane 580,795,884,565 "
-       "--lane 1380,805,1079,567", "intrinsics.fx: missing (--fx or the input file's intrinsics.fx)"},
+      {base + " --lane 500,900,600,300 --lane 900,900,1000.5,300",
+       "parallel lines: the lane lines are parallel"},
+      {base + " --lane 580,200,880,420 --lane 1380,200,1080,420",
+       "lanes[0][0] (580.0, 200.0) is above the horizon"},
+      {" --image " + (Front() / "front_camera.png").string() +
+           " --fx 1400 --fy 1400 --lane 580,795,884,565 --lane "
+           "1380,805,1079,567",
+       "camera_height_m: missing (--camera-height-m or the input file's camera_height_m)"},
+      {" --image " + (Front() / "front_camera.png").string() +
+           " --camera-height-m 1.35 --fy 1400 --lane 580,795,884,565 "
+           "--lane 1380,805,1079,567",
+       "intrinsics.fx: missing (--fx or the input file's intrinsics.fx)"},
       {base, "lanes: missing (--lane, --markers, or the input file's lanes)"},
-      {" --image " + (Front() / "aftersale.json").string() + " --camera-height-m 1.35 --fx 1400 --fy 1400 --lane 1,2,3,4 "
-       "--lane 5,6,7,8", "unreadable image: "},
+      {" --image " + (Front() / "aftersale.json").string() +
+           " --camera-height-m 1.35 --fx 1400 --fy 1400 --lane 1,2,3,4 "
+           "--lane 5,6,7,8",
+       "unreadable image: "},
       {base + " --lane 580,795,884,x --lane 1380,805,1079,567", "--lane: 'x' is not a number"},
       {base + " --lane 580,795,884,565 --lane 1380,805,1079,567 --marked-point 960,700",
        "marked_point.measured_distance_m: missing"},
@@ -204,13 +241,15 @@ TEST_F(AftersaleCliTest, BadInputIsRefusedByName) {
   const auto run = RunLinecal("aftersale --input " + bad.string());
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find(bad.string() + ": intrinsics.fx"), std::string::npos) << run.err;
-  const auto sim = RunLinecal("sim lanes" + kCar + " --camera roof_lidar --out " + (*dir_ / "x").string());
+  const auto sim =
+      RunLinecal("sim lanes" + kCar + " --camera roof_lidar --out " + (*dir_ / "x").string());
   EXPECT_EQ(sim.exit_code, 2);
   EXPECT_NE(sim.err.find("--camera: 'roof_lidar' is not a camera"), std::string::npos) << sim.err;
 }
 
 TEST(EvalAftersaleCliTest, SmallRunMeetsTheBarsAtATenthOfAPixel) {
-  const auto run = RunLinecal("eval aftersale" + kCar + " --camera front_camera --trials 100 --noise-px 0,0.1 --json");
+  const auto run = RunLinecal("eval aftersale" + kCar +
+                              " --camera front_camera --trials 100 --noise-px 0,0.1 --json");
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const nlohmann::json j = nlohmann::json::parse(run.out);
   ASSERT_EQ(j.size(), 2u);

@@ -57,11 +57,11 @@ TEST(CalibrateStrongLensTest, FrontCameraWithK1Minus035CalibratesWithinTheBars) 
   for (int seed : {1, 2, 3}) {
     SCOPED_TRACE("seed " + std::to_string(seed));
     const fs::path capture = dir / ("capture_" + std::to_string(seed));
-    const auto sim = RunLinecal("sim --station " + std::string(LINECAL_SOURCE_DIR) +
-                                "/deploy/stations/reference.json --car " + car.string() +
-                                " --seed " + std::to_string(seed) +
-                                " --sensors front_camera --noise 2 --blur 0.5 --out " +
-                                capture.string());
+    const auto sim =
+        RunLinecal("sim --station " + std::string(LINECAL_SOURCE_DIR) +
+                   "/deploy/stations/reference.json --car " + car.string() + " --seed " +
+                   std::to_string(seed) + " --sensors front_camera --noise 2 --blur 0.5 --out " +
+                   capture.string());
     ASSERT_EQ(sim.exit_code, 0) << sim.err;
     const auto run = RunLinecal("calibrate --json --capture " + capture.string());
     ASSERT_EQ(run.exit_code, 0) << run.out << run.err;

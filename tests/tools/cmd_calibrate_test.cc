@@ -9,9 +9,8 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <string>
-
 #include <opencv2/imgcodecs.hpp>
+#include <string>
 
 #include "station/camera/camera_model.h"
 #include "station/capture/capture.h"
@@ -25,8 +24,9 @@ namespace fs = std::filesystem;
 using testing_tools::LinecalRun;
 using testing_tools::RunLinecal;
 
-const std::string kRef = std::string(" --station ") + LINECAL_SOURCE_DIR + "/deploy/stations/reference.json --car " +
-                         LINECAL_SOURCE_DIR + "/deploy/cars/reference.json";
+const std::string kRef = std::string(" --station ") + LINECAL_SOURCE_DIR +
+                         "/deploy/stations/reference.json --car " + LINECAL_SOURCE_DIR +
+                         "/deploy/cars/reference.json";
 // Estimates within 4 reported sigma of the truth (a false failure once in 16,000 per check).
 constexpr double kSigmaBound = 4.0;
 
@@ -41,8 +41,9 @@ class CalibrateCliTest : public ::testing::Test {
     // Per process: ctest runs each test of the suite in its own process, in parallel.
     dir_ = fs::path(testing::TempDir()) / ("calibrate_cli_capture_" + std::to_string(::getpid()));
     fs::remove_all(dir_);
-    const LinecalRun sim = RunLinecal("sim" + kRef + " --seed 3 --sensors front_camera,front_radar --noise 2 --blur 0.5" +
-                                      " --out " + dir_.string());
+    const LinecalRun sim = RunLinecal(
+        "sim" + kRef + " --seed 3 --sensors front_camera,front_radar --noise 2 --blur 0.5" +
+        " --out " + dir_.string());
     ASSERT_EQ(sim.exit_code, 0) << sim.err;
   }
   static fs::path dir_;
@@ -77,13 +78,15 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
       if (s["deviation"][angles[i]].is_null()) continue;  // not observable by this sensor
       const double sigma = s["sigma"][angles[i]];
       EXPECT_GT(sigma, 0) << angles[i];
-      EXPECT_NEAR(s["deviation"][angles[i]].get<double>(), error["ypr_deg"][i].get<double>(), kSigmaBound * sigma)
+      EXPECT_NEAR(s["deviation"][angles[i]].get<double>(), error["ypr_deg"][i].get<double>(),
+                  kSigmaBound * sigma)
           << angles[i];
     }
     for (int i = 0; i < 3; ++i) {
       if (s["deviation"][position[i]].is_null()) continue;
       const double sigma = s["sigma"][position[i]];
-      EXPECT_NEAR(s["deviation"][position[i]].get<double>(), error["xyz_m"][i].get<double>(), kSigmaBound * sigma)
+      EXPECT_NEAR(s["deviation"][position[i]].get<double>(), error["xyz_m"][i].get<double>(),
+                  kSigmaBound * sigma)
           << position[i];
     }
     if (s["kind"] == "camera") {
@@ -107,7 +110,8 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
       ASSERT_TRUE(b["valid"].get<bool>()) << b.dump();
       EXPECT_LT(b["vanishing_point_disagreement_px"].get<double>(), 0.5);
       ASSERT_EQ(b["ranging_disagreement"].size(), 4u);
-      for (const nlohmann::json& c : b["ranging_disagreement"]) EXPECT_LT(c["fraction"].get<double>(), 0.005);
+      for (const nlohmann::json& c : b["ranging_disagreement"])
+        EXPECT_LT(c["fraction"].get<double>(), 0.005);
       ASSERT_EQ(b["ground_points_px"].size(), 4u);
       const nlohmann::json& roll = s["roll_from_vertical_board"];
       ASSERT_TRUE(roll["valid"].get<bool>()) << roll.dump();
@@ -126,10 +130,11 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
 // clouds, the mounting within 4 reported sigma of the truth. (The 16-ring bumper LiDAR is
 // not asserted: its hole centres' in-plane sigma is underestimated, docs/lidar-radar.md.)
 TEST(CalibrateLidarCliTest, RoofLidarAgreesWithTheGroundTruth) {
-  const fs::path dir = fs::path(testing::TempDir()) / ("calibrate_cli_lidar_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::path(testing::TempDir()) / ("calibrate_cli_lidar_" + std::to_string(::getpid()));
   fs::remove_all(dir);
-  const LinecalRun sim =
-      RunLinecal("sim" + kRef + " --seed 5 --sensors roof_lidar --lidar-rotations 10 --out " + dir.string());
+  const LinecalRun sim = RunLinecal(
+      "sim" + kRef + " --seed 5 --sensors roof_lidar --lidar-rotations 10 --out " + dir.string());
   ASSERT_EQ(sim.exit_code, 0) << sim.err;
   const LinecalRun run = RunLinecal("calibrate --json --capture " + dir.string());
   ASSERT_TRUE(run.exit_code == 0 || run.exit_code == 1) << run.err;
@@ -168,10 +173,9 @@ TEST(CalibrateFisheyeCliTest, SurroundRearPitchHasNoArucoBias) {
     SCOPED_TRACE(seed);
     const fs::path dir = base / std::to_string(seed);
     fs::remove_all(dir);
-    const LinecalRun sim =
-        RunLinecal("sim" + kRef + " --seed " + std::to_string(seed) +
-                   " --sensors surround_rear --frames 3 --noise 2 --blur 0.5 --out " +
-                   dir.string());
+    const LinecalRun sim = RunLinecal(
+        "sim" + kRef + " --seed " + std::to_string(seed) +
+        " --sensors surround_rear --frames 3 --noise 2 --blur 0.5 --out " + dir.string());
     ASSERT_EQ(sim.exit_code, 0) << sim.err;
     const LinecalRun run = RunLinecal("calibrate --json --capture " + dir.string());
     ASSERT_EQ(run.exit_code, 0) << run.out << run.err;
@@ -210,9 +214,11 @@ TEST_F(CalibrateCliTest, BadInputExitsTwoNamingTheProblem) {
 // a ring around a reprojected chessboard corner (magenta) and around the vanishing point on
 // the horizon (cyan), both computed here from the JSON pose, the layout and the aligner.
 TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
-  const fs::path report = fs::path(testing::TempDir()) / ("calibrate_cli_report_" + std::to_string(::getpid()));
+  const fs::path report =
+      fs::path(testing::TempDir()) / ("calibrate_cli_report_" + std::to_string(::getpid()));
   fs::remove_all(report);
-  const LinecalRun run = RunLinecal("calibrate --json --capture " + dir_.string() + " --report " + report.string());
+  const LinecalRun run =
+      RunLinecal("calibrate --json --capture " + dir_.string() + " --report " + report.string());
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const nlohmann::json r = nlohmann::json::parse(run.out);
   const absl::StatusOr<Capture> capture = ReadCapture(dir_.string());
@@ -225,13 +231,15 @@ TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
     }
     ++cameras;
     const SensorModel& sensor = *capture->car.FindSensor(s["name"]);
-    const cv::Mat png = cv::imread((report / (sensor.name + ".png")).string(), cv::IMREAD_COLOR);  // BGR
+    const cv::Mat png =
+        cv::imread((report / (sensor.name + ".png")).string(), cv::IMREAD_COLOR);  // BGR
     ASSERT_FALSE(png.empty()) << sensor.name;
     EXPECT_EQ(png.cols, sensor.intrinsics->width);
     EXPECT_EQ(png.rows, sensor.intrinsics->height);
     Eigen::Matrix4d T;
     for (int i = 0; i < 16; ++i) T(i / 4, i % 4) = s["T_car_sensor"][i];
-    const Rigid3d T_car_camera(Eigen::Matrix3d(T.topLeftCorner<3, 3>()), Eigen::Vector3d(T.topRightCorner<3, 1>()));
+    const Rigid3d T_car_camera(Eigen::Matrix3d(T.topLeftCorner<3, 3>()),
+                               Eigen::Vector3d(T.topRightCorner<3, 1>()));
     const CameraModel camera = *CameraModel::Create(*sensor.intrinsics);
     auto rgb_at = [&](const Eigen::Vector2d& uv, int du) {
       const cv::Vec3b bgr = png.at<cv::Vec3b>(static_cast<int>(std::lround(uv.y())),
@@ -240,11 +248,13 @@ TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
     };
     const StationBoard& board = *capture->station.FindBoard("front_chessboard");
     const Rigid3d T_camera_board =
-        (capture->manifest.aligner.T_station_car() * T_car_camera).Inverse() * board.T_station_board;
+        (capture->manifest.aligner.T_station_car() * T_car_camera).Inverse() *
+        board.T_station_board;
     Eigen::Vector2d corner;
-    ASSERT_TRUE(camera.Project(T_camera_board * Eigen::Vector3d(board.board.features()[0].p_board.x(),
-                                                               board.board.features()[0].p_board.y(), 0),
-                               &corner));
+    ASSERT_TRUE(
+        camera.Project(T_camera_board * Eigen::Vector3d(board.board.features()[0].p_board.x(),
+                                                        board.board.features()[0].p_board.y(), 0),
+                       &corner));
     EXPECT_EQ(rgb_at(corner, 6), (std::array<int, 3>{255, 0, 255})) << corner.transpose();
     Eigen::Vector2d vp;
     ASSERT_TRUE(camera.Project(T_car_camera.Inverse().RotationMatrix().col(0), &vp));
@@ -258,7 +268,8 @@ TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
 
   // A report path that is a file: exit 2 naming it, before any work.
   const fs::path file = report / "front_camera.png";
-  const LinecalRun bad = RunLinecal("calibrate --capture " + dir_.string() + " --report " + file.string());
+  const LinecalRun bad =
+      RunLinecal("calibrate --capture " + dir_.string() + " --report " + file.string());
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("--report " + file.string()), std::string::npos) << bad.err;
 }
@@ -266,7 +277,8 @@ TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
 // A camera whose frames were lost gives that sensor an error with the file named, and the
 // radar is still calibrated.
 TEST_F(CalibrateCliTest, UnreadableFrameIsThatSensorsError) {
-  const fs::path copy = fs::path(testing::TempDir()) / ("calibrate_cli_corrupt_" + std::to_string(::getpid()));
+  const fs::path copy =
+      fs::path(testing::TempDir()) / ("calibrate_cli_corrupt_" + std::to_string(::getpid()));
   fs::remove_all(copy);
   fs::copy(dir_, copy, fs::copy_options::recursive);
   const fs::path frame = copy / "front_camera" / "frame-000000.png";
@@ -280,7 +292,8 @@ TEST_F(CalibrateCliTest, UnreadableFrameIsThatSensorsError) {
     if (s["name"] == "front_camera") {
       EXPECT_EQ(s["verdict"], "error");
       EXPECT_EQ(s["reason"], "data_unreadable");
-      EXPECT_NE(s["message"].get<std::string>().find("frame-000000.png"), std::string::npos) << s["message"];
+      EXPECT_NE(s["message"].get<std::string>().find("frame-000000.png"), std::string::npos)
+          << s["message"];
     } else {
       EXPECT_EQ(s["verdict"], "pass") << s["name"];
     }

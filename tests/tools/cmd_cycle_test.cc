@@ -2,6 +2,7 @@
 // with a configuration file (the reference station, a two-sensor car); linecal cycle start
 // --wait, cycle show, cycles list and status over gRPC; no daemon and bad requests exit 2;
 // the same over mutual TLS with openssl-made certificates, and every TLS refusal.
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -15,11 +16,8 @@
 #include <string>
 #include <thread>
 
-#include <gtest/gtest.h>
-
 #include "tests/daemon/test_car.h"
 #include "tests/daemon/test_pki.h"
-
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -63,7 +61,8 @@ class CycleCliTest : public ::testing::Test {
       const std::string config = (dir_ / "linecald.json").string();
       FILE* err = std::freopen(log.c_str(), "w", stderr);
       (void)err;
-      ::execl(binary.c_str(), binary.c_str(), "--config", config.c_str(), static_cast<char*>(nullptr));
+      ::execl(binary.c_str(), binary.c_str(), "--config", config.c_str(),
+              static_cast<char*>(nullptr));
       ::_exit(127);
     }
     // The first log line names the port the kernel picked.
@@ -85,7 +84,8 @@ class CycleCliTest : public ::testing::Test {
       ::kill(daemon_, SIGTERM);
       int status = 0;
       ::waitpid(daemon_, &status, 0);
-      EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "linecald did not stop cleanly on SIGTERM";
+      EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
+          << "linecald did not stop cleanly on SIGTERM";
     }
     fs::remove_all(dir_);
   }
@@ -96,15 +96,17 @@ class CycleCliTest : public ::testing::Test {
 };
 
 TEST_F(CycleCliTest, CycleStartWaitShowListStatus) {
-  const LinecalRun start = RunLinecal("cycle start --vin 1M8GDM9AXKP042788 --car reference --lateral-m 0.01 --wait --json" +
-                                      connection_);
+  const LinecalRun start = RunLinecal(
+      "cycle start --vin 1M8GDM9AXKP042788 --car reference --lateral-m 0.01 --wait --json" +
+      connection_);
   ASSERT_TRUE(start.exit_code == 0 || start.exit_code == 1) << start.err;
   const nlohmann::json cycle = nlohmann::json::parse(start.out);
   EXPECT_EQ(cycle["vin"], "1M8GDM9AXKP042788");
   EXPECT_EQ(cycle["state"], "CYCLE_STATE_DONE");
   ASSERT_EQ(cycle["sensors"].size(), 2u);
   EXPECT_EQ(start.exit_code == 0, cycle["verdict"] == "VERDICT_PASS");
-  EXPECT_NE(start.err.find("SENSOR_VERDICT"), std::string::npos) << start.err;  // progress on stderr
+  EXPECT_NE(start.err.find("SENSOR_VERDICT"), std::string::npos)
+      << start.err;  // progress on stderr
 
   const std::string id = cycle["cycle_id"];
   const LinecalRun show = RunLinecal("cycle show " + id + connection_);
@@ -143,17 +145,21 @@ class TlsCycleCliTest : public CycleCliTest {
   void SetUp() override {
     MakeDir();
     ASSERT_TRUE(testing_daemon::MakeTestPki(dir_, &pki_));
-    StartDaemon(
-        {{"tls", {{"cert", "server.pem"}, {"key", "server.key"}, {"client_ca", "ca.pem"}, {"require_client_cert", true}}}});
-    tls_ = " --tls-ca " + pki_.ca_cert + " --tls-cert " + pki_.client_cert + " --tls-key " + pki_.client_key;
+    StartDaemon({{"tls",
+                  {{"cert", "server.pem"},
+                   {"key", "server.key"},
+                   {"client_ca", "ca.pem"},
+                   {"require_client_cert", true}}}});
+    tls_ = " --tls-ca " + pki_.ca_cert + " --tls-cert " + pki_.client_cert + " --tls-key " +
+           pki_.client_key;
   }
   testing_daemon::TestPki pki_;
   std::string tls_;
 };
 
 TEST_F(TlsCycleCliTest, ClientWithCertificateRunsACycle) {
-  const LinecalRun start =
-      RunLinecal("cycle start --vin 1M8GDM9AXKP042788 --car reference --wait --json" + connection_ + tls_);
+  const LinecalRun start = RunLinecal(
+      "cycle start --vin 1M8GDM9AXKP042788 --car reference --wait --json" + connection_ + tls_);
   ASSERT_TRUE(start.exit_code == 0 || start.exit_code == 1) << start.err;
   const nlohmann::json cycle = nlohmann::json::parse(start.out);
   EXPECT_EQ(cycle["state"], "CYCLE_STATE_DONE");
@@ -162,7 +168,8 @@ TEST_F(TlsCycleCliTest, ClientWithCertificateRunsACycle) {
   ASSERT_EQ(list.exit_code, 0) << list.err;
   EXPECT_EQ(nlohmann::json::parse(list.out)["cycles"].size(), 1u);
   // The certificate names localhost too: the override checks that name on the IP address.
-  const LinecalRun named = RunLinecal("status --json --tls-server-name localhost" + connection_ + tls_);
+  const LinecalRun named =
+      RunLinecal("status --json --tls-server-name localhost" + connection_ + tls_);
   ASSERT_EQ(named.exit_code, 0) << named.err;
   EXPECT_EQ(nlohmann::json::parse(named.out)["station_id"], "test-line");
   // The same files from the environment.
@@ -181,22 +188,26 @@ TEST_F(TlsCycleCliTest, RefusalsNameTheFlagOrTheHandshake) {
   const std::string missing = (dir_ / "missing.pem").string();
   const LinecalRun no_file = RunLinecal("status --tls-ca " + missing + connection_);
   EXPECT_EQ(no_file.exit_code, 2);
-  EXPECT_EQ(no_file.err.rfind("linecal status: --tls-ca: " + missing + ": cannot read", 0), 0u) << no_file.err;
+  EXPECT_EQ(no_file.err.rfind("linecal status: --tls-ca: " + missing + ": cannot read", 0), 0u)
+      << no_file.err;
   const LinecalRun no_key = RunLinecal("cycles list --tls-key " + missing + connection_);
   EXPECT_EQ(no_key.exit_code, 2);
   EXPECT_NE(no_key.err.find("--tls-key: " + missing), std::string::npos) << no_key.err;
-  const LinecalRun half = RunLinecal("status --tls-ca " + pki_.ca_cert + " --tls-cert " + pki_.client_cert + connection_);
+  const LinecalRun half = RunLinecal("status --tls-ca " + pki_.ca_cert + " --tls-cert " +
+                                     pki_.client_cert + connection_);
   EXPECT_EQ(half.exit_code, 2);
   EXPECT_NE(half.err.find("--tls-cert and --tls-key"), std::string::npos) << half.err;
   // No client certificate, one from another CA, a name the certificate does not carry: the
   // handshake fails, which gRPC reports as UNAVAILABLE.
   for (const std::string& flags :
        {" --tls-ca " + pki_.ca_cert,
-        " --tls-ca " + pki_.ca_cert + " --tls-cert " + pki_.other_client_cert + " --tls-key " + pki_.other_client_key,
+        " --tls-ca " + pki_.ca_cert + " --tls-cert " + pki_.other_client_cert + " --tls-key " +
+            pki_.other_client_key,
         tls_ + " --tls-server-name linecald.example"}) {
     const LinecalRun refused = RunLinecal("status" + connection_ + flags);
     EXPECT_EQ(refused.exit_code, 2) << flags;
-    EXPECT_NE(refused.err.find("no daemon answers or the TLS handshake failed"), std::string::npos) << refused.err;
+    EXPECT_NE(refused.err.find("no daemon answers or the TLS handshake failed"), std::string::npos)
+        << refused.err;
   }
   const LinecalRun insecure = RunLinecal("status" + connection_);
   EXPECT_EQ(insecure.exit_code, 2);
@@ -209,7 +220,8 @@ TEST_F(TlsCycleCliTest, RefusalsNameTheFlagOrTheHandshake) {
 // A key that does not belong to the certificate stops linecald at start-up with a message
 // naming both files.
 TEST(LinecaldTls, MismatchedKeyStopsTheStart) {
-  const fs::path dir = fs::path(testing::TempDir()) / ("linecald_tls_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::path(testing::TempDir()) / ("linecald_tls_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   testing_daemon::TestPki pki;
@@ -221,8 +233,8 @@ TEST(LinecaldTls, MismatchedKeyStopsTheStart) {
       {"car_models", {"car.json"}},
       {"data_root", "data"},
       {"tls", {{"cert", "server.pem"}, {"key", "client.key"}, {"client_ca", "ca.pem"}}}};
-  const std::string command =
-      std::string(LINECAL_BINARY_DIR) + "/bin/linecald --config '" + (dir / "linecald.json").string() + "' 2>&1";
+  const std::string command = std::string(LINECAL_BINARY_DIR) + "/bin/linecald --config '" +
+                              (dir / "linecald.json").string() + "' 2>&1";
   FILE* pipe = popen(command.c_str(), "r");
   ASSERT_NE(pipe, nullptr);
   std::string out;
@@ -231,8 +243,8 @@ TEST(LinecaldTls, MismatchedKeyStopsTheStart) {
   const int status = pclose(pipe);
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 1);
-  EXPECT_NE(out.find("linecald: tls.key: " + pki.client_key + ": does not match the certificate of tls.cert (" +
-                     pki.server_cert + ")"),
+  EXPECT_NE(out.find("linecald: tls.key: " + pki.client_key +
+                     ": does not match the certificate of tls.cert (" + pki.server_cert + ")"),
             std::string::npos)
       << out;
   fs::remove_all(dir);

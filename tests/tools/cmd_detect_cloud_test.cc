@@ -36,7 +36,8 @@ class DetectCloudCliTest : public ::testing::Test {
     std::string args;
     for (std::size_t f = 0; f < scene.frames.size(); ++f) {
       std::vector<LidarPoint> points;
-      for (const RoundHoleCloudPoint& p : scene.frames[f]) points.push_back({p.x, p.y, p.z, 100.0f, p.ring, 0});
+      for (const RoundHoleCloudPoint& p : scene.frames[f])
+        points.push_back({p.x, p.y, p.z, 100.0f, p.ring, 0});
       const std::string path = Path("scan-" + std::to_string(f) + ".pcd");
       EXPECT_TRUE(WritePcd(path, points, encoding).ok());
       args += " --cloud " + path;
@@ -58,7 +59,8 @@ class DetectCloudCliTest : public ::testing::Test {
       EXPECT_EQ(scene.board.features().at(id).kind, FeatureKind::kHoleCentre);
       EXPECT_NEAR(f.at("x").get<double>(), p_board.x(), 1e-12);
       EXPECT_NEAR(f.at("y").get<double>(), p_board.y(), 1e-12);
-      const Eigen::Vector3d truth = scene.T_lidar_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0);
+      const Eigen::Vector3d truth =
+          scene.T_lidar_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0);
       const Eigen::Vector3d p(f.at("p")[0].get<double>(), f.at("p")[1].get<double>(),
                               f.at("p")[2].get<double>());
       EXPECT_LT((p - truth).norm(), bar_m) << "hole " << id;
@@ -91,8 +93,8 @@ class DetectCloudCliTest : public ::testing::Test {
 TEST_F(DetectCloudCliTest, FindsTheBoardInAccumulatedClouds) {
   // Pandar64 at 5 m (bar 1 cm), binary_compressed; VLP-16 at 7 m (bar 2 cm), binary.
   const Scene p64 = Simulate(Beams("roof_lidar"), 5.0, 35.0, -20.0, 0.02, 10);
-  auto run = RunLinecal("detect --board round_hole" + WriteFrames(p64, PcdEncoding::kBinaryCompressed) +
-                        " --json");
+  auto run = RunLinecal("detect --board round_hole" +
+                        WriteFrames(p64, PcdEncoding::kBinaryCompressed) + " --json");
   ASSERT_EQ(run.exit_code, 0) << run.err << run.out;
   nlohmann::json j = nlohmann::json::parse(run.out);
   ExpectBoard(j, p64, 0.01);
@@ -100,7 +102,8 @@ TEST_F(DetectCloudCliTest, FindsTheBoardInAccumulatedClouds) {
   EXPECT_EQ(j.at("rings_from_elevation"), false);
 
   const Scene vlp = Simulate(Beams("bumper_lidar"), 7.0, -50.0, 15.0, 0.02, 10);
-  run = RunLinecal("detect --board round_hole" + WriteFrames(vlp, PcdEncoding::kBinary) + " --json");
+  run =
+      RunLinecal("detect --board round_hole" + WriteFrames(vlp, PcdEncoding::kBinary) + " --json");
   ASSERT_EQ(run.exit_code, 0) << run.err << run.out;
   ExpectBoard(nlohmann::json::parse(run.out), vlp, 0.02);
 
@@ -120,7 +123,8 @@ TEST_F(DetectCloudCliTest, AsciiCloudWithoutRings) {
         << scene.frames[f].size() << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS "
         << scene.frames[f].size() << "\nDATA ascii\n";
     out.precision(9);
-    for (const RoundHoleCloudPoint& p : scene.frames[f]) out << p.x << ' ' << p.y << ' ' << p.z << '\n';
+    for (const RoundHoleCloudPoint& p : scene.frames[f])
+      out << p.x << ' ' << p.y << ' ' << p.z << '\n';
     args += " --cloud " + path;
   }
   const auto run = RunLinecal("detect --board round_hole" + args + " --json");

@@ -270,8 +270,8 @@ TEST_F(DetectCliTest, BadInputExitsTwo) {
 // before 400 MB are allocated.
 TEST_F(DetectCliTest, HugeImageIsRefusedFromItsHeader) {
   const auto be32 = [](std::uint32_t v) {
-    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16), static_cast<char>(v >> 8),
-                       static_cast<char>(v)};
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16),
+                       static_cast<char>(v >> 8), static_cast<char>(v)};
   };
   const auto crc32 = [](const std::string& bytes) {
     std::uint32_t c = 0xffffffffu;
@@ -284,7 +284,9 @@ TEST_F(DetectCliTest, HugeImageIsRefusedFromItsHeader) {
   // IHDR: width, height, 8-bit grey, deflate, no filter, no interlace.
   const std::string ihdr = "IHDR" + be32(20000) + be32(20000) + std::string{8, 0, 0, 0, 0};
   std::ofstream(Path("huge.png"), std::ios::binary)
-      << "\x89PNG\r\n\x1a\n" << be32(13) << ihdr << be32(crc32(ihdr))
+      << "\x89PNG\r\n\x1a\n"
+      << be32(13) << ihdr
+      << be32(crc32(ihdr))
       // An empty IDAT: libpng reads the chunks up to the first IDAT before it reports the size.
       << be32(0) << "IDAT" << be32(crc32("IDAT"));
   const auto huge = RunLinecal("detect --board checker --image " + Path("huge.png"));
@@ -358,20 +360,19 @@ class DetectIntrinsicsTest : public DetectCliTest {
 
   std::string WriteRosYaml(const CameraIntrinsics& lens) {
     std::ostringstream f;
-    f << std::setprecision(17) << "image_width: " << lens.width << "\nimage_height: "
-      << lens.height << "\ncamera_name: front\ncamera_matrix:\n  rows: 3\n  cols: 3\n"
+    f << std::setprecision(17) << "image_width: " << lens.width << "\nimage_height: " << lens.height
+      << "\ncamera_name: front\ncamera_matrix:\n  rows: 3\n  cols: 3\n"
       << "  data: [" << lens.fx << ", 0, " << lens.cx << ", 0, " << lens.fy << ", " << lens.cy
       << ", 0, 0, 1]\ndistortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n"
-      << "  cols: 5\n  data: [" << lens.k1 << ", " << lens.k2 << ", " << lens.p1 << ", "
-      << lens.p2 << ", " << lens.k3 << "]\n";
+      << "  cols: 5\n  data: [" << lens.k1 << ", " << lens.k2 << ", " << lens.p1 << ", " << lens.p2
+      << ", " << lens.k3 << "]\n";
     return Write("ros.yaml", f.str());
   }
 
   // A camchain whose cam1 is the lens (radtan has no k3, which Lens() leaves 0).
   std::string WriteKalibrYaml(const CameraIntrinsics& lens) {
     std::ostringstream f;
-    f << std::setprecision(17)
-      << "cam0:\n  camera_model: pinhole\n  distortion_model: none\n"
+    f << std::setprecision(17) << "cam0:\n  camera_model: pinhole\n  distortion_model: none\n"
       << "  intrinsics: [500, 500, 319.5, 239.5]\n  resolution: [640, 480]\n"
       << "cam1:\n  camera_model: pinhole\n  distortion_model: radtan\n"
       << "  distortion_coeffs: [" << lens.k1 << ", " << lens.k2 << ", " << lens.p1 << ", "
@@ -422,8 +423,8 @@ class DetectIntrinsicsTest : public DetectCliTest {
     for (int i = 0; i < 16; ++i) m(i / 4, i % 4) = check.at("T_camera_board")[i].get<double>();
     const Rigid3d T = Rigid3d::FromMatrix(m);
     const double t_err_mm = 1e3 * (T.translation() - T_camera_board.translation()).norm();
-    const double r_err_deg = T.rotation().angularDistance(T_camera_board.rotation()) * 180.0 /
-                             std::numbers::pi;
+    const double r_err_deg =
+        T.rotation().angularDistance(T_camera_board.rotation()) * 180.0 / std::numbers::pi;
     EXPECT_LT(t_err_mm, kTranslationMm);
     EXPECT_LT(r_err_deg, kRotationDeg);
     std::printf("%s: residual %.3f px RMS, pose %.3f mm, %.4f deg\n", intrinsics_args.c_str(), rms,
@@ -454,7 +455,8 @@ TEST_F(DetectIntrinsicsTest, OpenCvFileVerifiesAndLocatesTheBoard) {
   const auto text = RunLinecal("detect --board checker --cols 9 --rows 6 --square 0.04 --image " +
                                Path("lens.png") + " --intrinsics " + Path("opencv.yaml"));
   ASSERT_EQ(text.exit_code, 0) << text.err;
-  EXPECT_NE(text.out.find("intrinsics " + Path("opencv.yaml") + " (pinhole): board homography "
+  EXPECT_NE(text.out.find("intrinsics " + Path("opencv.yaml") +
+                          " (pinhole): board homography "
                           "residual 0.0"),
             std::string::npos)
       << text.out;

@@ -21,9 +21,10 @@ using testing_tools::RunLinecal;
 constexpr int kCars = 1000;
 
 TEST(EvalCalibrateCliTest, ReferenceCarOnTheReferenceStation) {
-  const LinecalRun run = RunLinecal("eval calibrate --json --cars " + std::to_string(kCars) + " --seed 1 --station " +
-                                    LINECAL_SOURCE_DIR + "/deploy/stations/reference.json --car " +
-                                    LINECAL_SOURCE_DIR + "/deploy/cars/reference.json");
+  const LinecalRun run =
+      RunLinecal("eval calibrate --json --cars " + std::to_string(kCars) + " --seed 1 --station " +
+                 LINECAL_SOURCE_DIR + "/deploy/stations/reference.json --car " +
+                 LINECAL_SOURCE_DIR + "/deploy/cars/reference.json");
   // Exit 1: method (b) on surround_front misses its ranging bar on this layout (docs/solvers.md).
   ASSERT_EQ(run.exit_code, 1) << run.err;
   const nlohmann::json r = nlohmann::json::parse(run.out);
@@ -38,8 +39,10 @@ TEST(EvalCalibrateCliTest, ReferenceCarOnTheReferenceStation) {
       EXPECT_LT(ratio, 1.2) << k;
     }
     // The accuracy bars hold for every camera, the fisheye surround cameras included.
-    for (const char* k : {"yaw", "pitch", "roll"}) EXPECT_LE(c[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.02) << k;
-    for (const char* k : {"x", "y", "z"}) EXPECT_LE(c[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
+    for (const char* k : {"yaw", "pitch", "roll"})
+      EXPECT_LE(c[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.02) << k;
+    for (const char* k : {"x", "y", "z"})
+      EXPECT_LE(c[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
     if (!c["vanishing_point_p95_px"].is_null()) {
       EXPECT_LE(c["vanishing_point_p95_px"].get<double>(), 0.3);
       EXPECT_LE(c["ranging_p95_fraction"].get<double>(), 0.005);
@@ -50,8 +53,10 @@ TEST(EvalCalibrateCliTest, ReferenceCarOnTheReferenceStation) {
   EXPECT_TRUE(front["meets_bars"].get<bool>()) << front.dump(2);
   EXPECT_LE(front["vanishing_point_p95_px"].get<double>(), 0.3);
   EXPECT_LE(front["ranging_p95_fraction"].get<double>(), 0.005);
-  for (const char* k : {"yaw", "pitch", "roll"}) EXPECT_LE(front[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.02) << k;
-  for (const char* k : {"x", "y", "z"}) EXPECT_LE(front[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
+  for (const char* k : {"yaw", "pitch", "roll"})
+    EXPECT_LE(front[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.02) << k;
+  for (const char* k : {"x", "y", "z"})
+    EXPECT_LE(front[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
   for (const char* k : {"yaw", "pitch", "roll", "x", "y", "z"}) {
     const double coverage = front[std::string(k) + "_coverage95"];
     EXPECT_GE(coverage, 0.93) << k;
@@ -72,9 +77,10 @@ TEST(EvalCalibrateCliTest, BadInputExitsTwo) {
   const LinecalRun run = RunLinecal("eval calibrate --station /no/such.json --car /no/car.json");
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_NE(run.err.find("/no/such.json"), std::string::npos) << run.err;
-  const LinecalRun frames = RunLinecal(std::string("eval calibrate --frames 0 --station ") + LINECAL_SOURCE_DIR +
-                                       "/deploy/stations/reference.json --car " + LINECAL_SOURCE_DIR +
-                                       "/deploy/cars/reference.json");
+  const LinecalRun frames =
+      RunLinecal(std::string("eval calibrate --frames 0 --station ") + LINECAL_SOURCE_DIR +
+                 "/deploy/stations/reference.json --car " + LINECAL_SOURCE_DIR +
+                 "/deploy/cars/reference.json");
   EXPECT_EQ(frames.exit_code, 2);
   EXPECT_NE(frames.err.find("--frames"), std::string::npos) << frames.err;
 }

@@ -42,16 +42,20 @@ TEST(EvalLidarCliTest, ReferenceCarOnTheReferenceStation) {
   }
   // The Pandar64 meets every accuracy bar over 200 cars with at least half of it to spare:
   // angles 0.05 degree, positions 5 mm, hole centres 1 cm, normal 0.1 degree.
-  for (const char* k : {"yaw", "pitch", "roll"}) EXPECT_LE(roof[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.05) << k;
-  for (const char* k : {"x", "y", "z"}) EXPECT_LE(roof[std::string(k) + "_p95_abs_error_mm"].get<double>(), 5.0) << k;
+  for (const char* k : {"yaw", "pitch", "roll"})
+    EXPECT_LE(roof[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.05) << k;
+  for (const char* k : {"x", "y", "z"})
+    EXPECT_LE(roof[std::string(k) + "_p95_abs_error_mm"].get<double>(), 5.0) << k;
   EXPECT_LE(roof["hole_centre_max_mm"].get<double>(), 10.0);
   EXPECT_LE(roof["normal_p95_deg"].get<double>(), 0.1);
   // The VLP-16: yaw, roll (0.1 degree), x, y, z (10 mm) and hole centres (2 cm). Its pitch also
   // meets 0.1 degree over 200 cars, but at p95 0.075 degree (σ ≈ 0.038): the p95 of 4 cars, near
   // their largest error, passes 0.1 about one run in 25 (this seed's: 0.103), so it is not
   // asserted here.
-  for (const char* k : {"yaw", "roll"}) EXPECT_LE(bumper[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.1) << k;
-  for (const char* k : {"x", "y", "z"}) EXPECT_LE(bumper[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
+  for (const char* k : {"yaw", "roll"})
+    EXPECT_LE(bumper[std::string(k) + "_p95_abs_error_deg"].get<double>(), 0.1) << k;
+  for (const char* k : {"x", "y", "z"})
+    EXPECT_LE(bumper[std::string(k) + "_p95_abs_error_mm"].get<double>(), 10.0) << k;
   EXPECT_LE(bumper["hole_centre_max_mm"].get<double>(), 20.0);
   EXPECT_EQ(roof["verdict_agreement"], 1.0);
   EXPECT_EQ(bumper["verdict_agreement"], 1.0);

@@ -44,10 +44,9 @@ TEST_F(PatternCliTest, BoardsJsonListsAllBoards) {
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const nlohmann::json j = nlohmann::json::parse(run.out);
   const std::map<std::string, int> expected = {
-      {"chessboard", 20}, {"circle", 30},     {"vertical", 51}, {"aruco", 16},
-      {"apriltag", 144},  {"round_hole", 21}, {"checker", 54},  {"circle_grid", 54},
-      {"square_grid", 216},
-      {"charuco", 40}};
+      {"chessboard", 20},   {"circle", 30},     {"vertical", 51}, {"aruco", 16},
+      {"apriltag", 144},    {"round_hole", 21}, {"checker", 54},  {"circle_grid", 54},
+      {"square_grid", 216}, {"charuco", 40}};
   ASSERT_EQ(j.at("boards").size(), expected.size());
   for (const nlohmann::json& b : j.at("boards")) {
     const std::string name = b.at("name");
@@ -177,7 +176,8 @@ TEST_F(PatternCliTest, BadUsageExitsWithTwoAndOneLine) {
       {"pattern --board aruco", "missing --out"},
       {"pattern --board aruco --out " + Path("x.txt"), "must end in .svg or .png"},
       {"pattern --board aruco --cols 5 --out " + Path("x.svg"),
-       "--cols applies to --board checker or circle_grid or square_grid or charuco only, not aruco"},
+       "--cols applies to --board checker or circle_grid or square_grid or charuco only, not "
+       "aruco"},
       {"pattern --board checker --spacing 0.02 --out " + Path("x.svg"),
        "--spacing applies to --board circle_grid only, not checker"},
       {"pattern --board circle_grid --square 0.02 --out " + Path("x.svg"),

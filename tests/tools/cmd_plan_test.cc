@@ -25,7 +25,8 @@ using testing_tools::LinecalRun;
 using testing_tools::RunLinecal;
 
 const std::string kCar = std::string(LINECAL_SOURCE_DIR) + "/deploy/cars/reference.json";
-const std::string kFloor = std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference-floor.json";
+const std::string kFloor =
+    std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference-floor.json";
 // The chessboard detector's corner noise on the simulator's renders at --noise 2 --blur 0.5
 // (docs/planner.md, measured from the residuals of `linecal calibrate` on seeds 6..8).
 // The fisheye cameras' boards are found in resampled perspective views, whose corners are less
@@ -65,13 +66,15 @@ class PlanCliTest : public ::testing::Test {
     edit(station);
     const fs::path path = dir_ / "edited.json";
     WriteJson(path, station);
-    const LinecalRun run = RunLinecal("plan check --json --station " + path.string() + " --car " +
-                                      (dir_ / "plan" / "car.json").string() + " --floor " + kFloor + noise);
+    const LinecalRun run =
+        RunLinecal("plan check --json --station " + path.string() + " --car " +
+                   (dir_ / "plan" / "car.json").string() + " --floor " + kFloor + noise);
     if (exit_code) *exit_code = run.exit_code;
     std::map<std::string, std::vector<std::string>> out;
     const nlohmann::json j = nlohmann::json::parse(run.out);
     for (const nlohmann::json& s : j["sensors"]) {
-      if (!s["calibratable"].get<bool>()) out[s["name"]] = s["reasons"].get<std::vector<std::string>>();
+      if (!s["calibratable"].get<bool>())
+        out[s["name"]] = s["reasons"].get<std::vector<std::string>>();
     }
     return out;
   }
@@ -101,10 +104,12 @@ TEST_F(PlanCliTest, EverySensorIsPlannedAndTheFilesAreWritten) {
     EXPECT_GT(s["predicted_sigma"]["yaw_deg"].get<double>(), 0);
   }
   // The layout is a station file and the car a car file: `plan check` reads them back.
-  const LinecalRun check = RunLinecal("plan check --station " + (dir_ / "plan" / "station.json").string() + " --car " +
-                                      (dir_ / "plan" / "car.json").string() + " --floor " + kFloor + kCornerNoise);
+  const LinecalRun check =
+      RunLinecal("plan check --station " + (dir_ / "plan" / "station.json").string() + " --car " +
+                 (dir_ / "plan" / "car.json").string() + " --floor " + kFloor + kCornerNoise);
   EXPECT_EQ(check.exit_code, 0) << check.out << check.err;
-  for (const std::string name : {"birdseye", "side_front_camera", "side_roof_lidar", "side_front_radar"}) {
+  for (const std::string name :
+       {"birdseye", "side_front_camera", "side_roof_lidar", "side_front_radar"}) {
     std::ifstream svg(dir_ / "plan" / (name + ".svg"));
     std::string head(4, '\0');
     svg.read(head.data(), 4);
@@ -132,10 +137,10 @@ TEST_F(PlanCliTest, SimulatedPlanPassesWithinThirtyPercentOfThePredictedSigma) {
     const fs::path capture = dir_ / ("capture_" + std::to_string(seed));
     // The first car is the whole car; the two more only its fisheye cameras.
     const std::string sensors = seed == 11 ? "" : std::string(" --sensors ") + kFisheyes;
-    const LinecalRun sim = RunLinecal("sim --station " + (dir_ / "plan" / "station.json").string() + " --car " +
-                                      (dir_ / "plan" / "car.json").string() + sensors + " --seed " +
-                                      std::to_string(seed) + " --noise 2 --blur 0.5 --perturb-angle-deg 0.25 --out " +
-                                      capture.string());
+    const LinecalRun sim = RunLinecal(
+        "sim --station " + (dir_ / "plan" / "station.json").string() + " --car " +
+        (dir_ / "plan" / "car.json").string() + sensors + " --seed " + std::to_string(seed) +
+        " --noise 2 --blur 0.5 --perturb-angle-deg 0.25 --out " + capture.string());
     ASSERT_EQ(sim.exit_code, 0) << sim.err;
     const LinecalRun cal = RunLinecal("calibrate --json --capture " + capture.string());
     ASSERT_EQ(cal.exit_code, 0) << cal.out << cal.err;
@@ -155,7 +160,8 @@ TEST_F(PlanCliTest, SimulatedPlanPassesWithinThirtyPercentOfThePredictedSigma) {
         if (fisheye) {
           fisheye_ratios[{name, k}].push_back(ratio);
         } else {
-          EXPECT_NEAR(ratio, 1.0, 0.30) << k << ": measured " << s["sigma"][k] << ", predicted " << predicted[name][k];
+          EXPECT_NEAR(ratio, 1.0, 0.30)
+              << k << ": measured " << s["sigma"][k] << ", predicted " << predicted[name][k];
           ++compared;
         }
       }
@@ -167,8 +173,8 @@ TEST_F(PlanCliTest, SimulatedPlanPassesWithinThirtyPercentOfThePredictedSigma) {
   for (const auto& [key, ratios] : fisheye_ratios) {
     ASSERT_EQ(ratios.size(), 3u);
     const double mean = (ratios[0] + ratios[1] + ratios[2]) / 3;
-    EXPECT_NEAR(mean, 1.0, 0.30) << key.first << " " << key.second << ": measured/predicted " << ratios[0] << ", "
-                                 << ratios[1] << ", " << ratios[2];
+    EXPECT_NEAR(mean, 1.0, 0.30) << key.first << " " << key.second << ": measured/predicted "
+                                 << ratios[0] << ", " << ratios[1] << ", " << ratios[2];
   }
 }
 
@@ -179,17 +185,20 @@ TEST_F(PlanCliTest, CheckFlagsBrokenLayoutsWithTheRightReasons) {
   int exit_code = 0;
   const auto bad = CheckEdited(
       [](nlohmann::json& st) {
-        Board(st, "front_camera_board")["pose"] = {{"xyz_m", {5.4, 5.0, 1.26}}, {"ypr_deg", {55, 0, 0}}};
+        Board(st, "front_camera_board")["pose"] = {{"xyz_m", {5.4, 5.0, 1.26}},
+                                                   {"ypr_deg", {55, 0, 0}}};
       },
       kCornerNoise, &exit_code);
   EXPECT_EQ(exit_code, 1);
   // The surround front camera sees the board there, but too small.
-  EXPECT_EQ(bad, (std::map<std::string, std::vector<std::string>>{{"front_camera", {"board_outside_fov"}},
-                                                                  {"surround_front", {"features_too_small"}}}));
+  EXPECT_EQ(bad, (std::map<std::string, std::vector<std::string>>{
+                     {"front_camera", {"board_outside_fov"}},
+                     {"surround_front", {"features_too_small"}}}));
   // Shrunk boards: the camera board's squares and the bumper LiDAR boards' holes.
-  EXPECT_EQ(CheckEdited([](nlohmann::json& st) { Board(st, "front_camera_board")["scale"] = 0.2; }),
-            (std::map<std::string, std::vector<std::string>>{{"front_camera", {"features_too_small"}},
-                                                             {"surround_front", {"features_too_small"}}}));
+  EXPECT_EQ(
+      CheckEdited([](nlohmann::json& st) { Board(st, "front_camera_board")["scale"] = 0.2; }),
+      (std::map<std::string, std::vector<std::string>>{
+          {"front_camera", {"features_too_small"}}, {"surround_front", {"features_too_small"}}}));
   EXPECT_EQ(CheckEdited([](nlohmann::json& st) {
               Board(st, "bumper_lidar_board_left")["scale"] = 0.5;
               Board(st, "bumper_lidar_board_right")["scale"] = 0.5;
@@ -197,14 +206,15 @@ TEST_F(PlanCliTest, CheckFlagsBrokenLayoutsWithTheRightReasons) {
             (std::map<std::string, std::vector<std::string>>{{"bumper_lidar", {"too_few_rings"}}}));
   // A stray board in front of the camera board and the roof LiDAR's left board; a board
   // moved into the aligner's zone.
-  EXPECT_EQ(CheckEdited([](nlohmann::json& st) {
-              st["boards"].push_back({{"id", "stray"},
-                                      {"type", "aruco"},
-                                      {"pose", {{"xyz_m", {4.3, 0.7, 1.3}}, {"ypr_deg", {0, 0, 0}}}}});
-            }),
-            (std::map<std::string, std::vector<std::string>>{{"front_camera", {"occluded_by_board"}},
-                                                             {"surround_front", {"occluded_by_board"}},
-                                                             {"roof_lidar", {"occluded_by_board"}}}));
+  EXPECT_EQ(
+      CheckEdited([](nlohmann::json& st) {
+        st["boards"].push_back({{"id", "stray"},
+                                {"type", "aruco"},
+                                {"pose", {{"xyz_m", {4.3, 0.7, 1.3}}, {"ypr_deg", {0, 0, 0}}}}});
+      }),
+      (std::map<std::string, std::vector<std::string>>{{"front_camera", {"occluded_by_board"}},
+                                                       {"surround_front", {"occluded_by_board"}},
+                                                       {"roof_lidar", {"occluded_by_board"}}}));
   EXPECT_EQ(CheckEdited([](nlohmann::json& st) {
               nlohmann::json& pose = Board(st, "surround_left_board")["pose"];
               pose.erase("matrix");  // the matrix wins over xyz_m when reading
@@ -220,8 +230,10 @@ TEST_F(PlanCliTest, CheckFlagsBrokenLayoutsWithTheRightReasons) {
 }
 
 TEST(PlanCli, ValidRegionsContainThePlannedPose) {
-  const fs::path dir = fs::path(testing::TempDir()) / ("plan_regions_" + std::to_string(::getpid()));
-  const LinecalRun plan = RunLinecal("plan --json --car " + kCar + " --floor " + kFloor + " --out " + dir.string());
+  const fs::path dir =
+      fs::path(testing::TempDir()) / ("plan_regions_" + std::to_string(::getpid()));
+  const LinecalRun plan =
+      RunLinecal("plan --json --car " + kCar + " --floor " + kFloor + " --out " + dir.string());
   ASSERT_EQ(plan.exit_code, 0) << plan.err;
   const nlohmann::json j = nlohmann::json::parse(plan.out);
   std::set<std::pair<std::string, std::string>> pairs;
@@ -237,7 +249,8 @@ TEST(PlanCli, ValidRegionsContainThePlannedPose) {
   }
   for (const nlohmann::json& s : j["sensors"]) {
     for (const nlohmann::json& t : s["targets"]) {
-      EXPECT_TRUE(pairs.count({s["name"].get<std::string>(), t["id"].get<std::string>()})) << t["id"];
+      EXPECT_TRUE(pairs.count({s["name"].get<std::string>(), t["id"].get<std::string>()}))
+          << t["id"];
     }
   }
   // The distance range agrees with `plan check`: the front camera's board moved along the
@@ -266,7 +279,8 @@ TEST(PlanCli, ValidRegionsContainThePlannedPose) {
     const nlohmann::json result = nlohmann::json::parse(run.out);
     for (const nlohmann::json& s : result["sensors"]) {
       if (s["name"] != "front_camera") continue;
-      if (!s["calibratable"].get<bool>()) std::fprintf(stderr, "at %.2f m: %s\n", distance, s["reasons"].dump().c_str());
+      if (!s["calibratable"].get<bool>())
+        std::fprintf(stderr, "at %.2f m: %s\n", distance, s["reasons"].dump().c_str());
       return s["calibratable"].get<bool>();
     }
     return false;
@@ -370,17 +384,21 @@ TEST(PlanCli, BadInputExitsTwoNamingTheProblem) {
     EXPECT_NE(run.err.find(named), std::string::npos) << args << "\n" << run.err;
   };
   expect_bad("plan --floor " + kFloor + " --out " + dir.string(), "--car");
-  expect_bad("plan --car /nonexistent/car.json --floor " + kFloor + " --out " + dir.string(), "/nonexistent/car.json");
+  expect_bad("plan --car /nonexistent/car.json --floor " + kFloor + " --out " + dir.string(),
+             "/nonexistent/car.json");
   const fs::path floor = dir / "floor.json";
-  std::ofstream(floor) << R"({"format": "linecal.floor", "version": 1, "name": "x", "usable_area_m": [[0, 0], [1, 0]]})";
+  std::ofstream(floor)
+      << R"({"format": "linecal.floor", "version": 1, "name": "x", "usable_area_m": [[0, 0], [1, 0]]})";
   expect_bad("plan --car " + kCar + " --floor " + floor.string() + " --out " + dir.string(),
              floor.string() + ": usable_area_m");
-  expect_bad("plan --car " + kCar + " --floor " + kFloor + " --out " + dir.string() + " --min-feature-px -3",
+  expect_bad("plan --car " + kCar + " --floor " + kFloor + " --out " + dir.string() +
+                 " --min-feature-px -3",
              "--min-feature-px");
   const fs::path station = dir / "station.json";
   std::ofstream(station) << R"({"format": "linecal.station", "version": 1, "name": "x",
       "boards": [{"id": "b", "type": "chess", "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}}]})";
-  expect_bad("plan check --station " + station.string() + " --car " + kCar, station.string() + ": boards[0].type");
+  expect_bad("plan check --station " + station.string() + " --car " + kCar,
+             station.string() + ": boards[0].type");
   expect_bad("plan check --station " + station.string(), "--car");
   fs::remove_all(dir);
 }

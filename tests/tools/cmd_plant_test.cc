@@ -195,10 +195,10 @@ TEST_F(CmdPlantTest, ErrorsNameTheFlagOrTheServerNeverThePassword) {
                   .ok());
   const std::string password_file = absl::StrCat(cluster_->dir(), "/quality.pw");
   std::ofstream(password_file) << "q-pass-77\n";
-  const std::string dsn = absl::StrCat("'host=127.0.0.1 port=", cluster_->port(),
-                                       " dbname=plant user=quality'");
-  run = RunLinecal(absl::StrCat("plant cycles --vin V --dsn ", dsn, " --password-file ",
-                                password_file));
+  const std::string dsn =
+      absl::StrCat("'host=127.0.0.1 port=", cluster_->port(), " dbname=plant user=quality'");
+  run = RunLinecal(
+      absl::StrCat("plant cycles --vin V --dsn ", dsn, " --password-file ", password_file));
   EXPECT_EQ(run.exit_code, 1) << run.err;  // connected, no such car
   run = RunLinecal(absl::StrCat("plant cycles --vin V --dsn ", dsn));
   EXPECT_EQ(run.exit_code, 2);

@@ -85,7 +85,9 @@ TEST(CmdRadarTest, EsrTracksHaveNoRcs) {
   d.azimuth_rad = -5.0 * std::numbers::pi / 180.0;  // 5° to the right
   d.range_rate_mps = -1.5;
   scan.detections.push_back(d);
-  const std::string path = (std::filesystem::path(testing::TempDir()) / ("cmd_esr_" + std::to_string(::getpid()) + ".log")).string();
+  const std::string path = (std::filesystem::path(testing::TempDir()) /
+                            ("cmd_esr_" + std::to_string(::getpid()) + ".log"))
+                               .string();
   ASSERT_TRUE(WriteCandumpLog(path, *EncodeEsrScan(scan, "can0", {})).ok());
   const LinecalRun run = RunLinecal("radar decode --model esr --json --log " + path);
   ASSERT_EQ(run.exit_code, 0) << run.err;

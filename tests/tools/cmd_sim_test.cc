@@ -1,14 +1,14 @@
 // linecal sim, capture check and lidar topview through the built binary: the reference car
 // simulates into a capture that capture check accepts, and broken captures and bad flags are
 // refused with exit 2 and a one-line message naming the problem.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <functional>
-#include <string>
-
-#include <gtest/gtest.h>
-#include <unistd.h>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "tests/tools/run_linecal.h"
 
@@ -18,17 +18,20 @@ namespace {
 namespace fs = std::filesystem;
 using testing_tools::RunLinecal;
 
-const std::string kRef = std::string(" --station ") + LINECAL_SOURCE_DIR + "/deploy/stations/reference.json --car " +
-                         LINECAL_SOURCE_DIR + "/deploy/cars/reference.json";
+const std::string kRef = std::string(" --station ") + LINECAL_SOURCE_DIR +
+                         "/deploy/stations/reference.json --car " + LINECAL_SOURCE_DIR +
+                         "/deploy/cars/reference.json";
 
 class SimCliTest : public ::testing::Test {
  protected:
   // One simulated capture shared by the tests (radars and one LiDAR: fast to make).
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::path(testing::TempDir()) / ("cli_sim_capture_" + std::to_string(::getpid())));
+    dir_ = new fs::path(fs::path(testing::TempDir()) /
+                        ("cli_sim_capture_" + std::to_string(::getpid())));
     fs::remove_all(*dir_);
-    const auto run = RunLinecal("sim" + kRef + " --seed 4 --sensors front_camera,bumper_lidar,front_radar --json --out " +
-                                dir_->string());
+    const auto run = RunLinecal(
+        "sim" + kRef + " --seed 4 --sensors front_camera,bumper_lidar,front_radar --json --out " +
+        dir_->string());
     ASSERT_EQ(run.exit_code, 0) << run.err;
     const nlohmann::json j = nlohmann::json::parse(run.out);
     EXPECT_EQ(j["sensors"].size(), 3u);
@@ -74,7 +77,8 @@ TEST_F(SimCliTest, MissingFieldIsNamed) {
   EditManifest(c, [](nlohmann::json& j) { j.erase("aligner"); });
   const auto run = RunLinecal("capture check " + c.string());
   EXPECT_EQ(run.exit_code, 2);
-  EXPECT_EQ(run.err, "linecal capture check: " + (c / "manifest.json").string() + ": aligner: missing\n");
+  EXPECT_EQ(run.err,
+            "linecal capture check: " + (c / "manifest.json").string() + ": aligner: missing\n");
 }
 
 TEST_F(SimCliTest, WrongTypeIsNamed) {
@@ -82,7 +86,9 @@ TEST_F(SimCliTest, WrongTypeIsNamed) {
   EditManifest(c, [](nlohmann::json& j) { j["sensors"][0]["frames"][0]["t_ns"] = 1.5; });
   const auto run = RunLinecal("capture check " + c.string());
   EXPECT_EQ(run.exit_code, 2);
-  EXPECT_NE(run.err.find("sensors[0].frames[0].t_ns: expected a whole number, got 1.5"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("sensors[0].frames[0].t_ns: expected a whole number, got 1.5"),
+            std::string::npos)
+      << run.err;
 }
 
 TEST_F(SimCliTest, UnknownBoardIsNamed) {
@@ -94,7 +100,9 @@ TEST_F(SimCliTest, UnknownBoardIsNamed) {
   std::ofstream(c / "station.json") << j.dump();
   const auto run = RunLinecal("capture check " + c.string());
   EXPECT_EQ(run.exit_code, 2);
-  EXPECT_NE(run.err.find("station.json: boards[0].type: unknown board type 'dartboard'"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("station.json: boards[0].type: unknown board type 'dartboard'"),
+            std::string::npos)
+      << run.err;
 }
 
 TEST_F(SimCliTest, CorruptFrameIsNamed) {
@@ -107,8 +115,9 @@ TEST_F(SimCliTest, CorruptFrameIsNamed) {
 
 TEST_F(SimCliTest, TopviewDrawsTheScan) {
   const fs::path png = fs::path(testing::TempDir()) / "topview.png";
-  const auto run = RunLinecal("lidar topview --pcd " + (*dir_ / "bumper_lidar/scan-000000.pcd").string() +
-                              " --size 200 --out " + png.string());
+  const auto run =
+      RunLinecal("lidar topview --pcd " + (*dir_ / "bumper_lidar/scan-000000.pcd").string() +
+                 " --size 200 --out " + png.string());
   ASSERT_EQ(run.exit_code, 0) << run.err;
   EXPECT_GT(fs::file_size(png), 100u);
   EXPECT_EQ(RunLinecal("lidar topview --pcd /nonexistent.pcd --out " + png.string()).exit_code, 2);

@@ -191,8 +191,8 @@ TEST_F(TargetCliTest, BadFilesExitTwoNamingTheFileAndTheKey) {
   for (const BadFile& c : cases) {
     SCOPED_TRACE(c.name);
     const std::string path = c.yaml == nullptr ? Path(c.name) : Write(c.name, c.yaml);
-    const auto run = RunLinecal("detect --target '" + path + "' " + c.extra + " --image '" +
-                                image + "'");
+    const auto run =
+        RunLinecal("detect --target '" + path + "' " + c.extra + " --image '" + image + "'");
     EXPECT_EQ(run.exit_code, 2);
     EXPECT_NE(run.err.find(c.message), std::string::npos) << run.err;
     EXPECT_EQ(std::count(run.err.begin(), run.err.end(), '\n'), 1) << run.err;

@@ -8,8 +8,8 @@
 
 #include "gtest/gtest.h"
 #include "station/io/pcap.h"
-#include "station/sensors/lidar/pcd.h"
 #include "station/sensors/lidar/lidar_format.h"
+#include "station/sensors/lidar/pcd.h"
 #include "tests/support/external_data.h"
 #include "tests/support/lidar_recording.h"
 #include "tests/tools/run_linecal.h"

@@ -1,8 +1,8 @@
 #include "tools/cli/command_line.h"
 
 #include <charconv>
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include "absl/status/status.h"
@@ -59,7 +59,8 @@ absl::Status CommandLine::Parse(const std::vector<std::string>& args) {
       value = *inline_value;
     } else {
       if (i + 1 >= args.size()) {
-        return absl::InvalidArgumentError(absl::StrCat("--", name, " needs a value (", spec->metavar, ")"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("--", name, " needs a value (", spec->metavar, ")"));
       }
       value = args[++i];
     }
@@ -81,8 +82,8 @@ std::string CommandLine::Help() const {
   std::ostringstream out;
   out << "usage: " << usage_ << "\n\n" << summary_ << "\n\noptions:\n";
   for (const OptionSpec& o : options_) {
-    std::string left = o.positional ? "  " + o.name
-                                    : "  --" + o.name + (o.metavar.empty() ? "" : " " + o.metavar);
+    std::string left =
+        o.positional ? "  " + o.name : "  --" + o.name + (o.metavar.empty() ? "" : " " + o.metavar);
     out << left;
     // Align help text in a column; 28 fits the longest option names in use.
     constexpr size_t kHelpColumn = 28;
@@ -118,18 +119,21 @@ absl::StatusOr<double> CommandLine::GetDouble(const std::string& name, double fa
   return v;
 }
 
-absl::StatusOr<std::vector<double>> ParseNumberList(const std::string& text, const std::string& what, size_t count) {
+absl::StatusOr<std::vector<double>> ParseNumberList(const std::string& text,
+                                                    const std::string& what, size_t count) {
   std::vector<double> out;
   for (const absl::string_view part : absl::StrSplit(text, ',')) {
     double v = 0;
     const auto [end, ec] = std::from_chars(part.data(), part.data() + part.size(), v);
-    if (part.empty() || ec != std::errc() || end != part.data() + part.size() || !std::isfinite(v)) {
+    if (part.empty() || ec != std::errc() || end != part.data() + part.size() ||
+        !std::isfinite(v)) {
       return absl::InvalidArgumentError(absl::StrCat(what, ": '", part, "' is not a number"));
     }
     out.push_back(v);
   }
   if (count > 0 && out.size() != count) {
-    return absl::InvalidArgumentError(absl::StrCat(what, ": ", count, " comma-separated numbers needed, got ", out.size()));
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, ": ", count, " comma-separated numbers needed, got ", out.size()));
   }
   return out;
 }
@@ -140,7 +144,8 @@ absl::StatusOr<int> CommandLine::GetInt(const std::string& name, int fallback) c
   int v = 0;
   const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
   if (ec != std::errc() || end != s.data() + s.size()) {
-    return absl::InvalidArgumentError(absl::StrCat("--", name, ": '", s, "' is not a whole number"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("--", name, ": '", s, "' is not a whole number"));
   }
   return v;
 }

@@ -74,7 +74,8 @@ std::optional<int> ParseOrExit(CommandLine& cl, const std::string& command,
 
 // "1.5,-2,3" as numbers; an error naming `what` (a flag, "--lane") and the bad part, or the
 // count when `count` > 0 and another count was given. O(length).
-absl::StatusOr<std::vector<double>> ParseNumberList(const std::string& text, const std::string& what, size_t count = 0);
+absl::StatusOr<std::vector<double>> ParseNumberList(const std::string& text,
+                                                    const std::string& what, size_t count = 0);
 
 // Prints "linecal <command>: <message>" to stderr and returns kExitBadInput.
 int BadInput(const std::string& command, const std::string& message);

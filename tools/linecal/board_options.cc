@@ -87,8 +87,8 @@ absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
                              "asymmetric", "tag-cols", "tag-rows", "tag-spacing", "start-id",
                              "hexagonal", "marker", "legacy-pattern", "dictionary"}) {
     if (cl.Has(option)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("--", option, " cannot be combined with --target (the file gives the board)"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--", option, " cannot be combined with --target (the file gives the board)"));
     }
   }
   absl::StatusOr<BoardParams> p = ReadKalibrTarget(cl.Get("target", ""));
@@ -98,10 +98,9 @@ absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
                                                          {"border-bits", BoardType::kApriltag}};
   for (const auto& [option, type] : additions) {
     if (cl.Has(option) && p->type != type) {
-      return absl::InvalidArgumentError(absl::StrCat("--", option, " applies to a ",
-                                                     BoardTypeName(type), " only; ",
-                                                     cl.Get("target", ""), " describes a ",
-                                                     BoardTypeName(p->type)));
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", option, " applies to a ", BoardTypeName(type), " only; ",
+                       cl.Get("target", ""), " describes a ", BoardTypeName(p->type)));
     }
   }
   absl::StatusOr<int> border_bits = cl.GetInt("border-bits", p->apriltag_border_bits);
@@ -113,7 +112,8 @@ absl::StatusOr<BoardParams> BoardFromTargetFile(const cli::CommandLine& cl) {
   p->light_circles = p->light_circles || cl.Has("light-circles");
   const BoardParamsError e = ValidateBoardParams(*p);
   if (e == BoardParamsError::kOk) return p;
-  return absl::InvalidArgumentError(absl::StrCat("--", OptionOf(e), ": ", DescribeParamsError(e, *p)));
+  return absl::InvalidArgumentError(
+      absl::StrCat("--", OptionOf(e), ": ", DescribeParamsError(e, *p)));
 }
 
 }  // namespace
@@ -135,8 +135,7 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
     case BoardParamsError::kBadSpacing:
       return absl::StrCat(p.spacing_m, " m is outside (0, ", kMaxCircleSpacingM, "]");
     case BoardParamsError::kBadDiameter:
-      return absl::StrCat(p.diameter_m,
-                          " m must be > 0 and below the nearest circles' distance (",
+      return absl::StrCat(p.diameter_m, " m must be > 0 and below the nearest circles' distance (",
                           p.asymmetric ? "spacing * sqrt(2)" : "the spacing", ", ",
                           p.asymmetric ? p.spacing_m * std::sqrt(2.0) : p.spacing_m, " m)");
     case BoardParamsError::kBadTagGrid:
@@ -154,8 +153,7 @@ std::string DescribeParamsError(BoardParamsError e, const BoardParams& p) {
     case BoardParamsError::kBadGap:
       return absl::StrCat(p.gap_m, " m is outside (0, ", kMaxSquareGridGapM, "]");
     case BoardParamsError::kBadMarker:
-      return absl::StrCat(p.marker_m, " m must be > 0 and below the square (", p.square_m,
-                          " m)");
+      return absl::StrCat(p.marker_m, " m must be > 0 and below the square (", p.square_m, " m)");
     case BoardParamsError::kBadMarkerCount:
       return absl::StrCat(ArucoDictionaryInfoOf(p.charuco_dictionary).name, " has ",
                           ArucoDictionaryInfoOf(p.charuco_dictionary).marker_count(), " markers; ",
@@ -290,7 +288,8 @@ absl::StatusOr<BoardParams> BoardParamsFromCommandLine(const cli::CommandLine& c
 
   const BoardParamsError e = ValidateBoardParams(p);
   if (e == BoardParamsError::kOk) return p;
-  return absl::InvalidArgumentError(absl::StrCat("--", OptionOf(e), ": ", DescribeParamsError(e, p)));
+  return absl::InvalidArgumentError(
+      absl::StrCat("--", OptionOf(e), ": ", DescribeParamsError(e, p)));
 }
 
 }  // namespace linecal::tools

@@ -2,9 +2,9 @@
 // The per-camera picture of `linecal calibrate --report DIR`: the camera's first frame with
 // what the calibration found and what it implies, to judge a result by eye.
 
-#include "station/pipeline/capture_calibration.h"
 #include "detectors/core/image_view.h"
 #include "station/io/image_io.h"
+#include "station/pipeline/capture_calibration.h"
 #include "tools/linecal/detection_overlay.h"
 
 namespace linecal::tools {
@@ -27,7 +27,7 @@ inline constexpr int kVanishingPointRingPx = 8;
 // verdict, yaw/pitch/roll and the seed formulas' results. Pose, homography and detections
 // come from `result`; the layout and aligner from `capture`. Cost: one pass over the image
 // plus O(features + grid samples).
-RgbImage DrawCalibrationReport(const ImageView8& image, const Capture& capture, const SensorModel& sensor,
-                               const SensorCalibration& result);
+RgbImage DrawCalibrationReport(const ImageView8& image, const Capture& capture,
+                               const SensorModel& sensor, const SensorCalibration& result);
 
 }  // namespace linecal::tools

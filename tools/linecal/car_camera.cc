@@ -9,7 +9,8 @@ absl::StatusOr<SensorModel> ReadCarCamera(const std::string& car_path, const std
   if (!car.ok()) return absl::InvalidArgumentError(car.status().message());
   const SensorModel* sensor = car->FindSensor(name);
   if (sensor == nullptr || sensor->kind != SensorKind::kCamera || !sensor->intrinsics) {
-    return absl::InvalidArgumentError(absl::StrCat("--camera: '", name, "' is not a camera of ", car_path));
+    return absl::InvalidArgumentError(
+        absl::StrCat("--camera: '", name, "' is not a camera of ", car_path));
   }
   return *sensor;
 }

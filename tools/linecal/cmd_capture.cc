@@ -1,14 +1,13 @@
 // linecal capture check DIR: validates a capture (docs/capture-format.md).
 #include <cstdio>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "absl/strings/str_cat.h"
 #include "station/capture/capture.h"
 #include "tools/cli/command_line.h"
-#include "tools/linecal/input_budget_flags.h"
 #include "tools/linecal/commands.h"
+#include "tools/linecal/input_budget_flags.h"
 
 namespace linecal::tools {
 
@@ -44,16 +43,19 @@ int RunCaptureCheck(const Args& args) {
                          {"packets", s.packets.has_value()},
                          {"can_log", s.can_log.has_value()}});
     }
-    const nlohmann::json out = {{"valid", true},           {"version", m.version}, {"vin", m.vin},
-                                {"car_model", m.car_model}, {"origin", m.origin},   {"station", c->station.name},
+    const nlohmann::json out = {{"valid", true},      {"version", m.version},
+                                {"vin", m.vin},       {"car_model", m.car_model},
+                                {"origin", m.origin}, {"station", c->station.name},
                                 {"sensors", sensors}};
     std::printf("%s\n", out.dump(2).c_str());
   } else {
-    std::printf("capture %s: valid (format v%d, %s)\n", c->dir.c_str(), m.version, m.origin.c_str());
-    std::printf("  VIN %s, car model %s, station %s\n", m.vin.c_str(), m.car_model.c_str(), c->station.name.c_str());
+    std::printf("capture %s: valid (format v%d, %s)\n", c->dir.c_str(), m.version,
+                m.origin.c_str());
+    std::printf("  VIN %s, car model %s, station %s\n", m.vin.c_str(), m.car_model.c_str(),
+                c->station.name.c_str());
     for (const CaptureSensor& s : m.sensors) {
-      std::printf("  %-20s %-7s %zu frame(s)%s%s\n", s.name.c_str(), SensorKindName(s.kind), s.frames.size(),
-                  s.packets ? ", packets" : "", s.can_log ? ", CAN log" : "");
+      std::printf("  %-20s %-7s %zu frame(s)%s%s\n", s.name.c_str(), SensorKindName(s.kind),
+                  s.frames.size(), s.packets ? ", packets" : "", s.can_log ? ", CAN log" : "");
     }
   }
   return cli::kExitOk;

@@ -24,12 +24,18 @@ namespace {
 constexpr char kDefaultAddress[] = "127.0.0.1:50051";
 
 std::vector<cli::OptionSpec> ConnectionOptions(std::vector<cli::OptionSpec> options) {
-  options.push_back({"address", "HOST:PORT", "the daemon (default $LINECAL_ADDRESS or 127.0.0.1:50051)"});
+  options.push_back(
+      {"address", "HOST:PORT", "the daemon (default $LINECAL_ADDRESS or 127.0.0.1:50051)"});
   options.push_back({"token", "TOKEN", "authentication token (default $LINECAL_TOKEN)"});
-  options.push_back({"tls-ca", "PEM", "TLS: the CA of the daemon's certificate (default $LINECAL_TLS_CA)"});
-  options.push_back({"tls-cert", "PEM", "TLS: this client's certificate (default $LINECAL_TLS_CERT)"});
-  options.push_back({"tls-key", "PEM", "TLS: this client's private key (default $LINECAL_TLS_KEY)"});
-  options.push_back({"tls-server-name", "NAME", "TLS: the name the daemon's certificate must carry (default: the address's host)"});
+  options.push_back(
+      {"tls-ca", "PEM", "TLS: the CA of the daemon's certificate (default $LINECAL_TLS_CA)"});
+  options.push_back(
+      {"tls-cert", "PEM", "TLS: this client's certificate (default $LINECAL_TLS_CERT)"});
+  options.push_back(
+      {"tls-key", "PEM", "TLS: this client's private key (default $LINECAL_TLS_KEY)"});
+  options.push_back(
+      {"tls-server-name", "NAME",
+       "TLS: the name the daemon's certificate must carry (default: the address's host)"});
   options.push_back({"json", "", "print JSON"});
   return options;
 }
@@ -70,7 +76,8 @@ absl::StatusOr<Client> Connect(const cli::CommandLine& cl) {
     const std::string path = FlagOrEnv(cl, f.flag, f.env);
     if (path.empty()) continue;
     absl::StatusOr<std::string> text = ReadTextFile(path);
-    if (!text.ok()) return absl::InvalidArgumentError(absl::StrCat("--", f.flag, ": ", text.status().message()));
+    if (!text.ok())
+      return absl::InvalidArgumentError(absl::StrCat("--", f.flag, ": ", text.status().message()));
     *f.text = *std::move(text);
     c.tls = true;
   }
@@ -78,11 +85,13 @@ absl::StatusOr<Client> Connect(const cli::CommandLine& cl) {
     return absl::InvalidArgumentError("--tls-cert and --tls-key: give both or neither");
   }
   const std::string server_name = cl.Get("tls-server-name");
-  if (!server_name.empty() && !c.tls) return absl::InvalidArgumentError("--tls-server-name: needs --tls-ca or --tls-cert");
+  if (!server_name.empty() && !c.tls)
+    return absl::InvalidArgumentError("--tls-server-name: needs --tls-ca or --tls-cert");
   grpc::ChannelArguments arguments;
   if (!server_name.empty()) arguments.SetSslTargetNameOverride(server_name);
   c.stub = v1::Station::NewStub(grpc::CreateCustomChannel(
-      c.address, c.tls ? grpc::SslCredentials(pem) : grpc::InsecureChannelCredentials(), arguments));
+      c.address, c.tls ? grpc::SslCredentials(pem) : grpc::InsecureChannelCredentials(),
+      arguments));
   return c;
 }
 
@@ -94,7 +103,8 @@ int CallFailed(const char* command, const Client& client, const grpc::Status& s)
   if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
     why = client.tls ? "no daemon answers or the TLS handshake failed" : "no daemon answers";
   }
-  std::fprintf(stderr, "linecal %s: %s (%s): %s\n", command, client.address.c_str(), why, s.error_message().c_str());
+  std::fprintf(stderr, "linecal %s: %s (%s): %s\n", command, client.address.c_str(), why,
+               s.error_message().c_str());
   return s.error_code() == grpc::StatusCode::NOT_FOUND ? cli::kExitNegative : cli::kExitBadInput;
 }
 
@@ -110,10 +120,14 @@ std::string Json(const google::protobuf::Message& m) {
 
 const char* VerdictWord(v1::Verdict v) {
   switch (v) {
-    case v1::VERDICT_PASS: return "pass";
-    case v1::VERDICT_FAIL: return "fail";
-    case v1::VERDICT_ERROR: return "error";
-    default: return "-";
+    case v1::VERDICT_PASS:
+      return "pass";
+    case v1::VERDICT_FAIL:
+      return "fail";
+    case v1::VERDICT_ERROR:
+      return "error";
+    default:
+      return "-";
   }
 }
 
@@ -121,16 +135,17 @@ void PrintCycle(const v1::Cycle& c) {
   // "CYCLE_STATE_DONE" -> "done".
   std::string state = v1::CycleState_Name(c.state()).substr(std::string("CYCLE_STATE_").size());
   for (char& ch : state) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-  std::printf("cycle %s  VIN %s  car %s  %s  verdict %s%s%s\n", c.cycle_id().c_str(), c.vin().c_str(),
-              c.car_model_id().c_str(), state.c_str(), VerdictWord(c.verdict()),
+  std::printf("cycle %s  VIN %s  car %s  %s  verdict %s%s%s\n", c.cycle_id().c_str(),
+              c.vin().c_str(), c.car_model_id().c_str(), state.c_str(), VerdictWord(c.verdict()),
               c.reason().empty() ? "" : "  ", c.reason().c_str());
   if (c.sensors_size() == 0) return;
-  std::printf("  %-20s %-7s %-26s %9s %9s %9s %8s %8s %8s %6s\n", "sensor", "verdict", "reason", "dyaw_deg",
-              "dpitch_deg", "droll_deg", "dx_mm", "dy_mm", "dz_mm", "feat");
+  std::printf("  %-20s %-7s %-26s %9s %9s %9s %8s %8s %8s %6s\n", "sensor", "verdict", "reason",
+              "dyaw_deg", "dpitch_deg", "droll_deg", "dx_mm", "dy_mm", "dz_mm", "feat");
   for (const v1::SensorResult& s : c.sensors()) {
     const v1::MountingAngles& d = s.deviation();
-    std::printf("  %-20s %-7s %-26s %+9.3f %+9.3f %+9.3f %+8.1f %+8.1f %+8.1f %6u\n", s.name().c_str(),
-                VerdictWord(s.verdict()), s.reason().empty() ? "-" : s.reason().c_str(), d.yaw_deg(), d.pitch_deg(),
+    std::printf("  %-20s %-7s %-26s %+9.3f %+9.3f %+9.3f %+8.1f %+8.1f %+8.1f %6u\n",
+                s.name().c_str(), VerdictWord(s.verdict()),
+                s.reason().empty() ? "-" : s.reason().c_str(), d.yaw_deg(), d.pitch_deg(),
                 d.roll_deg(), d.x_m() * 1e3, d.y_m() * 1e3, d.z_m() * 1e3, s.features_used());
   }
 }
@@ -139,7 +154,8 @@ void PrintCycle(const v1::Cycle& c) {
 
 int RunCycleStart(const Args& args) {
   cli::CommandLine cl(
-      "linecal cycle start --vin VIN --car MODEL [--lateral-m M] [--longitudinal-m M] [--thrust-deg D] "
+      "linecal cycle start --vin VIN --car MODEL [--lateral-m M] [--longitudinal-m M] "
+      "[--thrust-deg D] "
       "[--record] [--frames N] [--wait] [--json]",
       "Starts a calibration cycle for one car on the station's daemon and prints its id. With "
       "--wait, follows its progress on stderr and prints the per-sensor table (or the cycle as "
@@ -160,7 +176,8 @@ int RunCycleStart(const Args& args) {
   const absl::StatusOr<double> longitudinal = cl.GetDouble("longitudinal-m", 0);
   const absl::StatusOr<double> thrust = cl.GetDouble("thrust-deg", 0);
   const absl::StatusOr<int> frames = cl.GetInt("frames", 0);
-  for (const absl::Status& s : {lateral.status(), longitudinal.status(), thrust.status(), frames.status()}) {
+  for (const absl::Status& s :
+       {lateral.status(), longitudinal.status(), thrust.status(), frames.status()}) {
     if (!s.ok()) return cli::BadInput("cycle start", std::string(s.message()));
   }
   if (*frames < 0) return cli::BadInput("cycle start", "--frames: must be >= 0");
@@ -170,7 +187,8 @@ int RunCycleStart(const Args& args) {
   request.mutable_options()->set_record_capture(cl.Has("record"));
   request.mutable_options()->set_frames_per_sensor(static_cast<uint32_t>(*frames));
   const absl::StatusOr<Client> connected = Connect(cl);
-  if (!connected.ok()) return cli::BadInput("cycle start", std::string(connected.status().message()));
+  if (!connected.ok())
+    return cli::BadInput("cycle start", std::string(connected.status().message()));
   const Client& client = *connected;
   grpc::ClientContext context;
   client.Prepare(&context);
@@ -188,11 +206,13 @@ int RunCycleStart(const Args& args) {
     client.Prepare(&watch_context);
     v1::WatchCycleRequest watch;
     watch.set_cycle_id(started.cycle_id());
-    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = client.stub->WatchCycle(&watch_context, watch);
+    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader =
+        client.stub->WatchCycle(&watch_context, watch);
     v1::CycleEvent e;
     while (reader->Read(&e)) {
-      std::fprintf(stderr, "  %-22s %-20s %s%s%s\n", v1::CycleEvent::Type_Name(e.type()).c_str() + 5,
-                   e.sensor().c_str(), e.verdict() == v1::VERDICT_UNSPECIFIED ? "" : VerdictWord(e.verdict()),
+      std::fprintf(stderr, "  %-22s %-20s %s%s%s\n",
+                   v1::CycleEvent::Type_Name(e.type()).c_str() + 5, e.sensor().c_str(),
+                   e.verdict() == v1::VERDICT_UNSPECIFIED ? "" : VerdictWord(e.verdict()),
                    e.detail().empty() ? "" : " ", e.detail().c_str());
     }
     if (grpc::Status s = reader->Finish(); !s.ok()) return CallFailed("cycle start", client, s);
@@ -214,18 +234,21 @@ int RunCycleStart(const Args& args) {
 }
 
 int RunCycleShow(const Args& args) {
-  cli::CommandLine cl("linecal cycle show ID [--json]", "Prints one stored cycle with its per-sensor results.",
+  cli::CommandLine cl("linecal cycle show ID [--json]",
+                      "Prints one stored cycle with its per-sensor results.",
                       ConnectionOptions({{"id", "ID", "cycle id", true, false, true}}));
   if (const std::optional<int> exit = cli::ParseOrExit(cl, "cycle show", args)) return *exit;
   const absl::StatusOr<Client> connected = Connect(cl);
-  if (!connected.ok()) return cli::BadInput("cycle show", std::string(connected.status().message()));
+  if (!connected.ok())
+    return cli::BadInput("cycle show", std::string(connected.status().message()));
   const Client& client = *connected;
   grpc::ClientContext context;
   client.Prepare(&context);
   v1::GetCycleRequest get;
   get.set_cycle_id(cl.Get("id"));
   v1::Cycle cycle;
-  if (grpc::Status s = client.stub->GetCycle(&context, get, &cycle); !s.ok()) return CallFailed("cycle show", client, s);
+  if (grpc::Status s = client.stub->GetCycle(&context, get, &cycle); !s.ok())
+    return CallFailed("cycle show", client, s);
   if (cl.Has("json")) {
     std::printf("%s\n", Json(cycle).c_str());
   } else {
@@ -235,11 +258,12 @@ int RunCycleShow(const Args& args) {
 }
 
 int RunCyclesList(const Args& args) {
-  cli::CommandLine cl("linecal cycles list [--vin VIN] [--verdict pass|fail|error] [--limit N] [--json]",
-                      "Lists stored cycles, newest first.",
-                      ConnectionOptions({{"vin", "VIN", "only this car"},
-                                         {"verdict", "V", "only cycles with this verdict"},
-                                         {"limit", "N", "at most N cycles (default 50)"}}));
+  cli::CommandLine cl(
+      "linecal cycles list [--vin VIN] [--verdict pass|fail|error] [--limit N] [--json]",
+      "Lists stored cycles, newest first.",
+      ConnectionOptions({{"vin", "VIN", "only this car"},
+                         {"verdict", "V", "only cycles with this verdict"},
+                         {"limit", "N", "at most N cycles (default 50)"}}));
   if (const std::optional<int> exit = cli::ParseOrExit(cl, "cycles list", args)) return *exit;
   v1::ListCyclesRequest request;
   request.set_vin(cl.Get("vin"));
@@ -251,13 +275,16 @@ int RunCyclesList(const Args& args) {
   } else if (verdict == "error") {
     request.set_verdict(v1::VERDICT_ERROR);
   } else if (!verdict.empty()) {
-    return cli::BadInput("cycles list", absl::StrCat("--verdict: '", verdict, "': must be pass, fail or error"));
+    return cli::BadInput("cycles list",
+                         absl::StrCat("--verdict: '", verdict, "': must be pass, fail or error"));
   }
   const absl::StatusOr<int> limit = cl.GetInt("limit", 50);
-  if (!limit.ok() || *limit < 1 || *limit > 1000) return cli::BadInput("cycles list", "--limit: must be in [1, 1000]");
+  if (!limit.ok() || *limit < 1 || *limit > 1000)
+    return cli::BadInput("cycles list", "--limit: must be in [1, 1000]");
   request.set_page_size(static_cast<uint32_t>(*limit));
   const absl::StatusOr<Client> connected = Connect(cl);
-  if (!connected.ok()) return cli::BadInput("cycles list", std::string(connected.status().message()));
+  if (!connected.ok())
+    return cli::BadInput("cycles list", std::string(connected.status().message()));
   const Client& client = *connected;
   grpc::ClientContext context;
   client.Prepare(&context);
@@ -274,7 +301,8 @@ int RunCyclesList(const Args& args) {
 }
 
 int RunStatus(const Args& args) {
-  cli::CommandLine cl("linecal status [--json]", "The daemon's station: version, car models, sensors, database.",
+  cli::CommandLine cl("linecal status [--json]",
+                      "The daemon's station: version, car models, sensors, database.",
                       ConnectionOptions({}));
   if (const std::optional<int> exit = cli::ParseOrExit(cl, "status", args)) return *exit;
   const absl::StatusOr<Client> connected = Connect(cl);
@@ -291,8 +319,10 @@ int RunStatus(const Args& args) {
     return cli::kExitOk;
   }
   std::printf("linecald %s, station %s, database %s (%.1f GB free)\n", status.version().c_str(),
-              status.station_id().c_str(), status.database_path().c_str(), status.disk_free_bytes() / 1e9);
-  std::printf("running cycle: %s\n", status.running_cycle_id().empty() ? "none" : status.running_cycle_id().c_str());
+              status.station_id().c_str(), status.database_path().c_str(),
+              status.disk_free_bytes() / 1e9);
+  std::printf("running cycle: %s\n",
+              status.running_cycle_id().empty() ? "none" : status.running_cycle_id().c_str());
   if (status.has_plant()) {
     const v1::PlantForwarding& plant = status.plant();
     std::printf(

@@ -1,10 +1,10 @@
 // linecal detect: finds a calibration board in an image, or the round-hole board in LiDAR
 // point clouds, and prints its features (docs/interfaces.md, "linecal detect"; fixed, the
 // acceptance tests call it).
+#include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
@@ -20,10 +20,10 @@
 #include "detectors/detection.h"
 #include "detectors/round_hole/round_hole_search.h"
 #include "station/camera/camera_model.h"
-#include "station/model/camera_intrinsics_file.h"
 #include "station/io/image_io.h"
-#include "station/sensors/lidar/pcd.h"
+#include "station/model/camera_intrinsics_file.h"
 #include "station/model/pose_json.h"
+#include "station/sensors/lidar/pcd.h"
 #include "station/solvers/undistorted_board.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/board_options.h"
@@ -167,9 +167,9 @@ absl::StatusOr<CameraModel> ReadCamera(const cli::CommandLine& cl, int width, in
       ReadCameraIntrinsicsFile(path, cl.Has("camera") ? cl.Get("camera") : "");
   if (!intrinsics.ok()) return intrinsics.status();
   if (intrinsics->width != width || intrinsics->height != height) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--intrinsics ", path, ": the camera is ", intrinsics->width, " x ",
-                     intrinsics->height, " px, the image ", width, " x ", height, " px"));
+    return absl::InvalidArgumentError(absl::StrCat("--intrinsics ", path, ": the camera is ",
+                                                   intrinsics->width, " x ", intrinsics->height,
+                                                   " px, the image ", width, " x ", height, " px"));
   }
   return CameraModel::Create(*intrinsics);
 }
@@ -178,8 +178,8 @@ absl::StatusOr<CameraModel> ReadCamera(const cli::CommandLine& cl, int width, in
 // detection (found, or partial with the 4 features a homography needs) that fails the check
 // becomes not found, verification_failed, without features, since none of them is certain.
 void ApplyCheck(const UndistortedBoard& check, Detection* detection) {
-  const bool checked = detection->found || (detection->reason == DetectReason::kPartial &&
-                                            check.points >= 4);
+  const bool checked =
+      detection->found || (detection->reason == DetectReason::kPartial && check.points >= 4);
   if (!checked || check.verified) return;
   detection->found = false;
   detection->reason = DetectReason::kVerificationFailed;
@@ -202,8 +202,8 @@ nlohmann::json CheckToJson(const cli::CommandLine& cl, const CameraModel& camera
           {"residual_rms_px", FiniteOrNull(check.homography_rms_px)},
           {"residual_max_px", FiniteOrNull(check.homography_max_px)},
           {"pose_reason", check.verified ? PnpOutcomeName(check.pose.outcome) : ""},
-          {"T_camera_board", pose ? MatrixToJson(check.pose.T_camera_object.Matrix())
-                                  : nlohmann::json()},
+          {"T_camera_board",
+           pose ? MatrixToJson(check.pose.T_camera_object.Matrix()) : nlohmann::json()},
           {"pose_rms_px", pose ? nlohmann::json(check.pose.residual_rms_px) : nlohmann::json()}};
 }
 
@@ -230,10 +230,10 @@ void PrintCheck(const cli::CommandLine& cl, const CameraModel& camera,
   const Eigen::AngleAxisd r(T.rotation());
   const Eigen::Vector3d r_deg = r.axis() * r.angle() * 180.0 / std::numbers::pi;
   const Eigen::Vector3d t_mm = 1e3 * T.translation();
-  std::printf("T_camera_board: t %.3f %.3f %.3f mm, rotation vector %.4f %.4f %.4f deg, "
-              "residual %.3f px RMS\n",
-              t_mm.x(), t_mm.y(), t_mm.z(), r_deg.x(), r_deg.y(), r_deg.z(),
-              check.pose.residual_rms_px);
+  std::printf(
+      "T_camera_board: t %.3f %.3f %.3f mm, rotation vector %.4f %.4f %.4f deg, "
+      "residual %.3f px RMS\n",
+      t_mm.x(), t_mm.y(), t_mm.z(), r_deg.x(), r_deg.y(), r_deg.z(), check.pose.residual_rms_px);
 }
 
 // The options of `linecal detect`: the board's (board_options.h), then the image or clouds and

@@ -135,9 +135,12 @@ absl::Status EvaluateTrial(const CameraUnderTest& c, const AftersaleEvalFlags& f
 int RunEvalAftersale(const Args& args) {
   cli::CommandLine cl(
       "linecal eval aftersale --car FILE --camera NAME [--trials N] [--noise-px S,S,...] [options]",
-      "Monte Carlo evaluation of the after-sale lane calibration: random mountings (nominal +- --perturb-deg on "
-      "every angle), the lane scene's exact points plus Gaussian noise, calibrated; p95 errors of the vanishing "
-      "point, yaw, pitch, roll, the ranging over ground points 5-30 m ahead across the lane, and the distance "
+      "Monte Carlo evaluation of the after-sale lane calibration: random mountings (nominal +- "
+      "--perturb-deg on "
+      "every angle), the lane scene's exact points plus Gaussian noise, calibrated; p95 errors of "
+      "the vanishing "
+      "point, yaw, pitch, roll, the ranging over ground points 5-30 m ahead across the lane, and "
+      "the distance "
       "check at the marked point, per noise level.",
       {{"car", "FILE", "car model", true},
        {"camera", "NAME", "the camera of the car model", true},
@@ -152,13 +155,15 @@ int RunEvalAftersale(const Args& args) {
        {"json", "", "print the result as JSON"}});
   if (auto code = cli::ParseOrExit(cl, kCommand, args)) return *code;
   absl::StatusOr<SensorModel> camera_sensor = ReadCarCamera(cl.Get("car"), cl.Get("camera"));
-  if (!camera_sensor.ok()) return cli::BadInput(kCommand, std::string(camera_sensor.status().message()));
+  if (!camera_sensor.ok())
+    return cli::BadInput(kCommand, std::string(camera_sensor.status().message()));
   const SensorModel* sensor = &*camera_sensor;
   const absl::StatusOr<AftersaleEvalFlags> flags = ReadAftersaleEvalFlags(cl);
   if (!flags.ok()) return cli::BadInput(kCommand, std::string(flags.status().message()));
 
   const Eigen::Matrix3d r_base = CameraBaseRotation();
-  const YawPitchRoll nominal = MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
+  const YawPitchRoll nominal =
+      MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
   const CameraUnderTest c{
       sensor,  *CameraModel::Create(*sensor->intrinsics),  r_base,
       nominal, sensor->T_car_sensor_nominal.translation(), std::cos(nominal.yaw) < 0};
@@ -171,7 +176,8 @@ int RunEvalAftersale(const Args& args) {
     o.roll_line_distance_m = flags->roll_line_m;
     o.marked_point_distance_m = flags->marked_m;
     o.point_noise_px = noise;
-    if (absl::Status s = o.Validate(); !s.ok()) return cli::BadInput(kCommand, std::string(s.message()));
+    if (absl::Status s = o.Validate(); !s.ok())
+      return cli::BadInput(kCommand, std::string(s.message()));
     Row row;
     row.noise_px = noise;
     for (int t = 0; t < flags->trials; ++t) {
@@ -188,8 +194,9 @@ int RunEvalAftersale(const Args& args) {
       "5-30 m, %% | "
       "p95 marked point, %% | refused |\n| --- | --- | --- | --- | --- | --- |\n");
   for (const Row& r : rows) {
-    const double vp = Percentile(r.vp, 0.95), yaw = Percentile(r.yaw, 0.95), pitch = Percentile(r.pitch, 0.95),
-                 roll = Percentile(r.roll, 0.95), rg = Percentile(r.ranging, 0.95), mk = Percentile(r.marked, 0.95);
+    const double vp = Percentile(r.vp, 0.95), yaw = Percentile(r.yaw, 0.95),
+                 pitch = Percentile(r.pitch, 0.95), roll = Percentile(r.roll, 0.95),
+                 rg = Percentile(r.ranging, 0.95), mk = Percentile(r.marked, 0.95);
     report.AddRow({{"noise_px", r.noise_px},
                    {"trials", r.trials},
                    {"refused", r.errors},

@@ -56,11 +56,12 @@ struct CameraSamples {
   // Method (b) against method (a), and the vertical board's roll against the truth and the pose.
   std::vector<double> seed_vp_px, seed_ranging, toolbox_ranging;
   std::vector<double> line_roll_errors, line_roll_vs_pose;
-  std::map<std::string, int> seed_refusals;  // reasons of method (b) where the camera saw the chessboard
+  std::map<std::string, int>
+      seed_refusals;  // reasons of method (b) where the camera saw the chessboard
 };
 
-void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937_64& rng, double noise_px, int frames,
-                 std::map<std::string, CameraSamples>* out) {
+void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937_64& rng,
+                 double noise_px, int frames, std::map<std::string, CameraSamples>* out) {
   std::normal_distribution<double> normal(0.0, 1.0);
   const AlignerMeasurement aligner = RandomAligner(rng);
   for (const SensorModel& s : car.sensors) {
@@ -70,8 +71,8 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
     const TrueMounting truth = RandomMounting(s, kErrorRangeOfTolerance, rng);
     const Rigid3d& T_car_camera = truth.T_car_sensor;
     const CameraModel camera = *CameraModel::Create(*s.intrinsics);
-    const std::vector<RenderedFeature> visible =
-        VisibleCameraFeatures(camera, aligner.T_station_car() * T_car_camera, station, {}, kFeatureMarginPx);
+    const std::vector<RenderedFeature> visible = VisibleCameraFeatures(
+        camera, aligner.T_station_car() * T_car_camera, station, {}, kFeatureMarginPx);
     std::vector<BoardObservation> observations;
     for (int frame = 0; frame < frames; ++frame) {
       const size_t first = observations.size();
@@ -99,7 +100,8 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
     samples.mounting.Add(r->mounting, truth, r->verdict);
     const MountingEstimate& m = r->mounting;
     if (r->vertical_roll.valid) {
-      const double roll_true = MountingAngles(T_car_camera.RotationMatrix(), SensorBaseRotation(s.kind)).roll;
+      const double roll_true =
+          MountingAngles(T_car_camera.RotationMatrix(), SensorBaseRotation(s.kind)).roll;
       samples.line_roll_errors.push_back(std::abs(r->vertical_roll.roll_rad - roll_true));
       samples.line_roll_vs_pose.push_back(std::abs(r->vertical_roll.roll_rad - m.angles.roll));
     }
@@ -125,8 +127,8 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, std::mt19937
     samples.vp_errors_px.push_back((r->vanishing_point_px - vp_true).norm());
     // Ranging: a ground point D ahead of the camera, imaged by the true homography, mapped
     // back to the ground by the calibrated one.
-    for (double e : GroundDisagreement(H_true, r->ground_homography, T_car_camera.translation(), along,
-                                       kRangingDistancesM)) {
+    for (double e : GroundDisagreement(H_true, r->ground_homography, T_car_camera.translation(),
+                                       along, kRangingDistancesM)) {
       if (std::isfinite(e)) samples.ranging_errors.push_back(e);
     }
   }
@@ -236,7 +238,8 @@ int RunEvalCalibrate(const Args& args) {
   const EvalInputs& in = *inputs;
   const absl::StatusOr<double> noise = cl.GetDouble("noise-px", 0.2);
   if (!noise.ok()) return cli::BadInput(kCommand, std::string(noise.status().message()));
-  if (!(*noise >= 0 && *noise <= 10)) return cli::BadInput(kCommand, absl::StrCat("--noise-px: ", *noise, ": must be in [0, 10]"));
+  if (!(*noise >= 0 && *noise <= 10))
+    return cli::BadInput(kCommand, absl::StrCat("--noise-px: ", *noise, ": must be in [0, 10]"));
 
   std::mt19937_64 rng(static_cast<std::uint64_t>(in.seed));
   std::map<std::string, CameraSamples> samples;

@@ -21,8 +21,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "station/pipeline/capture_calibration.h"
 #include "station/model/aligner.h"
+#include "station/pipeline/capture_calibration.h"
 #include "station/sim/lidar_sim.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
@@ -68,8 +68,9 @@ double ThreadCpuMs() {
   return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
 }
 
-void EvaluateCar(const StationLayout& station, const CarModel& car, const std::map<std::string, LidarBeamTable>& beams,
-                 std::mt19937_64& rng, double noise_m, int frames, std::uint64_t car_index,
+void EvaluateCar(const StationLayout& station, const CarModel& car,
+                 const std::map<std::string, LidarBeamTable>& beams, std::mt19937_64& rng,
+                 double noise_m, int frames, std::uint64_t car_index,
                  std::map<std::string, LidarSamples>* out) {
   const AlignerMeasurement aligner = RandomAligner(rng);
   std::uint64_t stream = 0;
@@ -100,7 +101,8 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, const std::m
     const std::vector<std::span<const RoundHoleCloudPoint>> views(clouds.begin(), clouds.end());
     std::vector<RoundHoleCloudDetection> detections;
     const double start_ms = ThreadCpuMs();
-    const SensorCalibration r = CalibrateLidarFrames(station, aligner.T_station_car(), s, views, &detections);
+    const SensorCalibration r =
+        CalibrateLidarFrames(station, aligner.T_station_car(), s, views, &detections);
     samples.detect_ms += ThreadCpuMs() - start_ms;
     samples.frames += static_cast<int>(views.size());
     // The detections against the truth.
@@ -113,10 +115,12 @@ void EvaluateCar(const StationLayout& station, const CarModel& car, const std::m
       double worst = 0.0;
       for (const RoundHoleHole& h : d.holes) {
         const Eigen::Vector2d& p = board.board.features()[h.id].p_board;
-        worst = std::max(worst, (h.p_lidar - T_lidar_board * Eigen::Vector3d(p.x(), p.y(), 0.0)).norm());
+        worst = std::max(worst,
+                         (h.p_lidar - T_lidar_board * Eigen::Vector3d(p.x(), p.y(), 0.0)).norm());
       }
       samples.centre_errors_m.push_back(worst);
-      const double c = d.T_lidar_board.RotationMatrix().col(2).dot(T_lidar_board.RotationMatrix().col(2));
+      const double c =
+          d.T_lidar_board.RotationMatrix().col(2).dot(T_lidar_board.RotationMatrix().col(2));
       samples.normal_errors_rad.push_back(std::acos(std::clamp(c, -1.0, 1.0)));
       // T_true = T_est * (R(theta), t), as the covariance is defined.
       const Rigid3d delta = d.T_lidar_board.Inverse() * T_lidar_board;
@@ -258,7 +262,8 @@ int RunEvalLidar(const Args& args) {
   const EvalInputs& in = *inputs;
   const absl::StatusOr<double> noise = cl.GetDouble("noise-m", 0.02);
   if (!noise.ok()) return cli::BadInput(kCommand, std::string(noise.status().message()));
-  if (!(*noise >= 0 && *noise <= 1)) return cli::BadInput(kCommand, absl::StrCat("--noise-m: ", *noise, ": must be in [0, 1]"));
+  if (!(*noise >= 0 && *noise <= 1))
+    return cli::BadInput(kCommand, absl::StrCat("--noise-m: ", *noise, ": must be in [0, 1]"));
   const absl::StatusOr<std::map<std::string, LidarBeamTable>> beams =
       BeamTables(in.car, cl.Get("car"));
   if (!beams.ok()) return cli::BadInput(kCommand, std::string(beams.status().message()));

@@ -17,12 +17,12 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
-#include "station/sensors/radar/radar_decoder.h"
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
-#include "station/solvers/radar_calibration.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/sim/radar_sim.h"
+#include "station/solvers/radar_calibration.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
 #include "tools/linecal/eval_harness.h"

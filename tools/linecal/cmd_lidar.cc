@@ -9,9 +9,9 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "station/sensors/lidar/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_format.h"
 #include "station/sensors/lidar/lidar_pcap.h"
 #include "station/sensors/lidar/pcd.h"
-#include "station/sensors/lidar/lidar_format.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
 

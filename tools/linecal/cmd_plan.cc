@@ -2,10 +2,9 @@
 // docs/planner.md) on the command line, with its JSON and drawings.
 #include <cstdio>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <numbers>
 #include <string>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -26,7 +25,8 @@ nlohmann::json SigmaJson(const SensorAssessment& a) {
   const char* names[6] = {"yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m"};
   nlohmann::json j = nlohmann::json::object();
   for (int i = 0; i < 6; ++i) {
-    j[names[i]] = a.observed[i] ? nlohmann::json(a.sigma[i] * (i < 3 ? kDegPerRad : 1.0)) : nlohmann::json(nullptr);
+    j[names[i]] = a.observed[i] ? nlohmann::json(a.sigma[i] * (i < 3 ? kDegPerRad : 1.0))
+                                : nlohmann::json(nullptr);
   }
   return j;
 }
@@ -34,7 +34,8 @@ nlohmann::json SigmaJson(const SensorAssessment& a) {
 nlohmann::json AssessmentJson(const SensorAssessment& a) {
   nlohmann::json targets = nlohmann::json::array();
   for (const TargetAssessment& t : a.targets) {
-    nlohmann::json j = {{"id", t.target}, {"reasons", t.reasons}, {"detail", t.detail}, {"features", t.features}};
+    nlohmann::json j = {
+        {"id", t.target}, {"reasons", t.reasons}, {"detail", t.detail}, {"features", t.features}};
     if (a.kind != SensorKind::kRadar) {
       j["hidden_share"] = t.hidden_share;
       j["hidden_by"] = t.hidden_by.empty() ? nlohmann::json(nullptr) : nlohmann::json(t.hidden_by);
@@ -48,7 +49,8 @@ nlohmann::json AssessmentJson(const SensorAssessment& a) {
           {"calibratable", a.calibratable},
           {"reasons", a.reasons},
           {"predicted_sigma", SigmaJson(a)},
-          {"uncertainty_ratio", a.sigma_valid ? nlohmann::json(a.uncertainty_ratio) : nlohmann::json(nullptr)},
+          {"uncertainty_ratio",
+           a.sigma_valid ? nlohmann::json(a.uncertainty_ratio) : nlohmann::json(nullptr)},
           {"targets", targets}};
 }
 
@@ -65,17 +67,19 @@ nlohmann::json RegionJson(const ValidRegion& r) {
 }
 
 void PrintAssessments(const std::vector<SensorAssessment>& sensors) {
-  std::printf("  %-20s %-7s %-13s %9s %9s %9s %7s %7s %7s  %s\n", "sensor", "kind", "calibratable", "s_yaw_deg",
-              "s_pitch", "s_roll", "s_x_mm", "s_y_mm", "s_z_mm", "reasons");
+  std::printf("  %-20s %-7s %-13s %9s %9s %9s %7s %7s %7s  %s\n", "sensor", "kind", "calibratable",
+              "s_yaw_deg", "s_pitch", "s_roll", "s_x_mm", "s_y_mm", "s_z_mm", "reasons");
   for (const SensorAssessment& a : sensors) {
     std::string numbers;
     for (int i = 0; i < 6; ++i) {
       numbers += a.sigma_valid && a.observed[i]
-                     ? absl::StrFormat(i < 3 ? " %9.4f" : " %7.2f", a.sigma[i] * (i < 3 ? kDegPerRad : 1e3))
+                     ? absl::StrFormat(i < 3 ? " %9.4f" : " %7.2f",
+                                       a.sigma[i] * (i < 3 ? kDegPerRad : 1e3))
                      : absl::StrFormat(i < 3 ? " %9s" : " %7s", "-");
     }
-    std::printf("  %-20s %-7s %-13s%s  %s\n", a.sensor.c_str(), SensorKindName(a.kind), a.calibratable ? "yes" : "no",
-                numbers.c_str(), a.reasons.empty() ? "-" : absl::StrJoin(a.reasons, ",").c_str());
+    std::printf("  %-20s %-7s %-13s%s  %s\n", a.sensor.c_str(), SensorKindName(a.kind),
+                a.calibratable ? "yes" : "no", numbers.c_str(),
+                a.reasons.empty() ? "-" : absl::StrJoin(a.reasons, ",").c_str());
     for (const TargetAssessment& t : a.targets) {
       // Failed targets, and partly hidden ones (usable: the detectors find them from what shows).
       if (!t.reasons.empty() || !t.hidden_by.empty()) {
@@ -99,9 +103,11 @@ std::optional<PlannerOptions> ReadOptions(const cli::CommandLine& cl, const std:
   PlannerOptions o;
   const absl::StatusOr<double> feature = cl.GetDouble("min-feature-px", o.min_feature_px);
   const absl::StatusOr<double> noise = cl.GetDouble("corner-noise-px", o.corner_noise_px);
-  const absl::StatusOr<double> fisheye_noise = cl.GetDouble("fisheye-corner-noise-px", o.fisheye_corner_noise_px);
+  const absl::StatusOr<double> fisheye_noise =
+      cl.GetDouble("fisheye-corner-noise-px", o.fisheye_corner_noise_px);
   const absl::StatusOr<int> frames = cl.GetInt("frames", o.camera_frames);
-  for (const absl::Status& s : {feature.status(), noise.status(), fisheye_noise.status(), frames.status()}) {
+  for (const absl::Status& s :
+       {feature.status(), noise.status(), fisheye_noise.status(), frames.status()}) {
     if (!s.ok()) {
       cli::BadInput(command, std::string(s.message()));
       return std::nullopt;
@@ -117,9 +123,10 @@ std::optional<PlannerOptions> ReadOptions(const cli::CommandLine& cl, const std:
     const std::string m(s.message());
     const std::string flag = m.rfind("min_feature_px", 0) == 0    ? "--min-feature-px"
                              : m.rfind("corner_noise_px", 0) == 0 ? "--corner-noise-px"
-                             : m.rfind("fisheye_corner_noise_px", 0) == 0 ? "--fisheye-corner-noise-px"
-                             : m.rfind("camera_frames", 0) == 0   ? "--frames"
-                                                                  : "option";
+                             : m.rfind("fisheye_corner_noise_px", 0) == 0
+                                 ? "--fisheye-corner-noise-px"
+                             : m.rfind("camera_frames", 0) == 0 ? "--frames"
+                                                                : "option";
     cli::BadInput(command, absl::StrCat(flag, ": ", m));
     return std::nullopt;
   }
@@ -144,12 +151,18 @@ int RunPlan(const Args& args) {
   options.insert(options.end(), kSharedOptions.begin(), kSharedOptions.end());
   cli::CommandLine cl(
       "linecal plan --car FILE --floor FILE --out DIR [--min-feature-px 15] [--json]",
-      "Plans where to put the calibration boards and radar reflectors for a car model in a station: per "
-      "sensor the target of lowest predicted calibration uncertainty that passes every check (field of view, "
-      "feature size, LiDAR rings through every hole, clear lines of sight, keep-out zones, height limits). "
-      "Writes the layout (station.json, the deploy/stations format), the car model with its sensors' new "
-      "targets (car.json), plan.json (predicted sigma, valid regions) and drawings (birdseye and side_<sensor>, "
-      "SVG and PNG) into --out. Exit 0 when every sensor is calibratable, 1 when not, 2 on bad input.",
+      "Plans where to put the calibration boards and radar reflectors for a car model in a "
+      "station: per "
+      "sensor the target of lowest predicted calibration uncertainty that passes every check "
+      "(field of view, "
+      "feature size, LiDAR rings through every hole, clear lines of sight, keep-out zones, height "
+      "limits). "
+      "Writes the layout (station.json, the deploy/stations format), the car model with its "
+      "sensors' new "
+      "targets (car.json), plan.json (predicted sigma, valid regions) and drawings (birdseye and "
+      "side_<sensor>, "
+      "SVG and PNG) into --out. Exit 0 when every sensor is calibratable, 1 when not, 2 on bad "
+      "input.",
       options);
   constexpr char kCommand[] = "plan";
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
@@ -170,23 +183,25 @@ int RunPlan(const Args& args) {
   for (const SensorAssessment& a : plan->sensors) sensors.push_back(AssessmentJson(a));
   nlohmann::json regions = nlohmann::json::array();
   for (const ValidRegion& r : plan->regions) regions.push_back(RegionJson(r));
-  const nlohmann::json doc = {{"format", "linecal.plan"},
-                              {"version", 1},
-                              {"car", car->id},
-                              {"floor", floor->name},
-                              {"options",
-                               {{"min_feature_px", o->min_feature_px},
-                                {"corner_noise_px", o->corner_noise_px},
-                                {"fisheye_corner_noise_px", o->fisheye_corner_noise_px},
-                                {"camera_frames", o->camera_frames},
-                                {"max_sigma_fraction_of_tolerance", o->max_sigma_fraction_of_tolerance}}},
-                              {"calibratable", AllCalibratable(plan->sensors)},
-                              {"station", StationLayoutToJson(plan->layout)},
-                              {"sensors", sensors},
-                              {"valid_regions", regions}};
-  for (const auto& [name, j] : {std::pair<std::string, nlohmann::json>{"station.json", StationLayoutToJson(plan->layout)},
-                                {"car.json", CarModelToJson(plan->car)},
-                                {"plan.json", doc}}) {
+  const nlohmann::json doc = {
+      {"format", "linecal.plan"},
+      {"version", 1},
+      {"car", car->id},
+      {"floor", floor->name},
+      {"options",
+       {{"min_feature_px", o->min_feature_px},
+        {"corner_noise_px", o->corner_noise_px},
+        {"fisheye_corner_noise_px", o->fisheye_corner_noise_px},
+        {"camera_frames", o->camera_frames},
+        {"max_sigma_fraction_of_tolerance", o->max_sigma_fraction_of_tolerance}}},
+      {"calibratable", AllCalibratable(plan->sensors)},
+      {"station", StationLayoutToJson(plan->layout)},
+      {"sensors", sensors},
+      {"valid_regions", regions}};
+  for (const auto& [name, j] :
+       {std::pair<std::string, nlohmann::json>{"station.json", StationLayoutToJson(plan->layout)},
+        {"car.json", CarModelToJson(plan->car)},
+        {"plan.json", doc}}) {
     if (absl::Status s = WriteJsonFile((out / name).string(), j); !s.ok()) {
       return cli::BadInput(kCommand, std::string(s.message()));
     }
@@ -198,8 +213,9 @@ int RunPlan(const Args& args) {
   if (cl.Has("json")) {
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
-    std::printf("plan for car %s in %s: %zu boards, %zu reflectors -> %s\n", car->id.c_str(), floor->name.c_str(),
-                plan->layout.boards.size(), plan->layout.reflectors.size(), out.string().c_str());
+    std::printf("plan for car %s in %s: %zu boards, %zu reflectors -> %s\n", car->id.c_str(),
+                floor->name.c_str(), plan->layout.boards.size(), plan->layout.reflectors.size(),
+                out.string().c_str());
     PrintAssessments(plan->sensors);
   }
   return AllCalibratable(plan->sensors) ? cli::kExitOk : cli::kExitNegative;
@@ -214,9 +230,11 @@ int RunPlanCheck(const Args& args) {
   options.insert(options.end(), kSharedOptions.begin(), kSharedOptions.end());
   cli::CommandLine cl(
       "linecal plan check --station FILE --car FILE [--floor FILE] [--out DIR] [--json]",
-      "Says for every sensor of the car whether it can be calibrated with this station layout and, when not, "
+      "Says for every sensor of the car whether it can be calibrated with this station layout and, "
+      "when not, "
       "why (reason codes of docs/planner.md: board_outside_fov, features_too_small, too_few_rings, "
-      "occluded_by_board, in_keep_out, uncertainty_above_tolerance, ...). Exit 0 when every sensor is "
+      "occluded_by_board, in_keep_out, uncertainty_above_tolerance, ...). Exit 0 when every sensor "
+      "is "
       "calibratable, 1 when some are not, 2 on bad input.",
       options);
   constexpr char kCommand[] = "plan check";
@@ -245,8 +263,10 @@ int RunPlanCheck(const Args& args) {
   if (cl.Has("json")) {
     nlohmann::json list = nlohmann::json::array();
     for (const SensorAssessment& a : *sensors) list.push_back(AssessmentJson(a));
-    const nlohmann::json doc = {{"station", layout->name}, {"car", car->id},
-                                {"calibratable", AllCalibratable(*sensors)}, {"sensors", list}};
+    const nlohmann::json doc = {{"station", layout->name},
+                                {"car", car->id},
+                                {"calibratable", AllCalibratable(*sensors)},
+                                {"sensors", list}};
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
     std::printf("car %s in station %s:\n", car->id.c_str(), layout->name.c_str());

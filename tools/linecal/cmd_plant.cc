@@ -4,11 +4,10 @@
 // A password is never printed: errors name the server as host:port.
 #include <cstdio>
 #include <cstdlib>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
@@ -24,8 +23,9 @@ namespace linecal::tools {
 namespace {
 
 std::vector<cli::OptionSpec> PlantOptions(std::vector<cli::OptionSpec> options) {
-  options.push_back({"dsn", "DSN", "the plant database, a libpq connection string "
-                                   "(default $LINECAL_PLANT_DSN)"});
+  options.push_back({"dsn", "DSN",
+                     "the plant database, a libpq connection string "
+                     "(default $LINECAL_PLANT_DSN)"});
   options.push_back({"password-file", "FILE", "the password, on the file's first line"});
   options.push_back({"json", "", "print JSON"});
   return options;
@@ -90,8 +90,9 @@ nlohmann::json Embedded(const std::string& text) {
 }
 
 nlohmann::json MountingJson(const MountingValues& m) {
-  return {{"yaw_deg", m.yaw_deg}, {"pitch_deg", m.pitch_deg}, {"roll_deg", m.roll_deg},
-          {"x_m", m.x_m},         {"y_m", m.y_m},             {"z_m", m.z_m}};
+  return {{"yaw_deg", m.yaw_deg},   {"pitch_deg", m.pitch_deg},
+          {"roll_deg", m.roll_deg}, {"x_m", m.x_m},
+          {"y_m", m.y_m},           {"z_m", m.z_m}};
 }
 
 nlohmann::json SensorJson(const StoredSensorResult& s) {
@@ -188,9 +189,10 @@ void AppendMounting(const MountingValues& m, std::vector<std::string>* out) {
 }
 
 void PrintCsv(const std::vector<PlantCycleRecord>& records) {
-  std::vector<std::string> header = {"station_id", "cycle_id", "vin", "car_model_id", "state",
-                                     "verdict", "reason", "started", "ended", "capture_path",
-                                     "sensor", "kind", "sensor_verdict", "sensor_reason"};
+  std::vector<std::string> header = {"station_id",     "cycle_id",     "vin",    "car_model_id",
+                                     "state",          "verdict",      "reason", "started",
+                                     "ended",          "capture_path", "sensor", "kind",
+                                     "sensor_verdict", "sensor_reason"};
   for (const char* group : {"measured", "deviation", "sigma"}) {
     for (const char* axis : {"yaw_deg", "pitch_deg", "roll_deg", "x_m", "y_m", "z_m"}) {
       header.push_back(absl::StrCat(group, "_", axis));
@@ -201,8 +203,9 @@ void PrintCsv(const std::vector<PlantCycleRecord>& records) {
   for (const PlantCycleRecord& r : records) {
     const StoredCycle& c = r.cycle;
     const std::vector<std::string> cycle = {
-        r.station_id, absl::StrCat(c.id), c.vin, c.car_model_id, CycleStateName(c.state),
-        VerdictName(c.verdict), c.reason, Rfc3339(c.started_ns), Rfc3339(c.ended_ns),
+        r.station_id,   absl::StrCat(c.id),      c.vin,
+        c.car_model_id, CycleStateName(c.state), VerdictName(c.verdict),
+        c.reason,       Rfc3339(c.started_ns),   Rfc3339(c.ended_ns),
         c.capture_path};
     std::vector<std::vector<std::string>> lines;
     for (const StoredSensorResult& s : c.sensors) {
@@ -290,8 +293,8 @@ int RunPlantYield(const Args& args) {
   if (!since.ok()) return Failed("plant yield", since.status());
   const absl::StatusOr<int> top = cl.GetInt("top", 3);
   if (!top.ok() || *top < 1 || *top > 100) {
-    return cli::BadInput("plant yield", absl::StrCat("--top: '", cl.Get("top"),
-                                                     "': must be in [1, 100]"));
+    return cli::BadInput("plant yield",
+                         absl::StrCat("--top: '", cl.Get("top"), "': must be in [1, 100]"));
   }
   absl::StatusOr<std::unique_ptr<PlantDb>> db = ConnectPlant(cl);
   if (!db.ok()) return Failed("plant yield", db.status());
@@ -302,9 +305,12 @@ int RunPlantYield(const Args& args) {
   if (cl.Has("json")) {
     nlohmann::json rows = nlohmann::json::array(), reasons = nlohmann::json::array();
     for (const YieldRow& r : report->rows) {
-      rows.push_back({{"station_id", r.station_id}, {"car_model_id", r.car_model_id},
-                      {"sensor", r.sensor}, {"first_attempts", r.first_attempts},
-                      {"passed", r.passed}, {"yield_percent", YieldPercent(r)}});
+      rows.push_back({{"station_id", r.station_id},
+                      {"car_model_id", r.car_model_id},
+                      {"sensor", r.sensor},
+                      {"first_attempts", r.first_attempts},
+                      {"passed", r.passed},
+                      {"yield_percent", YieldPercent(r)}});
     }
     for (const FailureReason& f : report->reasons) {
       reasons.push_back({{"sensor", f.sensor}, {"reason", f.reason}, {"count", f.count}});
@@ -348,14 +354,13 @@ int RunPlantExport(const Args& args) {
   }
   const absl::StatusOr<int> limit = cl.GetInt("limit", 1000000);
   if (!limit.ok() || *limit < 1 || *limit > 1000000) {
-    return cli::BadInput("plant export", absl::StrCat("--limit: '", cl.Get("limit"),
-                                                      "': must be in [1, 1000000]"));
+    return cli::BadInput("plant export",
+                         absl::StrCat("--limit: '", cl.Get("limit"), "': must be in [1, 1000000]"));
   }
   absl::StatusOr<std::unique_ptr<PlantDb>> db = ConnectPlant(cl);
   if (!db.ok()) return Failed("plant export", db.status());
   if (absl::Status s = (*db)->CheckSchema(); !s.ok()) return Failed("plant export", s);
-  const absl::StatusOr<std::vector<PlantCycleRecord>> records =
-      (*db)->CyclesSince(*since, *limit);
+  const absl::StatusOr<std::vector<PlantCycleRecord>> records = (*db)->CyclesSince(*since, *limit);
   if (!records.ok()) return Failed("plant export", records.status());
   if (format == "json") {
     nlohmann::json j = nlohmann::json::array();

@@ -5,8 +5,8 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
-#include "station/sensors/radar/radar_decoder.h"
 #include "station/io/candump.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"
 

@@ -6,10 +6,10 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
-#include "station/sensors/radar/radar_decoder.h"
 #include "station/capture/capture.h"
 #include "station/io/candump.h"
 #include "station/model/pose_json.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/solvers/radar_calibration.h"
 #include "tools/cli/command_line.h"
 #include "tools/linecal/commands.h"

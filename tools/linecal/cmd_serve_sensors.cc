@@ -5,10 +5,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
@@ -23,24 +22,33 @@ namespace {
 namespace fs = std::filesystem;
 constexpr char kCommand[] = "serve-sensors";
 
-std::string Absolute(const std::string& path) { return fs::absolute(path).lexically_normal().string(); }
+std::string Absolute(const std::string& path) {
+  return fs::absolute(path).lexically_normal().string();
+}
 
 }  // namespace
 
 int RunServeSensors(const Args& args) {
   cli::CommandLine cl(
       "linecal serve-sensors --capture DIR --write-config FILE --data-root DIR [options]",
-      "Serves a capture as live sensors over the real protocols: a fake GigE Vision camera per camera "
-      "(Aravis, one IPv4 address each), the LiDARs' packets over UDP (looped, recorded timing), the "
-      "radars' candump logs. Writes a linecald configuration using them, then serves until SIGINT or "
+      "Serves a capture as live sensors over the real protocols: a fake GigE Vision camera per "
+      "camera "
+      "(Aravis, one IPv4 address each), the LiDARs' packets over UDP (looped, recorded timing), "
+      "the "
+      "radars' candump logs. Writes a linecald configuration using them, then serves until SIGINT "
+      "or "
       "SIGTERM (docs/daemon.md, \"Live sources\").",
       {{"capture", "DIR", "the capture to serve (e.g. one written by `linecal sim`)", true},
-       {"write-config", "FILE", "linecald configuration to write (station and car of the capture, live sources)", true},
+       {"write-config", "FILE",
+        "linecald configuration to write (station and car of the capture, live sources)", true},
        {"data-root", "DIR", "the configuration's data_root (database and captures)", true},
-       {"camera-addresses", "A,B", "one IPv4 address per camera sensor, in the capture's order (default 127.0.0.1)"},
-       {"lost-ratio", "R", "share of GigE stream packets the fake cameras drop, [0, 1) (default 0)"},
+       {"camera-addresses", "A,B",
+        "one IPv4 address per camera sensor, in the capture's order (default 127.0.0.1)"},
+       {"lost-ratio", "R",
+        "share of GigE stream packets the fake cameras drop, [0, 1) (default 0)"},
        {"lidar-port", "P", "UDP port of the first LiDAR; the next ones follow (default 2368)"},
-       {"lidar-speed", "S", "LiDAR replay speed, 1 = recorded timing, 0 = as fast as possible (default 1)"}});
+       {"lidar-speed", "S",
+        "LiDAR replay speed, 1 = recorded timing, 0 = as fast as possible (default 1)"}});
   if (auto code = cli::ParseOrExit(cl, kCommand, args)) return *code;
 
   SensorServerOptions o;
@@ -54,7 +62,8 @@ int RunServeSensors(const Args& args) {
   for (const absl::Status& s : {lost.status(), port.status(), speed.status()}) {
     if (!s.ok()) return cli::BadInput(kCommand, std::string(s.message()));
   }
-  if (*port < 1 || *port > 65535) return cli::BadInput(kCommand, absl::StrCat("--lidar-port ", *port, ": not a port"));
+  if (*port < 1 || *port > 65535)
+    return cli::BadInput(kCommand, absl::StrCat("--lidar-port ", *port, ": not a port"));
   o.camera_lost_ratio = *lost;
   o.lidar_first_port = static_cast<std::uint16_t>(*port);
   o.lidar_speed = *speed;

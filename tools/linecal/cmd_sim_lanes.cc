@@ -3,11 +3,10 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <numbers>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
 #include "station/aftersale/document.h"
@@ -136,10 +135,14 @@ bool WriteSceneFiles(const fs::path& dir, const std::string& image_name, const L
 
 int RunSimLanes(const Args& args) {
   cli::CommandLine cl(
-      "linecal sim lanes --car FILE --camera NAME --out DIR [--ypr-deg Y,P,R] [--xyz-m X,Y,Z] [options]",
-      "Renders two lane lines (and a roll line, markers) painted on the ground ahead of one camera of the car "
-      "model at its nominal mounting or the one given, and writes the image <camera>.png, aftersale.json (the "
-      "input of linecal aftersale: the exact image points, plus noise if asked) and ground_truth.json.",
+      "linecal sim lanes --car FILE --camera NAME --out DIR [--ypr-deg Y,P,R] [--xyz-m X,Y,Z] "
+      "[options]",
+      "Renders two lane lines (and a roll line, markers) painted on the ground ahead of one camera "
+      "of the car "
+      "model at its nominal mounting or the one given, and writes the image <camera>.png, "
+      "aftersale.json (the "
+      "input of linecal aftersale: the exact image points, plus noise if asked) and "
+      "ground_truth.json.",
       {{"car", "FILE", "car model (e.g. deploy/cars/reference.json)", true},
        {"camera", "NAME", "the camera of the car model", true},
        {"out", "DIR", "directory to write", true},
@@ -151,16 +154,20 @@ int RunSimLanes(const Args& args) {
        {"blur", "SIGMA", "image blur, pixels (default 0)"},
        {"lane-width-m", "W", "distance between the lane lines' centre lines (default 3.5)"},
        {"lane-centre-m", "Y", "the lane's centre, y in the car frame (default 0)"},
-       {"points-m", "D,D[,...]", "distances ahead of the camera of the points on each line (default 6,25)"},
+       {"points-m", "D,D[,...]",
+        "distances ahead of the camera of the points on each line (default 6,25)"},
        {"roll-line-m", "D", "the roll line's distance ahead of the camera, 0 = none (default 8)"},
-       {"markers-m", "NEAR,FAR", "four markers at these distances instead of lane points (default none)"},
+       {"markers-m", "NEAR,FAR",
+        "four markers at these distances instead of lane points (default none)"},
        {"no-lane-lines", "", "paint no lane lines (with --markers-m)"},
-       {"marked-point-m", "D", "the marked point's distance, on the lane's centre line, 0 = none (default 15)"},
+       {"marked-point-m", "D",
+        "the marked point's distance, on the lane's centre line, 0 = none (default 15)"},
        {"json", "", "print the summary as JSON"}});
   if (auto code = cli::ParseOrExit(cl, kCommand, args)) return *code;
 
   absl::StatusOr<SensorModel> camera_sensor = ReadCarCamera(cl.Get("car"), cl.Get("camera"));
-  if (!camera_sensor.ok()) return cli::BadInput(kCommand, std::string(camera_sensor.status().message()));
+  if (!camera_sensor.ok())
+    return cli::BadInput(kCommand, std::string(camera_sensor.status().message()));
   const SensorModel* sensor = &*camera_sensor;
 
   const Eigen::Matrix3d r_base = CameraBaseRotation();
@@ -176,13 +183,16 @@ int RunSimLanes(const Args& args) {
 
   const CameraModel camera = *CameraModel::Create(*sensor->intrinsics);
   const Rigid3d T_car_camera(MountingRotation(angles, r_base), xyz);
-  absl::StatusOr<LaneScene> scene = RenderLaneScene(camera, T_car_camera, o, static_cast<std::uint64_t>(seed));
+  absl::StatusOr<LaneScene> scene =
+      RenderLaneScene(camera, T_car_camera, o, static_cast<std::uint64_t>(seed));
   if (!scene.ok()) return cli::BadInput(kCommand, std::string(scene.status().message()));
 
   const fs::path dir = cl.Get("out");
   std::error_code ec;
   fs::create_directories(dir, ec);
-  if (ec) return cli::BadInput(kCommand, absl::StrCat("--out: cannot create ", dir.string(), ": ", ec.message()));
+  if (ec)
+    return cli::BadInput(kCommand,
+                         absl::StrCat("--out: cannot create ", dir.string(), ": ", ec.message()));
   const std::string image_name = sensor->name + ".png";
   const nlohmann::json input = AftersaleInputJson(*sensor, xyz, angles, o, *scene, image_name);
   const nlohmann::json truth = {
@@ -204,8 +214,10 @@ int RunSimLanes(const Args& args) {
                             .dump(2)
                             .c_str());
   } else {
-    std::printf("lane scene of %s written to %s (image %s, input aftersale.json, truth ground_truth.json)\n",
-                sensor->name.c_str(), dir.string().c_str(), image_name.c_str());
+    std::printf(
+        "lane scene of %s written to %s (image %s, input aftersale.json, truth "
+        "ground_truth.json)\n",
+        sensor->name.c_str(), dir.string().c_str(), image_name.c_str());
   }
   return cli::kExitOk;
 }

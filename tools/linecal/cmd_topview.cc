@@ -22,7 +22,8 @@ std::array<std::uint8_t, 3> HeightColour(double t) {
   const double r = std::clamp(2.0 * t - 0.5, 0.0, 1.0);
   const double g = 1.0 - std::abs(2.0 * t - 1.0);
   const double b = std::clamp(1.5 - 2.0 * t, 0.0, 1.0);
-  return {static_cast<std::uint8_t>(255 * r), static_cast<std::uint8_t>(255 * g), static_cast<std::uint8_t>(255 * b)};
+  return {static_cast<std::uint8_t>(255 * r), static_cast<std::uint8_t>(255 * g),
+          static_cast<std::uint8_t>(255 * b)};
 }
 
 }  // namespace
@@ -30,8 +31,10 @@ std::array<std::uint8_t, 3> HeightColour(double t) {
 int RunLidarTopview(const Args& args) {
   cli::CommandLine cl(
       "linecal lidar topview --pcd FILE [--pcd FILE ...] --out FILE.png [--range M] [--size PX]",
-      "Draws LiDAR scans seen from above in the LiDAR frame: the sensor at the centre, its azimuth 0 "
-      "(+y) up, points coloured by height from blue (low) to red (high), grey range rings every 5 m.",
+      "Draws LiDAR scans seen from above in the LiDAR frame: the sensor at the centre, its azimuth "
+      "0 "
+      "(+y) up, points coloured by height from blue (low) to red (high), grey range rings every 5 "
+      "m.",
       {{"pcd", "FILE", "a scan (PCD)", true, true},
        {"out", "FILE.png", "the picture to write", true},
        {"range", "M", "metres from the centre to the picture's edge (default 15)"},
@@ -46,9 +49,11 @@ int RunLidarTopview(const Args& args) {
   for (const absl::Status& s : {range.status(), size.status(), z_min.status(), z_max.status()}) {
     if (!s.ok()) return cli::BadInput(kCommand, std::string(s.message()));
   }
-  if (*range <= 0) return cli::BadInput(kCommand, absl::StrCat("--range: must be > 0, got ", *range));
+  if (*range <= 0)
+    return cli::BadInput(kCommand, absl::StrCat("--range: must be > 0, got ", *range));
   // 16 px is too small to show anything; 8192 keeps the picture within a few hundred MB.
-  if (*size < 16 || *size > 8192) return cli::BadInput(kCommand, absl::StrCat("--size: must be in 16..8192, got ", *size));
+  if (*size < 16 || *size > 8192)
+    return cli::BadInput(kCommand, absl::StrCat("--size: must be in 16..8192, got ", *size));
   if (*z_max <= *z_min) return cli::BadInput(kCommand, "--z-max must be above --z-min");
 
   const int n = *size;
@@ -73,15 +78,18 @@ int RunLidarTopview(const Args& args) {
   for (const std::string& path : cl.GetAll("pcd")) {
     absl::StatusOr<PcdCloud> cloud = ReadPcd(path);
     if (!cloud.ok()) return cli::BadInput(kCommand, std::string(cloud.status().message()));
-    for (const LidarPoint& p : cloud->points) plot(p.x, p.y, HeightColour((p.z - *z_min) / (*z_max - *z_min)));
+    for (const LidarPoint& p : cloud->points)
+      plot(p.x, p.y, HeightColour((p.z - *z_min) / (*z_max - *z_min)));
     points += cloud->points.size();
   }
   for (int d = -4; d <= 4; ++d) {
     plot(d / px_per_m, 0, {255, 255, 255});
     plot(0, d / px_per_m, {255, 255, 255});
   }
-  if (absl::Status s = WritePngRgb(cl.Get("out"), img); !s.ok()) return cli::BadInput(kCommand, std::string(s.message()));
-  std::printf("%zu points drawn to %s (%d x %d px, %.1f m across)\n", points, cl.Get("out").c_str(), n, n, 2 * *range);
+  if (absl::Status s = WritePngRgb(cl.Get("out"), img); !s.ok())
+    return cli::BadInput(kCommand, std::string(s.message()));
+  std::printf("%zu points drawn to %s (%d x %d px, %.1f m across)\n", points, cl.Get("out").c_str(),
+              n, n, 2 * *range);
   return cli::kExitOk;
 }
 

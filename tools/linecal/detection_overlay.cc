@@ -96,12 +96,13 @@ void DrawSegment(RgbImage* img, const Eigen::Vector2d& a, const Eigen::Vector2d&
   }
 }
 
-void DrawFeatures(RgbImage* img, std::span<const DetectedFeature> features, const RgbColour& colour) {
+void DrawFeatures(RgbImage* img, std::span<const DetectedFeature> features,
+                  const RgbColour& colour) {
   for (const DetectedFeature& f : features) {
     if (!(f.uv_px.cwiseAbs().maxCoeff() < kFarOutsidePx)) continue;
     DrawCross(img, f.uv_px, kCrossHalfPx, colour);
-    DrawNumber(img, static_cast<int>(std::lround(f.uv_px.x())) + 3, static_cast<int>(std::lround(f.uv_px.y())) + 3,
-               f.id, colour);
+    DrawNumber(img, static_cast<int>(std::lround(f.uv_px.x())) + 3,
+               static_cast<int>(std::lround(f.uv_px.y())) + 3, f.id, colour);
   }
 }
 

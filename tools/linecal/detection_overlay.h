@@ -2,11 +2,10 @@
 // Drawing over images, for `linecal detect --overlay`, `linecal calibrate --report` and
 // `linecal aftersale`.
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <span>
-
-#include <Eigen/Core>
 
 #include "detectors/core/image_view.h"
 #include "detectors/detection.h"
@@ -37,7 +36,8 @@ void DrawSegment(RgbImage* img, const Eigen::Vector2d& a, const Eigen::Vector2d&
 // Marks each feature on *img: a cross at its (rounded) position in `colour` and its id in
 // small digits to the lower right. Marks falling partly outside the image are clipped.
 // O(features).
-void DrawFeatures(RgbImage* img, std::span<const DetectedFeature> features, const RgbColour& colour);
+void DrawFeatures(RgbImage* img, std::span<const DetectedFeature> features,
+                  const RgbColour& colour);
 
 // The grey image as RGB with each feature marked (DrawFeatures), green when the whole board
 // was found and orange otherwise. Cost: one pass over the image plus O(features).

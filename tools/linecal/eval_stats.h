@@ -41,7 +41,8 @@ struct ErrorSigmaStats {
 };
 
 // errors[i] (estimate - truth) with their reported 1-sigma sigmas[i]; same length. O(n log n).
-inline ErrorSigmaStats SummariseErrors(std::span<const double> errors, std::span<const double> sigmas) {
+inline ErrorSigmaStats SummariseErrors(std::span<const double> errors,
+                                       std::span<const double> sigmas) {
   ErrorSigmaStats s;
   s.n = static_cast<int>(errors.size());
   if (errors.empty()) return s;
@@ -83,16 +84,19 @@ struct TrueMounting {
   std::array<double, 6> tolerances{};
   Rigid3d T_car_sensor;
 };
-inline TrueMounting RandomMounting(const SensorModel& s, double range_of_tolerance, std::mt19937_64& rng) {
+inline TrueMounting RandomMounting(const SensorModel& s, double range_of_tolerance,
+                                   std::mt19937_64& rng) {
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
   TrueMounting m;
   const MountingTolerance& tol = s.tolerance;
-  m.tolerances = {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
+  m.tolerances = {tol.yaw_rad,   tol.pitch_rad, tol.roll_rad,
+                  tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
   for (int i = 0; i < 6; ++i) m.truth[i] = range_of_tolerance * m.tolerances[i] * unit(rng);
   const Eigen::Matrix3d r_base = SensorBaseRotation(s.kind);
   const YawPitchRoll n = MountingAngles(s.T_car_sensor_nominal.RotationMatrix(), r_base);
-  m.T_car_sensor = Rigid3d(MountingRotation({n.yaw + m.truth[0], n.pitch + m.truth[1], n.roll + m.truth[2]}, r_base),
-                           s.T_car_sensor_nominal.translation() + Eigen::Vector3d(m.truth[3], m.truth[4], m.truth[5]));
+  m.T_car_sensor = Rigid3d(
+      MountingRotation({n.yaw + m.truth[0], n.pitch + m.truth[1], n.roll + m.truth[2]}, r_base),
+      s.T_car_sensor_nominal.translation() + Eigen::Vector3d(m.truth[3], m.truth[4], m.truth[5]));
   return m;
 }
 

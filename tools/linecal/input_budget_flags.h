@@ -30,9 +30,9 @@ inline std::vector<cli::OptionSpec> InputBudgetOptions() {
   const InputBudget defaults;
   std::vector<cli::OptionSpec> specs;
   for (const auto& [name, field] : InputBudgetFlagFields()) {
-    specs.push_back({name, "N",
-                     absl::StrCat("input budget (docs/capture-format.md), default ",
-                                  defaults.*field)});
+    specs.push_back(
+        {name, "N",
+         absl::StrCat("input budget (docs/capture-format.md), default ", defaults.*field)});
   }
   return specs;
 }

@@ -5,12 +5,11 @@
 // of view or LiDAR rings, its targets' heights, the height limits). One list of primitives
 // is written both as SVG (text) and as PNG (rasterised with OpenCV's drawing functions).
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/status.h"
 #include "station/model/car_model.h"
@@ -24,7 +23,8 @@ using Rgb = std::array<std::uint8_t, 3>;
 
 struct DrawShape {
   enum Kind { kPolygon, kPolyline, kCircle, kText } kind = kPolygon;
-  std::vector<Eigen::Vector2d> points_px;  // polygon / polyline vertices; circle centre; text anchor
+  std::vector<Eigen::Vector2d>
+      points_px;  // polygon / polyline vertices; circle centre; text anchor
   Rgb fill = {255, 255, 255};
   double fill_opacity = 0;  // 0: not filled
   Rgb stroke = {0, 0, 0};

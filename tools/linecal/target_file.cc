@@ -39,7 +39,7 @@ class TargetYaml {
       return value;
     } catch (const YAML::Exception&) {
       return Error(key, absl::StrCat("'", node.Scalar().substr(0, 32), "' is not a ",
-                                     std::is_same_v<T, bool>  ? "boolean"
+                                     std::is_same_v<T, bool> ? "boolean"
                                      : std::is_integral_v<T> ? "whole number"
                                                              : "number"));
     }
@@ -72,8 +72,8 @@ absl::StatusOr<BoardParams> Checkerboard(const TargetYaml& y) {
   if (!col.ok()) return col.status();
   // A checker of oblong squares has no use on a station; a typo in one of them is likelier.
   if (std::abs(*row - *col) > 1e-9 * std::max(std::abs(*row), std::abs(*col))) {
-    return y.Error("colSpacingMeters", absl::StrCat(*col, " differs from rowSpacingMeters ",
-                                                    *row, ": linecal's checker has square "
+    return y.Error("colSpacingMeters", absl::StrCat(*col, " differs from rowSpacingMeters ", *row,
+                                                    ": linecal's checker has square "
                                                     "squares"));
   }
   p.square_m = *row;

@@ -9,8 +9,8 @@
 #include <optional>
 
 #include "absl/status/status.h"
-#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/io/pcap.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/sensors/lidar/lidar_point.h"
 
 namespace linecal {

@@ -105,8 +105,8 @@ bool ParseSingle(const std::vector<absl::string_view>& tok, std::uint64_t* out) 
 // at `pos` if it is DATA) in *h and *lists; NotPcd naming the entry if they are not what it
 // takes.
 absl::Status ParseEntry(const std::filesystem::path& path, absl::string_view key,
-                        const std::vector<absl::string_view>& tok, std::size_t pos,
-                        PcdHeader* h, PcdFieldLists* lists) {
+                        const std::vector<absl::string_view>& tok, std::size_t pos, PcdHeader* h,
+                        PcdFieldLists* lists) {
   if (key == "FIELDS") {
     lists->names = tok;
   } else if (key == "SIZE") {
@@ -135,8 +135,8 @@ absl::Status ParseEntry(const std::filesystem::path& path, absl::string_view key
 // Reads the header's entries from `text` (the file's first bytes), in the order the format
 // prescribes, up to and including DATA (h->data_offset: where the body starts). NotPcd for an
 // unknown entry, one out of order, a malformed value or no DATA line.
-absl::Status ParseEntries(const std::filesystem::path& path, const std::string& text,
-                          PcdHeader* h, PcdFieldLists* lists) {
+absl::Status ParseEntries(const std::filesystem::path& path, const std::string& text, PcdHeader* h,
+                          PcdFieldLists* lists) {
   // The entries in their prescribed order (COLUMNS is FIELDS in PCD v0.6).
   static constexpr absl::string_view kOrder[] = {"VERSION", "FIELDS", "SIZE",   "TYPE",
                                                  "COUNT",   "WIDTH",  "HEIGHT", "VIEWPOINT",
@@ -156,8 +156,7 @@ absl::Status ParseEntries(const std::filesystem::path& path, const std::string& 
     int entry = 0;
     while (entry < static_cast<int>(std::size(kOrder)) && kOrder[entry] != key) ++entry;
     if (entry == static_cast<int>(std::size(kOrder))) {
-      return NotPcd(path,
-                    absl::StrCat("unknown header entry ", Snippet({key.data(), key.size()})));
+      return NotPcd(path, absl::StrCat("unknown header entry ", Snippet({key.data(), key.size()})));
     }
     if (entry <= last_entry) {
       return NotPcd(path, absl::StrCat("header entry ", key, " out of order"));
@@ -209,13 +208,14 @@ absl::Status CheckPointCount(const std::filesystem::path& path, bool have_points
                              std::uint64_t body_bytes, const InputBudget& budget, PcdHeader* h) {
   if (!have_points) h->points = h->width * h->height;
   if (h->width > kMaxDataBytes || h->height > kMaxDataBytes || h->points != h->width * h->height) {
-    return NotPcd(path, absl::StrCat("POINTS ", h->points, " is not WIDTH ", h->width,
-                                     " x HEIGHT ", h->height));
+    return NotPcd(path, absl::StrCat("POINTS ", h->points, " is not WIDTH ", h->width, " x HEIGHT ",
+                                     h->height));
   }
   // The budget before the body is looked at: the header's claims decide what is allocated.
   if (h->points > static_cast<std::uint64_t>(budget.max_scan_points)) {
-    return OverBudget(path.string(), static_cast<std::int64_t>(std::min<std::uint64_t>(
-                                         h->points, std::numeric_limits<std::int64_t>::max())),
+    return OverBudget(path.string(),
+                      static_cast<std::int64_t>(std::min<std::uint64_t>(
+                          h->points, std::numeric_limits<std::int64_t>::max())),
                       "points", budget.max_scan_points, "max_scan_points");
   }
   const std::uint64_t data_bytes = h->points * h->point_bytes;
@@ -233,9 +233,9 @@ absl::Status CheckPointCount(const std::filesystem::path& path, bool have_points
     limit = body_bytes / kMinAsciiBytesPerValue * h->point_bytes / h->values_per_point;
   }
   if (data_bytes > limit || data_bytes > kMaxDataBytes) {
-    return NotPcd(path, absl::StrCat(h->points, " points of ", h->point_bytes,
-                                     " bytes do not fit the file's ", body_bytes,
-                                     " bytes of data"));
+    return NotPcd(path,
+                  absl::StrCat(h->points, " points of ", h->point_bytes,
+                               " bytes do not fit the file's ", body_bytes, " bytes of data"));
   }
   return absl::OkStatus();
 }
@@ -246,7 +246,7 @@ absl::Status CheckPointCount(const std::filesystem::path& path, bool have_points
 // entries must come in the order the PCD format prescribes, unknown ones are refused, and the
 // body must be able to hold what the header announces.
 absl::StatusOr<PcdHeader> ParseHeader(const std::filesystem::path& path,
-                                       const InputBudget& budget) {
+                                      const InputBudget& budget) {
   std::error_code ec;
   const std::uint64_t file_size = std::filesystem::file_size(path, ec);
   if (ec) return absl::InvalidArgumentError(absl::StrCat(path.string(), ": ", ec.message()));

@@ -16,7 +16,8 @@ std::optional<RadarFieldOfView> RadarFieldOfViewOf(const std::string& model) {
   return std::nullopt;
 }
 
-std::vector<RadarTruth> RadarReflectorTruth(const StationLayout& layout, const Rigid3d& T_station_radar,
+std::vector<RadarTruth> RadarReflectorTruth(const StationLayout& layout,
+                                            const Rigid3d& T_station_radar,
                                             const RadarFieldOfView& fov) {
   const Rigid3d T_radar_station = T_station_radar.Inverse();
   std::vector<RadarTruth> out;
@@ -26,7 +27,8 @@ std::vector<RadarTruth> RadarReflectorTruth(const StationLayout& layout, const R
     t.reflector_id = r.id;
     t.range_m = p_radar.norm();
     t.azimuth_rad = std::atan2(p_radar.y(), p_radar.x());
-    t.in_view = p_radar.x() > 0 && std::abs(t.azimuth_rad) <= fov.half_fov_rad && t.range_m <= fov.max_range_m;
+    t.in_view = p_radar.x() > 0 && std::abs(t.azimuth_rad) <= fov.half_fov_rad &&
+                t.range_m <= fov.max_range_m;
     out.push_back(t);
   }
   return out;

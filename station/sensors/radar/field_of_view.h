@@ -34,7 +34,8 @@ struct RadarTruth {
 // The reflectors of `layout` seen from a radar at T_station_radar: exact range and azimuth
 // (the radar frame's x-y plane; a reflector above or below counts by its horizontal
 // projection's direction and its 3-D range). O(reflectors).
-std::vector<RadarTruth> RadarReflectorTruth(const StationLayout& layout, const Rigid3d& T_station_radar,
+std::vector<RadarTruth> RadarReflectorTruth(const StationLayout& layout,
+                                            const Rigid3d& T_station_radar,
                                             const RadarFieldOfView& fov);
 
 }  // namespace linecal

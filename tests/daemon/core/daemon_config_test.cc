@@ -2,12 +2,12 @@
 // it; every bad key or value is refused naming the file and the key.
 #include "daemon/core/daemon_config.h"
 
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <string>
-
-#include <gtest/gtest.h>
-#include <unistd.h>
 
 namespace linecal {
 namespace {
@@ -18,8 +18,9 @@ class DaemonConfigTest : public ::testing::Test {
  protected:
   void SetUp() override {
     // Per test and process: ctest runs the tests in parallel, each in its own process.
-    dir_ = fs::path(testing::TempDir()) / ("daemon_config_" + std::to_string(::getpid()) + "_" +
-                                           testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir_ = fs::path(testing::TempDir()) /
+           ("daemon_config_" + std::to_string(::getpid()) + "_" +
+            testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::create_directories(dir_);
   }
   absl::StatusOr<DaemonConfig> Read(const std::string& text) {
@@ -42,7 +43,8 @@ TEST_F(DaemonConfigTest, FullFileReadsBack) {
   EXPECT_EQ(c->auth_token, "t");
   EXPECT_EQ(c->core.station_id, "line-3");
   EXPECT_EQ(c->core.station_path, (dir_ / "stations/a.json").string());
-  EXPECT_EQ(c->core.car_model_paths, (std::vector<std::string>{(dir_ / "cars/x.json").string(), "/abs/y.json"}));
+  EXPECT_EQ(c->core.car_model_paths,
+            (std::vector<std::string>{(dir_ / "cars/x.json").string(), "/abs/y.json"}));
   EXPECT_EQ(c->core.db_path, (dir_ / "data" / "station.db").string());
   EXPECT_EQ(c->core.source, CycleSource::kReplay);
   EXPECT_EQ(c->core.replay_capture, "rec/1");
@@ -110,9 +112,9 @@ TEST_F(DaemonConfigTest, ReplayCaptureLinkedOutsideDataRootIsRefused) {
     const absl::Status s =
         Read("{" + base + R"(, "source": {"type": "replay", "capture": ")" + link + R"("}})")
             .status();
-    EXPECT_NE(s.message().find(std::string("source.capture: '") + link +
-                               "': resolves outside data_root"),
-              std::string::npos)
+    EXPECT_NE(
+        s.message().find(std::string("source.capture: '") + link + "': resolves outside data_root"),
+        std::string::npos)
         << s;
   }
   absl::StatusOr<DaemonConfig> inside =
@@ -129,7 +131,8 @@ TEST_F(DaemonConfigTest, TlsFilesReadNamingKeyAndFile) {
   std::ofstream(dir_ / "pki/server.key") << "KEY";
   std::ofstream(dir_ / "pki/ca.pem") << "CA";
   const std::string base = R"("station": "s.json", "car_models": ["c.json"], "data_root": "d")";
-  absl::StatusOr<DaemonConfig> c = Read("{" + base + R"(, "tls": {"cert": "pki/server.pem", "key": "pki/server.key",
+  absl::StatusOr<DaemonConfig> c =
+      Read("{" + base + R"(, "tls": {"cert": "pki/server.pem", "key": "pki/server.key",
       "client_ca": "pki/ca.pem", "require_client_cert": true}})");
   ASSERT_TRUE(c.ok()) << c.status();
   ASSERT_TRUE(c->tls.has_value());
@@ -141,7 +144,9 @@ TEST_F(DaemonConfigTest, TlsFilesReadNamingKeyAndFile) {
   EXPECT_EQ(c->tls->client_ca_pem, "CA");
   EXPECT_TRUE(c->tls->require_client_cert);
   // Server-only TLS (the token authenticates): no client_ca, require_client_cert false.
-  c = Read("{" + base + R"(, "tls": {"cert": "pki/server.pem", "key": "pki/server.key", "require_client_cert": false}})");
+  c = Read(
+      "{" + base +
+      R"(, "tls": {"cert": "pki/server.pem", "key": "pki/server.key", "require_client_cert": false}})");
   ASSERT_TRUE(c.ok()) << c.status();
   EXPECT_TRUE(c->tls->client_ca_path.empty());
   EXPECT_FALSE(c->tls->require_client_cert);
@@ -155,7 +160,8 @@ TEST_F(DaemonConfigTest, TlsFilesReadNamingKeyAndFile) {
        "linecald.json: tls.key: " + missing + ": cannot read"},
       {R"({"cert": "pki/server.pem", "key": "pki/server.key", "client_ca": "pki/missing.pem"})",
        "linecald.json: tls.client_ca: " + missing + ": cannot read"},
-      {R"({"cert": "pki/server.pem", "key": "pki/server.key"})", "linecald.json: tls.client_ca: required"},
+      {R"({"cert": "pki/server.pem", "key": "pki/server.key"})",
+       "linecald.json: tls.client_ca: required"},
       {R"({"key": "pki/server.key", "client_ca": "pki/ca.pem"})", "linecald.json: tls.cert"},
       {R"({"cert": "pki/server.pem", "key": "pki/server.key", "client_ca": "pki/ca.pem", "ca": "x"})",
        "linecald.json: tls.ca"},
@@ -228,7 +234,8 @@ TEST_F(DaemonConfigTest, DeadlinesDefaultAndLiveErrorsNameTheKey) {
   };
   const std::pair<std::string, std::string> cases[] = {
       {live(R"({"front_camera": {"type": "usb"}})"),
-       "source.sensors.front_camera.type: must be aravis, v4l2, udp, socketcan or candump, got 'usb'"},
+       "source.sensors.front_camera.type: must be aravis, v4l2, udp, socketcan or candump, got "
+       "'usb'"},
       {live(R"({"front_camera": {"type": "aravis"}})"), "source.sensors.front_camera.device_id"},
       {live(R"({"front_camera": {"type": "aravis", "device_id": "x", "colour": 1}})"),
        "source.sensors.front_camera.colour"},
@@ -236,7 +243,8 @@ TEST_F(DaemonConfigTest, DeadlinesDefaultAndLiveErrorsNameTheKey) {
        "source.sensors.front_camera.frame_retries: must be in [0, 100]"},
       {live(R"({"roof_lidar": {"type": "udp", "port": 70000}})"),
        "source.sensors.roof_lidar.port: must be in [1, 65535], got 70000"},
-      {live(R"({"roof_lidar": {"type": "udp", "bind": "localhost"}})"), "source.sensors.roof_lidar: "},
+      {live(R"({"roof_lidar": {"type": "udp", "bind": "localhost"}})"),
+       "source.sensors.roof_lidar: "},
       {live(R"({"roof_lidar": {"type": "udp", "log": "x"}})"), "source.sensors.roof_lidar.log"},
       {live(R"({"front_radar": {"type": "socketcan"}})"), "source.sensors.front_radar.interface"},
       {live(R"({"front_radar": {"type": "candump", "log": "r.log", "record_ms": 0}})"),
@@ -245,8 +253,10 @@ TEST_F(DaemonConfigTest, DeadlinesDefaultAndLiveErrorsNameTheKey) {
        "source.sensors.front_radar: record_ms: 70000 must be in [1, 60000]"},
       {live(R"({"front_radar": 3})"), "source.sensors.front_radar"},
       {"{" + base + R"(, "source": {"type": "live"}})", "source.sensors"},
-      {"{" + base + R"(, "source": {"type": "live", "sensors": {}, "capture": "x"}})", "source.capture"},
-      {"{" + base + R"(, "deadlines_ms": {"acquire": 0}})", "deadlines_ms.acquire: must be in [1, 600000], got 0"},
+      {"{" + base + R"(, "source": {"type": "live", "sensors": {}, "capture": "x"}})",
+       "source.capture"},
+      {"{" + base + R"(, "deadlines_ms": {"acquire": 0}})",
+       "deadlines_ms.acquire: must be in [1, 600000], got 0"},
       {"{" + base + R"(, "deadlines_ms": {"solve": 5}})", "deadlines_ms.solve"},
   };
   for (const auto& [text, key] : cases) {

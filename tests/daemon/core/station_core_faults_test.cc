@@ -2,6 +2,7 @@
 // and the budget wiring): a real tmpfs that fills up, a real data root deleted while the core
 // runs, a calibration past its deadline on a capture of many frames, a replay capture changed
 // after the start. Each test fails on the code before (565161e).
+#include <gtest/gtest.h>
 #include <sys/mount.h>
 #include <unistd.h>
 
@@ -13,12 +14,10 @@
 #include <fstream>
 #include <future>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <numbers>
 #include <string>
 #include <thread>
-
-#include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 
 #include "daemon/core/station_core.h"
 #include "tests/daemon/reliability/reliability_support.h"
@@ -185,8 +184,9 @@ TEST_F(StationCoreFaultTest, DiskFullMidCycleEndsInErrorAndRecoversWhenSpaceRetu
   radar.type = SourceType::kCandump;
   radar.can.log_path = "/dev/null";
   config_.live_sources = {{"front_camera", camera}, {"front_radar", radar}};
-  config_.make_source = [gate](const std::string&, const SourceConfig&)
-      -> absl::StatusOr<std::unique_ptr<SensorSource>> {
+  config_.make_source = [gate](
+                            const std::string&,
+                            const SourceConfig&) -> absl::StatusOr<std::unique_ptr<SensorSource>> {
     return std::make_unique<GateSource>(gate);
   };
   std::unique_ptr<StationCore> core = Core();

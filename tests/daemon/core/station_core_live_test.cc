@@ -6,6 +6,7 @@
 // into a real SQLite store. Live cycles give what `linecal calibrate` gives for their recording;
 // a silent sensor gives that sensor error and the others their verdicts; cancel is prompt;
 // a calibration past its deadline ends the cycle in error; configurations name the key.
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -19,17 +20,13 @@
 #include <thread>
 #include <vector>
 
-#include <gtest/gtest.h>
-
+#include "daemon/core/station_core.h"
+#include "station/capture/capture.h"
+#include "station/pipeline/capture_calibration.h"
+#include "station/sim/simulator.h"
+#include "tests/daemon/loopback_udp.h"
 #include "tests/daemon/scratch_dir.h"
 #include "tests/daemon/test_car.h"
-
-#include "tests/daemon/loopback_udp.h"
-
-#include "daemon/core/station_core.h"
-#include "station/pipeline/capture_calibration.h"
-#include "station/capture/capture.h"
-#include "station/sim/simulator.h"
 
 namespace linecal {
 namespace {
@@ -44,14 +41,16 @@ constexpr char kVin[] = "1M8GDM9AXKP042788";
 class PngCopySource : public SensorSource {
  public:
   explicit PngCopySource(std::vector<std::string> frames) : frames_(std::move(frames)) {}
-  absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor, const AcquireRequest& request) override {
+  absl::StatusOr<CaptureSensor> Acquire(const SensorModel& sensor,
+                                        const AcquireRequest& request) override {
     CaptureSensor out;
     out.name = sensor.name;
     out.kind = sensor.kind;
     fs::create_directories(fs::path(request.capture_dir) / request.sensor_dir);
     for (int k = 0; k < request.frames; ++k) {
       if (request.cancelled()) return absl::CancelledError("cancelled");
-      const std::string rel = (fs::path(request.sensor_dir) / ("frame_" + std::to_string(k) + ".png")).string();
+      const std::string rel =
+          (fs::path(request.sensor_dir) / ("frame_" + std::to_string(k) + ".png")).string();
       std::error_code ec;
       fs::copy_file(frames_[k % frames_.size()], fs::path(request.capture_dir) / rel, ec);
       if (ec) return absl::InternalError(ec.message());
@@ -70,16 +69,16 @@ class StationCoreLiveTest : public ::testing::Test {
   void SetUp() override {
     dir_ = testing_daemon::FreshTestDir("live");
     // The reference car cut down to one sensor of each kind.
-    testing_daemon::WriteCutDownCar((dir_ / "car.json").string(), {"front_camera", "roof_lidar", "front_radar"},
-                                    "three_sensor");
+    testing_daemon::WriteCutDownCar((dir_ / "car.json").string(),
+                                    {"front_camera", "roof_lidar", "front_radar"}, "three_sensor");
 
     // The simulator's recording of the car: what the devices send.
     SimulatorOptions o;
     o.lidar.rotations = 2;
     o.aligner = Request().aligner;  // the car stands where the cycle's request says
     const CarModel model = *ReadCarModel((dir_ / "car.json").string());
-    ASSERT_TRUE(SimulateCapture(*ReadStationLayout(kDeploy + "/stations/reference.json"), model, o, 3,
-                                (dir_ / "sim").string())
+    ASSERT_TRUE(SimulateCapture(*ReadStationLayout(kDeploy + "/stations/reference.json"), model, o,
+                                3, (dir_ / "sim").string())
                     .ok());
 
     port_ = testing_daemon::FreeUdpPort();
@@ -98,12 +97,15 @@ class StationCoreLiveTest : public ::testing::Test {
     SourceConfig radar;
     radar.type = SourceType::kCandump;
     radar.can.log_path = (dir_ / "sim/front_radar/can.log").string();
-    config_.live_sources = {{"front_camera", camera}, {"roof_lidar", lidar}, {"front_radar", radar}};
+    config_.live_sources = {
+        {"front_camera", camera}, {"roof_lidar", lidar}, {"front_radar", radar}};
     // The camera from the simulator's renders; the others as the daemon builds them.
     const std::string render = (dir_ / "sim/front_camera/frame-000000.png").string();
-    config_.make_source = [render](const std::string& sensor,
-                                   const SourceConfig& c) -> absl::StatusOr<std::unique_ptr<SensorSource>> {
-      if (sensor == "front_camera") return std::make_unique<PngCopySource>(std::vector<std::string>{render});
+    config_.make_source =
+        [render](const std::string& sensor,
+                 const SourceConfig& c) -> absl::StatusOr<std::unique_ptr<SensorSource>> {
+      if (sensor == "front_camera")
+        return std::make_unique<PngCopySource>(std::vector<std::string>{render});
       return MakeSensorSource(c);
     };
     config_.acquire_deadline = std::chrono::milliseconds(5000);
@@ -130,11 +132,16 @@ class StationCoreLiveTest : public ::testing::Test {
   std::vector<std::string> Events(StationCore& core, int64_t id,
                                   std::map<std::string, Clock::time_point>* arrivals = nullptr) {
     std::vector<std::string> types;
-    EXPECT_TRUE(core.WatchCycle(id, [&](const StoredEvent& e) {
-                      types.push_back(EventTypeName(e.type) + std::string(e.sensor.empty() ? "" : ":" + e.sensor));
-                      if (arrivals != nullptr) arrivals->emplace(types.back(), Clock::now());
-                      return true;
-                    }).ok());
+    EXPECT_TRUE(core.WatchCycle(id,
+                                [&](const StoredEvent& e) {
+                                  types.push_back(
+                                      EventTypeName(e.type) +
+                                      std::string(e.sensor.empty() ? "" : ":" + e.sensor));
+                                  if (arrivals != nullptr)
+                                    arrivals->emplace(types.back(), Clock::now());
+                                  return true;
+                                })
+                    .ok());
     return types;
   }
 
@@ -161,7 +168,7 @@ void ExpectStoredEqualsOffline(const StoredCycle& stored, const CycleCalibration
     EXPECT_EQ(r->kind, SensorKindName(s.kind));
     EXPECT_EQ(r->verdict, s.verdict == Verdict::kPass   ? Verdict::kPass
                           : s.verdict == Verdict::kFail ? Verdict::kFail
-                                                              : Verdict::kError);
+                                                        : Verdict::kError);
     EXPECT_EQ(r->reason, s.reason);
     EXPECT_EQ(r->message, s.message);
     EXPECT_EQ(r->features_used, s.features_used);
@@ -192,13 +199,15 @@ TEST_F(StationCoreLiveTest, LiveCycleEqualsTheOfflineCalibrationOfItsRecording) 
   const StationStatusInfo status = core->Status();
   EXPECT_EQ(status.source, "live");
   EXPECT_EQ(status.sensor_sources.at("roof_lidar"), "udp 127.0.0.1:" + std::to_string(port_));
-  EXPECT_EQ(status.sensor_sources.at("front_radar"), "candump " + (dir_ / "sim/front_radar/can.log").string());
+  EXPECT_EQ(status.sensor_sources.at("front_radar"),
+            "candump " + (dir_ / "sim/front_radar/can.log").string());
   EXPECT_EQ(status.sensor_sources.at("front_camera"), "png copies");
 
   // Sending starts once the cycle has bound its socket, so the first rotation it completes is
   // the recording's first, not one spliced across the loop.
-  LoopingSender sender(port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
-                       testing_daemon::SendStart::kWhenBound);
+  LoopingSender sender(
+      port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
+      testing_daemon::SendStart::kWhenBound);
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok()) << id.status();
   const std::vector<std::string> events = Events(*core, *id);
@@ -213,7 +222,8 @@ TEST_F(StationCoreLiveTest, LiveCycleEqualsTheOfflineCalibrationOfItsRecording) 
   ASSERT_TRUE(cycle.ok());
   EXPECT_EQ(cycle->state, CycleState::kDone);
   ASSERT_EQ(cycle->sensors.size(), 3u);
-  absl::StatusOr<Capture> capture = ReadCapture((fs::path(config_.data_root) / cycle->capture_path).string());
+  absl::StatusOr<Capture> capture =
+      ReadCapture((fs::path(config_.data_root) / cycle->capture_path).string());
   ASSERT_TRUE(capture.ok()) << capture.status();
   EXPECT_EQ(capture->manifest.origin, "station");
   EXPECT_EQ(capture->manifest.vin, kVin);
@@ -227,9 +237,10 @@ TEST_F(StationCoreLiveTest, LiveCycleEqualsTheOfflineCalibrationOfItsRecording) 
   ExpectStoredEqualsOffline(*cycle, *offline);
   EXPECT_EQ(cycle->verdict, offline->verdict == Verdict::kPass   ? Verdict::kPass
                             : offline->verdict == Verdict::kFail ? Verdict::kFail
-                                                                       : Verdict::kError);
+                                                                 : Verdict::kError);
   // The simulated car is within tolerance: every sensor passes through the live path.
-  for (const StoredSensorResult& r : cycle->sensors) EXPECT_EQ(r.verdict, Verdict::kPass) << r.sensor << " " << r.reason;
+  for (const StoredSensorResult& r : cycle->sensors)
+    EXPECT_EQ(r.verdict, Verdict::kPass) << r.sensor << " " << r.reason;
 }
 
 TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVerdicts) {
@@ -244,7 +255,8 @@ TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVer
   // The silent sensor is given up at its deadline (1.5 s), not at the end of the others' work:
   // timed to that event, so a slow (sanitized, loaded) calibration of the others does not count.
   ASSERT_TRUE(arrivals.contains("sensor_error:roof_lidar"));
-  EXPECT_LT(std::chrono::duration<double>(arrivals["sensor_error:roof_lidar"] - start).count(), 4.0);
+  EXPECT_LT(std::chrono::duration<double>(arrivals["sensor_error:roof_lidar"] - start).count(),
+            4.0);
   EXPECT_TRUE(Has(events, "sensor_error:roof_lidar"));
   EXPECT_TRUE(Has(events, "sensor_acquired:front_camera"));
   EXPECT_TRUE(Has(events, "sensor_acquired:front_radar"));
@@ -254,7 +266,8 @@ TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVer
   EXPECT_EQ(cycle->state, CycleState::kDone);
   EXPECT_EQ(cycle->verdict, Verdict::kError);
   ASSERT_EQ(cycle->sensors.size(), 3u);
-  const std::string why = "roof_lidar: no packets from 127.0.0.1:" + std::to_string(port_) + " in 1.5 s";
+  const std::string why =
+      "roof_lidar: no packets from 127.0.0.1:" + std::to_string(port_) + " in 1.5 s";
   for (const StoredSensorResult& r : cycle->sensors) {
     if (r.sensor != "roof_lidar") continue;
     EXPECT_EQ(r.kind, "lidar");
@@ -262,9 +275,11 @@ TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVer
     EXPECT_EQ(r.reason, "acquisition_failed: " + why);
     EXPECT_EQ(r.message, why);
   }
-  EXPECT_NE(cycle->reason.find("roof_lidar:acquisition_failed: " + why), std::string::npos) << cycle->reason;
+  EXPECT_NE(cycle->reason.find("roof_lidar:acquisition_failed: " + why), std::string::npos)
+      << cycle->reason;
   // The recording holds the two sensors acquired, and they have the offline results.
-  absl::StatusOr<Capture> capture = ReadCapture((fs::path(config_.data_root) / cycle->capture_path).string());
+  absl::StatusOr<Capture> capture =
+      ReadCapture((fs::path(config_.data_root) / cycle->capture_path).string());
   ASSERT_TRUE(capture.ok()) << capture.status();
   EXPECT_EQ(capture->manifest.sensors.size(), 2u);
   EXPECT_EQ(capture->manifest.FindSensor("roof_lidar"), nullptr);
@@ -272,7 +287,8 @@ TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVer
   ASSERT_TRUE(offline.ok());
   ASSERT_EQ(offline->sensors.size(), 2u);
   ExpectStoredEqualsOffline(*cycle, *offline);
-  for (const SensorCalibration& s : offline->sensors) EXPECT_EQ(s.verdict, Verdict::kPass) << s.name;
+  for (const SensorCalibration& s : offline->sensors)
+    EXPECT_EQ(s.verdict, Verdict::kPass) << s.name;
 }
 
 TEST_F(StationCoreLiveTest, CancelDuringAcquisitionEndsTheCycleWithinASecond) {
@@ -301,8 +317,9 @@ TEST_F(StationCoreLiveTest, CalibrationPastItsDeadlineEndsTheCycleInError) {
   config_.calibrate_deadline = std::chrono::milliseconds(1);
   std::unique_ptr<StationCore> core = Core();
   ASSERT_NE(core, nullptr);
-  LoopingSender sender(port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
-                       testing_daemon::SendStart::kWhenBound);
+  LoopingSender sender(
+      port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
+      testing_daemon::SendStart::kWhenBound);
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok());
   core->WaitIdle();
@@ -322,13 +339,15 @@ TEST_F(StationCoreLiveTest, SourceConfigurationErrorsNameTheSensor) {
   c.live_sources.erase("roof_lidar");
   absl::Status s = StationCore::Create(c).status();
   EXPECT_TRUE(absl::IsInvalidArgument(s));
-  EXPECT_EQ(s.message(), "source.sensors: no source for sensor 'roof_lidar' of car model 'three_sensor'");
+  EXPECT_EQ(s.message(),
+            "source.sensors: no source for sensor 'roof_lidar' of car model 'three_sensor'");
 
   c = config_;
   c.live_sources["roof_lidar"].type = SourceType::kAravis;
   s = StationCore::Create(c).status();
   EXPECT_EQ(s.message(),
-            "source.sensors.roof_lidar.type: 'aravis' serves cameras, but 'roof_lidar' of car model 'three_sensor' is a "
+            "source.sensors.roof_lidar.type: 'aravis' serves cameras, but 'roof_lidar' of car "
+            "model 'three_sensor' is a "
             "lidar");
 
   c = config_;

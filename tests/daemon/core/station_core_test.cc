@@ -5,6 +5,7 @@
 // calibration of the same capture.
 #include "daemon/core/station_core.h"
 
+#include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <unistd.h>
 
@@ -15,15 +16,11 @@
 #include <string>
 #include <thread>
 
-#include <gtest/gtest.h>
-
-#include "tests/daemon/scratch_dir.h"
-
-#include "tests/daemon/test_car.h"
-
-#include "station/pipeline/capture_calibration.h"
 #include "station/capture/capture.h"
+#include "station/pipeline/capture_calibration.h"
 #include "station/sim/simulator.h"
+#include "tests/daemon/scratch_dir.h"
+#include "tests/daemon/test_car.h"
 
 namespace linecal {
 namespace {
@@ -59,9 +56,10 @@ class StationCoreTest : public ::testing::Test {
     o.sensors = {"front_camera", "front_radar"};
     const fs::path rec = fs::path(config_.data_root) / "recorded";
     fs::create_directories(config_.data_root);
-    const absl::Status simulated = SimulateCapture(*ReadStationLayout(config_.station_path),
-                                                   *ReadCarModel(kDeploy + "/cars/reference.json"), o, 9, rec.string())
-                                       .status();
+    const absl::Status simulated =
+        SimulateCapture(*ReadStationLayout(config_.station_path),
+                        *ReadCarModel(kDeploy + "/cars/reference.json"), o, 9, rec.string())
+            .status();
     EXPECT_TRUE(simulated.ok()) << simulated;
     config_.source = CycleSource::kReplay;
     config_.replay_capture = "recorded";
@@ -109,11 +107,15 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
   ASSERT_TRUE(id.ok()) << id.status();
   std::vector<std::string> types;
   std::vector<int64_t> sequences;
-  ASSERT_TRUE(core->WatchCycle(*id, [&](const StoredEvent& e) {
-                    types.push_back(EventTypeName(e.type) + std::string(e.sensor.empty() ? "" : ":" + e.sensor));
-                    sequences.push_back(e.sequence);
-                    return true;
-                  }).ok());
+  ASSERT_TRUE(core->WatchCycle(*id,
+                               [&](const StoredEvent& e) {
+                                 types.push_back(
+                                     EventTypeName(e.type) +
+                                     std::string(e.sensor.empty() ? "" : ":" + e.sensor));
+                                 sequences.push_back(e.sequence);
+                                 return true;
+                               })
+                  .ok());
   EXPECT_EQ(types.front(), "started");
   EXPECT_EQ(types.back(), "cycle_ended");
   EXPECT_NE(std::find(types.begin(), types.end(), "sensor_acquired:front_camera"), types.end());
@@ -126,11 +128,13 @@ TEST_F(StationCoreTest, SimulatedCycleIsStoredWithItsEventsAndEqualsTheOfflineRe
   EXPECT_EQ(cycle->vin, kVin);
   EXPECT_GT(cycle->ended_ns, cycle->started_ns);
   ASSERT_EQ(cycle->sensors.size(), 2u);
-  EXPECT_NE(cycle->request_json.find("\"lateral_offset_m\":-0.008"), std::string::npos) << cycle->request_json;
+  EXPECT_NE(cycle->request_json.find("\"lateral_offset_m\":-0.008"), std::string::npos)
+      << cycle->request_json;
 
   // The recorded capture holds the request's aligner, and calibrating it offline gives the
   // stored results exactly.
-  absl::StatusOr<Capture> capture = ReadCapture((fs::path(config_.data_root) / cycle->capture_path).string());
+  absl::StatusOr<Capture> capture =
+      ReadCapture((fs::path(config_.data_root) / cycle->capture_path).string());
   ASSERT_TRUE(capture.ok()) << capture.status();
   EXPECT_DOUBLE_EQ(capture->manifest.aligner.lateral_offset_m, -0.008);
   absl::StatusOr<CycleCalibration> offline = CalibrateCapture(*capture);
@@ -204,7 +208,8 @@ TEST_F(StationCoreTest, OneCycleAtATimeCancelAndUnknownIds) {
   EXPECT_EQ(core->CancelCycle(first).code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_EQ(core->GetCycle(999).status().code(), absl::StatusCode::kNotFound);
   EXPECT_EQ(core->CancelCycle(999).code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(core->WatchCycle(999, [](const StoredEvent&) { return true; }).code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(core->WatchCycle(999, [](const StoredEvent&) { return true; }).code(),
+            absl::StatusCode::kNotFound);
   // The station takes the next car.
   const int64_t next = *core->StartCycle(Request());
   EXPECT_GT(next, first);

@@ -4,10 +4,9 @@
 // for pixel (docs/sensors.md, "Several cameras at once"). Needs the loopback aliases
 // 127.0.0.2-5: added here when missing and the process may (root), removed again at the end;
 // skipped otherwise. ctest serialises it with the other fake-camera tests (gige_loopback).
+#include <arpa/inet.h>
 #include <ifaddrs.h>
 #include <netinet/in.h>
-
-#include <arpa/inet.h>
 
 #include <algorithm>
 #include <chrono>
@@ -83,9 +82,9 @@ std::vector<std::string> AravisConcurrentTest::added_;
 
 // What one camera's thread saw in a round.
 struct RoundResult {
-  std::string error;       // the first failed Open or Grab, empty if none
-  int wrong_frames = 0;    // complete frames that were not this camera's image
-  int incomplete = 0;      // incomplete frames dropped and grabbed again
+  std::string error;     // the first failed Open or Grab, empty if none
+  int wrong_frames = 0;  // complete frames that were not this camera's image
+  int incomplete = 0;    // incomplete frames dropped and grabbed again
 };
 
 RoundResult AcquireOnce(const FakeGigeCamera& fake, const Image8& served) {
@@ -147,9 +146,10 @@ TEST_F(AravisConcurrentTest, CamerasAcquiredAtOnceEachGetTheirOwnFrames) {
     }
   }
   // For docs/sensors.md: what the retries absorbed, and how long a round took at most.
-  std::printf("%d rounds x %d cameras x %d frames: %d incomplete frames retried; slowest round "
-              "%.3f s\n",
-              kRounds, kCameras, kFramesPerRound, incomplete, slowest_round_s);
+  std::printf(
+      "%d rounds x %d cameras x %d frames: %d incomplete frames retried; slowest round "
+      "%.3f s\n",
+      kRounds, kCameras, kFramesPerRound, incomplete, slowest_round_s);
 }
 
 }  // namespace

@@ -12,10 +12,10 @@
 #include <thread>
 #include <vector>
 
-#include "station/sensors/lidar/lidar_decoder.h"
-#include "station/sensors/lidar/lidar_pcap.h"
 #include "gtest/gtest.h"
 #include "station/io/pcap.h"
+#include "station/sensors/lidar/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_pcap.h"
 #include "tests/support/lidar_recording.h"
 
 namespace linecal {

@@ -74,7 +74,7 @@ TEST(V4l2FrameToGreyTest, GreyRowsWithPadding) {
 
 TEST(V4l2FrameToGreyTest, YuyvKeepsTheLuma) {
   // Y0 U Y1 V, 4 x 2 pixels, no padding.
-  const std::vector<std::uint8_t> bytes = {10, 128, 20, 128, 30, 90, 40, 200,
+  const std::vector<std::uint8_t> bytes = {10, 128, 20, 128, 30, 90,  40, 200,
                                            50, 0,   60, 255, 70, 128, 80, 128};
   auto grey = V4l2FrameToGrey(V4L2_PIX_FMT_YUYV, bytes.data(), bytes.size(), 4, 2, 8);
   ASSERT_TRUE(grey.ok()) << grey.status();
@@ -83,18 +83,15 @@ TEST(V4l2FrameToGreyTest, YuyvKeepsTheLuma) {
 
 TEST(V4l2FrameToGreyTest, RefusesBadFrames) {
   const std::vector<std::uint8_t> bytes(16, 0);
-  EXPECT_EQ(V4l2FrameToGrey(V4L2_PIX_FMT_GREY, bytes.data(), bytes.size(), 4, 5, 4)
-                .status()
-                .message(),
-            "frame of 4 x 5 needs 20 bytes, got 16");
-  EXPECT_EQ(V4l2FrameToGrey(V4L2_PIX_FMT_YUYV, bytes.data(), bytes.size(), 4, 2, 6)
-                .status()
-                .message(),
-            "bytes per line 6 below the row's 8");
-  EXPECT_EQ(V4l2FrameToGrey(V4L2_PIX_FMT_MJPEG, bytes.data(), bytes.size(), 4, 4, 4)
-                .status()
-                .message(),
-            "pixel format 'MJPG' cannot be converted to grey");
+  EXPECT_EQ(
+      V4l2FrameToGrey(V4L2_PIX_FMT_GREY, bytes.data(), bytes.size(), 4, 5, 4).status().message(),
+      "frame of 4 x 5 needs 20 bytes, got 16");
+  EXPECT_EQ(
+      V4l2FrameToGrey(V4L2_PIX_FMT_YUYV, bytes.data(), bytes.size(), 4, 2, 6).status().message(),
+      "bytes per line 6 below the row's 8");
+  EXPECT_EQ(
+      V4l2FrameToGrey(V4L2_PIX_FMT_MJPEG, bytes.data(), bytes.size(), 4, 4, 4).status().message(),
+      "pixel format 'MJPG' cannot be converted to grey");
   EXPECT_EQ(V4l2FrameToGrey(V4L2_PIX_FMT_GREY, bytes.data(), bytes.size(), kMaxImageSide + 1, 1,
                             kMaxImageSide + 1)
                 .status()

@@ -168,8 +168,8 @@ TEST_F(LinecaldProcessTest, SecondDaemonOnTheSameDatabaseExitsNamingTheHolder) {
   ASSERT_FALSE(id.empty());
 
   // The same configuration: the same database and port.
-  std::unique_ptr<LinecaldProcess> second = SpawnConfig(
-      "second", {"--config", config, "--listen", "127.0.0.1:" + std::to_string(*port)});
+  std::unique_ptr<LinecaldProcess> second =
+      SpawnConfig("second", {"--config", config, "--listen", "127.0.0.1:" + std::to_string(*port)});
   ASSERT_NE(second, nullptr);
   const int status = ExitBeforeListening(*second);
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << DescribeWaitStatus(status);
@@ -285,7 +285,8 @@ void LinecaldProcessTest::ExpectServedAgainAfterDescriptorsRanOut(
   reliability::IdleConnections idle;
   ASSERT_TRUE(idle.Open(*port, 300).ok());
   // gRPC's own line for the accept that failed: the fault happened.
-  const absl::Status failed = (*daemon)->WaitForLog("Failed accept4: Too many open files", kTimeout);
+  const absl::Status failed =
+      (*daemon)->WaitForLog("Failed accept4: Too many open files", kTimeout);
   ASSERT_TRUE(failed.ok()) << failed;
   idle.Close();
 
@@ -294,8 +295,8 @@ void LinecaldProcessTest::ExpectServedAgainAfterDescriptorsRanOut(
   // their connections by default).
   grpc::ChannelArguments arguments;
   arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-  std::unique_ptr<v1::Station::Stub> stub = v1::Station::NewStub(grpc::CreateCustomChannel(
-      "127.0.0.1:" + std::to_string(*port), credentials, arguments));
+  std::unique_ptr<v1::Station::Stub> stub = v1::Station::NewStub(
+      grpc::CreateCustomChannel("127.0.0.1:" + std::to_string(*port), credentials, arguments));
   grpc::ClientContext context;
   // A few seconds: the watchdog's detection (2-3 s), a restart and the client's reconnection
   // backoff; generous for the sanitizers. Without the watchdog the call waits for a listener
@@ -304,7 +305,8 @@ void LinecaldProcessTest::ExpectServedAgainAfterDescriptorsRanOut(
   context.set_wait_for_ready(true);  // retry the connection until the daemon accepts again
   v1::StationStatus status;
   const grpc::Status s = stub->GetStationStatus(&context, {}, &status);
-  const double served_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double served_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ASSERT_TRUE(s.ok()) << s.error_code() << " " << s.error_message() << "\n"
                       << ReadFile(LogPath("daemon"));
   std::printf("served %.2f s after the idle connections closed\n", served_s);
@@ -329,10 +331,10 @@ TEST_F(LinecaldProcessTest, AcceptsAgainAfterDescriptorsRanOutOnAMutualTlsPort) 
   testing_daemon::TestPki pki;
   ASSERT_TRUE(testing_daemon::MakeTestPki(dir_, &pki));
   ASSERT_TRUE(reliability::WriteLongCameraCapture(DataDir() + "/long", 1).ok());
-  const std::string config = WriteReplayConfig(
-      dir_, DataDir(),
-      absl::StrCat("\"tls\": {\"cert\": \"", pki.server_cert, "\", \"key\": \"", pki.server_key,
-                   "\", \"client_ca\": \"", pki.ca_cert, "\"}"));
+  const std::string config =
+      WriteReplayConfig(dir_, DataDir(),
+                        absl::StrCat("\"tls\": {\"cert\": \"", pki.server_cert, "\", \"key\": \"",
+                                     pki.server_key, "\", \"client_ca\": \"", pki.ca_cert, "\"}"));
   grpc::SslCredentialsOptions options;
   options.pem_root_certs = ReadFile(pki.ca_cert);
   options.pem_cert_chain = ReadFile(pki.client_cert);

@@ -7,6 +7,7 @@
 // would not add events either, so the events' count is checked too), "in order" on the
 // plant's receive times (one transaction per batch: a later batch is never received
 // before an earlier one).
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -19,8 +20,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -553,11 +552,10 @@ TEST_F(ForwarderPgTest, StationAnswersAndStoredResultsAreTheSameWithThePlantDown
                            "database 127.0.0.1:"),
             std::string::npos)
       << shown.out;
-  const testing_tools::LinecalRun json = testing_tools::RunLinecal(
-      absl::StrCat("status --json --address 127.0.0.1:", server->port));
+  const testing_tools::LinecalRun json =
+      testing_tools::RunLinecal(absl::StrCat("status --json --address 127.0.0.1:", server->port));
   EXPECT_NE(json.out.find("\"backlog\": \"1\""), std::string::npos) << json.out;
-  EXPECT_NE(json.out.find("\"max_backlog_age_ns\": \"1000000000\""), std::string::npos)
-      << json.out;
+  EXPECT_NE(json.out.find("\"max_backlog_age_ns\": \"1000000000\""), std::string::npos) << json.out;
   server->server->Shutdown();
   *server = {};
   // Health does not stop the station: the next cycle runs and is stored.

@@ -4,14 +4,13 @@
 // the error is reported, and stopping does not wait on the plant.
 #include "daemon/plant/forwarder.h"
 
+#include <gtest/gtest.h>
 #include <libpq-fe.h>
 
 #include <chrono>
 #include <map>
 #include <string>
 #include <thread>
-
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 #include "tests/daemon/ended_cycle.h"

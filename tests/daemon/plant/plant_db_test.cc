@@ -16,9 +16,9 @@
 namespace linecal {
 namespace {
 
-#define ASSERT_OK(expr)                           \
-  do {                                            \
-    const absl::Status status_ = (expr);          \
+#define ASSERT_OK(expr)                                    \
+  do {                                                     \
+    const absl::Status status_ = (expr);                   \
     ASSERT_TRUE(status_.ok()) << #expr << ": " << status_; \
   } while (0)
 
@@ -49,8 +49,9 @@ class PlantDbTest : public testing_support::PostgresTest {
   }
   // "cycles|sensors|events" row counts.
   std::string Counts() {
-    return Sql("SELECT (SELECT count(*) FROM cycles) || '|' || (SELECT count(*) FROM "
-               "sensor_results) || '|' || (SELECT count(*) FROM events)");
+    return Sql(
+        "SELECT (SELECT count(*) FROM cycles) || '|' || (SELECT count(*) FROM "
+        "sensor_results) || '|' || (SELECT count(*) FROM events)");
   }
 };
 
@@ -82,7 +83,8 @@ TEST_F(PlantDbTest, MigratesAnEmptyDatabaseOnceAndChecksTheVersion) {
   absl::Status check = db->CheckSchema();
   EXPECT_EQ(check.code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_NE(check.message().find("schema version 0 is older than this linecal's 1"),
-            std::string::npos) << check;
+            std::string::npos)
+      << check;
 
   ASSERT_TRUE(db->Migrate().ok());
   EXPECT_EQ(db->SchemaVersion().value_or(-1), 1);
@@ -112,7 +114,8 @@ TEST_F(PlantDbTest, MigratesAnOlderSchemaAndRefusesANewerOne) {
   for (const absl::Status& s : {db->CheckSchema(), db->Migrate()}) {
     EXPECT_EQ(s.code(), absl::StatusCode::kFailedPrecondition);
     EXPECT_NE(s.message().find("schema version 2 is newer than this linecal's 1"),
-              std::string::npos) << s;
+              std::string::npos)
+        << s;
     EXPECT_NE(s.message().find(absl::StrCat("127.0.0.1:", cluster_->port())), std::string::npos);
   }
   EXPECT_EQ(Sql("SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"),
@@ -184,9 +187,10 @@ TEST_F(PlantDbTest, ReapplyingChangesNothing) {
   // A different copy of cycle 2 (and a duplicate inside the batch) next to a new cycle 4:
   // only cycle 4 is added; cycle 2 keeps its first copy, sensors and events included.
   PlantCycle changed = Simple(2, "B-changed", kPlantT0Ns + 99);
-  changed.cycle.sensors.push_back(testing_support::FullSensor("extra", "radar", Verdict::kFail,
-                                                              "why"));
-  changed.events.push_back({2, 2, kPlantT0Ns + 100, EventType::kSensorProgress, "", "late", std::nullopt});
+  changed.cycle.sensors.push_back(
+      testing_support::FullSensor("extra", "radar", Verdict::kFail, "why"));
+  changed.events.push_back(
+      {2, 2, kPlantT0Ns + 100, EventType::kSensorProgress, "", "late", std::nullopt});
   ASSERT_TRUE(db->ApplyBatch("eol-1", {changed, Simple(4, "D", kPlantT0Ns + 3),
                                        Simple(4, "D-again", kPlantT0Ns + 4)})
                   .ok());
@@ -198,15 +202,15 @@ TEST_F(PlantDbTest, ReapplyingChangesNothing) {
 TEST_F(PlantDbTest, KeepsGapsOutOfOrderCyclesAndStationsApart) {
   std::unique_ptr<PlantDb> db = Migrated();
   ASSERT_NE(db, nullptr);
-  ASSERT_TRUE(db->ApplyBatch("eol-1", {Simple(9, "X", kPlantT0Ns + 9),
-                                       Simple(2, "X", kPlantT0Ns + 2),
-                                       Simple(5, "X", kPlantT0Ns + 5)})
-                  .ok());
+  ASSERT_TRUE(
+      db->ApplyBatch("eol-1", {Simple(9, "X", kPlantT0Ns + 9), Simple(2, "X", kPlantT0Ns + 2),
+                               Simple(5, "X", kPlantT0Ns + 5)})
+          .ok());
   ASSERT_TRUE(db->ApplyBatch("eol-1", {Simple(1, "X", kPlantT0Ns + 1)}).ok());
   // The same cycle ids at another station are other cycles.
-  ASSERT_TRUE(db->ApplyBatch("eol-2", {Simple(1, "X", kPlantT0Ns + 11),
-                                       Simple(2, "X", kPlantT0Ns + 12)})
-                  .ok());
+  ASSERT_TRUE(
+      db->ApplyBatch("eol-2", {Simple(1, "X", kPlantT0Ns + 11), Simple(2, "X", kPlantT0Ns + 12)})
+          .ok());
   ASSERT_TRUE(db->ApplyBatch("eol-3", {}).ok());  // registers the station only
   EXPECT_EQ(Counts(), "6|6|12");
   EXPECT_EQ(Sql("SELECT string_agg(station_id, ',' ORDER BY station_id) FROM stations"),
@@ -290,10 +294,10 @@ TEST_F(PlantDbTest, StationRoleOnlyAddsAndReportRoleOnlyReads) {
   ASSERT_TRUE(station->ApplyBatch("eol-7", {Simple(1, "V", kPlantT0Ns)}).ok());
   ASSERT_TRUE(station->ApplyBatch("eol-7", {Simple(1, "V", kPlantT0Ns)}).ok());  // idempotent
   EXPECT_EQ(station->CyclesByVin("V").status().code(), absl::StatusCode::kPermissionDenied);
-  for (const char* sql : {"DELETE FROM cycles", "UPDATE cycles SET verdict = 'pass'",
-                          "DELETE FROM sensor_results", "UPDATE events SET detail = ''",
-                          "TRUNCATE cycles", "SELECT vin FROM cycles",
-                          "CREATE TABLE sneaky (x int)"}) {
+  for (const char* sql :
+       {"DELETE FROM cycles", "UPDATE cycles SET verdict = 'pass'", "DELETE FROM sensor_results",
+        "UPDATE events SET detail = ''", "TRUNCATE cycles", "SELECT vin FROM cycles",
+        "CREATE TABLE sneaky (x int)"}) {
     absl::StatusOr<std::string> out = cluster_->Psql(station_dsn, sql);
     EXPECT_FALSE(out.ok()) << sql;
     EXPECT_NE(out.status().message().find("permission denied"), std::string::npos)
@@ -309,8 +313,8 @@ TEST_F(PlantDbTest, StationRoleOnlyAddsAndReportRoleOnlyReads) {
   EXPECT_TRUE(report->Yield(Since(0)).ok());
   const absl::Status write = report->ApplyBatch("eol-8", {Simple(1, "V", kPlantT0Ns)});
   EXPECT_EQ(write.code(), absl::StatusCode::kPermissionDenied) << write;
-  for (const char* sql : {"INSERT INTO stations VALUES ('x')", "DELETE FROM cycles",
-                          "UPDATE cycles SET vin = 'x'"}) {
+  for (const char* sql :
+       {"INSERT INTO stations VALUES ('x')", "DELETE FROM cycles", "UPDATE cycles SET vin = 'x'"}) {
     absl::StatusOr<std::string> out = cluster_->Psql(report_dsn, sql);
     EXPECT_NE(out.status().message().find("permission denied"), std::string::npos)
         << sql << ": " << out.status();

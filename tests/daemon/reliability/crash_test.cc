@@ -16,6 +16,8 @@
 // connections (gRPC's accept fails with EMFILE; the same process must serve again once they
 // close) and SIGHUP. Exit status 0 when every check held, 1 otherwise, 2 for bad flags or a
 // failed setup.
+#include <google/protobuf/util/message_differencer.h>
+#include <grpcpp/grpcpp.h>
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -30,15 +32,12 @@
 #include <fstream>
 #include <iterator>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <set>
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <google/protobuf/util/message_differencer.h>
-#include <grpcpp/grpcpp.h>
-#include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "absl/strings/numbers.h"
@@ -63,15 +62,17 @@ constexpr int kStartupKillEvery = 5;
 
 // What the client was doing when the daemon was killed.
 enum Phase : int { kIdle, kStarting, kWatching, kReading, kPhases };
-constexpr const char* kPhaseNames[kPhases] = {"between calls", "in StartCycle", "in WatchCycle (cycle running)",
-                                              "in GetCycle (cycle ended)"};
+constexpr const char* kPhaseNames[kPhases] = {
+    "between calls", "in StartCycle", "in WatchCycle (cycle running)", "in GetCycle (cycle ended)"};
 
-std::chrono::system_clock::time_point Deadline() { return std::chrono::system_clock::now() + kCallDeadline; }
+std::chrono::system_clock::time_point Deadline() {
+  return std::chrono::system_clock::now() + kCallDeadline;
+}
 
 struct Client {
   explicit Client(int port)
-      : stub(v1::Station::NewStub(
-            grpc::CreateChannel(absl::StrCat("127.0.0.1:", port), grpc::InsecureChannelCredentials()))) {}
+      : stub(v1::Station::NewStub(grpc::CreateChannel(absl::StrCat("127.0.0.1:", port),
+                                                      grpc::InsecureChannelCredentials()))) {}
 
   grpc::Status Get(const std::string& id, v1::Cycle* out) {
     grpc::ClientContext context;
@@ -111,7 +112,8 @@ struct Run {
   // ended OK, so the end was committed even if GetCycle did not get through.
   std::map<std::string, bool> pending;
   std::vector<std::string> violations;
-  int interrupted = 0, ended_unseen = 0, unacknowledged = 0, started = 0, startup_kills = 0, cycle_kills = 0;
+  int interrupted = 0, ended_unseen = 0, unacknowledged = 0, started = 0, startup_kills = 0,
+      cycle_kills = 0;
   int phase_kills[kPhases] = {};
   double startup_s = 0, cycle_s = 0;
   std::int64_t rss_after_cycle_kb = 0;
@@ -127,7 +129,8 @@ absl::StatusOr<std::unique_ptr<LinecaldProcess>> Spawn(const Run& r) {
 }
 
 std::string Describe(const v1::Cycle& c) {
-  return absl::StrCat(v1::CycleState_Name(c.state()), " ", v1::Verdict_Name(c.verdict()), " '", c.reason(), "'");
+  return absl::StrCat(v1::CycleState_Name(c.state()), " ", v1::Verdict_Name(c.verdict()), " '",
+                      c.reason(), "'");
 }
 
 // After a restart: every committed cycle as it was, every pending one ended or aborted,
@@ -138,8 +141,8 @@ void Verify(Run& r, Client& client, const std::string& when) {
     if (grpc::Status s = client.Get(id, &now); !s.ok()) {
       Violation(r, absl::StrCat(when, ": committed cycle ", id, " lost: ", s.error_message()));
     } else if (!google::protobuf::util::MessageDifferencer::Equals(before, now)) {
-      Violation(r, absl::StrCat(when, ": committed cycle ", id, " changed: was ", Describe(before), ", now ",
-                                Describe(now)));
+      Violation(r, absl::StrCat(when, ": committed cycle ", id, " changed: was ", Describe(before),
+                                ", now ", Describe(now)));
     }
   }
   for (const auto& [id, watched_to_end] : r.pending) {
@@ -152,7 +155,8 @@ void Verify(Run& r, Client& client, const std::string& when) {
       if (now.reason() != "daemon_restarted" || now.verdict() != v1::VERDICT_ERROR) {
         Violation(r, absl::StrCat(when, ": interrupted cycle ", id, " is ", Describe(now)));
       }
-      if (watched_to_end) Violation(r, absl::StrCat(when, ": cycle ", id, " was seen ended, now aborted"));
+      if (watched_to_end)
+        Violation(r, absl::StrCat(when, ": cycle ", id, " was seen ended, now aborted"));
       ++r.interrupted;
     } else if (now.state() == v1::CYCLE_STATE_DONE || now.state() == v1::CYCLE_STATE_CANCELLED) {
       ++r.ended_unseen;  // its end was committed just before the kill
@@ -171,14 +175,16 @@ void Verify(Run& r, Client& client, const std::string& when) {
     if (r.committed.count(c.cycle_id())) continue;
     // Stored by a StartCycle whose answer the kill cut off.
     if (c.state() == v1::CYCLE_STATE_RUNNING || c.state() == v1::CYCLE_STATE_UNSPECIFIED) {
-      Violation(r, absl::StrCat(when, ": unacknowledged cycle ", c.cycle_id(), " is ", Describe(c)));
+      Violation(r,
+                absl::StrCat(when, ": unacknowledged cycle ", c.cycle_id(), " is ", Describe(c)));
     }
     ++r.unacknowledged;
     v1::Cycle full;
     if (client.Get(c.cycle_id(), &full).ok()) r.committed[c.cycle_id()] = full;
   }
   if (all.size() != r.committed.size()) {
-    Violation(r, absl::StrCat(when, ": ", all.size(), " cycles listed, ", r.committed.size(), " known"));
+    Violation(
+        r, absl::StrCat(when, ": ", all.size(), " cycles listed, ", r.committed.size(), " known"));
   }
 }
 
@@ -190,8 +196,8 @@ struct CycleCall {
   bool watched_to_end = false;  // the stream ended OK after cycle_ended: the end is committed
   v1::Cycle cycle;
 };
-absl::Status OneCycle(Client& client, std::atomic<int>* phase, const std::function<void(const std::string&)>& on_started,
-                      CycleCall* out) {
+absl::Status OneCycle(Client& client, std::atomic<int>* phase,
+                      const std::function<void(const std::string&)>& on_started, CycleCall* out) {
   const auto failed = [](const char* call, const grpc::Status& s) {
     return absl::UnavailableError(absl::StrCat(call, ": ", s.error_message()));
   };
@@ -203,7 +209,8 @@ absl::Status OneCycle(Client& client, std::atomic<int>* phase, const std::functi
     v1::StartCycleResponse response;
     grpc::ClientContext context;
     context.set_deadline(Deadline());
-    if (grpc::Status s = client.stub->StartCycle(&context, request, &response); !s.ok()) return failed("StartCycle", s);
+    if (grpc::Status s = client.stub->StartCycle(&context, request, &response); !s.ok())
+      return failed("StartCycle", s);
     out->id = response.cycle_id();
   }
   on_started(out->id);
@@ -213,19 +220,23 @@ absl::Status OneCycle(Client& client, std::atomic<int>* phase, const std::functi
     context.set_deadline(Deadline());
     v1::WatchCycleRequest watch;
     watch.set_cycle_id(out->id);
-    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = client.stub->WatchCycle(&context, watch);
+    std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader =
+        client.stub->WatchCycle(&context, watch);
     v1::CycleEvent event;
     bool ended = false;
     while (reader->Read(&event)) ended |= event.type() == v1::CycleEvent::TYPE_CYCLE_ENDED;
     if (grpc::Status s = reader->Finish(); !s.ok()) return failed("WatchCycle", s);
-    if (!ended) return absl::InternalError(absl::StrCat("cycle ", out->id, ": the watch ended OK without cycle_ended"));
+    if (!ended)
+      return absl::InternalError(
+          absl::StrCat("cycle ", out->id, ": the watch ended OK without cycle_ended"));
     out->watched_to_end = true;
   }
   *phase = kReading;
   if (grpc::Status s = client.Get(out->id, &out->cycle); !s.ok()) return failed("GetCycle", s);
   *phase = kIdle;
   if (out->cycle.state() == v1::CYCLE_STATE_RUNNING) {
-    return absl::InternalError(absl::StrCat("cycle ", out->id, " still running after its watch ended"));
+    return absl::InternalError(
+        absl::StrCat("cycle ", out->id, " still running after its watch ended"));
   }
   return absl::OkStatus();
 }
@@ -276,8 +287,8 @@ double DescriptorsExhausted(Run& r, const LinecaldProcess& daemon, int port) {
     IdleConnections idle;
     if (absl::Status s = idle.Open(port, kDescriptorHeadroom + 100); !s.ok()) {
       Violation(r, absl::StrCat("descriptors: ", s.message()));
-    } else if (absl::Status s = daemon.WaitForLog("Failed accept4: Too many open files",
-                                                  kCallDeadline);
+    } else if (absl::Status s =
+                   daemon.WaitForLog("Failed accept4: Too many open files", kCallDeadline);
                !s.ok()) {
       Violation(r, absl::StrCat("descriptors: accept never failed: ", s.message()));
     } else {
@@ -325,10 +336,13 @@ std::string StartOnly(Run& r, Client& client) {
 void CycleLoop(Run& r, Client& client, const std::atomic<bool>& killed, std::atomic<int>* phase) {
   while (true) {
     CycleCall call;
-    const absl::Status s = OneCycle(client, phase, [&](const std::string& id) {
-      ++r.started;
-      r.pending[id] = false;
-    }, &call);
+    const absl::Status s = OneCycle(
+        client, phase,
+        [&](const std::string& id) {
+          ++r.started;
+          r.pending[id] = false;
+        },
+        &call);
     if (call.watched_to_end) r.pending[call.id] = true;
     if (!s.ok()) {
       if (!killed || s.code() != absl::StatusCode::kUnavailable) {
@@ -494,12 +508,12 @@ void CheckStoreAfterStop(Run& r, FinalState* f) {
     int64_t id = 0;
     if (absl::SimpleAtoi(f->last_id, &id)) {
       const absl::StatusOr<StoredCycle> last = (*store)->GetCycle(id);
-      const bool ended = last.ok() && (last->state == CycleState::kCancelled ||
-                                       last->state == CycleState::kDone);
+      const bool ended =
+          last.ok() && (last->state == CycleState::kCancelled || last->state == CycleState::kDone);
       if (!ended) {
-        Violation(r, absl::StrCat("the cycle running at SIGHUP: ",
-                                  last.ok() ? CycleStateName(last->state)
-                                            : last.status().ToString()));
+        Violation(r,
+                  absl::StrCat("the cycle running at SIGHUP: ",
+                               last.ok() ? CycleStateName(last->state) : last.status().ToString()));
       }
     }
   } else {
@@ -580,15 +594,18 @@ int main(int argc, char** argv) {
   using linecal::reliability::ProgramFlags;
   ProgramFlags defaults;
   defaults.cycles = 100;  // docs/acceptance.md: kill -9 at random moments in 100 cycles
-  const absl::StatusOr<ProgramFlags> flags = linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--linecald"});
+  const absl::StatusOr<ProgramFlags> flags =
+      linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--linecald"});
   if (!flags.ok()) {
     std::fprintf(stderr,
-                 "linecal-crash-test: %s\nusage: linecal-crash-test [--cycles N] [--seed S] [--sensors a,b,...] "
+                 "linecal-crash-test: %s\nusage: linecal-crash-test [--cycles N] [--seed S] "
+                 "[--sensors a,b,...] "
                  "[--linecald PATH] [--dir DIR]\n",
                  std::string(flags.status().message()).c_str());
     return 2;
   }
   const auto linecald = flags->own.find("--linecald");
   return linecal::reliability::Main(
-      *flags, linecald != flags->own.end() ? linecald->second : std::string(LINECAL_BINARY_DIR) + "/bin/linecald");
+      *flags, linecald != flags->own.end() ? linecald->second
+                                           : std::string(LINECAL_BINARY_DIR) + "/bin/linecald");
 }

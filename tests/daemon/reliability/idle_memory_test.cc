@@ -3,6 +3,7 @@
 // free loopback port with a scratch data directory; VmRSS and VmHWM read from /proc once it
 // serves calls. The bar is for Release builds: under AddressSanitizer the shadow memory
 // alone exceeds it, so there the numbers are printed and not judged.
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -12,8 +13,6 @@
 #include <filesystem>
 #include <string>
 #include <thread>
-
-#include <gtest/gtest.h>
 
 #include "tests/daemon/reliability/reliability_support.h"
 
@@ -35,7 +34,8 @@ constexpr bool kSanitized = false;
 #endif
 
 TEST(LinecaldMemory, IdleResidentSetIsAtMost100MB) {
-  const fs::path dir = fs::path(testing::TempDir()) / ("linecald_memory_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::path(testing::TempDir()) / ("linecald_memory_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   absl::StatusOr<std::unique_ptr<LinecaldProcess>> daemon =
@@ -59,7 +59,8 @@ TEST(LinecaldMemory, IdleResidentSetIsAtMost100MB) {
   }
   (*daemon)->Signal(SIGTERM);
   const int exit_status = (*daemon)->Wait();
-  EXPECT_TRUE(WIFEXITED(exit_status) && WEXITSTATUS(exit_status) == 0) << DescribeWaitStatus(exit_status);
+  EXPECT_TRUE(WIFEXITED(exit_status) && WEXITSTATUS(exit_status) == 0)
+      << DescribeWaitStatus(exit_status);
   fs::remove_all(dir);
 }
 

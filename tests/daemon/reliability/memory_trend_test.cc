@@ -94,7 +94,8 @@ TEST(MemoryTrendTest, HeapGrowingSteadilyFailsAndACacheFillingUpPasses) {
     cache.push_back(7.8 + 1.6 * (1 - std::exp(-(c - 100) / 300)) + noise(rng));
   }
   const MemoryGrowth l = JudgeMemoryGrowth(x, leak, kSoakHeapGrowthMbPer1000, kSoakMinSignificance);
-  const MemoryGrowth c = JudgeMemoryGrowth(x, cache, kSoakHeapGrowthMbPer1000, kSoakMinSignificance);
+  const MemoryGrowth c =
+      JudgeMemoryGrowth(x, cache, kSoakHeapGrowthMbPer1000, kSoakMinSignificance);
   EXPECT_TRUE(l.leak) << l.growth_per_1000 << " MB/1000";
   EXPECT_NEAR(l.growth_per_1000, 5, 0.5);
   EXPECT_FALSE(c.leak) << c.growth_per_1000 << " MB/1000";

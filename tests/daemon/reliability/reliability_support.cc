@@ -16,11 +16,10 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <regex>
 #include <sstream>
 #include <thread>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -60,7 +59,8 @@ absl::StatusOr<ProcessStatus> ReadProcessStatus(const std::string& pid) {
     if (key == "VmHWM:") s.hwm_kb = value, found |= 2;
     if (key == "Threads:") s.threads = static_cast<int>(value), found |= 4;
   }
-  if (found != 7) return absl::InternalError(absl::StrCat(path, ": VmRSS, VmHWM or Threads missing"));
+  if (found != 7)
+    return absl::InternalError(absl::StrCat(path, ": VmRSS, VmHWM or Threads missing"));
   return s;
 }
 
@@ -105,7 +105,8 @@ absl::StatusOr<ProgramFlags> ParseProgramFlags(int argc, char** argv, ProgramFla
     } else {
       return absl::InvalidArgumentError(absl::StrCat("unknown option '", flag, "'"));
     }
-    if (!ok) return absl::InvalidArgumentError(absl::StrCat(flag, " = '", value, "': not a valid value"));
+    if (!ok)
+      return absl::InvalidArgumentError(absl::StrCat(flag, " = '", value, "': not a valid value"));
   }
   return f;
 }
@@ -114,7 +115,8 @@ absl::StatusOr<Workspace> PrepareWorkspace(const ProgramFlags& flags, const std:
                                            const std::string& car_id, const std::string& capture) {
   Workspace w;
   w.owned = flags.dir.empty();
-  w.dir = w.owned ? fs::temp_directory_path() / absl::StrCat("linecal_", program, "_", ::getpid()) : fs::path(flags.dir);
+  w.dir = w.owned ? fs::temp_directory_path() / absl::StrCat("linecal_", program, "_", ::getpid())
+                  : fs::path(flags.dir);
   std::error_code ec;
   fs::remove_all(w.dir, ec);
   fs::create_directories(w.dir / "data", ec);
@@ -129,7 +131,8 @@ absl::StatusOr<Workspace> PrepareWorkspace(const ProgramFlags& flags, const std:
   // they are.
   for (nlohmann::json& s : car["sensors"]) {
     if (s.contains("angles_file") && fs::path(s["angles_file"].get<std::string>()).is_relative()) {
-      s["angles_file"] = (fs::path(reference).parent_path() / s["angles_file"].get<std::string>()).string();
+      s["angles_file"] =
+          (fs::path(reference).parent_path() / s["angles_file"].get<std::string>()).string();
     }
   }
   nlohmann::json kept = nlohmann::json::array();
@@ -138,7 +141,9 @@ absl::StatusOr<Workspace> PrepareWorkspace(const ProgramFlags& flags, const std:
     for (const nlohmann::json& s : car["sensors"]) {
       if (s["name"] == name) kept.push_back(s), found = true;
     }
-    if (!found) return absl::InvalidArgumentError(absl::StrCat("sensor '", name, "': not a sensor of ", reference));
+    if (!found)
+      return absl::InvalidArgumentError(
+          absl::StrCat("sensor '", name, "': not a sensor of ", reference));
   }
   if (!flags.sensors.empty()) car["sensors"] = kept;
   car["id"] = car_id;
@@ -154,7 +159,9 @@ absl::StatusOr<Workspace> PrepareWorkspace(const ProgramFlags& flags, const std:
   SimulatorOptions o;
   o.camera_frames = 1;  // the daemon's default frames per sensor
   o.lidar.rotations = 1;
-  if (absl::Status s = SimulateCapture(*station, *model, o, flags.seed, (w.dir / capture).string()).status(); !s.ok()) {
+  if (absl::Status s =
+          SimulateCapture(*station, *model, o, flags.seed, (w.dir / capture).string()).status();
+      !s.ok()) {
     return s;
   }
   return w;
@@ -209,10 +216,9 @@ absl::Status WriteLongCameraCapture(const std::string& dir, int frames) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<std::unique_ptr<LinecaldProcess>> LinecaldProcess::Spawn(const std::string& binary,
-                                                                       const std::vector<std::string>& args,
-                                                                       const std::string& log_path,
-                                                                       std::uint64_t descriptor_limit) {
+absl::StatusOr<std::unique_ptr<LinecaldProcess>> LinecaldProcess::Spawn(
+    const std::string& binary, const std::vector<std::string>& args, const std::string& log_path,
+    std::uint64_t descriptor_limit) {
   std::error_code ec;
   const std::uintmax_t offset = fs::exists(log_path, ec) ? fs::file_size(log_path, ec) : 0;
   std::vector<std::string> argv_strings = {binary};
@@ -289,8 +295,8 @@ LinearTrend FitLinearTrend(const std::vector<double>& x, const std::vector<doubl
   t.scatter = std::sqrt(squares / static_cast<double>(n - 2));
   // 0.95 at most: beyond it the widening (6.2x) would hide any trend in a short series.
   t.autocorrelation = squares > 0 ? std::clamp(lagged / squares, 0.0, 0.95) : 0;
-  t.slope_error = t.scatter / std::sqrt(sxx) *
-                  std::sqrt((1 + t.autocorrelation) / (1 - t.autocorrelation));
+  t.slope_error =
+      t.scatter / std::sqrt(sxx) * std::sqrt((1 + t.autocorrelation) / (1 - t.autocorrelation));
   return t;
 }
 
@@ -320,8 +326,8 @@ absl::Status IdleConnections::Open(int port, int count) {
       const int error = errno;
       if (fd >= 0) ::close(fd);
       return absl::InternalError(absl::StrCat(fd < 0 ? "socket" : "connect", " to port ", port,
-                                              " with ", fds_.size(), " open: ",
-                                              std::strerror(error)));
+                                              " with ", fds_.size(),
+                                              " open: ", std::strerror(error)));
     }
     fds_.push_back(fd);
   }
@@ -344,8 +350,10 @@ absl::StatusOr<int> LinecaldProcess::WaitReady(std::chrono::milliseconds timeout
     if (std::regex_search(log, m, kPort) && absl::SimpleAtoi(m[1].str(), &port)) return port;
     siginfo_t info{};
     // WNOWAIT: only look; Wait reaps, so the pid cannot be reused while we hold it.
-    if (::waitid(P_PID, static_cast<id_t>(pid_), &info, WEXITED | WNOHANG | WNOWAIT) == 0 && info.si_pid == pid_) {
-      return absl::AbortedError(absl::StrCat("linecald exited before it was ready; its log:\n", log));
+    if (::waitid(P_PID, static_cast<id_t>(pid_), &info, WEXITED | WNOHANG | WNOWAIT) == 0 &&
+        info.si_pid == pid_) {
+      return absl::AbortedError(
+          absl::StrCat("linecald exited before it was ready; its log:\n", log));
     }
     if (std::chrono::steady_clock::now() > deadline) {
       return absl::DeadlineExceededError(

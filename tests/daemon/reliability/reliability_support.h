@@ -88,7 +88,7 @@ struct ProgramFlags {
   int cycles = 0;                    // --cycles N (>= 1)
   std::uint64_t seed = 1;            // --seed S: the capture's simulation and every random draw
   std::vector<std::string> sensors;  // --sensors a,b,...: of the reference car; empty: all
-  std::string dir;                   // --dir DIR: the scratch directory (kept); empty: a fresh one, removed
+  std::string dir;  // --dir DIR: the scratch directory (kept); empty: a fresh one, removed
   std::map<std::string, std::string> own;  // the program's own flags: "--rss-from" -> "100"
 };
 // Parses "--flag value" pairs over `defaults`; `own_flags` are the program's own names.
@@ -126,10 +126,9 @@ class LinecaldProcess {
   // Forks and execs `binary` with `args`; returns at once. Internal when fork fails. With a
   // `descriptor_limit`, the child's RLIMIT_NOFILE, soft and hard, is set to it before the
   // exec (linecald raises its soft limit to the hard one: both, so that the limit holds).
-  static absl::StatusOr<std::unique_ptr<LinecaldProcess>> Spawn(const std::string& binary,
-                                                               const std::vector<std::string>& args,
-                                                               const std::string& log_path,
-                                                               std::uint64_t descriptor_limit = 0);
+  static absl::StatusOr<std::unique_ptr<LinecaldProcess>> Spawn(
+      const std::string& binary, const std::vector<std::string>& args, const std::string& log_path,
+      std::uint64_t descriptor_limit = 0);
   ~LinecaldProcess();
   LinecaldProcess(const LinecaldProcess&) = delete;
   LinecaldProcess& operator=(const LinecaldProcess&) = delete;

@@ -25,8 +25,8 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -66,22 +66,24 @@ struct Soak {
   StationCore* core = nullptr;
   StationCoreConfig config;  // the core's: the storage faults build cores of their own from it
   fs::path dir;              // the scratch directory
-  fs::path capture;   // the replayed capture (data_root/replay), restored after each fault
-  fs::path pristine;  // the untouched copy
-  Capture layout;     // the pristine capture as read: which files each sensor has
+  fs::path capture;          // the replayed capture (data_root/replay), restored after each fault
+  fs::path pristine;         // the untouched copy
+  Capture layout;            // the pristine capture as read: which files each sensor has
   std::string db_path;
   std::mt19937_64 rng;
   CycleRequest request;
-  Clock::duration clean_time{};          // of cycle 0
-  StoredCycle clean;                     // cycle 0, elapsed times zeroed
-  std::vector<std::int64_t> started;     // every id StartCycle returned
-  std::vector<std::string> changed;      // capture files a fault changed (relative)
+  Clock::duration clean_time{};       // of cycle 0
+  StoredCycle clean;                  // cycle 0, elapsed times zeroed
+  std::vector<std::int64_t> started;  // every id StartCycle returned
+  std::vector<std::string> changed;   // capture files a fault changed (relative)
   std::vector<Clock::duration> cycle_times;
 };
 
 absl::Status Violation(const std::string& what) { return absl::InternalError(what); }
 
-double Uniform(Soak& s, double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(s.rng); }
+double Uniform(Soak& s, double lo, double hi) {
+  return std::uniform_real_distribution<double>(lo, hi)(s.rng);
+}
 size_t Pick(Soak& s, size_t n) { return std::uniform_int_distribution<size_t>(0, n - 1)(s.rng); }
 
 // Every sensor of the capture of `kind`.
@@ -187,7 +189,8 @@ int HoldLock(const char* db_path) {
 }
 
 // Starts the cycle, runs `during` while it runs, waits for its stored end and reads it.
-absl::StatusOr<StoredCycle> RunOneCycle(Soak& s, const std::function<absl::Status(std::int64_t)>& during = nullptr) {
+absl::StatusOr<StoredCycle> RunOneCycle(
+    Soak& s, const std::function<absl::Status(std::int64_t)>& during = nullptr) {
   const Clock::time_point t0 = Clock::now();
   absl::StatusOr<std::int64_t> id = s.core->StartCycle(s.request);
   if (!id.ok()) return Violation(absl::StrCat("StartCycle: ", id.status().ToString()));
@@ -197,38 +200,45 @@ absl::StatusOr<StoredCycle> RunOneCycle(Soak& s, const std::function<absl::Statu
   s.cycle_times.push_back(Clock::now() - t0);
   if (!d.ok()) return d;
   absl::StatusOr<StoredCycle> cycle = s.core->GetCycle(*id);
-  if (!cycle.ok()) return Violation(absl::StrCat("GetCycle ", *id, ": ", cycle.status().ToString()));
+  if (!cycle.ok())
+    return Violation(absl::StrCat("GetCycle ", *id, ": ", cycle.status().ToString()));
   for (StoredSensorResult& r : cycle->sensors) r.elapsed_ns = 0;
   return cycle;
 }
 
 // The rule for every stored cycle: ended, with end time, and a reason unless it passed.
 absl::Status ExpectEnded(const StoredCycle& c) {
-  if (c.state == CycleState::kRunning) return Violation(absl::StrCat("cycle ", c.id, " still running"));
+  if (c.state == CycleState::kRunning)
+    return Violation(absl::StrCat("cycle ", c.id, " still running"));
   if (c.ended_ns < c.started_ns || c.started_ns <= 0) {
-    return Violation(absl::StrCat("cycle ", c.id, ": ended_ns ", c.ended_ns, " before started_ns ", c.started_ns));
+    return Violation(absl::StrCat("cycle ", c.id, ": ended_ns ", c.ended_ns, " before started_ns ",
+                                  c.started_ns));
   }
   const bool passed = c.state == CycleState::kDone && c.verdict == Verdict::kPass;
   if (!passed && c.reason.empty()) {
-    return Violation(absl::StrCat("cycle ", c.id, " (", CycleStateName(c.state), ", ", VerdictName(c.verdict),
-                                  ") has no reason"));
+    return Violation(absl::StrCat("cycle ", c.id, " (", CycleStateName(c.state), ", ",
+                                  VerdictName(c.verdict), ") has no reason"));
   }
   return absl::OkStatus();
 }
 
 // Every sensor but `except` gave what it gave in cycle 0.
-absl::Status ExpectSensorsAsClean(const Soak& s, const StoredCycle& c, const std::string& except = "") {
+absl::Status ExpectSensorsAsClean(const Soak& s, const StoredCycle& c,
+                                  const std::string& except = "") {
   if (c.state != CycleState::kDone) {
-    return Violation(absl::StrCat("cycle ", c.id, ": ", CycleStateName(c.state), " (", c.reason, "), expected done"));
+    return Violation(absl::StrCat("cycle ", c.id, ": ", CycleStateName(c.state), " (", c.reason,
+                                  "), expected done"));
   }
   if (c.sensors.size() != s.clean.sensors.size()) {
-    return Violation(absl::StrCat("cycle ", c.id, ": ", c.sensors.size(), " sensor results, expected ",
-                                  s.clean.sensors.size(), " (", c.reason, ")"));
+    return Violation(absl::StrCat("cycle ", c.id, ": ", c.sensors.size(),
+                                  " sensor results, expected ", s.clean.sensors.size(), " (",
+                                  c.reason, ")"));
   }
   for (size_t i = 0; i < c.sensors.size(); ++i) {
     if (c.sensors[i].sensor != except && !(c.sensors[i] == s.clean.sensors[i])) {
-      return Violation(absl::StrCat("cycle ", c.id, ": ", c.sensors[i].sensor, " differs from cycle 0 (",
-                                    VerdictName(c.sensors[i].verdict), " ", c.sensors[i].reason, ")"));
+      return Violation(absl::StrCat("cycle ", c.id, ": ", c.sensors[i].sensor,
+                                    " differs from cycle 0 (", VerdictName(c.sensors[i].verdict),
+                                    " ", c.sensors[i].reason, ")"));
     }
   }
   return absl::OkStatus();
@@ -237,29 +247,33 @@ absl::Status ExpectSensorsAsClean(const Soak& s, const StoredCycle& c, const std
 absl::Status ExpectClean(const Soak& s, const StoredCycle& c) {
   if (absl::Status st = ExpectSensorsAsClean(s, c); !st.ok()) return st;
   if (c.verdict != s.clean.verdict || c.reason != s.clean.reason) {
-    return Violation(absl::StrCat("cycle ", c.id, ": verdict ", VerdictName(c.verdict), " '", c.reason,
-                                  "', cycle 0 had ", VerdictName(s.clean.verdict), " '", s.clean.reason, "'"));
+    return Violation(absl::StrCat("cycle ", c.id, ": verdict ", VerdictName(c.verdict), " '",
+                                  c.reason, "', cycle 0 had ", VerdictName(s.clean.verdict), " '",
+                                  s.clean.reason, "'"));
   }
   return absl::OkStatus();
 }
 
 // The one damaged sensor is in error with data_unreadable naming the file; the others as in
 // cycle 0; the cycle done in error with the sensor in its reason.
-absl::Status ExpectUnreadable(const Soak& s, const StoredCycle& c, const std::string& sensor, const std::string& file) {
+absl::Status ExpectUnreadable(const Soak& s, const StoredCycle& c, const std::string& sensor,
+                              const std::string& file) {
   if (absl::Status st = ExpectSensorsAsClean(s, c, sensor); !st.ok()) return st;
   for (const StoredSensorResult& r : c.sensors) {
     if (r.sensor != sensor) continue;
     if (r.verdict != Verdict::kError || r.reason != "data_unreadable") {
-      return Violation(absl::StrCat("cycle ", c.id, ": ", sensor, " ", VerdictName(r.verdict), " '", r.reason,
-                                    "', expected error data_unreadable (", file, ")"));
+      return Violation(absl::StrCat("cycle ", c.id, ": ", sensor, " ", VerdictName(r.verdict), " '",
+                                    r.reason, "', expected error data_unreadable (", file, ")"));
     }
     if (r.message.find(fs::path(file).filename().string()) == std::string::npos) {
-      return Violation(absl::StrCat("cycle ", c.id, ": ", sensor, "'s message does not name ", file, ": ", r.message));
+      return Violation(absl::StrCat("cycle ", c.id, ": ", sensor, "'s message does not name ", file,
+                                    ": ", r.message));
     }
   }
-  if (c.verdict != Verdict::kError || c.reason.find(sensor + ":data_unreadable") == std::string::npos) {
-    return Violation(absl::StrCat("cycle ", c.id, ": ", VerdictName(c.verdict), " '", c.reason, "', expected error with ",
-                                  sensor, ":data_unreadable"));
+  if (c.verdict != Verdict::kError ||
+      c.reason.find(sensor + ":data_unreadable") == std::string::npos) {
+    return Violation(absl::StrCat("cycle ", c.id, ": ", VerdictName(c.verdict), " '", c.reason,
+                                  "', expected error with ", sensor, ":data_unreadable"));
   }
   return absl::OkStatus();
 }
@@ -286,7 +300,9 @@ absl::StatusOr<std::string> DamagedSensor(Soak& s, SensorKind kind,
   const std::vector<const CaptureSensor*> sensors = SensorsOf(s, kind);
   if (sensors.empty()) return std::string("skipped: no sensor of this kind");
   const CaptureSensor& sensor = *sensors[Pick(s, sensors.size())];
-  const std::string rel = kind == SensorKind::kRadar ? sensor.can_log->path : sensor.frames[Pick(s, sensor.frames.size())].path;
+  const std::string rel = kind == SensorKind::kRadar
+                              ? sensor.can_log->path
+                              : sensor.frames[Pick(s, sensor.frames.size())].path;
   const fs::path path = Change(s, rel);
   std::string bytes;
   {
@@ -312,13 +328,15 @@ absl::StatusOr<std::string> CorruptCameraFrame(Soak& s) {
 }
 
 absl::StatusOr<std::string> TruncatedCameraFrame(Soak& s) {
-  return DamagedSensor(s, SensorKind::kCamera,
-                       [&](std::string* png) { png->resize(static_cast<size_t>(png->size() * Uniform(s, 0.1, 0.9))); });
+  return DamagedSensor(s, SensorKind::kCamera, [&](std::string* png) {
+    png->resize(static_cast<size_t>(png->size() * Uniform(s, 0.1, 0.9)));
+  });
 }
 
 absl::StatusOr<std::string> TruncatedLidarScan(Soak& s) {
-  return DamagedSensor(s, SensorKind::kLidar,
-                       [&](std::string* pcd) { pcd->resize(static_cast<size_t>(pcd->size() * Uniform(s, 0.3, 0.95))); });
+  return DamagedSensor(s, SensorKind::kLidar, [&](std::string* pcd) {
+    pcd->resize(static_cast<size_t>(pcd->size() * Uniform(s, 0.3, 0.95)));
+  });
 }
 
 absl::StatusOr<std::string> TruncatedCanLog(Soak& s) {
@@ -344,12 +362,14 @@ absl::StatusOr<std::string> MissingFile(Soak& s) {
   if (!c.ok()) return c.status();
   if (c->state != CycleState::kDone || c->verdict != Verdict::kError ||
       c->reason.rfind("capture_unreadable: ", 0) != 0 || !c->sensors.empty()) {
-    return Violation(absl::StrCat("cycle ", c->id, " without ", rel, ": ", CycleStateName(c->state), " ",
-                                  VerdictName(c->verdict), " '", c->reason, "' with ", c->sensors.size(),
+    return Violation(absl::StrCat("cycle ", c->id, " without ", rel, ": ", CycleStateName(c->state),
+                                  " ", VerdictName(c->verdict), " '", c->reason, "' with ",
+                                  c->sensors.size(),
                                   " sensors, expected done error capture_unreadable"));
   }
   if (c->reason.find(fs::path(rel).filename().string()) == std::string::npos) {
-    return Violation(absl::StrCat("cycle ", c->id, ": the reason does not name ", rel, ": ", c->reason));
+    return Violation(
+        absl::StrCat("cycle ", c->id, ": the reason does not name ", rel, ": ", c->reason));
   }
   return std::string("done error capture_unreadable naming the file");
 }
@@ -395,7 +415,8 @@ absl::StatusOr<std::string> DatabaseLockedAtStart(Soak& s) {
   if ((page->cycles.empty() ? 0 : page->cycles[0].id) != *newest_before) {
     return Violation("a refused StartCycle left a cycle in the store");
   }
-  if (s.core->Status().running_cycle) return Violation("the station is busy after a refused StartCycle");
+  if (s.core->Status().running_cycle)
+    return Violation("the station is busy after a refused StartCycle");
   return std::string("refused UNAVAILABLE, nothing stored");
 }
 
@@ -414,7 +435,8 @@ absl::StatusOr<std::string> DatabaseLockedMidCycle(Soak& s) {
     // Longer than two whole cycles: the cycle meets the lock when it stores its results.
     std::this_thread::sleep_for(2 * s.clean_time + 4 * kBusyTimeout);
     if (s.core->Status().running_cycle != id) {
-      return Violation(absl::StrCat("cycle ", id, ": the station went idle while its end could not be stored"));
+      return Violation(
+          absl::StrCat("cycle ", id, ": the station went idle while its end could not be stored"));
     }
     return absl::OkStatus();
   });
@@ -422,7 +444,8 @@ absl::StatusOr<std::string> DatabaseLockedMidCycle(Soak& s) {
   if (c->state != CycleState::kDone || c->verdict != Verdict::kError ||
       c->reason.rfind("store_unavailable: ", 0) != 0) {
     return Violation(absl::StrCat("cycle ", c->id, " under a lock: ", CycleStateName(c->state), " ",
-                                  VerdictName(c->verdict), " '", c->reason, "', expected done error store_unavailable"));
+                                  VerdictName(c->verdict), " '", c->reason,
+                                  "', expected done error store_unavailable"));
   }
   return std::string("done error store_unavailable, stored after the lock");
 }
@@ -431,15 +454,18 @@ absl::StatusOr<std::string> CancelAtRandom(Soak& s) {
   absl::Status cancel;
   absl::StatusOr<StoredCycle> c = RunOneCycle(s, [&](std::int64_t id) {
     // Anywhere from the start to a little after a clean cycle's end.
-    std::this_thread::sleep_for(std::chrono::duration_cast<Clock::duration>(s.clean_time * Uniform(s, 0, 1.2)));
+    std::this_thread::sleep_for(
+        std::chrono::duration_cast<Clock::duration>(s.clean_time * Uniform(s, 0, 1.2)));
     cancel = s.core->CancelCycle(id);
     return absl::OkStatus();
   });
   if (!c.ok()) return c.status();
   if (cancel.ok()) {
-    if (c->state != CycleState::kCancelled || c->verdict != Verdict::kError || c->reason != "cancelled") {
-      return Violation(absl::StrCat("cycle ", c->id, ": cancel accepted, yet ", CycleStateName(c->state), " ",
-                                    VerdictName(c->verdict), " '", c->reason, "'"));
+    if (c->state != CycleState::kCancelled || c->verdict != Verdict::kError ||
+        c->reason != "cancelled") {
+      return Violation(absl::StrCat("cycle ", c->id, ": cancel accepted, yet ",
+                                    CycleStateName(c->state), " ", VerdictName(c->verdict), " '",
+                                    c->reason, "'"));
     }
     return std::string("cancel accepted, cancelled");
   }
@@ -461,9 +487,12 @@ absl::StatusOr<std::string> InvalidRequests(Soak& s) {
       {[](CycleRequest* r) { r->vin = "1M8GDM9AXKP042789"; }, "vin"},  // wrong check digit
       {[](CycleRequest* r) { r->vin.clear(); }, "vin"},
       {[](CycleRequest* r) { r->car_model_id = "sedan"; }, "car_model_id"},
-      {[](CycleRequest* r) { r->aligner.longitudinal_offset_m = 1e9; }, "aligner.longitudinal_offset_m"},
+      {[](CycleRequest* r) { r->aligner.longitudinal_offset_m = 1e9; },
+       "aligner.longitudinal_offset_m"},
       {[=](CycleRequest* r) { r->aligner.lateral_offset_m = nan; }, "aligner.lateral_offset_m"},
-      {[](CycleRequest* r) { r->aligner.thrust_angle_rad = std::numeric_limits<double>::infinity(); },
+      {[](CycleRequest* r) {
+         r->aligner.thrust_angle_rad = std::numeric_limits<double>::infinity();
+       },
        "aligner.thrust_angle_deg"},
       {[](CycleRequest* r) { r->frames_per_sensor = -1; }, "options.frames_per_sensor"},
       {[](CycleRequest* r) { r->frames_per_sensor = 101; }, "options.frames_per_sensor"},
@@ -473,21 +502,25 @@ absl::StatusOr<std::string> InvalidRequests(Soak& s) {
     b.change(&r);
     const absl::StatusOr<std::int64_t> id = s.core->StartCycle(r);
     if (id.ok()) s.started.push_back(*id);
-    if (id.status().code() != absl::StatusCode::kInvalidArgument || id.status().message().rfind(b.field, 0) != 0) {
-      return Violation(absl::StrCat("bad ", b.field, ": ", id.status().ToString(), ", expected INVALID_ARGUMENT naming it"));
+    if (id.status().code() != absl::StatusCode::kInvalidArgument ||
+        id.status().message().rfind(b.field, 0) != 0) {
+      return Violation(absl::StrCat("bad ", b.field, ": ", id.status().ToString(),
+                                    ", expected INVALID_ARGUMENT naming it"));
     }
   }
   const std::int64_t unknown = (s.started.empty() ? 0 : s.started.back()) + 1000000;
   if (s.core->GetCycle(unknown).status().code() != absl::StatusCode::kNotFound ||
       s.core->CancelCycle(unknown).code() != absl::StatusCode::kNotFound ||
-      s.core->WatchCycle(unknown, [](const StoredEvent&) { return true; }).code() != absl::StatusCode::kNotFound) {
+      s.core->WatchCycle(unknown, [](const StoredEvent&) { return true; }).code() !=
+          absl::StatusCode::kNotFound) {
     return Violation("an unknown cycle id is not NOT_FOUND everywhere");
   }
   absl::StatusOr<StoredCycle> c = RunOneCycle(s, [&](std::int64_t id) {
     const absl::StatusOr<std::int64_t> second = s.core->StartCycle(s.request);
     if (second.ok()) s.started.push_back(*second);
     if (second.status().code() != absl::StatusCode::kFailedPrecondition) {
-      return Violation(absl::StrCat("a second StartCycle while ", id, " runs: ", second.status().ToString()));
+      return Violation(
+          absl::StrCat("a second StartCycle while ", id, " runs: ", second.status().ToString()));
     }
     return absl::OkStatus();
   });
@@ -499,7 +532,8 @@ absl::StatusOr<std::string> InvalidRequests(Soak& s) {
   if (!page.ok() || page->cycles.empty() || page->cycles[0].id != c->id) {
     return Violation("refused requests left cycles in the store");
   }
-  return std::string("9 refused INVALID_ARGUMENT, NOT_FOUND, busy FAILED_PRECONDITION, then done as cycle 0");
+  return std::string(
+      "9 refused INVALID_ARGUMENT, NOT_FOUND, busy FAILED_PRECONDITION, then done as cycle 0");
 }
 
 // A core of its own on `data_root` (the pristine capture copied in as its replay capture,
@@ -669,7 +703,8 @@ absl::StatusOr<std::string> DescriptorsExhausted(Soak& s) {
     if (::setrlimit(RLIMIT_NOFILE, &before) != 0) {
       return Violation(absl::StrCat("setrlimit (restore): ", std::strerror(errno)));
     }
-    return exhausted ? absl::OkStatus() : Violation("descriptors not exhausted by the lowered limit");
+    return exhausted ? absl::OkStatus()
+                     : Violation("descriptors not exhausted by the lowered limit");
   });
   ::setrlimit(RLIMIT_NOFILE, &before);  // whatever happened above
   if (!c.ok()) return c.status();
@@ -679,7 +714,8 @@ absl::StatusOr<std::string> DescriptorsExhausted(Soak& s) {
     outcome = "done as cycle 0";
   } else if (c->verdict == Verdict::kError) {
     // The kind of error, without the file names: "sensor error data_unreadable", ...
-    outcome = absl::StrCat(CycleStateName(c->state), " error ", c->reason.substr(0, c->reason.find(':')));
+    outcome =
+        absl::StrCat(CycleStateName(c->state), " error ", c->reason.substr(0, c->reason.find(':')));
     for (const StoredSensorResult& r : c->sensors) {
       if (r.verdict == Verdict::kError) {
         outcome = absl::StrCat(CycleStateName(c->state), " error, a sensor ", r.reason);
@@ -687,9 +723,9 @@ absl::StatusOr<std::string> DescriptorsExhausted(Soak& s) {
       }
     }
   } else {
-    return Violation(absl::StrCat("cycle ", c->id, " with descriptors exhausted: ",
-                                  CycleStateName(c->state), " ", VerdictName(c->verdict), " '",
-                                  c->reason, "', expected cycle 0's end or an error"));
+    return Violation(absl::StrCat(
+        "cycle ", c->id, " with descriptors exhausted: ", CycleStateName(c->state), " ",
+        VerdictName(c->verdict), " '", c->reason, "', expected cycle 0's end or an error"));
   }
   if (const absl::Status h = s.core->Health(); !h.ok()) {
     return Violation(absl::StrCat("descriptors back, yet Health(): ", h.ToString()));
@@ -703,19 +739,29 @@ absl::StatusOr<std::string> DescriptorsExhausted(Soak& s) {
 std::vector<Fault> Faults() {
   return {
       {"clean", 30, "no fault: the result must equal cycle 0's", Clean},
-      {"corrupt_camera_frame", 8, "32 random bytes in the second half of a camera's PNG", CorruptCameraFrame},
-      {"truncated_camera_frame", 8, "a camera's PNG cut to 10-90% of its length", TruncatedCameraFrame},
-      {"truncated_lidar_scan", 8, "a LiDAR's PCD scan cut to 30-95% of its length", TruncatedLidarScan},
-      {"truncated_can_log", 8, "a radar's candump log cut inside a line's time stamp", TruncatedCanLog},
-      {"missing_file", 6, "one file of the capture (manifest, station, car or sensor data) deleted", MissingFile},
-      {"db_locked_briefly", 6, "another connection holds the write lock for a third of the busy timeout",
+      {"corrupt_camera_frame", 8, "32 random bytes in the second half of a camera's PNG",
+       CorruptCameraFrame},
+      {"truncated_camera_frame", 8, "a camera's PNG cut to 10-90% of its length",
+       TruncatedCameraFrame},
+      {"truncated_lidar_scan", 8, "a LiDAR's PCD scan cut to 30-95% of its length",
+       TruncatedLidarScan},
+      {"truncated_can_log", 8, "a radar's candump log cut inside a line's time stamp",
+       TruncatedCanLog},
+      {"missing_file", 6, "one file of the capture (manifest, station, car or sensor data) deleted",
+       MissingFile},
+      {"db_locked_briefly", 6,
+       "another connection holds the write lock for a third of the busy timeout",
        DatabaseLockedBriefly},
-      {"db_locked_at_start", 4, "the write lock held by another connection when the cycle is started",
+      {"db_locked_at_start", 4,
+       "the write lock held by another connection when the cycle is started",
        DatabaseLockedAtStart},
-      {"db_locked_mid_cycle", 3, "the write lock held from the start for two cycles and 4 busy timeouts",
+      {"db_locked_mid_cycle", 3,
+       "the write lock held from the start for two cycles and 4 busy timeouts",
        DatabaseLockedMidCycle},
-      {"cancel", 12, "CancelCycle at a random moment from the start to 1.2 clean cycles", CancelAtRandom},
-      {"invalid_requests", 7, "9 invalid requests, unknown ids, a second start while running; then a cycle",
+      {"cancel", 12, "CancelCycle at a random moment from the start to 1.2 clean cycles",
+       CancelAtRandom},
+      {"invalid_requests", 7,
+       "9 invalid requests, unknown ids, a second start while running; then a cycle",
        InvalidRequests},
       {"disk_full", 2, "a tmpfs under the data root and database filled during a cycle, freed",
        DiskFull},
@@ -804,7 +850,9 @@ absl::Status RunCycles(Soak& s, const std::vector<Fault>& faults, const ProgramF
   std::discrete_distribution<size_t> draw(weights.begin(), weights.end());
   const Clock::time_point start = Clock::now();
   for (int cycle = 0; cycle < flags.cycles; ++cycle) {
-    const Fault& fault = cycle == 0 ? faults[0] : cycle <= static_cast<int>(faults.size()) ? faults[cycle - 1] : faults[draw(s.rng)];
+    const Fault& fault = cycle == 0                                 ? faults[0]
+                         : cycle <= static_cast<int>(faults.size()) ? faults[cycle - 1]
+                                                                    : faults[draw(s.rng)];
     absl::StatusOr<std::string> outcome;
     if (cycle == 0) {
       const Clock::time_point t0 = Clock::now();
@@ -923,7 +971,9 @@ void PrintReport(const Soak& s, const std::vector<Fault>& faults, const ProgramF
                  int rss_from, const SoakTally& t) {
   std::vector<Clock::duration> times = s.cycle_times;
   std::sort(times.begin(), times.end());
-  const auto ms = [](Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); };
+  const auto ms = [](Clock::duration d) {
+    return std::chrono::duration<double, std::milli>(d).count();
+  };
   std::printf("\nfaults (cycles, outcome):\n");
   for (const Fault& f : faults) {
     const auto outcomes = t.outcomes.find(f.name);
@@ -958,17 +1008,21 @@ void PrintReport(const Soak& s, const std::vector<Fault>& faults, const ProgramF
          {std::tuple{"RSS", t.rss_growth, t.rss_bound_mb, *rss_min, *rss_max},
           std::tuple{"heap in use", t.heap_growth, kSoakHeapGrowthMbPer1000, *heap_min,
                      *heap_max}}) {
-      std::printf("  %-11s slope %+.5f MB/cycle = %+.2f MB per 1000 cycles (bound %.2f), intercept %.2f MB, "
-                  "scatter %.2f MB, autocorrelation %.2f, slope %+.1f standard errors (leak above %.0f), "
-                  "rise over the run %+.2f MB, range %.1f-%.1f MB: %s\n",
-                  name, g.trend.slope, g.growth_per_1000, bound, g.trend.intercept, g.trend.scatter,
-                  g.trend.autocorrelation, g.significance, kSoakMinSignificance, g.run_growth, lo, hi,
-                  g.leak ? "LEAK" : "no leak");
+      std::printf(
+          "  %-11s slope %+.5f MB/cycle = %+.2f MB per 1000 cycles (bound %.2f), intercept %.2f "
+          "MB, "
+          "scatter %.2f MB, autocorrelation %.2f, slope %+.1f standard errors (leak above %.0f), "
+          "rise over the run %+.2f MB, range %.1f-%.1f MB: %s\n",
+          name, g.trend.slope, g.growth_per_1000, bound, g.trend.intercept, g.trend.scatter,
+          g.trend.autocorrelation, g.significance, kSoakMinSignificance, g.run_growth, lo, hi,
+          g.leak ? "LEAK" : "no leak");
     }
     std::printf("RSS at the end %.1f MB, peak %.1f MB\n", Mb(end.rss_kb), Mb(end.hwm_kb));
   } else {
-    std::printf("RSS: %.1f MB at the end, peak %.1f MB (growth not checked: fewer than %zu samples after cycle %d)\n",
-                Mb(end.rss_kb), Mb(end.hwm_kb), kMinMemorySamples, rss_from);
+    std::printf(
+        "RSS: %.1f MB at the end, peak %.1f MB (growth not checked: fewer than %zu samples after "
+        "cycle %d)\n",
+        Mb(end.rss_kb), Mb(end.hwm_kb), kMinMemorySamples, rss_from);
   }
   std::printf("violations: %zu\n", t.violations.size());
   for (const std::string& v : t.violations) std::printf("  %s\n", v.c_str());
@@ -1012,13 +1066,15 @@ int Run(const ProgramFlags& flags, int rss_from) {
 
 int main(int argc, char** argv) {
   using linecal::reliability::ProgramFlags;
-  if (argc == 3 && std::string(argv[1]) == "--hold-lock") return linecal::reliability::HoldLock(argv[2]);
+  if (argc == 3 && std::string(argv[1]) == "--hold-lock")
+    return linecal::reliability::HoldLock(argv[2]);
   // The allocator as linecald's main sets it (daemon/linecald/main.cc): the soak's memory
   // figures are the daemon's.
   mallopt(M_ARENA_MAX, 2);
   ProgramFlags defaults;
   defaults.cycles = 1000;  // docs/acceptance.md's soak
-  const absl::StatusOr<ProgramFlags> flags = linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--rss-from"});
+  const absl::StatusOr<ProgramFlags> flags =
+      linecal::reliability::ParseProgramFlags(argc, argv, defaults, {"--rss-from"});
   int rss_from = 100;  // memory growth is fitted from after this cycle (one-time allocations done)
   if (flags.ok() && flags->own.count("--rss-from") &&
       (!absl::SimpleAtoi(flags->own.at("--rss-from"), &rss_from) || rss_from < 1)) {
@@ -1026,9 +1082,11 @@ int main(int argc, char** argv) {
   }
   if (!flags.ok() || rss_from < 1) {
     std::fprintf(stderr,
-                 "linecal-soak: %s\nusage: linecal-soak [--cycles N] [--seed S] [--sensors a,b,...] [--rss-from K] "
+                 "linecal-soak: %s\nusage: linecal-soak [--cycles N] [--seed S] [--sensors "
+                 "a,b,...] [--rss-from K] "
                  "[--dir DIR]\n",
-                 flags.ok() ? "--rss-from: not a positive number" : std::string(flags.status().message()).c_str());
+                 flags.ok() ? "--rss-from: not a positive number"
+                            : std::string(flags.status().message()).c_str());
     return 2;
   }
   return linecal::reliability::Run(*flags, rss_from);

@@ -1,10 +1,12 @@
 // The listener watchdog's parts on real loopback sockets: the kernel's accept queue as the
 // watchdog reads it, the descriptor reserve, and a listener that never accepts (as gRPC's
 // after EMFILE) found dead and replaced (daemon/service/listener_watchdog.h). The whole path
-// with gRPC under a real descriptor limit is LinecaldProcessTest.AcceptsAgainAfterDescriptorsRanOut.
+// with gRPC under a real descriptor limit is
+// LinecaldProcessTest.AcceptsAgainAfterDescriptorsRanOut.
 #include "daemon/service/listener_watchdog.h"
 
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -14,8 +16,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 namespace linecal {
 namespace {
@@ -123,7 +123,8 @@ TEST(ListenerWatchdogTest, ListenerThatNeverAcceptsIsReplaced) {
     }
     restarts = watchdog.restarts();
   }
-  const double after_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double after_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ::close(waiting);
   EXPECT_EQ(restarts, 1);
   EXPECT_EQ(starts, 1);
@@ -135,7 +136,8 @@ TEST(ListenerWatchdogTest, ListenerThatNeverAcceptsIsReplaced) {
                            0),
             0u)
       << lines[0];
-  EXPECT_EQ(lines[1], "info: listening again on 127.0.0.1:" + std::to_string(port) + " (restart 1)");
+  EXPECT_EQ(lines[1],
+            "info: listening again on 127.0.0.1:" + std::to_string(port) + " (restart 1)");
 }
 
 // A listener that accepts everything is never restarted, however many connections come.

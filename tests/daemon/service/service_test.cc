@@ -2,8 +2,10 @@
 // simulator: a cycle started, watched to its end and read back; every RPC's error codes;
 // authentication on and off (token, mutual TLS with certificates made by openssl, both); two
 // clients watching one cycle.
-#include "daemon/service/station_service.h"
-
+#include <google/protobuf/descriptor.pb.h>
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -13,15 +15,10 @@
 #include <string>
 #include <thread>
 
-#include <google/protobuf/descriptor.pb.h>
-#include <grpcpp/generic/generic_stub.h>
-#include <grpcpp/grpcpp.h>
-#include <gtest/gtest.h>
-
+#include "daemon/service/station_service.h"
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
-#include "tests/daemon/scratch_dir.h"
-
 #include "station/io/json_reader.h"
+#include "tests/daemon/scratch_dir.h"
 #include "tests/daemon/test_car.h"
 #include "tests/daemon/test_pki.h"
 
@@ -35,9 +32,7 @@ constexpr char kVin[] = "1M8GDM9AXKP042788";
 class ServiceTest : public ::testing::Test {
  protected:
   // A scratch directory per test and process (ctest runs tests in parallel processes).
-  void MakeDir() {
-    dir_ = testing_daemon::FreshTestDir("service");
-  }
+  void MakeDir() { dir_ = testing_daemon::FreshTestDir("service"); }
   void CreateCore() {
     if (dir_.empty()) MakeDir();
     // The reference car with two sensors: a short cycle.
@@ -51,10 +46,12 @@ class ServiceTest : public ::testing::Test {
   }
   void Start(const std::string& token, const std::optional<TlsConfig>& tls = std::nullopt) {
     CreateCore();
-    absl::StatusOr<RunningServer> server = StartServer(core_.get(), "127.0.0.1:0", token, "test", tls);
+    absl::StatusOr<RunningServer> server =
+        StartServer(core_.get(), "127.0.0.1:0", token, "test", tls);
     ASSERT_TRUE(server.ok()) << server.status();
     server_ = std::move(*server);
-    channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port), grpc::InsecureChannelCredentials());
+    channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port),
+                                   grpc::InsecureChannelCredentials());
     stub_ = v1::Station::NewStub(channel_);
   }
   void TearDown() override {
@@ -189,7 +186,8 @@ TEST_F(ServiceTest, ErrorCodesOfEveryRpc) {
   grpc::ClientContext watch_context;
   v1::WatchCycleRequest watch;
   watch.set_cycle_id("777");
-  std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader = stub_->WatchCycle(&watch_context, watch);
+  std::unique_ptr<grpc::ClientReader<v1::CycleEvent>> reader =
+      stub_->WatchCycle(&watch_context, watch);
   v1::CycleEvent e;
   EXPECT_FALSE(reader->Read(&e));
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
@@ -197,7 +195,8 @@ TEST_F(ServiceTest, ErrorCodesOfEveryRpc) {
   v1::ListCyclesRequest list;
   list.set_page_token("garbage");
   v1::ListCyclesResponse listed;
-  EXPECT_EQ(stub_->ListCycles(&list_context, list, &listed).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(stub_->ListCycles(&list_context, list, &listed).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
 }
 
 // A second server on a port in use fails to start (gRPC's SO_REUSEPORT is off): two daemons
@@ -208,8 +207,9 @@ TEST_F(ServiceTest, SecondServerOnTheSamePortFailsToStart) {
       StartServer(core_.get(), "127.0.0.1:" + std::to_string(server_.port), "", "test");
   ASSERT_FALSE(second.ok());
   EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable);
-  EXPECT_NE(second.status().message().find("cannot listen on '127.0.0.1:" + std::to_string(server_.port)),
-            std::string::npos)
+  EXPECT_NE(
+      second.status().message().find("cannot listen on '127.0.0.1:" + std::to_string(server_.port)),
+      std::string::npos)
       << second.status();
 }
 
@@ -316,13 +316,15 @@ TEST_F(ServiceTest, TokenAuthentication) {
   {
     grpc::ClientContext c;
     v1::StationStatus status;
-    EXPECT_EQ(stub_->GetStationStatus(&c, {}, &status).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_EQ(stub_->GetStationStatus(&c, {}, &status).error_code(),
+              grpc::StatusCode::UNAUTHENTICATED);
   }
   {
     grpc::ClientContext c;
     c.AddMetadata("authorization", "Bearer wrong");
     v1::StartCycleResponse out;
-    EXPECT_EQ(stub_->StartCycle(&c, Request(), &out).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_EQ(stub_->StartCycle(&c, Request(), &out).error_code(),
+              grpc::StatusCode::UNAUTHENTICATED);
   }
   {
     grpc::ClientContext c;
@@ -474,7 +476,8 @@ class TlsServiceTest : public ServiceTest {
     return tls;
   }
   // A stub over TLS trusting the test CA, with this client certificate (none when empty).
-  std::unique_ptr<v1::Station::Stub> TlsStub(const std::string& cert, const std::string& key) const {
+  std::unique_ptr<v1::Station::Stub> TlsStub(const std::string& cert,
+                                             const std::string& key) const {
     return v1::Station::NewStub(TlsChannel(cert, key));
   }
   std::shared_ptr<grpc::Channel> TlsChannel(const std::string& cert, const std::string& key) const {
@@ -484,7 +487,8 @@ class TlsServiceTest : public ServiceTest {
       options.pem_cert_chain = *ReadTextFile(cert);
       options.pem_private_key = *ReadTextFile(key);
     }
-    return grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port), grpc::SslCredentials(options));
+    return grpc::CreateChannel("127.0.0.1:" + std::to_string(server_.port),
+                               grpc::SslCredentials(options));
   }
   static grpc::Status Status(v1::Station::Stub& stub, const std::string& token = "") {
     grpc::ClientContext c;
@@ -527,20 +531,22 @@ TEST_F(TlsServiceTest, ClientWithCertificateIsServedHealthIncluded) {
   grpc::ByteBuffer request(&empty_message, 1);
   grpc::ByteBuffer response;
   std::promise<grpc::Status> done;
-  generic.UnaryCall(&health_context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request, &response,
-                    [&](grpc::Status s) { done.set_value(s); });
+  generic.UnaryCall(&health_context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request,
+                    &response, [&](grpc::Status s) { done.set_value(s); });
   const grpc::Status health = done.get_future().get();
   ASSERT_TRUE(health.ok()) << health.error_message();
   grpc::Slice slice;
   ASSERT_TRUE(response.DumpToSingleSlice(&slice).ok());
-  EXPECT_EQ(std::string(reinterpret_cast<const char*>(slice.begin()), slice.size()), std::string("\x08\x01", 2));
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(slice.begin()), slice.size()),
+            std::string("\x08\x01", 2));
 }
 
 TEST_F(TlsServiceTest, ClientsWithoutAValidCertificateAreRefused) {
   Start("", ServerTls(pki_.server_cert, pki_.server_key));
-  ExpectRefusedHandshake(Status(*TlsStub("", "")));                                        // no certificate
-  ExpectRefusedHandshake(Status(*TlsStub(pki_.other_client_cert, pki_.other_client_key)));  // another CA's
-  ExpectRefusedHandshake(Status(*stub_));                                                   // no TLS at all
+  ExpectRefusedHandshake(Status(*TlsStub("", "")));  // no certificate
+  ExpectRefusedHandshake(
+      Status(*TlsStub(pki_.other_client_cert, pki_.other_client_key)));  // another CA's
+  ExpectRefusedHandshake(Status(*stub_));                                // no TLS at all
   EXPECT_TRUE(core_->ListCycles({})->cycles.empty());
 }
 
@@ -556,22 +562,27 @@ TEST_F(TlsServiceTest, TokenAndCertificateBothRequired) {
 TEST_F(TlsServiceTest, WrongFilesFailAtStartNamingKeyAndFile) {
   CreateCore();
   // The client's key with the server's certificate.
-  absl::StatusOr<RunningServer> mismatched =
-      StartServer(core_.get(), "127.0.0.1:0", "", "test", ServerTls(pki_.server_cert, pki_.client_key));
+  absl::StatusOr<RunningServer> mismatched = StartServer(
+      core_.get(), "127.0.0.1:0", "", "test", ServerTls(pki_.server_cert, pki_.client_key));
   ASSERT_EQ(mismatched.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(mismatched.status().message(), "tls.key: " + pki_.client_key +
-                                               ": does not match the certificate of tls.cert (" + pki_.server_cert + ")");
+                                               ": does not match the certificate of tls.cert (" +
+                                               pki_.server_cert + ")");
   // A key where the certificate belongs.
-  absl::StatusOr<RunningServer> swapped =
-      StartServer(core_.get(), "127.0.0.1:0", "", "test", ServerTls(pki_.server_key, pki_.server_key));
+  absl::StatusOr<RunningServer> swapped = StartServer(core_.get(), "127.0.0.1:0", "", "test",
+                                                      ServerTls(pki_.server_key, pki_.server_key));
   ASSERT_EQ(swapped.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(swapped.status().message().rfind("tls.cert: " + pki_.server_key + ": not a PEM certificate", 0), 0u)
+  EXPECT_EQ(swapped.status().message().rfind(
+                "tls.cert: " + pki_.server_key + ": not a PEM certificate", 0),
+            0u)
       << swapped.status().message();
   TlsConfig bad_ca = ServerTls(pki_.server_cert, pki_.server_key);
   bad_ca.client_ca_pem = "junk";
   absl::StatusOr<RunningServer> junk = StartServer(core_.get(), "127.0.0.1:0", "", "test", bad_ca);
   ASSERT_EQ(junk.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(junk.status().message().rfind("tls.client_ca: " + pki_.ca_cert + ": not a PEM certificate", 0), 0u)
+  EXPECT_EQ(junk.status().message().rfind(
+                "tls.client_ca: " + pki_.ca_cert + ": not a PEM certificate", 0),
+            0u)
       << junk.status().message();
 }
 

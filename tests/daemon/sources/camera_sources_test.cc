@@ -10,8 +10,8 @@
 
 #include "daemon/simstation/fake_gige_camera.h"
 #include "gtest/gtest.h"
-#include "tests/daemon/random_image.h"
 #include "station/io/image_io.h"
+#include "tests/daemon/random_image.h"
 
 namespace linecal {
 namespace {
@@ -33,7 +33,8 @@ class CameraSourcesTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = std::filesystem::path(::testing::TempDir()) /
-           ("camera_sources_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+           ("camera_sources_" +
+            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
   }
@@ -208,7 +209,8 @@ TEST_F(CameraSourcesTest, V4l2SourceOnANonV4l2DeviceIsUnavailable) {
   config.device = "/dev/null";
   std::unique_ptr<SensorSource> source = MakeV4l2CameraSource(config);
   EXPECT_EQ(source->Describe(), "v4l2 /dev/null");
-  absl::StatusOr<CaptureSensor> sensor = source->Acquire(Camera("front_camera"), Request(1, seconds(5)));
+  absl::StatusOr<CaptureSensor> sensor =
+      source->Acquire(Camera("front_camera"), Request(1, seconds(5)));
   EXPECT_EQ(sensor.status().code(), absl::StatusCode::kUnavailable);
   EXPECT_EQ(sensor.status().message(), "/dev/null: not a V4L2 device");
 }

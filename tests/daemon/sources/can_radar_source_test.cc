@@ -4,6 +4,7 @@
 // (socketcan.h's SocketCanSyscalls), fed kernel frames by a thread.
 #include "daemon/sources/can_radar_source.h"
 
+#include <gtest/gtest.h>
 #include <linux/can.h>
 #include <net/if.h>
 #include <net/if_arp.h>
@@ -22,8 +23,6 @@
 #include <utility>
 #include <vector>
 
-#include <gtest/gtest.h>
-
 #include "station/io/candump.h"
 #include "station/sim/simulator.h"
 
@@ -38,7 +37,8 @@ class CanRadarSourceTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = fs::path(testing::TempDir()) /
-           ("can_src_" + std::to_string(::getpid()) + "_" + testing::UnitTest::GetInstance()->current_test_info()->name());
+           ("can_src_" + std::to_string(::getpid()) + "_" +
+            testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "capture");
     car_ = *ReadCarModel(kDeploy + "/cars/reference.json");
@@ -50,13 +50,15 @@ class CanRadarSourceTest : public ::testing::Test {
     SimulatorOptions o;
     o.sensors = {"front_radar", "corner_radar_left"};
     o.time_ns = 1'700'000'000'000'000'000;
-    EXPECT_TRUE(SimulateCapture(*ReadStationLayout(kDeploy + "/stations/reference.json"), car_, o, 5,
-                                (dir_ / "sim").string())
+    EXPECT_TRUE(SimulateCapture(*ReadStationLayout(kDeploy + "/stations/reference.json"), car_, o,
+                                5, (dir_ / "sim").string())
                     .ok());
-    return {*ReadCandumpLog(dir_ / "sim/front_radar/can.log"), *ReadCandumpLog(dir_ / "sim/corner_radar_left/can.log")};
+    return {*ReadCandumpLog(dir_ / "sim/front_radar/can.log"),
+            *ReadCandumpLog(dir_ / "sim/corner_radar_left/can.log")};
   }
 
-  AcquireRequest Request(std::chrono::milliseconds deadline = std::chrono::milliseconds(5000)) const {
+  AcquireRequest Request(
+      std::chrono::milliseconds deadline = std::chrono::milliseconds(5000)) const {
     AcquireRequest r;
     r.capture_dir = (dir_ / "capture").string();
     r.sensor_dir = "radar";
@@ -90,7 +92,9 @@ TEST_F(CanRadarSourceTest, SimulatorLogGivesTheSameFrames) {
   EXPECT_EQ(got->kind, SensorKind::kRadar);
   ASSERT_TRUE(got->can_log.has_value());
   EXPECT_EQ(got->can_log->path, "radar/can.log");
-  EXPECT_EQ(got->can_log->t_ns, std::chrono::duration_cast<std::chrono::nanoseconds>(front[0].time.time_since_epoch()).count());
+  EXPECT_EQ(got->can_log->t_ns,
+            std::chrono::duration_cast<std::chrono::nanoseconds>(front[0].time.time_since_epoch())
+                .count());
   EXPECT_EQ(*ReadCandumpLog(dir_ / "capture/radar/can.log"), front);
   // The simulator's default: 20 ARS408 cycles.
   ASSERT_EQ(progress.size(), 1u);
@@ -101,7 +105,8 @@ TEST_F(CanRadarSourceTest, AMixedLogGivesEachRadarItsOwnFrames) {
   const auto [front, corner] = SimulatedLogs();
   std::vector<CanFrame> mixed = front;
   mixed.insert(mixed.end(), corner.begin(), corner.end());
-  std::stable_sort(mixed.begin(), mixed.end(), [](const CanFrame& a, const CanFrame& b) { return a.time < b.time; });
+  std::stable_sort(mixed.begin(), mixed.end(),
+                   [](const CanFrame& a, const CanFrame& b) { return a.time < b.time; });
   ASSERT_TRUE(WriteCandumpLog(dir_ / "bus.log", mixed).ok());
   CanRadarSource source(LogConfig(dir_ / "bus.log"));
   ASSERT_TRUE(source.Acquire(Sensor("front_radar"), Request()).ok());
@@ -111,7 +116,8 @@ TEST_F(CanRadarSourceTest, AMixedLogGivesEachRadarItsOwnFrames) {
   // Another interface's frames are left out when the source names its interface.
   CanRadarSourceConfig can1 = LogConfig(dir_ / "bus.log");
   can1.interface = "can1";
-  absl::StatusOr<CaptureSensor> none = CanRadarSource(can1).Acquire(Sensor("front_radar"), Request());
+  absl::StatusOr<CaptureSensor> none =
+      CanRadarSource(can1).Acquire(Sensor("front_radar"), Request());
   EXPECT_TRUE(absl::IsDataLoss(none.status())) << none.status();
   EXPECT_NE(none.status().message().find("on can1"), std::string::npos) << none.status();
 }
@@ -134,9 +140,11 @@ TEST_F(CanRadarSourceTest, ALogWithoutThisRadarIsDataLoss) {
   CanRadarSource source(LogConfig(dir_ / "sim/corner_radar_left/can.log"));
   absl::StatusOr<CaptureSensor> got = source.Acquire(Sensor("front_radar"), Request());
   ASSERT_TRUE(absl::IsDataLoss(got.status())) << got.status();
-  EXPECT_EQ(got.status().message(),
-            absl::StrCat("front_radar: candump log '", (dir_ / "sim/corner_radar_left/can.log").string(),
-                         "' has no frame of ars408 sensor id 0 (", corner.size(), " frames in all): the radar was silent"));
+  EXPECT_EQ(
+      got.status().message(),
+      absl::StrCat("front_radar: candump log '", (dir_ / "sim/corner_radar_left/can.log").string(),
+                   "' has no frame of ars408 sensor id 0 (", corner.size(),
+                   " frames in all): the radar was silent"));
   std::ofstream(dir_ / "empty.log").flush();
   got = CanRadarSource(LogConfig(dir_ / "empty.log")).Acquire(Sensor("front_radar"), Request());
   EXPECT_TRUE(absl::IsDataLoss(got.status())) << got.status();
@@ -175,9 +183,11 @@ TEST_F(CanRadarSourceTest, SocketCanWithoutKernelSupportNamesTheInterface) {
     ::close(probe);
     GTEST_SKIP() << "this kernel has CAN";
   }
-  absl::StatusOr<CaptureSensor> got = CanRadarSource(BusConfig("can0")).Acquire(Sensor("front_radar"), Request());
+  absl::StatusOr<CaptureSensor> got =
+      CanRadarSource(BusConfig("can0")).Acquire(Sensor("front_radar"), Request());
   ASSERT_TRUE(absl::IsFailedPrecondition(got.status())) << got.status();
-  EXPECT_EQ(got.status().message().rfind("front_radar: SocketCAN can0: kernel has no CAN support", 0), 0u)
+  EXPECT_EQ(
+      got.status().message().rfind("front_radar: SocketCAN can0: kernel has no CAN support", 0), 0u)
       << got.status();
 }
 
@@ -193,7 +203,8 @@ TEST_F(CanRadarSourceTest, SocketCanMissingInterfaceIsUnavailableNamingIt) {
   absl::StatusOr<CaptureSensor> got =
       CanRadarSource(BusConfig("can9"), sys).Acquire(Sensor("front_radar"), Request());
   ASSERT_TRUE(absl::IsUnavailable(got.status())) << got.status();
-  EXPECT_EQ(got.status().message(), "front_radar: SocketCAN can9: no such interface (ip link lists the interfaces)");
+  EXPECT_EQ(got.status().message(),
+            "front_radar: SocketCAN can9: no such interface (ip link lists the interfaces)");
 }
 
 // A CAN interface that is up, for Open; reading uses the real calls on the socket pair.
@@ -219,7 +230,9 @@ class SocketPairBus {
     if (thread_.joinable()) thread_.join();
     ::close(writer_);
   }
-  SocketCanSyscalls syscalls() const { return {StandInSocket, IndexSeven, IoctlUpCan, SetsockoptOk, BindOk}; }
+  SocketCanSyscalls syscalls() const {
+    return {StandInSocket, IndexSeven, IoctlUpCan, SetsockoptOk, BindOk};
+  }
   // Sends the frames as the kernel would deliver them, after `delay`, 200 us apart; the time
   // frame `marked` went out is kept for sent_at().
   void SendLater(std::vector<CanFrame> frames, std::chrono::milliseconds delay,
@@ -284,11 +297,13 @@ TEST_F(CanRadarSourceTest, SilentSocketCanIsDeadlineExceeded) {
   CanRadarSource source(BusConfig("can7"), pair.syscalls());
   pair.SendLater({corner.begin(), corner.begin() + 50}, std::chrono::milliseconds(0));
   const auto start = Clock::now();
-  absl::StatusOr<CaptureSensor> got = source.Acquire(Sensor("front_radar"), Request(std::chrono::milliseconds(1000)));
+  absl::StatusOr<CaptureSensor> got =
+      source.Acquire(Sensor("front_radar"), Request(std::chrono::milliseconds(1000)));
   const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
   ASSERT_TRUE(absl::IsDeadlineExceeded(got.status())) << got.status();
   EXPECT_EQ(got.status().message(),
-            "front_radar: no frame of ars408 sensor id 0 on can7 in 1.0 s (50 other frames): the radar is silent");
+            "front_radar: no frame of ars408 sensor id 0 on can7 in 1.0 s (50 other frames): the "
+            "radar is silent");
   EXPECT_LT(elapsed, 1.5);
 }
 

@@ -14,8 +14,8 @@
 #include <thread>
 #include <vector>
 
-#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/io/pcap.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/sensors/lidar/pcd.h"
 #include "tests/daemon/loopback_udp.h"
 #include "tests/daemon/scratch_dir.h"
@@ -171,14 +171,16 @@ TEST_F(LidarUdpSourceTest, TruncatedPacketsAreCountedAndSkipped) {
   EXPECT_GE(short_packets, static_cast<std::int64_t>(2 * kPandar64PacketsPerTurn / 50));
   EXPECT_EQ(counters.decoder.skipped[static_cast<int>(LidarSkipReason::kTruncated)], short_packets);
   EXPECT_EQ(counters.decoder.skipped_total(), short_packets);
-  EXPECT_EQ(counters.decoder.packets_decoded, static_cast<std::int64_t>(written.size()) - short_packets);
+  EXPECT_EQ(counters.decoder.packets_decoded,
+            static_cast<std::int64_t>(written.size()) - short_packets);
   EXPECT_EQ(got->frames.size(), 2u);
 }
 
 TEST_F(LidarUdpSourceTest, SilentPortIsDeadlineExceededAtTheDeadline) {
   LidarUdpSource source(config_);
   const auto start = Clock::now();
-  absl::StatusOr<CaptureSensor> got = source.Acquire(RoofLidar(), Request(2, std::chrono::milliseconds(2000)));
+  absl::StatusOr<CaptureSensor> got =
+      source.Acquire(RoofLidar(), Request(2, std::chrono::milliseconds(2000)));
   const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
   ASSERT_TRUE(absl::IsDeadlineExceeded(got.status())) << got.status();
   EXPECT_EQ(got.status().message(),
@@ -201,10 +203,12 @@ TEST_F(LidarUdpSourceTest, AnotherModelsPacketsAreDataLossNamingTheCount) {
   EXPECT_GT(counters.receiver.datagrams, 10);
   EXPECT_EQ(counters.decoder.packets_decoded, 0);
   EXPECT_EQ(counters.decoder.skipped_total(), counters.receiver.datagrams);
-  EXPECT_NE(got.status().message().find(absl::StrCat("roof_lidar: ", counters.receiver.datagrams, " packets from 127.0.0.1:")),
+  EXPECT_NE(got.status().message().find(absl::StrCat("roof_lidar: ", counters.receiver.datagrams,
+                                                     " packets from 127.0.0.1:")),
             std::string::npos)
       << got.status();
-  EXPECT_NE(got.status().message().find("none decodes as pandar64"), std::string::npos) << got.status();
+  EXPECT_NE(got.status().message().find("none decodes as pandar64"), std::string::npos)
+      << got.status();
 }
 
 TEST_F(LidarUdpSourceTest, CancelStopsWithinAPollInterval) {
@@ -228,14 +232,16 @@ TEST_F(LidarUdpSourceTest, OtherKindsAndBusyPortsAreRefused) {
   LidarUdpSource source(config_);
   SensorModel radar = RoofLidar();
   radar.kind = SensorKind::kRadar;
-  EXPECT_TRUE(absl::IsInvalidArgument(source.Acquire(radar, Request(1, std::chrono::milliseconds(100))).status()));
+  EXPECT_TRUE(absl::IsInvalidArgument(
+      source.Acquire(radar, Request(1, std::chrono::milliseconds(100))).status()));
   // The port is taken by another receiver: Unavailable naming the address.
   UdpReceiverOptions o;
   o.bind_address = "127.0.0.1";
   o.port = port_;
   absl::StatusOr<std::unique_ptr<UdpReceiver>> other = UdpReceiver::Open(o);
   ASSERT_TRUE(other.ok());
-  absl::StatusOr<CaptureSensor> got = source.Acquire(RoofLidar(), Request(1, std::chrono::milliseconds(100)));
+  absl::StatusOr<CaptureSensor> got =
+      source.Acquire(RoofLidar(), Request(1, std::chrono::milliseconds(100)));
   EXPECT_TRUE(absl::IsUnavailable(got.status())) << got.status();
   EXPECT_NE(got.status().message().find("127.0.0.1"), std::string::npos) << got.status();
   EXPECT_EQ(source.Describe(), "udp 127.0.0.1:" + std::to_string(port_));

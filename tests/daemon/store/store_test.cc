@@ -3,6 +3,7 @@
 // process (kill -9) that must lose nothing it committed; the outbox for the plant database.
 #include "daemon/store/store.h"
 
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sqlite3.h>
 #include <sys/mount.h>
@@ -18,8 +19,6 @@
 #include <map>
 #include <set>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "tests/daemon/ended_cycle.h"
 #include "tests/daemon/reliability/reliability_support.h"
@@ -119,7 +118,8 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
   ASSERT_TRUE(id.ok()) << id.status();
   EXPECT_EQ(*store->RunningCycle(), std::optional<int64_t>(*id));
   for (int i = 0; i < 3; ++i) {
-    absl::StatusOr<int64_t> seq = store->AppendEvent({*id, 0, 1000 + i, EventType::kSensorAcquired, "front_camera", "", std::nullopt});
+    absl::StatusOr<int64_t> seq = store->AppendEvent(
+        {*id, 0, 1000 + i, EventType::kSensorAcquired, "front_camera", "", std::nullopt});
     ASSERT_TRUE(seq.ok()) << seq.status();
     EXPECT_EQ(*seq, i);
   }
@@ -158,10 +158,12 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
 TEST_F(StoreTest, ErrorCodesOfUnknownAndEndedCycles) {
   std::unique_ptr<Store> store = OpenOk();
   EXPECT_EQ(store->GetCycle(42).status().code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(store->AppendEvent({42, 0, 1, EventType::kStarted, "", "", std::nullopt}).status().code(),
-            absl::StatusCode::kNotFound);
+  EXPECT_EQ(
+      store->AppendEvent({42, 0, 1, EventType::kStarted, "", "", std::nullopt}).status().code(),
+      absl::StatusCode::kNotFound);
   EXPECT_EQ(store->PutSensorResult(42, CameraResult()).code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(store->EndCycle(42, CycleState::kDone, Verdict::kPass, "", 1).code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store->EndCycle(42, CycleState::kDone, Verdict::kPass, "", 1).code(),
+            absl::StatusCode::kNotFound);
 
   const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
   EXPECT_EQ(store->EndCycle(id, CycleState::kRunning, Verdict::kPass, "", 2).code(),
@@ -170,7 +172,8 @@ TEST_F(StoreTest, ErrorCodesOfUnknownAndEndedCycles) {
   const absl::Status again = store->EndCycle(id, CycleState::kDone, Verdict::kPass, "", 3);
   EXPECT_EQ(again.code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_NE(again.message().find("cancelled"), std::string::npos) << again;
-  EXPECT_EQ(store->PutSensorResult(id, CameraResult()).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store->PutSensorResult(id, CameraResult()).code(),
+            absl::StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->GetCycle(id)->state, CycleState::kCancelled);
 }
 
@@ -184,7 +187,8 @@ TEST_F(StoreTest, IdsIncreaseAndAreNeverReused) {
   store.reset();  // one Store per database at a time (its lock)
   store = OpenOk();
   EXPECT_EQ(*store->BeginCycle(Request("WVWZZZ1JZXW000001", 3)), b + 1);
-  EXPECT_EQ(RawQuery("SELECT last_cycle_id FROM cars WHERE vin = 'WVWZZZ1JZXW000001'"), std::to_string(b + 1));
+  EXPECT_EQ(RawQuery("SELECT last_cycle_id FROM cars WHERE vin = 'WVWZZZ1JZXW000001'"),
+            std::to_string(b + 1));
 }
 
 TEST_F(StoreTest, ListFiltersAndPagesNewestFirstWithoutRepeats) {
@@ -291,7 +295,8 @@ TEST_F(StoreTest, KillNineLosesNothingCommittedAndAbortsTheInterruptedCycle) {
       if (!id.ok()) ::_exit(4);
       (*store)->AppendEvent({*id, 0, i, EventType::kStarted, "", "", std::nullopt}).IgnoreError();
       // Every second cycle ends: the other half are left running, as a crash leaves them.
-      if (i % 2 == 0 && !(*store)->EndCycle(*id, CycleState::kDone, Verdict::kPass, "", i + 1).ok()) ::_exit(5);
+      if (i % 2 == 0 && !(*store)->EndCycle(*id, CycleState::kDone, Verdict::kPass, "", i + 1).ok())
+        ::_exit(5);
       if (::write(fds[1], &*id, sizeof(*id)) != sizeof(*id)) ::_exit(6);
     }
   }
@@ -302,7 +307,8 @@ TEST_F(StoreTest, KillNineLosesNothingCommittedAndAbortsTheInterruptedCycle) {
   std::vector<int64_t> committed;
   int64_t id = 0;
   // 40 commits: enough to be mid-stream, few enough to stay quick with fsync on every commit.
-  while (committed.size() < 40 && ::read(fds[0], &id, sizeof(id)) == sizeof(id)) committed.push_back(id);
+  while (committed.size() < 40 && ::read(fds[0], &id, sizeof(id)) == sizeof(id))
+    committed.push_back(id);
   ::kill(child, SIGKILL);
   int status = 0;
   ::waitpid(child, &status, 0);
@@ -363,8 +369,8 @@ TEST_F(StoreTest, FullDiskIsResourceExhaustedAndTheWriteWorksOnceSpaceReturns) {
   const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1));
   ASSERT_GT(reliability::FillFileSystem((at / "filler").string()), 0u);
 
-  const absl::StatusOr<int64_t> event = store->AppendEvent({id, 0, 2, EventType::kCycleEnded, "", "x",
-                                                            Verdict::kError});
+  const absl::StatusOr<int64_t> event =
+      store->AppendEvent({id, 0, 2, EventType::kCycleEnded, "", "x", Verdict::kError});
   EXPECT_EQ(event.status().code(), absl::StatusCode::kResourceExhausted) << event.status();
   EXPECT_NE(event.status().message().find("database " + path_), std::string::npos);
   EXPECT_NE(event.status().message().find("database or disk is full"), std::string::npos);
@@ -373,7 +379,8 @@ TEST_F(StoreTest, FullDiskIsResourceExhaustedAndTheWriteWorksOnceSpaceReturns) {
   EXPECT_EQ(store->GetCycle(id)->state, CycleState::kRunning);  // nothing of it stored
 
   fs::remove(at / "filler");
-  EXPECT_TRUE(store->AppendEvent({id, 0, 2, EventType::kCycleEnded, "", "x", Verdict::kError}).ok());
+  EXPECT_TRUE(
+      store->AppendEvent({id, 0, 2, EventType::kCycleEnded, "", "x", Verdict::kError}).ok());
   ASSERT_TRUE(store->EndCycle(id, CycleState::kDone, Verdict::kError, "disk_full", 3).ok());
   EXPECT_EQ(store->GetCycle(id)->reason, "disk_full");
   EXPECT_EQ(store->Events(id)->size(), 1u);

@@ -2,8 +2,7 @@
 // and the installed daemon: `cmake --install` into a temporary prefix, the unit's hardening
 // keys, and linecald started as systemd would (NOTIFY_SOCKET, WATCHDOG_USEC) sending
 // READY=1, WATCHDOG=1 and, on SIGTERM, STOPPING=1 before a clean exit.
-#include "daemon/systemd/sd_notify.h"
-
+#include <gtest/gtest.h>
 #include <poll.h>
 #include <signal.h>
 #include <sys/socket.h>
@@ -20,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include <gtest/gtest.h>
+#include "daemon/systemd/sd_notify.h"
 
 namespace linecal {
 namespace {
@@ -61,13 +60,16 @@ class NotifySocket {
 };
 
 std::string Scratch(const std::string& what) {
-  return (fs::path(testing::TempDir()) / ("linecald_systemd_" + std::to_string(::getpid()) + "_" + what)).string();
+  return (fs::path(testing::TempDir()) /
+          ("linecald_systemd_" + std::to_string(::getpid()) + "_" + what))
+      .string();
 }
 
 TEST(SystemdNotifier, SendsToPathAndAbstractSockets) {
   NotifySocket path_socket(Scratch("notify.sock"));
   ASSERT_TRUE(path_socket.bound());
-  EXPECT_TRUE(SystemdNotifier(Scratch("notify.sock"), std::nullopt).Notify("READY=1\nSTATUS=up").ok());
+  EXPECT_TRUE(
+      SystemdNotifier(Scratch("notify.sock"), std::nullopt).Notify("READY=1\nSTATUS=up").ok());
   EXPECT_EQ(path_socket.Receive(milliseconds(1000)), "READY=1\nSTATUS=up");
 
   const std::string abstract = "@linecal-test-" + std::to_string(::getpid());
@@ -115,26 +117,30 @@ std::string ReadFile(const fs::path& path) {
 TEST(InstalledDaemon, UnitConfigAndNotifications) {
   const fs::path prefix = Scratch("prefix");
   fs::remove_all(prefix);
-  const std::string install = std::string(LINECAL_CMAKE_COMMAND) + " --install " + LINECAL_BINARY_DIR +
-                              " --prefix " + prefix.string() + " > " + Scratch("install.log") + " 2>&1";
+  const std::string install = std::string(LINECAL_CMAKE_COMMAND) + " --install " +
+                              LINECAL_BINARY_DIR + " --prefix " + prefix.string() + " > " +
+                              Scratch("install.log") + " 2>&1";
   ASSERT_EQ(std::system(install.c_str()), 0) << ReadFile(Scratch("install.log"));
-  for (const char* f : {"bin/linecald", "bin/linecal", "etc/linecal/linecald.json", "lib/systemd/system/linecald.service",
-                        "lib/sysusers.d/linecal.conf", "share/linecal/stations/reference.json",
+  for (const char* f : {"bin/linecald", "bin/linecal", "etc/linecal/linecald.json",
+                        "lib/systemd/system/linecald.service", "lib/sysusers.d/linecal.conf",
+                        "share/linecal/stations/reference.json",
                         "share/linecal/cars/reference.json", "share/linecal/cars/Pandar64.csv"}) {
     EXPECT_TRUE(fs::exists(prefix / f)) << f;
   }
   EXPECT_TRUE(fs::is_directory(prefix / "var/lib/linecal"));
   const std::string unit = ReadFile(prefix / "lib/systemd/system/linecald.service");
   const std::string data_dir = (prefix / "var/lib/linecal").string();
-  for (const std::string& key : std::vector<std::string>{"Type=notify\n", "WatchdogSec=10\n",
-        "LimitNOFILE=65536\n", "User=linecal\n", "NoNewPrivileges=yes\n", "ProtectSystem=strict\n",
-        "ReadWritePaths=" + data_dir + "\n",
-        "ExecStart=" + (prefix / "bin/linecald").string() + " --config " + (prefix / "etc/linecal/linecald.json").string() + "\n"}) {
+  for (const std::string& key : std::vector<std::string>{
+           "Type=notify\n", "WatchdogSec=10\n", "LimitNOFILE=65536\n", "User=linecal\n",
+           "NoNewPrivileges=yes\n", "ProtectSystem=strict\n", "ReadWritePaths=" + data_dir + "\n",
+           "ExecStart=" + (prefix / "bin/linecald").string() + " --config " +
+               (prefix / "etc/linecal/linecald.json").string() + "\n"}) {
     EXPECT_NE(unit.find(key), std::string::npos) << key;
   }
   if (std::system("command -v systemd-analyze > /dev/null 2>&1") == 0) {
-    const std::string verify = "systemd-analyze verify " + (prefix / "lib/systemd/system/linecald.service").string() +
-                               " > " + Scratch("verify.log") + " 2>&1";
+    const std::string verify = "systemd-analyze verify " +
+                               (prefix / "lib/systemd/system/linecald.service").string() + " > " +
+                               Scratch("verify.log") + " 2>&1";
     EXPECT_EQ(std::system(verify.c_str()), 0) << ReadFile(Scratch("verify.log"));
   }
 
@@ -158,7 +164,8 @@ TEST(InstalledDaemon, UnitConfigAndNotifications) {
   }
   const std::string ready = notify.Receive(milliseconds(30000));
   EXPECT_EQ(ready.rfind("READY=1\nSTATUS=listening on 127.0.0.1:0 (port ", 0), 0u)
-      << ready << "\n" << ReadFile(Scratch("daemon.log"));
+      << ready << "\n"
+      << ReadFile(Scratch("daemon.log"));
   int pings = 0;
   for (int i = 0; i < 3; ++i) pings += notify.Receive(milliseconds(2000)) == "WATCHDOG=1";
   EXPECT_EQ(pings, 3);

@@ -16,10 +16,10 @@
 #include <sstream>
 #include <string>
 
-#include "station/pipeline/capture_calibration.h"
 #include "daemon/web/operator_actions.h"
 #include "daemon/web/web_server.h"
 #include "station/camera/camera_model.h"
+#include "station/pipeline/capture_calibration.h"
 #include "tests/daemon/scratch_dir.h"
 #include "tests/daemon/web/reference_core.h"
 

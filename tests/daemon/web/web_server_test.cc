@@ -190,11 +190,10 @@ TEST_F(WebServerTest, LoginWithTheTokenGivesASessionCookie) {
   ASSERT_EQ(status_json["sensors"].size(), 2u);
   EXPECT_EQ(status_json["sensors"][0],
             (json{{"name", "front_camera"}, {"kind", "camera"}, {"source", "simulator"}}));
-  EXPECT_EQ(GetJson("/api/session", cookie).second,
-            (json{{"login_required", true},
-                  {"logged_in", true},
-                  {"operator_login", false},
-                  {"role", "read-only"}}));
+  EXPECT_EQ(GetJson("/api/session", cookie).second, (json{{"login_required", true},
+                                                          {"logged_in", true},
+                                                          {"operator_login", false},
+                                                          {"role", "read-only"}}));
 
   // A made-up session id is refused; a logged-out one too.
   EXPECT_EQ(GetJson("/api/status", "linecal_session=" + std::string(64, 'a')).first, 401);
@@ -208,11 +207,10 @@ TEST_F(WebServerTest, LoginWithTheTokenGivesASessionCookie) {
 TEST_F(WebServerTest, WithoutATokenNoLoginIsNeeded) {
   Start("");
   EXPECT_EQ(GetJson("/api/status").first, 200);
-  EXPECT_EQ(GetJson("/api/session").second,
-            (json{{"login_required", false},
-                  {"logged_in", true},
-                  {"operator_login", false},
-                  {"role", "read-only"}}));
+  EXPECT_EQ(GetJson("/api/session").second, (json{{"login_required", false},
+                                                  {"logged_in", true},
+                                                  {"operator_login", false},
+                                                  {"role", "read-only"}}));
   int status = 0;
   EXPECT_EQ(Login("anything", &status), "");
   EXPECT_EQ(status, 409);

@@ -20,8 +20,8 @@ namespace {
 
 using test_scene::BoardView;
 using test_scene::CleanRender;
-using test_scene::NoisyRender;
 using test_scene::FeatureRmsPx;
+using test_scene::NoisyRender;
 using test_scene::RenderView;
 
 // docs/acceptance.md's sub-pixel bars.
@@ -227,8 +227,16 @@ TEST(ApriltagDetectorTest, FoundThroughAStrongLensAndAFisheye) {
     double yaw_deg;
   };
   const Case cases[] = {
-      {"strong pinhole, off the axis", reference_cameras::StrongPinhole(), 0.9, {0.25, -0.05}, -20.0},
-      {"strong pinhole, filling the view", reference_cameras::StrongPinhole(), 0.75, {0.0, -0.15}, 0.0},
+      {"strong pinhole, off the axis",
+       reference_cameras::StrongPinhole(),
+       0.9,
+       {0.25, -0.05},
+       -20.0},
+      {"strong pinhole, filling the view",
+       reference_cameras::StrongPinhole(),
+       0.75,
+       {0.0, -0.15},
+       0.0},
       {"fisheye, off the axis", reference_cameras::Fisheye190(), 0.55, {0.2, -0.1}, -25.0},
       {"fisheye, filling the view", reference_cameras::Fisheye190(), 0.45, {0.0, -0.15}, 0.0},
   };
@@ -397,8 +405,8 @@ TEST(ApriltagDetectorTest, PartialGridReportsOnlyCertainTags) {
 
 TEST(ApriltagDetectorTest, FindsNothingOnOtherBoards) {
   const Board board = Grid(2);
-  for (BoardType other : {BoardType::kAruco, BoardType::kRoundHole, BoardType::kChessboard,
-                          BoardType::kCircle}) {
+  for (BoardType other :
+       {BoardType::kAruco, BoardType::kRoundHole, BoardType::kChessboard, BoardType::kCircle}) {
     BoardView view;
     view.params.type = other;
     view.distance_m = 2.0;

@@ -19,8 +19,8 @@ namespace {
 
 using test_scene::BoardView;
 using test_scene::CleanRender;
-using test_scene::NoisyRender;
 using test_scene::FeatureRmsPx;
+using test_scene::NoisyRender;
 using test_scene::RenderView;
 
 // docs/acceptance.md's sub-pixel bars.
@@ -95,8 +95,8 @@ TEST(ArucoDetectorTest, FindsTheBoardOverAPoseGrid) {
     double distance_m, roll_deg, yaw_deg, pitch_deg;
   };
   const std::vector<Pose> poses = {
-      {1.5, 30, 50, 0},  {1.5, -30, 0, -50}, {2.5, 0, -50, 50}, {2.5, 30, 50, 50},
-      {4.0, -30, -50, 0}, {4.0, 0, 0, 50},   {4.0, 30, 50, -50}, {6.0, 15, 30, 30},
+      {1.5, 30, 50, 0},   {1.5, -30, 0, -50}, {2.5, 0, -50, 50},  {2.5, 30, 50, 50},
+      {4.0, -30, -50, 0}, {4.0, 0, 0, 50},    {4.0, 30, 50, -50}, {6.0, 15, 30, 30},
   };
   std::uint64_t seed = 10;
   for (const Pose& pose : poses) {
@@ -116,10 +116,10 @@ TEST(ArucoDetectorTest, FindsTheBoardOverAPoseGrid) {
     const CameraFrame frame = RenderView(view, o, seed++);
     ASSERT_EQ(frame.features.size(), 16u) << "the whole board must be in view";
     const Detection d = DetectAruco(frame.image8.view(), board);
-    SCOPED_TRACE(::testing::Message() << "distance " << pose.distance_m << " roll "
-                                      << pose.roll_deg << " yaw " << pose.yaw_deg << " pitch "
-                                      << pose.pitch_deg << " gamma " << o.gamma << ": "
-                                      << DetectReasonName(d.reason));
+    SCOPED_TRACE(::testing::Message()
+                 << "distance " << pose.distance_m << " roll " << pose.roll_deg << " yaw "
+                 << pose.yaw_deg << " pitch " << pose.pitch_deg << " gamma " << o.gamma << ": "
+                 << DetectReasonName(d.reason));
     ExpectAllMarkerCorners(d, board);
     int matched = 0;
     int unknown = 0;
@@ -448,8 +448,8 @@ TEST(ArucoDetectorTest, FindsNothingOnABoardFreeClutteredScene) {
   CameraRenderOptions o = NoisyRender();
   o.clutter = true;
   o.clutter_density = 1.0;
-  const absl::StatusOr<CameraFrame> frame = RenderCameraFrame(
-      test_scene::TestCamera(), test_scene::TestCameraPose(), layout, o, 7);
+  const absl::StatusOr<CameraFrame> frame =
+      RenderCameraFrame(test_scene::TestCamera(), test_scene::TestCameraPose(), layout, o, 7);
   ASSERT_TRUE(frame.ok()) << frame.status();
   for (BoardType type : {BoardType::kAruco, BoardType::kRoundHole}) {
     const Detection d = DetectAruco(frame->image8.view(), MakeBoard(type));
@@ -462,8 +462,8 @@ TEST(ArucoDetectorTest, FindsNothingOnABoardFreeClutteredScene) {
 void DrawMarker(Image8* img, int id, int x0, int y0, int cell) {
   for (int r = 0; r < kAruco4x4MarkerCells; ++r) {
     for (int c = 0; c < kAruco4x4MarkerCells; ++c) {
-      const bool border = r == 0 || c == 0 || r == kAruco4x4MarkerCells - 1 ||
-                          c == kAruco4x4MarkerCells - 1;
+      const bool border =
+          r == 0 || c == 0 || r == kAruco4x4MarkerCells - 1 || c == kAruco4x4MarkerCells - 1;
       const bool white = !border && Aruco4x4CellIsWhite(kAruco4x4_50Codes[id], r - 1, c - 1);
       for (int y = 0; y < cell; ++y) {
         for (int x = 0; x < cell; ++x) {

@@ -336,8 +336,8 @@ TEST(Board, AprilGridOfAnySizeSpacingAndStartId) {
   ASSERT_TRUE(b.has_value());
   constexpr double kTag = 0.044, kGap = 0.011, kPitch = kTag + kGap;
   // 4 pitches + one gap of corner squares + 2 x 2 gaps of margin, by 3 pitches + 5 gaps.
-  ExpectNear(b->page_size_m(), Eigen::Vector2d(4 * kPitch + 5 * kGap, 3 * kPitch + 5 * kGap),
-             1e-12, "page");
+  ExpectNear(b->page_size_m(), Eigen::Vector2d(4 * kPitch + 5 * kGap, 3 * kPitch + 5 * kGap), 1e-12,
+             "page");
   ASSERT_EQ(b->features().size(), 48u);
   const std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)> family(tag36h11_create(),
                                                                                 tag36h11_destroy);
@@ -557,7 +557,7 @@ TEST(Board, SquareGridCornersIdsAndPaint) {
     EXPECT_EQ(black, 1) << f.id;
   }
   // The gaps, their crossings and the margin are white; square centres black.
-  EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.05, 0.075)), Paint::kBlack);  // square (0, 0)
+  EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.05, 0.075)), Paint::kBlack);   // square (0, 0)
   EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.025, 0.075)), Paint::kWhite);  // gap right of it
   EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.025, 0.05)), Paint::kWhite);   // crossing
   EXPECT_EQ(b.PaintAt(Eigen::Vector2d(-0.08, 0.075)), Paint::kWhite);   // margin

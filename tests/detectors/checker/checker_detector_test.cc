@@ -16,12 +16,12 @@ namespace linecal {
 namespace {
 
 using test_scene::BoardView;
+using test_scene::CleanRender;
 using test_scene::ExpectComplete;
+using test_scene::FeatureRmsPx;
 using test_scene::kCleanRmsBarPx;
 using test_scene::kNoisyRmsBarPx;
-using test_scene::CleanRender;
 using test_scene::NoisyRender;
-using test_scene::FeatureRmsPx;
 using test_scene::RenderView;
 
 BoardParams Checker(int cols, int rows, double square_m) {
@@ -82,9 +82,8 @@ TEST(CheckerDetectorTest, PoseGridWithNoiseBlurAndLighting) {
           const Detection d = DetectChecker(frame.image8.view(), board);
           ++views;
           if (!d.found) {
-            ADD_FAILURE() << "roll " << roll << " yaw " << yaw << " pitch " << pitch
-                          << " distance " << distance << " noisy " << noisy << ": "
-                          << DetectReasonName(d.reason);
+            ADD_FAILURE() << "roll " << roll << " yaw " << yaw << " pitch " << pitch << " distance "
+                          << distance << " noisy " << noisy << ": " << DetectReasonName(d.reason);
             continue;
           }
           ++detected;
@@ -188,8 +187,7 @@ TEST(CheckerDetectorTest, BadInputGivesAReason) {
   huge.width = kMaxImageSide + 1;
   EXPECT_EQ(DetectChecker(huge, board).reason, DetectReason::kBadImage);
   EXPECT_EQ(DetectChecker(Image8(320, 240, 0).view(), board).reason, DetectReason::kLowContrast);
-  EXPECT_EQ(DetectChecker(Image8(320, 240, 255).view(), board).reason,
-            DetectReason::kLowContrast);
+  EXPECT_EQ(DetectChecker(Image8(320, 240, 255).view(), board).reason, DetectReason::kLowContrast);
   const Image8 noise = test_scene::UniformNoiseImage(320, 240);
   const Detection d = DetectChecker(noise.view(), board);
   EXPECT_FALSE(d.found);

@@ -8,12 +8,11 @@
 // show, checked there too (detectors_photos_test).
 #include <gtest/gtest.h>
 
-#include <cmath>
-#include <vector>
-
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <cmath>
+#include <vector>
 
 #include "detectors/checker/checker_detector.h"
 
@@ -95,8 +94,8 @@ Image8 Draw(const Print& print, const Lens& lens) {
     for (int u = 0; u < image.width; ++u) {
       double sum = 0.0;
       for (int k = 0; k < 16; ++k) {
-        sum += Paint(print, BoardPoint(lens, H_inv, u - 0.375 + 0.25 * (k % 4),
-                                       v - 0.375 + 0.25 * (k / 4)));
+        sum += Paint(
+            print, BoardPoint(lens, H_inv, u - 0.375 + 0.25 * (k % 4), v - 0.375 + 0.25 * (k / 4)));
       }
       image.at(u, v) = static_cast<std::uint8_t>(std::lround(sum / 16.0));
     }
@@ -109,11 +108,10 @@ Image8 Draw(const Print& print, const Lens& lens) {
 Lens WideView(const Print& print) {
   Lens lens;
   constexpr double kDeg = 3.14159265358979 / 180.0;
-  const Eigen::Matrix3d R =
-      (Eigen::AngleAxisd(15 * kDeg, Eigen::Vector3d::UnitZ()) *
-       Eigen::AngleAxisd(25 * kDeg, Eigen::Vector3d::UnitY()) *
-       Eigen::AngleAxisd(20 * kDeg, Eigen::Vector3d::UnitX()))
-          .toRotationMatrix();
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(15 * kDeg, Eigen::Vector3d::UnitZ()) *
+                             Eigen::AngleAxisd(25 * kDeg, Eigen::Vector3d::UnitY()) *
+                             Eigen::AngleAxisd(20 * kDeg, Eigen::Vector3d::UnitX()))
+                                .toRotationMatrix();
   // Far enough that the board's half width (square units) spans 300 px at the centre.
   const double z = lens.f * 0.5 * (print.cols + 1) / 300.0;
   const Eigen::Vector3d centre(0.5 * (print.cols - 1), 0.5 * (print.rows - 1), 0.0);

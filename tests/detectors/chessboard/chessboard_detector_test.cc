@@ -172,7 +172,8 @@ TEST(ChessboardDetectorTest, HardLightingAndNoiseStillFindTheBoard) {
       const Detection d = DetectChessboard(frame.image8.view(), board);
       ++views;
       if (!d.found) {
-        ADD_FAILURE() << "gradient towards " << direction << " deg, gamma " << gamma << ": " << DetectReasonName(d.reason);
+        ADD_FAILURE() << "gradient towards " << direction << " deg, gamma " << gamma << ": "
+                      << DetectReasonName(d.reason);
         continue;
       }
       ++found;
@@ -333,7 +334,8 @@ TEST(ChessboardDetectorTest, SpeedAt1280x720) {
     const Detection d = DetectChessboard(small.image8.view(), board);
     EXPECT_TRUE(d.found);
   });
-  std::printf("chessboard 1280x720, second path: %.2f ms CPU (best of %d)\n", second_path_ms, kRuns);
+  std::printf("chessboard 1280x720, second path: %.2f ms CPU (best of %d)\n", second_path_ms,
+              kRuns);
 }
 
 }  // namespace

@@ -104,8 +104,8 @@ TEST(ContoursTest, FindsARotatedSquareAndNotADiscOrATriangle) {
   std::vector<Eigen::Vector2d> square;
   for (int k = 0; k < 4; ++k) {
     const double t = a + k * std::numbers::pi / 2.0 + std::numbers::pi / 4.0 * 5.0;
-    square.push_back(Eigen::Vector2d(50, 60) + 20.0 * std::sqrt(2.0) *
-                                                   Eigen::Vector2d(std::cos(t), std::sin(t)));
+    square.push_back(Eigen::Vector2d(50, 60) +
+                     20.0 * std::sqrt(2.0) * Eigen::Vector2d(std::cos(t), std::sin(t)));
   }
   FillConvex(&img, square);
   // A disc of radius 18 at (110, 60) and a triangle at the right.
@@ -125,7 +125,8 @@ TEST(ContoursTest, FindsARotatedSquareAndNotADiscOrATriangle) {
   double turn = 0.0;
   for (int k = 0; k < 4; ++k) {
     double best = 1e9;
-    for (const Eigen::Vector2d& c : square) best = std::min(best, (quads[0].corners_px[k] - c).norm());
+    for (const Eigen::Vector2d& c : square)
+      best = std::min(best, (quads[0].corners_px[k] - c).norm());
     EXPECT_LT(best, kContourCornerTolPx) << "corner " << k;
     const Eigen::Vector2d e0 = quads[0].corners_px[(k + 1) % 4] - quads[0].corners_px[k];
     const Eigen::Vector2d e1 = quads[0].corners_px[(k + 2) % 4] - quads[0].corners_px[(k + 1) % 4];
@@ -138,8 +139,8 @@ TEST(ContoursTest, ChamferedSquareIsAQuadOnlyWhenMoreVerticesAreAllowed) {
   Image8 img = Blank(160, 80);
   // A 40 px square at (10..50, 20..60) with every corner cut by 9 px along each side: eight
   // vertices that Douglas-Peucker keeps, too far apart to merge.
-  FillConvex(&img, {{19, 20}, {41, 20}, {50, 29}, {50, 51}, {41, 60}, {19, 60}, {10, 51},
-                    {10, 29}});
+  FillConvex(&img,
+             {{19, 20}, {41, 20}, {50, 29}, {50, 51}, {41, 60}, {19, 60}, {10, 51}, {10, 29}});
   // A regular hexagon of radius 20 at (110, 40): its largest quad holds two thirds of it.
   std::vector<Eigen::Vector2d> hexagon;
   for (int k = 0; k < 6; ++k) {

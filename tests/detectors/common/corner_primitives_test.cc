@@ -152,7 +152,8 @@ TEST(SaddleFitTest, PatchRefinementEqualsTheWholeBlurredImage) {
     saddle.half_window = std::clamp(static_cast<int>(side_px / 3.0), 2, 7);
     const Eigen::Vector2d start(38.1, 21.9);
     const std::optional<Eigen::Vector2d> whole = RefineSaddle(blurred, start, saddle);
-    const std::optional<Eigen::Vector2d> patch = RefineXCornerOnPatch(img.view(), start, side_px, 1.5);
+    const std::optional<Eigen::Vector2d> patch =
+        RefineXCornerOnPatch(img.view(), start, side_px, 1.5);
     ASSERT_TRUE(whole.has_value());
     ASSERT_TRUE(patch.has_value());
     EXPECT_NEAR((*whole - *patch).norm(), 0.0, 1e-4);
@@ -214,8 +215,9 @@ TEST(XCornersTest, FindsTheXCornerNotTheLCornerWithItsGeometry) {
             tol);
   EXPECT_GT(std::max(std::abs(corners[0].line_a.dot(l2)), std::abs(corners[0].line_b.dot(l2))),
             tol);
-  EXPECT_GT(corners[0].line_a.x() * corners[0].line_b.y() - corners[0].line_a.y() * corners[0].line_b.x(),
-            0.0);
+  EXPECT_GT(
+      corners[0].line_a.x() * corners[0].line_b.y() - corners[0].line_a.y() * corners[0].line_b.x(),
+      0.0);
   // The dark sectors are where the two sides disagree, which holds the bisector at angle
   // (a1 + a2) / 2 (it is left of line 1 and right of line 2).
   const double dark_angle = 0.5 * (0.3 + 1.8);

@@ -1,11 +1,11 @@
 #include "detectors/common/homography.h"
 
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
 #include <cmath>
 #include <random>
 #include <vector>
-
-#include <Eigen/Geometry>
-#include <gtest/gtest.h>
 
 namespace linecal {
 namespace {

@@ -1,8 +1,8 @@
 #include "detectors/core/image_view.h"
 
-#include <cstring>
-
 #include <gtest/gtest.h>
+
+#include <cstring>
 
 namespace linecal {
 namespace {

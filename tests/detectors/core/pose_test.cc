@@ -1,10 +1,10 @@
 #include "detectors/core/pose.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <numbers>
 #include <random>
-
-#include <gtest/gtest.h>
 
 namespace linecal {
 namespace {
@@ -25,8 +25,9 @@ TEST(Rigid3dTest, IdentityLeavesPointsAlone) {
 
 TEST(Rigid3dTest, ClosedFormRotationAboutZ) {
   // 90 degrees about z maps x to y; then translate by (1, 2, 3).
-  const Rigid3d t(Eigen::Quaterniond(Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitZ())),
-                  Eigen::Vector3d(1, 2, 3));
+  const Rigid3d t(
+      Eigen::Quaterniond(Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitZ())),
+      Eigen::Vector3d(1, 2, 3));
   const Eigen::Vector3d p = t * Eigen::Vector3d(1, 0, 0);
   EXPECT_NEAR(p.x(), 1.0, kTight);
   EXPECT_NEAR(p.y(), 3.0, kTight);
@@ -98,7 +99,8 @@ TEST(MountingAnglesTest, RandomRoundTrip) {
   std::uniform_real_distribution<double> yaw(-3.1, 3.1), pitch(-1.5, 1.5), roll(-3.1, 3.1);
   for (int i = 0; i < 1000; ++i) {
     const YawPitchRoll a{yaw(rng), pitch(rng), roll(rng)};
-    const YawPitchRoll b = MountingAngles(MountingRotation(a, CameraBaseRotation()), CameraBaseRotation());
+    const YawPitchRoll b =
+        MountingAngles(MountingRotation(a, CameraBaseRotation()), CameraBaseRotation());
     EXPECT_NEAR(a.yaw, b.yaw, 1e-10);
     EXPECT_NEAR(a.pitch, b.pitch, 1e-10);
     EXPECT_NEAR(a.roll, b.roll, 1e-10);

@@ -110,10 +110,12 @@ TEST(RoundHoleCloudTest, AnOccludingPostIsNotAHole) {
     ASSERT_TRUE(d.found) << post_x << ": " << RoundHoleCloudReasonName(d.reason);
     const double worst = WorstHoleError(scene, d);
     const Rigid3d delta = d.T_lidar_board.Inverse() * scene.T_lidar_board;
-    std::printf("post at board x %.2f: worst hole %.1f mm, board y error %.1f mm (1-sigma %.1f)\n", post_x,
-                1e3 * worst, 1e3 * delta.translation().y(), 1e3 * std::sqrt(d.pose_covariance(4, 4)));
+    std::printf("post at board x %.2f: worst hole %.1f mm, board y error %.1f mm (1-sigma %.1f)\n",
+                post_x, 1e3 * worst, 1e3 * delta.translation().y(),
+                1e3 * std::sqrt(d.pose_covariance(4, 4)));
     EXPECT_LT(worst, 0.02) << post_x;  // docs/acceptance.md, 16 rings
-    EXPECT_LT(std::abs(delta.translation().y()), 4.0 * std::sqrt(d.pose_covariance(4, 4))) << post_x;
+    EXPECT_LT(std::abs(delta.translation().y()), 4.0 * std::sqrt(d.pose_covariance(4, 4)))
+        << post_x;
   }
 }
 
@@ -236,7 +238,8 @@ TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
           RoundHoleAt(FacingPose(distance, 30.0 * u(rng), 25.0 * u(rng), 0.15 * u(rng))));
       const Scene scene = SimulateLayout(beams, layout, 0.02, 2, 100 + run);
       const RoundHoleCloudDetection d = Detect(scene, Prior(scene.T_lidar_board, run));
-      ASSERT_TRUE(d.found) << sensor << " run " << run << ": " << RoundHoleCloudReasonName(d.reason);
+      ASSERT_TRUE(d.found) << sensor << " run " << run << ": "
+                           << RoundHoleCloudReasonName(d.reason);
       // The error in the board frame: T_true = T_est * (R(theta), t).
       const Rigid3d delta = d.T_lidar_board.Inverse() * scene.T_lidar_board;
       const Eigen::AngleAxisd aa(delta.RotationMatrix());
@@ -247,9 +250,10 @@ TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
     }
     const Eigen::Matrix<double, 6, 1> ratio = (sum_z2 / runs).cwiseSqrt();
     const double pooled = std::sqrt(sum_z2.sum() / (6.0 * runs));
-    std::printf("%-12s error / sigma over %d runs: theta_x %.2f theta_y %.2f theta_z %.2f "
-                "t_x %.2f t_y %.2f t_z %.2f, pooled %.2f\n",
-                sensor, runs, ratio(0), ratio(1), ratio(2), ratio(3), ratio(4), ratio(5), pooled);
+    std::printf(
+        "%-12s error / sigma over %d runs: theta_x %.2f theta_y %.2f theta_z %.2f "
+        "t_x %.2f t_y %.2f t_z %.2f, pooled %.2f\n",
+        sensor, runs, ratio(0), ratio(1), ratio(2), ratio(3), ratio(4), ratio(5), pooled);
     for (int k = 0; k < 6; ++k) {
       const bool theta_z = k == 2;
       EXPECT_GT(ratio(k), theta_z ? 0.6 : 0.75) << sensor << " component " << k;

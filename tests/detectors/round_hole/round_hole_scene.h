@@ -10,12 +10,12 @@
 #include <vector>
 
 #include "detectors/round_hole/round_hole_cloud.h"
-#include "tests/detectors/board_scene.h"
 #include "station/model/car_model.h"
 #include "station/model/pose_json.h"
 #include "station/model/station_layout.h"
 #include "station/sensors/lidar/lidar_format.h"
 #include "station/sim/lidar_sim.h"
+#include "tests/detectors/board_scene.h"
 
 namespace linecal {
 
@@ -120,7 +120,8 @@ inline double WorstHoleError(const Scene& scene, const RoundHoleCloudDetection& 
 // machine's load).
 template <typename Detect>
 auto TimedPerFrame(const Scene& scene, double* ms_per_frame, Detect&& detect) {
-  const std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(), scene.frames.end());
+  const std::vector<std::span<const RoundHoleCloudPoint>> views(scene.frames.begin(),
+                                                                scene.frames.end());
   const double start_ms = test_scene::ThreadCpuMs();
   auto result = detect(std::span<const std::span<const RoundHoleCloudPoint>>(views));
   const double elapsed_ms = test_scene::ThreadCpuMs() - start_ms;

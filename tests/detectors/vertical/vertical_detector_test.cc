@@ -19,11 +19,11 @@ namespace linecal {
 namespace {
 
 using test_scene::BoardView;
+using test_scene::CleanRender;
 using test_scene::ExpectComplete;
+using test_scene::FeatureRmsPx;
 using test_scene::kCleanRmsBarPx;
 using test_scene::kNoisyRmsBarPx;
-using test_scene::CleanRender;
-using test_scene::FeatureRmsPx;
 using test_scene::NoisyRender;
 using test_scene::RenderView;
 

@@ -2,12 +2,12 @@
 // the simulator (exact ground truth), detected in the view, mapped back to raw pixels.
 #include "station/camera/board_view.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <filesystem>
 #include <map>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "detectors/detect.h"
 #include "station/capture/capture.h"
@@ -28,8 +28,10 @@ struct Truth {
 class BoardViewScene : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new std::string((fs::temp_directory_path() / ("board_view_test_" + std::to_string(getpid()))).string());
-    auto station = ReadStationLayout(std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference.json");
+    dir_ = new std::string(
+        (fs::temp_directory_path() / ("board_view_test_" + std::to_string(getpid()))).string());
+    auto station =
+        ReadStationLayout(std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference.json");
     auto car = ReadCarModel(std::string(LINECAL_SOURCE_DIR) + "/deploy/cars/reference.json");
     ASSERT_TRUE(station.ok() && car.ok());
     SimulatorOptions o;
@@ -48,7 +50,9 @@ class BoardViewScene : public ::testing::Test {
     Truth t;
     for (const auto& s : summary_->ground_truth["sensors"]) {
       if (s["name"] != sensor) continue;
-      for (const auto& f : s["frames"][0]["features"]) t.uv[{f["board"].get<std::string>(), f["id"].get<int>()}] = Eigen::Vector2d(f["u"].get<double>(), f["v"].get<double>());
+      for (const auto& f : s["frames"][0]["features"])
+        t.uv[{f["board"].get<std::string>(), f["id"].get<int>()}] =
+            Eigen::Vector2d(f["u"].get<double>(), f["v"].get<double>());
     }
     return t;
   }
@@ -83,15 +87,15 @@ TEST_F(BoardViewScene, SurroundBoardsFoundInTheirViewsAtTheTruePixels) {
     ASSERT_TRUE(camera.ok());
     absl::StatusOr<Image8> image = ReadImage8(capture->PathOf(recorded.frames[0]));
     ASSERT_TRUE(image.ok());
-    const Rigid3d T_camera_station =
-        sensor->T_car_sensor_nominal.Inverse() * capture->manifest.aligner.T_station_car().Inverse();
+    const Rigid3d T_camera_station = sensor->T_car_sensor_nominal.Inverse() *
+                                     capture->manifest.aligner.T_station_car().Inverse();
     const Truth truth = TruthOf(recorded.name);
     int found = 0;
     for (const std::string& id : sensor->targets) {
       const StationBoard* board = capture->station.FindBoard(id);
       ASSERT_NE(board, nullptr);
-      std::optional<Detection> d =
-          DetectInBoardView(*camera, image->view(), T_camera_station * board->T_station_board, board->board);
+      std::optional<Detection> d = DetectInBoardView(
+          *camera, image->view(), T_camera_station * board->T_station_board, board->board);
       ASSERT_TRUE(d.has_value()) << id;
       if (!d->found) continue;
       ++found;
@@ -101,12 +105,14 @@ TEST_F(BoardViewScene, SurroundBoardsFoundInTheirViewsAtTheTruePixels) {
       // from edge lines) on the ArUco and round-hole markers, which are about as far off in the
       // raw image when the detector finds them there (rear_aruco: 0.27 px raw).
       const BoardType type = board->board.params().type;
-      const double bar = type == BoardType::kChecker                                     ? 0.05
+      const double bar = type == BoardType::kChecker                                      ? 0.05
                          : type == BoardType::kChessboard || type == BoardType::kVertical ? 0.15
                                                                                           : 0.35;
       EXPECT_LT(rms, bar) << id;
-      std::printf("%s %s: %zu features, rms %.4f px\n", recorded.name.c_str(), id.c_str(), d->features.size(), rms);
-      if (std::optional<Detection> raw = DetectBoard(image->view(), board->board); raw && raw->found) {
+      std::printf("%s %s: %zu features, rms %.4f px\n", recorded.name.c_str(), id.c_str(),
+                  d->features.size(), rms);
+      if (std::optional<Detection> raw = DetectBoard(image->view(), board->board);
+          raw && raw->found) {
         // Where the raw image suffices, the view is no worse.
         EXPECT_LT(rms, 1.25 * RmsError(*raw, truth, id) + 0.01) << id;
       }
@@ -131,7 +137,8 @@ TEST(BoardView, RefusesBoardsBehindTheCameraAndBadOptions) {
   const Eigen::Vector2d page(0.8, 0.6);
   // Facing the camera 2 m ahead: a view; behind it (the fisheye's valid region ends before
   // the negative axis) or edge-on: refused with the reason.
-  const Rigid3d facing(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX())), {0, 0, 2});
+  const Rigid3d facing(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX())),
+                       {0, 0, 2});
   absl::StatusOr<BoardView> view = BoardView::Render(*camera, raw.view(), facing, page);
   ASSERT_TRUE(view.ok()) << view.status();
   EXPECT_EQ(view->image().at(view->image().width / 2, view->image().height / 2), 100);
@@ -140,10 +147,13 @@ TEST(BoardView, RefusesBoardsBehindTheCameraAndBadOptions) {
   ASSERT_TRUE(centre.has_value());
   EXPECT_NEAR(centre->x(), 320, 1.0);
   EXPECT_NEAR(centre->y(), 240, 1.0);
-  const Rigid3d edge_on(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY())), {0, 0, 2});
-  EXPECT_EQ(BoardView::Render(*camera, raw.view(), edge_on, page).status().code(), absl::StatusCode::kInvalidArgument);
+  const Rigid3d edge_on(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY())),
+                        {0, 0, 2});
+  EXPECT_EQ(BoardView::Render(*camera, raw.view(), edge_on, page).status().code(),
+            absl::StatusCode::kInvalidArgument);
   const Rigid3d behind(Eigen::Quaterniond::Identity(), {0, 0, -2});
-  EXPECT_EQ(BoardView::Render(*camera, raw.view(), behind, page).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(BoardView::Render(*camera, raw.view(), behind, page).status().code(),
+            absl::StatusCode::kInvalidArgument);
   BoardViewOptions bad;
   bad.scale = 0;
   absl::Status s = BoardView::Render(*camera, raw.view(), facing, page, bad).status();

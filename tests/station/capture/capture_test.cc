@@ -2,12 +2,12 @@
 // is refused with a message naming the offending path and field.
 #include "station/capture/capture.h"
 
-#include <filesystem>
-#include <functional>
-#include <fstream>
-#include <string>
-
 #include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <string>
 
 #include "station/io/image_io.h"
 #include "station/model/vin.h"
@@ -28,7 +28,9 @@ void WriteBytes(const fs::path& p, const std::string& bytes) {
 class CaptureTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::path(testing::TempDir()) / ("capture_" + std::string(testing::UnitTest::GetInstance()->current_test_info()->name()));
+    dir_ =
+        fs::path(testing::TempDir()) /
+        ("capture_" + std::string(testing::UnitTest::GetInstance()->current_test_info()->name()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
     absl::StatusOr<StationLayout> st = ReadStationLayout(kDeploy + "/stations/reference.json");
@@ -47,9 +49,21 @@ class CaptureTest : public ::testing::Test {
     WriteBytes(dir_ / "roof_lidar/packets.pcap", "pcap");
     WriteBytes(dir_ / "front_radar/can.log", "(0.0) can0 701#00");
     m_.sensors = {
-        {"front_camera", SensorKind::kCamera, {{"front_camera/frame-000000.png", 1763776000000000000}}, {}, {}},
-        {"roof_lidar", SensorKind::kLidar, {}, CaptureFile{"roof_lidar/packets.pcap", 1763776000000000000}, {}},
-        {"front_radar", SensorKind::kRadar, {}, {}, CaptureFile{"front_radar/can.log", 1763776000000000000}},
+        {"front_camera",
+         SensorKind::kCamera,
+         {{"front_camera/frame-000000.png", 1763776000000000000}},
+         {},
+         {}},
+        {"roof_lidar",
+         SensorKind::kLidar,
+         {},
+         CaptureFile{"roof_lidar/packets.pcap", 1763776000000000000},
+         {}},
+        {"front_radar",
+         SensorKind::kRadar,
+         {},
+         {},
+         CaptureFile{"front_radar/can.log", 1763776000000000000}},
     };
   }
 
@@ -72,7 +86,8 @@ class CaptureTest : public ::testing::Test {
   void ExpectError(const std::string& expected) {
     absl::StatusOr<Capture> c = ReadCapture(dir_.string());
     ASSERT_FALSE(c.ok());
-    EXPECT_NE(std::string(c.status().message()).find(expected), std::string::npos) << c.status().message();
+    EXPECT_NE(std::string(c.status().message()).find(expected), std::string::npos)
+        << c.status().message();
   }
 
   fs::path dir_;
@@ -137,13 +152,15 @@ TEST_F(CaptureTest, KindMismatchIsNamed) {
 }
 
 TEST_F(CaptureTest, MissingFileIsNamed) {
-  WriteWith([](nlohmann::json& j) { j["sensors"][0]["frames"][0]["path"] = "front_camera/nope.png"; });
+  WriteWith(
+      [](nlohmann::json& j) { j["sensors"][0]["frames"][0]["path"] = "front_camera/nope.png"; });
   ExpectError("sensors[0].frames[0].path: no such file 'front_camera/nope.png'");
 }
 
 TEST_F(CaptureTest, PathsCannotEscape) {
   WriteWith([](nlohmann::json& j) { j["sensors"][0]["frames"][0]["path"] = "../../etc/passwd"; });
-  ExpectError("sensors[0].frames[0].path: '../../etc/passwd' must be a relative path inside the capture");
+  ExpectError(
+      "sensors[0].frames[0].path: '../../etc/passwd' must be a relative path inside the capture");
   WriteWith([](nlohmann::json& j) { j["sensors"][0]["frames"][0]["path"] = "/etc/passwd"; });
   ExpectError("must be a relative path inside the capture");
 }
@@ -252,13 +269,14 @@ TEST_F(CaptureTest, ManifestWithTooManyFramesIsRefusedBeforeItsFiles) {
   WriteWith([](nlohmann::json& j) {
     nlohmann::json frames = nlohmann::json::array();
     for (int k = 0; k < 2000; ++k) {
-      frames.push_back({{"path", "front_camera/f" + std::to_string(k) + ".png"},
-                        {"t_ns", 1763776000000000000}});
+      frames.push_back(
+          {{"path", "front_camera/f" + std::to_string(k) + ".png"}, {"t_ns", 1763776000000000000}});
     }
     j["sensors"][0]["frames"] = frames;
   });
-  ExpectError("sensors[0].frames: 2000 frames exceed the budget of 1000 "
-              "(input_budget.max_manifest_frames)");
+  ExpectError(
+      "sensors[0].frames: 2000 frames exceed the budget of 1000 "
+      "(input_budget.max_manifest_frames)");
 }
 
 TEST_F(CaptureTest, FileOverTheByteBudgetIsRefusedByReadCapture) {
@@ -285,9 +303,10 @@ TEST_F(CaptureTest, CheckCaptureDataRefusesAGarbageCanLog) {
   // ReadCapture looks at names and sizes only; the data check parses the log as calibration.
   const absl::Status s = CheckCaptureData(*c);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(std::string(s.message()).find("sensors[2].can_log: " + (dir_ / "front_radar/can.log")
-                                              .string() + ":2: expected '(seconds.micros) "
-                                              "interface ID#DATA', got 2 field(s)"),
+  EXPECT_NE(std::string(s.message())
+                .find("sensors[2].can_log: " + (dir_ / "front_radar/can.log").string() +
+                      ":2: expected '(seconds.micros) "
+                      "interface ID#DATA', got 2 field(s)"),
             std::string::npos)
       << s;
   EXPECT_EQ(std::string(s.message()).find("hunter2"), std::string::npos) << s;
@@ -306,10 +325,10 @@ TEST_F(CaptureTest, CheckCaptureDataRefusesATruncatedPcd) {
   ASSERT_TRUE(c.ok()) << c.status();
   const absl::Status s = CheckCaptureData(*c);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(std::string(s.message()).find("sensors[1].frames[0]: " +
-                                          (dir_ / "roof_lidar/scan-000000.pcd").string() +
-                                          ": not a readable PCD file (1000 points of 12 bytes do "
-                                          "not fit the file's 100 bytes of data)"),
+  EXPECT_NE(std::string(s.message())
+                .find("sensors[1].frames[0]: " + (dir_ / "roof_lidar/scan-000000.pcd").string() +
+                      ": not a readable PCD file (1000 points of 12 bytes do "
+                      "not fit the file's 100 bytes of data)"),
             std::string::npos)
       << s;
 }

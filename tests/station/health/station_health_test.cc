@@ -180,8 +180,8 @@ TEST(StationHealth, StillStationNeverAlarmsInAThousandCars) {
     std::vector<HealthCycle> cycles;
     for (int64_t id = 1; id <= 1000; ++id) {
       cycles.push_back(line.Car(id, 1'000'000));
-      ASSERT_TRUE(AlarmsAt(car, cycles).empty()) << "seed " << seed << ": false alarm at car "
-                                                 << id;
+      ASSERT_TRUE(AlarmsAt(car, cycles).empty())
+          << "seed " << seed << ": false alarm at car " << id;
     }
   }
 }

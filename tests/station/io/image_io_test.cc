@@ -246,8 +246,10 @@ TEST_F(ImageIoTest, DecodeImage8ReadsBytesAsTheFile) {
   few.max_image_pixels = 40 * 30 - 1;
   EXPECT_NE(DecodeImage8(png, "photo", few).status().message().find("photo: 1200 pixels exceed"),
             std::string::npos);
-  EXPECT_EQ(DecodeImage8(png.substr(0, png.size() / 2), "photo", {}).status().message().rfind(
-                "photo: bad PNG", 0),
+  EXPECT_EQ(DecodeImage8(png.substr(0, png.size() / 2), "photo", {})
+                .status()
+                .message()
+                .rfind("photo: bad PNG", 0),
             0u);
 }
 

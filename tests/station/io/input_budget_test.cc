@@ -3,6 +3,7 @@
 // the file, the value, the limit and its key in the message.
 #include "station/io/input_budget.h"
 
+#include <gtest/gtest.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -11,8 +12,6 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "station/io/candump.h"
 #include "station/io/image_io.h"
@@ -48,9 +47,9 @@ TEST(InputBudget, TinyPngClaimingHugeSizeIsRefusedBeforeDecoding) {
   WriteBytes(png, bytes);
   const absl::StatusOr<Image8> image = ReadImage8(png.string(), InputBudget{});
   ASSERT_FALSE(image.ok());
-  EXPECT_EQ(image.status().message(),
-            png.string() + ": 268435456 pixels exceed the budget of 50000000 "
-                           "(input_budget.max_image_pixels)");
+  EXPECT_EQ(image.status().message(), png.string() +
+                                          ": 268435456 pixels exceed the budget of 50000000 "
+                                          "(input_budget.max_image_pixels)");
 
   // The peak memory of the refusal, measured in a child process so that nothing else of
   // this test counts: a decode would take 1.6 GB; 32 MB is far above a header's read.
@@ -79,8 +78,9 @@ TEST(InputBudget, ImageWithinTheBudgetIsRead) {
   EXPECT_EQ(image->width, 100);
   budget.max_image_pixels = 4999;
   EXPECT_EQ(ReadImage8(png.string(), budget).status().message(),
-            png.string() + ": 5000 pixels exceed the budget of 4999 "
-                           "(input_budget.max_image_pixels)");
+            png.string() +
+                ": 5000 pixels exceed the budget of 4999 "
+                "(input_budget.max_image_pixels)");
   fs::remove(png);
 }
 
@@ -91,9 +91,9 @@ TEST(InputBudget, SparseTwoGigabyteCanLogIsRefusedByBytesUnread) {
   fs::resize_file(log, kTwoGiB);  // sparse: no disk space, and no read should happen
   const absl::StatusOr<std::vector<CanFrame>> frames = ReadCandumpLog(log, InputBudget{});
   ASSERT_FALSE(frames.ok());
-  EXPECT_EQ(frames.status().message(),
-            log.string() + ": 2147483648 bytes exceed the budget of 1073741824 "
-                           "(input_budget.max_file_bytes)");
+  EXPECT_EQ(frames.status().message(), log.string() +
+                                           ": 2147483648 bytes exceed the budget of 1073741824 "
+                                           "(input_budget.max_file_bytes)");
   fs::remove(log);
 }
 
@@ -106,9 +106,9 @@ TEST(InputBudget, CanLogOverTheLineBudgetIsRefused) {
   budget.max_can_lines = 10;
   const absl::StatusOr<std::vector<CanFrame>> frames = ReadCandumpLog(log, budget);
   ASSERT_FALSE(frames.ok());
-  EXPECT_EQ(frames.status().message(),
-            log.string() + ": 11 or more lines exceed the budget of 10 "
-                           "(input_budget.max_can_lines)");
+  EXPECT_EQ(frames.status().message(), log.string() +
+                                           ": 11 or more lines exceed the budget of 10 "
+                                           "(input_budget.max_can_lines)");
   budget.max_can_lines = 11;
   const absl::StatusOr<std::vector<CanFrame>> all = ReadCandumpLog(log, budget);
   ASSERT_TRUE(all.ok()) << all.status();
@@ -127,9 +127,9 @@ TEST(InputBudget, PcdClaimingHundredMillionPointsIsRefused) {
   fs::resize_file(pcd, header.size() + (12u << 20));
   const absl::StatusOr<PcdCloud> cloud = ReadPcd(pcd, InputBudget{});
   ASSERT_FALSE(cloud.ok());
-  EXPECT_EQ(cloud.status().message(),
-            pcd.string() + ": 100000000 points exceed the budget of 5000000 "
-                           "(input_budget.max_scan_points)");
+  EXPECT_EQ(cloud.status().message(), pcd.string() +
+                                          ": 100000000 points exceed the budget of 5000000 "
+                                          "(input_budget.max_scan_points)");
   fs::remove(pcd);
 }
 
@@ -149,8 +149,9 @@ TEST(InputBudget, PcdFileAndDecodedDataAreHeldToTheByteBudget) {
   // The file fits, the 100 x 12 bytes it decodes to do not.
   budget.max_file_bytes = 1000;
   EXPECT_EQ(ReadPcd(pcd, budget).status().message(),
-            pcd.string() + ": decoded point data: 1200 bytes exceed the budget of 1000 "
-                           "(input_budget.max_file_bytes)");
+            pcd.string() +
+                ": decoded point data: 1200 bytes exceed the budget of 1000 "
+                "(input_budget.max_file_bytes)");
   budget.max_file_bytes = 1200;
   budget.max_scan_points = 99;
   EXPECT_EQ(ReadPcd(pcd, budget).status().message(),
@@ -169,9 +170,10 @@ TEST(InputBudget, CanLogErrorsDoNotQuoteTheFile) {
   const absl::StatusOr<std::vector<CanFrame>> three =
       ParseCandumpLog("\n(1.0) can0 SECRET0123456789abcdefSECRET\n", "can.log");
   ASSERT_FALSE(three.ok());
-  EXPECT_EQ(three.status().message(),
-            "can.log:2: no '#' in frame 'SECRET0123456789abcd...'");
-  EXPECT_EQ(Snippet("a\x01\xff" "bcdefghijklmnop"), "'a??bcdefghij...'");
+  EXPECT_EQ(three.status().message(), "can.log:2: no '#' in frame 'SECRET0123456789abcd...'");
+  EXPECT_EQ(Snippet("a\x01\xff"
+                    "bcdefghijklmnop"),
+            "'a??bcdefghij...'");
 }
 
 TEST(InputBudget, ValidateNamesTheKey) {

@@ -1,10 +1,10 @@
 // Station layout, car model, aligner and pose files: the shipped reference files load, and
 // every kind of broken file is rejected with a message that names the file and the field.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <numbers>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "station/model/aligner.h"
 #include "station/model/car_model.h"
@@ -30,11 +30,13 @@ TEST(StationLayoutTest, ReferenceStationLoads) {
   const Eigen::Vector3d n_station = chess->T_station_board.rotation() * Eigen::Vector3d::UnitZ();
   EXPECT_TRUE(n_station.isApprox(-Eigen::Vector3d::UnitX(), 1e-12));
   // Its top (y) is up.
-  EXPECT_TRUE((chess->T_station_board.rotation() * Eigen::Vector3d::UnitY()).isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
+  EXPECT_TRUE((chess->T_station_board.rotation() * Eigen::Vector3d::UnitY())
+                  .isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
   // A floor board with pitch 90 faces up.
   const StationBoard* floor = s->FindBoard("left_floor_grid");
   ASSERT_NE(floor, nullptr);
-  EXPECT_TRUE((floor->T_station_board.rotation() * Eigen::Vector3d::UnitZ()).isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
+  EXPECT_TRUE((floor->T_station_board.rotation() * Eigen::Vector3d::UnitZ())
+                  .isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
 }
 
 TEST(CarModelTest, ReferenceCarLoadsAndMatchesStation) {
@@ -60,7 +62,8 @@ TEST(CarModelTest, ReferenceCarLoadsAndMatchesStation) {
 TEST(CarModelTest, JsonRoundTripKeepsEverything) {
   absl::StatusOr<CarModel> car = ReadCarModel(kDeploy + "/cars/reference.json");
   ASSERT_TRUE(car.ok());
-  absl::StatusOr<CarModel> again = ParseCarModel(CarModelToJson(*car).dump(), kDeploy + "/cars/copy.json");
+  absl::StatusOr<CarModel> again =
+      ParseCarModel(CarModelToJson(*car).dump(), kDeploy + "/cars/copy.json");
   ASSERT_TRUE(again.ok()) << again.status();
   ASSERT_EQ(again->sensors.size(), car->sensors.size());
   for (size_t i = 0; i < car->sensors.size(); ++i) {
@@ -79,7 +82,8 @@ TEST(StationLayoutTest, JsonRoundTripKeepsPoses) {
   ASSERT_EQ(again->boards.size(), s->boards.size());
   for (size_t i = 0; i < s->boards.size(); ++i) {
     EXPECT_EQ(again->boards[i].id, s->boards[i].id);
-    EXPECT_TRUE(again->boards[i].T_station_board.Matrix().isApprox(s->boards[i].T_station_board.Matrix(), 1e-15));
+    EXPECT_TRUE(again->boards[i].T_station_board.Matrix().isApprox(
+        s->boards[i].T_station_board.Matrix(), 1e-15));
   }
 }
 
@@ -224,38 +228,68 @@ INSTANTIATE_TEST_SUITE_P(
     Cases, BrokenStationTest,
     ::testing::Values(
         BrokenCase{"syntax", R"({"format": )", "st.json:1:"},
-        BrokenCase{"wrong_format", R"({"format": "linecal.car", "version": 1, "name": "x"})", "st.json: format: expected 'linecal.station'"},
-        BrokenCase{"future_version", R"({"format": "linecal.station", "version": 9, "name": "x"})", "version: unsupported version 9"},
-        BrokenCase{"missing_name", R"({"format": "linecal.station", "version": 1})", "st.json: name: missing"},
-        BrokenCase{"unknown_board", "{" HDR R"(, "boards": [{"id": "a", "type": "chess", )" POSE "}]}",
+        BrokenCase{"wrong_format", R"({"format": "linecal.car", "version": 1, "name": "x"})",
+                   "st.json: format: expected 'linecal.station'"},
+        BrokenCase{"future_version", R"({"format": "linecal.station", "version": 9, "name": "x"})",
+                   "version: unsupported version 9"},
+        BrokenCase{"missing_name", R"({"format": "linecal.station", "version": 1})",
+                   "st.json: name: missing"},
+        BrokenCase{"unknown_board",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "chess", )" POSE "}]}",
                    "boards[0].type: unknown board type 'chess'"},
-        BrokenCase{"bad_scale", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "scale": -1, )" POSE "}]}",
+        BrokenCase{"bad_scale",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "scale": -1, )" POSE "}]}",
                    "boards[0].scale: bad_scale"},
-        BrokenCase{"wrong_type", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "scale": "big", )" POSE "}]}",
+        BrokenCase{"wrong_type",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "scale": "big", )" POSE
+                   "}]}",
                    "boards[0].scale: expected a number"},
-        BrokenCase{"bad_diameter", "{" HDR R"(, "boards": [{"id": "a", "type": "circle_grid", "diameter_m": 0.03, )" POSE "}]}",
+        BrokenCase{"bad_diameter",
+                   "{" HDR
+                   R"(, "boards": [{"id": "a", "type": "circle_grid", "diameter_m": 0.03, )" POSE
+                   "}]}",
                    "boards[0].diameter_m: bad_diameter"},
-        BrokenCase{"bad_layout", "{" HDR R"(, "boards": [{"id": "a", "type": "circle_grid", )"
+        BrokenCase{"bad_layout",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "circle_grid", )"
                    R"("hexagonal": true, "asymmetric": true, )" POSE "}]}",
                    "boards[0].hexagonal: bad_layout"},
-        BrokenCase{"bad_gap", "{" HDR R"(, "boards": [{"id": "a", "type": "square_grid", "gap_m": 0, )" POSE "}]}",
+        BrokenCase{"bad_gap",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "square_grid", "gap_m": 0, )" POSE
+                   "}]}",
                    "boards[0].gap_m: bad_gap"},
-        BrokenCase{"bad_marker", "{" HDR R"(, "boards": [{"id": "a", "type": "charuco", "marker_m": 0.03, )" POSE "}]}",
+        BrokenCase{"bad_marker",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "charuco", "marker_m": 0.03, )" POSE
+                   "}]}",
                    "boards[0].marker_m: bad_marker"},
-        BrokenCase{"bad_tag_grid", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "tag_cols": 0, )" POSE "}]}",
+        BrokenCase{"bad_tag_grid",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "tag_cols": 0, )" POSE
+                   "}]}",
                    "boards[0].tag_cols: bad_tag_grid"},
-        BrokenCase{"bad_start_id", "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "start_id": 560, )" POSE "}]}",
+        BrokenCase{"bad_start_id",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "apriltag", "start_id": 560, )" POSE
+                   "}]}",
                    "boards[0].start_id: bad_start_id"},
-        BrokenCase{"missing_pose", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco"}]})", "boards[0].pose: missing"},
-        BrokenCase{"short_xyz", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "pose": {"xyz_m": [1, 2], "ypr_deg": [0, 0, 0]}}]})",
-                   "boards[0].pose.xyz_m: expected 3 numbers, got 2"},
-        BrokenCase{"typo_field", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "scael": 2, )" POSE "}]}",
+        BrokenCase{"missing_pose", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco"}]})",
+                   "boards[0].pose: missing"},
+        BrokenCase{
+            "short_xyz",
+            "{" HDR
+            R"(, "boards": [{"id": "a", "type": "aruco", "pose": {"xyz_m": [1, 2], "ypr_deg": [0, 0, 0]}}]})",
+            "boards[0].pose.xyz_m: expected 3 numbers, got 2"},
+        BrokenCase{"typo_field",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "scael": 2, )" POSE "}]}",
                    "boards[0].scael: unknown field"},
-        BrokenCase{"not_a_rotation", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "pose": {"matrix": [2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}}]})",
-                   "boards[0].pose.matrix: rotation part is not a rotation"},
-        BrokenCase{"duplicate_id", "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", )" POSE R"(}, {"id": "a", "type": "circle", )" POSE "}]}",
+        BrokenCase{
+            "not_a_rotation",
+            "{" HDR
+            R"(, "boards": [{"id": "a", "type": "aruco", "pose": {"matrix": [2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}}]})",
+            "boards[0].pose.matrix: rotation part is not a rotation"},
+        BrokenCase{"duplicate_id",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", )" POSE
+                   R"(}, {"id": "a", "type": "circle", )" POSE "}]}",
                    "boards[1].id: duplicate id 'a'"},
-        BrokenCase{"bad_rcs", "{" HDR R"(, "reflectors": [{"id": "r", "xyz_m": [1, 2, 3], "rcs_dbsm": 500}]})",
+        BrokenCase{"bad_rcs",
+                   "{" HDR R"(, "reflectors": [{"id": "r", "xyz_m": [1, 2, 3], "rcs_dbsm": 500}]})",
                    "reflectors[0].rcs_dbsm: must be within -20..60"}),
     [](const auto& info) { return std::string(info.param.name); });
 
@@ -269,40 +303,75 @@ TEST_P(BrokenCarTest, RejectedNamingTheField) {
 }
 
 #define CAR R"("format": "linecal.car", "version": 1, "id": "c", "sensors": )"
-#define TOL R"("nominal": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}, "tolerance": {"ypr_deg": [1, 1, 1], "xyz_m": [0.1, 0.1, 0.1]}, "targets": ["t"])"
-#define K R"("intrinsics": {"width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320, "cy": 240})"
+#define TOL \
+  R"("nominal": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}, "tolerance": {"ypr_deg": [1, 1, 1], "xyz_m": [0.1, 0.1, 0.1]}, "targets": ["t"])"
+#define K \
+  R"("intrinsics": {"width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320, "cy": 240})"
 
 INSTANTIATE_TEST_SUITE_P(
     Cases, BrokenCarTest,
     ::testing::Values(
-        BrokenCase{"bad_kind", "{" CAR R"([{"name": "s", "kind": "sonar", "model": "x", )" TOL "}]}",
+        BrokenCase{"bad_kind",
+                   "{" CAR R"([{"name": "s", "kind": "sonar", "model": "x", )" TOL "}]}",
                    "sensors[0].kind: must be camera, lidar or radar, got 'sonar'"},
-        BrokenCase{"bad_lidar_model", "{" CAR R"([{"name": "s", "kind": "lidar", "model": "hdl64", )" TOL "}]}",
+        BrokenCase{"bad_lidar_model",
+                   "{" CAR R"([{"name": "s", "kind": "lidar", "model": "hdl64", )" TOL "}]}",
                    "sensors[0].model: lidar model must be"},
-        BrokenCase{"missing_intrinsics", "{" CAR R"([{"name": "s", "kind": "camera", "model": "pinhole", )" TOL "}]}",
+        BrokenCase{"missing_intrinsics",
+                   "{" CAR R"([{"name": "s", "kind": "camera", "model": "pinhole", )" TOL "}]}",
                    "sensors[0].intrinsics: missing"},
-        BrokenCase{"negative_focal", "{" CAR R"([{"name": "s", "kind": "camera", "model": "pinhole", "intrinsics": {"width": 640, "height": 480, "fx": -5, "fy": 500, "cx": 320, "cy": 240}, )" TOL "}]}",
-                   "sensors[0].intrinsics: fx"},
-        BrokenCase{"huge_image", "{" CAR R"([{"name": "s", "kind": "camera", "model": "pinhole", "intrinsics": {"width": 20000, "height": 480, "fx": 5, "fy": 500, "cx": 320, "cy": 240}, )" TOL "}]}",
-                   "sensors[0].intrinsics.width: must be within 1..16384, got 20000"},
-        BrokenCase{"fisheye_with_p1", "{" CAR R"([{"name": "s", "kind": "camera", "model": "fisheye", "intrinsics": {"width": 640, "height": 480, "fx": 300, "fy": 300, "cx": 320, "cy": 240, "p1": 0.1}, )" TOL "}]}",
-                   "sensors[0].intrinsics.p1: unknown field"},
-        BrokenCase{"zero_tolerance", "{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", "nominal": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}, "tolerance": {"ypr_deg": [0, 1, 1], "xyz_m": [0.1, 0.1, 0.1]}, "targets": ["t"]}]})",
-                   "sensors[0].tolerance.ypr_deg[0]: must be within (0, 45], got 0"},
-        BrokenCase{"no_targets", "{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", "nominal": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}, "tolerance": {"ypr_deg": [1, 1, 1], "xyz_m": [0.1, 0.1, 0.1]}, "targets": []}]})",
-                   "sensors[0].targets: a sensor needs at least one target"},
-        BrokenCase{"radar_id", "{" CAR R"([{"name": "s", "kind": "radar", "model": "ars408", "radar_sensor_id": 9, )" TOL "}]}",
-                   "sensors[0].radar_sensor_id: must be within 0..7, got 9"},
-        BrokenCase{"intrinsics_on_radar", "{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", )" K ", " TOL "}]}",
+        BrokenCase{
+            "negative_focal",
+            "{" CAR
+            R"([{"name": "s", "kind": "camera", "model": "pinhole", "intrinsics": {"width": 640, "height": 480, "fx": -5, "fy": 500, "cx": 320, "cy": 240}, )" TOL
+            "}]}",
+            "sensors[0].intrinsics: fx"},
+        BrokenCase{
+            "huge_image",
+            "{" CAR
+            R"([{"name": "s", "kind": "camera", "model": "pinhole", "intrinsics": {"width": 20000, "height": 480, "fx": 5, "fy": 500, "cx": 320, "cy": 240}, )" TOL
+            "}]}",
+            "sensors[0].intrinsics.width: must be within 1..16384, got 20000"},
+        BrokenCase{
+            "fisheye_with_p1",
+            "{" CAR
+            R"([{"name": "s", "kind": "camera", "model": "fisheye", "intrinsics": {"width": 640, "height": 480, "fx": 300, "fy": 300, "cx": 320, "cy": 240, "p1": 0.1}, )" TOL
+            "}]}",
+            "sensors[0].intrinsics.p1: unknown field"},
+        BrokenCase{
+            "zero_tolerance",
+            "{" CAR
+            R"([{"name": "s", "kind": "radar", "model": "esr", "nominal": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}, "tolerance": {"ypr_deg": [0, 1, 1], "xyz_m": [0.1, 0.1, 0.1]}, "targets": ["t"]}]})",
+            "sensors[0].tolerance.ypr_deg[0]: must be within (0, 45], got 0"},
+        BrokenCase{
+            "no_targets",
+            "{" CAR
+            R"([{"name": "s", "kind": "radar", "model": "esr", "nominal": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}, "tolerance": {"ypr_deg": [1, 1, 1], "xyz_m": [0.1, 0.1, 0.1]}, "targets": []}]})",
+            "sensors[0].targets: a sensor needs at least one target"},
+        BrokenCase{
+            "radar_id",
+            "{" CAR
+            R"([{"name": "s", "kind": "radar", "model": "ars408", "radar_sensor_id": 9, )" TOL
+            "}]}",
+            "sensors[0].radar_sensor_id: must be within 0..7, got 9"},
+        BrokenCase{"intrinsics_on_radar",
+                   "{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", )" K ", " TOL "}]}",
                    "sensors[0].intrinsics: only cameras have intrinsics"},
-        BrokenCase{"missing_angles_file", "{" CAR R"([{"name": "s", "kind": "lidar", "model": "pandar64", "angles_file": "nope.csv", )" TOL "}]}",
-                   "sensors[0].angles_file: no such file"},
-        BrokenCase{"duplicate_name", "{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", )" TOL R"(}, {"name": "s", "kind": "radar", "model": "esr", )" TOL "}]}",
+        BrokenCase{
+            "missing_angles_file",
+            "{" CAR
+            R"([{"name": "s", "kind": "lidar", "model": "pandar64", "angles_file": "nope.csv", )" TOL
+            "}]}",
+            "sensors[0].angles_file: no such file"},
+        BrokenCase{"duplicate_name",
+                   "{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", )" TOL
+                   R"(}, {"name": "s", "kind": "radar", "model": "esr", )" TOL "}]}",
                    "sensors[1].name: duplicate sensor name 's'"}),
     [](const auto& info) { return std::string(info.param.name); });
 
 TEST(CarModelTest, MissingTargetIsNamed) {
-  absl::StatusOr<CarModel> car = ParseCarModel("{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", )" TOL "}]}", "car.json");
+  absl::StatusOr<CarModel> car = ParseCarModel(
+      "{" CAR R"([{"name": "s", "kind": "radar", "model": "esr", )" TOL "}]}", "car.json");
   ASSERT_TRUE(car.ok()) << car.status();
   StationLayout layout;
   layout.name = "st";
@@ -312,7 +381,8 @@ TEST(CarModelTest, MissingTargetIsNamed) {
 
 TEST(AlignerTest, TransformPutsCarOnTheFloor) {
   absl::StatusOr<JsonDocument> doc = JsonDocument::FromText(
-      R"({"a": {"longitudinal_offset_m": 0.05, "lateral_offset_m": -0.02, "thrust_angle_deg": 0.3}})", "req");
+      R"({"a": {"longitudinal_offset_m": 0.05, "lateral_offset_m": -0.02, "thrust_angle_deg": 0.3}})",
+      "req");
   ASSERT_TRUE(doc.ok());
   absl::StatusOr<AlignerMeasurement> a = ReadAligner(*doc->Root(), "a");
   ASSERT_TRUE(a.ok()) << a.status();
@@ -327,7 +397,8 @@ TEST(AlignerTest, TransformPutsCarOnTheFloor) {
 
 TEST(AlignerTest, ImplausibleValuesAreRejected) {
   absl::StatusOr<JsonDocument> doc = JsonDocument::FromText(
-      R"({"a": {"longitudinal_offset_m": 50, "lateral_offset_m": 0, "thrust_angle_deg": 0}})", "req");
+      R"({"a": {"longitudinal_offset_m": 50, "lateral_offset_m": 0, "thrust_angle_deg": 0}})",
+      "req");
   ASSERT_TRUE(doc.ok());
   absl::StatusOr<AlignerMeasurement> a = ReadAligner(*doc->Root(), "a");
   ASSERT_FALSE(a.ok());
@@ -335,7 +406,8 @@ TEST(AlignerTest, ImplausibleValuesAreRejected) {
 }
 
 TEST(PoseJsonTest, AnglesAndMatrixFormsAgree) {
-  const Rigid3d pose(MountingRotation({0.1, -0.2, 0.05}, CameraBaseRotation()), Eigen::Vector3d(1, 2, 3));
+  const Rigid3d pose(MountingRotation({0.1, -0.2, 0.05}, CameraBaseRotation()),
+                     Eigen::Vector3d(1, 2, 3));
   const nlohmann::json j = {{"p", PoseToJson(pose, CameraBaseRotation())}};
   // Drop the matrix to read the angle form alone.
   nlohmann::json angles_only = j;

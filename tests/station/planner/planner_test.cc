@@ -41,22 +41,25 @@ SensorModel Sensor(SensorKind kind, const std::string& model, const Eigen::Vecto
 
 // A station layout from its boards' and reflectors' JSON.
 StationLayout Layout(const std::string& boards, const std::string& reflectors = "") {
-  const std::string text = R"({"format": "linecal.station", "version": 1, "name": "t", "boards": [)" + boards +
-                           R"(], "reflectors": [)" + reflectors + "]}";
+  const std::string text =
+      R"({"format": "linecal.station", "version": 1, "name": "t", "boards": [)" + boards +
+      R"(], "reflectors": [)" + reflectors + "]}";
   absl::StatusOr<StationLayout> layout = ParseStationLayout(text, "test");
   EXPECT_TRUE(layout.ok()) << layout.status();
   return layout.ok() ? *layout : StationLayout{};
 }
 
-std::string BoardJson(const std::string& id, const std::string& type, double x, double y, double z, double yaw_deg,
-                      double scale = 1.0) {
-  return "{\"id\": \"" + id + "\", \"type\": \"" + type + "\", \"scale\": " + std::to_string(scale) +
-         ", \"pose\": {\"xyz_m\": [" + std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) +
+std::string BoardJson(const std::string& id, const std::string& type, double x, double y, double z,
+                      double yaw_deg, double scale = 1.0) {
+  return "{\"id\": \"" + id + "\", \"type\": \"" + type +
+         "\", \"scale\": " + std::to_string(scale) + ", \"pose\": {\"xyz_m\": [" +
+         std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) +
          "], \"ypr_deg\": [" + std::to_string(yaw_deg) + ", 0, 0]}}";
 }
 
-SensorAssessment AssessOrDie(const SensorModel& s, const StationLayout& layout, const FloorLimits* floor = nullptr,
-                             bool predict = false, const PlannerOptions& o = {}) {
+SensorAssessment AssessOrDie(const SensorModel& s, const StationLayout& layout,
+                             const FloorLimits* floor = nullptr, bool predict = false,
+                             const PlannerOptions& o = {}) {
   absl::StatusOr<SensorAssessment> a = AssessSensor(s, layout, floor, o, predict);
   EXPECT_TRUE(a.ok()) << a.status();
   return a.ok() ? *a : SensorAssessment{};
@@ -89,11 +92,12 @@ TEST(SmallestCellPx, FaceOnIsFOverDistanceAndObliqueIsSmaller) {
   const StationLayout face_on = Layout(BoardJson("b", "chessboard", 10, 0, 1.2, 0));
   const Rigid3d T_camera_station = s.T_car_sensor_nominal.Inverse();
   // A fronto-parallel 150 mm square 10 m away is 1000 * 0.15 / 10 = 15 px anywhere in the image.
-  EXPECT_NEAR(SmallestCellPx(camera, T_camera_station * face_on.boards[0].T_station_board, face_on.boards[0].board),
+  EXPECT_NEAR(SmallestCellPx(camera, T_camera_station * face_on.boards[0].T_station_board,
+                             face_on.boards[0].board),
               15.0, 1e-6);
   const StationLayout turned = Layout(BoardJson("b", "chessboard", 10, 0, 1.2, 60));
-  const double oblique =
-      SmallestCellPx(camera, T_camera_station * turned.boards[0].T_station_board, turned.boards[0].board);
+  const double oblique = SmallestCellPx(camera, T_camera_station * turned.boards[0].T_station_board,
+                                        turned.boards[0].board);
   EXPECT_GT(oblique, 6.0);  // about 15 cos(60°), the nearer end a little larger
   EXPECT_LT(oblique, 8.0);
 }
@@ -113,8 +117,10 @@ TEST(AssessCamera, FieldOfViewAndFeatureSize) {
   EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "chessboard", 9, 0, 1.2, 0))).reasons, Reasons{});
   PlannerOptions fine;
   fine.min_feature_px = 9;
-  EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "chessboard", 15, 0, 1.2, 0)), nullptr, false, fine).reasons,
-            Reasons{});
+  EXPECT_EQ(
+      AssessOrDie(s, Layout(BoardJson("b", "chessboard", 15, 0, 1.2, 0)), nullptr, false, fine)
+          .reasons,
+      Reasons{});
 }
 
 TEST(AssessCamera, PredictedSigmaIsLinearInTheCornerNoiseAndTightensWithFrames) {
@@ -137,7 +143,8 @@ TEST(AssessCamera, PredictedSigmaIsLinearInTheCornerNoiseAndTightensWithFrames) 
   // 5 px corners: far beyond a third of 1° / 3 cm.
   o.camera_frames = 1;
   o.corner_noise_px = 5;
-  EXPECT_EQ(AssessOrDie(s, layout, nullptr, true, o).reasons, Reasons{"uncertainty_above_tolerance"});
+  EXPECT_EQ(AssessOrDie(s, layout, nullptr, true, o).reasons,
+            Reasons{"uncertainty_above_tolerance"});
 }
 
 TEST(SegmentHitsBoard, ThroughThePageOnly) {
@@ -155,14 +162,20 @@ TEST(AssessCamera, OccludedByAnotherBoardNamesIt) {
   // The chessboard's left group (board x -1.2..-0.75 m, i.e. station y +0.75..+1.2) behind
   // an ArUco board halfway.
   const std::string target = BoardJson("b", "chessboard", 8, 0, 1.2, 0);
-  const SensorAssessment hidden = AssessOrDie(s, Layout(target + ", " + BoardJson("stray", "aruco", 4, 0.5, 1.2, 0)));
+  const SensorAssessment hidden =
+      AssessOrDie(s, Layout(target + ", " + BoardJson("stray", "aruco", 4, 0.5, 1.2, 0)));
   EXPECT_EQ(hidden.reasons, Reasons{"occluded_by_board"});
   ASSERT_EQ(hidden.targets.size(), 1u);
-  EXPECT_NE(hidden.targets[0].detail.find("'stray'"), std::string::npos) << hidden.targets[0].detail;
+  EXPECT_NE(hidden.targets[0].detail.find("'stray'"), std::string::npos)
+      << hidden.targets[0].detail;
   // Between the two groups it hides no feature.
-  EXPECT_EQ(AssessOrDie(s, Layout(target + ", " + BoardJson("stray", "vertical", 4, 0, 1.2, 0))).reasons, Reasons{});
+  EXPECT_EQ(
+      AssessOrDie(s, Layout(target + ", " + BoardJson("stray", "vertical", 4, 0, 1.2, 0))).reasons,
+      Reasons{});
   // Behind the target it hides nothing.
-  EXPECT_EQ(AssessOrDie(s, Layout(target + ", " + BoardJson("stray", "aruco", 10, 0.5, 1.2, 0))).reasons, Reasons{});
+  EXPECT_EQ(
+      AssessOrDie(s, Layout(target + ", " + BoardJson("stray", "aruco", 10, 0.5, 1.2, 0))).reasons,
+      Reasons{});
 }
 
 // The hidden share of a page counts its 24 x 24 samples behind other boards and surfaces. The
@@ -220,7 +233,8 @@ TEST(RingsThroughHole, CountsTheElevationsInsideTheHole) {
   std::vector<double> beams;
   for (int e = -15; e <= 15; ++e) beams.push_back(e * kDeg);
   beams.push_back(0.0);  // a second beam at 0°: the same ring
-  const Eigen::Vector3d facing(0, -1, 0);  // LiDAR frame: azimuth 0 is +y; the hole faces the sensor
+  const Eigen::Vector3d facing(0, -1,
+                               0);  // LiDAR frame: azimuth 0 is +y; the hole faces the sensor
   // A 0.12 m hole 5 m away spans ±1.375°: rings -1°, 0°, +1°.
   EXPECT_EQ(RingsThroughHole(beams, {0, 5, 0}, facing, 0.12), 3);
   // 10 m: ±0.69°, only 0°.
@@ -241,7 +255,8 @@ TEST(AssessLidar, TooFewRingsThroughTheHolesOfAFarBoard) {
   EXPECT_EQ(far.reasons, Reasons{"too_few_rings"});
   EXPECT_LE(far.targets[0].fewest_rings, 1);
   // A chessboard is no LiDAR target.
-  EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "chessboard", 3, 0, 1.0, 0))).reasons, Reasons{"wrong_target_type"});
+  EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "chessboard", 3, 0, 1.0, 0))).reasons,
+            Reasons{"wrong_target_type"});
   // Turned away.
   EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "round_hole", 3, 0, 1.0, 180))).reasons,
             Reasons{"board_outside_fov"});
@@ -260,12 +275,13 @@ TEST(AssessLidar, PredictedSigmaFromTheSimulatedDetector) {
 }
 
 FloorLimits TestFloor() {
-  absl::StatusOr<FloorLimits> f = ParseFloorLimits(R"({"format": "linecal.floor", "version": 1, "name": "t",
+  absl::StatusOr<FloorLimits> f =
+      ParseFloorLimits(R"({"format": "linecal.floor", "version": 1, "name": "t",
       "usable_area_m": [[-2, -5], [12, -5], [12, 5], [-2, 5]],
       "height_limits_m": [0, 2.5],
       "walls": [{"id": "w", "from_m": [12, -5], "to_m": [12, 5]}],
       "keep_out": [{"id": "aligner", "polygon_m": [[5, 1], [6, 1], [6, 3], [5, 3]]}]})",
-                                                   "floor.json");
+                       "floor.json");
   EXPECT_TRUE(f.ok()) << f.status();
   return f.ok() ? *f : FloorLimits{};
 }
@@ -275,14 +291,17 @@ TEST(AssessFloor, KeepOutUsableAreaAndHeight) {
   const SensorModel s = Sensor(SensorKind::kCamera, "pinhole", {0, 0, 1.2}, {"b"});
   PlannerOptions o;
   o.min_feature_px = 1;  // the floor checks alone
-  EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "aruco", 6, 0, 1.2, 0)), &floor, false, o).reasons, Reasons{});
+  EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "aruco", 6, 0, 1.2, 0)), &floor, false, o).reasons,
+            Reasons{});
   // The 1.1 m wide board at y = 1.3 reaches into the aligner zone (y 1..3, x 5..6).
-  const SensorAssessment in_zone = AssessOrDie(s, Layout(BoardJson("b", "aruco", 5.5, 0.8, 1.2, 0)), &floor, false, o);
+  const SensorAssessment in_zone =
+      AssessOrDie(s, Layout(BoardJson("b", "aruco", 5.5, 0.8, 1.2, 0)), &floor, false, o);
   EXPECT_EQ(in_zone.reasons, Reasons{"in_keep_out"});
   EXPECT_NE(in_zone.targets[0].detail.find("'aligner'"), std::string::npos);
   // Through the wall at x = 12 (turned, so that its footprint crosses it).
-  EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "aruco", 12, 0, 1.2, 60)), &floor, false, o).reasons,
-            Reasons{"outside_usable_area"});
+  EXPECT_EQ(
+      AssessOrDie(s, Layout(BoardJson("b", "aruco", 12, 0, 1.2, 60)), &floor, false, o).reasons,
+      Reasons{"outside_usable_area"});
   // Its top at 2.55 m, above the 2.5 m limit.
   EXPECT_EQ(AssessOrDie(s, Layout(BoardJson("b", "aruco", 9, 0, 2.0, 0)), &floor, false, o).reasons,
             Reasons{"outside_height_limits"});
@@ -295,7 +314,7 @@ TEST(FloorGeometry, PolygonsAndSegments) {
   EXPECT_TRUE(SegmentsIntersect({0, 0}, {1, 1}, {0, 1}, {1, 0}));
   EXPECT_FALSE(SegmentsIntersect({0, 0}, {1, 0}, {0, 1}, {1, 1}));
   EXPECT_TRUE(SegmentsIntersect({0, 0}, {1, 0}, {1, 0}, {2, 5}));  // touching
-  EXPECT_TRUE(PolygonsOverlap(square, {{0.5, 0.5}, {3, 3}}));        // a segment poking in
+  EXPECT_TRUE(PolygonsOverlap(square, {{0.5, 0.5}, {3, 3}}));      // a segment poking in
   EXPECT_TRUE(PolygonsOverlap(square, {{0.2, 0.2}, {0.4, 0.2}, {0.3, 0.4}}));  // inside
   EXPECT_FALSE(PolygonsOverlap(square, {{2, 2}, {3, 2}, {3, 3}}));
 }
@@ -303,15 +322,16 @@ TEST(FloorGeometry, PolygonsAndSegments) {
 TEST(AssessRadar, FieldOfViewAndLineOfSight) {
   // ESR: ±45°, 60 m.
   const SensorModel s = Sensor(SensorKind::kRadar, "esr", {0, 0, 0.5}, {"a", "b", "c"});
-  const std::string reflectors = R"({"id": "a", "xyz_m": [10, -3, 0.5]}, {"id": "b", "xyz_m": [10, 3, 0.5]},
+  const std::string reflectors =
+      R"({"id": "a", "xyz_m": [10, -3, 0.5]}, {"id": "b", "xyz_m": [10, 3, 0.5]},
                                     {"id": "c", "xyz_m": [5, 8, 0.5]})";
   const SensorAssessment a = AssessOrDie(s, Layout("", reflectors), nullptr, true);
   EXPECT_EQ(a.reasons, Reasons{"reflector_outside_fov"});  // c at 58°
-  EXPECT_TRUE(a.sigma_valid);                                // a and b still give a yaw
+  EXPECT_TRUE(a.sigma_valid);                              // a and b still give a yaw
   EXPECT_TRUE(a.observed[0]);
   EXPECT_FALSE(a.observed[1]);
-  const SensorAssessment blocked =
-      AssessOrDie(s, Layout(BoardJson("wall", "aruco", 5, 1.5, 0.6, 0), reflectors), nullptr, false);
+  const SensorAssessment blocked = AssessOrDie(
+      s, Layout(BoardJson("wall", "aruco", 5, 1.5, 0.6, 0), reflectors), nullptr, false);
   EXPECT_EQ(blocked.reasons, (Reasons{"occluded_by_board", "reflector_outside_fov"}));
   EXPECT_EQ(blocked.targets[1].reasons, Reasons{"occluded_by_board"});
 }
@@ -339,7 +359,8 @@ TEST(ValidRegion, AroundThePlannedPoseAndBoundedByFeatureSize) {
 }
 
 TEST(FloorLimitsFile, ReferenceFloorAndErrorsNamingTheField) {
-  absl::StatusOr<FloorLimits> f = ReadFloorLimits(std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference-floor.json");
+  absl::StatusOr<FloorLimits> f =
+      ReadFloorLimits(std::string(LINECAL_SOURCE_DIR) + "/deploy/stations/reference-floor.json");
   ASSERT_TRUE(f.ok()) << f.status();
   EXPECT_EQ(f->name, "reference");
   EXPECT_EQ(f->walls.size(), 4u);
@@ -349,21 +370,28 @@ TEST(FloorLimitsFile, ReferenceFloorAndErrorsNamingTheField) {
   EXPECT_TRUE(PointInPolygon({0, 0}, f->keep_outs[0].polygon));  // the car stands in its path
 
   const auto error = [](const std::string& body) {
-    absl::StatusOr<FloorLimits> r =
-        ParseFloorLimits(R"({"format": "linecal.floor", "version": 1, "name": "t", )" + body + "}", "floor.json");
+    absl::StatusOr<FloorLimits> r = ParseFloorLimits(
+        R"({"format": "linecal.floor", "version": 1, "name": "t", )" + body + "}", "floor.json");
     return r.ok() ? std::string("ok") : std::string(r.status().message());
   };
   EXPECT_EQ(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]])"), "ok");
-  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0]])").find("floor.json: usable_area_m"), std::string::npos);
-  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1]])").find("usable_area_m[2]"), std::string::npos);
-  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "height_limits_m": [2, 1])").find("height_limits_m"),
+  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0]])").find("floor.json: usable_area_m"),
             std::string::npos);
-  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "keep_out": [{"id": "k"}])").find("keep_out[0].polygon_m"),
+  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1]])").find("usable_area_m[2]"),
             std::string::npos);
-  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "walls": [{"id": "w", "from_m": [0, 0], "to_m": [0, 0]}])")
-                .find("walls[0].to_m"),
+  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "height_limits_m": [2, 1])")
+                .find("height_limits_m"),
             std::string::npos);
-  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "keepout": [])").find("keepout"), std::string::npos);
+  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "keep_out": [{"id": "k"}])")
+                .find("keep_out[0].polygon_m"),
+            std::string::npos);
+  EXPECT_NE(
+      error(
+          R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "walls": [{"id": "w", "from_m": [0, 0], "to_m": [0, 0]}])")
+          .find("walls[0].to_m"),
+      std::string::npos);
+  EXPECT_NE(error(R"("usable_area_m": [[0, 0], [1, 0], [1, 1]], "keepout": [])").find("keepout"),
+            std::string::npos);
 }
 
 }  // namespace

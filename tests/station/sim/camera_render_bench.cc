@@ -26,7 +26,8 @@ struct Setup {
 const Setup& Reference() {
   static const Setup* setup = [] {
     const std::string root = LINECAL_SOURCE_DIR;
-    absl::StatusOr<StationLayout> layout = ReadStationLayout(root + "/deploy/stations/reference.json");
+    absl::StatusOr<StationLayout> layout =
+        ReadStationLayout(root + "/deploy/stations/reference.json");
     absl::StatusOr<CarModel> car = ReadCarModel(root + "/deploy/cars/reference.json");
     if (!layout.ok() || !car.ok()) {
       std::fprintf(stderr, "reference files: %s %s\n", layout.status().ToString().c_str(),
@@ -93,16 +94,28 @@ void BM_UnprojectCornerGrid(benchmark::State& state, const char* sensor_name) {
   }
 }
 
-BENCHMARK_CAPTURE(BM_UnprojectCornerGrid, front_camera, "front_camera")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_UnprojectCornerGrid, front_camera, "front_camera")
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_Render, front_camera, "front_camera", false)
-    ->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMillisecond);
+    ->Arg(1)
+    ->Arg(2)
+    ->ArgName("threads")
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_Render, front_camera_effects, "front_camera", true)
-    ->Arg(2)->ArgName("threads")->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(BM_UnprojectCornerGrid, surround_left, "surround_left")->Unit(benchmark::kMillisecond);
+    ->Arg(2)
+    ->ArgName("threads")
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_UnprojectCornerGrid, surround_left, "surround_left")
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_Render, surround_left, "surround_left", false)
-    ->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMillisecond);
+    ->Arg(1)
+    ->Arg(2)
+    ->ArgName("threads")
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_Render, surround_left_effects, "surround_left", true)
-    ->Arg(2)->ArgName("threads")->Unit(benchmark::kMillisecond);
+    ->Arg(2)
+    ->ArgName("threads")
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace linecal

@@ -5,10 +5,11 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <array>
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <limits>
 #include <numbers>
@@ -17,8 +18,6 @@
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Dense>
 
 namespace linecal {
 namespace {
@@ -147,8 +146,9 @@ double Grey(const CameraFrame& f, int x, int y) { return f.image16.at(x, y) / kF
 // The projection of a board point, which must succeed.
 Eigen::Vector2d ProjectBoardPoint(const CameraModel& camera, const Rigid3d& T_station_camera,
                                   const StationBoard& b, const Eigen::Vector2d& p_board) {
-  const Eigen::Vector3d p_camera = T_station_camera.Inverse() *
-                                   (b.T_station_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0));
+  const Eigen::Vector3d p_camera =
+      T_station_camera.Inverse() *
+      (b.T_station_board * Eigen::Vector3d(p_board.x(), p_board.y(), 0));
   Eigen::Vector2d uv;
   EXPECT_TRUE(camera.Project(p_camera, &uv));
   return uv;
@@ -166,8 +166,8 @@ Eigen::Vector2d ProjectedDiscCentroid(const CameraModel& camera, const Rigid3d& 
   std::vector<Eigen::Vector2d> polygon;
   for (int i = 0; i < kVertices; ++i) {
     const double a = 2 * kPi * i / kVertices;
-    polygon.push_back(ProjectBoardPoint(camera, T_station_camera, b,
-                                        centre + radius * Eigen::Vector2d(std::cos(a), std::sin(a))));
+    polygon.push_back(ProjectBoardPoint(
+        camera, T_station_camera, b, centre + radius * Eigen::Vector2d(std::cos(a), std::sin(a))));
   }
   double twice_area = 0.0;
   Eigen::Vector2d moment = Eigen::Vector2d::Zero();
@@ -288,7 +288,8 @@ struct EdgeProfile {
 double ExpectedCrossing(const CameraModel& camera, const Rigid3d& T_station_camera,
                         const StationBoard& b, const MarkerEdge& e, bool vertical, double along) {
   const auto uv_at = [&](double lambda) {
-    return ProjectBoardPoint(camera, T_station_camera, b, e.a_board + lambda * (e.b_board - e.a_board));
+    return ProjectBoardPoint(camera, T_station_camera, b,
+                             e.a_board + lambda * (e.b_board - e.a_board));
   };
   const int a_axis = vertical ? 1 : 0;  // the coordinate that runs along the edge
   const double nodes[5] = {-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
@@ -326,7 +327,8 @@ EdgeProfile MeasureEdge(const CameraModel& camera, const Rigid3d& T_station_came
   const int along_axis = p.vertical ? 1 : 0, across_axis = 1 - along_axis;
   const double lo = std::min(ua[along_axis], ub[along_axis]) + kCornerClearancePx;
   const double hi = std::max(ua[along_axis], ub[along_axis]) - kCornerClearancePx;
-  for (int line = static_cast<int>(std::ceil(lo)); line <= static_cast<int>(std::floor(hi)); ++line) {
+  for (int line = static_cast<int>(std::ceil(lo)); line <= static_cast<int>(std::floor(hi));
+       ++line) {
     const double expected = ExpectedCrossing(camera, T_station_camera, b, e, p.vertical, line);
     // Black on the low side of the edge if the marker's inside projects there (the marker
     // is convex and its edges nearly straight at this scale).
@@ -417,7 +419,8 @@ EdgeResult MeasureMarkers(const CameraModel& camera, const Rigid3d& T_station_ca
       const Eigen::Vector2d corner =
           ProjectBoardPoint(camera, T_station_camera, b, b.board.features()[feature].p_board);
       std::array<Eigen::VectorXd, 2> fit;
-      std::array<const EdgeProfile*, 2> prof = {&profiles[4 * m + (k + 3) % 4], &profiles[4 * m + k]};
+      std::array<const EdgeProfile*, 2> prof = {&profiles[4 * m + (k + 3) % 4],
+                                                &profiles[4 * m + k]};
       for (int j = 0; j < 2; ++j) {
         const EdgeProfile& p = *prof[j];
         const int axis = p.vertical ? 1 : 0;
@@ -430,10 +433,10 @@ EdgeResult MeasureMarkers(const CameraModel& camera, const Rigid3d& T_station_ca
         fit[j] = FitPolynomial(along, across, degree, corner[axis]);
         // The fitted curve against the exact edge over the fitted span.
         for (std::size_t i = 0; i < along.size(); ++i) {
-          const double exact = ExpectedCrossing(camera, T_station_camera, b, edges[&p - profiles.data()],
-                                                p.vertical, along[i]);
-          r.worst_line_px = std::max(r.worst_line_px,
-                                     std::abs(EvalPolynomial(fit[j], along[i] - corner[axis]) - exact));
+          const double exact = ExpectedCrossing(camera, T_station_camera, b,
+                                                edges[&p - profiles.data()], p.vertical, along[i]);
+          r.worst_line_px = std::max(
+              r.worst_line_px, std::abs(EvalPolynomial(fit[j], along[i] - corner[axis]) - exact));
         }
       }
       // Intersect: one curve gives u(v), the other v(u) (adjacent edges of a square
@@ -476,7 +479,8 @@ void ExpectWithinBars(const EdgeResult& r, int min_lines, const char* what) {
 
 TEST(CameraRenderEdges, PinholeLinesAndCornersMatchTheProjection) {
   // Rolled and turned so that no edge is near an image axis; ~100 px markers.
-  const StationLayout layout = ArucoLayout(BoardPose(Eigen::Vector3d(1.6, 0.05, 1.52), 25, -15, 17));
+  const StationLayout layout =
+      ArucoLayout(BoardPose(Eigen::Vector3d(1.6, 0.05, 1.52), 25, -15, 17));
   ExpectWithinBars(MeasureMarkers(Pinhole(), CameraPose(), layout, GeometryOptions(), 1), 1000,
                    "pinhole");
 }
@@ -497,7 +501,8 @@ TEST(CameraRenderEdges, FisheyeEdgesMatchTheProjection) {
 
 TEST(CameraRenderEdges, BlurKeepsStraightEdgesInPlace) {
   // A symmetric kernel moves no straight edge: the coverage sum across it is unchanged.
-  const StationLayout layout = ArucoLayout(BoardPose(Eigen::Vector3d(1.6, 0.05, 1.52), 25, -15, 17));
+  const StationLayout layout =
+      ArucoLayout(BoardPose(Eigen::Vector3d(1.6, 0.05, 1.52), 25, -15, 17));
   CameraRenderOptions o = GeometryOptions();
   o.blur_sigma_px = 1.0;
   const EdgeResult r = MeasureMarkers(Pinhole(), CameraPose(), layout, o, 1);
@@ -523,7 +528,8 @@ double ClippedArea(std::vector<Eigen::Vector2d> poly, const Eigen::Vector2d& lo,
       const Eigen::Vector2d& a = poly[i];
       const Eigen::Vector2d& b = poly[(i + 1) % poly.size()];
       if (inside(a)) out.push_back(a);
-      if (inside(a) != inside(b)) out.push_back(a + (bound - a[axis]) / (b[axis] - a[axis]) * (b - a));
+      if (inside(a) != inside(b))
+        out.push_back(a + (bound - a[axis]) / (b[axis] - a[axis]) * (b - a));
     }
     poly = std::move(out);
   }
@@ -546,7 +552,8 @@ double WorstDenseCoverageError(double square_m) {
   StationLayout layout;
   // 2 m ahead: 1 px is 3.33 mm on the board. The page centre projects at (321.3, 238.6),
   // near the principal point.
-  layout.boards.push_back(Checker("dense", square_m, BoardPose(Eigen::Vector3d(2.0, 0.0, 1.5), 0, 0, 20)));
+  layout.boards.push_back(
+      Checker("dense", square_m, BoardPose(Eigen::Vector3d(2.0, 0.0, 1.5), 0, 0, 20)));
   StationBoard& b = layout.boards[0];
   b.params.cols = b.params.rows = 30;
   b.board = *Board::Create(b.params);
@@ -564,8 +571,9 @@ double WorstDenseCoverageError(double square_m) {
   int pixels = 0;
   for (int y = 0; y < 480; ++y) {
     for (int x = 0; x < 640; ++x) {
-      const std::vector<Eigen::Vector2d> quad = {preimage(x - 0.5, y - 0.5), preimage(x + 0.5, y - 0.5),
-                                                 preimage(x + 0.5, y + 0.5), preimage(x - 0.5, y + 0.5)};
+      const std::vector<Eigen::Vector2d> quad = {
+          preimage(x - 0.5, y - 0.5), preimage(x + 0.5, y - 0.5), preimage(x + 0.5, y + 0.5),
+          preimage(x - 0.5, y + 0.5)};
       if (std::any_of(quad.begin(), quad.end(), [&](const Eigen::Vector2d& q) {
             return q.cwiseAbs().maxCoeff() > half_pattern;
           })) {
@@ -573,9 +581,11 @@ double WorstDenseCoverageError(double square_m) {
       }
       double black = 0.0;
       for (const BoardShape& shape : b.board.shapes()) {
-        if (shape.paint == Paint::kBlack) black += ClippedArea(quad, shape.box_board.min(), shape.box_board.max());
+        if (shape.paint == Paint::kBlack)
+          black += ClippedArea(quad, shape.box_board.min(), shape.box_board.max());
       }
-      const double area = ClippedArea(quad, Eigen::Vector2d::Constant(-1), Eigen::Vector2d::Constant(1));
+      const double area =
+          ClippedArea(quad, Eigen::Vector2d::Constant(-1), Eigen::Vector2d::Constant(1));
       worst = std::max(worst, std::abs(Grey(frame, x, y) - (1.0 - black / area)));
       ++pixels;
     }
@@ -594,8 +604,9 @@ TEST(CameraRenderDense, EveryPixelHasItsExactCoverage) {
   // Squares of 4 px: about one pixel in four holds a corner.
   const double coarse = WorstDenseCoverageError(0.0133);
   EXPECT_LE(coarse, kCornerPixelBar);
-  std::printf("dense checkerboards: worst pixel coverage error %.2e (1.3 px squares), %.2e (4 px)\n",
-              fine, coarse);
+  std::printf(
+      "dense checkerboards: worst pixel coverage error %.2e (1.3 px squares), %.2e (4 px)\n", fine,
+      coarse);
 }
 
 // ---- Ground truth ------------------------------------------------------------------------
@@ -626,10 +637,12 @@ TEST(CameraRenderGroundTruth, ListsExactlyTheUnoccludedFeaturesInView) {
   // 0: a checkerboard 3 m ahead; 1: a small ArUco board in front of part of it; 2: a board
   // behind the camera facing it; 3: a board in view whose print faces away.
   layout.boards.push_back(Checker("far", 0.08, BoardPose(Eigen::Vector3d(3.0, 0.1, 1.5), 5, 0, 3)));
+  layout.boards.push_back(MakeBoard("near", BoardType::kAruco, 0.25,
+                                    BoardPose(Eigen::Vector3d(1.8, 0.2, 1.45), 0, 0, 0)));
   layout.boards.push_back(
-      MakeBoard("near", BoardType::kAruco, 0.25, BoardPose(Eigen::Vector3d(1.8, 0.2, 1.45), 0, 0, 0)));
-  layout.boards.push_back(Checker("behind", 0.08, BoardPose(Eigen::Vector3d(-3.0, 0, 1.5), 180, 0, 0)));
-  layout.boards.push_back(Checker("away", 0.05, BoardPose(Eigen::Vector3d(3.0, -1.2, 1.5), 180, 0, 0)));
+      Checker("behind", 0.08, BoardPose(Eigen::Vector3d(-3.0, 0, 1.5), 180, 0, 0)));
+  layout.boards.push_back(
+      Checker("away", 0.05, BoardPose(Eigen::Vector3d(3.0, -1.2, 1.5), 180, 0, 0)));
   CameraRenderOptions options;
   options.feature_margin_px = 3.0;
   const CameraFrame frame = Render(camera, T_station_camera, layout, options);
@@ -667,7 +680,8 @@ TEST(CameraRenderGroundTruth, ListsExactlyTheUnoccludedFeaturesInView) {
     // The exact projection, and inside the image by the margin.
     Eigen::Vector2d uv;
     ASSERT_TRUE(camera.Project(
-        T_station_camera.Inverse() * FeatureInStation(layout.boards[f.board_index], f.feature_id), &uv));
+        T_station_camera.Inverse() * FeatureInStation(layout.boards[f.board_index], f.feature_id),
+        &uv));
     EXPECT_LE((f.uv_px - uv).norm(), kRoundingPx);
     EXPECT_GE(f.uv_px.x(), -0.5 + options.feature_margin_px);
     EXPECT_LE(f.uv_px.x(), 639.5 - options.feature_margin_px);
@@ -695,8 +709,10 @@ TEST(CameraRenderGroundTruth, FisheyeListsWhatItSeesBehindItsImagePlaneOnly) {
   const CameraModel camera = Fisheye();
   const Rigid3d T_station_camera = CameraPose();
   StationLayout layout;
-  layout.boards.push_back(Checker("behind", 0.08, BoardPose(Eigen::Vector3d(-2.0, 0, 1.5), 180, 0, 0)));
-  layout.boards.push_back(Checker("beside", 0.04, BoardPose(Eigen::Vector3d(-0.2, 1.0, 1.5), 90, 0, 0)));
+  layout.boards.push_back(
+      Checker("behind", 0.08, BoardPose(Eigen::Vector3d(-2.0, 0, 1.5), 180, 0, 0)));
+  layout.boards.push_back(
+      Checker("beside", 0.04, BoardPose(Eigen::Vector3d(-0.2, 1.0, 1.5), 90, 0, 0)));
   const CameraRenderOptions options;
   const CameraFrame frame = Render(camera, T_station_camera, layout, options);
   std::set<int> expected;
@@ -715,7 +731,8 @@ TEST(CameraRenderGroundTruth, FisheyeListsWhatItSeesBehindItsImagePlaneOnly) {
   for (const RenderedFeature& f : frame.features) {
     EXPECT_EQ(f.board_index, 1);
     listed.insert(f.feature_id);
-    const Eigen::Vector3d p_camera = T_station_camera.Inverse() * FeatureInStation(beside, f.feature_id);
+    const Eigen::Vector3d p_camera =
+        T_station_camera.Inverse() * FeatureInStation(beside, f.feature_id);
     if (p_camera.z() < 0) ++behind_image_plane;
   }
   EXPECT_EQ(listed, expected);
@@ -751,7 +768,8 @@ TEST(CameraRenderGroundTruth, OccludersHideTheFeaturesBehindThem) {
       if (!SightLineHits(T_station_camera, p, o.T_station_surface, 0.5 * o.size_m, &hit)) continue;
       ++hides[i];
       const double distance = (o.T_station_surface * Eigen::Vector3d(hit.x(), hit.y(), 0) -
-                               T_station_camera.translation()).norm();
+                               T_station_camera.translation())
+                                  .norm();
       if (distance < nearest_distance) {
         nearest = static_cast<int>(i);
         nearest_distance = distance;
@@ -764,8 +782,10 @@ TEST(CameraRenderGroundTruth, OccludersHideTheFeaturesBehindThem) {
     }
     // Well inside the occluder (80% of its half sizes), the pixel shows its grey.
     const StationSurface& o = frame.occluders[nearest];
-    if (std::abs(nearest_hit.x()) < 0.4 * o.size_m.x() && std::abs(nearest_hit.y()) < 0.4 * o.size_m.y()) {
-      const int x = static_cast<int>(std::lround(f.uv_px.x())), y = static_cast<int>(std::lround(f.uv_px.y()));
+    if (std::abs(nearest_hit.x()) < 0.4 * o.size_m.x() &&
+        std::abs(nearest_hit.y()) < 0.4 * o.size_m.y()) {
+      const int x = static_cast<int>(std::lround(f.uv_px.x())),
+                y = static_cast<int>(std::lround(f.uv_px.y()));
       EXPECT_NEAR(frame.image16.at(x, y), o.reflectivity * kFull16, 0.5) << o.id;
       ++checked_pixels;
     }
@@ -790,10 +810,11 @@ TEST(CameraRenderScene, HolesBacksWallsFloorAndBackground) {
   const Rigid3d T_station_camera = CameraPose();
   StationLayout layout;
   layout.floor_reflectivity = 0.15;
-  layout.boards.push_back(
-      MakeBoard("holes", BoardType::kRoundHole, 0.5, BoardPose(Eigen::Vector3d(2.0, 0.25, 1.5), 0, 0, 0)));
+  layout.boards.push_back(MakeBoard("holes", BoardType::kRoundHole, 0.5,
+                                    BoardPose(Eigen::Vector3d(2.0, 0.25, 1.5), 0, 0, 0)));
   // Seen from behind: its print faces +x, away from the camera.
-  layout.boards.push_back(Checker("back", 0.05, BoardPose(Eigen::Vector3d(2.5, -0.6, 1.5), 180, 0, 0)));
+  layout.boards.push_back(
+      Checker("back", 0.05, BoardPose(Eigen::Vector3d(2.5, -0.6, 1.5), 180, 0, 0)));
   StationSurface wall;
   wall.id = "wall";
   wall.T_station_surface = BoardPose(Eigen::Vector3d(4.0, 0, 1.5), 0, 0, 0);
@@ -805,7 +826,8 @@ TEST(CameraRenderScene, HolesBacksWallsFloorAndBackground) {
   o.background_reflectance = 0.2;
   const CameraFrame frame = Render(camera, T_station_camera, layout, o);
   const auto level = [&](const Eigen::Vector2d& uv) {
-    return frame.image16.at(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
+    return frame.image16.at(static_cast<int>(std::lround(uv.x())),
+                            static_cast<int>(std::lround(uv.y())));
   };
   // Through the holes: the wall.
   int holes = 0;
@@ -816,8 +838,9 @@ TEST(CameraRenderScene, HolesBacksWallsFloorAndBackground) {
   }
   EXPECT_EQ(holes, 5);
   // The back of the second board, at its centre.
-  EXPECT_NEAR(level(ProjectBoardPoint(camera, T_station_camera, layout.boards[1], Eigen::Vector2d::Zero())),
-              0.4 * kFull16, 0.5);
+  EXPECT_NEAR(
+      level(ProjectBoardPoint(camera, T_station_camera, layout.boards[1], Eigen::Vector2d::Zero())),
+      0.4 * kFull16, 0.5);
   // Straight up: nothing; straight down at the bottom row: the floor.
   EXPECT_NEAR(frame.image16.at(320, 0), 0.2 * kFull16, 0.5);
   EXPECT_NEAR(frame.image16.at(320, 479), 0.15 * kFull16, 0.5);
@@ -848,7 +871,8 @@ TEST(CameraRenderScene, ClutterBelongsToTheWallsNotToTheFrame) {
 TEST(CameraRenderResponse, SameSeedSameBytesWhateverTheThreads) {
   const CameraModel camera = Pinhole(-0.1, 0.02);
   StationLayout layout;
-  layout.boards.push_back(Checker("board", 0.06, BoardPose(Eigen::Vector3d(2.0, 0, 1.4), 15, 5, 10)));
+  layout.boards.push_back(
+      Checker("board", 0.06, BoardPose(Eigen::Vector3d(2.0, 0, 1.4), 15, 5, 10)));
   layout.surfaces.push_back(Wall(5.0, 0.5));
   CameraRenderOptions o;
   o.clutter = true;
@@ -940,7 +964,8 @@ TEST(CameraRenderResponse, GradientAndVignettingAsRequested) {
   const Eigen::Vector2d pp(321.3, 238.6);
   const double r2_max = (Eigen::Vector2d(-0.5, 479.5) - pp).squaredNorm();
   const double centre = v.image16.at(321, 239);
-  for (const auto& [x, y] : {std::pair(0, 0), std::pair(639, 0), std::pair(0, 479), std::pair(639, 479)}) {
+  for (const auto& [x, y] :
+       {std::pair(0, 0), std::pair(639, 0), std::pair(0, 479), std::pair(639, 479)}) {
     const double expected = (1 - 0.4 * (Eigen::Vector2d(x, y) - pp).squaredNorm() / r2_max) /
                             (1 - 0.4 * (Eigen::Vector2d(321, 239) - pp).squaredNorm() / r2_max);
     EXPECT_NEAR(v.image16.at(x, y) / centre, expected, 1e-4) << x << "," << y;
@@ -957,7 +982,8 @@ TEST(CameraRenderResponse, GammaEncodesLinearLight) {
 
 TEST(CameraRenderResponse, JpegQuantisationIsBoundedAndFaithfulAtHighQuality) {
   StationLayout layout;
-  layout.boards.push_back(Checker("board", 0.04, BoardPose(Eigen::Vector3d(1.5, 0, 1.5), 20, 0, 10)));
+  layout.boards.push_back(
+      Checker("board", 0.04, BoardPose(Eigen::Vector3d(1.5, 0, 1.5), 20, 0, 10)));
   layout.surfaces.push_back(Wall(4.0, 0.5));
   CameraRenderOptions o;
   o.clutter = true;
@@ -986,7 +1012,9 @@ TEST(CameraRenderResponse, JpegQuantisationIsBoundedAndFaithfulAtHighQuality) {
 
 // ---- Validation ----------------------------------------------------------------------------
 
-TEST(CameraRenderOptionsTest, DefaultsAreValid) { EXPECT_TRUE(CameraRenderOptions().Validate().ok()); }
+TEST(CameraRenderOptionsTest, DefaultsAreValid) {
+  EXPECT_TRUE(CameraRenderOptions().Validate().ok());
+}
 
 TEST(CameraRenderOptionsTest, ErrorsNameTheField) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -1000,7 +1028,8 @@ TEST(CameraRenderOptionsTest, ErrorsNameTheField) {
       {"background_reflectance", [&](auto& o) { o.background_reflectance = nan; }},
       {"illumination", [](auto& o) { o.illumination = 0.0; }},
       {"illumination_gradient_ratio", [](auto& o) { o.illumination_gradient_ratio = 5.0; }},
-      {"illumination_gradient_direction_deg", [](auto& o) { o.illumination_gradient_direction_deg = kInf; }},
+      {"illumination_gradient_direction_deg",
+       [](auto& o) { o.illumination_gradient_direction_deg = kInf; }},
       {"vignetting", [](auto& o) { o.vignetting = 1.0; }},
       {"blur_sigma_px", [](auto& o) { o.blur_sigma_px = -1.0; }},
       {"gamma", [](auto& o) { o.gamma = 0.0; }},
@@ -1020,15 +1049,17 @@ TEST(CameraRenderOptionsTest, ErrorsNameTheField) {
     const absl::Status s = o.Validate();
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << field;
     EXPECT_EQ(std::string(s.message()).rfind(field + " = ", 0), 0u) << s.message();
-    const absl::StatusOr<CameraFrame> frame = RenderCameraFrame(Pinhole(), CameraPose(), layout, o, 1);
+    const absl::StatusOr<CameraFrame> frame =
+        RenderCameraFrame(Pinhole(), CameraPose(), layout, o, 1);
     EXPECT_EQ(frame.status(), s);
   }
 }
 
 TEST(CameraRenderOptionsTest, BadPoseAndLayoutAreRefused) {
   StationLayout layout;
-  const absl::StatusOr<CameraFrame> pose = RenderCameraFrame(
-      Pinhole(), Rigid3d::Translation(Eigen::Vector3d(kInf, 0, 0)), layout, CameraRenderOptions(), 1);
+  const absl::StatusOr<CameraFrame> pose =
+      RenderCameraFrame(Pinhole(), Rigid3d::Translation(Eigen::Vector3d(kInf, 0, 0)), layout,
+                        CameraRenderOptions(), 1);
   EXPECT_EQ(pose.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(std::string(pose.status().message()).rfind("T_station_camera", 0), 0u);
   layout.surfaces.push_back(Wall(2.0, 0.5));
@@ -1042,7 +1073,8 @@ TEST(CameraRenderOptionsTest, BadPoseAndLayoutAreRefused) {
   layout.surfaces[0].reflectivity = 2.0;
   const absl::StatusOr<CameraFrame> reflectivity =
       RenderCameraFrame(Pinhole(), CameraPose(), layout, CameraRenderOptions(), 1);
-  EXPECT_EQ(std::string(reflectivity.status().message()).rfind("surfaces[0] 'wall'.reflectivity", 0), 0u)
+  EXPECT_EQ(
+      std::string(reflectivity.status().message()).rfind("surfaces[0] 'wall'.reflectivity", 0), 0u)
       << reflectivity.status();
 }
 

@@ -3,10 +3,10 @@
 // cameras that cannot see the scene are refused by name.
 #include "station/sim/lane_scene.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <numbers>
-
-#include <gtest/gtest.h>
 
 namespace linecal {
 namespace {
@@ -25,12 +25,14 @@ CameraIntrinsics FrontCamera() {
 }
 
 Rigid3d Mounting(double yaw_deg, double pitch_deg, double roll_deg) {
-  return Rigid3d(MountingRotation({yaw_deg * kDeg, pitch_deg * kDeg, roll_deg * kDeg}, CameraBaseRotation()),
-                 Eigen::Vector3d(1.9, 0.1, 1.35));
+  return Rigid3d(
+      MountingRotation({yaw_deg * kDeg, pitch_deg * kDeg, roll_deg * kDeg}, CameraBaseRotation()),
+      Eigen::Vector3d(1.9, 0.1, 1.35));
 }
 
 int Grey(const LaneScene& s, const Eigen::Vector2d& uv) {
-  return s.frame.image8.at(static_cast<int>(std::lround(uv.x())), static_cast<int>(std::lround(uv.y())));
+  return s.frame.image8.at(static_cast<int>(std::lround(uv.x())),
+                           static_cast<int>(std::lround(uv.y())));
 }
 
 TEST(LaneSceneTest, PaintIsUnderTheListedPoints) {
@@ -87,7 +89,8 @@ TEST(LaneSceneTest, RefusesWhatItCannotRender) {
   LaneSceneOptions o;
   o.render_image = false;
   o.lane_width_m = 0;
-  EXPECT_EQ(RenderLaneScene(camera, Mounting(0, 2, 0), o, 1).status().message(), "lane_width_m = 0: must be in (0, 20]");
+  EXPECT_EQ(RenderLaneScene(camera, Mounting(0, 2, 0), o, 1).status().message(),
+            "lane_width_m = 0: must be in (0, 20]");
   o = LaneSceneOptions();
   o.render_image = false;
   EXPECT_EQ(RenderLaneScene(camera, Mounting(90, 2, 0), o, 1).status().message(),

@@ -2,6 +2,8 @@
 // points lie on the board planes within the noise and never inside a hole, rays pass through
 // every hole, simulated packets decode to the simulated points, and simulated CAN frames decode
 // back to the reflectors' range and azimuth.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -10,15 +12,13 @@
 #include <numbers>
 #include <string>
 
-#include <gtest/gtest.h>
-
-#include "station/sensors/lidar/lidar_decoder.h"
-#include "station/sensors/lidar/lidar_pcap.h"
-#include "station/sensors/radar/radar_decoder.h"
 #include "station/io/candump.h"
-#include "station/sensors/lidar/pcd.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
+#include "station/sensors/lidar/lidar_decoder.h"
+#include "station/sensors/lidar/lidar_pcap.h"
+#include "station/sensors/lidar/pcd.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/sim/lidar_sim.h"
 #include "station/sim/radar_sim.h"
 #include "station/sim/simulator.h"
@@ -41,11 +41,14 @@ class SimTest : public ::testing::Test {
     delete car_;
   }
   // The nominal T_station_sensor of a car at the station origin.
-  static Rigid3d NominalPose(const std::string& sensor) { return car_->FindSensor(sensor)->T_car_sensor_nominal; }
+  static Rigid3d NominalPose(const std::string& sensor) {
+    return car_->FindSensor(sensor)->T_car_sensor_nominal;
+  }
   static LidarBeamTable Beams(const std::string& sensor) {
     const SensorModel* s = car_->FindSensor(sensor);
     const LidarModel model = *LidarModelFromName(s->model);
-    return *(s->angles_file.empty() ? DefaultBeamTable(model) : ReadAngleCorrectionCsv(model, s->angles_file));
+    return *(s->angles_file.empty() ? DefaultBeamTable(model)
+                                    : ReadAngleCorrectionCsv(model, s->angles_file));
   }
 
   static StationLayout* station_;
@@ -56,8 +59,8 @@ CarModel* SimTest::car_ = nullptr;
 
 // For every point that lies near a target board's plane: its position on the board is printed
 // (never a hole), and the distances to the plane spread like the range noise.
-void CheckBoardPoints(const LidarSimResult& sim, const Rigid3d& T_station_lidar, const StationBoard& board,
-                      double sigma, int* on_board, double* rms) {
+void CheckBoardPoints(const LidarSimResult& sim, const Rigid3d& T_station_lidar,
+                      const StationBoard& board, double sigma, int* on_board, double* rms) {
   const Rigid3d T_board_lidar = board.T_station_board.Inverse() * T_station_lidar;
   const Eigen::Vector2d half = 0.5 * board.board.page_size_m();
   // Points within 5 sigma (or 1 cm without noise) of the plane and inside the page count.
@@ -66,14 +69,16 @@ void CheckBoardPoints(const LidarSimResult& sim, const Rigid3d& T_station_lidar,
   *on_board = 0;
   for (const LidarPoint& p : sim.scans[0].points) {
     const Eigen::Vector3d q = T_board_lidar * Eigen::Vector3d(p.x, p.y, p.z);
-    if (std::abs(q.z()) > band || std::abs(q.x()) > half.x() || std::abs(q.y()) > half.y()) continue;
+    if (std::abs(q.z()) > band || std::abs(q.x()) > half.x() || std::abs(q.y()) > half.y())
+      continue;
     // Noise moves a point along its ray, so it lands slightly beside where the ray hit: compare
     // the paint where the ray crossed the plane.
     const Eigen::Vector3d o = T_board_lidar.translation();
     const Eigen::Vector3d d = (q - o).normalized();
     const Eigen::Vector3d hit = o + (-o.z() / d.z()) * d;
     const Paint paint = board.board.PaintAt(hit.head<2>());
-    EXPECT_NE(paint, Paint::kHole) << "point in a hole of " << board.id << " at " << hit.transpose();
+    EXPECT_NE(paint, Paint::kHole)
+        << "point in a hole of " << board.id << " at " << hit.transpose();
     ++*on_board;
     sum2 += q.z() * q.z();
   }
@@ -126,7 +131,8 @@ TEST_F(SimTest, LidarRaysPassThroughEveryHole) {
       const Eigen::Vector3d o = T_board_lidar.translation();
       const Eigen::Vector3d hit = o + (-o.z() / (q - o).z()) * (q - o);
       for (const BoardFeature& f : b.board.features()) {
-        if (f.kind == FeatureKind::kHoleCentre && (hit.head<2>() - f.p_board).norm() < 0.12) ++through[f.id];
+        if (f.kind == FeatureKind::kHoleCentre && (hit.head<2>() - f.p_board).norm() < 0.12)
+          ++through[f.id];
       }
     }
     EXPECT_EQ(through.size(), 5u) << id;
@@ -170,8 +176,13 @@ TEST_F(SimTest, PacketsDecodeToTheSimulatedPoints) {
     ASSERT_TRUE(decoder.ok());
     std::vector<LidarScan> scans;
     LidarPcapStats stats;
-    ASSERT_TRUE(DecodeLidarPcap(dir / entry.packets->path, {}, &*decoder,
-                                [&](LidarScan&& s) { scans.push_back(std::move(s)); return absl::OkStatus(); }, &stats)
+    ASSERT_TRUE(DecodeLidarPcap(
+                    dir / entry.packets->path, {}, &*decoder,
+                    [&](LidarScan&& s) {
+                      scans.push_back(std::move(s));
+                      return absl::OkStatus();
+                    },
+                    &stats)
                     .ok());
     EXPECT_EQ(decoder->stats().skipped_total(), 0);
     ASSERT_EQ(scans.size(), 2u) << sensor;
@@ -205,19 +216,23 @@ TEST_F(SimTest, RadarFramesDecodeToTheReflectors) {
     absl::StatusOr<std::vector<CanFrame>> frames =
         SimulateRadar(s->model, s->radar_sensor_id, *station_, pose, CanTime{}, "can0", o, 3);
     ASSERT_TRUE(frames.ok()) << frames.status();
-    const RadarDecodeResult decoded = DecodeRadarFrames(*frames, *ParseRadarModel(s->model), RadarConventions{});
+    const RadarDecodeResult decoded =
+        DecodeRadarFrames(*frames, *ParseRadarModel(s->model), RadarConventions{});
     EXPECT_EQ(decoded.cycles.size(), 50u);
     for (const RadarCycle& c : decoded.cycles) EXPECT_TRUE(c.complete());
     // Every target reflector: the detections nearest its true position average to the truth.
-    for (const RadarTruth& t : RadarReflectorTruth(*station_, pose, *RadarFieldOfViewOf(s->model))) {
-      if (std::find(s->targets.begin(), s->targets.end(), t.reflector_id) == s->targets.end()) continue;
+    for (const RadarTruth& t :
+         RadarReflectorTruth(*station_, pose, *RadarFieldOfViewOf(s->model))) {
+      if (std::find(s->targets.begin(), s->targets.end(), t.reflector_id) == s->targets.end())
+        continue;
       ASSERT_TRUE(t.in_view) << t.reflector_id;
       double sum_az = 0, sum_r = 0;
       int n = 0;
       for (const RadarCycle& c : decoded.cycles) {
         for (const RadarDetection& d : c.detections) {
           // Within 5 sigma of range and azimuth plus the encoding steps (0.2 m, 0.1 deg).
-          if (std::abs(d.range_m - t.range_m) < 0.5 && std::abs(d.azimuth_rad - t.azimuth_rad) < 1.0 * kDegToRad) {
+          if (std::abs(d.range_m - t.range_m) < 0.5 &&
+              std::abs(d.azimuth_rad - t.azimuth_rad) < 1.0 * kDegToRad) {
             sum_az += d.azimuth_rad;
             sum_r += d.range_m;
             ++n;
@@ -232,7 +247,8 @@ TEST_F(SimTest, RadarFramesDecodeToTheReflectors) {
       // the boresight decodes at +-0.1 m, the sign set by the noise (+-0.1 m / range).
       const double step_rad = 0.1 / t.range_m;
       const double spread_rad = std::hypot(0.1 * kDegToRad, step_rad);
-      EXPECT_NEAR(sum_az / n, t.azimuth_rad, 0.05 * kDegToRad + 4 * spread_rad / std::sqrt(n)) << t.reflector_id;
+      EXPECT_NEAR(sum_az / n, t.azimuth_rad, 0.05 * kDegToRad + 4 * spread_rad / std::sqrt(n))
+          << t.reflector_id;
       EXPECT_NEAR(sum_r / n, t.range_m, 0.06 + 4 * 0.05 / std::sqrt(n)) << t.reflector_id;
     }
   }
@@ -250,9 +266,11 @@ TEST_F(SimTest, WholeCaptureIsValidAndDeterministic) {
   ASSERT_TRUE(c.ok()) << c.status();
   EXPECT_EQ(c->manifest.sensors.size(), 3u);
   EXPECT_EQ(sa->ground_truth.dump(), sb->ground_truth.dump());
-  for (const char* f : {"front_camera/frame-000000.png", "bumper_lidar/packets.pcap", "front_radar/can.log"}) {
+  for (const char* f :
+       {"front_camera/frame-000000.png", "bumper_lidar/packets.pcap", "front_radar/can.log"}) {
     std::ifstream fa(a / f, std::ios::binary), fb(b / f, std::ios::binary);
-    const std::string da((std::istreambuf_iterator<char>(fa)), {}), db((std::istreambuf_iterator<char>(fb)), {});
+    const std::string da((std::istreambuf_iterator<char>(fa)), {}),
+        db((std::istreambuf_iterator<char>(fb)), {});
     EXPECT_FALSE(da.empty());
     EXPECT_EQ(da, db) << f;
   }

@@ -3,9 +3,9 @@
 // rotation cast against the floor only, i.e. the cost of the beam loop, ray directions and
 // the point output without the station's boards, stands and walls.
 //   build/bin/lidar_sim_bench --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
-#include <string>
-
 #include <benchmark/benchmark.h>
+
+#include <string>
 
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
@@ -25,11 +25,14 @@ void Run(benchmark::State& state, const char* sensor, bool floor_only) {
   const CarModel car = *ReadCarModel(kDeploy + "/cars/reference.json");
   const SensorModel* s = car.FindSensor(sensor);
   const LidarModel model = *LidarModelFromName(s->model);
-  const LidarBeamTable beams = *(s->angles_file.empty() ? DefaultBeamTable(model) : ReadAngleCorrectionCsv(model, s->angles_file));
+  const LidarBeamTable beams =
+      *(s->angles_file.empty() ? DefaultBeamTable(model)
+                               : ReadAngleCorrectionCsv(model, s->angles_file));
   LidarSimOptions options;
   size_t points = 0;
   for (auto _ : state) {
-    absl::StatusOr<LidarSimResult> r = SimulateLidar(beams, s->T_car_sensor_nominal, station, options, 0, 1);
+    absl::StatusOr<LidarSimResult> r =
+        SimulateLidar(beams, s->T_car_sensor_nominal, station, options, 0, 1);
     points = r->scans[0].points.size();
     benchmark::DoNotOptimize(points);
   }
@@ -37,9 +40,11 @@ void Run(benchmark::State& state, const char* sensor, bool floor_only) {
 }
 
 BENCHMARK_CAPTURE(Run, pandar64_station, "roof_lidar", false)->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(Run, pandar64_floor_only_baseline, "roof_lidar", true)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(Run, pandar64_floor_only_baseline, "roof_lidar", true)
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(Run, vlp16_station, "bumper_lidar", false)->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(Run, vlp16_floor_only_baseline, "bumper_lidar", true)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(Run, vlp16_floor_only_baseline, "bumper_lidar", true)
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace linecal

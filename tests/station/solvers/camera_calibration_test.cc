@@ -4,13 +4,13 @@
 // recovered within its reported sigma, and the verdict follows the tolerance.
 #include "station/solvers/camera_calibration.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_format.h"
 #include "station/model/aligner.h"
@@ -33,21 +33,24 @@ class CameraCalibrationTest : public ::testing::Test {
   }
 
   // The sensor's true pose: nominal angles + `error`, nominal position + `offset_m`.
-  Rigid3d TrueMounting(const SensorModel& s, const YawPitchRoll& error, const Eigen::Vector3d& offset_m) const {
+  Rigid3d TrueMounting(const SensorModel& s, const YawPitchRoll& error,
+                       const Eigen::Vector3d& offset_m) const {
     const Eigen::Matrix3d r_base = SensorBaseRotation(s.kind);
     const YawPitchRoll n = MountingAngles(s.T_car_sensor_nominal.RotationMatrix(), r_base);
-    return Rigid3d(MountingRotation({n.yaw + error.yaw, n.pitch + error.pitch, n.roll + error.roll}, r_base),
-                   s.T_car_sensor_nominal.translation() + offset_m);
+    return Rigid3d(
+        MountingRotation({n.yaw + error.yaw, n.pitch + error.pitch, n.roll + error.roll}, r_base),
+        s.T_car_sensor_nominal.translation() + offset_m);
   }
 
   // Every visible feature of the sensor's target boards, with Gaussian noise, one frame.
-  std::vector<BoardObservation> Observe(const SensorModel& s, const Rigid3d& T_car_camera, double sigma_px,
-                                        std::mt19937_64& rng) const {
+  std::vector<BoardObservation> Observe(const SensorModel& s, const Rigid3d& T_car_camera,
+                                        double sigma_px, std::mt19937_64& rng) const {
     const CameraModel camera = *CameraModel::Create(*s.intrinsics);
     const Rigid3d T_station_camera = aligner_.T_station_car() * T_car_camera;
     std::normal_distribution<double> noise(0.0, 1.0);
     std::vector<BoardObservation> out;
-    for (const RenderedFeature& f : VisibleCameraFeatures(camera, T_station_camera, station_, {}, 2.0)) {
+    for (const RenderedFeature& f :
+         VisibleCameraFeatures(camera, T_station_camera, station_, {}, 2.0)) {
       if (std::find(s.targets.begin(), s.targets.end(), f.board_id) == s.targets.end()) continue;
       if (out.empty() || out.back().board_id != f.board_id) out.push_back({f.board_id, {}});
       const Board& board = station_.FindBoard(f.board_id)->board;
@@ -63,11 +66,13 @@ class CameraCalibrationTest : public ::testing::Test {
   }
 
   // `frames` frames of Observe, each with fresh noise (frames are combined in one problem).
-  std::vector<BoardObservation> ObserveFrames(const SensorModel& s, const Rigid3d& T_car_camera, double sigma_px,
-                                              int frames, std::mt19937_64& rng) const {
+  std::vector<BoardObservation> ObserveFrames(const SensorModel& s, const Rigid3d& T_car_camera,
+                                              double sigma_px, int frames,
+                                              std::mt19937_64& rng) const {
     std::vector<BoardObservation> out;
     for (int frame = 0; frame < frames; ++frame) {
-      for (BoardObservation& o : Observe(s, T_car_camera, sigma_px, rng)) out.push_back(std::move(o));
+      for (BoardObservation& o : Observe(s, T_car_camera, sigma_px, rng))
+        out.push_back(std::move(o));
     }
     return out;
   }
@@ -84,17 +89,20 @@ TEST_F(CameraCalibrationTest, FrontCameraIsRecoveredWithinItsSigmaAndPasses) {
   const Rigid3d truth = TrueMounting(s, error, offset);
   std::mt19937_64 rng(21);
   std::vector<BoardObservation> obs = Observe(s, truth, 0.2, rng);
-  ASSERT_GE(obs.size(), 3u) << "the front camera should see the chessboard, circle and vertical boards";
+  ASSERT_GE(obs.size(), 3u)
+      << "the front camera should see the chessboard, circle and vertical boards";
   // A second frame: the same boards, fresh noise (frames are combined in one problem).
   for (BoardObservation& o : Observe(s, truth, 0.2, rng)) obs.push_back(std::move(o));
 
-  absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), obs);
+  absl::StatusOr<CameraCalibrationResult> r =
+      CalibrateCamera(s, station_, aligner_.T_station_car(), obs);
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_EQ(r->verdict, Verdict::kPass) << r->reason << ": " << r->message;
   EXPECT_TRUE(r->reason.empty());
   ASSERT_TRUE(r->solved);
   const MountingEstimate& m = r->mounting;
-  const double dev_true[6] = {error.yaw, error.pitch, error.roll, offset.x(), offset.y(), offset.z()};
+  const double dev_true[6] = {error.yaw,  error.pitch, error.roll,
+                              offset.x(), offset.y(),  offset.z()};
   const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
   for (int i = 0; i < 6; ++i) {
     EXPECT_GT(m.sigma[i], 0) << i;
@@ -123,7 +131,8 @@ TEST_F(CameraCalibrationTest, FrontCameraIsRecoveredWithinItsSigmaAndPasses) {
   // Ranging: the flat-ground formula at 5..50 m within 0.5% of the distance.
   ASSERT_EQ(r->ranging.size(), 4u);
   for (const RangingCheck& c : r->ranging) {
-    EXPECT_NEAR(c.measured_distance_m, c.true_distance_m, 0.005 * c.true_distance_m) << c.true_distance_m;
+    EXPECT_NEAR(c.measured_distance_m, c.true_distance_m, 0.005 * c.true_distance_m)
+        << c.true_distance_m;
   }
 }
 
@@ -135,15 +144,16 @@ TEST_F(CameraCalibrationTest, MountingSigmaMatchesTheMonteCarloSpread) {
   const YawPitchRoll error{0.3 * kDeg, -0.4 * kDeg, 0.2 * kDeg};
   const Eigen::Vector3d offset(0.008, -0.006, 0.004);
   const Rigid3d truth = TrueMounting(s, error, offset);
-  const double dev_true[6] = {error.yaw, error.pitch, error.roll, offset.x(), offset.y(), offset.z()};
+  const double dev_true[6] = {error.yaw,  error.pitch, error.roll,
+                              offset.x(), offset.y(),  offset.z()};
   CameraCalibrationOptions options;
   options.pnp.feature_sigma_px = 0.2;  // known noise: the spread is then the covariance's
   std::mt19937_64 rng(99);
   constexpr int kTrials = 200;
   Eigen::Matrix<double, 6, 1> sum_sq = Eigen::Matrix<double, 6, 1>::Zero(), sum_sigma = sum_sq;
   for (int t = 0; t < kTrials; ++t) {
-    absl::StatusOr<CameraCalibrationResult> r =
-        CalibrateCamera(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.2, rng), options);
+    absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(
+        s, station_, aligner_.T_station_car(), Observe(s, truth, 0.2, rng), options);
     ASSERT_TRUE(r.ok() && r->solved);
     const MountingEstimate& m = r->mounting;
     const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
@@ -154,7 +164,8 @@ TEST_F(CameraCalibrationTest, MountingSigmaMatchesTheMonteCarloSpread) {
     const double spread = std::sqrt(sum_sq[i] / kTrials);
     const double sigma = sum_sigma[i] / kTrials;
     // 200 trials measure a spread to +-5% (1 sigma); the bar is +-20%.
-    EXPECT_NEAR(spread / sigma, 1.0, 0.2) << "component " << i << ": spread " << spread << ", sigma " << sigma;
+    EXPECT_NEAR(spread / sigma, 1.0, 0.2)
+        << "component " << i << ": spread " << spread << ", sigma " << sigma;
   }
 }
 
@@ -175,7 +186,8 @@ class CameraFramesSigmaTest : public CameraCalibrationTest {
     const YawPitchRoll error{0.3 * kDeg, -0.4 * kDeg, 0.2 * kDeg};
     const Eigen::Vector3d offset(0.008, -0.006, 0.004);
     const Rigid3d truth = TrueMounting(s, error, offset);
-    const double dev_true[6] = {error.yaw, error.pitch, error.roll, offset.x(), offset.y(), offset.z()};
+    const double dev_true[6] = {error.yaw,  error.pitch, error.roll,
+                                offset.x(), offset.y(),  offset.z()};
     std::mt19937_64 rng(2020 + frames);
     SigmaCheck out;
     for (int t = 0; t < trials; ++t) {
@@ -192,7 +204,8 @@ class CameraFramesSigmaTest : public CameraCalibrationTest {
         }
         for (BoardObservation& o : frame) obs.push_back(std::move(o));
       }
-      absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), obs);
+      absl::StatusOr<CameraCalibrationResult> r =
+          CalibrateCamera(s, station_, aligner_.T_station_car(), obs);
       EXPECT_TRUE(r.ok() && r->solved);
       if (!r.ok() || !r->solved) return out;
       const Eigen::Matrix<double, 6, 1> dev = r->mounting.Deviation();
@@ -227,13 +240,15 @@ TEST_F(CameraFramesSigmaTest, IndependentNoiseStillAveragesOverFrames) {
   const SigmaCheck three = Run(3, 0.0, 0.2, 150);
   for (int i = 0; i < 6; ++i) {
     EXPECT_NEAR(three.rms_error_over_sigma[i], 1.0, 0.2) << "component " << i;
-    EXPECT_NEAR(three.mean_sigma[i] / one.mean_sigma[i], 1.0 / std::sqrt(3.0), 0.08) << "component " << i;
+    EXPECT_NEAR(three.mean_sigma[i] / one.mean_sigma[i], 1.0 / std::sqrt(3.0), 0.08)
+        << "component " << i;
   }
 }
 
 TEST_F(CameraCalibrationTest, YawBeyondToleranceFailsWithTheReason) {
   const SensorModel& s = *car_.FindSensor("front_camera");
-  const Rigid3d truth = TrueMounting(s, {1.6 * kDeg, 0, 0}, Eigen::Vector3d::Zero());  // tolerance 1 deg
+  const Rigid3d truth =
+      TrueMounting(s, {1.6 * kDeg, 0, 0}, Eigen::Vector3d::Zero());  // tolerance 1 deg
   std::mt19937_64 rng(3);
   absl::StatusOr<CameraCalibrationResult> r =
       CalibrateCamera(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.2, rng));
@@ -242,7 +257,8 @@ TEST_F(CameraCalibrationTest, YawBeyondToleranceFailsWithTheReason) {
   EXPECT_EQ(r->reason, "yaw_out_of_tolerance");
   EXPECT_NEAR(r->mounting.angles_deviation.yaw, 1.6 * kDeg, 0.01 * kDeg);
   // The message names the measured deviation as MountingEstimate reports it (3 decimals).
-  const std::string deviation = absl::StrFormat("yaw %+.3f deg", r->mounting.angles_deviation.yaw / kDeg);
+  const std::string deviation =
+      absl::StrFormat("yaw %+.3f deg", r->mounting.angles_deviation.yaw / kDeg);
   EXPECT_NE(r->message.find(deviation), std::string::npos) << r->message << " lacks " << deviation;
 }
 
@@ -279,13 +295,15 @@ TEST_F(CameraCalibrationTest, MirroredOrMisidentifiedBoardFailsTheResidualTest) 
         if (mirror) {
           f.p_board.x() = -f.p_board.x();
         } else {
-          f.p_board.x() += f.p_board.x() < 0 ? 1.95 : -1.95;  // the groups' centres are 1.95 m apart
+          f.p_board.x() +=
+              f.p_board.x() < 0 ? 1.95 : -1.95;  // the groups' centres are 1.95 m apart
         }
       }
       changed = true;
     }
     ASSERT_TRUE(changed);
-    absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), bad);
+    absl::StatusOr<CameraCalibrationResult> r =
+        CalibrateCamera(s, station_, aligner_.T_station_car(), bad);
     ASSERT_TRUE(r.ok());
     EXPECT_EQ(r->verdict, Verdict::kError);
     // Either the fit is refused by its residual, or the bad board pulls the solve to a pose
@@ -307,14 +325,17 @@ TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
 
   // Nothing found.
   std::vector<BoardObservation> none = {{"front_chessboard", {}}};
-  absl::StatusOr<CameraCalibrationResult> r = CalibrateCamera(s, station_, aligner_.T_station_car(), none);
+  absl::StatusOr<CameraCalibrationResult> r =
+      CalibrateCamera(s, station_, aligner_.T_station_car(), none);
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->verdict, Verdict::kError);
   EXPECT_EQ(r->reason, "board_not_found");
 
   // Too few features.
-  std::vector<BoardObservation> few = {{obs[0].board_id, {obs[0].features.begin(), obs[0].features.begin() + 5}}};
-  EXPECT_EQ(CalibrateCamera(s, station_, aligner_.T_station_car(), few)->reason, "too_few_features");
+  std::vector<BoardObservation> few = {
+      {obs[0].board_id, {obs[0].features.begin(), obs[0].features.begin() + 5}}};
+  EXPECT_EQ(CalibrateCamera(s, station_, aligner_.T_station_car(), few)->reason,
+            "too_few_features");
 
   // A board the station does not have.
   std::vector<BoardObservation> unknown = {{"no_such_board", obs[0].features}};
@@ -327,7 +348,8 @@ TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
   std::vector<BoardObservation> swapped = obs;
   ASSERT_GE(swapped.size(), 2u);
   std::swap(swapped[0].board_id, swapped[1].board_id);
-  absl::StatusOr<CameraCalibrationResult> wrong = CalibrateCamera(s, station_, aligner_.T_station_car(), swapped);
+  absl::StatusOr<CameraCalibrationResult> wrong =
+      CalibrateCamera(s, station_, aligner_.T_station_car(), swapped);
   ASSERT_TRUE(wrong.ok());
   EXPECT_EQ(wrong->verdict, Verdict::kError);
   EXPECT_TRUE(wrong->reason == "residual_too_high" || wrong->reason == "board_seen_from_behind" ||
@@ -350,10 +372,16 @@ TEST_F(CameraCalibrationTest, ErrorsAndUntrustworthyInputs) {
 
   CameraCalibrationOptions invalid;
   invalid.min_features = 2;
-  EXPECT_NE(CalibrateCamera(s, station_, aligner_.T_station_car(), obs, invalid).status().message().find("min_features"),
+  EXPECT_NE(CalibrateCamera(s, station_, aligner_.T_station_car(), obs, invalid)
+                .status()
+                .message()
+                .find("min_features"),
             std::string::npos);
-  EXPECT_EQ(CalibrateCamera(*car_.FindSensor("front_radar"), station_, aligner_.T_station_car(), obs).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      CalibrateCamera(*car_.FindSensor("front_radar"), station_, aligner_.T_station_car(), obs)
+          .status()
+          .code(),
+      absl::StatusCode::kInvalidArgument);
 }
 
 // The true vanishing point of the car axis for a camera at T_car_camera (looking forward).
@@ -375,8 +403,8 @@ TEST_F(CameraCalibrationTest, BoardMethodOnExactFeaturesAgreesWithTheTruth) {
   for (const double pitch_error_deg : {0.3, -1.5}) {
     SCOPED_TRACE(pitch_error_deg);
     const double yaw_error_deg = pitch_error_deg == -1.5 ? 0.0 : 0.4;
-    const Rigid3d truth =
-        TrueMounting(s, {yaw_error_deg * kDeg, pitch_error_deg * kDeg, 0}, Eigen::Vector3d(0.01, -0.02, 0.005));
+    const Rigid3d truth = TrueMounting(s, {yaw_error_deg * kDeg, pitch_error_deg * kDeg, 0},
+                                       Eigen::Vector3d(0.01, -0.02, 0.005));
     std::vector<DetectedFeature> corners;
     for (const BoardObservation& o : Observe(s, truth, 0.0, rng)) {
       if (o.board_id == "front_chessboard") corners = o.features;
@@ -390,19 +418,22 @@ TEST_F(CameraCalibrationTest, BoardMethodOnExactFeaturesAgreesWithTheTruth) {
     ASSERT_EQ(b.ground_points_car_m.size(), 4u);
     // A and B stand on the ground line of the board, at its foot.
     for (int g = 0; g < 2; ++g) {
-      const Eigen::Vector3d on_board = T_car_board.Inverse() *
-                                       Eigen::Vector3d(b.ground_points_car_m[g].x(), b.ground_points_car_m[g].y(), 0);
+      const Eigen::Vector3d on_board =
+          T_car_board.Inverse() *
+          Eigen::Vector3d(b.ground_points_car_m[g].x(), b.ground_points_car_m[g].y(), 0);
       if (pitch_error_deg == -1.5) {
         EXPECT_NEAR(on_board.z(), 0, 1e-6) << g;
       }
     }
     Eigen::Matrix3d H_true;
     const Rigid3d T_camera_car = truth.Inverse();
-    H_true << T_camera_car.RotationMatrix().col(0), T_camera_car.RotationMatrix().col(1), T_camera_car.translation();
+    H_true << T_camera_car.RotationMatrix().col(0), T_camera_car.RotationMatrix().col(1),
+        T_camera_car.translation();
     H_true = PinholeMatrix(*s.intrinsics) * H_true;
     const std::vector<double> distances = {5, 10, 20, 50};
     // The levelled ground homography is exact, pitched and yawed or not.
-    const std::vector<double> off = GroundDisagreement(H_true, b.ground_homography, truth.translation(), 1, distances);
+    const std::vector<double> off =
+        GroundDisagreement(H_true, b.ground_homography, truth.translation(), 1, distances);
     ASSERT_EQ(off.size(), 4u);
     for (size_t i = 0; i < off.size(); ++i) EXPECT_LT(off[i], 1e-9) << distances[i];
     const std::vector<double> toolbox =
@@ -429,7 +460,8 @@ TEST_F(CameraCalibrationTest, BoardMethodPointAheadIsTheToolboxFormulaWhenTheBoa
   aligner_ = AlignerMeasurement{};
   const StationBoard& board = *station_.FindBoard("front_chessboard");
   const Rigid3d T_car_board = board.T_station_board;
-  const Rigid3d truth = TrueMounting(s, {0.2 * kDeg, 0.1 * kDeg, -0.3 * kDeg}, Eigen::Vector3d(0.0, 0.025, -0.01));
+  const Rigid3d truth =
+      TrueMounting(s, {0.2 * kDeg, 0.1 * kDeg, -0.3 * kDeg}, Eigen::Vector3d(0.0, 0.025, -0.01));
   std::mt19937_64 rng(2);
   const std::vector<BoardObservation> obs = Observe(s, truth, 0.0, rng);
   const BoardMethodResult b =
@@ -445,7 +477,8 @@ TEST_F(CameraCalibrationTest, BoardMethodPointAheadIsTheToolboxFormulaWhenTheBoa
 // acceptance bar of method (a) (0.5 px) and of the truth.
 TEST_F(CameraCalibrationTest, BoardMethodWithNoiseAgreesWithMethodA) {
   const SensorModel& s = *car_.FindSensor("front_camera");
-  const Rigid3d truth = TrueMounting(s, {-0.5 * kDeg, 0.6 * kDeg, 0.3 * kDeg}, Eigen::Vector3d(-0.01, 0.01, 0.02));
+  const Rigid3d truth =
+      TrueMounting(s, {-0.5 * kDeg, 0.6 * kDeg, 0.3 * kDeg}, Eigen::Vector3d(-0.01, 0.01, 0.02));
   std::mt19937_64 rng(31);
   absl::StatusOr<CameraCalibrationResult> r =
       CalibrateCamera(s, station_, aligner_.T_station_car(), ObserveFrames(s, truth, 0.2, 3, rng));
@@ -454,15 +487,16 @@ TEST_F(CameraCalibrationTest, BoardMethodWithNoiseAgreesWithMethodA) {
   const Eigen::Vector2d vp_true = TrueVanishingPoint(*s.intrinsics, truth);
   EXPECT_LT((r->board_method.vanishing_point_px - vp_true).norm(), 0.5);
   EXPECT_LT(r->vanishing_point_disagreement_px, 0.5);
-  EXPECT_NEAR(r->vanishing_point_disagreement_px, (r->board_method.vanishing_point_px - r->vanishing_point_px).norm(),
-              1e-12);
+  EXPECT_NEAR(r->vanishing_point_disagreement_px,
+              (r->board_method.vanishing_point_px - r->vanishing_point_px).norm(), 1e-12);
   ASSERT_EQ(r->ground_disagreement.size(), 4u);
   for (double d : r->ground_disagreement) EXPECT_LT(d, 0.005);  // acceptance: 0.5%
   ASSERT_EQ(r->toolbox_ground_disagreement.size(), 4u);
   // A side camera has neither.
   const SensorModel& side = *car_.FindSensor("surround_left");
-  absl::StatusOr<CameraCalibrationResult> l = CalibrateCamera(
-      side, station_, aligner_.T_station_car(), Observe(side, TrueMounting(side, {}, Eigen::Vector3d::Zero()), 0.2, rng));
+  absl::StatusOr<CameraCalibrationResult> l =
+      CalibrateCamera(side, station_, aligner_.T_station_car(),
+                      Observe(side, TrueMounting(side, {}, Eigen::Vector3d::Zero()), 0.2, rng));
   ASSERT_TRUE(l.ok() && l->solved);
   EXPECT_FALSE(l->board_method.valid);
   EXPECT_EQ(l->board_method.reason, "chessboard_not_seen");
@@ -479,23 +513,32 @@ TEST_F(CameraCalibrationTest, BoardMethodRefusesBadGeometryWithAReason) {
   const std::vector<DetectedFeature> corners = Observe(s, truth, 0.0, rng)[0].features;
   ASSERT_EQ(corners.size(), 20u);
   const Eigen::Vector3d c = truth.translation();
-  EXPECT_EQ(SolveBoardMethod(camera, station_.FindBoard("front_circle")->board, T_car_board, c, 1, corners).reason,
+  EXPECT_EQ(SolveBoardMethod(camera, station_.FindBoard("front_circle")->board, T_car_board, c, 1,
+                             corners)
+                .reason,
             "not_a_chessboard");
-  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, c, 0, corners).reason, "not_looking_along_car");
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, c, 0, corners).reason,
+            "not_looking_along_car");
   const std::vector<DetectedFeature> left_only(corners.begin(), corners.begin() + 10);
   const BoardMethodResult few = SolveBoardMethod(camera, board.board, T_car_board, c, 1, left_only);
   EXPECT_EQ(few.reason, "too_few_features");
   EXPECT_NE(few.message.find("0 of the right"), std::string::npos) << few.message;
   // The board turned edge-on to the car axis, the camera looking backward, the board lying flat.
-  const Rigid3d edge_on = T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(1.55, Eigen::Vector3d::UnitY())),
-                                                Eigen::Vector3d::Zero());
-  EXPECT_EQ(SolveBoardMethod(camera, board.board, edge_on, c, 1, corners).reason, "axis_parallel_to_board");
-  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, c, -1, corners).reason, "board_behind_camera");
-  const Rigid3d flat = T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(-1.3, Eigen::Vector3d::UnitX())),
-                                             Eigen::Vector3d::Zero());
+  const Rigid3d edge_on =
+      T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(1.55, Eigen::Vector3d::UnitY())),
+                            Eigen::Vector3d::Zero());
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, edge_on, c, 1, corners).reason,
+            "axis_parallel_to_board");
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, c, -1, corners).reason,
+            "board_behind_camera");
+  const Rigid3d flat =
+      T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(-1.3, Eigen::Vector3d::UnitX())),
+                            Eigen::Vector3d::Zero());
   EXPECT_EQ(SolveBoardMethod(camera, board.board, flat, c, 1, corners).reason, "board_not_upright");
   // A camera below the ground sees the ground points above its horizon.
-  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, Eigen::Vector3d(c.x(), c.y(), -0.5), 1, corners).reason,
+  EXPECT_EQ(SolveBoardMethod(camera, board.board, T_car_board, Eigen::Vector3d(c.x(), c.y(), -0.5),
+                             1, corners)
+                .reason,
             "ground_point_above_horizon");
 }
 
@@ -512,20 +555,22 @@ TEST_F(CameraCalibrationTest, RollFromTheVerticalBoard) {
     SCOPED_TRACE(roll_deg);
     const YawPitchRoll error{0.6 * kDeg, -0.8 * kDeg, roll_deg * kDeg};
     const Rigid3d truth = TrueMounting(s, error, Eigen::Vector3d::Zero());
-    const double roll_true = MountingAngles(truth.RotationMatrix(), SensorBaseRotation(s.kind)).roll;
+    const double roll_true =
+        MountingAngles(truth.RotationMatrix(), SensorBaseRotation(s.kind)).roll;
     const Eigen::Vector3d car_x = truth.Inverse().RotationMatrix().col(0);
     std::vector<DetectedFeature> exact;
     for (const BoardObservation& o : Observe(s, truth, 0.0, rng)) {
       if (o.board_id == "front_vertical") exact = o.features;
     }
     ASSERT_GE(exact.size(), 40u);
-    const VerticalBoardRoll r = RollFromVerticalBoard(camera, board.board, T_car_board, car_x, exact);
+    const VerticalBoardRoll r =
+        RollFromVerticalBoard(camera, board.board, T_car_board, car_x, exact);
     ASSERT_TRUE(r.valid) << r.reason;
     EXPECT_EQ(r.lines_used, 3);
     EXPECT_NEAR(r.roll_rad, roll_true, 1e-9);
 
-    absl::StatusOr<CameraCalibrationResult> c =
-        CalibrateCamera(s, station_, aligner_.T_station_car(), ObserveFrames(s, truth, 0.2, 3, rng));
+    absl::StatusOr<CameraCalibrationResult> c = CalibrateCamera(
+        s, station_, aligner_.T_station_car(), ObserveFrames(s, truth, 0.2, 3, rng));
     ASSERT_TRUE(c.ok() && c->solved);
     ASSERT_TRUE(c->vertical_roll.valid) << c->vertical_roll.reason;
     EXPECT_NEAR(c->vertical_roll.roll_rad, roll_true, 0.05 * kDeg);
@@ -537,9 +582,11 @@ TEST_F(CameraCalibrationTest, RollFromTheVerticalBoard) {
     if (o.board_id == "front_vertical") exact = o.features;
   }
   const Eigen::Vector3d car_x = truth.Inverse().RotationMatrix().col(0);
-  const Rigid3d tilted = T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(0.01, Eigen::Vector3d::UnitZ())),
-                                               Eigen::Vector3d::Zero());
-  EXPECT_EQ(RollFromVerticalBoard(camera, board.board, tilted, car_x, exact).reason, "board_not_upright");
+  const Rigid3d tilted =
+      T_car_board * Rigid3d(Eigen::Matrix3d(Eigen::AngleAxisd(0.01, Eigen::Vector3d::UnitZ())),
+                            Eigen::Vector3d::Zero());
+  EXPECT_EQ(RollFromVerticalBoard(camera, board.board, tilted, car_x, exact).reason,
+            "board_not_upright");
   const std::vector<DetectedFeature> one_column = [&] {
     std::vector<DetectedFeature> v;
     for (const DetectedFeature& f : exact) {
@@ -547,8 +594,10 @@ TEST_F(CameraCalibrationTest, RollFromTheVerticalBoard) {
     }
     return v;
   }();
-  EXPECT_EQ(RollFromVerticalBoard(camera, board.board, T_car_board, car_x, one_column).reason, "too_few_lines");
-  EXPECT_EQ(RollFromVerticalBoard(camera, station_.FindBoard("front_chessboard")->board, T_car_board, car_x, exact)
+  EXPECT_EQ(RollFromVerticalBoard(camera, board.board, T_car_board, car_x, one_column).reason,
+            "too_few_lines");
+  EXPECT_EQ(RollFromVerticalBoard(camera, station_.FindBoard("front_chessboard")->board,
+                                  T_car_board, car_x, exact)
                 .reason,
             "not_a_vertical_board");
 }

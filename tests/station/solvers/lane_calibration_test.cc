@@ -5,14 +5,14 @@
 // 5-30 m); degenerate input is refused with a message naming the problem.
 #include "station/solvers/lane_calibration.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "station/sim/lane_scene.h"
 
@@ -28,8 +28,8 @@ struct Pose {
   YawPitchRoll angles_deg;
 };
 
-CameraIntrinsics Pinhole(int w, int h, double f, double cx, double cy, double k1 = 0, double k2 = 0, double p1 = 0,
-                         double p2 = 0) {
+CameraIntrinsics Pinhole(int w, int h, double f, double cx, double cy, double k1 = 0, double k2 = 0,
+                         double p1 = 0, double p2 = 0) {
   CameraIntrinsics k;
   k.width = w;
   k.height = h;
@@ -56,16 +56,25 @@ std::vector<Pose> Poses() {
   fisheye.k2 = -0.01;
   return {
       // The reference car's front camera (deploy/cars/reference.json).
-      {"front_distorted", Pinhole(1920, 1080, 1400, 962.3, 541.8, -0.12, 0.05, 0.0004, -0.0002), {1.9, 0.0, 1.35},
+      {"front_distorted",
+       Pinhole(1920, 1080, 1400, 962.3, 541.8, -0.12, 0.05, 0.0004, -0.0002),
+       {1.9, 0.0, 1.35},
        {0.8, 2.1, -0.6}},
-      {"front_pinhole_offset", Pinhole(1280, 720, 1000, 641.0, 359.0), {2.2, 0.35, 1.2}, {-1.5, 4.0, 1.2}},
-      {"rear_distorted", Pinhole(1280, 960, 700, 644.0, 476.0, -0.2, 0.04), {-1.0, -0.1, 1.0}, {181.0, 9.0, 0.7}},
+      {"front_pinhole_offset",
+       Pinhole(1280, 720, 1000, 641.0, 359.0),
+       {2.2, 0.35, 1.2},
+       {-1.5, 4.0, 1.2}},
+      {"rear_distorted",
+       Pinhole(1280, 960, 700, 644.0, 476.0, -0.2, 0.04),
+       {-1.0, -0.1, 1.0},
+       {181.0, 9.0, 0.7}},
       {"front_fisheye", fisheye, {3.7, 0.0, 0.6}, {0.5, 12.0, -1.0}},
   };
 }
 
 Rigid3d TrueMounting(const Pose& p) {
-  const YawPitchRoll a{p.angles_deg.yaw * kDeg, p.angles_deg.pitch * kDeg, p.angles_deg.roll * kDeg};
+  const YawPitchRoll a{p.angles_deg.yaw * kDeg, p.angles_deg.pitch * kDeg,
+                       p.angles_deg.roll * kDeg};
   return Rigid3d(MountingRotation(a, CameraBaseRotation()), p.position_m);
 }
 
@@ -93,7 +102,9 @@ LaneCalibrationInput InputOf(const Pose& p, const LaneScene& scene) {
   return in;
 }
 
-double AngleError(double a, double b) { return std::abs(std::remainder(a - b, 2 * std::numbers::pi)); }
+double AngleError(double a, double b) {
+  return std::abs(std::remainder(a - b, 2 * std::numbers::pi));
+}
 
 // The worst relative ranging error over ground points 5-30 m ahead across the lane: each
 // projected through the true camera, then back to the ground through the estimate.
@@ -117,10 +128,12 @@ TEST(LaneCalibrationTest, ExactPointsRecoverEveryPose) {
   for (const Pose& p : Poses()) {
     SCOPED_TRACE(p.name);
     const CameraModel camera = *CameraModel::Create(p.intrinsics);
-    const absl::StatusOr<LaneScene> scene = RenderLaneScene(camera, TrueMounting(p), PointsOnly(p), 1);
+    const absl::StatusOr<LaneScene> scene =
+        RenderLaneScene(camera, TrueMounting(p), PointsOnly(p), 1);
     ASSERT_TRUE(scene.ok()) << scene.status();
     LaneCalibrationInput in = InputOf(p, *scene);
-    in.marked_point = LaneMarkedPoint{scene->marked_point_px, PointsOnly(p).marked_point_distance_m};
+    in.marked_point =
+        LaneMarkedPoint{scene->marked_point_px, PointsOnly(p).marked_point_distance_m};
     const absl::StatusOr<LaneCalibrationResult> r = CalibrateFromLanes(in);
     ASSERT_TRUE(r.ok()) << r.status();
     EXPECT_TRUE(r->roll_from_line);
@@ -170,7 +183,8 @@ TEST(LaneCalibrationTest, FourMarkersParallelToTheCar) {
   ASSERT_EQ(scene.markers_px.size(), 4u);
   EXPECT_TRUE(scene.lanes_px.empty());
   LaneCalibrationInput in = InputOf(p, scene);
-  in.lanes_px = {{scene.markers_px[0], scene.markers_px[1]}, {scene.markers_px[2], scene.markers_px[3]}};
+  in.lanes_px = {{scene.markers_px[0], scene.markers_px[1]},
+                 {scene.markers_px[2], scene.markers_px[3]}};
   const LaneCalibrationResult r = *CalibrateFromLanes(in);
   EXPECT_LT((r.vanishing_point_px - scene.vanishing_point_px).norm(), 1e-6);
   EXPECT_LT(AngleError(r.angles.pitch, scene.angles.pitch), 1e-9);
@@ -208,8 +222,8 @@ TEST(LaneCalibrationTest, NoisyPointsMeetTheBars) {
   for (const Pose& p : {Poses()[0], Poses()[1]}) {
     SCOPED_TRACE(p.name);
     const NoiseStats s = MeasureNoise(p, 0.1, 200);
-    printf("%s: p95 vp %.3f px, pitch %.4f, yaw %.4f, roll %.4f deg, ranging %.3f%%\n", p.name, s.vp_px, s.pitch_deg,
-           s.yaw_deg, s.roll_deg, 100 * s.ranging);
+    printf("%s: p95 vp %.3f px, pitch %.4f, yaw %.4f, roll %.4f deg, ranging %.3f%%\n", p.name,
+           s.vp_px, s.pitch_deg, s.yaw_deg, s.roll_deg, 100 * s.ranging);
     EXPECT_LE(s.vp_px, 0.5);
     EXPECT_LE(s.pitch_deg, 0.05);
     EXPECT_LE(s.yaw_deg, 0.05);
@@ -284,7 +298,8 @@ TEST_F(LaneCalibrationBadInputTest, MissingOrBadValues) {
 
 TEST_F(LaneCalibrationBadInputTest, RollLineAlongTheCar) {
   in_.roll_line_px = std::array<Eigen::Vector2d, 2>{in_.lanes_px[0][0], in_.lanes_px[0][1]};
-  EXPECT_EQ(Error().rfind("roll_line: it runs (nearly) through the vanishing point", 0), 0u) << Error();
+  EXPECT_EQ(Error().rfind("roll_line: it runs (nearly) through the vanishing point", 0), 0u)
+      << Error();
 }
 
 TEST(LaneCalibrationTest, DistanceCheckFailsBeyondTheTolerance) {

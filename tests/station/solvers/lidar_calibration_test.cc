@@ -4,12 +4,12 @@
 // the verdicts and refusals.
 #include "station/solvers/lidar_calibration.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "station/model/aligner.h"
 
@@ -29,7 +29,8 @@ class LidarCalibrationTest : public ::testing::Test {
     aligner_.thrust_angle_rad = -0.15 * kDeg;
   }
 
-  Rigid3d TrueMounting(const SensorModel& s, const YawPitchRoll& e, const Eigen::Vector3d& offset) const {
+  Rigid3d TrueMounting(const SensorModel& s, const YawPitchRoll& e,
+                       const Eigen::Vector3d& offset) const {
     const Eigen::Matrix3d r_base = SensorBaseRotation(s.kind);
     const YawPitchRoll n = MountingAngles(s.T_car_sensor_nominal.RotationMatrix(), r_base);
     return Rigid3d(MountingRotation({n.yaw + e.yaw, n.pitch + e.pitch, n.roll + e.roll}, r_base),
@@ -38,8 +39,9 @@ class LidarCalibrationTest : public ::testing::Test {
 
   // The hole centres and normals of the sensor's target boards as the LiDAR at T_car_lidar
   // would measure them, with Gaussian noise of sigma_m per axis and sigma_rad on the normal.
-  std::vector<LidarBoardObservation> Observe(const SensorModel& s, const Rigid3d& T_car_lidar, double sigma_m,
-                                             double sigma_rad, std::mt19937_64& rng) const {
+  std::vector<LidarBoardObservation> Observe(const SensorModel& s, const Rigid3d& T_car_lidar,
+                                             double sigma_m, double sigma_rad,
+                                             std::mt19937_64& rng) const {
     std::normal_distribution<double> normal(0.0, 1.0);
     const Rigid3d T_lidar_station = (aligner_.T_station_car() * T_car_lidar).Inverse();
     std::vector<LidarBoardObservation> out;
@@ -59,7 +61,8 @@ class LidarCalibrationTest : public ::testing::Test {
       // A small random rotation of the true normal, sigma_rad per axis.
       const double ax = normal(rng), ay = normal(rng), az = normal(rng);
       const Eigen::Vector3d tilt = sigma_rad * Eigen::Vector3d(ax, ay, az);
-      o.normal_lidar = (Eigen::AngleAxisd(tilt.norm(), tilt.normalized()) * T_lidar_board.RotationMatrix().col(2))
+      o.normal_lidar = (Eigen::AngleAxisd(tilt.norm(), tilt.normalized()) *
+                        T_lidar_board.RotationMatrix().col(2))
                            .normalized();
       out.push_back(o);
     }
@@ -80,15 +83,16 @@ TEST_F(LidarCalibrationTest, BothLidarsRecoveredWithinSigma) {
     const Eigen::Vector3d offset(0.01, -0.012, 0.008);
     std::mt19937_64 rng(4);
     const Rigid3d truth = TrueMounting(s, error, offset);
-    absl::StatusOr<LidarCalibrationResult> r =
-        CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.005, 0.1 * kDeg, rng));
+    absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(
+        s, station_, aligner_.T_station_car(), Observe(s, truth, 0.005, 0.1 * kDeg, rng));
     ASSERT_TRUE(r.ok()) << r.status();
     EXPECT_EQ(r->verdict, Verdict::kPass) << r->reason << " " << r->message;
     EXPECT_EQ(r->features_used, 10);
     EXPECT_EQ(r->boards_used, 2);
     const MountingEstimate& m = r->mounting;
     const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
-    const double truth_dev[6] = {error.yaw, error.pitch, error.roll, offset.x(), offset.y(), offset.z()};
+    const double truth_dev[6] = {error.yaw,  error.pitch, error.roll,
+                                 offset.x(), offset.y(),  offset.z()};
     for (int i = 0; i < 6; ++i) {
       EXPECT_GT(m.sigma[i], 0) << i;
       EXPECT_NEAR(dev[i], truth_dev[i], 4 * m.sigma[i]) << "component " << i;
@@ -106,8 +110,8 @@ TEST_F(LidarCalibrationTest, SigmaMatchesTheMonteCarloSpread) {
   constexpr int kTrials = 300;
   Eigen::Matrix<double, 6, 1> sum_sq = Eigen::Matrix<double, 6, 1>::Zero(), sum_sigma = sum_sq;
   for (int t = 0; t < kTrials; ++t) {
-    absl::StatusOr<LidarCalibrationResult> r =
-        CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, truth, 0.01, 0.2 * kDeg, rng));
+    absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(
+        s, station_, aligner_.T_station_car(), Observe(s, truth, 0.01, 0.2 * kDeg, rng));
     ASSERT_TRUE(r.ok() && r->solved);
     const MountingEstimate& m = r->mounting;
     const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
@@ -130,7 +134,8 @@ TEST_F(LidarCalibrationTest, BoardPosesWithTheirCovariance) {
   const Rigid3d truth = TrueMounting(s, {}, Eigen::Vector3d::Zero());
   Eigen::Matrix<double, 6, 1> sd;
   sd << 0.1 * kDeg, 0.1 * kDeg, 0.3 * kDeg, 0.0015, 0.008, 0.003;
-  Eigen::Matrix<double, 6, 6> cov = sd.asDiagonal() * Eigen::Matrix<double, 6, 6>::Identity() * sd.asDiagonal();
+  Eigen::Matrix<double, 6, 6> cov =
+      sd.asDiagonal() * Eigen::Matrix<double, 6, 6>::Identity() * sd.asDiagonal();
   cov(4, 2) = cov(2, 4) = 0.5 * sd(4) * sd(2);
   const Eigen::Matrix<double, 6, 6> L = cov.llt().matrixL();
   std::mt19937_64 rng(23);
@@ -141,16 +146,19 @@ TEST_F(LidarCalibrationTest, BoardPosesWithTheirCovariance) {
     // Hole centres without noise: were they used besides the poses, sigma would shrink.
     std::vector<LidarBoardObservation> obs = Observe(s, truth, 1e-9, 1e-9, rng);
     for (LidarBoardObservation& o : obs) {
-      const Rigid3d T_true = (aligner_.T_station_car() * truth).Inverse() * station_.FindBoard(o.board_id)->T_station_board;
+      const Rigid3d T_true = (aligner_.T_station_car() * truth).Inverse() *
+                             station_.FindBoard(o.board_id)->T_station_board;
       Eigen::Matrix<double, 6, 1> z;
       for (int k = 0; k < 6; ++k) z(k) = normal(rng);
       const Eigen::Matrix<double, 6, 1> e = L * z;  // T_true = T_meas * (R(theta), t)
       const Eigen::Vector3d theta = e.head<3>();
-      const Rigid3d delta(Eigen::Quaterniond(Eigen::AngleAxisd(theta.norm(), theta.normalized())), e.tail<3>());
+      const Rigid3d delta(Eigen::Quaterniond(Eigen::AngleAxisd(theta.norm(), theta.normalized())),
+                          e.tail<3>());
       o.T_lidar_board = T_true * delta.Inverse();
       o.pose_covariance = cov;
     }
-    absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(s, station_, aligner_.T_station_car(), obs);
+    absl::StatusOr<LidarCalibrationResult> r =
+        CalibrateLidar(s, station_, aligner_.T_station_car(), obs);
     ASSERT_TRUE(r.ok() && r->solved) << (r.ok() ? r->reason : std::string(r.status().message()));
     const MountingEstimate& m = r->mounting;
     const Eigen::Matrix<double, 6, 1> dev = m.Deviation();
@@ -172,8 +180,8 @@ TEST_F(LidarCalibrationTest, VerdictsAndRefusals) {
   std::mt19937_64 rng(6);
   // Beyond tolerance.
   const Rigid3d off = TrueMounting(s, {0.9 * kDeg, 0, 0}, Eigen::Vector3d::Zero());
-  absl::StatusOr<LidarCalibrationResult> fail =
-      CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, off, 0.003, 0.05 * kDeg, rng));
+  absl::StatusOr<LidarCalibrationResult> fail = CalibrateLidar(
+      s, station_, aligner_.T_station_car(), Observe(s, off, 0.003, 0.05 * kDeg, rng));
   ASSERT_TRUE(fail.ok());
   EXPECT_EQ(fail->verdict, Verdict::kFail);
   EXPECT_EQ(fail->reason, "yaw_out_of_tolerance");
@@ -185,7 +193,8 @@ TEST_F(LidarCalibrationTest, VerdictsAndRefusals) {
   std::vector<LidarHoleCentre>& holes = wrong[0].holes;
   std::rotate(holes.begin(), holes.begin() + 1, holes.end());
   for (size_t i = 0; i < holes.size(); ++i) holes[i].feature_id = obs[0].holes[i].feature_id;
-  absl::StatusOr<LidarCalibrationResult> mismatched = CalibrateLidar(s, station_, aligner_.T_station_car(), wrong);
+  absl::StatusOr<LidarCalibrationResult> mismatched =
+      CalibrateLidar(s, station_, aligner_.T_station_car(), wrong);
   ASSERT_TRUE(mismatched.ok());
   EXPECT_EQ(mismatched->verdict, Verdict::kError);
   EXPECT_EQ(mismatched->reason, "residual_too_high") << mismatched->message;
@@ -194,8 +203,8 @@ TEST_F(LidarCalibrationTest, VerdictsAndRefusals) {
   LidarCalibrationOptions bounded;
   bounded.translation_bound_m = 0.02;
   const Rigid3d shifted = TrueMounting(s, {}, Eigen::Vector3d(0.05, 0, 0));
-  absl::StatusOr<LidarCalibrationResult> at_bound =
-      CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, shifted, 0.003, 0.05 * kDeg, rng), bounded);
+  absl::StatusOr<LidarCalibrationResult> at_bound = CalibrateLidar(
+      s, station_, aligner_.T_station_car(), Observe(s, shifted, 0.003, 0.05 * kDeg, rng), bounded);
   ASSERT_TRUE(at_bound.ok());
   EXPECT_TRUE(at_bound->translation_at_bound);
   EXPECT_NEAR(at_bound->mounting.position_deviation_m.x(), 0.02, 1e-6);
@@ -209,18 +218,25 @@ TEST_F(LidarCalibrationTest, VerdictsAndRefusals) {
   EXPECT_EQ(CalibrateLidar(s, station_, aligner_.T_station_car(), two)->reason, "too_few_features");
   std::vector<LidarBoardObservation> unknown = {obs[0]};
   unknown[0].board_id = "front_circle";  // a board, but its features are not holes
-  const absl::Status not_holes = CalibrateLidar(s, station_, aligner_.T_station_car(), unknown).status();
+  const absl::Status not_holes =
+      CalibrateLidar(s, station_, aligner_.T_station_car(), unknown).status();
   EXPECT_EQ(not_holes.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(not_holes.message().find("no hole centre"), std::string::npos) << not_holes;
   unknown[0].board_id = "nowhere";
-  EXPECT_NE(CalibrateLidar(s, station_, aligner_.T_station_car(), unknown).status().message().find("nowhere"),
+  EXPECT_NE(CalibrateLidar(s, station_, aligner_.T_station_car(), unknown)
+                .status()
+                .message()
+                .find("nowhere"),
             std::string::npos);
   std::vector<LidarBoardObservation> nan = {obs[0]};
   nan[0].holes[1].p_lidar.y() = std::nan("");
   EXPECT_EQ(CalibrateLidar(s, station_, aligner_.T_station_car(), nan).status().code(),
             absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(CalibrateLidar(*car_.FindSensor("front_camera"), station_, aligner_.T_station_car(), obs).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      CalibrateLidar(*car_.FindSensor("front_camera"), station_, aligner_.T_station_car(), obs)
+          .status()
+          .code(),
+      absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace

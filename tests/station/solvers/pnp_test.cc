@@ -4,11 +4,11 @@
 // face-on and grazing views, degenerate input, and a mirrored board that must not fit.
 #include "station/solvers/pnp.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 namespace linecal {
 namespace {
@@ -66,7 +66,8 @@ Rigid3d CameraViewing(double d, double yaw, double pitch, double roll,
                       const Eigen::Vector3d& shift = Eigen::Vector3d::Zero()) {
   // Camera looking along -z_board (towards the print) with x_camera = x_board: a rotation of
   // pi about x_board maps z_camera to -z_board and y_camera to -y_board.
-  const Eigen::Matrix3d R_board_camera0 = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const Eigen::Matrix3d R_board_camera0 =
+      Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
   const Eigen::Matrix3d turn = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()) *
                                 Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitX()))
                                    .toRotationMatrix();
@@ -78,8 +79,8 @@ Rigid3d CameraViewing(double d, double yaw, double pitch, double roll,
 }
 
 std::vector<PnpCorrespondence> Observe(const CameraModel& camera, const Rigid3d& T_camera_object,
-                                       const std::vector<Eigen::Vector3d>& p_object, double sigma_px,
-                                       std::mt19937_64& rng) {
+                                       const std::vector<Eigen::Vector3d>& p_object,
+                                       double sigma_px, std::mt19937_64& rng) {
   std::normal_distribution<double> noise(0.0, 1.0);
   std::vector<PnpCorrespondence> out;
   for (const Eigen::Vector3d& p : p_object) {
@@ -112,7 +113,8 @@ TEST(PnpTest, ExactDataIsSolvedExactlyPlanarAndNot) {
   EXPECT_LT(planar->residual_rms_px, 1e-8);
   // Two boards at an angle to each other (a non-planar set, as in camera-to-car).
   std::vector<Eigen::Vector3d> two = Grid();
-  const Rigid3d T_a_b(Eigen::AngleAxisd(50 * kDeg, Eigen::Vector3d::UnitY()).toRotationMatrix(), {1.2, 0.1, -0.4});
+  const Rigid3d T_a_b(Eigen::AngleAxisd(50 * kDeg, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+                      {1.2, 0.1, -0.4});
   for (const Eigen::Vector3d& p : Grid(5, 4)) two.push_back(T_a_b * p);
   absl::StatusOr<PnpResult> general = SolvePnp(camera, Observe(camera, truth, two, 0.0, rng));
   ASSERT_TRUE(general.ok());
@@ -143,23 +145,28 @@ TEST(PnpTest, FaceOnTiltedAndGrazingViews) {
   for (const Case& c : cases) {
     const CameraModel camera = c.fisheye ? Fisheye() : Pinhole();
     std::mt19937_64 rng(7);
-    const Rigid3d truth = CameraViewing(c.d, c.yaw_deg * kDeg, c.pitch_deg * kDeg, c.roll_deg * kDeg, c.shift);
+    const Rigid3d truth =
+        CameraViewing(c.d, c.yaw_deg * kDeg, c.pitch_deg * kDeg, c.roll_deg * kDeg, c.shift);
     const double sigma = 0.2;
     absl::StatusOr<PnpResult> r = SolvePnp(camera, Observe(camera, truth, Grid(), sigma, rng));
     ASSERT_TRUE(r.ok()) << c.name;
     ASSERT_EQ(r->outcome, PnpOutcome::kOk) << c.name;
     EXPECT_TRUE(r->T_camera_object.translation().allFinite()) << c.name;
     // Within 5 reported standard deviations on every axis: the covariance is honest per view.
-    const Eigen::AngleAxisd d_rotation(r->T_camera_object.RotationMatrix() * truth.RotationMatrix().transpose());
+    const Eigen::AngleAxisd d_rotation(r->T_camera_object.RotationMatrix() *
+                                       truth.RotationMatrix().transpose());
     const Eigen::Vector3d d_theta = d_rotation.angle() * d_rotation.axis();
     const Eigen::Vector3d d_t = r->T_camera_object.translation() - truth.translation();
     for (int k = 0; k < 3; ++k) {
-      EXPECT_LT(std::abs(d_theta[k]), 5 * std::sqrt(r->covariance(k, k))) << c.name << " rotation " << k;
-      EXPECT_LT(std::abs(d_t[k]), 5 * std::sqrt(r->covariance(3 + k, 3 + k))) << c.name << " translation " << k;
+      EXPECT_LT(std::abs(d_theta[k]), 5 * std::sqrt(r->covariance(k, k)))
+          << c.name << " rotation " << k;
+      EXPECT_LT(std::abs(d_t[k]), 5 * std::sqrt(r->covariance(3 + k, 3 + k)))
+          << c.name << " translation " << k;
     }
     // RMS of the 54 residual lengths after a fit with 6 unknowns: sigma * sqrt(2 (2n - 6) / 2n)
     // = 0.2 * 1.37; 15% covers the chi-square spread of 102 degrees of freedom at 3 sigma.
-    EXPECT_NEAR(r->residual_rms_px, sigma * std::sqrt(2 * (108.0 - 6) / 108), 0.15 * sigma) << c.name;
+    EXPECT_NEAR(r->residual_rms_px, sigma * std::sqrt(2 * (108.0 - 6) / 108), 0.15 * sigma)
+        << c.name;
     EXPECT_TRUE(BoardFacesCamera(r->T_camera_object)) << c.name;
   }
 }
@@ -181,9 +188,11 @@ TEST(PnpTest, ReportedUncertaintyMatchesTheMonteCarloSpread) {
     absl::StatusOr<PnpResult> r = SolvePnp(camera, Observe(camera, truth, grid, 0.2, rng), options);
     ASSERT_TRUE(r.ok());
     ASSERT_EQ(r->outcome, PnpOutcome::kOk);
-    const Eigen::AngleAxisd d_rotation(r->T_camera_object.RotationMatrix() * truth.RotationMatrix().transpose());
+    const Eigen::AngleAxisd d_rotation(r->T_camera_object.RotationMatrix() *
+                                       truth.RotationMatrix().transpose());
     Eigen::Matrix<double, 6, 1> e;
-    e << d_rotation.angle() * d_rotation.axis(), r->T_camera_object.translation() - truth.translation();
+    e << d_rotation.angle() * d_rotation.axis(),
+        r->T_camera_object.translation() - truth.translation();
     sum_sq += e.cwiseProduct(e);
     reported += r->covariance;
     for (int k = 0; k < 6; ++k) {
@@ -226,8 +235,9 @@ TEST(PnpTest, CovarianceJacobianMatchesNumericDerivatives) {
           Eigen::Matrix<double, 6, 1> delta = Eigen::Matrix<double, 6, 1>::Zero();
           delta[k] = side == 0 ? kStep : -kStep;
           const Eigen::Vector3d w = delta.head<3>();
-          const Eigen::Matrix3d dR = Eigen::AngleAxisd(w.norm(), w.norm() > 0 ? w.normalized() : Eigen::Vector3d::UnitX())
-                                         .toRotationMatrix();
+          const Eigen::Matrix3d dR =
+              Eigen::AngleAxisd(w.norm(), w.norm() > 0 ? w.normalized() : Eigen::Vector3d::UnitX())
+                  .toRotationMatrix();
           ASSERT_TRUE(camera.Project(dR * R * c.p_object + t + delta.tail<3>(), &uv[side]));
         }
         J.col(k) = (uv[0] - uv[1]) / (2 * kStep);
@@ -235,7 +245,8 @@ TEST(PnpTest, CovarianceJacobianMatchesNumericDerivatives) {
       JtJ += J.transpose() * J;
     }
     const Eigen::Matrix<double, 6, 6> numeric = 0.3 * 0.3 * JtJ.inverse();
-    EXPECT_LT((numeric - r->covariance).norm() / r->covariance.norm(), 1e-6) << camera.intrinsics().width;
+    EXPECT_LT((numeric - r->covariance).norm() / r->covariance.norm(), 1e-6)
+        << camera.intrinsics().width;
   }
 }
 
@@ -267,7 +278,8 @@ TEST(PnpTest, MirroredBoardsAreSeenFromBehindOrDoNotFit) {
   EXPECT_FALSE(BoardFacesCamera(r->T_camera_object));
 
   std::vector<Eigen::Vector3d> two = Grid();
-  const Rigid3d T_a_b(Eigen::AngleAxisd(50 * kDeg, Eigen::Vector3d::UnitY()).toRotationMatrix(), {1.2, 0.1, -0.4});
+  const Rigid3d T_a_b(Eigen::AngleAxisd(50 * kDeg, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+                      {1.2, 0.1, -0.4});
   for (const Eigen::Vector3d& p : Grid(5, 4)) two.push_back(T_a_b * p);
   const Rigid3d wide = CameraViewing(2.5, 20 * kDeg, -10 * kDeg, 5 * kDeg, {0.1, -0.05, 0});
   std::vector<PnpCorrespondence> both = Observe(camera, wide, two, 0.1, rng);

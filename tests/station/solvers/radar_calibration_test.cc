@@ -154,8 +154,9 @@ SensorModel WithKnownPosition(SensorModel s) {
 // docs/acceptance.md's bars: RMS error / RMS σ within ±20%, 95% intervals cover 93-97%; with 400
 // cars the coverage itself scatters by ±1.1 percentage points.
 TEST(RadarCalibrationTest, ReportedSigmaMatchesMonteCarlo) {
-  const MonteCarloSpread m = SpreadOverCars(WithKnownPosition(radar_test::TestRadar("esr", -3 * kDeg)),
-                                            radar_test::TestLayout(), 400, 2026);
+  const MonteCarloSpread m =
+      SpreadOverCars(WithKnownPosition(radar_test::TestRadar("esr", -3 * kDeg)),
+                     radar_test::TestLayout(), 400, 2026);
   EXPECT_GE(m.error_over_sigma, 0.8);
   EXPECT_LE(m.error_over_sigma, 1.2);
   EXPECT_GE(m.coverage95, 0.93);
@@ -198,8 +199,7 @@ TEST(RadarCalibrationTest, VerdictAroundTheTolerance) {
   const SensorModel s = WithKnownPosition(radar_test::TestRadar("esr"));
   // 0.8° and 1.2° against a 1° tolerance: 0.2° from the edge is ~15 σ.
   for (const auto& [yaw_error, verdict, reason] :
-       {std::tuple{0.8 * kDeg, Verdict::kPass, ""},
-        std::tuple{-0.8 * kDeg, Verdict::kPass, ""},
+       {std::tuple{0.8 * kDeg, Verdict::kPass, ""}, std::tuple{-0.8 * kDeg, Verdict::kPass, ""},
         std::tuple{1.2 * kDeg, Verdict::kFail, "yaw_out_of_tolerance"},
         std::tuple{-1.2 * kDeg, Verdict::kFail, "yaw_out_of_tolerance"}}) {
     SCOPED_TRACE(yaw_error / kDeg);
@@ -269,8 +269,8 @@ TEST(RadarCalibrationTest, RecoversALateralOffsetWithReflectorsAtDifferentRanges
   // Across the lines of sight (the boresight's normal, 130° in the car frame) the offset is
   // measured; along them the prior (±5 cm) decides it.
   const Eigen::Vector2d across(std::cos(130 * kDeg), std::sin(130 * kDeg));
-  const double sigma_across = std::sqrt(across.dot(
-      r.position_offset_sigma_m.cwiseAbs2().cwiseProduct(across.cwiseAbs2())));
+  const double sigma_across =
+      std::sqrt(across.dot(r.position_offset_sigma_m.cwiseAbs2().cwiseProduct(across.cwiseAbs2())));
   EXPECT_LT(sigma_across, 0.005);
   EXPECT_NEAR(across.dot(r.position_offset_m), across.dot(offset.head<2>()), 4 * sigma_across);
   EXPECT_TRUE(r.T_car_radar.translation().head<2>().isApprox(

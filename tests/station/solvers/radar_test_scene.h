@@ -6,10 +6,10 @@
 #include <string>
 #include <vector>
 
-#include "station/sensors/radar/radar_decoder.h"
 #include "detectors/core/pose.h"
 #include "station/model/car_model.h"
 #include "station/model/station_layout.h"
+#include "station/sensors/radar/radar_decoder.h"
 #include "station/sim/radar_sim.h"
 
 namespace linecal::radar_test {
@@ -72,8 +72,8 @@ inline StationLayout CornerLayout() {
 inline SensorModel TestCornerRadar() {
   SensorModel s = TestRadar("esr", 40 * kDeg);
   s.name = "corner_radar_left";
-  s.T_car_sensor_nominal = Rigid3d(s.T_car_sensor_nominal.RotationMatrix(),
-                                   Eigen::Vector3d(3.6, 0.85, 0.5));
+  s.T_car_sensor_nominal =
+      Rigid3d(s.T_car_sensor_nominal.RotationMatrix(), Eigen::Vector3d(3.6, 0.85, 0.5));
   s.targets = {"near", "far", "close"};
   return s;
 }

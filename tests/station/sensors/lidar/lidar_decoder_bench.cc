@@ -6,8 +6,8 @@
 #include <string>
 #include <vector>
 
-#include "station/sensors/lidar/lidar_decoder.h"
 #include "station/io/pcap.h"
+#include "station/sensors/lidar/lidar_decoder.h"
 #include "tests/support/external_data.h"
 #include "tests/support/lidar_recording.h"
 

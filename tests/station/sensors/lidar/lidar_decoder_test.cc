@@ -6,10 +6,10 @@
 #include <random>
 #include <string>
 
-#include "station/sensors/lidar/lidar_pcap.h"
 #include "gtest/gtest.h"
 #include "station/io/byte_io.h"
 #include "station/io/pcap.h"
+#include "station/sensors/lidar/lidar_pcap.h"
 #include "station/sensors/lidar/pcd.h"
 #include "tests/support/external_data.h"
 #include "tests/support/lidar_recording.h"

@@ -177,7 +177,8 @@ TEST(RadarDecoderTest, Ars408EncodeWriteReadDecodeRoundTrip) {
   }
   std::stable_sort(frames.begin(), frames.end(),
                    [](const CanFrame& a, const CanFrame& b) { return a.time < b.time; });
-  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / ("ars408_" + std::to_string(::getpid()) + ".log");
+  const std::filesystem::path path =
+      std::filesystem::path(testing::TempDir()) / ("ars408_" + std::to_string(::getpid()) + ".log");
   ASSERT_TRUE(WriteCandumpLog(path, frames).ok());
   const absl::StatusOr<std::vector<CanFrame>> read = ReadCandumpLog(path);
   ASSERT_TRUE(read.ok()) << read.status();
@@ -251,7 +252,8 @@ TEST(RadarDecoderTest, EsrEncodeWriteReadDecodeRoundTrip) {
     frames.insert(frames.end(), encoded->begin(), encoded->end());
     sent.push_back(c);
   }
-  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / ("esr_" + std::to_string(::getpid()) + ".log");
+  const std::filesystem::path path =
+      std::filesystem::path(testing::TempDir()) / ("esr_" + std::to_string(::getpid()) + ".log");
   ASSERT_TRUE(WriteCandumpLog(path, frames).ok());
   const absl::StatusOr<std::vector<CanFrame>> read = ReadCandumpLog(path);
   ASSERT_TRUE(read.ok()) << read.status();
