@@ -40,7 +40,7 @@ StoredSensorResult ToStored(const SensorCalibration& s) {
   constexpr double kDeg = kRadToDeg;
   StoredSensorResult r;
   r.sensor = s.name;
-  r.kind = SensorKindName(s.kind);
+  r.kind = s.kind;
   r.verdict = s.verdict;
   r.reason = s.reason;
   r.message = s.message;

@@ -273,8 +273,8 @@ std::string SensorValues(const pqxx::work& tx, const std::string& station, int64
                          const StoredSensorResult& s) {
   auto optional = [](const std::optional<double>& v) { return v ? Float(*v) : "NULL"; };
   return absl::StrCat("(", tx.quote(station), ", ", cycle_id, ", ", tx.quote(s.sensor), ", ",
-                      tx.quote(s.kind), ", ", tx.quote(VerdictName(s.verdict)), ", ",
-                      tx.quote(s.reason), ", ", tx.quote(s.message), ", ",
+                      tx.quote(SensorKindName(s.kind)), ", ", tx.quote(VerdictName(s.verdict)),
+                      ", ", tx.quote(s.reason), ", ", tx.quote(s.message), ", ",
                       FloatArray(tx, s.T_car_sensor), ", ", Mounting(s.measured), ", ",
                       Mounting(s.deviation), ", ", Mounting(s.sigma), ", ", Float(s.residual_rms),
                       ", ", s.features_used, ", ", optional(s.vanishing_point_u_px), ", ",
@@ -323,10 +323,21 @@ MountingValues ParseMounting(const pqxx::row& r, int first) {
 
 std::string Text(const pqxx::field& f) { return f.is_null() ? "" : f.c_str(); }
 
+// A refusal inside a transaction: Run ends it and returns the status.
+struct Refusal {
+  absl::Status status;
+};
+
 StoredSensorResult ParseSensor(const pqxx::row& r, int first) {
   StoredSensorResult s;
   s.sensor = Text(r[first]);
-  s.kind = Text(r[first + 1]);
+  const std::optional<SensorKind> kind = ParseSensorKind(Text(r[first + 1]));
+  // Only forwarders write the column: another word is a damaged or foreign row.
+  if (!kind) {
+    throw Refusal{absl::DataLossError(absl::StrCat("sensor '", s.sensor, "' of unknown kind '",
+                                                   Text(r[first + 1]), "' in the plant database"))};
+  }
+  s.kind = *kind;
   s.verdict = ParseVerdict(Text(r[first + 2]));
   s.reason = Text(r[first + 3]);
   s.message = Text(r[first + 4]);
@@ -402,10 +413,6 @@ WITH first AS (
 )sql";
 
 // A refusal decided inside a transaction: Run rolls back and returns its status.
-struct Refusal {
-  absl::Status status;
-};
-
 int ReadVersion(pqxx::work& tx) {
   const pqxx::row exists = tx.exec1("SELECT to_regclass('schema_migrations') IS NOT NULL");
   if (!exists[0].as<bool>()) return 0;

@@ -74,10 +74,15 @@ v1::CycleState ToProto(CycleState s) {
   return v1::CYCLE_STATE_UNSPECIFIED;
 }
 
-v1::SensorKind KindToProto(const std::string& kind) {
-  if (kind == "camera") return v1::SENSOR_KIND_CAMERA;
-  if (kind == "lidar") return v1::SENSOR_KIND_LIDAR;
-  if (kind == "radar") return v1::SENSOR_KIND_RADAR;
+v1::SensorKind KindToProto(SensorKind kind) {
+  switch (kind) {
+    case SensorKind::kCamera:
+      return v1::SENSOR_KIND_CAMERA;
+    case SensorKind::kLidar:
+      return v1::SENSOR_KIND_LIDAR;
+    case SensorKind::kRadar:
+      return v1::SENSOR_KIND_RADAR;
+  }
   return v1::SENSOR_KIND_UNSPECIFIED;
 }
 
@@ -311,7 +316,7 @@ grpc::Status StationService::GetStationStatus(grpc::ServerContext* context,
   for (const auto& [name, kind] : s.sensors) {
     v1::SensorStatus* sensor = response->add_sensors();
     sensor->set_name(name);
-    sensor->set_kind(KindToProto(SensorKindName(kind)));
+    sensor->set_kind(KindToProto(kind));
     sensor->set_source(s.SourceOf(name));
     // The simulator and a recorded capture are always there; live devices are not probed
     // here (they are opened at each cycle, where a missing one is that sensor's error).

@@ -495,7 +495,7 @@ absl::Status Store::PutSensorResult(int64_t cycle_id, const StoredSensorResult& 
               "?25, ?26, ?27, ?28, ?29, ?30, ?31, ?32)");
   s.Bind(1, cycle_id)
       .Bind(2, r.sensor)
-      .Bind(3, r.kind)
+      .Bind(3, SensorKindName(r.kind))
       .Bind(4, std::string(VerdictName(r.verdict)))
       .Bind(5, r.reason)
       .Bind(6, r.message)
@@ -576,7 +576,14 @@ absl::StatusOr<StoredCycle> Store::ReadCycleLocked(int64_t cycle_id) {
   while ((step = r.Step()) == SQLITE_ROW) {
     StoredSensorResult x;
     x.sensor = r.Text(1);
-    x.kind = r.Text(2);
+    const std::optional<SensorKind> kind = ParseSensorKind(r.Text(2));
+    // Only the store writes the column: another word is a damaged or foreign file.
+    if (!kind) {
+      return absl::DataLossError(absl::StrCat(path_, ": cycle ", cycle_id, " has sensor ",
+                                              QuoteInput(r.Text(1)), " of unknown kind ",
+                                              QuoteInput(r.Text(2))));
+    }
+    x.kind = *kind;
     x.verdict = ParseVerdict(r.Text(3));
     x.reason = r.Text(4);
     x.message = r.Text(5);

@@ -41,6 +41,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
+#include "station/model/car_model.h"
 #include "station/model/verdict.h"
 
 struct sqlite3;
@@ -93,8 +94,8 @@ struct MountingValues {
 };
 
 struct StoredSensorResult {
-  std::string sensor;  // the car model's sensor name
-  std::string kind;    // "camera", "lidar", "radar"
+  std::string sensor;                     // the car model's sensor name
+  SensorKind kind = SensorKind::kCamera;  // stored as SensorKindName's word
   std::optional<Verdict> verdict;
   std::string reason;                // a code ("yaw_out_of_tolerance"); empty on pass
   std::string message;               // the same for a person

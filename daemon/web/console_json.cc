@@ -18,7 +18,7 @@ nlohmann::json MountingJson(const MountingValues& m) {
 
 nlohmann::json SensorJson(const StoredSensorResult& s) {
   nlohmann::json j = {{"name", s.sensor},
-                      {"kind", s.kind},
+                      {"kind", SensorKindName(s.kind)},
                       {"verdict", VerdictName(s.verdict)},
                       {"reason", s.reason},
                       {"message", s.message},

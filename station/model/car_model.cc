@@ -186,6 +186,13 @@ const char* SensorKindName(SensorKind kind) {
   return "unknown";
 }
 
+std::optional<SensorKind> ParseSensorKind(std::string_view name) {
+  for (SensorKind k : {SensorKind::kCamera, SensorKind::kLidar, SensorKind::kRadar}) {
+    if (name == SensorKindName(k)) return k;
+  }
+  return std::nullopt;
+}
+
 Eigen::Matrix3d SensorBaseRotation(SensorKind kind) {
   switch (kind) {
     case SensorKind::kCamera:

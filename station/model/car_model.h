@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -20,6 +21,8 @@ enum class SensorKind { kCamera, kLidar, kRadar };
 
 // "camera", "lidar", "radar".
 const char* SensorKindName(SensorKind kind);
+// The kind SensorKindName names ("camera", "lidar", "radar"); nullopt for any other word.
+std::optional<SensorKind> ParseSensorKind(std::string_view name);
 
 // Largest allowed deviation from the nominal mounting, per axis (symmetric).
 struct MountingTolerance {

@@ -23,7 +23,7 @@ inline int64_t EndCycleInStore(Store& store, int64_t started_ns, int64_t ended_n
   if (!id.ok()) return 0;
   StoredSensorResult r;
   r.sensor = "front_camera";
-  r.kind = "camera";
+  r.kind = SensorKind::kCamera;
   r.verdict = Verdict::kPass;
   r.T_car_sensor = {1, 0, 0, 3.7, 0, 1, 0, 0, 0, 0, 1, 0.5, 0, 0, 0, 1};
   r.sigma.yaw_deg = 0.01;

@@ -20,7 +20,7 @@ inline StoredSensorResult FullSensor(const std::string& name, const std::string&
                                      Verdict verdict, const std::string& reason) {
   StoredSensorResult s;
   s.sensor = name;
-  s.kind = kind;
+  s.kind = ParseSensorKind(kind).value();  // the test names a kind by its word
   s.verdict = verdict;
   s.reason = reason;
   s.message = reason.empty() ? "" : "it's \"out\", see the ranging check";

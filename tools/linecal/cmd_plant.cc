@@ -97,7 +97,7 @@ nlohmann::json MountingJson(const MountingValues& m) {
 
 nlohmann::json SensorJson(const StoredSensorResult& s) {
   nlohmann::json j = {{"sensor", s.sensor},
-                      {"kind", s.kind},
+                      {"kind", SensorKindName(s.kind)},
                       {"verdict", VerdictName(s.verdict)},
                       {"reason", s.reason},
                       {"message", s.message},
@@ -210,7 +210,7 @@ void PrintCsv(const std::vector<PlantCycleRecord>& records) {
     std::vector<std::vector<std::string>> lines;
     for (const StoredSensorResult& s : c.sensors) {
       std::vector<std::string> line = cycle;
-      line.insert(line.end(), {s.sensor, s.kind, VerdictName(s.verdict), s.reason});
+      line.insert(line.end(), {s.sensor, SensorKindName(s.kind), VerdictName(s.verdict), s.reason});
       AppendMounting(s.measured, &line);
       AppendMounting(s.deviation, &line);
       AppendMounting(s.sigma, &line);

@@ -165,7 +165,7 @@ void ExpectStoredEqualsOffline(const StoredCycle& stored, const CycleCalibration
       if (x.sensor == s.name) r = &x;
     }
     ASSERT_NE(r, nullptr);
-    EXPECT_EQ(r->kind, SensorKindName(s.kind));
+    EXPECT_EQ(r->kind, s.kind);
     EXPECT_EQ(r->verdict, s.verdict == Verdict::kPass   ? Verdict::kPass
                           : s.verdict == Verdict::kFail ? Verdict::kFail
                                                         : Verdict::kError);
@@ -270,7 +270,7 @@ TEST_F(StationCoreLiveTest, SilentLidarIsThatSensorsErrorAndTheOthersGetTheirVer
       "roof_lidar: no packets from 127.0.0.1:" + std::to_string(port_) + " in 1.5 s";
   for (const StoredSensorResult& r : cycle->sensors) {
     if (r.sensor != "roof_lidar") continue;
-    EXPECT_EQ(r.kind, "lidar");
+    EXPECT_EQ(r.kind, SensorKind::kLidar);
     EXPECT_EQ(r.verdict, Verdict::kError);
     EXPECT_EQ(r.reason, "acquisition_failed: " + why);
     EXPECT_EQ(r.message, why);

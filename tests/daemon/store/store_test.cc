@@ -20,6 +20,7 @@
 #include <set>
 #include <string>
 
+#include "absl/strings/match.h"
 #include "tests/daemon/ended_cycle.h"
 #include "tests/daemon/reliability/reliability_support.h"
 
@@ -82,7 +83,7 @@ StoredCycle Request(const std::string& vin, int64_t started_ns) {
 StoredSensorResult CameraResult() {
   StoredSensorResult r;
   r.sensor = "front_camera";
-  r.kind = "camera";
+  r.kind = SensorKind::kCamera;
   r.verdict = Verdict::kFail;
   r.reason = "yaw_out_of_tolerance";
   r.message = "yaw 0.61 deg off nominal, tolerance 0.5 deg";
@@ -126,7 +127,7 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
   StoredSensorResult camera = CameraResult();
   StoredSensorResult radar;
   radar.sensor = "front_radar";
-  radar.kind = "radar";
+  radar.kind = SensorKind::kRadar;
   radar.verdict = Verdict::kPass;
   radar.T_car_sensor = {1, 0, 0, 3.7, 0, 1, 0, 0, 0, 0, 1, 0.5, 0, 0, 0, 1};
   ASSERT_TRUE(store->PutSensorResult(*id, camera).ok());
@@ -153,6 +154,23 @@ TEST_F(StoreTest, CycleResultsAndEventsReadBackExactly) {
   EXPECT_EQ((*events)[2].sequence, 2);
   EXPECT_EQ((*events)[2].time_ns, 1002);
   EXPECT_EQ(*store->RunningCycle(), std::nullopt);
+}
+
+// Sensor kinds cross the store as an enum; the column holds SensorKindName's word. Another
+// word (a damaged or foreign file) is DataLoss naming the file, the sensor and the word.
+TEST_F(StoreTest, UnknownSensorKindInTheFileIsDataLoss) {
+  std::unique_ptr<Store> store = OpenOk();
+  absl::StatusOr<int64_t> id = store->BeginCycle(Request("WVWZZZ1JZXW000001", 1000));
+  ASSERT_TRUE(id.ok()) << id.status();
+  ASSERT_TRUE(store->PutSensorResult(*id, CameraResult()).ok());
+  EXPECT_EQ(RawQuery("SELECT kind FROM sensor_results"), "camera");
+  RawQuery("UPDATE sensor_results SET kind = 'sonar'");
+  const absl::StatusOr<StoredCycle> read = store->GetCycle(*id);
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kDataLoss) << read.status();
+  const std::string message(read.status().message());
+  EXPECT_TRUE(absl::StrContains(message, path_)) << message;
+  EXPECT_TRUE(absl::StrContains(message, "'front_camera' of unknown kind 'sonar'")) << message;
 }
 
 TEST_F(StoreTest, ErrorCodesOfUnknownAndEndedCycles) {
@@ -594,7 +612,7 @@ TEST_F(StoreTest, RecentSolvedResultsAreTheNewestDoneCyclesOldestFirst) {
     ASSERT_TRUE(store->PutSensorResult(*id, camera).ok());
     StoredSensorResult unsolved;
     unsolved.sensor = "front_radar";
-    unsolved.kind = "radar";
+    unsolved.kind = SensorKind::kRadar;
     unsolved.verdict = Verdict::kError;
     ASSERT_TRUE(store->PutSensorResult(*id, unsolved).ok());
     const CycleState state = i == 2 ? CycleState::kCancelled : CycleState::kDone;
