@@ -80,7 +80,7 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
                                 "asymmetric", "light_circles",  "border_bits", "tag_cols",
                                 "tag_rows",   "tag_spacing",    "start_id",    "gap_m",
                                 "marker_m",   "legacy_pattern", "dictionary",  "pose",
-                                "hexagonal"});
+                                "hexagonal",  "allow_partial"});
       !s.ok()) {
     return s;
   }
@@ -148,7 +148,16 @@ absl::StatusOr<StationBoard> ReadBoard(const JsonField& f) {
   if (!board) return f.Error(KeyOfBoardError(error), BoardParamsErrorName(error));
   absl::StatusOr<Rigid3d> pose = ReadPose(f, "pose", BoardBaseRotation());
   if (!pose.ok()) return pose.status();
-  return StationBoard{*id, params, std::move(*board), *pose};
+  absl::StatusOr<bool> allow_partial = f.BoolOr("allow_partial", false);
+  if (!allow_partial.ok()) return allow_partial.status();
+  if (*allow_partial && !BoardAllowsPartial(params.type)) {
+    return f.Error("allow_partial",
+                   absl::StrCat("a '", *type,
+                                "' board has no ids, so a partial view of it cannot be placed; "
+                                "only vertical, aruco, apriltag, round_hole and charuco boards "
+                                "allow partial views"));
+  }
+  return StationBoard{*id, params, std::move(*board), *pose, *allow_partial};
 }
 
 absl::StatusOr<CornerReflector> ReadReflector(const JsonField& f) {
@@ -208,6 +217,24 @@ absl::Status ReadList(const JsonField& root, const char* key, ReadFn read, std::
 }
 
 }  // namespace
+
+bool BoardAllowsPartial(BoardType type) {
+  switch (type) {
+    case BoardType::kVertical:
+    case BoardType::kAruco:
+    case BoardType::kApriltag:
+    case BoardType::kRoundHole:
+    case BoardType::kCharuco:
+      return true;
+    case BoardType::kChessboard:
+    case BoardType::kCircle:
+    case BoardType::kChecker:
+    case BoardType::kCircleGrid:
+    case BoardType::kSquareGrid:
+      return false;
+  }
+  return false;
+}
 
 const StationBoard* StationLayout::FindBoard(const std::string& id) const {
   for (const StationBoard& b : boards) {
@@ -313,6 +340,7 @@ nlohmann::json StationLayoutToJson(const StationLayout& layout) {
     nlohmann::json j = {{"id", b.id}, {"type", BoardTypeName(b.params.type)}};
     j.update(BoardParamsToJson(b.params));
     j["pose"] = PoseToJson(b.T_station_board, BoardBaseRotation());
+    if (b.allow_partial) j["allow_partial"] = true;
     boards.push_back(std::move(j));
   }
   nlohmann::json reflectors = nlohmann::json::array();

@@ -19,7 +19,17 @@ struct StationBoard {
   BoardParams params;
   Board board;              // built from params
   Rigid3d T_station_board;  // board frame (page centre) in the station frame
+  // Whether a calibration may use a partial view of this board (the features the detector
+  // is certain of, with their ids). Off by default: a board the station planned is expected
+  // whole, and a partial view usually means a board knocked, hidden or out of frame, which
+  // the operator should hear about. Only boards with ids allow it (BoardAllowsPartial).
+  bool allow_partial = false;
 };
+
+// Whether a board of this type reports partial views with ids (vertical, ArUco, AprilTag grid,
+// round-hole and ChArUco boards): a partial view of a chessboard or circle grid cannot be
+// placed on the board, so `allow_partial` is refused for those. O(1).
+bool BoardAllowsPartial(BoardType type);
 
 // A trihedral corner reflector for radars: a point target.
 struct CornerReflector {

@@ -59,7 +59,7 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
                                         const CaptureCalibrationOptions& capture_options) {
   const CameraCalibrationOptions& options = capture_options.camera;
   SensorCalibration out;
-  for (const std::string& id : sensor.targets) out.boards.push_back({id, 0, 0, ""});
+  for (const std::string& id : sensor.targets) out.boards.emplace_back().board_id = id;
   std::vector<BoardObservation> observations;
   for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
     if (capture_options.stop.stop_requested()) return Stopped();
@@ -247,7 +247,8 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
   const Rigid3d T_lidar_station = (T_station_car * sensor.T_car_sensor_nominal).Inverse();
   std::vector<LidarBoardObservation> observations;
   for (const std::string& id : sensor.targets) {
-    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
+    BoardDetectionSummary& summary = out.boards.emplace_back();
+    summary.board_id = id;
     const StationBoard* board = station.FindBoard(id);
     if (board == nullptr) {  // ReadCapture checked the targets; kept for safety of the data
       if (detections != nullptr) detections->emplace_back();
@@ -304,11 +305,17 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
       summary.last_reason = "no_detector";
       continue;
     }
-    // Whole boards, and partial views whose reported features the detector is certain of.
+    // Whole boards, and partial views whose reported features the detector is certain of
+    // where the station file allows them for this board.
+    summary.partial_allowed = board->allow_partial;
     if (d->found) {
       ++summary.frames_found;
     } else if (d->reason == DetectReason::kPartial && !d->features.empty()) {
       ++summary.frames_partial;
+      if (!board->allow_partial) {
+        summary.last_reason = DetectReasonName(d->reason);
+        continue;
+      }
     } else {
       summary.last_reason = DetectReasonName(d->reason);
       continue;

@@ -30,8 +30,11 @@ namespace linecal {
 
 struct BoardDetectionSummary {
   std::string board_id;
-  int frames_found = 0;     // frames in which the whole board was identified
-  int frames_partial = 0;   // frames with certain features of a partly seen board
+  int frames_found = 0;    // frames in which the whole board was identified
+  int frames_partial = 0;  // frames with certain features of a partly seen board
+  // Whether those partial views were used: the station file's `allow_partial` of the board
+  // (StationBoard). When not, a partial frame counts here but its reason stays "partial".
+  bool partial_allowed = false;
   std::string last_reason;  // the detector's reason in the last frame without the board
 };
 

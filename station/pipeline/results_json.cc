@@ -107,6 +107,7 @@ nlohmann::json CycleCalibrationToJson(const Capture& capture, const CycleCalibra
         boards.push_back({{"board", b.board_id},
                           {"frames_found", b.frames_found},
                           {"frames_partial", b.frames_partial},
+                          {"partial_allowed", b.partial_allowed},
                           {"reason", b.last_reason}});
       }
       j["boards"] = boards;

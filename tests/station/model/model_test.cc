@@ -204,6 +204,44 @@ TEST(StationLayoutTest, AprilGridParametersRoundTrip) {
   EXPECT_EQ(f.back().marker, 111);
 }
 
+// `allow_partial` is off unless a board says so, survives a round trip, and is refused for a
+// board without ids, naming the key and the board type.
+TEST(StationLayoutTest, AllowPartialOnlyForBoardsWithIds) {
+  const std::string json = R"({"format": "linecal.station", "version": 1, "name": "x", "boards": [
+      {"id": "v", "type": "vertical", "allow_partial": true,
+       "pose": {"xyz_m": [1, 0, 1], "ypr_deg": [0, 0, 0]}},
+      {"id": "a", "type": "aruco", "pose": {"xyz_m": [1, 1, 1], "ypr_deg": [0, 0, 0]}}]})";
+  absl::StatusOr<StationLayout> s = ParseStationLayout(json, "st.json");
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_TRUE(s->boards.at(0).allow_partial);
+  EXPECT_FALSE(s->boards.at(1).allow_partial);
+  const nlohmann::json written = StationLayoutToJson(*s);
+  EXPECT_TRUE(written.at("boards").at(0).at("allow_partial").get<bool>());
+  EXPECT_FALSE(written.at("boards").at(1).contains("allow_partial"));
+  absl::StatusOr<StationLayout> again = ParseStationLayout(written.dump(), "copy");
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_TRUE(again->boards.at(0).allow_partial);
+  EXPECT_FALSE(again->boards.at(1).allow_partial);
+  for (const char* type : {"chessboard", "circle", "checker", "circle_grid", "square_grid"}) {
+    SCOPED_TRACE(type);
+    std::string bad = json;
+    bad.replace(bad.find("\"vertical\""), 10, std::string("\"") + type + "\"");
+    const absl::StatusOr<StationLayout> refused = ParseStationLayout(bad, "st.json");
+    ASSERT_FALSE(refused.ok());
+    EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_NE(refused.status().message().find(std::string("st.json: boards[0].allow_partial: a '") +
+                                              type + "' board has no ids"),
+              std::string::npos)
+        << refused.status();
+  }
+  for (BoardType t : kAllBoardTypes) {
+    const bool with_ids = t == BoardType::kVertical || t == BoardType::kAruco ||
+                          t == BoardType::kApriltag || t == BoardType::kRoundHole ||
+                          t == BoardType::kCharuco;
+    EXPECT_EQ(BoardAllowsPartial(t), with_ids) << BoardTypeName(t);
+  }
+}
+
 // Each broken document must fail with a message containing `expected`.
 struct BrokenCase {
   const char* name;
@@ -284,6 +322,10 @@ INSTANTIATE_TEST_SUITE_P(
             "{" HDR
             R"(, "boards": [{"id": "a", "type": "aruco", "pose": {"matrix": [2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}}]})",
             "boards[0].pose.matrix: rotation part is not a rotation"},
+        BrokenCase{"allow_partial_not_bool",
+                   "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", "allow_partial": 1, )" POSE
+                   "}]}",
+                   "boards[0].allow_partial: expected"},
         BrokenCase{"duplicate_id",
                    "{" HDR R"(, "boards": [{"id": "a", "type": "aruco", )" POSE
                    R"(}, {"id": "a", "type": "circle", )" POSE "}]}",
