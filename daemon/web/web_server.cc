@@ -484,6 +484,23 @@ void WebServer::ListCycles(const httplib::Request& req, httplib::Response& res) 
                   page->next_page_token.empty() ? "" : std::to_string(page->cycles.back().id)}});
 }
 
+void WebServer::SendArchive(CaptureArchiveToSend archive, httplib::Response& res) {
+  res.set_header("Cache-Control", "private, max-age=3600");
+  res.set_header("Content-Disposition",
+                 absl::StrCat("attachment; filename=\"", archive.download_name, "\""));
+  // Written as it is sent (chunked: the size of a tar with pax headers is known only once
+  // written). A file that fails to read mid-way cuts the download short, which the browser
+  // reports as a failed download rather than saving a truncated archive as complete.
+  auto members = std::make_shared<std::vector<ArchiveMember>>(std::move(archive.members));
+  res.set_chunked_content_provider("application/x-tar", [members](size_t, httplib::DataSink& sink) {
+    const absl::Status s = WriteTarArchive(*members, [&sink](std::string_view piece) {
+      return sink.write(piece.data(), piece.size());
+    });
+    if (s.ok()) sink.done();
+    return s.ok();
+  });
+}
+
 void WebServer::Events(const httplib::Request& req, httplib::Response& res) {
   std::optional<int64_t> cycle;
   if (req.has_param("cycle")) {
@@ -600,6 +617,14 @@ void WebServer::RouteCycleViews() {
                 const std::streamsize got = in->gcount();
                 return got > 0 && sink.write(buffer.data(), static_cast<size_t>(got));
               });
+        });
+  s.Get(R"(/api/cycles/([^/]+)/capture\.tar)",
+        [this](const httplib::Request& req, httplib::Response& res) {
+          absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+          if (!id.ok()) return SendError(res, id.status());
+          absl::StatusOr<CaptureArchiveToSend> archive = views_.Archive(*id);
+          if (!archive.ok()) return SendError(res, archive.status());
+          SendArchive(*std::move(archive), res);
         });
   s.Get(R"(/api/cycles/([^/]+)/views/([^/]+))",
         [this](const httplib::Request& req, httplib::Response& res) {

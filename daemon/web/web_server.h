@@ -27,6 +27,8 @@
 //                     a multipart form 415
 //   GET  /api/cycles/ID/capture        the kept capture's files (capture_views.h), or why none
 //   GET  /api/cycles/ID/capture/N      file N of that list (a download; a camera's frame)
+//   GET  /api/cycles/ID/capture.tar    the whole capture as one tar archive (capture_archive.h);
+//                                      404 when the cycle kept no capture
 //   GET  /api/cycles/ID/views/SENSOR?frame=K  the sensor's view (station/pipeline/cycle_views.h)
 //   POST /api/cycles            operators: start a cycle (operator_actions.h's body), as
 //                               gRPC StartCycle; {"cycle_id": "N"}
@@ -120,6 +122,8 @@ class WebServer {
   void FollowCycle(int64_t cycle_id, httplib::DataSink& sink);
   // The routes of the cycle page's recorded data and of the operator's actions.
   void RouteCycleViews();
+  // Streams the archive of a cycle's capture (capture_archive.h) as a download.
+  static void SendArchive(CaptureArchiveToSend archive, httplib::Response& res);
   void RouteOperator();
   // Whether the request may change the station: an operator session and CheckSameSiteAction;
   // else answers 403 and returns false.
