@@ -9,6 +9,7 @@
 #include <cctype>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <vector>
@@ -94,10 +95,10 @@ bool ReadBoundedBody(const httplib::Request& req, const httplib::ContentReader& 
 }
 
 // The after-sale page's POSTs (aftersale_api.h): the body under `max_bytes`, then `answer`.
-void ServeBoundedPost(const httplib::Request& req, httplib::Response& res,
-                      const httplib::ContentReader& read, std::int64_t max_bytes,
-                      const std::string& what,
-                      absl::StatusOr<nlohmann::json> (*answer)(std::string_view)) {
+void ServeBoundedPost(
+    const httplib::Request& req, httplib::Response& res, const httplib::ContentReader& read,
+    std::int64_t max_bytes, const std::string& what,
+    const std::function<absl::StatusOr<nlohmann::json>(std::string_view)>& answer) {
   std::string body;
   if (!ReadBoundedBody(req, read, max_bytes, &body)) {
     if (req.is_multipart_form_data()) {
@@ -400,14 +401,7 @@ void WebServer::Route() {
   s.Get("/api/aftersale/cameras", [this](const httplib::Request&, httplib::Response& res) {
     SendJson(res, AftersaleCamerasJson(core_->car_models()));
   });
-  s.Post("/api/aftersale/photo", [](const httplib::Request& req, httplib::Response& res,
-                                    const httplib::ContentReader& read) {
-    ServeBoundedPost(req, res, read, kMaxPhotoBytes, "photo", AftersalePhotoJson);
-  });
-  s.Post("/api/aftersale", [](const httplib::Request& req, httplib::Response& res,
-                              const httplib::ContentReader& read) {
-    ServeBoundedPost(req, res, read, kMaxAftersaleRequestBytes, "request", AftersaleSolveJson);
-  });
+  RouteAftersale();
   RouteCycleViews();
   RouteOperator();
   // Trends and station health (docs/console.md): ?cycles=N (1..100000, default 200), &sensor=S.
@@ -437,6 +431,28 @@ void WebServer::Route() {
                                                    httplib::Response& res) {
     ServeFile((fs::path(options_.static_dir) / std::string(req.matches[1])).string(), req, res);
   });
+}
+
+void WebServer::RouteAftersale() {
+  httplib::Server& s = *server_;
+  s.Post("/api/aftersale/photo", [this](const httplib::Request& req, httplib::Response& res,
+                                        const httplib::ContentReader& read) {
+    ServeBoundedPost(req, res, read, kMaxPhotoBytes, "photo",
+                     [this](std::string_view body) { return AftersalePhotoJson(body, photos_); });
+  });
+  s.Post("/api/aftersale", [this](const httplib::Request& req, httplib::Response& res,
+                                  const httplib::ContentReader& read) {
+    ServeBoundedPost(req, res, read, kMaxAftersaleRequestBytes, "request",
+                     [this](std::string_view body) { return AftersaleSolveJson(body, photos_); });
+  });
+  s.Get(R"(/api/aftersale/photos/([^/]+)/birdseye\.png)",
+        [this](const httplib::Request& req, httplib::Response& res) {
+          absl::StatusOr<std::string> png = photos_.BirdsEyePng(req.matches[1]);
+          if (!png.ok()) return SendError(res, png.status());
+          // The path names a solve (?solve=N), and a newer one gets a new path.
+          res.set_header("Cache-Control", "no-store");
+          res.set_content(*std::move(png), "image/png");
+        });
 }
 
 void WebServer::ServeFile(const std::string& path, const httplib::Request& req,
