@@ -4,8 +4,9 @@ source (docs/console.md, "Trends and station health"): 30 cycles of a car with t
 the bumper boards, `bumper_lidar_left` turned 0.3 degrees by the simulator from cycle 16
 (source.moved_boards); the page shows the alarm naming it, from the same cycle as `linecal
 status --json` (gRPC), and the browser logs no errors. Then 10,000 cycles of those results are
-added to the database and the speed of a 1,000-cycle page and of 10,000-cycle trends measured
-(printed, not asserted: docs/console.md's table). A screenshot goes to --screenshots.
+added to the database: the cycles list (cycles.html) against ListCycles, with its filters, and
+the speed of the 1,000-cycle list, of 1,000- and 10,000-cycle trends measured in the page
+(printed, not asserted: docs/console.md's table). Screenshots go to --screenshots.
 
 Exit 0 passed, 1 failed, 77 skipped when Chromium, its driver or Selenium is missing.
 """
@@ -94,7 +95,7 @@ def open_cycles(driver, url, query):
         " message: document.getElementById('cycles-message').textContent, requests: requests()};" + REQUESTS)
 
 
-def check_cycles_list(driver, url, address, cli):
+def check_cycles_list(driver, url, address, cli, shots):
     """The cycles list against the API's ListCycles (gRPC, `linecal cycle list`): the newest
     1,000, a VIN's, none failed, and the link to the next page."""
     listed = linecal(cli, address, "cycles", "list", "--limit", "1000")
@@ -102,6 +103,7 @@ def check_cycles_list(driver, url, address, cli):
     page = open_cycles(driver, url, "limit=1000")
     check(page["ids"] == grpc_ids, f"cycles page ids {page['ids'][:3]}... differ from ListCycles' {grpc_ids[:3]}...")
     check(f"before={grpc_ids[-1]}" in page["older"], f"the older link: {page['older']}")
+    driver.save_screenshot(os.path.join(shots, "cycles.png"))
     page = open_cycles(driver, url, f"vin={VIN}&limit=50")
     check(len(page["ids"]) == 50 and set(page["vins"]) == {VIN}, f"VIN filter: {set(page['vins'])}")
     failed = linecal(cli, address, "cycles", "list", "--verdict", "fail", "--limit", "50")
@@ -178,7 +180,7 @@ def test(args, work):
         add_cycles(os.path.join(work, "data", "linecal.db"), ADDED)
         daemon, address, url = start_daemon(args.linecald, args.source_dir, work)
         login(driver, url, "trends.html?sensor=front_camera&cycles=1000")
-        check_cycles_list(driver, url, address, args.linecal)
+        check_cycles_list(driver, url, address, args.linecal, args.screenshots)
         for attempt in range(3):
             m = open_cycles(driver, url, "limit=1000")
             check(len(m["ids"]) == 1000, f"{len(m['ids'])} rows")
@@ -204,7 +206,7 @@ def test(args, work):
 
 
 def main():
-    return run_main(__doc__, "trends_browser_", "folder for trends.png", test)
+    return run_main(__doc__, "trends_browser_", "folder for trends.png and cycles.png", test)
 
 
 if __name__ == "__main__":
