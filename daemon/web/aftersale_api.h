@@ -4,7 +4,9 @@
 // computations are station/aftersale's and station/solvers/lane_calibration's, the same as
 // `linecal aftersale` (docs/aftersale.md), so the page shows the command's numbers and exports
 // its bytes. Nothing here reads or changes the station's state: the calls are open to every
-// console role. Pure functions over their arguments, without HTTP (web_server.cc routes them).
+// console role. Functions of their arguments, without HTTP (web_server.cc routes them); the
+// only state is the uploaded photos and their latest solves in AftersalePhotos, kept for the
+// bird's-eye view.
 
 #include <cstddef>
 #include <cstdint>
