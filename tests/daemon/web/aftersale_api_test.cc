@@ -3,8 +3,9 @@
 // solved by POST /api/aftersale equals `linecal aftersale --json` on the same input (every
 // number, as doubles) and its export equals `--export`'s files byte for byte; the overlay's
 // lines; the photo upload's size and its refusals (not an image, empty, too large, a form, a
-// header claiming too many pixels); the command's refusals with the command's messages; and
-// no call without a session.
+// header claiming too many pixels); the command's refusals with the command's messages; the
+// bird's-eye PNG of a kept photo equal to the command's --out file and its refusals; and no
+// call without a session.
 // First: httplib.h brings resolv.h, whose `_res` macro breaks Eigen's headers after it.
 #include "daemon/web/aftersale_api.h"
 

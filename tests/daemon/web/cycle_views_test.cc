@@ -3,8 +3,9 @@
 // reference car: a recorded cycle's capture files and their bytes, each sensor's view against
 // what the cycle computed (the camera features of CalibrateCapture, the store's feature
 // counts, a reprojected board feature computed here from the stored mounting, the LiDAR holes
-// of CalibrateLidarFrames, the radar's reflectors), refusals of bad ids; operator POSTs
-// refused for read-only sessions and cross-site requests, taken for an operator.
+// of CalibrateLidarFrames, the radar's reflectors), the whole capture as one tar archive,
+// refusals of bad ids; operator POSTs refused for read-only sessions and cross-site requests,
+// taken for an operator.
 #include "station/pipeline/cycle_views.h"
 
 #include <archive.h>
