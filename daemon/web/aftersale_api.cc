@@ -53,9 +53,62 @@ absl::StatusOr<std::array<int, 2>> ImageSize(const JsonField& root) {
   return out;
 }
 
+// The kept photo `id` is of `size`, the request's image_size: NotFound when it is not kept,
+// InvalidArgument naming image_size when it differs.
+absl::Status CheckPhotoSize(AftersalePhotos& photos, const std::string& id,
+                            const std::array<int, 2>& size, const JsonField& root) {
+  absl::StatusOr<std::pair<int, int>> kept = photos.Size(id);
+  if (!kept.ok()) return kept.status();
+  if (kept->first == size[0] && kept->second == size[1]) return absl::OkStatus();
+  return root.Error("image_size", absl::StrCat("[", size[0], ", ", size[1], "] differs from photo ",
+                                               id, "'s ", kept->first, " x ", kept->second));
+}
+
+// A solve's answer (without birdseye) and what it was computed from.
+struct SolvedRequest {
+  nlohmann::json answer;
+  LaneCalibrationInput in;
+  LaneCalibrationResult result;
+};
+
+// The solve of the request's `input` for an image of `size`: the command's input reader,
+// solver, result JSON, overlay and export files. Errors: the command's messages.
+absl::StatusOr<SolvedRequest> Solve(const JsonField& input, const std::array<int, 2>& size) {
+  AftersaleRequest request;
+  if (absl::Status s = ReadAftersaleInput(input, &request); !s.ok()) return s;
+  if (!request.image.empty()) {
+    return input.Error("image",
+                       "not taken here: the photo is uploaded (POST "
+                       "/api/aftersale/photo) and its size given as image_size");
+  }
+  absl::StatusOr<LaneCalibrationInput> in = AftersaleSolverInput(request, size[0], size[1]);
+  if (!in.ok()) return in.status();
+  absl::StatusOr<LaneCalibrationResult> r = CalibrateFromLanes(*in);
+  if (!r.ok()) return r.status();
+  // CalibrateFromLanes accepted the intrinsics, so the model exists.
+  const CameraModel camera = *CameraModel::Create(in->intrinsics);
+  LaneOverlayOptions overlay_options;
+  overlay_options.segments = kPageOverlaySegments;
+  const LaneOverlay overlay = LaneOverlayOf(camera, *in, *r, overlay_options);
+  nlohmann::json files = nlohmann::json::array();
+  for (const auto& [file, j] : AftersaleExportFiles(request.name, *in, *r)) {
+    files.push_back({{"file", file}, {"text", JsonFileText(j)}});
+  }
+  nlohmann::json answer{
+      {"result", AftersaleResultJson(request.name, *in, *r)},
+      {"overlay",
+       {{"ground_grid", PolylinesJson(overlay.ground_grid)},
+        {"horizon", PolylineJson(overlay.horizon)},
+        {"lane_lines", PolylinesJson(overlay.lane_lines)},
+        {"vanishing_point", overlay.vanishing_point_uv ? DrawnPixel(*overlay.vanishing_point_uv)
+                                                       : nlohmann::json(nullptr)}}},
+      {"export", files}};
+  return SolvedRequest{std::move(answer), *std::move(in), *std::move(r)};
+}
+
 }  // namespace
 
-absl::StatusOr<nlohmann::json> AftersalePhotoJson(std::string_view bytes) {
+absl::StatusOr<nlohmann::json> AftersalePhotoJson(std::string_view bytes, AftersalePhotos& photos) {
   if (++photo_decodes > kMaxPhotoDecodes) {
     --photo_decodes;
     return absl::UnavailableError(absl::StrCat(
@@ -67,7 +120,10 @@ absl::StatusOr<nlohmann::json> AftersalePhotoJson(std::string_view bytes) {
   absl::StatusOr<Image8> image = DecodeImage8(bytes, "photo", budget);
   --photo_decodes;
   if (!image.ok()) return image.status();
-  return nlohmann::json{{"width", image->width}, {"height", image->height}};
+  const int width = image->width, height = image->height;
+  absl::StatusOr<std::string> id = photos.Keep(*std::move(image));
+  if (!id.ok()) return id.status();
+  return nlohmann::json{{"width", width}, {"height", height}, {"photo_id", *id}};
 }
 
 nlohmann::json AftersaleCamerasJson(const std::vector<CarModel>& cars) {
@@ -88,45 +144,35 @@ nlohmann::json AftersaleCamerasJson(const std::vector<CarModel>& cars) {
   return {{"cameras", cameras}, {"max_photo_bytes", kMaxPhotoBytes}};
 }
 
-absl::StatusOr<nlohmann::json> AftersaleSolveJson(std::string_view body) {
+absl::StatusOr<nlohmann::json> AftersaleSolveJson(std::string_view body, AftersalePhotos& photos) {
   absl::StatusOr<JsonDocument> doc = JsonDocument::FromText(std::string(body), "request");
   if (!doc.ok()) return doc.status();
   absl::StatusOr<JsonField> root = doc->Root();
   if (!root.ok()) return root.status();
-  if (absl::Status s = root->AllowOnlyKeys({"image_size", "input"}); !s.ok()) return s;
+  if (absl::Status s = root->AllowOnlyKeys({"image_size", "input", "photo_id"}); !s.ok()) return s;
   absl::StatusOr<std::array<int, 2>> size = ImageSize(*root);
   if (!size.ok()) return size.status();
+  absl::StatusOr<std::string> photo_id = root->StringOr("photo_id", "");
+  if (!photo_id.ok()) return photo_id.status();
+  if (!photo_id->empty()) {
+    if (absl::Status s = CheckPhotoSize(photos, *photo_id, *size, *root); !s.ok()) return s;
+  }
   absl::StatusOr<JsonField> input = root->Object("input");
   if (!input.ok()) return input.status();
-  AftersaleRequest request;
-  if (absl::Status s = ReadAftersaleInput(*input, &request); !s.ok()) return s;
-  if (!request.image.empty()) {
-    return input->Error("image",
-                        "not taken here: the photo is uploaded (POST "
-                        "/api/aftersale/photo) and its size given as image_size");
+  absl::StatusOr<SolvedRequest> solved = Solve(*input, *size);
+  if (!photo_id->empty()) {
+    // The bird's-eye view follows the latest solve, and shows nothing after a refused one.
+    absl::StatusOr<int> solve = photos.SetSolution(
+        *photo_id,
+        solved.ok() ? std::optional(AftersaleSolution{solved->in, solved->result}) : std::nullopt);
+    if (!solve.ok()) return solve.status();
+    if (solved.ok()) {
+      solved->answer["birdseye"] =
+          absl::StrCat("/api/aftersale/photos/", *photo_id, "/birdseye.png?solve=", *solve);
+    }
   }
-  absl::StatusOr<LaneCalibrationInput> in = AftersaleSolverInput(request, (*size)[0], (*size)[1]);
-  if (!in.ok()) return in.status();
-  absl::StatusOr<LaneCalibrationResult> r = CalibrateFromLanes(*in);
-  if (!r.ok()) return r.status();
-  // CalibrateFromLanes accepted the intrinsics, so the model exists.
-  const CameraModel camera = *CameraModel::Create(in->intrinsics);
-  LaneOverlayOptions overlay_options;
-  overlay_options.segments = kPageOverlaySegments;
-  const LaneOverlay overlay = LaneOverlayOf(camera, *in, *r, overlay_options);
-  nlohmann::json files = nlohmann::json::array();
-  for (const auto& [file, j] : AftersaleExportFiles(request.name, *in, *r)) {
-    files.push_back({{"file", file}, {"text", JsonFileText(j)}});
-  }
-  return nlohmann::json{
-      {"result", AftersaleResultJson(request.name, *in, *r)},
-      {"overlay",
-       {{"ground_grid", PolylinesJson(overlay.ground_grid)},
-        {"horizon", PolylineJson(overlay.horizon)},
-        {"lane_lines", PolylinesJson(overlay.lane_lines)},
-        {"vanishing_point", overlay.vanishing_point_uv ? DrawnPixel(*overlay.vanishing_point_uv)
-                                                       : nlohmann::json(nullptr)}}},
-      {"export", files}};
+  if (!solved.ok()) return solved.status();
+  return std::move(solved->answer);
 }
 
 }  // namespace linecal

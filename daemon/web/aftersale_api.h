@@ -4,7 +4,9 @@
 // computations are station/aftersale's and station/solvers/lane_calibration's, the same as
 // `linecal aftersale` (docs/aftersale.md), so the page shows the command's numbers and exports
 // its bytes. Nothing here reads or changes the station's state: the calls are open to every
-// console role. Pure functions over their arguments, without HTTP (web_server.cc routes them).
+// console role. Functions of their arguments, without HTTP (web_server.cc routes them); the
+// only state is the uploaded photos and their latest solves in AftersalePhotos, kept for the
+// bird's-eye view.
 
 #include <cstddef>
 #include <cstdint>
@@ -13,6 +15,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "daemon/web/aftersale_photos.h"
 #include "station/model/car_model.h"
 
 namespace linecal {
@@ -36,11 +39,12 @@ inline constexpr int kPageOverlaySegments = 40;
 
 // POST /api/aftersale/photo: the upload's bytes decoded as `linecal aftersale` reads an image
 // (PNG or JPEG by its signature, station/io/image_io.h), under kMaxPhotoBytes and
-// kMaxPhotoPixels. Answer {"width", "height"}: the image size the solve needs (the page draws
-// the photo itself). InvalidArgument "photo: not a PNG or JPEG file", "photo: empty", "photo:
+// kMaxPhotoPixels, and kept in `photos`. Answer {"width", "height", "photo_id"}: the image
+// size the solve needs (the page draws the photo itself) and the photo's id in `photos` for the
+// bird's-eye view. InvalidArgument "photo: not a PNG or JPEG file", "photo: empty", "photo:
 // N pixels exceed the budget ...", a corrupt file's message; Unavailable when kMaxPhotoDecodes
 // decodes are running. Cost: one decode.
-absl::StatusOr<nlohmann::json> AftersalePhotoJson(std::string_view bytes);
+absl::StatusOr<nlohmann::json> AftersalePhotoJson(std::string_view bytes, AftersalePhotos& photos);
 
 // GET /api/aftersale/cameras: {"cameras": [{car_model_id, camera, image_size: [w, h], input}]}
 // for every camera with intrinsics of the station's car models, in their order; `input` is the
@@ -56,7 +60,11 @@ nlohmann::json AftersaleCamerasJson(const std::vector<CarModel>& cars);
 // vanishing_point: [u, v] or null}, "export": [{"file", "text"}] (the three files of --export,
 // their text byte for byte)}. InvalidArgument with the command's message for bad input or a
 // refused calibration ("parallel lines: ...", "lanes[0][0] (...) is above the horizon: ...");
-// JSON errors name "request". Cost: the solve, O(points), and the overlay, O(lines).
-absl::StatusOr<nlohmann::json> AftersaleSolveJson(std::string_view body);
+// JSON errors name "request". With "photo_id" (of AftersalePhotoJson) the solve is recorded
+// as that photo's latest (a refused one clears it) and the answer has "birdseye": the path of
+// its bird's-eye PNG (GET /api/aftersale/photos/ID/birdseye.png?solve=N); NotFound when the
+// photo is not kept, InvalidArgument when image_size is not its size. Cost: the solve,
+// O(points), and the overlay, O(lines).
+absl::StatusOr<nlohmann::json> AftersaleSolveJson(std::string_view body, AftersalePhotos& photos);
 
 }  // namespace linecal

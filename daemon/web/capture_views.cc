@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "station/pipeline/cycle_views.h"
@@ -75,6 +76,20 @@ absl::StatusOr<CaptureFileToSend> CaptureViews::File(int64_t cycle_id, const std
     if (!absl::ascii_isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '-') c = '_';
   }
   return out;
+}
+
+absl::StatusOr<CaptureArchiveToSend> CaptureViews::Archive(int64_t cycle_id) {
+  absl::StatusOr<Capture> capture = core_->CycleCapture(cycle_id);
+  // Nothing to download is a missing resource here, not a state of the page to explain.
+  if (absl::IsFailedPrecondition(capture.status()) &&
+      absl::StartsWith(capture.status().message(), "capture_not_kept")) {
+    return absl::NotFoundError(capture.status().message());
+  }
+  if (!capture.ok()) return capture.status();
+  const std::string top = absl::StrCat("cycle-", cycle_id);
+  absl::StatusOr<std::vector<ArchiveMember>> members = CaptureArchiveMembers(*capture, top);
+  if (!members.ok()) return members.status();
+  return CaptureArchiveToSend{*std::move(members), absl::StrCat(top, "-capture.tar")};
 }
 
 absl::StatusOr<std::string> CaptureViews::View(int64_t cycle_id, const std::string& sensor,

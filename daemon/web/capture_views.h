@@ -18,11 +18,18 @@
 
 #include "absl/status/statusor.h"
 #include "daemon/core/station_core.h"
+#include "daemon/web/capture_archive.h"
 
 namespace linecal {
 
 // Views kept: a cycle page of the reference car asks for 10, so three pages' worth.
 inline constexpr size_t kViewCacheSize = 32;
+
+// A cycle's whole capture to send as one tar archive (capture_archive.h).
+struct CaptureArchiveToSend {
+  std::vector<ArchiveMember> members;  // under the folder cycle-<id>/
+  std::string download_name;           // cycle-<id>-capture.tar
+};
 
 // A file of a capture to send: where it is, its size and how the browser should take it.
 struct CaptureFileToSend {
@@ -44,6 +51,10 @@ class CaptureViews {
   // File `index` (decimal, of Files' list). InvalidArgument for an index that is not one;
   // errors of CycleCapture.
   absl::StatusOr<CaptureFileToSend> File(int64_t cycle_id, const std::string& index);
+  // The capture's files for the archive (CaptureArchiveMembers under cycle-<id>/). NotFound
+  // for an unknown cycle and for one that kept no capture ("capture_not_kept: ..."); the
+  // other errors of CycleCapture (FailedPrecondition while it runs or when it does not read).
+  absl::StatusOr<CaptureArchiveToSend> Archive(int64_t cycle_id);
   // SensorViewJson of `sensor` with the cycle's solved mounting, as JSON text, plus "image":
   // the index of a camera's frame in Files' list. `frame` is "" (0) or a decimal index.
   // Errors of CycleCapture and SensorViewJson; InvalidArgument for a malformed frame.

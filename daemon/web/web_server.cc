@@ -4,10 +4,12 @@
 #include <openssl/pem.h>
 #include <openssl/ssl.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 
 #include <cctype>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <vector>
@@ -93,10 +95,10 @@ bool ReadBoundedBody(const httplib::Request& req, const httplib::ContentReader& 
 }
 
 // The after-sale page's POSTs (aftersale_api.h): the body under `max_bytes`, then `answer`.
-void ServeBoundedPost(const httplib::Request& req, httplib::Response& res,
-                      const httplib::ContentReader& read, std::int64_t max_bytes,
-                      const std::string& what,
-                      absl::StatusOr<nlohmann::json> (*answer)(std::string_view)) {
+void ServeBoundedPost(
+    const httplib::Request& req, httplib::Response& res, const httplib::ContentReader& read,
+    std::int64_t max_bytes, const std::string& what,
+    const std::function<absl::StatusOr<nlohmann::json>(std::string_view)>& answer) {
   std::string body;
   if (!ReadBoundedBody(req, read, max_bytes, &body)) {
     if (req.is_multipart_form_data()) {
@@ -138,6 +140,15 @@ void RefuseBrotli(const httplib::Request& req) {
     if (!e.empty() && !absl::StartsWith(e, "br")) kept.emplace_back(e);
   }
   accepted->second = absl::StrJoin(kept, ", ");
+}
+
+// A static file's entity tag: its size and modification time, "" when it cannot be read.
+// Cost: one stat.
+std::string FileTag(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return "";
+  return absl::StrCat("\"", absl::Hex(st.st_size), "-", absl::Hex(st.st_mtim.tv_sec), "-",
+                      absl::Hex(st.st_mtim.tv_nsec), "\"");
 }
 
 // The value of cookie `name` in a Cookie header ("a=1; linecal_session=abc"), or "".
@@ -390,14 +401,7 @@ void WebServer::Route() {
   s.Get("/api/aftersale/cameras", [this](const httplib::Request&, httplib::Response& res) {
     SendJson(res, AftersaleCamerasJson(core_->car_models()));
   });
-  s.Post("/api/aftersale/photo", [](const httplib::Request& req, httplib::Response& res,
-                                    const httplib::ContentReader& read) {
-    ServeBoundedPost(req, res, read, kMaxPhotoBytes, "photo", AftersalePhotoJson);
-  });
-  s.Post("/api/aftersale", [](const httplib::Request& req, httplib::Response& res,
-                              const httplib::ContentReader& read) {
-    ServeBoundedPost(req, res, read, kMaxAftersaleRequestBytes, "request", AftersaleSolveJson);
-  });
+  RouteAftersale();
   RouteCycleViews();
   RouteOperator();
   // Trends and station health (docs/console.md): ?cycles=N (1..100000, default 200), &sensor=S.
@@ -429,18 +433,48 @@ void WebServer::Route() {
   });
 }
 
-void WebServer::ServeFile(const std::string& path, const httplib::Request&,
+void WebServer::RouteAftersale() {
+  httplib::Server& s = *server_;
+  s.Post("/api/aftersale/photo", [this](const httplib::Request& req, httplib::Response& res,
+                                        const httplib::ContentReader& read) {
+    ServeBoundedPost(req, res, read, kMaxPhotoBytes, "photo",
+                     [this](std::string_view body) { return AftersalePhotoJson(body, photos_); });
+  });
+  s.Post("/api/aftersale", [this](const httplib::Request& req, httplib::Response& res,
+                                  const httplib::ContentReader& read) {
+    ServeBoundedPost(req, res, read, kMaxAftersaleRequestBytes, "request",
+                     [this](std::string_view body) { return AftersaleSolveJson(body, photos_); });
+  });
+  s.Get(R"(/api/aftersale/photos/([^/]+)/birdseye\.png)",
+        [this](const httplib::Request& req, httplib::Response& res) {
+          absl::StatusOr<std::string> png = photos_.BirdsEyePng(req.matches[1]);
+          if (!png.ok()) return SendError(res, png.status());
+          // The path names a solve (?solve=N), and a newer one gets a new path.
+          res.set_header("Cache-Control", "no-store");
+          res.set_content(*std::move(png), "image/png");
+        });
+}
+
+void WebServer::ServeFile(const std::string& path, const httplib::Request& req,
                           httplib::Response& res) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) {
+  const std::string tag = FileTag(path);
+  if (!in || tag.empty()) {
     res.status = 404;
     res.set_content("not found\n", "text/plain; charset=utf-8");
     return;
   }
+  // Pages change with the daemon (and Chart.js with its package): revalidated at every load,
+  // which the tag answers with a 304 and no body, so a page's scripts come from the browser's
+  // cache (and its compiled code cache) instead of being read, compressed and parsed again.
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header("ETag", tag);
+  if (req.get_header_value("If-None-Match") == tag) {
+    res.status = 304;
+    return;
+  }
   std::ostringstream text;
   text << in.rdbuf();
-  // Pages change with the daemon: revalidated at every load, which costs one small read here.
-  res.set_header("Cache-Control", "no-cache");
   res.set_content(text.str(), ContentType(fs::path(path).extension().string()));
 }
 
@@ -482,6 +516,23 @@ void WebServer::ListCycles(const httplib::Request& req, httplib::Response& res) 
   SendJson(res, {{"cycles", std::move(cycles)},
                  {"next_before",
                   page->next_page_token.empty() ? "" : std::to_string(page->cycles.back().id)}});
+}
+
+void WebServer::SendArchive(CaptureArchiveToSend archive, httplib::Response& res) {
+  res.set_header("Cache-Control", "private, max-age=3600");
+  res.set_header("Content-Disposition",
+                 absl::StrCat("attachment; filename=\"", archive.download_name, "\""));
+  // Written as it is sent (chunked: the size of a tar with pax headers is known only once
+  // written). A file that fails to read mid-way cuts the download short, which the browser
+  // reports as a failed download rather than saving a truncated archive as complete.
+  auto members = std::make_shared<std::vector<ArchiveMember>>(std::move(archive.members));
+  res.set_chunked_content_provider("application/x-tar", [members](size_t, httplib::DataSink& sink) {
+    const absl::Status s = WriteTarArchive(*members, [&sink](std::string_view piece) {
+      return sink.write(piece.data(), piece.size());
+    });
+    if (s.ok()) sink.done();
+    return s.ok();
+  });
 }
 
 void WebServer::Events(const httplib::Request& req, httplib::Response& res) {
@@ -600,6 +651,14 @@ void WebServer::RouteCycleViews() {
                 const std::streamsize got = in->gcount();
                 return got > 0 && sink.write(buffer.data(), static_cast<size_t>(got));
               });
+        });
+  s.Get(R"(/api/cycles/([^/]+)/capture\.tar)",
+        [this](const httplib::Request& req, httplib::Response& res) {
+          absl::StatusOr<int64_t> id = ParseCycleId(req.matches[1]);
+          if (!id.ok()) return SendError(res, id.status());
+          absl::StatusOr<CaptureArchiveToSend> archive = views_.Archive(*id);
+          if (!archive.ok()) return SendError(res, archive.status());
+          SendArchive(*std::move(archive), res);
         });
   s.Get(R"(/api/cycles/([^/]+)/views/([^/]+))",
         [this](const httplib::Request& req, httplib::Response& res) {

@@ -21,12 +21,16 @@
 //                     every new cycle's as they happen (an `event: cycle` with the cycle
 //                     before its `event: cycle_event`s); ?cycle=ID: that cycle's events
 //                     only, then `event: end`. The events are StationCore::WatchCycle's.
-//   GET  /api/aftersale/cameras, POST /api/aftersale/photo, POST /api/aftersale
-//                     the after-sale page's calls (aftersale_api.h); a photo over
+//   GET  /api/aftersale/cameras, POST /api/aftersale/photo, POST /api/aftersale,
+//   GET  /api/aftersale/photos/ID/birdseye.png
+//                     the after-sale page's calls (aftersale_api.h, aftersale_photos.h: the
+//                     bird's-eye PNG of a kept photo through its latest solve); a photo over
 //                     kMaxPhotoBytes or a request over kMaxAftersaleRequestBytes gets 413,
 //                     a multipart form 415
 //   GET  /api/cycles/ID/capture        the kept capture's files (capture_views.h), or why none
 //   GET  /api/cycles/ID/capture/N      file N of that list (a download; a camera's frame)
+//   GET  /api/cycles/ID/capture.tar    the whole capture as one tar archive (capture_archive.h);
+//                                      404 when the cycle kept no capture
 //   GET  /api/cycles/ID/views/SENSOR?frame=K  the sensor's view (station/pipeline/cycle_views.h)
 //   POST /api/cycles            operators: start a cycle (operator_actions.h's body), as
 //                               gRPC StartCycle; {"cycle_id": "N"}
@@ -51,6 +55,7 @@
 #include "absl/status/statusor.h"
 #include "daemon/core/daemon_config.h"
 #include "daemon/core/station_core.h"
+#include "daemon/web/aftersale_photos.h"
 #include "daemon/web/capture_views.h"
 #include "daemon/web/sessions.h"
 
@@ -120,7 +125,11 @@ class WebServer {
   void FollowCycle(int64_t cycle_id, httplib::DataSink& sink);
   // The routes of the cycle page's recorded data and of the operator's actions.
   void RouteCycleViews();
+  // Streams the archive of a cycle's capture (capture_archive.h) as a download.
+  static void SendArchive(CaptureArchiveToSend archive, httplib::Response& res);
   void RouteOperator();
+  // The after-sale page's calls (aftersale_api.h) over the kept photos.
+  void RouteAftersale();
   // Whether the request may change the station: an operator session and CheckSameSiteAction;
   // else answers 403 and returns false.
   bool OperatorAllowed(const httplib::Request& req, httplib::Response& res);
@@ -129,6 +138,7 @@ class WebServer {
   const WebServerOptions options_;
   Sessions sessions_;
   CaptureViews views_;
+  AftersalePhotos photos_;
   std::unique_ptr<httplib::Server> server_;
   std::thread thread_;
   int port_ = 0;

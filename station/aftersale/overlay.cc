@@ -116,4 +116,32 @@ Image8 BirdsEyeImage(const Image8& image, const CameraModel& camera,
   return page;
 }
 
+RgbImage BirdsEyePicture(const Image8& image, const CameraModel& camera,
+                         const LaneCalibrationInput& input, const LaneCalibrationResult& result,
+                         const BirdsEyeLayout& layout) {
+  const Image8 grey = BirdsEyeImage(image, camera, input, result, layout);
+  const int w = grey.width, h = grey.height;
+  RgbImage img(w, h);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      std::uint8_t* p = img.at(x, y);
+      p[0] = p[1] = p[2] = grey.at(x, y);
+    }
+  }
+  // Whole rows and columns: the grid's lines fall on pixel centres at the page's scale.
+  const auto paint = [&img](int x, int y) {
+    if (x < 0 || y < 0 || x >= img.width || y >= img.height) return;
+    std::copy(kBirdsEyeGridColour.begin(), kBirdsEyeGridColour.end(), img.at(x, y));
+  };
+  for (double d = 5; d < layout.far_m; d += 5) {
+    const int row = static_cast<int>(std::lround((layout.far_m - d) * layout.px_per_m));
+    for (int x = 0; x < w; ++x) paint(x, row);
+  }
+  for (double y = -layout.half_width_m + 1; y < layout.half_width_m; y += 1) {
+    const int col = static_cast<int>(std::lround((layout.half_width_m - y) * layout.px_per_m));
+    for (int row = 0; row < h; ++row) paint(col, row);
+  }
+  return img;
+}
+
 }  // namespace linecal

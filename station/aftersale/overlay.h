@@ -12,6 +12,7 @@
 
 #include "detectors/core/image_view.h"
 #include "station/camera/camera_model.h"
+#include "station/io/image_io.h"
 #include "station/solvers/lane_calibration.h"
 
 namespace linecal {
@@ -65,5 +66,15 @@ struct BirdsEyeLayout {
 Image8 BirdsEyeImage(const Image8& image, const CameraModel& camera,
                      const LaneCalibrationInput& input, const LaneCalibrationResult& result,
                      const BirdsEyeLayout& layout = {});
+
+// The colour of BirdsEyePicture's grid lines.
+inline constexpr std::array<std::uint8_t, 3> kBirdsEyeGridColour = {0, 200, 255};
+
+// <name>-birdseye.png of `linecal aftersale --out`, and the console's after-sale page's
+// bird's-eye view: BirdsEyeImage in grey with grid lines (kBirdsEyeGridColour, one pixel wide)
+// every 5 m ahead and every metre across. O(width x height of the page).
+RgbImage BirdsEyePicture(const Image8& image, const CameraModel& camera,
+                         const LaneCalibrationInput& input, const LaneCalibrationResult& result,
+                         const BirdsEyeLayout& layout = {});
 
 }  // namespace linecal

@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <cmath>
 #include <csetjmp>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 
@@ -326,36 +327,57 @@ bool PngWriteAll(png_structp png, png_infop info, std::FILE* file, const PngLayo
   return true;
 }
 
-// `row(y)` gives the bytes of row y; libpng copies each row before transforming it, so the
-// caller's pixels are never written.
-template <typename RowFn>
-absl::Status WritePng(const std::string& path, PngLayout layout, RowFn row) {
+absl::Status CheckPngLayout(const std::string& name, const PngLayout& layout) {
   if (layout.width <= 0 || layout.height <= 0 || layout.width > kMaxImageSide ||
       layout.height > kMaxImageSide) {
     return absl::InvalidArgumentError(
-        absl::StrCat(path, ": cannot write a ", layout.width, " x ", layout.height, " image"));
+        absl::StrCat(name, ": cannot write a ", layout.width, " x ", layout.height, " image"));
   }
   if (!(layout.pixels_per_metre >= 0) || !std::isfinite(layout.pixels_per_metre)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(path, ": bad pixels_per_metre ", layout.pixels_per_metre));
+        absl::StrCat(name, ": bad pixels_per_metre ", layout.pixels_per_metre));
   }
+  return absl::OkStatus();
+}
+
+// Encodes the PNG into `file`; false (and error->message) when libpng fails. `row(y)` gives
+// the bytes of row y; libpng copies each row before transforming it, so the caller's pixels
+// are never written. The layout must pass CheckPngLayout.
+template <typename RowFn>
+bool EncodePng(std::FILE* file, const PngLayout& layout, RowFn row, PngErrorState* error) {
   std::vector<png_bytep> rows(layout.height);
   for (int y = 0; y < layout.height; ++y) rows[y] = const_cast<png_bytep>(row(y));
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, error, PngOnError, PngOnWarning);
+  png_infop info = png != nullptr ? png_create_info_struct(png) : nullptr;
+  const bool ok =
+      png != nullptr && info != nullptr && PngWriteAll(png, info, file, layout, rows.data());
+  png_destroy_write_struct(&png, &info);
+  return ok;
+}
 
+template <typename RowFn>
+absl::Status WritePng(const std::string& path, PngLayout layout, RowFn row) {
+  if (absl::Status s = CheckPngLayout(path, layout); !s.ok()) return s;
   std::FILE* raw = std::fopen(path.c_str(), "wb");
   if (raw == nullptr) return FileError(path, "cannot create", errno);
   PngErrorState error;
-  png_structp png =
-      png_create_write_struct(PNG_LIBPNG_VER_STRING, &error, PngOnError, PngOnWarning);
-  png_infop info = png != nullptr ? png_create_info_struct(png) : nullptr;
-  bool ok = png != nullptr && info != nullptr && PngWriteAll(png, info, raw, layout, rows.data());
-  png_destroy_write_struct(&png, &info);
+  const bool ok = EncodePng(raw, layout, row, &error);
   const bool write_error = std::ferror(raw) != 0;
   const int close_errno = std::fclose(raw) != 0 ? errno : 0;
   if (ok && !write_error && close_errno == 0) return absl::OkStatus();
   std::remove(path.c_str());
   if (!ok) return absl::InternalError(absl::StrCat(path, ": PNG encoding failed: ", error.message));
   return FileError(path, "write failed", write_error ? EIO : close_errno);
+}
+
+absl::Status CheckRgbBuffer(const std::string& name, const RgbImage& image) {
+  if (image.rgb.size() != 3 * static_cast<std::size_t>(std::max(image.width, 0)) *
+                              static_cast<std::size_t>(std::max(image.height, 0))) {
+    return absl::InvalidArgumentError(absl::StrCat(name, ": RGB image buffer size ",
+                                                   image.rgb.size(), " does not match ",
+                                                   image.width, " x ", image.height));
+  }
+  return absl::OkStatus();
 }
 
 template <typename T>
@@ -434,15 +456,29 @@ absl::Status WritePng16(const std::string& path, const ImageView16& image,
 
 absl::Status WritePngRgb(const std::string& path, const RgbImage& image,
                          const PngWriteOptions& options) {
-  if (image.rgb.size() != 3 * static_cast<std::size_t>(std::max(image.width, 0)) *
-                              static_cast<std::size_t>(std::max(image.height, 0))) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": RGB image buffer size ",
-                                                   image.rgb.size(), " does not match ",
-                                                   image.width, " x ", image.height));
-  }
+  if (absl::Status s = CheckRgbBuffer(path, image); !s.ok()) return s;
   return WritePng(
       path, PngLayout{image.width, image.height, 8, PNG_COLOR_TYPE_RGB, options.pixels_per_metre},
       [&](int y) { return image.at(0, y); });
+}
+
+absl::StatusOr<std::string> EncodePngRgb(const RgbImage& image, const std::string& name) {
+  if (absl::Status s = CheckRgbBuffer(name, image); !s.ok()) return s;
+  const PngLayout layout{image.width, image.height, 8, PNG_COLOR_TYPE_RGB, 0.0};
+  if (absl::Status s = CheckPngLayout(name, layout); !s.ok()) return s;
+  char* buffer = nullptr;
+  size_t size = 0;
+  std::FILE* memory = open_memstream(&buffer, &size);
+  if (memory == nullptr) return FileError(name, "cannot open a memory stream", errno);
+  PngErrorState error;
+  const bool ok = EncodePng(
+      memory, layout, [&](int y) { return image.at(0, y); }, &error);
+  const bool closed = std::fclose(memory) == 0;  // sets buffer and size
+  std::string png = ok && closed ? std::string(buffer, size) : "";
+  std::free(buffer);
+  if (!ok) return absl::InternalError(absl::StrCat(name, ": PNG encoding failed: ", error.message));
+  if (!closed) return FileError(name, "write failed", errno);
+  return png;
 }
 
 }  // namespace linecal

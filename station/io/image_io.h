@@ -77,4 +77,8 @@ absl::Status WritePng16(const std::string& path, const ImageView16& image,
 absl::Status WritePngRgb(const std::string& path, const RgbImage& image,
                          const PngWriteOptions& options = {});
 
+// The PNG file WritePngRgb writes (without pHYs), as bytes in memory: an image sent over the
+// network. `name` stands for the image in messages. Errors as WritePngRgb's.
+absl::StatusOr<std::string> EncodePngRgb(const RgbImage& image, const std::string& name);
+
 }  // namespace linecal

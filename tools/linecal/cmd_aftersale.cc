@@ -154,26 +154,6 @@ RgbImage DrawOverlay(const Image8& image, const CameraModel& camera, const LaneC
   return img;
 }
 
-// <name>-birdseye.png: the ground seen from above through the estimate
-// (station/aftersale/overlay.h, BirdsEyeImage) with grid lines every 5 m ahead and every
-// metre across.
-RgbImage DrawBirdsEye(const Image8& image, const CameraModel& camera,
-                      const LaneCalibrationInput& in, const LaneCalibrationResult& r) {
-  const BirdsEyeLayout layout;
-  const int w = layout.width(), h = layout.height();
-  RgbImage img = GreyToRgb(BirdsEyeImage(image, camera, in, r, layout).view());
-  const RgbColour grid{0, 200, 255};
-  for (double d = 5; d < layout.far_m; d += 5) {
-    const double row = (layout.far_m - d) * layout.px_per_m;
-    DrawSegment(&img, {0, row}, {w - 1.0, row}, 1, grid);
-  }
-  for (double y = -layout.half_width_m + 1; y < layout.half_width_m; y += 1) {
-    const double col = (layout.half_width_m - y) * layout.px_per_m;
-    DrawSegment(&img, {col, 0}, {col, h - 1.0}, 1, grid);
-  }
-  return img;
-}
-
 // The reference toolbox's three files (docs/aftersale.md, "Export"), with the real values.
 absl::StatusOr<std::vector<std::string>> Export(const std::string& dir, const std::string& name,
                                                 const LaneCalibrationInput& in,
@@ -267,7 +247,7 @@ int RunAftersale(const Args& args) {
     const std::string birdseye = (dir / (request.name + "-birdseye.png")).string();
     for (const auto& [path, picture] :
          {std::pair{overlay, DrawOverlay(*image, camera, *in, *r)},
-          std::pair{birdseye, DrawBirdsEye(*image, camera, *in, *r)}}) {
+          std::pair{birdseye, BirdsEyePicture(*image, camera, *in, *r)}}) {
       if (absl::Status s = WritePngRgb(path, picture); !s.ok()) {
         std::fprintf(stderr, "linecal aftersale: %s\n", std::string(s.message()).c_str());
         return cli::kExitNegative;

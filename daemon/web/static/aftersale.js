@@ -65,6 +65,7 @@ class AftersalePage {
     this.cameras = [];
     this.bitmap = null;
     this.photoName = "";
+    this.photoId = "";  // the daemon's id of the uploaded photo, for its bird's-eye view
     this.size = null;  // [width, height] as the daemon read the photo
     this.points = { lane0: [], lane1: [], roll: [], mark: [] };
     this.last = null;  // {key, index} of the point last placed or moved
@@ -166,6 +167,7 @@ class AftersalePage {
       // The daemon reads it as `linecal aftersale` does (and refuses what it cannot read);
       // the page draws its own decode, of the same size.
       this.size = null;
+      this.photoId = "";
       const info = await postJson("/api/aftersale/photo", file, file.type || "application/octet-stream");
       const bitmap = await createImageBitmap(file, { imageOrientation: "none" });
       if (bitmap.width !== info.width || bitmap.height !== info.height) {
@@ -175,6 +177,7 @@ class AftersalePage {
       this.bitmap = bitmap;
       this.size = [info.width, info.height];
       this.photoName = file.name;
+      this.photoId = info.photo_id;
     } catch (error) {
       this.showMessage("Photo refused: " + error.message);
       return;
@@ -341,7 +344,8 @@ class AftersalePage {
     if (p.mark.length === 1 && distance !== "") {
       input.marked_point = { uv_px: p.mark[0], measured_distance_m: Number(distance) };
     }
-    return { image_size: this.size, input };
+    // With the photo's id the daemon keeps this solve for the photo's bird's-eye view.
+    return { image_size: this.size, input, photo_id: this.photoId };
   }
 
   async solve() {
@@ -469,6 +473,7 @@ class AftersalePage {
   showResult() {
     this.draw();
     const a = this.answer;
+    this.showBirdsEye();
     $("result").hidden = !a;
     if (!a) {
       delete document.body.dataset.solved;
@@ -505,6 +510,23 @@ class AftersalePage {
     this.makeDownloads();
     this.fillCertificate();
     document.body.dataset.solved = this.answered;
+  }
+
+  // The daemon's bird's-eye picture of the photo through the latest solve (a new path for each
+  // solve); hidden without a result. body[data-birdseye] is the path once its image is shown.
+  showBirdsEye() {
+    const img = $("birdseye");
+    const path = this.answer && this.answer.birdseye;
+    $("birdseye-figure").hidden = !path;
+    if (!path) {
+      img.removeAttribute("src");
+      delete document.body.dataset.birdseye;
+      return;
+    }
+    if (img.getAttribute("src") === path) return;
+    img.onload = () => { if (img.getAttribute("src") === path) document.body.dataset.birdseye = path; };
+    img.onerror = () => this.showMessage("The bird's-eye view did not load: upload the photo again.");
+    img.src = path;
   }
 
   makeDownloads() {

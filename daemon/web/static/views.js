@@ -208,6 +208,16 @@
       section.appendChild(text("p", "No capture: " + capture.reason, "muted"));
       return section;
     }
+    // The whole capture as one tar archive (daemon/web/capture_archive.h), replayable as is.
+    const all = document.createElement("a");
+    all.id = "capture-archive";
+    all.href = "/api/cycles/" + encodeURIComponent(cycleId) + "/capture.tar";
+    all.download = "";
+    all.textContent = "Download the whole capture (cycle-" + cycleId + "-capture.tar)";
+    const total = capture.files.reduce((n, f) => n + f.bytes, 0);
+    const p = document.createElement("p");
+    p.append(all, " · " + capture.files.length + " files, " + (total / 1048576).toFixed(1) + " MB");
+    section.appendChild(p);
     const list = document.createElement("ul");
     list.className = "files";
     for (const f of capture.files) {

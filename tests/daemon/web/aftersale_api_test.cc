@@ -3,8 +3,9 @@
 // solved by POST /api/aftersale equals `linecal aftersale --json` on the same input (every
 // number, as doubles) and its export equals `--export`'s files byte for byte; the overlay's
 // lines; the photo upload's size and its refusals (not an image, empty, too large, a form, a
-// header claiming too many pixels); the command's refusals with the command's messages; and
-// no call without a session.
+// header claiming too many pixels); the command's refusals with the command's messages; the
+// bird's-eye PNG of a kept photo equal to the command's --out file and its refusals; and no
+// call without a session.
 // First: httplib.h brings resolv.h, whose `_res` macro breaks Eigen's headers after it.
 #include "daemon/web/aftersale_api.h"
 
@@ -130,14 +131,18 @@ TEST_F(AftersaleApiTest, SolveEqualsTheCommandAndExportsItsBytes) {
     const auto [photo_status, photo] =
         Post("/api/aftersale/photo", ReadBytes(scene / (c.camera + ".png")), "image/png");
     ASSERT_EQ(photo_status, 200) << photo.dump();
-    EXPECT_EQ(photo, (json{{"width", c.width}, {"height", c.height}}));
+    const std::string photo_id = photo.value("photo_id", "");
+    EXPECT_EQ(photo_id.size(), 32u);
+    EXPECT_EQ(photo_id.find_first_not_of("0123456789abcdef"), std::string::npos) << photo_id;
+    EXPECT_EQ(photo, (json{{"width", c.width}, {"height", c.height}, {"photo_id", photo_id}}));
 
-    const testing_tools::LinecalRun cli =
-        RunLinecal("aftersale --input " + (scene / "aftersale.json").string() + " --json" +
-                   " --export " + (scene / "export").string());
+    const testing_tools::LinecalRun cli = RunLinecal(
+        "aftersale --input " + (scene / "aftersale.json").string() + " --json" + " --export " +
+        (scene / "export").string() + " --out " + (scene / "out").string());
     ASSERT_EQ(cli.exit_code, 0) << cli.err;
     json expected = json::parse(cli.out);
-    for (const char* file_key : {"image", "export"}) expected.erase(file_key);
+    for (const char* file_key : {"image", "export", "overlay_png", "birdseye_png"})
+      expected.erase(file_key);
 
     const auto [status, answer] =
         Post("/api/aftersale", ApiRequest(scene, c.width, c.height).dump());
@@ -151,7 +156,101 @@ TEST_F(AftersaleApiTest, SolveEqualsTheCommandAndExportsItsBytes) {
       ASSERT_TRUE(fs::exists(written)) << written;
       EXPECT_EQ(file["text"].get<std::string>(), ReadBytes(written)) << written;
     }
+    EXPECT_FALSE(answer.contains("birdseye"));  // no photo_id: nothing kept for the answer
+
+    // With the photo's id: the bird's-eye PNG of the uploaded photo through this solve is the
+    // command's <name>-birdseye.png byte for byte (the same picture, encoder and settings).
+    json request = ApiRequest(scene, c.width, c.height);
+    request["photo_id"] = photo_id;
+    const auto [with_status, with_photo] = Post("/api/aftersale", request.dump());
+    ASSERT_EQ(with_status, 200) << with_photo.dump();
+    EXPECT_EQ(with_photo["result"], answer["result"]);
+    EXPECT_EQ(with_photo["birdseye"],
+              "/api/aftersale/photos/" + photo_id + "/birdseye.png?solve=1");
+    httplib::Result png = Client().Get(with_photo["birdseye"].get<std::string>().c_str(), Cookie());
+    ASSERT_TRUE(png);
+    ASSERT_EQ(png->status, 200) << png->body;
+    EXPECT_EQ(png->get_header_value("Content-Type"), "image/png");
+    const std::string birdseye = ReadBytes(scene / "out" / (c.camera + "-birdseye.png"));
+    ASSERT_FALSE(birdseye.empty());
+    EXPECT_TRUE(png->body == birdseye) << png->body.size() << " vs " << birdseye.size() << " bytes";
   }
+}
+
+// The bird's-eye view's refusals: each names what is missing.
+TEST_F(AftersaleApiTest, BirdsEyeNeedsAKeptPhotoAndASolution) {
+  const fs::path scene = SimLanes("front_camera", "--points-m 5,10,20,30 --seed 3");
+  const auto get = [&](const std::string& path) {
+    httplib::Result r = Client().Get(path.c_str(), Cookie());
+    EXPECT_TRUE(r) << path;
+    if (!r) return std::make_pair(0, json());
+    return std::make_pair(r->status, json::parse(r->body));
+  };
+  // No such photo.
+  const std::string unknown = "0123456789abcdef0123456789abcdef";
+  auto [status, body] = get("/api/aftersale/photos/" + unknown + "/birdseye.png");
+  EXPECT_EQ(status, 404);
+  EXPECT_EQ(body["error"], "photo_id: '" + unknown +
+                               "' is not kept (never uploaded, or dropped for newer photos): "
+                               "upload the photo again (POST /api/aftersale/photo)");
+  json request = ApiRequest(scene, 1920, 1080);
+  request["photo_id"] = unknown;
+  std::tie(status, body) = Post("/api/aftersale", request.dump());
+  EXPECT_EQ(status, 404);
+  EXPECT_EQ(body["code"], "not_found");
+  // A photo, no solution yet.
+  const auto [photo_status, photo] =
+      Post("/api/aftersale/photo", ReadBytes(scene / "front_camera.png"), "image/png");
+  ASSERT_EQ(photo_status, 200);
+  const std::string id = photo["photo_id"];
+  const std::string path = "/api/aftersale/photos/" + id + "/birdseye.png";
+  std::tie(status, body) = get(path);
+  EXPECT_EQ(status, 409);
+  EXPECT_EQ(body["error"], "birdseye: photo '" + id +
+                               "' has no solution yet: solve its lane points first (POST "
+                               "/api/aftersale with its photo_id)");
+  // A solve for another image size than the photo's.
+  request["photo_id"] = id;
+  request["image_size"] = {1280, 960};
+  std::tie(status, body) = Post("/api/aftersale", request.dump());
+  EXPECT_EQ(status, 400);
+  EXPECT_EQ(body["error"],
+            "request: image_size: [1280, 960] differs from photo " + id + "'s 1920 x 1080");
+  // Solved: a picture; then a refused solve (parallel lines): no solution any more.
+  request["image_size"] = {1920, 1080};
+  std::tie(status, body) = Post("/api/aftersale", request.dump());
+  ASSERT_EQ(status, 200);
+  httplib::Result png = Client().Get(path.c_str(), Cookie());
+  ASSERT_TRUE(png);
+  EXPECT_EQ(png->status, 200);
+  request["input"]["lanes"] = {{{500, 900}, {600, 300}}, {{900, 900}, {1000.5, 300}}};
+  std::tie(status, body) = Post("/api/aftersale", request.dump());
+  EXPECT_EQ(status, 400);
+  std::tie(status, body) = get(path);
+  EXPECT_EQ(status, 409);
+  EXPECT_EQ(body["error"],
+            "birdseye: photo '" + id + "' has no solution: its latest solve was refused");
+  // Not without a session.
+  httplib::Result anonymous = Client().Get(path.c_str());
+  ASSERT_TRUE(anonymous);
+  EXPECT_EQ(anonymous->status, 401);
+}
+
+// Photos are kept within kMaxKeptPhotoPixels: the least recently used go first.
+TEST(AftersalePhotosTest, KeepsTheMostRecentlyUsedWithinTheBound) {
+  AftersalePhotos photos;
+  // 1920 x 1080: 24 fit in 50 Mpx.
+  std::vector<std::string> ids;
+  for (int i = 0; i < 25; ++i) {
+    absl::StatusOr<std::string> id = photos.Keep(Image8(1920, 1080, 0));
+    ASSERT_TRUE(id.ok());
+    ids.push_back(*id);
+    if (i == 0) continue;
+    ASSERT_TRUE(photos.Size(ids[0]).ok());  // used at each upload: never the least recent
+  }
+  EXPECT_TRUE(photos.Size(ids[0]).ok());
+  EXPECT_EQ(photos.Size(ids[1]).status().code(), absl::StatusCode::kNotFound);
+  for (int i = 2; i < 25; ++i) EXPECT_TRUE(photos.Size(ids[i]).ok()) << i;
 }
 
 TEST_F(AftersaleApiTest, OverlayIsTheCommandsLinesAtThePagesDensity) {

@@ -107,8 +107,8 @@ def compare_with_command(driver, args, work, request, tag):
         json.dump(input_doc, f)
     export = os.path.join(work, f"export-{tag}")
     # Exit 1: done, the distance check failed (docs/aftersale.md).
-    text, code = run([args.linecal, "aftersale", "--input", path, "--json", "--export", export],
-                     "linecal aftersale", codes=(0, 1))
+    text, code = run([args.linecal, "aftersale", "--input", path, "--json", "--export", export,
+                      "--out", os.path.join(work, f"out-{tag}")], "linecal aftersale", codes=(0, 1))
     cli = json.loads(text)
     check(code == (1 if cli["distance_check"]["verdict"] == "fail" else 0), f"{tag}: exit {code}")
     shown = {
@@ -131,6 +131,51 @@ def compare_with_command(driver, args, work, request, tag):
     verdict = driver.find_element(By.CSS_SELECTOR, "#checks-table tr[data-key='verdict']").get_attribute("data-verdict")
     check(verdict == cli["distance_check"]["verdict"], f"{tag}: verdict {verdict} vs {cli['distance_check']['verdict']}")
     return cli, export, compared
+
+
+# The bird's-eye picture shown and the command's, decoded by the browser: their sizes and how
+# many pixels differ, and by how much at most (any channel).
+COMPARE_PICTURES = """
+const done = arguments[arguments.length - 1];
+const bytes = Uint8Array.from(atob(arguments[0]), (c) => c.charCodeAt(0));
+const pixels = (bitmap) => {
+  const canvas = new OffscreenCanvas(bitmap.width, bitmap.height);
+  const ctx = canvas.getContext("2d");
+  ctx.drawImage(bitmap, 0, 0);
+  return ctx.getImageData(0, 0, bitmap.width, bitmap.height).data;
+};
+Promise.all([createImageBitmap(new Blob([bytes], { type: "image/png" })),
+             createImageBitmap(document.getElementById("birdseye"))]).then(([expected, shown]) => {
+  const a = pixels(expected), b = pixels(shown);
+  let differing = 0, worst = 0;
+  for (let i = 0; i < a.length && a.length === b.length; i += 4) {
+    const d = Math.max(...[0, 1, 2, 3].map((k) => Math.abs(a[i + k] - b[i + k])));
+    if (d > 0) differing += 1;
+    worst = Math.max(worst, d);
+  }
+  done({ expected: [expected.width, expected.height], shown: [shown.width, shown.height], differing, worst });
+}).catch((e) => done({ error: String(e) }));
+"""
+
+
+def compare_birdseye(driver, url, work, tag):
+    """The page's bird's-eye view of the current result is `linecal aftersale --out`'s
+    <camera>-birdseye.png for the same points: the daemon's bytes equal the file's, and the
+    picture shown equals it pixel for pixel."""
+    wait(driver, "the bird's-eye view", lambda d: js(
+        d, "const img = document.getElementById('birdseye'); return img.getAttribute('src') !== null &&"
+           " document.body.dataset.birdseye === img.getAttribute('src') && img.complete;"))
+    path = js(driver, "return document.getElementById('birdseye').getAttribute('src');")
+    with open(os.path.join(work, f"out-{tag}", f"{CAMERA}-birdseye.png"), "rb") as f:
+        expected = f.read()
+    served, headers = console.api_bytes(driver, url, path)
+    check(headers["Content-Type"] == "image/png", f"{tag}: the bird's-eye view's type {headers['Content-Type']}")
+    check(served == expected, f"{tag}: the daemon's bird's-eye PNG ({len(served)} bytes) differs from"
+                              f" linecal aftersale --out's ({len(expected)} bytes)")
+    shown = driver.execute_async_script(COMPARE_PICTURES, base64.b64encode(expected).decode())
+    check(shown.get("expected") == [320, 800] and shown.get("shown") == [320, 800] and shown.get("differing") == 0,
+          f"{tag}: the bird's-eye view shown vs the command's: {shown}")
+    return len(expected)
 
 
 def test(args, work):
@@ -194,6 +239,7 @@ def test(args, work):
         driver.find_element(By.ID, "measured-distance").send_keys(str(distance))
         request = wait_solved_with(driver, points, distance)
         cli, _, compared = compare_with_command(driver, args, work, request, "clicked")
+        birdseye_bytes = compare_birdseye(driver, url, work, "clicked")
         driver.save_screenshot(os.path.join(shots, "aftersale.png"))
         # The certificate: the VIN, the result, one printed page; its picture at A4's
         # proportions (794 x 1123 CSS px is A4 at 96 px an inch).
@@ -232,6 +278,7 @@ def test(args, work):
         points = page_points(driver)
         request = wait_solved_with(driver, points, distance)
         cli, export, compared_after = compare_with_command(driver, args, work, request, "dragged")
+        compare_birdseye(driver, url, work, "dragged")
         compared += compared_after
 
         # The wheel zooms around the pointer: the image point under it stays.
@@ -264,6 +311,9 @@ def test(args, work):
         # A lane point dragged above the horizon: the page shows the command's refusal. Its
         # refused POST is the one console error allowed ("Failed to load resource ... 400").
         check(not console.errors(driver), "console errors before the refusal")
+        # Clicking the links scrolled the page to them: back to the top, where the view was.
+        js(driver, "window.scrollTo(0, 0);")
+        rect = canvas_rect(driver)
         first = page_points(driver)["lane0"][0]
         x, y = round(rect[0] + (first[0] + 0.5) * scale), round(rect[1] + (first[1] + 0.5) * scale)
         actions = ActionBuilder(driver)
@@ -282,6 +332,8 @@ def test(args, work):
         check("Refused: " + out.stderr.removeprefix("linecal aftersale: ").strip() == message,
               f"the page says '{message}', the command '{out.stderr.strip()}'")
         check(driver.find_element(By.ID, "result").get_attribute("hidden") is not None, "a refused result is hidden")
+        check(driver.find_element(By.ID, "birdseye-figure").get_attribute("hidden") is not None,
+              "no bird's-eye view of a refused result")
         refused_errors = console.errors(driver)
         check(len(refused_errors) == 1 and "/api/aftersale" in refused_errors[0]["message"]
               and "400" in refused_errors[0]["message"], f"console errors at the refusal: {refused_errors}")
@@ -292,6 +344,8 @@ def test(args, work):
         print(f"after-sale page: {sum(len(v) for v in points.values())} points clicked at scale {scale:.4f} "
               f"(worst {worst:.3f} px from the scene's points), {compared} numbers equal to linecal aftersale's, "
               f"3 export files equal byte for byte, certificate on {pages} page")
+        print(f"after-sale page: the bird's-eye view ({birdseye_bytes} bytes of PNG) equal byte for byte and"
+              " pixel for pixel to linecal aftersale --out's, after the clicks and after the drag")
         left = console.errors(driver)
         check(not left, f"console errors: {left}")
     finally:

@@ -294,6 +294,37 @@ def api_json(driver, url, path):
         return json.load(r)
 
 
+def api_bytes(driver, url, path):
+    """GET a path with the browser's session cookie: (bytes, headers)."""
+    import urllib.request
+    cookie = "; ".join(f"{c['name']}={c['value']}" for c in driver.get_cookies())
+    with urllib.request.urlopen(urllib.request.Request(url.rstrip("/") + path, headers={"Cookie": cookie})) as r:
+        return r.read(), r.headers
+
+
+def capture_archive(driver, url, cycle_id, capture):
+    """The cycle page's link to the whole capture: a tar holding every listed file under
+    cycle-ID/, byte for byte as the file's own download."""
+    import io
+    import tarfile
+    link = driver.find_element(By.ID, "capture-archive")
+    href = link.get_attribute("href")
+    check(href == f"{url}api/cycles/{cycle_id}/capture.tar", f"the archive's link: {href}")
+    check(link.get_attribute("download") is not None, "the archive's link is a download")
+    tar, headers = api_bytes(driver, url, f"/api/cycles/{cycle_id}/capture.tar")
+    check(headers["Content-Disposition"] == f'attachment; filename="cycle-{cycle_id}-capture.tar"',
+          f"the archive's name: {headers['Content-Disposition']}")
+    with tarfile.open(fileobj=io.BytesIO(tar), mode="r:") as archive:
+        members = {m.name: archive.extractfile(m).read() for m in archive.getmembers() if m.isfile()}
+    for f in capture["files"]:
+        name = f"cycle-{cycle_id}/{f['path']}"
+        check(name in members, f"{name} is not in the archive: {sorted(members)}")
+        own, _ = api_bytes(driver, url, f"/api/cycles/{cycle_id}/capture/{f['index']}")
+        check(members[name] == own, f"{name}: the archive's bytes differ from the file's download")
+    print(f"capture archive: {len(members)} files, {len(tar)} bytes, the {len(capture['files'])} listed"
+          " files equal to their downloads")
+
+
 def cycle_views(driver, url, cycle_id, shots):
     """The cycle page of a cycle with a capture: every camera's frame loads at its size and
     shows as many detected features as the API's view has; the LiDAR and radar views draw
@@ -303,6 +334,7 @@ def cycle_views(driver, url, cycle_id, shots):
     capture = api_json(driver, url, f"/api/cycles/{cycle_id}/capture")
     links = driver.find_elements(By.CSS_SELECTOR, "#capture ul.files a")
     check(len(links) == len(capture["files"]), f"{len(links)} capture links for {len(capture['files'])} files")
+    capture_archive(driver, url, cycle_id, capture)
     counts = []
     for figure in driver.find_elements(By.CSS_SELECTOR, "figure.camera-view"):
         sensor = figure.get_attribute("data-sensor")

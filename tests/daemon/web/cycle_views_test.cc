@@ -3,16 +3,21 @@
 // reference car: a recorded cycle's capture files and their bytes, each sensor's view against
 // what the cycle computed (the camera features of CalibrateCapture, the store's feature
 // counts, a reprojected board feature computed here from the stored mounting, the LiDAR holes
-// of CalibrateLidarFrames, the radar's reflectors), refusals of bad ids; operator POSTs
-// refused for read-only sessions and cross-site requests, taken for an operator.
+// of CalibrateLidarFrames, the radar's reflectors), the whole capture as one tar archive,
+// refusals of bad ids; operator POSTs refused for read-only sessions and cross-site requests,
+// taken for an operator.
 #include "station/pipeline/cycle_views.h"
 
+#include <archive.h>
+#include <archive_entry.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <string>
 
@@ -31,6 +36,33 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
+
+std::string FileBytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  return bytes.str();
+}
+
+// A tar archive's members in order, name -> bytes, read with libarchive; `ok` false when the
+// archive does not read to its end.
+std::vector<std::pair<std::string, std::string>> TarMembers(const std::string& tar, bool* ok) {
+  std::vector<std::pair<std::string, std::string>> members;
+  archive* a = archive_read_new();
+  archive_read_support_format_tar(a);
+  *ok = archive_read_open_memory(a, tar.data(), tar.size()) == ARCHIVE_OK;
+  archive_entry* entry = nullptr;
+  int r = ARCHIVE_OK;
+  while (*ok && (r = archive_read_next_header(a, &entry)) == ARCHIVE_OK) {
+    std::string bytes(static_cast<size_t>(archive_entry_size(entry)), '\0');
+    *ok = archive_entry_filetype(entry) == AE_IFREG &&
+          archive_read_data(a, bytes.data(), bytes.size()) == static_cast<la_ssize_t>(bytes.size());
+    members.emplace_back(archive_entry_pathname(entry), std::move(bytes));
+  }
+  *ok = *ok && r == ARCHIVE_EOF;
+  archive_read_free(a);
+  return members;
+}
 
 using testing_web::kStatic;
 constexpr char kVin[] = "1M8GDM9AXKP042788";
@@ -300,6 +332,77 @@ TEST_F(CycleViewsTest, RefusesWhatIsNotThere) {
   EXPECT_EQ(status, 200);
   EXPECT_FALSE(body["kept"]);
   EXPECT_EQ(body["reason"], "cycle " + std::to_string(id + 2) + " is running");
+}
+
+// The capture's download as one archive: every file of the capture's folder, byte for byte,
+// the manifest's list first; nothing a link in the folder points at; 404 without a capture.
+TEST_F(CycleViewsTest, CaptureArchiveHoldsEveryFileOfTheCapture) {
+  const int64_t id = RecordedCycle();
+  const std::string top = "cycle-" + std::to_string(id);
+  absl::StatusOr<StoredCycle> stored = core_->GetCycle(id);
+  ASSERT_TRUE(stored.ok());
+  const fs::path dir = dir_ / "data" / stored->capture_path;
+  absl::StatusOr<Capture> capture = ReadCapture(dir.string());
+  ASSERT_TRUE(capture.ok()) << capture.status();
+  // Links to what is outside the capture (a file and a folder) must not be followed.
+  const fs::path secret = dir_ / "secret";
+  fs::create_directories(secret);
+  { std::ofstream(secret / "token.txt") << "not for download"; }
+  fs::create_symlink(secret / "token.txt", dir / "linked.txt");
+  fs::create_directory_symlink(secret, dir / "linked_folder");
+  std::vector<std::pair<std::string, std::string>> expected;
+  std::set<std::string> listed;
+  for (const CaptureFileEntry& f : CaptureFileList(*capture)) {
+    expected.emplace_back(top + "/" + f.path, FileBytes(dir / f.path));
+    listed.insert(f.path);
+  }
+  std::vector<std::string> others;
+  for (const fs::directory_entry& e : fs::recursive_directory_iterator(dir)) {
+    const std::string name = e.path().lexically_relative(dir).generic_string();
+    if (fs::is_regular_file(e.symlink_status()) && !listed.contains(name)) others.push_back(name);
+  }
+  std::sort(others.begin(), others.end());
+  for (const std::string& name : others)
+    expected.emplace_back(top + "/" + name, FileBytes(dir / name));
+  ASSERT_GT(expected.size(), 10u);
+
+  httplib::Result r = Client().Get(("/api/cycles/" + std::to_string(id) + "/capture.tar").c_str(),
+                                   {{"Cookie", reader_}});
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 200) << r->body;
+  EXPECT_EQ(r->get_header_value("Content-Type"), "application/x-tar");
+  EXPECT_EQ(r->get_header_value("Content-Disposition"),
+            "attachment; filename=\"" + top + "-capture.tar\"");
+  bool ok = false;
+  const std::vector<std::pair<std::string, std::string>> members = TarMembers(r->body, &ok);
+  EXPECT_TRUE(ok);
+  ASSERT_EQ(members.size(), expected.size());
+  for (size_t i = 0; i < members.size(); ++i) {
+    EXPECT_EQ(members[i].first, expected[i].first);
+    EXPECT_TRUE(members[i].second == expected[i].second) << members[i].first;
+  }
+  std::cout << members.size() << " files, " << r->body.size() << " bytes of tar\n";
+
+  // Without a session, for a malformed or unknown cycle, and for one that kept no capture.
+  httplib::Result anonymous =
+      Client().Get(("/api/cycles/" + std::to_string(id) + "/capture.tar").c_str());
+  ASSERT_TRUE(anonymous);
+  EXPECT_EQ(anonymous->status, 401);
+  auto [status, body] = GetJson("/api/cycles/abc/capture.tar");
+  EXPECT_EQ(status, 400);
+  EXPECT_EQ(body["error"], "cycle_id: 'abc' is not a cycle id");
+  std::tie(status, body) = GetJson("/api/cycles/77/capture.tar");
+  EXPECT_EQ(status, 404);
+  CycleRequest request;
+  request.vin = kVin;
+  request.car_model_id = "reference";
+  ASSERT_TRUE(core_->StartCycle(request).ok());
+  core_->WaitIdle();
+  std::tie(status, body) = GetJson("/api/cycles/" + std::to_string(id + 1) + "/capture.tar");
+  EXPECT_EQ(status, 404);
+  EXPECT_EQ(body["error"],
+            "capture_not_kept: cycle " + std::to_string(id + 1) +
+                "'s capture was not kept (the cycle was started without record_capture)");
 }
 
 TEST_F(CycleViewsTest, OnlyOperatorsStartAndCancelCycles) {

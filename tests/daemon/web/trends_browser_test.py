@@ -4,8 +4,9 @@ source (docs/console.md, "Trends and station health"): 30 cycles of a car with t
 the bumper boards, `bumper_lidar_left` turned 0.3 degrees by the simulator from cycle 16
 (source.moved_boards); the page shows the alarm naming it, from the same cycle as `linecal
 status --json` (gRPC), and the browser logs no errors. Then 10,000 cycles of those results are
-added to the database and the speed of a 1,000-cycle page and of 10,000-cycle trends measured
-(printed, not asserted: docs/console.md's table). A screenshot goes to --screenshots.
+added to the database: the cycles list (cycles.html) against ListCycles, with its filters, and
+the speed of the 1,000-cycle list, of 1,000- and 10,000-cycle trends measured in the page
+(printed, not asserted: docs/console.md's table). Screenshots go to --screenshots.
 
 Exit 0 passed, 1 failed, 77 skipped when Chromium, its driver or Selenium is missing.
 """
@@ -69,9 +70,50 @@ def open_trends(driver, url, query):
     driver.get(f"{url}trends.html?{query}")
     wait(driver, f"trends {query}", lambda d: d.execute_script("return document.body.dataset.loaded"))
     return driver.execute_script(
-        "const b = document.body.dataset; const n = performance.getEntriesByType('navigation')[0];"
-        "return {points: +b.points, fetch_ms: +b.fetchMs, draw_ms: +b.drawMs,"
-        " loaded_ms: performance.now() - n.startTime};")
+        "const b = document.body.dataset;"
+        "return {points: +b.points, fetch_ms: +b.fetchMs, draw_ms: +b.drawMs, loaded_ms: +b.drawnAtMs,"
+        " requests: requests()};" + REQUESTS)
+
+
+# The page's requests as "path start-end" (ms since the navigation started; a 304 has a small
+# transferSize): what costs what in a page's load.
+REQUESTS = ("function requests() { return performance.getEntriesByType('resource').map((e) =>"
+            " `${e.name.replace(location.origin, '')} ${e.startTime.toFixed(0)}-${e.responseEnd.toFixed(0)}`"
+            " + (e.transferSize < 400 ? ' (cached)' : '')).join(', '); }")
+
+
+def open_cycles(driver, url, query):
+    """The cycles list at `query`: its rows' cycle ids, verdicts and VINs, and when the table
+    was drawn (ms since the navigation started)."""
+    driver.get(f"{url}cycles.html?{query}")
+    wait(driver, f"cycles {query}", lambda d: d.execute_script("return document.body.dataset.loaded"))
+    return driver.execute_script(
+        "const rows = [...document.querySelectorAll('#cycles tr')];"
+        "return {ids: rows.map((r) => r.dataset.cycle), vins: rows.map((r) => r.cells[1].textContent),"
+        " verdicts: rows.map((r) => r.cells[6].textContent), loaded_ms: +document.body.dataset.drawnAtMs,"
+        " older: document.getElementById('older').hidden ? '' : document.getElementById('older').href,"
+        " message: document.getElementById('cycles-message').textContent, requests: requests()};" + REQUESTS)
+
+
+def check_cycles_list(driver, url, address, cli, shots):
+    """The cycles list against the API's ListCycles (gRPC, `linecal cycle list`): the newest
+    1,000, a VIN's, none failed, and the link to the next page."""
+    listed = linecal(cli, address, "cycles", "list", "--limit", "1000")
+    grpc_ids = [str(c.get("cycleId", c.get("cycle_id"))) for c in listed.get("cycles", listed)]
+    page = open_cycles(driver, url, "limit=1000")
+    check(page["ids"] == grpc_ids, f"cycles page ids {page['ids'][:3]}... differ from ListCycles' {grpc_ids[:3]}...")
+    check(f"before={grpc_ids[-1]}" in page["older"], f"the older link: {page['older']}")
+    driver.save_screenshot(os.path.join(shots, "cycles.png"))
+    page = open_cycles(driver, url, f"vin={VIN}&limit=50")
+    check(len(page["ids"]) == 50 and set(page["vins"]) == {VIN}, f"VIN filter: {set(page['vins'])}")
+    failed = linecal(cli, address, "cycles", "list", "--verdict", "fail", "--limit", "50")
+    failed_ids = [str(c.get("cycleId", c.get("cycle_id"))) for c in failed.get("cycles", [])]
+    page = open_cycles(driver, url, "verdict=fail&limit=50")
+    check(page["ids"] == failed_ids and set(page["verdicts"]) <= {"FAIL"}, f"verdict filter: {page}")
+    page = open_cycles(driver, url, "vin=NO0SUCH0VIN&limit=50")
+    check(page["ids"] == [] and page["message"] == "No cycle matches.", f"an unknown VIN: {page}")
+    print(f"cycles page: the newest 1,000 equal to ListCycles', filters by VIN and verdict"
+          f" ({len(failed_ids)} failed cycles)")
 
 
 def add_cycles(db, count):
@@ -138,11 +180,18 @@ def test(args, work):
         add_cycles(os.path.join(work, "data", "linecal.db"), ADDED)
         daemon, address, url = start_daemon(args.linecald, args.source_dir, work)
         login(driver, url, "trends.html?sensor=front_camera&cycles=1000")
+        check_cycles_list(driver, url, address, args.linecal, args.screenshots)
+        for attempt in range(3):
+            m = open_cycles(driver, url, "limit=1000")
+            check(len(m["ids"]) == 1000, f"{len(m['ids'])} rows")
+            print(f"speed cycles.html?limit=1000 run {attempt + 1}: 1000 rows drawn {m['loaded_ms']:.0f} ms after"
+                  f" the navigation started; requests: {m['requests']}")
         for query in ("sensor=front_camera&cycles=1000", "sensor=front_camera&cycles=10000"):
             for attempt in range(3):
                 m = open_trends(driver, url, query)
-                print(f"speed {query} run {attempt + 1}: {m['points']} cars, page loaded in {m['loaded_ms']:.0f} ms"
-                      f" (trends fetched in {m['fetch_ms']:.0f} ms, drawn in {m['draw_ms']:.0f} ms)")
+                print(f"speed trends.html?{query} run {attempt + 1}: {m['points']} cars, charts drawn"
+                      f" {m['loaded_ms']:.0f} ms after the navigation started (trends fetched in"
+                      f" {m['fetch_ms']:.0f} ms, drawn in {m['draw_ms']:.0f} ms); requests: {m['requests']}")
         for attempt in range(3):
             listed = driver.execute_script(
                 "const t = performance.now(); return fetch('/api/cycles?limit=1000').then((r) => r.json())"
@@ -157,7 +206,7 @@ def test(args, work):
 
 
 def main():
-    return run_main(__doc__, "trends_browser_", "folder for trends.png", test)
+    return run_main(__doc__, "trends_browser_", "folder for trends.png and cycles.png", test)
 
 
 if __name__ == "__main__":

@@ -461,6 +461,8 @@ TEST_F(WebServerTest, StaticFilesWithTheirTypes) {
       {"/cycle.html", "text/html; charset=utf-8"},
       {"/login.html", "text/html; charset=utf-8"},
       {"/app.js", "text/javascript; charset=utf-8"},
+      {"/cycles.html", "text/html; charset=utf-8"},
+      {"/cycles.js", "text/javascript; charset=utf-8"},
       {"/app.css", "text/css; charset=utf-8"},
   };
   for (const auto& [path, type] : files) {
@@ -478,6 +480,21 @@ TEST_F(WebServerTest, StaticFilesWithTheirTypes) {
   EXPECT_EQ(chart->status, 200);
   EXPECT_EQ(chart->get_header_value("Content-Type"), "text/javascript; charset=utf-8");
   EXPECT_EQ(chart->body, *ReadTextFile(kChartJsPath));
+  // Revalidated by its entity tag: the same tag answers 304 without a body, another one the file.
+  const std::string tag = chart->get_header_value("ETag");
+  EXPECT_EQ(chart->get_header_value("Cache-Control"), "no-cache");
+  ASSERT_EQ(tag.size() > 2 ? tag.front() + std::string(1, tag.back()) : "", "\"\"") << tag;
+  httplib::Result again = Client().Get(
+      "/vendor/chart.js", httplib::Headers{{"Cookie", cookie}, {"If-None-Match", tag}});
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->status, 304);
+  EXPECT_EQ(again->body, "");
+  httplib::Result other =
+      Client().Get("/app.js", httplib::Headers{{"Cookie", cookie}, {"If-None-Match", tag}});
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->status, 200);
+  EXPECT_EQ(other->body, *ReadTextFile(kStatic + "/app.js"));
+  EXPECT_NE(other->get_header_value("ETag"), tag);
   // Nothing outside the folder, nothing it does not hold.
   for (const std::string path :
        {"/../CMakeLists.txt", "/%2e%2e/CMakeLists.txt", "/nothing.html", "/static/app.js"}) {
