@@ -76,33 +76,44 @@ std::vector<int> TileThresholds(const TileExtremes& t, int min_contrast, double 
   const int th = t.th;
   std::array<int, 256> offset2;
   for (int r = 0; r < 256; ++r) offset2[r] = static_cast<int>(std::lround(2.0 * dark_fraction * r));
-  // Per tile, the extremes of itself and its left and right neighbours (inside the image).
+  // Per tile, the extremes of itself and its left and right neighbours (inside the image);
+  // the inner tiles in a loop without clamps, which vectorises.
   std::vector<std::uint8_t> row_min(t.tmin.size());
   std::vector<std::uint8_t> row_max(t.tmax.size());
+  const auto extremes_of_three = [tw](const std::uint8_t* in, std::uint8_t* out, auto pick) {
+    for (int tx : {0, tw - 1}) {
+      out[tx] = pick(pick(in[std::max(tx - 1, 0)], in[tx]), in[std::min(tx + 1, tw - 1)]);
+    }
+    for (int tx = 1; tx + 1 < tw; ++tx) out[tx] = pick(pick(in[tx - 1], in[tx]), in[tx + 1]);
+  };
+  const auto min8 = [](std::uint8_t a, std::uint8_t b) { return std::min(a, b); };
+  const auto max8 = [](std::uint8_t a, std::uint8_t b) { return std::max(a, b); };
   for (int ty = 0; ty < th; ++ty) {
     const std::size_t row = static_cast<std::size_t>(ty) * tw;
-    for (int tx = 0; tx < tw; ++tx) {
-      const std::size_t l = row + std::max(tx - 1, 0), c = row + tx;
-      const std::size_t r = row + std::min(tx + 1, tw - 1);
-      row_min[c] = std::min(std::min(t.tmin[l], t.tmin[c]), t.tmin[r]);
-      row_max[c] = std::max(std::max(t.tmax[l], t.tmax[c]), t.tmax[r]);
-    }
+    extremes_of_three(&t.tmin[row], &row_min[row], min8);
+    extremes_of_three(&t.tmax[row], &row_max[row], max8);
   }
   std::vector<int> thr2(static_cast<std::size_t>(tw) * th, -1);
+  std::vector<std::uint8_t> lo(static_cast<std::size_t>(tw));
+  std::vector<std::uint8_t> hi(static_cast<std::size_t>(tw));
   *max_contrast = 0;
   for (int ty = 0; ty < th; ++ty) {
-    const std::uint8_t* mn_up = &row_min[static_cast<std::size_t>(std::max(ty - 1, 0)) * tw];
-    const std::uint8_t* mn = &row_min[static_cast<std::size_t>(ty) * tw];
-    const std::uint8_t* mn_down = &row_min[static_cast<std::size_t>(std::min(ty + 1, th - 1)) * tw];
-    const std::uint8_t* mx_up = &row_max[static_cast<std::size_t>(std::max(ty - 1, 0)) * tw];
-    const std::uint8_t* mx = &row_max[static_cast<std::size_t>(ty) * tw];
-    const std::uint8_t* mx_down = &row_max[static_cast<std::size_t>(std::min(ty + 1, th - 1)) * tw];
+    const auto row = [tw](const std::vector<std::uint8_t>& v, int y) {
+      return &v[static_cast<std::size_t>(y) * tw];
+    };
+    const int up = std::max(ty - 1, 0), down = std::min(ty + 1, th - 1);
+    const std::uint8_t *mn_up = row(row_min, up), *mn = row(row_min, ty);
+    const std::uint8_t *mn_down = row(row_min, down), *mx_up = row(row_max, up);
+    const std::uint8_t *mx = row(row_max, ty), *mx_down = row(row_max, down);
+    for (int tx = 0; tx < tw; ++tx) {
+      lo[tx] = std::min(std::min(mn_up[tx], mn[tx]), mn_down[tx]);
+      hi[tx] = std::max(std::max(mx_up[tx], mx[tx]), mx_down[tx]);
+    }
     int* out = &thr2[static_cast<std::size_t>(ty) * tw];
     for (int tx = 0; tx < tw; ++tx) {
-      const int lo = std::min(std::min(mn_up[tx], mn[tx]), mn_down[tx]);
-      const int hi = std::max(std::max(mx_up[tx], mx[tx]), mx_down[tx]);
-      *max_contrast = std::max(*max_contrast, hi - lo);
-      if (hi - lo >= min_contrast) out[tx] = 2 * lo + offset2[hi - lo];
+      const int range = hi[tx] - lo[tx];
+      *max_contrast = std::max(*max_contrast, range);
+      if (range >= min_contrast) out[tx] = 2 * lo[tx] + offset2[range];
     }
   }
   return thr2;
@@ -115,14 +126,16 @@ std::vector<int> TileThresholds(const TileExtremes& t, int min_contrast, double 
 // neighbours are found without bounds checks or divisions.
 void PropagateThresholds(int tw, int th, std::vector<int>* thresholds) {
   std::vector<int>& thr2 = *thresholds;
+  // Per tile: its doubled threshold when known, kUnknown, or kQueued (unknown, in a frontier,
+  // or the border, which is never queued).
+  constexpr int kUnknown = -1;
+  constexpr int kQueued = -2;
   const int pw = tw + 2;
   const std::size_t padded_size = static_cast<std::size_t>(pw) * (th + 2);
-  std::vector<int> padded(padded_size, -1);
-  std::vector<std::uint8_t> queued(padded_size, 1);
+  std::vector<int> padded(padded_size, kQueued);
   for (int ty = 0; ty < th; ++ty) {
-    const std::size_t p = static_cast<std::size_t>(ty + 1) * pw + 1;
-    std::copy_n(&thr2[static_cast<std::size_t>(ty) * tw], tw, &padded[p]);
-    std::fill_n(&queued[p], tw, 0);
+    std::copy_n(&thr2[static_cast<std::size_t>(ty) * tw], tw,
+                &padded[static_cast<std::size_t>(ty + 1) * pw + 1]);
   }
   const std::array<int, 4> offsets = {-1, 1, -pw, pw};
   // Each tile is queued once: a frontier holds at most every tile. The appends are
@@ -133,10 +146,10 @@ void PropagateThresholds(int tw, int th, std::vector<int>* thresholds) {
   auto push_unknown_neighbours = [&](int i, std::vector<int>* out, std::size_t* size) {
     for (int o : offsets) {
       const int j = i + o;
-      const bool join = (padded[j] < 0) & (queued[j] == 0);
+      const bool join = padded[j] == kUnknown;
       (*out)[*size] = j;
       *size += join;
-      queued[j] |= static_cast<std::uint8_t>(join);
+      padded[j] = join ? kQueued : padded[j];
     }
   };
   for (int i = 0; i < static_cast<int>(padded_size); ++i) {
@@ -164,9 +177,11 @@ void PropagateThresholds(int tw, int th, std::vector<int>* thresholds) {
     frontier.swap(next);
     frontier_size = next_size;
   }
+  // Tiles queued for a pass beyond the last are unknown.
   for (int ty = 0; ty < th; ++ty) {
-    std::copy_n(&padded[static_cast<std::size_t>(ty + 1) * pw + 1], tw,
-                &thr2[static_cast<std::size_t>(ty) * tw]);
+    const int* p = &padded[static_cast<std::size_t>(ty + 1) * pw + 1];
+    int* out = &thr2[static_cast<std::size_t>(ty) * tw];
+    for (int tx = 0; tx < tw; ++tx) out[tx] = std::max(p[tx], kUnknown);
   }
 }
 
@@ -182,8 +197,9 @@ Image8 ApplyThresholds(const ImageView8& image, const std::vector<int>& thr2, in
   for (int y = 0; y < image.height; ++y) {
     if (y % kTile == 0) {
       const int* t = &thr2[static_cast<std::size_t>(y / kTile) * tw];
-      for (int x = 0; x < tw * kTile; ++x) {
-        column_thr[x] = static_cast<std::uint8_t>((std::max(t[x / kTile], 0) + 1) >> 1);
+      for (int tx = 0; tx < tw; ++tx) {
+        const auto threshold = static_cast<std::uint8_t>((std::max(t[tx], 0) + 1) >> 1);
+        std::fill_n(&column_thr[static_cast<std::size_t>(tx) * kTile], kTile, threshold);
       }
     }
     const std::uint8_t* row = image.Row(y);
