@@ -138,6 +138,44 @@ void AddSquareLayout(GridModel* m) {
 // (sqrt(3) spacings away), or as near to that as the board's edge allows.
 constexpr int kHexBlock = 13;
 
+// The ids of the k circles nearest to circle `id` (itself first among them), sorted; ties
+// broken by id, so that the block is the same on every call. `xy`: the circles in rows
+// (row r: ids row_start[r] to row_start[r + 1] - 1, left to right, rows kRowSpacings
+// apart). Only the rows and columns within `reach` of the circle are searched, `reach`
+// doubled until k circles lie within it: every circle nearer than the k-th is then among
+// those searched, so the result is that of a search of the whole board, in O(k) per circle
+// instead of O(circles).
+std::vector<int> NearestCircles(const std::vector<Eigen::Vector2d>& xy,
+                                const std::vector<int>& row_start, int id, int k) {
+  constexpr double kRowSpacings = 0.86602540378443865;  // sqrt(3) / 2
+  const int n = static_cast<int>(xy.size());
+  const int rows = static_cast<int>(row_start.size()) - 1;
+  k = std::min(n, k);
+  const int row = static_cast<int>(std::upper_bound(row_start.begin(), row_start.end(), id) -
+                                   row_start.begin() - 1);
+  std::vector<std::pair<double, int>> by_distance;
+  for (double reach = 2.0;; reach *= 2.0) {
+    // One row and column more than reach needs: a margin for rounding.
+    const int dr = static_cast<int>(reach / kRowSpacings) + 1;
+    by_distance.clear();
+    int within = 0;
+    for (int r = std::max(0, row - dr); r <= std::min(rows - 1, row + dr); ++r) {
+      for (int other = row_start[r]; other < row_start[r + 1]; ++other) {
+        if (std::abs(xy[other].x() - xy[id].x()) > reach + 1.0) continue;
+        const double d2 = (xy[other] - xy[id]).squaredNorm();
+        by_distance.emplace_back(d2, other);
+        within += d2 <= reach * reach;
+      }
+    }
+    if (within >= k || static_cast<int>(by_distance.size()) == n) break;
+  }
+  std::partial_sort(by_distance.begin(), by_distance.begin() + k, by_distance.end());
+  std::vector<int> ids;
+  for (int q = 0; q < k; ++q) ids.push_back(by_distance[q].second);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
 // BoofCV's hexagonal layout (docs/boards.md §8): row i from the top on the zig-zag columns
 // (rows - 1 - i) % 2, + 2, ... below cols; ids row by row, left to right.
 void AddHexagonalLayout(GridModel* m) {
@@ -167,19 +205,9 @@ void AddHexagonalLayout(GridModel* m) {
     m->beyond[2].push_back(GridModel::HexLattice(first(i) - 2, i));
     m->beyond[3].push_back(GridModel::HexLattice(last(i) + 2, i));
   }
-  // Each circle's nearest, ties broken by id so that the block is the same on every call.
-  const int n = static_cast<int>(m->xy.size());
-  for (int id = 0; id < n; ++id) {
-    std::vector<std::pair<double, int>> by_distance;
-    for (int other = 0; other < n; ++other) {
-      by_distance.emplace_back((m->xy[other] - m->xy[id]).squaredNorm(), other);
-    }
-    const int k = std::min(n, kHexBlock);
-    std::partial_sort(by_distance.begin(), by_distance.begin() + k, by_distance.end());
-    std::vector<int> ids;
-    for (int q = 0; q < k; ++q) ids.push_back(by_distance[q].second);
-    std::sort(ids.begin(), ids.end());
-    m->block.push_back(std::move(ids));
+  row_start.push_back(static_cast<int>(m->xy.size()));
+  for (int id = 0; id < static_cast<int>(m->xy.size()); ++id) {
+    m->block.push_back(NearestCircles(m->xy, row_start, id, kHexBlock));
   }
 }
 
@@ -447,20 +475,52 @@ struct Placement {
 // lattice missing more is not taken for the board.
 int MaxFilledCircles(std::size_t circles) { return std::max<int>(1, circles / 10); }
 
-const LatticePoint* Find(const Lattice& lattice, const Eigen::Vector2i& p) {
-  const auto it = lattice.find({p.x(), p.y()});
-  return it == lattice.end() ? nullptr : &it->second;
-}
+// A grown lattice's points in a dense array over their bounding box, for lookups in O(1):
+// the placements look up every circle of the board at every rotation, anchor and offset.
+class LatticeIndex {
+ public:
+  explicit LatticeIndex(const Lattice& lattice) : lattice_(lattice) {
+    if (lattice.empty()) return;
+    int a1 = a0_ = lattice.begin()->first.first;
+    int b1 = b0_ = lattice.begin()->first.second;
+    for (const auto& [ab, unused] : lattice) {
+      a0_ = std::min(a0_, ab.first);
+      a1 = std::max(a1, ab.first);
+      b0_ = std::min(b0_, ab.second);
+      b1 = std::max(b1, ab.second);
+    }
+    width_ = a1 - a0_ + 1;
+    height_ = b1 - b0_ + 1;
+    at_.assign(static_cast<std::size_t>(width_) * height_, nullptr);
+    for (const auto& [ab, point] : lattice) at_[Index(ab.first - a0_, ab.second - b0_)] = &point;
+  }
+
+  const Lattice& lattice() const { return lattice_; }
+
+  // The point at p, nullptr when p is not in the lattice.
+  const LatticePoint* Find(const Eigen::Vector2i& p) const {
+    const int a = p.x() - a0_, b = p.y() - b0_;
+    if (a < 0 || b < 0 || a >= width_ || b >= height_) return nullptr;
+    return at_[Index(a, b)];
+  }
+
+ private:
+  std::size_t Index(int a, int b) const { return static_cast<std::size_t>(b) * width_ + a; }
+
+  const Lattice& lattice_;
+  int a0_ = 0, b0_ = 0, width_ = 0, height_ = 0;
+  std::vector<const LatticePoint*> at_;
+};
 
 // The seed of a circle at lattice point p without a blob: a lattice neighbour's ellipse moved
 // by that neighbour's step; nullopt when p has no neighbour in the lattice.
-std::optional<Ellipse> PredictedSeed(const std::vector<CircleBlob>& blobs, const Lattice& lattice,
-                                     const Eigen::Vector2i& p) {
+std::optional<Ellipse> PredictedSeed(const std::vector<CircleBlob>& blobs,
+                                     const LatticeIndex& lattice, const Eigen::Vector2i& p) {
   for (int g = 0; g < 4; ++g) {
     const int axis = g % 2;
     const int sign = g < 2 ? 1 : -1;  // p = neighbour + sign * step
     const Eigen::Vector2i from = p - sign * Eigen::Vector2i(axis == 0, axis == 1);
-    if (const LatticePoint* q = Find(lattice, from)) {
+    if (const LatticePoint* q = lattice.Find(from)) {
       Ellipse e = blobs[q->blob].ellipse;
       e.centre += sign * q->step[axis];
       return e;
@@ -469,38 +529,61 @@ std::optional<Ellipse> PredictedSeed(const std::vector<CircleBlob>& blobs, const
   return std::nullopt;
 }
 
+// True when the board's circles at `turned` (their lattice points, turned), moved by
+// `offset`, make a placement anchored on circle `anchor`: the circles before it have no blob
+// (each placement comes once: anchored on the board's first circle with a blob), and at most
+// max_filled have none, each next to one with a blob. Stops at the first circle that fails.
+bool PlacementFits(const LatticeIndex& lattice, const std::vector<Eigen::Vector2i>& turned,
+                   const Eigen::Vector2i& offset, int anchor, int max_filled) {
+  int filled = 0;
+  for (std::size_t id = 0; id < turned.size(); ++id) {
+    const Eigen::Vector2i p = turned[id] + offset;
+    if (lattice.Find(p) != nullptr) {
+      if (static_cast<int>(id) < anchor) return false;
+      continue;
+    }
+    if (++filled > max_filled) return false;
+    for (int g = 0; g < 4; ++g) {
+      const int axis = g % 2;
+      const int sign = g < 2 ? 1 : -1;
+      if (lattice.Find(p - sign * Eigen::Vector2i(axis == 0, axis == 1)) != nullptr) break;
+      if (g == 3) return false;  // no neighbour to predict it (PredictedSeed)
+    }
+  }
+  return true;
+}
+
 // Every placement of the board on the lattice with at most MaxFilledCircles circles
-// without a blob, each next to one with a blob.
+// without a blob, each next to one with a blob. Each candidate is checked first
+// (PlacementFits) and only those that fit are built.
 std::vector<Placement> Placements(const GridModel& m, const std::vector<CircleBlob>& blobs,
-                                  const Lattice& lattice) {
+                                  const LatticeIndex& lattice) {
   std::vector<Placement> out;
   const std::size_t n = m.lattice.size();
   const int max_filled = MaxFilledCircles(n);
+  std::vector<Eigen::Vector2i> turned(n);
   for (int rotation = 0; rotation < m.Rotations(); ++rotation) {
+    for (std::size_t id = 0; id < n; ++id) turned[id] = m.Rotate(m.lattice[id], rotation);
     for (int anchor = 0; anchor <= max_filled; ++anchor) {
-      for (const auto& [point, unused] : lattice) {
+      for (const auto& [point, unused] : lattice.lattice()) {
+        const Eigen::Vector2i offset = Eigen::Vector2i(point.first, point.second) - turned[anchor];
+        if (!PlacementFits(lattice, turned, offset, anchor, max_filled)) continue;
         Placement pl;
         pl.rotation = rotation;
-        pl.offset =
-            Eigen::Vector2i(point.first, point.second) - m.Rotate(m.lattice[anchor], rotation);
-        int filled = 0;
-        for (std::size_t id = 0; id < n && filled <= max_filled; ++id) {
-          const Eigen::Vector2i p = m.Rotate(m.lattice[id], rotation) + pl.offset;
-          const LatticePoint* lp = Find(lattice, p);
-          // Anchored on the board's first circle with a blob: each placement comes once.
-          if (lp != nullptr && static_cast<int>(id) < anchor) break;
-          if (lp != nullptr) {
+        pl.offset = offset;
+        pl.blob.reserve(n);
+        pl.seed.reserve(n);
+        for (std::size_t id = 0; id < n; ++id) {
+          const Eigen::Vector2i p = turned[id] + offset;
+          if (const LatticePoint* lp = lattice.Find(p)) {
             pl.blob.push_back(lp->blob);
             pl.seed.push_back(blobs[lp->blob].ellipse);
-          } else if (const std::optional<Ellipse> seed = PredictedSeed(blobs, lattice, p)) {
-            ++filled;
-            pl.blob.push_back(-1);
-            pl.seed.push_back(*seed);
           } else {
-            break;
+            pl.blob.push_back(-1);
+            pl.seed.push_back(*PredictedSeed(blobs, lattice, p));
           }
         }
-        if (filled <= max_filled && pl.blob.size() == n) out.push_back(std::move(pl));
+        out.push_back(std::move(pl));
       }
     }
   }
@@ -511,11 +594,11 @@ std::vector<Placement> Placements(const GridModel& m, const std::vector<CircleBl
 // positions next to the board beyond that side, at least three quarters (all when there are
 // one or two) hold blobs of the lattice. The board is then part of a larger grid. A page's
 // margin, its edge or the room behind it hold no such row.
-bool LatticeContinues(const GridModel& m, const Lattice& lattice, const Placement& pl) {
+bool LatticeContinues(const GridModel& m, const LatticeIndex& lattice, const Placement& pl) {
   for (const std::vector<Eigen::Vector2i>& side : m.beyond) {
     int taken = 0;
     for (const Eigen::Vector2i& p : side) {
-      taken += Find(lattice, m.Rotate(p, pl.rotation) + pl.offset) != nullptr;
+      taken += lattice.Find(m.Rotate(p, pl.rotation) + pl.offset) != nullptr;
     }
     const int judged = static_cast<int>(side.size());
     if (taken >= std::max(std::min(judged, 2), (3 * judged + 3) / 4)) return true;
@@ -863,12 +946,13 @@ class Search {
       if (!steps) continue;
       const Lattice lattice = GrowLattice(blobs_, index_, seed, *steps, claimed, seed, &member);
       if (lattice.size() + MaxFilledCircles(n) < n) continue;
+      const LatticeIndex lattice_index(lattice);
       std::vector<Hypothesis> verified;
-      for (const Placement& pl : UprightPlacements(m_, Placements(m_, blobs_, lattice))) {
+      for (const Placement& pl : UprightPlacements(m_, Placements(m_, blobs_, lattice_index))) {
         for (const int b : pl.blob) {
           if (b >= 0) placed[b] = true;
         }
-        if (LatticeContinues(m_, lattice, pl)) {
+        if (LatticeContinues(m_, lattice_index, pl)) {
           Note(DetectReason::kWrongBoard, reason);
           continue;
         }

@@ -67,32 +67,53 @@ TileExtremes ComputeTileExtremes(const ImageView8& image) {
 
 // Needs the tiles' extremes; gives twice the threshold per tile (the minimum plus
 // dark_fraction of the range over the 3 x 3 tiles around it), or -1 where that range is under
-// min_contrast. *max_contrast: the largest range seen. O(tiles).
+// min_contrast. *max_contrast: the largest range seen. The 3 x 3 extremes are taken in two
+// passes (rows of three, then columns of three), and the rounded fraction of each of the 256
+// possible ranges comes from a table: O(tiles).
 std::vector<int> TileThresholds(const TileExtremes& t, int min_contrast, double dark_fraction,
                                 int* max_contrast) {
   const int tw = t.tw;
   const int th = t.th;
+  std::array<int, 256> offset2;
+  for (int r = 0; r < 256; ++r) offset2[r] = static_cast<int>(std::lround(2.0 * dark_fraction * r));
+  // Per tile, the extremes of itself and its left and right neighbours (inside the image);
+  // the inner tiles in a loop without clamps, which vectorises.
+  std::vector<std::uint8_t> row_min(t.tmin.size());
+  std::vector<std::uint8_t> row_max(t.tmax.size());
+  const auto extremes_of_three = [tw](const std::uint8_t* in, std::uint8_t* out, auto pick) {
+    for (int tx : {0, tw - 1}) {
+      out[tx] = pick(pick(in[std::max(tx - 1, 0)], in[tx]), in[std::min(tx + 1, tw - 1)]);
+    }
+    for (int tx = 1; tx + 1 < tw; ++tx) out[tx] = pick(pick(in[tx - 1], in[tx]), in[tx + 1]);
+  };
+  const auto min8 = [](std::uint8_t a, std::uint8_t b) { return std::min(a, b); };
+  const auto max8 = [](std::uint8_t a, std::uint8_t b) { return std::max(a, b); };
+  for (int ty = 0; ty < th; ++ty) {
+    const std::size_t row = static_cast<std::size_t>(ty) * tw;
+    extremes_of_three(&t.tmin[row], &row_min[row], min8);
+    extremes_of_three(&t.tmax[row], &row_max[row], max8);
+  }
   std::vector<int> thr2(static_cast<std::size_t>(tw) * th, -1);
+  std::vector<std::uint8_t> lo(static_cast<std::size_t>(tw));
+  std::vector<std::uint8_t> hi(static_cast<std::size_t>(tw));
   *max_contrast = 0;
   for (int ty = 0; ty < th; ++ty) {
+    const auto row = [tw](const std::vector<std::uint8_t>& v, int y) {
+      return &v[static_cast<std::size_t>(y) * tw];
+    };
+    const int up = std::max(ty - 1, 0), down = std::min(ty + 1, th - 1);
+    const std::uint8_t *mn_up = row(row_min, up), *mn = row(row_min, ty);
+    const std::uint8_t *mn_down = row(row_min, down), *mx_up = row(row_max, up);
+    const std::uint8_t *mx = row(row_max, ty), *mx_down = row(row_max, down);
     for (int tx = 0; tx < tw; ++tx) {
-      int lo = 255;
-      int hi = 0;
-      for (int dy = -1; dy <= 1; ++dy) {
-        const int yy = ty + dy;
-        if (yy < 0 || yy >= th) continue;
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int xx = tx + dx;
-          if (xx < 0 || xx >= tw) continue;
-          lo = std::min<int>(lo, t.tmin[static_cast<std::size_t>(yy) * tw + xx]);
-          hi = std::max<int>(hi, t.tmax[static_cast<std::size_t>(yy) * tw + xx]);
-        }
-      }
-      *max_contrast = std::max(*max_contrast, hi - lo);
-      if (hi - lo >= min_contrast) {
-        thr2[static_cast<std::size_t>(ty) * tw + tx] =
-            2 * lo + static_cast<int>(std::lround(2.0 * dark_fraction * (hi - lo)));
-      }
+      lo[tx] = std::min(std::min(mn_up[tx], mn[tx]), mn_down[tx]);
+      hi[tx] = std::max(std::max(mx_up[tx], mx[tx]), mx_down[tx]);
+    }
+    int* out = &thr2[static_cast<std::size_t>(ty) * tw];
+    for (int tx = 0; tx < tw; ++tx) {
+      const int range = hi[tx] - lo[tx];
+      *max_contrast = std::max(*max_contrast, range);
+      if (range >= min_contrast) out[tx] = 2 * lo[tx] + offset2[range];
     }
   }
   return thr2;
@@ -101,49 +122,66 @@ std::vector<int> TileThresholds(const TileExtremes& t, int min_contrast, double 
 // Needs the doubled thresholds of tw x th tiles (-1 unknown); gives unknown tiles the mean of
 // their known 4-neighbours, kThresholdPropagationPasses rings of tiles deep. Breadth-first,
 // one ring of tiles per pass, so the cost is the number of tiles reached, not passes x tiles.
+// The tiles are held with a border of one tile, marked as queued, so that a tile's
+// neighbours are found without bounds checks or divisions.
 void PropagateThresholds(int tw, int th, std::vector<int>* thresholds) {
   std::vector<int>& thr2 = *thresholds;
-  std::vector<std::uint8_t> queued(thr2.size(), 0);
-  std::vector<int> frontier;
-  auto push_unknown_neighbours = [&](int i, std::vector<int>* out) {
-    const int tx = i % tw;
-    const int ty = i / tw;
-    const std::array<int, 4> nb = {tx > 0 ? i - 1 : -1, tx + 1 < tw ? i + 1 : -1,
-                                   ty > 0 ? i - tw : -1, ty + 1 < th ? i + tw : -1};
-    for (int j : nb) {
-      if (j >= 0 && thr2[j] < 0 && queued[j] == 0) {
-        queued[j] = 1;
-        out->push_back(j);
-      }
+  // Per tile: its doubled threshold when known, kUnknown, or kQueued (unknown, in a frontier,
+  // or the border, which is never queued).
+  constexpr int kUnknown = -1;
+  constexpr int kQueued = -2;
+  const int pw = tw + 2;
+  const std::size_t padded_size = static_cast<std::size_t>(pw) * (th + 2);
+  std::vector<int> padded(padded_size, kQueued);
+  for (int ty = 0; ty < th; ++ty) {
+    std::copy_n(&thr2[static_cast<std::size_t>(ty) * tw], tw,
+                &padded[static_cast<std::size_t>(ty + 1) * pw + 1]);
+  }
+  const std::array<int, 4> offsets = {-1, 1, -pw, pw};
+  // Each tile is queued once: a frontier holds at most every tile. The appends are
+  // branch-free (whether a tile joins is as good as random in a cluttered image).
+  std::vector<int> frontier(padded_size);
+  std::vector<int> next(padded_size);
+  std::size_t frontier_size = 0;
+  auto push_unknown_neighbours = [&](int i, std::vector<int>* out, std::size_t* size) {
+    for (int o : offsets) {
+      const int j = i + o;
+      const bool join = padded[j] == kUnknown;
+      (*out)[*size] = j;
+      *size += join;
+      padded[j] = join ? kQueued : padded[j];
     }
   };
-  for (int i = 0; i < tw * th; ++i) {
-    if (thr2[i] >= 0) push_unknown_neighbours(i, &frontier);
+  for (int i = 0; i < static_cast<int>(padded_size); ++i) {
+    if (padded[i] >= 0) push_unknown_neighbours(i, &frontier, &frontier_size);
   }
-  std::vector<int> values;
-  std::vector<int> next;
-  for (int pass = 0; pass < kThresholdPropagationPasses && !frontier.empty(); ++pass) {
-    values.assign(frontier.size(), -1);
-    for (std::size_t f = 0; f < frontier.size(); ++f) {
-      const int i = frontier[f];
-      const int tx = i % tw;
-      const int ty = i / tw;
+  std::vector<int> values(padded_size);
+  for (int pass = 0; pass < kThresholdPropagationPasses && frontier_size > 0; ++pass) {
+    for (std::size_t f = 0; f < frontier_size; ++f) {
       int sum = 0;
       int n = 0;
-      const std::array<int, 4> nb = {tx > 0 ? i - 1 : -1, tx + 1 < tw ? i + 1 : -1,
-                                     ty > 0 ? i - tw : -1, ty + 1 < th ? i + tw : -1};
-      for (int j : nb) {
-        if (j >= 0 && thr2[j] >= 0) {
-          sum += thr2[j];
-          ++n;
-        }
+      for (int o : offsets) {
+        const int v = padded[frontier[f] + o];
+        sum += std::max(v, 0);
+        n += v >= 0;
       }
-      values[f] = sum / n;  // n >= 1: the tile was queued next to a known one
+      // n >= 1 (the tile was queued next to a known one); sum >= 0, so the shifts divide by
+      // 1, 2 and 4.
+      values[f] = n == 3 ? sum / 3 : sum >> (n >> 1);
     }
-    for (std::size_t f = 0; f < frontier.size(); ++f) thr2[frontier[f]] = values[f];
-    next.clear();
-    for (int i : frontier) push_unknown_neighbours(i, &next);
+    for (std::size_t f = 0; f < frontier_size; ++f) padded[frontier[f]] = values[f];
+    std::size_t next_size = 0;
+    for (std::size_t f = 0; f < frontier_size; ++f) {
+      push_unknown_neighbours(frontier[f], &next, &next_size);
+    }
     frontier.swap(next);
+    frontier_size = next_size;
+  }
+  // Tiles queued for a pass beyond the last are unknown.
+  for (int ty = 0; ty < th; ++ty) {
+    const int* p = &padded[static_cast<std::size_t>(ty + 1) * pw + 1];
+    int* out = &thr2[static_cast<std::size_t>(ty) * tw];
+    for (int tx = 0; tx < tw; ++tx) out[tx] = std::max(p[tx], kUnknown);
   }
 }
 
@@ -152,21 +190,21 @@ void PropagateThresholds(int tw, int th, std::vector<int>* thresholds) {
 Image8 ApplyThresholds(const ImageView8& image, const std::vector<int>& thr2, int tw) {
   const int w = image.width;
   Image8 dark(image.width, image.height, 0);
-  // Per tile row, the doubled threshold of every pixel column (0 where unknown: 2 v < 0
-  // never holds), so that the per-pixel loop is a plain comparison.
-  std::vector<std::int16_t> column_thr2(static_cast<std::size_t>(tw) * kTile);
+  // Per tile row, the threshold of every pixel column as a byte: 2 v < t2 holds exactly when
+  // v < (t2 + 1) / 2 (0 where unknown: v < 0 never holds; t2 <= 2 x 255), so that the
+  // per-pixel loop is a comparison of bytes, 16 or 32 to an instruction.
+  std::vector<std::uint8_t> column_thr(static_cast<std::size_t>(tw) * kTile);
   for (int y = 0; y < image.height; ++y) {
     if (y % kTile == 0) {
       const int* t = &thr2[static_cast<std::size_t>(y / kTile) * tw];
-      for (int x = 0; x < tw * kTile; ++x) {
-        column_thr2[x] = static_cast<std::int16_t>(std::max(t[x / kTile], 0));
+      for (int tx = 0; tx < tw; ++tx) {
+        const auto threshold = static_cast<std::uint8_t>((std::max(t[tx], 0) + 1) >> 1);
+        std::fill_n(&column_thr[static_cast<std::size_t>(tx) * kTile], kTile, threshold);
       }
     }
     const std::uint8_t* row = image.Row(y);
     std::uint8_t* out = &dark.pixels[static_cast<std::size_t>(y) * image.width];
-    for (int x = 0; x < w; ++x) {
-      out[x] = static_cast<std::uint8_t>(2 * static_cast<std::int16_t>(row[x]) < column_thr2[x]);
-    }
+    for (int x = 0; x < w; ++x) out[x] = static_cast<std::uint8_t>(row[x] < column_thr[x]);
   }
   return dark;
 }
@@ -177,23 +215,35 @@ Image8 ApplyThresholds(const ImageView8& image, const std::vector<int>& thr2, in
 // sparse grid of pixels, divided by 0.6745 (the median of |N(0, 1)|) and 6. O(W * H / 8).
 double EstimateNoiseSigma(const ImageView8& image) {
   if (image.width < 3 || image.height < 3) return 0.0;
-  std::vector<int> histogram(4 * 255 * 4 + 1, 0);
+  // |response| <= 16 x 255: a 16-bit integer. Four histograms, one per sample in turn, so
+  // that the increments of a flat area's equal responses do not wait on one another.
+  constexpr int kMaxResponse = 4 * 255 * 4;
+  std::vector<std::array<int, 4>> histograms(kMaxResponse + 1, {0, 0, 0, 0});
+  std::vector<std::int16_t> response(static_cast<std::size_t>(image.width));
   long count = 0;
-  // Every 4th row and 2nd column: ample samples for a median, an eighth of the cost.
+  // Every 4th row and 2nd column: ample samples for a median, an eighth of the cost. The
+  // responses of a row are taken at every column (a loop that vectorises), then read at
+  // every other.
   for (int y = 1; y + 1 < image.height; y += 4) {
     const std::uint8_t* a = image.Row(y - 1);
     const std::uint8_t* b = image.Row(y);
     const std::uint8_t* c = image.Row(y + 1);
-    for (int x = 1; x + 1 < image.width; x += 2) {
+    for (int x = 1; x + 1 < image.width; ++x) {
       const int r = a[x - 1] - 2 * a[x] + a[x + 1] - 2 * (b[x - 1] - 2 * b[x] + b[x + 1]) +
                     c[x - 1] - 2 * c[x] + c[x + 1];
-      ++histogram[std::abs(r)];
+      response[x] = static_cast<std::int16_t>(std::abs(r));
+    }
+    int k = 0;
+    for (int x = 1; x + 1 < image.width; x += 2) {
+      ++histograms[response[x]][k];
+      k = (k + 1) & 3;
       ++count;
     }
   }
   long seen = 0;
-  for (int v = 0; v < static_cast<int>(histogram.size()); ++v) {
-    seen += histogram[v];
+  for (int v = 0; v <= kMaxResponse; ++v) {
+    const std::array<int, 4>& h = histograms[v];
+    seen += h[0] + h[1] + h[2] + h[3];
     if (2 * seen >= count) return v / (0.6745 * 6.0);
   }
   return 0.0;

@@ -52,10 +52,12 @@ std::optional<EdgePoint> MeasureEdgePoint(const ImageView8& image, const Eigen::
   const double floor = 0.25 * g_max;
   double sw = 0.0;
   double sws = 0.0;
+  // Without a branch (which half the samples take, at random): a sample at or under the
+  // floor adds a weight of +0, which leaves both sums as they are.
   for (int j = 0; j < m; ++j) {
-    if (g[j] <= floor) continue;
-    sw += g[j] - floor;
-    sws += (g[j] - floor) * s[j];
+    const double w = std::max(g[j] - floor, 0.0);
+    sw += w;
+    sws += w * s[j];
   }
   if (sw <= 0.0) return std::nullopt;
   return EdgePoint{q + (sws / sw) * n, g_max};

@@ -85,16 +85,33 @@ std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
   return out;
 }
 
+// The homography that maps the unit square's corners (0, 0), (1, 0), (1, 1), (0, 1) onto
+// p[0] .. p[3], in closed form (the projective map of a square onto a quad: four points
+// determine it exactly, so a least-squares fit is not needed, and costs some twenty times
+// as much). nullopt when p[1], p[2] and p[3] are collinear or the map is singular.
+std::optional<Eigen::Matrix3d> UnitSquareHomography(const std::array<Eigen::Vector2d, 4>& p) {
+  const Eigen::Vector2d sum = p[0] - p[1] + p[2] - p[3];  // zero for a parallelogram
+  const Eigen::Vector2d d1 = p[1] - p[2], d3 = p[3] - p[2];
+  const double den = d1.x() * d3.y() - d3.x() * d1.y();
+  if (!(std::abs(den) > 0.0)) return std::nullopt;
+  // The bottom row: where the unit square's sides meet (0 for a parallelogram's image).
+  const double g = (sum.x() * d3.y() - d3.x() * sum.y()) / den;
+  const double h = (d1.x() * sum.y() - sum.x() * d1.y()) / den;
+  Eigen::Matrix3d H;
+  H << p[1].x() - p[0].x() + g * p[1].x(), p[3].x() - p[0].x() + h * p[3].x(), p[0].x(),
+      p[1].y() - p[0].y() + g * p[1].y(), p[3].y() - p[0].y() + h * p[3].y(), p[0].y(),  //
+      g, h, 1.0;
+  if (!H.allFinite() || !(std::abs(H.determinant()) > 0.0)) return std::nullopt;
+  return H;
+}
+
 // The square of four refined corners; nullopt when they give no homography.
 std::optional<Square> MakeSquare(const std::array<Eigen::Vector2d, 4>& corners) {
-  static constexpr HomographyFitOptions kDltOnly{.refine = false};  // four points: exact
-  const std::array<Eigen::Vector2d, 4> unit = {Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 0),
-                                               Eigen::Vector2d(1, 1), Eigen::Vector2d(0, 1)};
-  const std::optional<HomographyFit> fit = FitHomography(unit, corners, kDltOnly);
-  if (!fit) return std::nullopt;
+  const std::optional<Eigen::Matrix3d> H = UnitSquareHomography(corners);
+  if (!H) return std::nullopt;
   Square s;
   s.corners = corners;
-  s.H = fit->H;
+  s.H = *H;
   s.centre = ApplyHomography(s.H, Eigen::Vector2d(0.5, 0.5));
   for (int k = 0; k < 4; ++k) s.side_px += 0.25 * (corners[(k + 1) % 4] - corners[k]).norm();
   if (!s.centre.allFinite()) return std::nullopt;
@@ -162,6 +179,17 @@ std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares,
           Eigen::Vector2d(0.5 + reach * kSideDirection[k][0], 0.5 + reach * kSideDirection[k][1]));
     }
   }
+  // Per square, the farthest of its gap centres from its centre (infinite when one is not
+  // finite): two squares whose centres lie further apart than their two reaches and the
+  // tolerance have no gap centres within the tolerance, and are passed over (the clutter of
+  // a room makes most pairs such).
+  std::vector<double> reach(n, 0.0);
+  for (int a = 0; a < n; ++a) {
+    for (int k = 0; k < 4; ++k) {
+      const double r = (gap_centre[a][k] - squares[a].centre).norm();
+      reach[a] = std::isfinite(r) ? std::max(reach[a], r) : std::numeric_limits<double>::infinity();
+    }
+  }
   std::vector<std::array<Link, 4>> best(n);
   for (int a = 0; a < n; ++a) {
     for (int k = 0; k < 4; ++k) {
@@ -171,6 +199,10 @@ std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares,
         const double ratio = squares[b].side_px / squares[a].side_px;
         if (b == a || ratio > kMaxSideRatio || ratio < 1.0 / kMaxSideRatio) continue;
         const double tol = max_fraction * 0.5 * (squares[a].side_px + squares[b].side_px);
+        // 1 px of margin for rounding: the test only skips pairs that cannot link.
+        if ((squares[b].centre - squares[a].centre).norm() > reach[a] + reach[b] + tol + 1.0) {
+          continue;
+        }
         for (int m = 0; m < 4; ++m) {
           const double dist = (gap_centre[b][m] - gap_centre[a][k]).norm();
           if (dist <= tol && dist < nearest) {

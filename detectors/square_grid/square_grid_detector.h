@@ -76,8 +76,9 @@ struct SquareGridOptions {
 // geometry or paint checks), kWrongBoard (every complete group is part of a larger grid),
 // kAmbiguous (two different grids). Pure function; cost: a binarisation and labelling, O(W * H),
 // O(perimeter) per dark component, and O(quads^2) for the links (twice when step 4 finds a
-// square): 4-6 ms on the corpus's 640 x 480 photos, 7.5 ms of CPU for 54 squares at
-// 1280 x 720 (detectors_bench, machine under a load of 6-7; docs/detectors.md, "Speed").
+// square): 4-6 ms on the corpus's 640 x 480 photos, 4.5-5 ms of CPU for 54 squares at
+// 1280 x 720 (detectors_bench, machine under a load of 4-6 where the checker took 3.9 ms;
+// docs/detectors.md, "The square grid and the hexagonal grid made faster").
 Detection DetectSquareGrid(const ImageView8& image, const Board& board,
                            const SquareGridOptions& options = {});
 
