@@ -51,6 +51,13 @@ bool TakeResult(const absl::StatusOr<Result>& r, SensorCalibration* out) {
   out->solved = r->solved;
   out->mounting = r->mounting;
   out->features_used = r->features_used;
+  if (r->solved) {
+    for (const BoardResidual& b : r->board_residuals) {
+      for (BoardDetectionSummary& summary : out->boards) {
+        if (summary.board_id == b.board_id) summary.residual_rms = b.rms;
+      }
+    }
+  }
   return true;
 }
 
@@ -59,7 +66,7 @@ SensorCalibration CalibrateCameraSensor(const Capture& capture, const SensorMode
                                         const CaptureCalibrationOptions& capture_options) {
   const CameraCalibrationOptions& options = capture_options.camera;
   SensorCalibration out;
-  for (const std::string& id : sensor.targets) out.boards.push_back({id, 0, 0, ""});
+  for (const std::string& id : sensor.targets) out.boards.push_back({id, 0, 0, "", 0, {}});
   std::vector<BoardObservation> observations;
   for (size_t frame_index = 0; frame_index < recorded.frames.size(); ++frame_index) {
     if (capture_options.stop.stop_requested()) return Stopped();
@@ -247,7 +254,8 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
   const Rigid3d T_lidar_station = (T_station_car * sensor.T_car_sensor_nominal).Inverse();
   std::vector<LidarBoardObservation> observations;
   for (const std::string& id : sensor.targets) {
-    BoardDetectionSummary& summary = out.boards.emplace_back(BoardDetectionSummary{id, 0, 0, ""});
+    BoardDetectionSummary& summary = out.boards.emplace_back(
+        BoardDetectionSummary{id, 0, 0, "", static_cast<int>(frames.size()), {}});
     const StationBoard* board = station.FindBoard(id);
     if (board == nullptr) {  // ReadCapture checked the targets; kept for safety of the data
       if (detections != nullptr) detections->emplace_back();
@@ -288,6 +296,7 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
     const StationBoard* board = capture.station.FindBoard(sensor.targets[i]);
     if (board == nullptr) continue;
     BoardDetectionSummary& summary = (*summaries)[i];
+    ++summary.frames;
     std::optional<Detection> d = DetectBoard(image, board->board);
     if (d && camera && (!d->found || ViewRefinesMarkerCorners(*camera, board->board))) {
       // Not found in the raw image, or a marker board whose corners a fisheye shifts there:

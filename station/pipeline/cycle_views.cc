@@ -48,7 +48,7 @@ absl::StatusOr<nlohmann::json> CameraView(const Capture& capture, const SensorMo
       ReadCaptureImage(capture, recorded.frames[static_cast<size_t>(frame)]);
   if (!image.ok()) return image.status();
   std::vector<BoardDetectionSummary> summaries;
-  for (const std::string& id : sensor.targets) summaries.push_back({id, 0, 0, ""});
+  for (const std::string& id : sensor.targets) summaries.push_back({id, 0, 0, "", 0, {}});
   const std::vector<BoardObservation> found =
       DetectCameraFrame(capture, sensor, image->view(), &summaries);
 
