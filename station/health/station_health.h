@@ -86,8 +86,9 @@ struct StationHealthOptions {
   int recent_cars = 20;
   // Fewest baseline points for a chart or an alarm: fewer give a σ too uncertain to judge by.
   int min_baseline = 10;
-  // Sensors of a target that must share the shift ("several sensors"): a rise in one
-  // sensor alone cannot be told from that sensor's own trouble.
+  // Sensors with a residual (and a baseline) of a target for it to be judged: one sensor's
+  // residual alone cannot tell a moved board from that sensor's own trouble. The sum does not
+  // need each of them to rise: a large rise in one can raise the alarm, whose shifts show it.
   int min_sensors = 2;
   // σ below this is taken as this (a series that happens to be constant): 1e-9 of the unit.
   double min_sigma = 1e-9;
