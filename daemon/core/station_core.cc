@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
 
@@ -60,6 +61,13 @@ StoredSensorResult ToStored(const SensorCalibration& s) {
   }
   r.residual_rms = s.residual_rms;
   r.features_used = s.features_used;
+  for (const BoardDetectionSummary& b : s.boards) {
+    r.boards.push_back({b.board_id, b.frames, b.frames_found, b.frames_partial, b.residual_rms});
+  }
+  // By board id, as the store reads them back.
+  std::sort(
+      r.boards.begin(), r.boards.end(),
+      [](const StoredBoardResult& a, const StoredBoardResult& b) { return a.board < b.board; });
   if (s.vanishing_point_px) {
     r.vanishing_point_u_px = s.vanishing_point_px->x();
     r.vanishing_point_v_px = s.vanishing_point_px->y();
@@ -858,15 +866,32 @@ StationStatusInfo StationCore::Status() {
 absl::StatusOr<StationHealth> StationCore::Trends(int cycles, const StationHealthOptions& options) {
   absl::StatusOr<std::vector<TrendRow>> rows = store_->RecentSolvedResults(cycles);
   if (!rows.ok()) return rows.status();
-  std::vector<HealthCycle> health_cycles;
+  absl::StatusOr<std::vector<BoardTrendRow>> boards = store_->RecentBoardResults(cycles);
+  if (!boards.ok()) return boards.status();
+  // Both lists are in cycle order; a cycle may be in either alone (none solved, or stored
+  // before the store kept boards).
+  std::map<int64_t, HealthCycle> by_id;
   for (const TrendRow& row : *rows) {
-    if (health_cycles.empty() || health_cycles.back().cycle_id != row.cycle_id) {
-      health_cycles.push_back({row.cycle_id, row.started_ns, row.car_model_id, {}});
-    }
+    HealthCycle& c = by_id[row.cycle_id];
+    c.cycle_id = row.cycle_id;
+    c.started_ns = row.started_ns;
+    c.car_model = row.car_model_id;
     const MountingValues& d = row.deviation;
-    health_cycles.back().results.push_back(
+    c.results.push_back(
         {row.sensor, {d.yaw_deg, d.pitch_deg, d.roll_deg, d.x_m, d.y_m, d.z_m, row.residual_rms}});
   }
+  for (const BoardTrendRow& row : *boards) {
+    HealthCycle& c = by_id[row.cycle_id];
+    c.cycle_id = row.cycle_id;
+    c.started_ns = row.started_ns;
+    c.car_model = row.car_model_id;
+    const StoredBoardResult& b = row.board;
+    c.boards.push_back({row.sensor, b.board, b.frames, b.frames_found, b.frames_partial,
+                        row.solved ? b.residual_rms : std::nullopt});
+  }
+  std::vector<HealthCycle> health_cycles;
+  health_cycles.reserve(by_id.size());
+  for (auto& [id, c] : by_id) health_cycles.push_back(std::move(c));
   return ComputeStationHealth(cars_, health_cycles, options);
 }
 

@@ -120,6 +120,22 @@ GRANT SELECT (station_id, cycle_id) ON cycles TO linecal_station;
 GRANT SELECT ON schema_migrations TO linecal_station, linecal_report;
 GRANT SELECT ON stations, cycles, sensor_results, events TO linecal_report;
 )sql",
+    // 2: each sensor's target boards (the station store's board_results, its schema 3).
+    R"sql(
+CREATE TABLE board_results (
+  station_id     text    NOT NULL,
+  cycle_id       bigint  NOT NULL,
+  sensor         text    NOT NULL,
+  board          text    NOT NULL,
+  frames         integer NOT NULL,
+  frames_found   integer NOT NULL,
+  frames_partial integer NOT NULL,
+  residual_rms   float8,  -- NULL when the board did not enter a solve
+  PRIMARY KEY (station_id, cycle_id, sensor, board),
+  FOREIGN KEY (station_id, cycle_id, sensor) REFERENCES sensor_results);
+GRANT INSERT ON board_results TO linecal_station;
+GRANT SELECT ON board_results TO linecal_report;
+)sql",
 };
 constexpr int kMigrationCount = static_cast<int>(std::size(kMigrations));
 static_assert(kMigrationCount == PlantDb::kSchemaVersion);
@@ -282,6 +298,15 @@ std::string SensorValues(const pqxx::work& tx, const std::string& station, int64
                       ", ", Jsonb(tx, s.ranging_json), ", ", s.elapsed_ns, ")");
 }
 
+std::string BoardValues(const pqxx::work& tx, const std::string& station, int64_t cycle_id,
+                        const std::string& sensor, const StoredBoardResult& b) {
+  // Quoted through esc: GCC 12 inlines quote() here into a false -Wrestrict warning.
+  const std::string residual = b.residual_rms ? Float(*b.residual_rms) : std::string("NULL");
+  return absl::StrFormat("('%s', %d, '%s', '%s', %d, %d, %d, %s)", tx.esc(station), cycle_id,
+                         tx.esc(sensor), tx.esc(b.board), b.frames, b.frames_found,
+                         b.frames_partial, residual);
+}
+
 std::string EventValues(const pqxx::work& tx, const std::string& station, const StoredEvent& e,
                         int64_t cycle_id) {
   return absl::StrCat("(", tx.quote(station), ", ", cycle_id, ", ", e.sequence, ", ", e.time_ns,
@@ -356,7 +381,7 @@ StoredSensorResult ParseSensor(const pqxx::row& r, int first) {
 }
 
 // The cycles a WHERE clause selects (over `cycles c`, parameters $1...), in `order`, with
-// their sensors: two statements in the caller's transaction.
+// their sensors and boards: three statements in the caller's transaction.
 template <typename... Args>
 std::vector<PlantCycleRecord> ReadCycles(pqxx::work& tx, const std::string& where,
                                          const std::string& order, Args&&... args) {
@@ -396,6 +421,26 @@ std::vector<PlantCycleRecord> ReadCycles(pqxx::work& tx, const std::string& wher
   for (const pqxx::row& r : sensors) {
     auto it = index.find({Text(r[0]), r[1].as<int64_t>()});
     if (it != index.end()) records[it->second].cycle.sensors.push_back(ParseSensor(r, 2));
+  }
+  const pqxx::result boards = tx.exec_params(
+      absl::StrCat("SELECT b.station_id, b.cycle_id, b.sensor, b.board, b.frames, "
+                   "b.frames_found, b.frames_partial, b.residual_rms FROM board_results b "
+                   "WHERE (b.station_id, b.cycle_id) IN (SELECT c.station_id, c.cycle_id FROM "
+                   "cycles c WHERE ",
+                   where, ") ORDER BY b.station_id, b.cycle_id, b.sensor, b.board"),
+      args...);
+  for (const pqxx::row& r : boards) {
+    auto it = index.find({Text(r[0]), r[1].as<int64_t>()});
+    if (it == index.end()) continue;
+    for (StoredSensorResult& s : records[it->second].cycle.sensors) {
+      if (s.sensor != Text(r[2])) continue;
+      StoredBoardResult& b = s.boards.emplace_back();
+      b.board = Text(r[3]);
+      b.frames = r[4].as<int>();
+      b.frames_found = r[5].as<int>();
+      b.frames_partial = r[6].as<int>();
+      if (!r[7].is_null()) b.residual_rms = ParseFloat(r[7]);
+    }
   }
   return records;
 }
@@ -610,11 +655,14 @@ absl::Status PlantDb::ApplyBatch(const std::string& station_id,
         absl::StrJoin(rows, ", "), " ON CONFLICT DO NOTHING RETURNING cycle_id"));
     std::set<int64_t> fresh;
     for (const pqxx::row& r : inserted) fresh.insert(r[0].as<int64_t>());
-    std::vector<std::string> sensors, events;
+    std::vector<std::string> sensors, boards, events;
     for (const PlantCycle* p : unique) {
       if (!fresh.count(p->cycle.id)) continue;  // present already: changes nothing
       for (const StoredSensorResult& s : p->cycle.sensors) {
         sensors.push_back(SensorValues(tx, station_id, p->cycle.id, s));
+        for (const StoredBoardResult& b : s.boards) {
+          boards.push_back(BoardValues(tx, station_id, p->cycle.id, s.sensor, b));
+        }
       }
       for (const StoredEvent& e : p->events) {
         events.push_back(EventValues(tx, station_id, e, p->cycle.id));
@@ -623,6 +671,12 @@ absl::Status PlantDb::ApplyBatch(const std::string& station_id,
     if (!sensors.empty()) {
       tx.exec0(absl::StrCat("INSERT INTO sensor_results (station_id, cycle_id, ", kSensorColumns,
                             ") VALUES ", absl::StrJoin(sensors, ", "), " ON CONFLICT DO NOTHING"));
+    }
+    if (!boards.empty()) {
+      tx.exec0(
+          absl::StrCat("INSERT INTO board_results (station_id, cycle_id, sensor, board, "
+                       "frames, frames_found, frames_partial, residual_rms) VALUES ",
+                       absl::StrJoin(boards, ", "), " ON CONFLICT DO NOTHING"));
     }
     if (!events.empty()) {
       tx.exec0(

@@ -83,7 +83,7 @@ struct YieldReport {
 
 class PlantDb {
  public:
-  static constexpr int kSchemaVersion = 1;
+  static constexpr int kSchemaVersion = 2;
 
   // Connects with `dsn`, a libpq connection string ("host=... port=... dbname=... user=...",
   // or a postgresql:// URI); the password comes from it, PGPASSWORD or ~/.pgpass. Does not

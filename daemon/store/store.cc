@@ -83,6 +83,21 @@ CREATE TABLE outbox (
   cycle_id INTEGER NOT NULL UNIQUE REFERENCES cycles(id)
 );
 )sql",
+    // 3: each sensor's target boards in a cycle: detections and the board's own residual
+    // (NULL when it did not enter a solve), for the moved-target alarm and detection counts.
+    R"sql(
+CREATE TABLE board_results (
+  cycle_id INTEGER NOT NULL,
+  sensor TEXT NOT NULL,
+  board TEXT NOT NULL,
+  frames INTEGER NOT NULL,
+  frames_found INTEGER NOT NULL,
+  frames_partial INTEGER NOT NULL,
+  residual_rms REAL,
+  PRIMARY KEY (cycle_id, sensor, board),
+  FOREIGN KEY (cycle_id, sensor) REFERENCES sensor_results (cycle_id, sensor)
+);
+)sql",
 };
 constexpr int kMigrationCount = sizeof(kMigrations) / sizeof(kMigrations[0]);
 static_assert(kMigrationCount == Store::kSchemaVersion);
@@ -209,6 +224,18 @@ StoredCycle ReadCycle(const Statement& s) {
   c.request_json = s.Text(8);
   c.capture_path = s.Text(9);
   return c;
+}
+
+// A board_results row's board, from column `first` (board, frames, frames_found,
+// frames_partial, residual_rms).
+StoredBoardResult ReadBoard(const Statement& s, int first) {
+  StoredBoardResult b;
+  b.board = s.Text(first);
+  b.frames = static_cast<int>(s.Int(first + 1));
+  b.frames_found = static_cast<int>(s.Int(first + 2));
+  b.frames_partial = static_cast<int>(s.Int(first + 3));
+  if (!s.IsNull(first + 4)) b.residual_rms = s.Real(first + 4);
+  return b;
 }
 
 // The pid a lock file's holder wrote into it, for the message of the one refused.
@@ -489,6 +516,11 @@ absl::Status Store::PutSensorResult(int64_t cycle_id, const StoredSensorResult& 
     return absl::FailedPreconditionError(absl::StrCat("cycle ", cycle_id, " has ended (",
                                                       state.Text(0), "); its results are final"));
   }
+  // A replaced result replaces its boards too; they go first, as they refer to it.
+  Statement clear(db_, "DELETE FROM board_results WHERE cycle_id = ?1 AND sensor = ?2");
+  clear.Bind(1, cycle_id).Bind(2, r.sensor);
+  if (const int step = clear.Step(); step != SQLITE_DONE)
+    return SqliteError(db_, path_, "store sensor result", step);
   Statement s(db_,
               "INSERT OR REPLACE INTO sensor_results VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, "
               "?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18, ?19, ?20, ?21, ?22, ?23, ?24, "
@@ -513,7 +545,24 @@ absl::Status Store::PutSensorResult(int64_t cycle_id, const StoredSensorResult& 
       .Bind(32, r.elapsed_ns);
   if (const int step = s.Step(); step != SQLITE_DONE)
     return SqliteError(db_, path_, "store sensor result", step);
+  if (absl::Status b = PutBoardResultsLocked(cycle_id, r); !b.ok()) return b;
   return tx.Commit();
+}
+
+absl::Status Store::PutBoardResultsLocked(int64_t cycle_id, const StoredSensorResult& r) {
+  for (const StoredBoardResult& b : r.boards) {
+    Statement s(db_, "INSERT INTO board_results VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)");
+    s.Bind(1, cycle_id)
+        .Bind(2, r.sensor)
+        .Bind(3, b.board)
+        .Bind(4, static_cast<int64_t>(b.frames))
+        .Bind(5, static_cast<int64_t>(b.frames_found))
+        .Bind(6, static_cast<int64_t>(b.frames_partial))
+        .Bind(7, b.residual_rms);
+    if (const int step = s.Step(); step != SQLITE_DONE)
+      return SqliteError(db_, path_, "store board results", step);
+  }
+  return absl::OkStatus();
 }
 
 absl::Status Store::EndCycle(int64_t cycle_id, CycleState state, Verdict verdict,
@@ -603,6 +652,18 @@ absl::StatusOr<StoredCycle> Store::ReadCycleLocked(int64_t cycle_id) {
     cycle.sensors.push_back(std::move(x));
   }
   if (step != SQLITE_DONE) return SqliteError(db_, path_, "read sensor results", step);
+  Statement b(db_,
+              "SELECT sensor, board, frames, frames_found, frames_partial, residual_rms "
+              "FROM board_results WHERE cycle_id = ?1 ORDER BY sensor, board");
+  b.Bind(1, cycle_id);
+  // Both in sensor order: one pass matches each board to its sensor.
+  auto sensor = cycle.sensors.begin();
+  while ((step = b.Step()) == SQLITE_ROW) {
+    while (sensor != cycle.sensors.end() && sensor->sensor < b.Text(0)) ++sensor;
+    if (sensor == cycle.sensors.end() || sensor->sensor != b.Text(0)) continue;
+    sensor->boards.push_back(ReadBoard(b, 1));
+  }
+  if (step != SQLITE_DONE) return SqliteError(db_, path_, "read board results", step);
   return cycle;
 }
 
@@ -709,6 +770,28 @@ absl::StatusOr<std::vector<TrendRow>> Store::RecentSolvedResults(int cycles) {
     rows.push_back(std::move(row));
   }
   if (rc != SQLITE_DONE) return SqliteError(db_, path_, "read trends", rc);
+  return rows;
+}
+
+absl::StatusOr<std::vector<BoardTrendRow>> Store::RecentBoardResults(int cycles) {
+  if (cycles < 1 || cycles > 100000) {  // as RecentSolvedResults
+    return absl::InvalidArgumentError(
+        absl::StrCat("cycles = ", cycles, ": must be in [1, 100000]"));
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  Statement s(db_,
+              "SELECT c.id, c.started_ns, c.car_model_id, b.sensor, r.T_car_sensor <> '', b.board, "
+              "b.frames, b.frames_found, b.frames_partial, b.residual_rms FROM (SELECT id, "
+              "started_ns, car_model_id FROM cycles WHERE state = 'done' ORDER BY id DESC "
+              "LIMIT ?1) c JOIN board_results b ON b.cycle_id = c.id JOIN sensor_results r ON "
+              "r.cycle_id = b.cycle_id AND r.sensor = b.sensor ORDER BY c.id, b.sensor, b.board");
+  s.Bind(1, static_cast<int64_t>(cycles));
+  std::vector<BoardTrendRow> rows;
+  int rc;
+  while ((rc = s.Step()) == SQLITE_ROW) {
+    rows.push_back({s.Int(0), s.Int(1), s.Text(2), s.Text(3), s.Int(4) != 0, ReadBoard(s, 5)});
+  }
+  if (rc != SQLITE_DONE) return SqliteError(db_, path_, "read board trends", rc);
   return rows;
 }
 

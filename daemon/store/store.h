@@ -15,7 +15,9 @@
 // forwarder reads the queue in order (ReadOutbox), ships it, then deletes what the plant
 // acknowledged (MarkShipped): a crash between the two resends a batch, which the plant
 // applies idempotently. Version 2 of the schema added the table; migrating from 1 queues
-// nothing (cycles of a station that did not forward stay on the station).
+// nothing (cycles of a station that did not forward stay on the station). Version 3 added
+// each sensor's per-board detections and residuals (StoredBoardResult); cycles stored before
+// it have none.
 //
 // Errors (absl::Status, messages name the database file):
 //   Unavailable         the database stayed locked by another process past the busy timeout
@@ -93,6 +95,18 @@ struct MountingValues {
   bool operator==(const MountingValues&) const = default;
 };
 
+// One target board as one sensor saw it in a cycle (cameras and LiDARs; schema version 3):
+// the detections of SensorCalibration::boards and, when the sensor was solved with the board,
+// its own residual (BoardResidual).
+struct StoredBoardResult {
+  std::string board;
+  int frames = 0;                      // frames (LiDARs: accumulated scans) it was looked for in
+  int frames_found = 0;                // of those, frames with the whole board
+  int frames_partial = 0;              // frames with certain features of a partly seen board
+  std::optional<double> residual_rms;  // the sensor's unit; none when it did not enter a solve
+  bool operator==(const StoredBoardResult&) const = default;
+};
+
 struct StoredSensorResult {
   std::string sensor;                     // the car model's sensor name
   SensorKind kind = SensorKind::kCamera;  // stored as SensorKindName's word
@@ -107,6 +121,7 @@ struct StoredSensorResult {
   std::vector<double> ground_homography;  // cameras: 9 values, row-major; else empty
   std::string ranging_json;               // cameras: the ranging check as JSON; else empty
   int64_t elapsed_ns = 0;                 // acquire to verdict
+  std::vector<StoredBoardResult> boards;  // by board id; empty for radars and older cycles
   bool operator==(const StoredSensorResult&) const = default;
 };
 
@@ -158,6 +173,16 @@ struct TrendRow {
   double residual_rms = 0;
 };
 
+// A target board of a sensor in a done cycle, as trends read it (Store::RecentBoardResults).
+struct BoardTrendRow {
+  int64_t cycle_id = 0;
+  int64_t started_ns = 0;
+  std::string car_model_id;
+  std::string sensor;
+  bool solved = false;  // the sensor's mounting was found
+  StoredBoardResult board;
+};
+
 struct StoreOptions {
   // How long a call waits for another process's lock before giving up with Unavailable.
   // 5 s: longer than any write of ours takes, short enough for a cycle to end in error
@@ -184,7 +209,7 @@ struct OutboxBacklog {
 class Store {
  public:
   // The current schema version (PRAGMA user_version after Open).
-  static constexpr int kSchemaVersion = 2;
+  static constexpr int kSchemaVersion = 3;
 
   // Opens or creates the database at `path` (its directory must exist), migrates it to
   // kSchemaVersion and turns running cycles into aborted ones. Cost: a few fsyncs.
@@ -228,6 +253,10 @@ class Store {
   // ended done, oldest cycle first, by sensor name within a cycle. InvalidArgument for a count
   // out of range. One query; cost O(cycles × sensors) (10,000 cycles of 10 sensors: ~0.1 s).
   absl::StatusOr<std::vector<TrendRow>> RecentSolvedResults(int cycles);
+  // Every stored board result (solved sensor or not) of the same newest `cycles` cycles that
+  // ended done, oldest cycle first, by sensor and board within a cycle. InvalidArgument for a
+  // count out of range. One query; cost O(cycles × sensors × boards of a sensor).
+  absl::StatusOr<std::vector<BoardTrendRow>> RecentBoardResults(int cycles);
 
   // The first `limit` (>= 1) queued cycles in queue order, each with its sensors and events,
   // read in one transaction. Cost: three queries per cycle.
@@ -254,6 +283,9 @@ class Store {
   absl::Status AbortRunning();
   // Queues `cycle_id` in the outbox when it is kept; inside the caller's transaction.
   absl::Status Enqueue(int64_t cycle_id);
+  // Inserts the board results of `r` in cycle_id (the old ones deleted); inside the caller's
+  // transaction.
+  absl::Status PutBoardResultsLocked(int64_t cycle_id, const StoredSensorResult& r);
   // GetCycle and Events without taking mutex_ (the caller holds it).
   absl::StatusOr<StoredCycle> ReadCycleLocked(int64_t cycle_id);
   absl::StatusOr<std::vector<StoredEvent>> ReadEventsLocked(int64_t cycle_id);

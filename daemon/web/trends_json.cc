@@ -55,7 +55,9 @@ nlohmann::json TrendsJson(const StationHealth& health, const std::string& sensor
                       {"target", c.target},
                       {"sensors", c.sensors},
                       {"cycle_ids", c.cycle_ids},
-                      {"solved", c.solved}});
+                      {"detected", c.detected},
+                      {"frames_found", c.frames_found},
+                      {"frames", c.frames}});
   }
   return {
       {"trends", std::move(trends)}, {"alarms", std::move(alarms)}, {"counts", std::move(counts)}};

@@ -15,8 +15,9 @@ nlohmann::json TargetAlarmJson(const TargetAlarm& alarm);
 
 // {trends: [{car_model, sensor, kind, targets, series: [{name, cycle_ids, values, ewma, mean,
 // sigma, lower, upper, tolerance}]}], alarms, counts: [{car_model, target, sensors, cycle_ids,
-// solved}]}, the trends of `sensor` only and the counts of its targets when `sensor` is not
-// empty (a page of 10,000 cycles of every sensor would be tens of MB). Pure; O(size).
+// detected, frames_found, frames}]}, the trends of `sensor` only and the counts of its targets when
+// `sensor` is not empty (a page of 10,000 cycles of every sensor would be tens of MB). Pure;
+// O(size).
 nlohmann::json TrendsJson(const StationHealth& health, const std::string& sensor);
 
 }  // namespace linecal

@@ -77,69 +77,226 @@ std::array<double, kHealthSeries> Tolerances(const SensorModel& m) {
           0.0};
 }
 
-// The alarm of the targets used by exactly `users` (sensor indices of `car`), judged over the
-// last recent_cars cycles of the car model in which all of them were solved.
-std::optional<TargetAlarm> JudgeTargets(const CarModel& car, const std::vector<size_t>& users,
-                                        const std::vector<std::vector<const double*>>& residuals,
-                                        const std::vector<int64_t>& ids,
-                                        const StationHealthOptions& o) {
-  // Cycles in which every user has a residual.
+// The trend of `sensor` of `car` from its solved results in the model's cycles `ids`
+// (results[c]: nullptr where it was not solved).
+SensorTrend SensorTrendOf(const CarModel& car, const SensorModel& m,
+                          const std::vector<const HealthResult*>& results,
+                          const std::vector<int64_t>& ids, const StationHealthOptions& options) {
+  SensorTrend trend{car.id, m.name, SensorKindName(m.kind), m.targets, {}};
+  const std::array<double, kHealthSeries> tolerance = Tolerances(m);
+  std::vector<int64_t> solved_ids;
+  std::array<std::vector<double>, kHealthSeries> values;
+  for (size_t c = 0; c < ids.size(); ++c) {
+    const HealthResult* r = results[c];
+    if (r == nullptr) continue;
+    solved_ids.push_back(ids[c]);
+    for (int k = 0; k < kHealthSeries; ++k) values[k].push_back(r->values[k]);
+  }
+  for (int k = 0; k < kHealthSeries; ++k) {
+    trend.series.push_back(MakeSeries(k, solved_ids, std::move(values[k]), tolerance[k], options));
+  }
+  return trend;
+}
+
+// Per sensor of a car model (by index), one board's residual in each of the model's cycles
+// (nullopt: none recorded).
+using PairResiduals = std::vector<std::vector<std::optional<double>>>;
+
+// The alarm of `target`, used by `users` (sensor indices of `car`) whose residuals of it are
+// `residuals[u][c]` in cycle ids[c]: judged over the last recent_cars cycles in which at least
+// min_sensors users have a residual of it, each user standardised by its own baseline (its
+// residuals in the cycles before those; a user with fewer than min_baseline is left out).
+std::optional<TargetAlarm> JudgeTarget(const CarModel& car, const std::string& target,
+                                       const std::vector<size_t>& users,
+                                       const PairResiduals& residuals,
+                                       const std::vector<int64_t>& ids,
+                                       const StationHealthOptions& o) {
+  const size_t min_sensors = static_cast<size_t>(o.min_sensors);
   std::vector<size_t> rows;
   for (size_t c = 0; c < ids.size(); ++c) {
-    bool all = true;
-    for (size_t u : users) all = all && residuals[u][c] != nullptr;
-    if (all) rows.push_back(c);
+    size_t present = 0;
+    for (size_t u : users) present += residuals[u][c].has_value() ? 1 : 0;
+    if (present >= min_sensors) rows.push_back(c);
   }
   const size_t recent = static_cast<size_t>(o.recent_cars);
   if (rows.size() < recent + static_cast<size_t>(o.min_baseline)) return std::nullopt;
   const size_t first_recent = rows.size() - recent;
+  std::vector<size_t> judged;
   std::vector<Baseline> base;
+  // The mean of 1 / (baseline points) over the judged pairs: the variance, in the statistic's
+  // units, of the error of the baseline means, which every recent point shares.
+  double mean_error_variance = 0;
   for (size_t u : users) {
     std::vector<double> v;
-    for (size_t r = 0; r < first_recent; ++r) v.push_back(*residuals[u][rows[r]]);
-    base.push_back(BaselineOf(v, v.size(), o));
+    for (size_t r = 0; r < first_recent; ++r) {
+      if (residuals[u][rows[r]]) v.push_back(*residuals[u][rows[r]]);
+    }
+    const Baseline b = BaselineOf(v, v.size(), o);
+    if (b.sigma == 0) continue;
+    judged.push_back(u);
+    base.push_back(b);
+    mean_error_variance += 1.0 / static_cast<double>(v.size());
   }
-  const double norm = std::sqrt(static_cast<double>(users.size()));
+  if (judged.size() < min_sensors) return std::nullopt;
+  mean_error_variance /= static_cast<double>(judged.size());
   double z = 0;
   std::vector<double> combined;
   for (size_t r = first_recent; r < rows.size(); ++r) {
     double sum = 0;
-    for (size_t k = 0; k < users.size(); ++k) {
-      sum += (*residuals[users[k]][rows[r]] - base[k].mean) / base[k].sigma;
+    int n = 0;
+    for (size_t k = 0; k < judged.size(); ++k) {
+      const std::optional<double>& x = residuals[judged[k]][rows[r]];
+      if (!x) continue;
+      sum += (*x - base[k].mean) / base[k].sigma;
+      ++n;
     }
-    combined.push_back(sum / norm);
+    combined.push_back(n > 0 ? sum / std::sqrt(static_cast<double>(n)) : 0.0);
     z = o.lambda * combined.back() + (1 - o.lambda) * z;
   }
-  // The rise's first cycle: the start of the recent tail with the largest sum, the maximum
-  // likelihood change point of a step in the mean (Hinkley 1970).
+  // The EWMA's σ over the recent cars and the baseline means' shared error: with 10 baseline
+  // cars the latter is nearly as large (0.1 against 0.11 in variance), and left out it raised
+  // false alarms on young baselines (tests/station/health).
+  const double ewma_sigma = EwmaSigma(o.lambda, static_cast<int>(recent));
+  const double statistic = z / std::sqrt(ewma_sigma * ewma_sigma + mean_error_variance);
+  if (!(statistic > o.alarm_sigmas)) return std::nullopt;
+  // The rise's first cycle: the start of the recent tail whose sum over the square root of
+  // its length is highest, the maximum-likelihood change point of a rise of unknown size in
+  // the mean of unit-variance points (Hinkley 1970). The bare sum would also take in the
+  // cars before the move whenever their noise happens to sum above zero.
   size_t rise = first_recent;
   double tail = 0, best = -1;
   for (size_t i = combined.size(); i-- > 0;) {
     tail += combined[i];
-    if (tail > best) {
-      best = tail;
+    const double score = tail / std::sqrt(static_cast<double>(combined.size() - i));
+    if (score > best) {
+      best = score;
       rise = first_recent + i;
     }
   }
-  const double statistic = z / EwmaSigma(o.lambda, static_cast<int>(recent));
-  if (!(statistic > o.alarm_sigmas)) return std::nullopt;
   TargetAlarm alarm;
   alarm.car_model = car.id;
+  alarm.targets = {target};
   alarm.since_cycle = ids[rows[rise]];
   alarm.last_cycle = ids[rows.back()];
   alarm.statistic_sigmas = statistic;
   alarm.alarm_sigmas = o.alarm_sigmas;
-  for (size_t k = 0; k < users.size(); ++k) {
+  for (size_t k = 0; k < judged.size(); ++k) {
     ShiftedSensor s;
-    s.sensor = car.sensors[users[k]].name;
+    s.sensor = car.sensors[judged[k]].name;
     s.baseline_residual = base[k].mean;
     double sum = 0;
-    for (size_t r = rise; r < rows.size(); ++r) sum += *residuals[users[k]][rows[r]];
-    s.recent_residual = sum / static_cast<double>(rows.size() - rise);
+    int n = 0;
+    for (size_t r = rise; r < rows.size(); ++r) {
+      if (const std::optional<double>& x = residuals[judged[k]][rows[r]]; x) {
+        sum += *x;
+        ++n;
+      }
+    }
+    s.recent_residual = n > 0 ? sum / n : base[k].mean;
     s.shift_sigmas = (s.recent_residual - base[k].mean) / base[k].sigma;
     alarm.sensors.push_back(s);
   }
   return alarm;
+}
+
+// The sensors of `car` (indices) that use each target, by target id.
+std::map<std::string, std::vector<size_t>> UsersOf(const CarModel& car) {
+  std::map<std::string, std::vector<size_t>> users_of;
+  for (size_t s = 0; s < car.sensors.size(); ++s) {
+    for (const std::string& t : car.sensors[s].targets) users_of[t].push_back(s);
+  }
+  return users_of;
+}
+
+// Per target of `car`, its board records in `model_cycles` (oldest first), per sensor of the
+// car (index) and cycle; nullptr where none. One pass over the records.
+using BoardTable = std::map<std::string, std::vector<std::vector<const HealthBoard*>>>;
+BoardTable BoardsByTarget(const CarModel& car,
+                          const std::vector<const HealthCycle*>& model_cycles) {
+  BoardTable table;
+  for (const auto& [target, users] : UsersOf(car)) {
+    table[target].assign(car.sensors.size(),
+                         std::vector<const HealthBoard*>(model_cycles.size(), nullptr));
+  }
+  for (size_t c = 0; c < model_cycles.size(); ++c) {
+    for (const HealthBoard& b : model_cycles[c]->boards) {
+      const auto entry = table.find(b.board);
+      const SensorModel* m = car.FindSensor(b.sensor);
+      if (entry == table.end() || m == nullptr) continue;
+      entry->second[static_cast<size_t>(m - car.sensors.data())][c] = &b;
+    }
+  }
+  return table;
+}
+
+// The alarms of `car` at its newest cycle (`table`: BoardsByTarget of the cycles `ids`): every
+// target judged (JudgeTarget), then, as a
+// moved board also shifts the fits of the boards that share its sensors a little (the
+// solvers spread it), only the strongest of alarms sharing a sensor is kept.
+std::vector<TargetAlarm> CarAlarms(const CarModel& car, const BoardTable& table,
+                                   const std::vector<int64_t>& ids,
+                                   const StationHealthOptions& options) {
+  std::vector<std::pair<std::vector<size_t>, TargetAlarm>> raised;
+  for (const auto& [target, users] : UsersOf(car)) {
+    if (users.size() < static_cast<size_t>(options.min_sensors)) continue;
+    const std::vector<std::vector<const HealthBoard*>>& boards = table.at(target);
+    PairResiduals residuals(car.sensors.size());
+    for (size_t u = 0; u < car.sensors.size(); ++u) {
+      for (const HealthBoard* b : boards[u]) {
+        residuals[u].push_back(b != nullptr ? b->residual : std::nullopt);
+      }
+    }
+    std::optional<TargetAlarm> alarm = JudgeTarget(car, target, users, residuals, ids, options);
+    if (alarm) raised.emplace_back(users, std::move(*alarm));
+  }
+  std::sort(raised.begin(), raised.end(), [](const auto& a, const auto& b) {
+    return a.second.statistic_sigmas > b.second.statistic_sigmas;
+  });
+  std::vector<TargetAlarm> kept;
+  std::vector<const std::vector<size_t>*> kept_users;
+  for (const auto& [users, alarm] : raised) {
+    bool explained = false;
+    for (const std::vector<size_t>* k : kept_users) {
+      for (size_t u : users)
+        explained = explained || std::find(k->begin(), k->end(), u) != k->end();
+    }
+    if (explained) continue;
+    kept_users.push_back(&users);
+    kept.push_back(alarm);
+  }
+  return kept;
+}
+
+// Per target of `car`, its detections in each of `model_cycles` that has board records
+// (`table`: BoardsByTarget of them).
+std::vector<TargetCounts> CarCounts(const CarModel& car, const BoardTable& table,
+                                    const std::vector<const HealthCycle*>& model_cycles) {
+  std::vector<TargetCounts> out;
+  for (const auto& [target, users] : UsersOf(car)) {
+    TargetCounts counts;
+    counts.car_model = car.id;
+    counts.target = target;
+    counts.sensors = static_cast<int>(users.size());
+    const std::vector<std::vector<const HealthBoard*>>& boards = table.at(target);
+    for (size_t c = 0; c < model_cycles.size(); ++c) {
+      if (model_cycles[c]->boards.empty()) continue;
+      int detected = 0, found = 0, frames = 0;
+      for (size_t u : users) {
+        const HealthBoard* b = boards[u][c];
+        if (b == nullptr) continue;
+        const int seen = b->frames_found + b->frames_partial;
+        detected += seen > 0 ? 1 : 0;
+        found += seen;
+        frames += b->frames;
+      }
+      counts.cycle_ids.push_back(model_cycles[c]->cycle_id);
+      counts.detected.push_back(detected);
+      counts.frames_found.push_back(found);
+      counts.frames.push_back(frames);
+    }
+    out.push_back(std::move(counts));
+  }
+  return out;
 }
 
 }  // namespace
@@ -174,10 +331,12 @@ absl::StatusOr<StationHealth> ComputeStationHealth(const std::vector<CarModel>& 
   StationHealth health;
   for (const CarModel& car : cars) {
     // This model's cycles, and per sensor its result in each (nullptr: none solved).
+    std::vector<const HealthCycle*> model_cycles;
     std::vector<int64_t> ids;
     std::vector<std::vector<const HealthResult*>> results(car.sensors.size());
     for (const HealthCycle& c : cycles) {
       if (c.car_model != car.id) continue;
+      model_cycles.push_back(&c);
       ids.push_back(c.cycle_id);
       for (auto& r : results) r.push_back(nullptr);
       for (const HealthResult& r : c.results) {
@@ -186,66 +345,14 @@ absl::StatusOr<StationHealth> ComputeStationHealth(const std::vector<CarModel>& 
       }
     }
     if (ids.empty()) continue;
-    std::vector<std::vector<const double*>> residuals(car.sensors.size());
     for (size_t s = 0; s < car.sensors.size(); ++s) {
-      const SensorModel& m = car.sensors[s];
-      SensorTrend trend{car.id, m.name, SensorKindName(m.kind), m.targets, {}};
-      const std::array<double, kHealthSeries> tolerance = Tolerances(m);
-      std::vector<int64_t> solved_ids;
-      std::array<std::vector<double>, kHealthSeries> values;
-      for (size_t c = 0; c < ids.size(); ++c) {
-        const HealthResult* r = results[s][c];
-        residuals[s].push_back(r == nullptr ? nullptr : &r->values[kResidualSeries]);
-        if (r == nullptr) continue;
-        solved_ids.push_back(ids[c]);
-        for (int k = 0; k < kHealthSeries; ++k) values[k].push_back(r->values[k]);
-      }
-      for (int k = 0; k < kHealthSeries; ++k) {
-        trend.series.push_back(
-            MakeSeries(k, solved_ids, std::move(values[k]), tolerance[k], options));
-      }
-      health.trends.push_back(std::move(trend));
+      health.trends.push_back(SensorTrendOf(car, car.sensors[s], results[s], ids, options));
     }
-    // Targets grouped by the sensors that use them.
-    std::map<std::string, std::vector<size_t>> users_of;
-    for (size_t s = 0; s < car.sensors.size(); ++s) {
-      for (const std::string& t : car.sensors[s].targets) users_of[t].push_back(s);
-    }
-    std::map<std::vector<size_t>, std::vector<std::string>> groups;
-    for (const auto& [target, users] : users_of) groups[users].push_back(target);
-    std::vector<std::pair<std::vector<size_t>, TargetAlarm>> raised;
-    for (const auto& [users, targets] : groups) {
-      if (users.size() < static_cast<size_t>(options.min_sensors)) continue;
-      std::optional<TargetAlarm> alarm = JudgeTargets(car, users, residuals, ids, options);
-      if (!alarm) continue;
-      alarm->targets = targets;
-      raised.emplace_back(users, std::move(*alarm));
-    }
-    // Targets that share a sensor with a moved one see part of its shift (the front boards'
-    // two cameras also use the bumper boards): the strongest alarm among those sharing
-    // sensors is the explanation, and only it is named.
-    std::sort(raised.begin(), raised.end(), [](const auto& a, const auto& b) {
-      return a.second.statistic_sigmas > b.second.statistic_sigmas;
-    });
-    std::vector<const std::vector<size_t>*> kept;
-    for (const auto& [users, alarm] : raised) {
-      bool explained = false;
-      for (const std::vector<size_t>* k : kept) {
-        for (size_t u : users)
-          explained = explained || std::find(k->begin(), k->end(), u) != k->end();
-      }
-      if (explained) continue;
-      kept.push_back(&users);
-      health.alarms.push_back(alarm);
-    }
-    for (const auto& [target, users] : users_of) {
-      TargetCounts counts{car.id, target, ids, {}, static_cast<int>(users.size())};
-      for (size_t c = 0; c < ids.size(); ++c) {
-        int solved = 0;
-        for (size_t u : users) solved += residuals[u][c] != nullptr ? 1 : 0;
-        counts.solved.push_back(solved);
-      }
-      health.counts.push_back(std::move(counts));
+    const BoardTable boards = BoardsByTarget(car, model_cycles);
+    for (TargetAlarm& a : CarAlarms(car, boards, ids, options))
+      health.alarms.push_back(std::move(a));
+    for (TargetCounts& c : CarCounts(car, boards, model_cycles)) {
+      health.counts.push_back(std::move(c));
     }
   }
   return health;

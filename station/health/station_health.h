@@ -13,18 +13,24 @@
 // Alarm: a moved board or stand changes what every sensor that uses it measures, while the
 // cars' own mounting errors are independent from sensor to sensor. Measured on simulated cycles
 // (docs/console.md): a board turned 0.3° about its centre moves the mountings found by less
-// than 0.01° (the solvers spread it over all boards) but raises the residual of its sensors by
-// up to 1.2 σ of the car-to-car spread. So per target, over the sensors of the car model that
-// use it (at least `min_sensors`), the residuals are standardised by their baselines and summed
-// (divided by the square root of their number: unit variance on a still station); an EWMA of
-// that sum over the recent cars above `alarm_sigmas` of its own σ is the alarm. One-sided: a
-// moved target can only make the fit worse. Targets used by the same sensors share the
-// statistic and alarm together (the alarm names them all).
+// than 0.01° (the solvers spread it over all boards) and raises a sensor's residual by at most
+// 1.2 σ of the car-to-car spread, but the residual of the turned board itself in each sensor
+// that uses it (BoardResidual: its reprojection RMS in a camera, its hole-centre RMS in a
+// LiDAR) by several σ. So per target, over the sensors of the car model that use it (at least
+// `min_sensors` with a baseline), each sensor's residual of that board is standardised by its
+// own baseline (the board-sensor pair's mean and σ) and the cycle's standardised residuals are
+// summed (divided by the square root of their number: unit variance on a still station); an
+// EWMA of that sum over the recent cars above `alarm_sigmas` of its own σ (the EWMA's and the
+// baseline means' error, which all recent cars share) is the alarm, which names the target.
+// One-sided: a moved target can only make the fit worse. Of targets whose alarms share a
+// sensor only the strongest is kept: a moved board also shifts, a little, the fits of the
+// boards its sensors see with it.
 //
 // Pure functions, no I/O; cost O(cycles × sensors × targets of a sensor).
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -47,11 +53,23 @@ struct HealthResult {
   std::array<double, kHealthSeries> values{};
 };
 
+// One target board as one sensor saw it in one cycle, solved or not.
+struct HealthBoard {
+  std::string sensor;
+  std::string board;
+  int frames = 0;          // frames (LiDARs: accumulated scans) it was looked for in
+  int frames_found = 0;    // frames with the whole board
+  int frames_partial = 0;  // frames with certain features of a partly seen board
+  // The board's own residual RMS when the sensor was solved with it (the sensor's unit).
+  std::optional<double> residual;
+};
+
 struct HealthCycle {
   int64_t cycle_id = 0;
   int64_t started_ns = 0;
   std::string car_model;
   std::vector<HealthResult> results;
+  std::vector<HealthBoard> boards;  // empty for a cycle stored without them
 };
 
 struct StationHealthOptions {
@@ -60,14 +78,17 @@ struct StationHealthOptions {
   double lambda = 0.2;
   // Chart limits in σ of the EWMA: the usual 3.
   double chart_sigmas = 3.0;
-  // Alarm limit in σ of the target's EWMA; chosen with tests/station/health (docs/console.md).
-  double alarm_sigmas = 3.8;
+  // Alarm limit in σ of the target's EWMA: the highest of 30 simulated still lines of 1,000
+  // cars reached 4.6, a board turned 0.3° passes 5.5 within 3-6 cars (tests/station/health,
+  // docs/console.md "Moved-target alarm: measured").
+  double alarm_sigmas = 5.5;
   // The cars the alarm's EWMA runs over; the points before them are the baseline.
   int recent_cars = 20;
   // Fewest baseline points for a chart or an alarm: fewer give a σ too uncertain to judge by.
   int min_baseline = 10;
-  // Sensors of a target that must share the shift ("several sensors"): a rise in one
-  // sensor alone cannot be told from that sensor's own trouble.
+  // Sensors with a residual (and a baseline) of a target for it to be judged: one sensor's
+  // residual alone cannot tell a moved board from that sensor's own trouble. The sum does not
+  // need each of them to rise: a large rise in one can raise the alarm, whose shifts show it.
   int min_sensors = 2;
   // σ below this is taken as this (a series that happens to be constant): 1e-9 of the unit.
   double min_sigma = 1e-9;
@@ -93,6 +114,7 @@ struct SensorTrend {
   std::vector<HealthSeries> series;  // kHealthSeries, in HealthSeriesName order
 };
 
+// A sensor's residual of the alarm's target board (HealthBoard::residual).
 struct ShiftedSensor {
   std::string sensor;
   double baseline_residual = 0;  // mean of the baseline
@@ -102,23 +124,28 @@ struct ShiftedSensor {
 
 struct TargetAlarm {
   std::string car_model;
-  std::vector<std::string> targets;  // used by exactly these sensors (sorted)
-  std::vector<ShiftedSensor> sensors;
+  std::vector<std::string> targets;    // the target board that moved (one)
+  std::vector<ShiftedSensor> sensors;  // in the car model's order
   // The first cycle of the rise: the start of the recent tail whose standardised residuals
-  // sum highest (the change point of a step in the mean); within the last recent_cars.
+  // sum over the square root of its length is highest (the change point of a step in the
+  // mean); within the last recent_cars.
   int64_t since_cycle = 0;
   int64_t last_cycle = 0;       // the newest cycle judged
   double statistic_sigmas = 0;  // the EWMA in its σ at last_cycle
   double alarm_sigmas = 0;
 };
 
-// Per target and cycle: how many of its sensors found a mounting with it (the store keeps
-// per-sensor results, not per-board detections).
+// Per target, its detections in each cycle of the car model that has board records
+// (HealthCycle::boards): how many of its sensors found it in at least one frame (whole or
+// partly), and over those sensors the frames with it (whole or partly) and the frames looked
+// in.
 struct TargetCounts {
   std::string car_model;
   std::string target;
   std::vector<int64_t> cycle_ids;
-  std::vector<int> solved;
+  std::vector<int> detected;
+  std::vector<int> frames_found;
+  std::vector<int> frames;
   int sensors = 0;  // sensors of the car model that use it
 };
 

@@ -51,6 +51,13 @@ bool TakeResult(const absl::StatusOr<Result>& r, SensorCalibration* out) {
   out->solved = r->solved;
   out->mounting = r->mounting;
   out->features_used = r->features_used;
+  if (r->solved) {
+    for (const BoardResidual& b : r->board_residuals) {
+      for (BoardDetectionSummary& summary : out->boards) {
+        if (summary.board_id == b.board_id) summary.residual_rms = b.rms;
+      }
+    }
+  }
   return true;
 }
 
@@ -249,6 +256,7 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
   for (const std::string& id : sensor.targets) {
     BoardDetectionSummary& summary = out.boards.emplace_back();
     summary.board_id = id;
+    summary.frames = static_cast<int>(frames.size());
     const StationBoard* board = station.FindBoard(id);
     if (board == nullptr) {  // ReadCapture checked the targets; kept for safety of the data
       if (detections != nullptr) detections->emplace_back();
@@ -289,6 +297,7 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
     const StationBoard* board = capture.station.FindBoard(sensor.targets[i]);
     if (board == nullptr) continue;
     BoardDetectionSummary& summary = (*summaries)[i];
+    ++summary.frames;
     std::optional<Detection> d = DetectBoard(image, board->board);
     if (d && camera && (!d->found || ViewRefinesMarkerCorners(*camera, board->board))) {
       // Not found in the raw image, or a marker board whose corners a fisheye shifts there:

@@ -36,6 +36,10 @@ struct BoardDetectionSummary {
   // (StationBoard). When not, a partial frame counts here but its reason stays "partial".
   bool partial_allowed = false;
   std::string last_reason;  // the detector's reason in the last frame without the board
+  int frames = 0;           // frames (LiDARs: accumulated scans) the board was looked for in
+  // When the sensor was solved with this board: its own residual RMS at the solved mounting
+  // (BoardResidual; pixels for cameras, metres for LiDARs).
+  std::optional<double> residual_rms;
 };
 
 struct SensorCalibration {
@@ -48,7 +52,7 @@ struct SensorCalibration {
   MountingEstimate mounting;  // when solved
   double residual_rms = 0;    // pixels (cameras), metres (LiDARs), degrees (radars)
   int features_used = 0;  // board features (cameras), hole centres (LiDARs), reflectors (radars)
-  std::vector<BoardDetectionSummary> boards;  // cameras and LiDARs
+  std::vector<BoardDetectionSummary> boards;  // cameras and LiDARs, in the targets' order
   // Cameras, when solved: see CameraCalibrationResult.
   std::optional<Eigen::Vector2d> vanishing_point_px;
   std::optional<Eigen::Matrix3d> ground_homography;

@@ -1,6 +1,7 @@
 #include "station/solvers/camera_calibration.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -108,10 +109,12 @@ Eigen::Matrix3d GroundHomography(const CameraIntrinsics& intrinsics, const Rigid
 
 namespace {
 
-// The correspondences of the observed boards: every detection of every frame, each
-// feature's mean over the frames, and the boards seen (id, T_car_board) in first-seen order.
+// The correspondences of the observed boards: every detection of every frame (with the
+// index in boards_seen of its board), each feature's mean over the frames, and the boards
+// seen (id, T_car_board) in first-seen order.
 struct CameraInputs {
   std::vector<PnpCorrespondence> points;
+  std::vector<size_t> point_board;
   std::vector<PnpCorrespondence> means;
   std::vector<std::pair<std::string, Rigid3d>> boards_seen;
 };
@@ -133,12 +136,14 @@ absl::StatusOr<CameraInputs> CollectCorrespondences(
     }
     if (o.features.empty()) continue;
     const Rigid3d T_car_board = T_car_station * board->T_station_board;
-    bool listed = false;
-    for (const auto& b : in.boards_seen) listed |= b.first == o.board_id;
-    if (!listed) in.boards_seen.emplace_back(o.board_id, T_car_board);
+    size_t board_index = 0;
+    while (board_index < in.boards_seen.size() && in.boards_seen[board_index].first != o.board_id)
+      ++board_index;
+    if (board_index == in.boards_seen.size()) in.boards_seen.emplace_back(o.board_id, T_car_board);
     for (const DetectedFeature& f : o.features) {
       in.points.push_back(
           {T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
+      in.point_board.push_back(board_index);
       auto& [sum, n] = sums[{o.board_id, f.id}];
       sum.p_object = in.points.back().p_object;
       sum.uv_px += f.uv_px;
@@ -208,6 +213,22 @@ void SetSeedFormulas(const CameraModel& camera, const SensorModel& sensor,
         RollFromVerticalBoard(camera, board.board, T_car_station * board.T_station_board,
                               T_camera_car.RotationMatrix().col(0), vertical);
   }
+}
+
+// Each seen board's RMS reprojection error over its detections in every frame at the solved
+// pose T_camera_car, in boards_seen order. O(points).
+std::vector<BoardResidual> BoardResiduals(const CameraModel& camera, const CameraInputs& in,
+                                          const Rigid3d& T_camera_car) {
+  const std::vector<double> errors = ReprojectionErrors(camera, T_camera_car, in.points);
+  std::vector<BoardResidual> out;
+  for (const auto& [id, T_car_board] : in.boards_seen) out.push_back({id, 0.0, 0});
+  for (size_t i = 0; i < errors.size(); ++i) {
+    BoardResidual& b = out[in.point_board[i]];
+    b.rms += errors[i] * errors[i];
+    ++b.features;
+  }
+  for (BoardResidual& b : out) b.rms = std::sqrt(b.rms / std::max(b.features, 1));
+  return out;
 }
 
 // Trust checks, then the tolerance: the verdict, reason and message of a solved result.
@@ -293,6 +314,7 @@ absl::StatusOr<CameraCalibrationResult> CalibrateCamera(
   const Rigid3d& T_camera_car = pnp->T_camera_object;
   result.solved = true;
   result.mounting = MountingFromSensorPose(T_camera_car, pnp->covariance, sensor);
+  result.board_residuals = BoardResiduals(*camera, *in, T_camera_car);
   SetDerived(*camera, sensor, T_camera_car, options, &result);
   SetSeedFormulas(*camera, sensor, station, T_car_station, observations, options, T_camera_car,
                   &result);

@@ -75,6 +75,9 @@ struct CameraCalibrationResult {
   double residual_rms_px = 0;
   int features_used = 0;
   int boards_used = 0;
+  // When solved: each observed board's reprojection RMS (pixels) over its detections in every
+  // frame, in the order the boards were first observed.
+  std::vector<BoardResidual> board_residuals;
   // The vanishing point of the car's longitudinal axis in the undistorted image (K of the
   // intrinsics), pixels: of +x_car for a camera looking forward, of -x_car for one looking
   // backward (CarAxisAlong); side cameras have none (vanishing_point_valid = false).

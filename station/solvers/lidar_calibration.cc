@@ -46,6 +46,7 @@ struct Pair {
   double sigma;
   bool direction;
   bool in_solve = true;  // false: the board's pose residual stands for it
+  size_t board = 0;      // index in LidarInputs::boards
 };
 
 // A whitened board-pose residual: L^-1 (theta, t) for the board-frame error between the
@@ -156,6 +157,7 @@ namespace {
 // features, the boards' measured poses, and how many of each enter it.
 struct LidarInputs {
   std::vector<Pair> pairs;
+  std::vector<std::string> boards;  // the ids of the boards with holes, in observation order
   std::vector<BoardPose> poses;
   int features_used = 0;
   int boards_used = 0;
@@ -174,6 +176,8 @@ absl::Status AddObservation(const SensorModel& sensor, const StationLayout& stat
                                                    "' is not in station '", station.name, "'"));
   }
   if (o.holes.empty()) return absl::OkStatus();
+  const size_t board_index = in->boards.size();
+  in->boards.push_back(o.board_id);
   const Rigid3d T_car_board = T_car_station * board->T_station_board;
   const double sigma = o.centre_sigma_m > 0 ? o.centre_sigma_m : options.centre_sigma_m;
   const bool by_pose = o.T_lidar_board.has_value();
@@ -202,8 +206,8 @@ absl::Status AddObservation(const SensorModel& sensor, const StationLayout& stat
                                                      ": position is not finite"));
     }
     const Eigen::Vector2d& p = features[h.feature_id].p_board;
-    in->pairs.push_back(
-        {h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false, !by_pose});
+    in->pairs.push_back({h.p_lidar, T_car_board * Eigen::Vector3d(p.x(), p.y(), 0), sigma, false,
+                         !by_pose, board_index});
     ++in->features_used;
   }
   if (o.normal_lidar) {
@@ -212,8 +216,8 @@ absl::Status AddObservation(const SensorModel& sensor, const StationLayout& stat
           sensor.name, ": board '", o.board_id, "': normal_lidar must be a finite unit vector"));
     }
     const double nsigma = o.normal_sigma_rad > 0 ? o.normal_sigma_rad : options.normal_sigma_rad;
-    in->pairs.push_back(
-        {*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true, !by_pose});
+    in->pairs.push_back({*o.normal_lidar, T_car_board.RotationMatrix().col(2), nsigma, true,
+                         !by_pose, board_index});
   }
   ++in->boards_used;
   return absl::OkStatus();
@@ -337,6 +341,20 @@ double CentreResidualRms(const Rigid3d& T_car_lidar, const LidarInputs& in) {
   return std::sqrt(sum_sq / in.features_used);
 }
 
+// Per board of in.boards, the RMS distance of its hole centres, moved by T_car_lidar, from
+// their car-frame features. O(pairs).
+std::vector<BoardResidual> BoardCentreResiduals(const Rigid3d& T_car_lidar, const LidarInputs& in) {
+  std::vector<BoardResidual> out;
+  for (const std::string& id : in.boards) out.push_back({id, 0.0, 0});
+  for (const Pair& x : in.pairs) {
+    if (x.direction) continue;
+    out[x.board].rms += (T_car_lidar * x.p_lidar - x.q_car).squaredNorm();
+    ++out[x.board].features;
+  }
+  for (BoardResidual& b : out) b.rms = std::sqrt(b.rms / std::max(b.features, 1));
+  return out;
+}
+
 }  // namespace
 
 absl::StatusOr<LidarCalibrationResult> CalibrateLidar(
@@ -383,6 +401,7 @@ absl::StatusOr<LidarCalibrationResult> CalibrateLidar(
         std::abs(std::abs(solve.t[k] - nominal[k]) - options.translation_bound_m) < 1e-6;
   }
   result.residual_rms_m = CentreResidualRms(solve.T_car_lidar, in);
+  result.board_residuals = BoardCentreResiduals(solve.T_car_lidar, in);
   result.solved = true;
   result.mounting =
       MountingFromCarPose(solve.T_car_lidar, PoseInformation(solve, in).inverse(), sensor);

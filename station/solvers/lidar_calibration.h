@@ -93,6 +93,8 @@ struct LidarCalibrationResult {
   double residual_rms_m = 0;  // RMS of the hole-centre residual lengths after the solve
   int features_used = 0;      // hole centres
   int boards_used = 0;
+  // When solved: each board's hole-centre RMS (metres), in observation order.
+  std::vector<BoardResidual> board_residuals;
   bool translation_at_bound = false;  // a bound is active: the sigma of that axis is optimistic
 };
 

@@ -38,6 +38,17 @@ struct MountingEstimate {
   }
 };
 
+// One board's share of a solved fit: the RMS of its own features' residuals at the solved
+// mounting (a camera's reprojection errors in pixels over all frames, a LiDAR's hole-centre
+// distances in metres). The sensor's residual RMS pools every board, so a board moved from
+// its surveyed place is diluted there; here it stands alone (docs/console.md, "Moved-target
+// alarm").
+struct BoardResidual {
+  std::string board_id;
+  double rms = 0;
+  int features = 0;  // residuals pooled (detections, hole centres)
+};
+
 // The mounting of a sensor whose pose is T_sensor_car, with the covariance of that pose as
 // PnpResult gives it: (δθ, δt), the left rotation vector and the translation, both in the
 // sensor frame. Propagates the covariance to yaw/pitch/roll and the position in the car

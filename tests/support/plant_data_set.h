@@ -36,6 +36,9 @@ inline StoredSensorResult FullSensor(const std::string& name, const std::string&
     s.ground_homography = {1, 0, 0.5, 0, 1, -0.25, 1e-5, 2e-5, 1};
     s.ranging_json = R"({"board_m": 5.0, "ok": true, "note": "naïve"})";
   }
+  if (kind != "radar") {  // by board id, as the station's store keeps them
+    s.boards = {{"board_a", 3, 2, 1, 1.0 / 3.0}, {"board_b", 3, 0, 0, std::nullopt}};
+  }
   s.elapsed_ns = 1234567891;
   return s;
 }

@@ -50,15 +50,15 @@ TEST_F(CmdPlantTest, MigrateCreatesTheSchemaThenHasNothingToDo) {
   const std::string server = absl::StrCat("127.0.0.1:", cluster_->port());
   LinecalRun run = RunLinecal("plant migrate");
   ASSERT_EQ(run.exit_code, 0) << run.err;
-  EXPECT_EQ(run.out, absl::StrCat("plant database ", server, ": schema version 0 -> 1\n"));
+  EXPECT_EQ(run.out, absl::StrCat("plant database ", server, ": schema version 0 -> 2\n"));
   run = RunLinecal("plant migrate --json");
   ASSERT_EQ(run.exit_code, 0) << run.err;
   const nlohmann::json j = nlohmann::json::parse(run.out);
-  EXPECT_EQ(j["schema_version_before"], 1);
-  EXPECT_EQ(j["schema_version"], 1);
+  EXPECT_EQ(j["schema_version_before"], 2);
+  EXPECT_EQ(j["schema_version"], 2);
   EXPECT_EQ(j["server"], server);
   run = RunLinecal("plant migrate");
-  EXPECT_EQ(run.out, absl::StrCat("plant database ", server, ": schema version 1, up to date\n"));
+  EXPECT_EQ(run.out, absl::StrCat("plant database ", server, ": schema version 2, up to date\n"));
 }
 
 TEST_F(CmdPlantTest, CyclesListsEveryAttemptNewestFirst) {

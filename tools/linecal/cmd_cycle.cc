@@ -333,7 +333,7 @@ int RunStatus(const Args& args) {
         plant.last_error().empty() ? "" : ", last error: ", plant.last_error().c_str());
   }
   for (const v1::TargetAlarm& a : status.target_alarms()) {
-    std::printf("ALARM: target %s (car model %s) has likely moved since cycle %s: residuals of",
+    std::printf("ALARM: target %s (car model %s) has likely moved since cycle %s: its residual in",
                 absl::StrJoin(a.targets(), " or ").c_str(), a.car_model().c_str(),
                 a.since_cycle_id().c_str());
     for (const v1::ShiftedSensor& x : a.sensors()) {

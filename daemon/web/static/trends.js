@@ -1,6 +1,6 @@
 // The trends page: per sensor and car model, each deviation axis and the residual of the last
 // N cars with tolerance bands and EWMA control limits, the moved-target alarm and the sensors
-// solved with each target (docs/console.md, "Trends and station health"). Charts are Debian's
+// that detected each target (docs/console.md, "Trends and station health"). Charts are Debian's
 // Chart.js (/vendor/chart.js); getJson and $ come from app.js.
 "use strict";
 
@@ -88,7 +88,7 @@ function showAlarms(alarms) {
 function showCounts(counts) {
   const palette = ["#1565c0", "#2e7d32", "#ef6c00", "#6a1b9a", "#00838f", "#c62828", "#4e342e", "#546e7a"];
   const datasets = counts.map((c, i) => ({ ...line(`${c.target} (of ${c.sensors})`,
-                                                   corners(c.cycle_ids, c.solved), palette[i % palette.length]),
+                                                   corners(c.cycle_ids, c.detected), palette[i % palette.length]),
                                            stepped: true }));
   const options = chartOptions("");
   options.scales.y = { beginAtZero: true, ticks: { stepSize: 1 } };

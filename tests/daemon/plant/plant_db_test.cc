@@ -82,17 +82,17 @@ TEST_F(PlantDbTest, MigratesAnEmptyDatabaseOnceAndChecksTheVersion) {
   EXPECT_EQ(db->SchemaVersion().value_or(-1), 0);
   absl::Status check = db->CheckSchema();
   EXPECT_EQ(check.code(), absl::StatusCode::kFailedPrecondition);
-  EXPECT_NE(check.message().find("schema version 0 is older than this linecal's 1"),
+  EXPECT_NE(check.message().find("schema version 0 is older than this linecal's 2"),
             std::string::npos)
       << check;
 
   ASSERT_TRUE(db->Migrate().ok());
-  EXPECT_EQ(db->SchemaVersion().value_or(-1), 1);
+  EXPECT_EQ(db->SchemaVersion().value_or(-1), 2);
   EXPECT_TRUE(db->CheckSchema().ok());
   const std::string applied = Sql("SELECT version, applied_at FROM schema_migrations");
   EXPECT_EQ(Sql("SELECT string_agg(table_name, ',' ORDER BY table_name) FROM "
                 "information_schema.tables WHERE table_schema = 'public'"),
-            "cycles,events,schema_migrations,sensor_results,stations");
+            "board_results,cycles,events,schema_migrations,sensor_results,stations");
 
   // Again: nothing to do, nothing changed.
   ASSERT_TRUE(db->Migrate().ok());
@@ -107,19 +107,19 @@ TEST_F(PlantDbTest, MigratesAnOlderSchemaAndRefusesANewerOne) {
   ASSERT_NE(db, nullptr);
   EXPECT_EQ(db->SchemaVersion().value_or(-1), 0);
   ASSERT_TRUE(db->Migrate().ok());
-  EXPECT_EQ(db->SchemaVersion().value_or(-1), 1);
+  EXPECT_EQ(db->SchemaVersion().value_or(-1), 2);
 
-  // Newer: a later linecal migrated to version 2.
-  Sql("INSERT INTO schema_migrations (version) VALUES (2)");
+  // Newer: a later linecal migrated to version 3.
+  Sql("INSERT INTO schema_migrations (version) VALUES (3)");
   for (const absl::Status& s : {db->CheckSchema(), db->Migrate()}) {
     EXPECT_EQ(s.code(), absl::StatusCode::kFailedPrecondition);
-    EXPECT_NE(s.message().find("schema version 2 is newer than this linecal's 1"),
+    EXPECT_NE(s.message().find("schema version 3 is newer than this linecal's 2"),
               std::string::npos)
         << s;
     EXPECT_NE(s.message().find(absl::StrCat("127.0.0.1:", cluster_->port())), std::string::npos);
   }
   EXPECT_EQ(Sql("SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"),
-            "1,2");
+            "1,2,3");
 }
 
 TEST_F(PlantDbTest, ApplyBatchStoresEveryFieldAsGiven) {
@@ -172,6 +172,24 @@ TEST_F(PlantDbTest, ApplyBatchStoresEveryFieldAsGiven) {
             absl::StrCat("0 ", kPlantT0Ns + 123456789, " started aligner ok \n1 ",
                          sent.cycle.ended_ns, " cycle_ended yaw_bad fail"));
   EXPECT_EQ(Sql("SELECT started_at AT TIME ZONE 'UTC' FROM cycles"), "2026-11-02 08:00:00.123457");
+}
+
+// A version-1 database (one migrated and turned back: no board_results) with a cycle migrates
+// to 2; the old cycle reads without boards, a new one with them.
+TEST_F(PlantDbTest, MigratesSchemaOneToBoardResults) {
+  std::unique_ptr<PlantDb> db = Migrated();
+  ASSERT_NE(db, nullptr);
+  ASSERT_OK(db->ApplyBatch("eol-7", {Simple(1, "VIN1", kPlantT0Ns)}));
+  Sql("DROP TABLE board_results; DELETE FROM schema_migrations WHERE version = 2");
+  EXPECT_EQ(db->SchemaVersion().value_or(-1), 1);
+  ASSERT_OK(db->Migrate());
+  EXPECT_EQ(db->SchemaVersion().value_or(-1), 2);
+  ASSERT_OK(db->ApplyBatch("eol-7", {Simple(2, "VIN1", kPlantT0Ns + kHourNs)}));
+  const std::vector<PlantCycleRecord> got = db->CyclesByVin("VIN1").value();
+  ASSERT_EQ(got.size(), 2u);  // newest first
+  ASSERT_EQ(got[1].cycle.sensors.size(), 1u);
+  EXPECT_TRUE(got[1].cycle.sensors[0].boards.empty());
+  EXPECT_EQ(got[0].cycle.sensors.at(0).boards, Simple(2, "VIN1", 0).cycle.sensors[0].boards);
 }
 
 TEST_F(PlantDbTest, ReapplyingChangesNothing) {

@@ -98,6 +98,8 @@ StoredSensorResult CameraResult() {
   r.ground_homography = {1.5, 0.25, -3, 0.0625, 7, 11, 1e-3, 2e-5, 1};
   r.ranging_json = R"([{"true_m":5,"measured_m":5.01}])";
   r.elapsed_ns = 412000000;
+  // By board id, as the store reads them back; one seen whole and in part, one never seen.
+  r.boards = {{"bumper_lidar_left", 3, 2, 1, 0.1328125}, {"front_chessboard", 3, 0, 0, {}}};
   return r;
 }
 
@@ -533,10 +535,10 @@ TEST_F(StoreTest, OutboxSchemaOneMigratesWithoutQueueingOldCycles) {
     std::unique_ptr<Store> store = OpenOk();
     OutboxCycle(*store, 1, 2);
   }
-  RawQuery("DROP TABLE outbox; PRAGMA user_version = 1");
+  RawQuery("DROP TABLE outbox; DROP TABLE board_results; PRAGMA user_version = 1");
   ASSERT_EQ(RawQuery("SELECT COUNT(*) FROM sqlite_master WHERE name = 'outbox'"), "0");
   std::unique_ptr<Store> store = OpenOk(WithOutbox());
-  EXPECT_EQ(RawQuery("PRAGMA user_version"), "2");
+  EXPECT_EQ(RawQuery("PRAGMA user_version"), std::to_string(Store::kSchemaVersion));
   EXPECT_EQ(store->Backlog()->cycles, 0);
   const int64_t id = OutboxCycle(*store, 10, 20);
   const std::vector<OutboxEntry> queued = *store->ReadOutbox(10);
@@ -632,6 +634,83 @@ TEST_F(StoreTest, RecentSolvedResultsAreTheNewestDoneCyclesOldestFirst) {
   EXPECT_EQ((*rows)[1].residual_rms, 3.25);
   EXPECT_EQ(store->RecentSolvedResults(0).status().message(), "cycles = 0: must be in [1, 100000]");
   EXPECT_EQ(store->RecentSolvedResults(100001).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// Replacing a sensor's result replaces its boards: none left from the first.
+TEST_F(StoreTest, ReplacedSensorResultReplacesItsBoards) {
+  std::unique_ptr<Store> store = OpenOk();
+  absl::StatusOr<int64_t> id = store->BeginCycle(Request("WVWZZZ1JZXW000001", 1000));
+  ASSERT_TRUE(id.ok()) << id.status();
+  ASSERT_TRUE(store->PutSensorResult(*id, CameraResult()).ok());
+  StoredSensorResult again = CameraResult();
+  again.boards = {{"front_circle", 2, 2, 0, 0.0625}};
+  ASSERT_TRUE(store->PutSensorResult(*id, again).ok());
+  EXPECT_EQ(store->GetCycle(*id)->sensors.at(0), again);
+  EXPECT_EQ(RawQuery("SELECT COUNT(*) FROM board_results"), "1");
+}
+
+// A version-2 file (a new file turned back: no board_results) with a cycle opens, migrates
+// to 3, reads its old cycle without boards and stores the boards of new ones.
+TEST_F(StoreTest, SchemaTwoMigratesToBoardResults) {
+  int64_t old_id = 0;
+  {
+    std::unique_ptr<Store> store = OpenOk();
+    old_id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1000));
+    StoredSensorResult camera = CameraResult();
+    camera.boards.clear();
+    ASSERT_TRUE(store->PutSensorResult(old_id, camera).ok());
+    ASSERT_TRUE(store->EndCycle(old_id, CycleState::kDone, Verdict::kFail, "", 2000).ok());
+  }
+  RawQuery("DROP TABLE board_results; PRAGMA user_version = 2");
+  ASSERT_EQ(RawQuery("SELECT COUNT(*) FROM sqlite_master WHERE name = 'board_results'"), "0");
+  std::unique_ptr<Store> store = OpenOk();
+  EXPECT_EQ(RawQuery("PRAGMA user_version"), "3");
+  absl::StatusOr<StoredCycle> old = store->GetCycle(old_id);
+  ASSERT_TRUE(old.ok()) << old.status();
+  ASSERT_EQ(old->sensors.size(), 1u);
+  EXPECT_TRUE(old->sensors[0].boards.empty());
+  EXPECT_EQ(old->sensors[0].residual_rms, 0.187);
+  const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 3000));
+  ASSERT_TRUE(store->PutSensorResult(id, CameraResult()).ok());
+  EXPECT_EQ(store->GetCycle(id)->sensors.at(0).boards, CameraResult().boards);
+  EXPECT_TRUE(store->IntegrityCheck().ok());
+}
+
+// Board trends: every board of every sensor (solved or not) of the newest done cycles, oldest
+// first, by sensor and board, with whether the sensor was solved.
+TEST_F(StoreTest, RecentBoardResultsAreTheNewestDoneCyclesBoards) {
+  std::unique_ptr<Store> store = OpenOk();
+  std::vector<int64_t> ids;
+  for (int i = 0; i < 3; ++i) {
+    const int64_t id = *store->BeginCycle(Request("WVWZZZ1JZXW000001", 1000 + i));
+    ids.push_back(id);
+    StoredSensorResult camera = CameraResult();
+    camera.boards[0].residual_rms = 0.5 + i;
+    ASSERT_TRUE(store->PutSensorResult(id, camera).ok());
+    StoredSensorResult lidar;
+    lidar.sensor = "bumper_lidar";
+    lidar.kind = SensorKind::kLidar;
+    lidar.verdict = Verdict::kError;
+    lidar.boards = {{"bumper_lidar_left", 10, 0, 0, {}}};
+    ASSERT_TRUE(store->PutSensorResult(id, lidar).ok());
+    const CycleState state = i == 1 ? CycleState::kCancelled : CycleState::kDone;
+    ASSERT_TRUE(store->EndCycle(id, state, Verdict::kFail, "", 5000 + i).ok());
+  }
+  absl::StatusOr<std::vector<BoardTrendRow>> rows = store->RecentBoardResults(1);
+  ASSERT_TRUE(rows.ok()) << rows.status();
+  ASSERT_EQ(rows->size(), 3u);  // the newest done cycle (3): the LiDAR's board, the camera's two
+  EXPECT_EQ((*rows)[0].cycle_id, ids[2]);
+  EXPECT_EQ((*rows)[0].started_ns, 1002);
+  EXPECT_EQ((*rows)[0].car_model_id, "reference");
+  EXPECT_EQ((*rows)[0].sensor, "bumper_lidar");
+  EXPECT_FALSE((*rows)[0].solved);
+  EXPECT_EQ((*rows)[0].board, (StoredBoardResult{"bumper_lidar_left", 10, 0, 0, {}}));
+  EXPECT_EQ((*rows)[1].sensor, "front_camera");
+  EXPECT_TRUE((*rows)[1].solved);
+  EXPECT_EQ((*rows)[1].board, (StoredBoardResult{"bumper_lidar_left", 3, 2, 1, 2.5}));
+  EXPECT_EQ((*rows)[2].board.board, "front_chessboard");
+  EXPECT_EQ(store->RecentBoardResults(2)->front().cycle_id, ids[0]);
+  EXPECT_EQ(store->RecentBoardResults(0).status().message(), "cycles = 0: must be in [1, 100000]");
 }
 
 }  // namespace

@@ -117,13 +117,17 @@ def check_cycles_list(driver, url, address, cli, shots):
 
 
 def add_cycles(db, count):
-    """Appends `count` done cycles whose sensor results are copies of the stored ones, in turn."""
+    """Appends `count` done cycles whose sensor and board results are copies of the stored ones, in
+    turn."""
     con = sqlite3.connect(db)
     cycles = con.execute("SELECT vin, car_model_id, started_ns, request_json FROM cycles ORDER BY id").fetchall()
     results = {}
     columns = [r[1] for r in con.execute("PRAGMA table_info(sensor_results)")]
     for row in con.execute("SELECT * FROM sensor_results ORDER BY cycle_id"):
         results.setdefault(row[0], []).append(row)
+    boards = {}
+    for row in con.execute("SELECT * FROM board_results ORDER BY cycle_id"):
+        boards.setdefault(row[0], []).append(row)
     source_ids = sorted(results)
     next_id = con.execute("SELECT max(id) FROM cycles").fetchone()[0] + 1
     started = cycles[-1][2]
@@ -137,6 +141,8 @@ def add_cycles(db, count):
                         (next_id + k, vin, model, started, started + 5_000_000_000, request))
             for row in results[source_ids[k % len(source_ids)]]:
                 con.execute(f"INSERT INTO sensor_results VALUES ({marks})", (next_id + k, *row[1:]))
+            for row in boards.get(source_ids[k % len(source_ids)], []):
+                con.execute("INSERT INTO board_results VALUES (?, ?, ?, ?, ?, ?, ?)", (next_id + k, *row[1:]))
     con.close()
 
 

@@ -136,6 +136,37 @@ TEST_F(CameraCalibrationTest, FrontCameraIsRecoveredWithinItsSigmaAndPasses) {
   }
 }
 
+// Each board's own reprojection RMS, in first-observed order: the pooled residual is their
+// feature-weighted RMS, and a board whose features are 3 px off (a moved board) stands out in
+// its own residual, above the pooled one and at least twice any other board's.
+TEST_F(CameraCalibrationTest, BoardResidualsPoolAndShowAMovedBoard) {
+  const SensorModel& s = *car_.FindSensor("front_camera");
+  const Rigid3d truth = TrueMounting(s, {0.1 * kDeg, 0, 0}, Eigen::Vector3d::Zero());
+  std::mt19937_64 rng(22);
+  std::vector<BoardObservation> obs = Observe(s, truth, 0.2, rng);
+  ASSERT_GE(obs.size(), 3u);
+  for (DetectedFeature& f : obs[1].features) f.uv_px.x() += 3.0;
+  absl::StatusOr<CameraCalibrationResult> r =
+      CalibrateCamera(s, station_, aligner_.T_station_car(), obs);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_TRUE(r->solved);
+  ASSERT_EQ(r->board_residuals.size(), obs.size());
+  double sum_sq = 0;
+  int n = 0;
+  for (size_t i = 0; i < obs.size(); ++i) {
+    const BoardResidual& b = r->board_residuals[i];
+    EXPECT_EQ(b.board_id, obs[i].board_id);
+    EXPECT_EQ(b.features, static_cast<int>(obs[i].features.size()));
+    sum_sq += b.features * b.rms * b.rms;
+    n += b.features;
+    if (i != 1) {
+      EXPECT_LT(2 * b.rms, r->board_residuals[1].rms) << b.board_id;
+    }
+  }
+  EXPECT_NEAR(r->residual_rms_px, std::sqrt(sum_sq / n), 1e-6);
+  EXPECT_GT(r->board_residuals[1].rms, r->residual_rms_px);
+}
+
 // Monte Carlo over fresh noise: the reported 1-sigma of yaw, pitch, roll and x, y, z in the
 // car frame (propagated from the PnP covariance through the inverse pose and the mounting
 // angles) against the spread of 200 solves: within +-20% (docs/acceptance.md).

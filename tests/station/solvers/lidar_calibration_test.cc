@@ -102,6 +102,31 @@ TEST_F(LidarCalibrationTest, BothLidarsRecoveredWithinSigma) {
   }
 }
 
+// Each board's own hole-centre RMS, in observation order: the pooled residual is their
+// feature-weighted RMS, and centres with 1 µm of noise fit to about that.
+TEST_F(LidarCalibrationTest, BoardResidualsPoolToTheSensorsResidual) {
+  const SensorModel& s = *car_.FindSensor("bumper_lidar");
+  std::mt19937_64 rng(5);
+  const Rigid3d truth = TrueMounting(s, {0.1 * kDeg, 0, 0}, Eigen::Vector3d(0.005, 0, 0));
+  absl::StatusOr<LidarCalibrationResult> r = CalibrateLidar(
+      s, station_, aligner_.T_station_car(), Observe(s, truth, 0.005, 0.1 * kDeg, rng));
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_EQ(r->board_residuals.size(), 2u);
+  EXPECT_EQ(r->board_residuals[0].board_id, "bumper_lidar_left");
+  EXPECT_EQ(r->board_residuals[1].board_id, "bumper_lidar_right");
+  double sum_sq = 0;
+  for (const BoardResidual& b : r->board_residuals) {
+    EXPECT_EQ(b.features, 5);
+    EXPECT_GT(b.rms, 0.001);
+    sum_sq += b.features * b.rms * b.rms;
+  }
+  EXPECT_NEAR(r->residual_rms_m, std::sqrt(sum_sq / 10), 1e-12);
+  absl::StatusOr<LidarCalibrationResult> exact =
+      CalibrateLidar(s, station_, aligner_.T_station_car(), Observe(s, truth, 1e-6, 1e-6, rng));
+  ASSERT_TRUE(exact.ok()) << exact.status();
+  for (const BoardResidual& b : exact->board_residuals) EXPECT_LT(b.rms, 1e-5) << b.board_id;
+}
+
 // The reported sigma against 300 solves with fresh noise (docs/acceptance.md: within ±20%).
 TEST_F(LidarCalibrationTest, SigmaMatchesTheMonteCarloSpread) {
   const SensorModel& s = *car_.FindSensor("roof_lidar");
