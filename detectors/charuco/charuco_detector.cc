@@ -452,6 +452,46 @@ bool CornerPaintAgrees(const ImageView8& image, const Eigen::Matrix3d& H,
   return darkest_white - lightest_black >= 0.5 * min_contrast;
 }
 
+// The homography (board metres to pixels) of the corners found among the 5 x 5 inner corners
+// centred on inner corner (r, c) (`found`: by id, nullopt where not found), when they are at
+// least four and span two rows and two columns; nullopt otherwise. Refined chessboard
+// corners place their neighbour better than the markers' edges do where those were not read
+// or their fit failed (the board's own corner squares: markers on two sides only). O(25).
+std::optional<Eigen::Matrix3d> FoundCornersHomography(
+    const std::vector<std::optional<DetectedFeature>>& found, const BoardParams& p, int r, int c) {
+  std::vector<Eigen::Vector2d> src;
+  std::vector<Eigen::Vector2d> dst;
+  int rows_seen = 0;
+  int cols_seen = 0;
+  for (int dr = -2; dr <= 2; ++dr) {
+    bool row = false;
+    for (int dc = -2; dc <= 2; ++dc) {
+      const int rr = r + dr, cc = c + dc;
+      if (rr < 1 || rr >= p.rows || cc < 1 || cc >= p.cols) continue;
+      const std::optional<DetectedFeature>& f = found[(p.cols - 1) * (rr - 1) + (cc - 1)];
+      if (!f) continue;
+      src.push_back(f->p_board);
+      dst.push_back(f->uv_px);
+      row = true;
+    }
+    rows_seen += row ? 1 : 0;
+  }
+  for (int dc = -2; dc <= 2; ++dc) {
+    for (int dr = -2; dr <= 2; ++dr) {
+      const int rr = r + dr, cc = c + dc;
+      if (rr < 1 || rr >= p.rows || cc < 1 || cc >= p.cols) continue;
+      if (found[(p.cols - 1) * (rr - 1) + (cc - 1)]) {
+        ++cols_seen;
+        break;
+      }
+    }
+  }
+  if (src.size() < 4 || rows_seen < 2 || cols_seen < 2) return std::nullopt;
+  const std::optional<HomographyFit> fit = FitHomography(src, dst);
+  if (!fit) return std::nullopt;
+  return fit->H;
+}
+
 }  // namespace
 
 std::string_view CharucoOptions::Validate() const {
@@ -462,6 +502,48 @@ std::string_view CharucoOptions::Validate() const {
 }
 
 namespace {
+
+// The inner corners not found from the markers, looked for as a chessboard's: each predicted
+// by the homography of the corners found around it (FoundCornersHomography), refined by the
+// saddle fit in the white margin as the others, and kept when the paint around it agrees;
+// repeated while corners are added. The ids stay those the markers gave the grid. Adds to
+// detection->features, ordered by id. O(passes * corners * (25 + saddle fit)).
+void FindCornersFromNeighbours(const ImageView8& image, const Board& board,
+                               const CharucoGeometry& g, const CharucoOptions& options,
+                               double margin_m, int min_contrast, Detection* detection) {
+  const BoardParams& p = board.params();
+  const int count = static_cast<int>(board.features().size());
+  std::vector<std::optional<DetectedFeature>> found(count);
+  for (const DetectedFeature& f : detection->features) found[f.id] = f;
+  for (bool added = !detection->features.empty(); added;) {
+    added = false;
+    for (int id = 0; id < count; ++id) {
+      if (found[id]) continue;
+      const int r = id / (p.cols - 1) + 1, c = id % (p.cols - 1) + 1;
+      const std::optional<Eigen::Matrix3d> H = FoundCornersHomography(found, p, r, c);
+      if (!H) continue;
+      const BoardFeature& feature = board.features()[id];
+      const Eigen::Vector2d predicted = ApplyHomography(*H, feature.p_board);
+      const double reach_px = std::min(InscribedRadiusPx(*H, feature.p_board, margin_m),
+                                       BorderRoomPx(image, predicted, options.blur_sigma_px));
+      if (!std::isfinite(reach_px)) continue;
+      const std::optional<Eigen::Vector2d> refined =
+          RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
+      if (!refined) continue;
+      const bool dark_first = !CharucoSquareHasMarker(p, r - 1, c - 1);
+      if (!CornerPaintAgrees(image, *H, feature.p_board, g.square_m, margin_m, dark_first,
+                             min_contrast)) {
+        continue;
+      }
+      found[id] = DetectedFeature{id, *refined, feature.p_board, feature.marker};
+      added = true;
+    }
+  }
+  detection->features.clear();
+  for (const std::optional<DetectedFeature>& f : found) {
+    if (f) detection->features.push_back(*f);
+  }
+}
 
 // DetectCharuco on a view already checked.
 Detection DetectOnce(const ImageView8& image, const Board& board, const CharucoOptions& options) {
@@ -525,6 +607,7 @@ Detection DetectOnce(const ImageView8& image, const Board& board, const CharucoO
       detection.features.push_back({id, *refined, feature.p_board, feature.marker});
     }
   }
+  FindCornersFromNeighbours(image, board, g, options, margin_m, scan.min_contrast, &detection);
   if (detection.features.empty()) {
     detection.reason = DetectReason::kTooFewFeatures;
     return detection;

@@ -21,7 +21,11 @@
 // the markers), the corner is the prediction of the markers of the 4 x 4 squares around it when
 // that is an interpolation that holds: markers on every side of it, one homography through
 // all their corners within MarkerDetectOptions::max_residual_cells, and the paint check.
-// Markers the scan missed are read where the kept markers around them put them. A partial
+// Markers the scan missed are read where the kept markers around them put them. Corners still
+// missing are then looked for as a chessboard's: predicted by the homography of the corners
+// found around them (at least four over two rows and two columns of the 5 x 5 about it),
+// refined and checked as above, repeated while corners are added; the ids stay those the
+// markers gave. A partial
 // board whose marker cells are under 4 px (the scan's design size) is looked for again on its
 // part of the image at twice the resolution, and the result with more corners is returned.
 

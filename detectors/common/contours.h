@@ -86,7 +86,9 @@ struct QuadOptions {
   // longest edges, when the others are short and the polygon fills the quad
   // (kMinQuadAreaFraction). Blur and a gamma round a small square's corners into chamfers
   // of two vertices each; a disc, a hexagon or a pentagon fills under 0.8 of such a quad.
-  // [4, 8].
+  // When that leaves more than four (both ends of a small square's side rounded into arcs,
+  // on which the vertices fall anywhere), the largest quad inscribed in the contour, when it
+  // and the contour each hold kMinQuadAreaFraction of the other's area. [4, 8].
   int max_polygon_vertices = 4;
 };
 

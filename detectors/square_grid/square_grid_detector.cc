@@ -1,5 +1,6 @@
 #include "detectors/square_grid/square_grid_detector.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -327,8 +328,9 @@ bool ForEachGapLine(const Window& win, Fn&& fn) {
 // line: perspective and a lens's bending over one pitch drop out (a fisheye bends the board's
 // corner squares by over half a side against a quadratic through 3 x 3 squares), while a
 // square that is not the grid's is off by a good part of a side. Each within max(1 px,
-// fraction x the two squares' mean side). The squares' dilation (below) changes r; it is
-// left in: a few percent of a side.
+// fraction x the two squares' mean side). The window's corners must have the squares'
+// dilation taken out (below): it changes r by the same amount along every line, 3-4 px of a
+// 15 px square's gap under blur 1.5 and a gamma, as much as the tolerance.
 bool LocallyConsistent(const Window& win, double gap_ratio, double fraction) {
   return ForEachGapLine(win, [&](const Eigen::Vector2d& p0, const Eigen::Vector2d& p1,
                                  const Eigen::Vector2d& p2, const Eigen::Vector2d& p3) {
@@ -338,20 +340,6 @@ bool LocallyConsistent(const Window& win, double gap_ratio, double fraction) {
   });
 }
 
-// Two neighbouring squares at grid points a and b (4-neighbours) as a window of their own,
-// LocallyConsistent.
-bool PairConsistent(const std::vector<Square>& squares, const GridSquare& a,
-                    std::pair<int, int> at_a, const GridSquare& b, std::pair<int, int> at_b,
-                    double gap_ratio, double fraction) {
-  const bool b_first = at_b < at_a;
-  Window pair;
-  pair.w = at_a.first == at_b.first ? 1 : 2;
-  pair.h = 3 - pair.w;
-  pair.squares = b_first ? std::vector<GridSquare>{b, a} : std::vector<GridSquare>{a, b};
-  for (const GridSquare& gs : pair.squares) pair.geometry.push_back(&squares[gs.square]);
-  return LocallyConsistent(pair, gap_ratio, fraction);
-}
-
 // Corners located on edges carry one bias that the geometry cannot show square by square: a
 // gamma applied after the optics' blur (and ink spread) moves every dark-to-light edge out or
 // in by the same amount, so every square grows or shrinks about its centre while the pitch
@@ -359,30 +347,79 @@ bool PairConsistent(const std::vector<Square>& squares, const GridSquare& a,
 // its side, r, measures it: seen as q (the gaps' length over the squares' along every line
 // of the lattice), the squares have grown by d sides at each edge with q = (r - 2d) / (1 + 2d).
 // Returns d / (1 + 2d): the fraction of a seen side by which each corner lies outwards along
-// both sides of its square.
-double DilationFraction(const Window& win, double gap_ratio) {
+// both sides of its square; *d_px: d in pixels of the window's mean side.
+double DilationFraction(const Window& win, double gap_ratio, double* d_px) {
   double gaps = 0.0, sides = 0.0;
+  int lines = 0;
   ForEachGapLine(win, [&](const Eigen::Vector2d& p0, const Eigen::Vector2d& p1,
                           const Eigen::Vector2d& p2, const Eigen::Vector2d& p3) {
     gaps += (p2 - p1).norm();
     sides += 0.5 * ((p1 - p0).norm() + (p3 - p2).norm());
+    ++lines;
     return true;
   });
   const double q = gaps / sides;
   const double d = (gap_ratio - q) / (2.0 * (1.0 + q));
+  *d_px = d * sides / lines;
   return d / (1.0 + 2.0 * d);
 }
 
-// Lattice point (x, y) with its square's dilation taken out: moved inwards along both sides
-// of its square by `fraction` of the square's mean side vectors.
-Eigen::Vector2d UndilatedCorner(const Window& win, int x, int y, double fraction) {
-  const int i0 = x - x % 2, j0 = y - y % 2;
-  const Eigen::Vector2d across = 0.5 * (win.Corner(i0 + 1, j0) - win.Corner(i0, j0) +
-                                        win.Corner(i0 + 1, j0 + 1) - win.Corner(i0, j0 + 1));
-  const Eigen::Vector2d down = 0.5 * (win.Corner(i0, j0 + 1) - win.Corner(i0, j0) +
-                                      win.Corner(i0 + 1, j0 + 1) - win.Corner(i0 + 1, j0));
-  const double su = x % 2 == 0 ? 1.0 : -1.0, sv = y % 2 == 0 ? 1.0 : -1.0;
-  return win.Corner(x, y) + fraction * (su * across + sv * down);
+// The largest dilation taken out, pixels: the edge shift of a gamma after the optics' blur is
+// about a third of the blur's sigma (0.5-0.9 px at blur 1.5 and gamma 0.6 or 1.6, measured on
+// the hard renders of detectors_eval); a print whose gap over its side differs from the
+// board's seems dilated by a share of every side (a gap of 0.8 side for 1.0: 8% of it), which
+// this bounds on squares over 25 px.
+constexpr double kMaxDilationPx = 2.0;
+
+// Square `s` with its dilation taken out: each corner moved inwards along both sides of the
+// square by `fraction` of its mean side vectors (DilationFraction); nullopt when the corners
+// give no homography.
+std::optional<Square> Undilated(const Square& s, double fraction) {
+  const std::array<Eigen::Vector2d, 4>& c = s.corners;
+  const Eigen::Vector2d across = 0.5 * (c[1] - c[0] + c[2] - c[3]);
+  const Eigen::Vector2d down = 0.5 * (c[3] - c[0] + c[2] - c[1]);
+  return MakeSquare({c[0] + fraction * (across + down), c[1] + fraction * (down - across),
+                     c[2] - fraction * (across + down), c[3] + fraction * (across - down)});
+}
+
+// The squares of `win` with the dilation `fraction` taken out (Undilated), and the window on
+// them; nullopt when a square gives no homography.
+struct UndilatedWindow {
+  std::vector<Square> squares;
+  Window win;  // on `squares`: moved (the vector keeps its storage), never copied
+
+  UndilatedWindow() = default;
+  UndilatedWindow(UndilatedWindow&&) = default;
+  UndilatedWindow(const UndilatedWindow&) = delete;
+};
+std::optional<UndilatedWindow> UndilatedWindowOf(const Window& win, double fraction) {
+  UndilatedWindow out;
+  out.squares.reserve(win.geometry.size());
+  for (const Square* s : win.geometry) {
+    std::optional<Square> u = Undilated(*s, fraction);
+    if (!u) return std::nullopt;
+    out.squares.push_back(*u);
+  }
+  out.win.w = win.w;
+  out.win.h = win.h;
+  out.win.squares = win.squares;
+  for (const Square& s : out.squares) out.win.geometry.push_back(&s);
+  return std::optional<UndilatedWindow>(std::move(out));
+}
+
+// Two neighbouring squares at grid points a and b (4-neighbours) as a window of their own,
+// their dilation `dilation` taken out (DilationFraction), LocallyConsistent.
+bool PairConsistent(const std::vector<Square>& squares, const GridSquare& a,
+                    std::pair<int, int> at_a, const GridSquare& b, std::pair<int, int> at_b,
+                    double gap_ratio, double fraction, double dilation) {
+  const bool b_first = at_b < at_a;
+  Window pair;
+  pair.w = at_a.first == at_b.first ? 1 : 2;
+  pair.h = 3 - pair.w;
+  pair.squares = b_first ? std::vector<GridSquare>{b, a} : std::vector<GridSquare>{a, b};
+  for (const GridSquare& gs : pair.squares) pair.geometry.push_back(&squares[gs.square]);
+  const std::optional<UndilatedWindow> undilated = UndilatedWindowOf(pair, dilation);
+  return undilated && LocallyConsistent(undilated->win, gap_ratio, fraction);
 }
 
 // The mean grey at uv and at four points spread_px away along the image axes (noise
@@ -399,10 +436,51 @@ std::optional<double> MeanGrey(const ImageView8& image, const Eigen::Vector2d& u
   return sum / 5.0;
 }
 
-// The paint of the window: every gap between neighbouring squares and every crossing of gaps
-// lighter than the mean of the squares around it by at least half the board's contrast (the
-// median light sample minus the median square) and by min_contrast. A chessboard prints a
-// black square at every crossing; an AprilGrid, a corner square.
+// The light level of the gaps where the window lies: a plane through the grey levels of the
+// gaps' centres (`points`: position, grey), which takes out the light's gradient across the
+// board (a 4:1 gradient leaves the dim end's gaps at half the median gap's grey); the mean
+// grey where the points give no plane (a single row). `points` not empty.
+struct LightPlane {
+  Eigen::Vector3d coefficients = Eigen::Vector3d::Zero();  // grey = c0 + c1 du + c2 dv
+  Eigen::Vector2d origin = Eigen::Vector2d::Zero();        // the points' mean position
+
+  double At(const Eigen::Vector2d& uv) const {
+    const Eigen::Vector2d d = uv - origin;
+    return coefficients(0) + coefficients(1) * d.x() + coefficients(2) * d.y();
+  }
+};
+LightPlane FitLightPlane(const std::vector<std::pair<Eigen::Vector2d, double>>& points) {
+  LightPlane plane;
+  double mean_grey = 0.0;
+  for (const auto& point : points) {
+    plane.origin += point.first;
+    mean_grey += point.second;
+  }
+  plane.origin /= static_cast<double>(points.size());
+  mean_grey /= static_cast<double>(points.size());
+  Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  for (const auto& point : points) {
+    const Eigen::Vector2d d = point.first - plane.origin;
+    const Eigen::Vector3d row(1.0, d.x(), d.y());
+    normal += row * row.transpose();
+    rhs += point.second * row;
+  }
+  const Eigen::FullPivLU<Eigen::Matrix3d> lu(normal);
+  if (lu.rank() == 3) {
+    plane.coefficients = lu.solve(rhs);
+  } else {
+    plane.coefficients(0) = mean_grey;
+  }
+  return plane;
+}
+
+// The paint of the window: the board's contrast (the median light sample minus the median
+// square) at least min_contrast, and every gap between neighbouring squares and every
+// crossing of gaps lighter than the mean of the squares around it by at least min_contrast
+// and half the local contrast: the gaps' light level there (FitLightPlane) minus those
+// squares. A chessboard prints a black square at every crossing; an AprilGrid, a corner
+// square.
 bool PaintAgrees(const ImageView8& image, const Window& win, int min_contrast) {
   std::vector<double> dark(win.w * win.h);
   for (int j = 0; j < win.h; ++j) {
@@ -416,10 +494,12 @@ bool PaintAgrees(const ImageView8& image, const Window& win, int min_contrast) {
   // Light points: the centre of the inner corners between the squares (i, j) .. (i + di,
   // j + dj), with the squares around it.
   struct Light {
+    Eigen::Vector2d centre;
     double value;
     double around;
   };
   std::vector<Light> light;
+  std::vector<std::pair<Eigen::Vector2d, double>> gaps;
   for (int j = 0; j < win.h; ++j) {
     for (int i = 0; i < win.w; ++i) {
       for (const auto& [di, dj] : {std::pair{1, 0}, {0, 1}, {1, 1}}) {
@@ -443,7 +523,8 @@ bool PaintAgrees(const ImageView8& image, const Window& win, int min_contrast) {
         const int squares_around = (di + 1) * (dj + 1);
         const std::optional<double> v = MeanGrey(image, centre, 0.1 * side / squares_around);
         if (!v) return false;
-        light.push_back({*v, around / squares_around});
+        light.push_back({centre, *v, around / squares_around});
+        if (di + dj == 1) gaps.emplace_back(centre, *v);
       }
     }
   }
@@ -455,9 +536,11 @@ bool PaintAgrees(const ImageView8& image, const Window& win, int min_contrast) {
   };
   const double contrast = median(light_values) - median(dark);
   if (!(contrast >= min_contrast)) return false;
-  const double min_step = std::max<double>(min_contrast, 0.5 * contrast);
-  return std::all_of(light.begin(), light.end(),
-                     [&](const Light& l) { return l.value - l.around >= min_step; });
+  const LightPlane plane = FitLightPlane(gaps);
+  return std::all_of(light.begin(), light.end(), [&](const Light& l) {
+    return l.value - l.around >=
+           std::max<double>(min_contrast, 0.5 * (plane.At(l.centre) - l.around));
+  });
 }
 
 // A verified window in one of its orientations: feature id and image position.
@@ -466,12 +549,11 @@ struct Hypothesis {
   double x_axis_u = 0.0;  // image u component of the board's +x direction at the centre
 };
 
-// The rotations of a verified window onto the board's corner lattice (C, R), the most upright
-// (header), its corners with the squares' dilation taken out; nullopt when none fits cols x rows.
+// The rotations of a verified window (its squares' dilation taken out) onto the board's
+// corner lattice (C, R), the most upright (header); nullopt when none fits cols x rows.
 // Rotation k of the lattice point (x, y) of a 2w x 2h lattice: 0: (x, y); 1: (y, 2w-1-x); 2:
 // (2w-1-x, 2h-1-y); 3: (2h-1-y, x).
-std::optional<Hypothesis> Orient(const Window& win, int cols, int rows, double gap_ratio) {
-  const double dilation = DilationFraction(win, gap_ratio);
+std::optional<Hypothesis> Orient(const Window& win, int cols, int rows) {
   const int ci = std::min((win.w - 1) / 2, win.w - 2), cj = std::min((win.h - 1) / 2, win.h - 2);
   const Eigen::Vector2d step_i = win.At(ci + 1, cj).centre - win.At(ci, cj).centre;
   const Eigen::Vector2d step_j = win.At(ci, cj + 1).centre - win.At(ci, cj).centre;
@@ -506,7 +588,7 @@ std::optional<Hypothesis> Orient(const Window& win, int cols, int rows, double g
             r = x;
             break;
         }
-        hyp.id_uv.emplace_back(2 * cols * r + c, UndilatedCorner(win, x, y, dilation));
+        hyp.id_uv.emplace_back(2 * cols * r + c, win.Corner(x, y));
       }
     }
     best = std::move(hyp);
@@ -550,7 +632,14 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
           }
         }
         if (static_cast<int>(win.squares.size()) != w * h) continue;
-        if (!LocallyConsistent(win, pitch_ratio - 1.0, options.max_residual_side_fraction) ||
+        double dilation_px = 0.0;
+        const double dilation = DilationFraction(win, pitch_ratio - 1.0, &dilation_px);
+        const std::optional<UndilatedWindow> undilated = std::abs(dilation_px) <= kMaxDilationPx
+                                                             ? UndilatedWindowOf(win, dilation)
+                                                             : std::nullopt;
+        if (!undilated ||
+            !LocallyConsistent(undilated->win, pitch_ratio - 1.0,
+                               options.max_residual_side_fraction) ||
             !PaintAgrees(image, win, min_contrast)) {
           search->refusal = DetectReason::kVerificationFailed;
           continue;
@@ -573,13 +662,13 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
           else
             return false;
           return PairConsistent(squares, group.at(inside), inside, entry.second, entry.first,
-                                pitch_ratio - 1.0, options.max_residual_side_fraction);
+                                pitch_ratio - 1.0, options.max_residual_side_fraction, dilation);
         });
         if (continues) {
           search->refusal = DetectReason::kWrongBoard;
           continue;
         }
-        std::optional<Hypothesis> hyp = Orient(win, cols, rows, pitch_ratio - 1.0);
+        std::optional<Hypothesis> hyp = Orient(undilated->win, cols, rows);
         if (!hyp) continue;
         std::vector<int> ids;
         for (const GridSquare& gs : win.squares) ids.push_back(gs.square);

@@ -165,6 +165,43 @@ TEST(ContoursTest, ChamferedSquareIsAQuadOnlyWhenMoreVerticesAreAllowed) {
   }
 }
 
+// A w x h rectangle at (x0, y0) whose corners are arcs of radius r, clockwise in the image.
+std::vector<Eigen::Vector2d> RoundedRectangle(double x0, double y0, double w, double h, double r) {
+  const std::vector<Eigen::Vector2d> centres = {
+      {x0 + w - r, y0 + r}, {x0 + w - r, y0 + h - r}, {x0 + r, y0 + h - r}, {x0 + r, y0 + r}};
+  std::vector<Eigen::Vector2d> out;
+  for (int k = 0; k < 4; ++k) {
+    for (int i = 0; i <= 6; ++i) {
+      const double t = (-0.5 + 0.5 * k + i / 12.0) * std::numbers::pi;
+      out.push_back(centres[k] + r * Eigen::Vector2d(std::cos(t), std::sin(t)));
+    }
+  }
+  return out;
+}
+
+TEST(ContoursTest, SquareWhoseShortSidesAreArcsIsAQuad) {
+  Image8 img = Blank(60, 60);
+  // Blur under a gamma rounds a small square's corners until its short sides are mostly arc
+  // (squares of the square grid 26 x 13 px seen at pitch 50 degrees): the polygon's vertices
+  // fall on the arcs, and no four of its edges are the sides.
+  FillConvex(&img, RoundedRectangle(10, 20, 26, 13, 4.0));
+  const ComponentLabels labels = LabelComponents(img.view());
+  ASSERT_EQ(labels.components.size(), 1u);
+  EXPECT_TRUE(FindQuads(labels).empty());
+  QuadOptions options;
+  options.max_polygon_vertices = 8;
+  const std::vector<Quad> quads = FindQuads(labels, options);
+  ASSERT_EQ(quads.size(), 1u);
+  // Each corner lies on its arc: within the arc's radius (4 px) and the contour's half pixel
+  // of the rectangle's corner, where the square grid's line fits take it.
+  const std::vector<Eigen::Vector2d> corners = {{10, 20}, {36, 20}, {36, 33}, {10, 33}};
+  for (const Eigen::Vector2d& c : corners) {
+    double best = 1e9;
+    for (const Eigen::Vector2d& q : quads[0].corners_px) best = std::min(best, (q - c).norm());
+    EXPECT_LT(best, 4.5);
+  }
+}
+
 TEST(ContoursTest, QuadsTouchingTheBorderAreDropped) {
   Image8 img = Blank(60, 60);
   FillRect(&img, 0, 10, 30, 40);
