@@ -73,9 +73,6 @@ constexpr double kEdgeFloorVarM2 = 1e-7;
 // An edge whose ring runs along its boundary this closely (the step seen through the
 // boundary's normal, metres) cannot say where along the ring the boundary is.
 constexpr double kMinAlongM = 1e-6;
-// Two frames of one ring fired at the same azimuths when their phases (azimuth over the step,
-// modulo 1) differ by less than this.
-constexpr double kSamePhase = 0.05;
 // Convergence of both fits: updates below 1e-7 (relative, m or rad) change nothing measurable.
 constexpr double kConvergence = 1e-7;
 
@@ -270,11 +267,16 @@ PlaneFit FitPlane(const std::vector<RoiPoint>& points, const Eigen::Vector3d& n0
   return fit;
 }
 
-// How many frames share each frame's azimuth quantisation, per ring: the ring's frames
-// clustered by their azimuth phase (circularly, kSamePhase apart); frames / clusters, the
-// median over the rings. 1 when every frame fired at its own azimuths (a free-running
-// sensor), the number of frames when all fired at the same (a phase-locked one, the
-// simulator).
+// How many frames' worth of independent errors each frame's azimuth quantisation counts for,
+// per ring: an edge's error is a sawtooth of where its boundary falls on the ring's firing
+// grid, so the same boundary in two frames whose grids lie a phase difference d (in steps)
+// apart has errors correlated by rho(d) = 1 - 6 frac(d) (1 - frac(d)) (1 at d = 0, 0 on
+// average over a uniform d, -1/2 at half a step). The variance of the frames' mean is the
+// single frame's times (1 / N^2) sum over frame pairs of rho; the fit's covariance already
+// divides by N, so this returns (1 / N) sum rho, the median over the rings: N when all
+// frames fired at the same azimuths (a phase-locked sensor), about 1 for a free-running one.
+// Clustering the phases (0.05 of a step apart) instead counted a free-running motor's close
+// but distinct phases as repeats, and its sigma came out up to 1.6 times too large.
 double FrameRepeats(const std::vector<int>& group_ring, const std::vector<int>& group_frame,
                     const std::vector<double>& group_phase) {
   std::map<int, std::map<int, double>> phases;  // ring -> frame -> phase
@@ -283,12 +285,18 @@ double FrameRepeats(const std::vector<int>& group_ring, const std::vector<int>& 
   }
   std::vector<double> repeats;
   for (const auto& [ring, by_frame] : phases) {
-    std::vector<double> p;
-    for (const auto& [frame, phase] : by_frame) p.push_back(phase);
-    std::sort(p.begin(), p.end());
-    int clusters = p.back() - p.front() > 1.0 - kSamePhase ? 0 : 1;  // the wrap-around gap
-    for (std::size_t i = 1; i < p.size(); ++i) clusters += p[i] - p[i - 1] > kSamePhase ? 1 : 0;
-    repeats.push_back(static_cast<double>(p.size()) / std::max(clusters, 1));
+    double sum = 0.0;
+    for (const auto& [frame_a, phase_a] : by_frame) {
+      for (const auto& [frame_b, phase_b] : by_frame) {
+        const double d = phase_a - phase_b;
+        const double frac = d - std::floor(d);
+        sum += 1.0 - 6.0 * frac * (1.0 - frac);
+      }
+    }
+    // The sum is never negative (rho is a covariance); grids spread evenly over the step
+    // (N of them) bring it down to 1 / N, the least it can be.
+    const double n = static_cast<double>(by_frame.size());
+    repeats.push_back(std::max(sum / n, 1.0 / n));
   }
   return repeats.empty() ? 1.0 : Median(repeats);
 }

@@ -1,5 +1,6 @@
 #include "station/sim/lidar_sim.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -146,6 +147,20 @@ class Scene {
   std::vector<SurfaceTarget> surfaces_;
 };
 
+// Every rotation's azimuth phase in whole centidegrees within one step: 0 unless
+// `free_running`, else uniform from a generator of its own, so that the default draws of the
+// range noise (and every existing output) stay as they were.
+std::vector<int> RotationPhasesCentideg(int rotations, int step, bool free_running,
+                                        std::uint64_t seed) {
+  std::vector<int> phases(rotations, 0);
+  if (!free_running) return phases;
+  constexpr std::uint64_t kPhaseStream = 0x9e3779b97f4a7c15ULL;
+  std::mt19937_64 rng(seed ^ kPhaseStream);
+  std::uniform_int_distribution<int> phase(0, step - 1);
+  for (int& p : phases) p = phase(rng);
+  return phases;
+}
+
 }  // namespace
 
 absl::Status LidarSimOptions::Validate() const {
@@ -215,16 +230,24 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams,
   }
   const int total_columns = options.rotations * columns_per_rotation + 2 * lead;
   result.columns.resize(total_columns);
+  const std::vector<int> phases =
+      RotationPhasesCentideg(options.rotations, step, options.free_running, seed);
   for (int k = 0; k < total_columns; ++k) {
-    // Column index relative to azimuth 0 of the first rotation.
+    // Column index relative to azimuth 0 of the first rotation, and the column's azimuth in
+    // centidegrees (unwrapped) with its rotation's phase.
     const std::int64_t c = k - lead;
     const std::int64_t column_time = start_time_ns + c * info.column_period_ns;
+    const auto phase_rotation =
+        std::clamp<std::int64_t>(c / columns_per_rotation, 0, options.rotations - 1);
+    const std::int64_t c_centideg = c * step + phases[phase_rotation];
     LidarColumn& col = result.columns[k];
     const std::int64_t az_centideg =
-        ((c * step) % kCentidegPerTurn + kCentidegPerTurn) % kCentidegPerTurn;
+        (c_centideg % kCentidegPerTurn + kCentidegPerTurn) % kCentidegPerTurn;
     col.azimuth_centideg = static_cast<std::uint16_t>(az_centideg);
     col.echoes.resize(channels);
-    const double column_az = static_cast<double>(c) * step_rad;  // unwrapped
+    // Unwrapped; the phase added apart keeps the phase-locked azimuths bit for bit.
+    const double column_az = static_cast<double>(c) * step_rad +
+                             static_cast<double>(phases[phase_rotation]) * kCentidegToRad;
     for (int ch = 0; ch < channels; ++ch) {
       const LidarBeam& beam = beams.beams[ch];
       const double az = BeamAzimuthRad(beam, column_az, step_rad);
@@ -243,7 +266,7 @@ absl::StatusOr<LidarSimResult> SimulateLidar(const LidarBeamTable& beams,
       // The rotation the point's own azimuth falls in, decided in centidegrees as the decoders
       // do (a beam exactly at 360 degrees starts the next rotation); lead-in and lead-out points
       // of other rotations go to the packets only.
-      const double az_centideg_total = static_cast<double>(c * step) +
+      const double az_centideg_total = static_cast<double>(c_centideg) +
                                        beam.azimuth_offset_rad / kCentidegToRad +
                                        beam.firing_fraction * step;
       const auto rotation =

@@ -39,6 +39,11 @@ struct LidarSimOptions {
   double board_back_reflectivity = 0.4;
   double stand_reflectivity = 0.3;
   double stand_radius_m = 0.03;  // a 6 cm post
+  // A free-running motor (a real sensor's is not locked to the scan): every rotation's firing
+  // grid starts at its own azimuth phase, uniform over the whole centidegrees of one column
+  // step (0.2 deg: 20 phases), drawn from the seed. Off: every rotation fires at the same
+  // azimuths, the first column at azimuth 0 (a phase-locked sensor).
+  bool free_running = false;
   // OK or InvalidArgument naming the first bad field. O(1).
   absl::Status Validate() const;
 };
@@ -66,7 +71,10 @@ inline constexpr double kLidarLeadDeg = 10.0;
 int SimulatedColumnStepCentideg(LidarModel model);
 
 // Casts `options.rotations` rotations, the first starting at azimuth 0 at time `start_time_ns`
-// (the lead-in fires before it).
+// (the lead-in fires before it). With options.free_running, rotation r's columns (the lead-in
+// with the first, the lead-out with the last) fire at their azimuths plus rotation r's phase;
+// where the phase changes, one column gap is shorter or longer than a step, which a decoder
+// that interpolates azimuths between columns places slightly differently for that column.
 // Deterministic for a seed. Errors: InvalidArgument for invalid options or beam table.
 // Cost: rotations · columns · beams ray casts against every board, surface and stand
 // (about 40 ms for a Pandar64 rotation in the reference station).

@@ -62,6 +62,19 @@ TEST(EvalLidarCliTest, ReferenceCarOnTheReferenceStation) {
   EXPECT_FALSE(bumper["meets_bars"].get<bool>());
 }
 
+// --free-running: every rotation at its own azimuth phase (docs/lidar-radar.md, "A
+// free-running motor"); the JSON says so, and every car is solved.
+TEST(EvalLidarCliTest, FreeRunningMotor) {
+  const LinecalRun run =
+      RunLinecal("eval lidar --json --cars 2 --seed 3 --frames 2 --free-running" + kReference);
+  ASSERT_TRUE(run.exit_code == 0 || run.exit_code == 1) << run.err;
+  const nlohmann::json r = nlohmann::json::parse(run.out);
+  EXPECT_EQ(r["free_running"], true);
+  EXPECT_EQ(r["frames"], 2);
+  ASSERT_EQ(r["lidars"].size(), 2u);
+  for (const nlohmann::json& l : r["lidars"]) EXPECT_EQ(l["solved"], 2) << l["lidar"];
+}
+
 TEST(EvalLidarCliTest, BadInputExitsTwo) {
   const LinecalRun run = RunLinecal("eval lidar --station /no/such.json --car /no/car.json");
   EXPECT_EQ(run.exit_code, 2);

@@ -73,13 +73,16 @@ inline StationBoard RoundHoleAt(const Rigid3d& T_station_board, double scale = 1
   return b;
 }
 
-// Scans `layout` (its first board is the scene's truth) for `rotations` rotations.
+// Scans `layout` (its first board is the scene's truth) for `rotations` rotations, each at its
+// own azimuth phase when `free_running` (LidarSimOptions::free_running).
 inline Scene SimulateLayout(const LidarBeamTable& beams, const StationLayout& layout,
-                            double sigma_m, int rotations, std::uint64_t seed = 1) {
+                            double sigma_m, int rotations, std::uint64_t seed = 1,
+                            bool free_running = false) {
   const Rigid3d T_station_lidar(LidarBaseRotation(), Eigen::Vector3d(0, 0, kHeightM));
   LidarSimOptions o;
   o.rotations = rotations;
   o.range_sigma_m = sigma_m;
+  o.free_running = free_running;
   absl::StatusOr<LidarSimResult> sim = SimulateLidar(beams, T_station_lidar, layout, o, 0, seed);
   EXPECT_TRUE(sim.ok()) << sim.status();
   const StationBoard& b = layout.boards.front();

@@ -10,6 +10,7 @@
 #include <iterator>
 #include <map>
 #include <numbers>
+#include <set>
 #include <string>
 
 #include "station/io/candump.h"
@@ -149,6 +150,37 @@ TEST_F(SimTest, LidarIsDeterministic) {
   ASSERT_TRUE(a.ok() && b.ok() && c.ok());
   EXPECT_EQ(a->scans[0].points, b->scans[0].points);
   EXPECT_NE(a->scans[0].points, c->scans[0].points);
+}
+
+// A free-running motor: each rotation's columns fire at their phase-locked azimuths plus the
+// rotation's own phase (whole centidegrees within the 0.2 degree step), the same for a seed;
+// the default keeps every rotation on the grid from azimuth 0.
+TEST_F(SimTest, LidarFreeRunningRotationsFireAtTheirOwnPhase) {
+  const Rigid3d pose = NominalPose("bumper_lidar");
+  LidarSimOptions o;
+  o.rotations = 4;
+  o.range_sigma_m = 0;
+  absl::StatusOr<LidarSimResult> locked =
+      SimulateLidar(Beams("bumper_lidar"), pose, *station_, o, 0, 5);
+  o.free_running = true;
+  absl::StatusOr<LidarSimResult> a = SimulateLidar(Beams("bumper_lidar"), pose, *station_, o, 0, 5);
+  absl::StatusOr<LidarSimResult> b = SimulateLidar(Beams("bumper_lidar"), pose, *station_, o, 0, 5);
+  ASSERT_TRUE(locked.ok() && a.ok() && b.ok());
+  EXPECT_EQ(a->scans[3].points, b->scans[3].points);
+  const int step = SimulatedColumnStepCentideg(LidarModel::kVlp16);
+  const std::size_t per_rotation = 36000 / step;
+  const std::size_t lead = (locked->columns.size() - 4 * per_rotation) / 2;  // lead-in columns
+  std::set<int> phases;
+  for (int r = 0; r < 4; ++r) {
+    // The column half way through rotation r.
+    const std::size_t k = lead + static_cast<std::size_t>(r) * per_rotation + per_rotation / 2;
+    EXPECT_EQ(locked->columns[k].azimuth_centideg % step, 0) << r;
+    const int phase = a->columns[k].azimuth_centideg - locked->columns[k].azimuth_centideg;
+    EXPECT_GE(phase, 0) << r;
+    EXPECT_LT(phase, step) << r;
+    phases.insert(phase);
+  }
+  EXPECT_GT(phases.size(), 1u);
 }
 
 TEST_F(SimTest, LidarOptionsErrorsNameTheField) {
