@@ -1,5 +1,6 @@
 #include "detectors/circle/circle_edge_fit.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -136,7 +137,144 @@ std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bo
   return fit;
 }
 
+// How far past a circle's edge its blur reaches the page (3 sigma of docs/acceptance.md's
+// hardest blur, 1.5 px, is 4.5 px; at 2.5 px the share left out beyond is symmetric about
+// the centre, so it only dims the edge), and the page ring's least width.
+constexpr double kCentroidBlurReachPx = 2.5;
+constexpr double kCentroidRingPx = 2.0;
+constexpr double kCentroidMinRingPx = 1.0;
+constexpr double kNeighbourBlurPx = 1.5;
+
+// The scale s of p relative to an ellipse: s^2 = (p - c)^T M (p - c), 1 on the ellipse, 0 at
+// its centre, s on the ellipse scaled by s about its centre.
+struct EllipseScale {
+  Eigen::Vector2d centre;
+  Eigen::Matrix2d m;
+
+  explicit EllipseScale(const Ellipse& e) : centre(e.centre) {
+    const Eigen::Vector2d major(std::cos(e.angle_rad), std::sin(e.angle_rad));
+    const Eigen::Vector2d minor(-major.y(), major.x());
+    m = major * major.transpose() / (e.semi_major * e.semi_major) +
+        minor * minor.transpose() / (e.semi_minor * e.semi_minor);
+  }
+  double Squared(const Eigen::Vector2d& p) const {
+    const Eigen::Vector2d d = p - centre;
+    return d.dot(m * d);
+  }
+};
+
+// The pixels of a grey centroid's window: the ellipse scaled by `outer` about its centre.
+struct Window {
+  int x0, y0, x1, y1;  // inclusive
+};
+
+// The window's pixel box; nullopt when it leaves the image (a centroid of a cut window is
+// pulled away from the border).
+std::optional<Window> WindowIn(const ImageView8& image, const Ellipse& e, double outer) {
+  const double reach = outer * e.semi_major + 1.0;
+  const Window w{static_cast<int>(std::floor(e.centre.x() - reach)),
+                 static_cast<int>(std::floor(e.centre.y() - reach)),
+                 static_cast<int>(std::ceil(e.centre.x() + reach)),
+                 static_cast<int>(std::ceil(e.centre.y() + reach))};
+  if (!(w.x0 >= 0 && w.y0 >= 0 && w.x1 < image.width && w.y1 < image.height)) {
+    return std::nullopt;
+  }
+  return w;
+}
+
+// The print's and the page's grey around `e`: the page a plane a + b du + c dv (du, dv from
+// e's centre) fitted to the ring between scales `inner` and `outer` (the light varies across
+// a circle), the print the grey that nine tenths of the circle's core (scale 0.6) reach, so
+// that texture in the print weighs nothing. nullopt when the ring or the core is too small
+// to tell.
+struct Levels {
+  Eigen::Vector3d page;
+  double print = 0.0;
+};
+std::optional<Levels> MeasureLevels(const ImageView8& image, const Ellipse& e, const Window& w,
+                                    double inner, double outer, bool light) {
+  const EllipseScale scale(e);
+  Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  std::vector<float> core;
+  for (int y = w.y0; y <= w.y1; ++y) {
+    const std::uint8_t* row = image.Row(y);
+    for (int x = w.x0; x <= w.x1; ++x) {
+      const double s2 = scale.Squared(Eigen::Vector2d(x, y));
+      if (s2 <= 0.36) {
+        core.push_back(row[x]);
+      } else if (s2 >= inner * inner && s2 <= outer * outer) {
+        const Eigen::Vector3d a(1.0, x - e.centre.x(), y - e.centre.y());
+        normal += a * a.transpose();
+        rhs += a * row[x];
+      }
+    }
+  }
+  // A dozen ring pixels at least: three unknowns, and a ring of a circle 4 px across.
+  if (core.size() < 5 || normal(0, 0) < 12.0) return std::nullopt;
+  const Eigen::LDLT<Eigen::Matrix3d> ldlt(normal);
+  if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return std::nullopt;
+  Levels levels;
+  levels.page = ldlt.solve(rhs);
+  const std::size_t k = light ? core.size() / 10 : core.size() - 1 - core.size() / 10;
+  std::nth_element(core.begin(), core.begin() + k, core.end());
+  levels.print = core[k];
+  return levels;
+}
+
+// The centroid of the print's share of each pixel of the window (scale <= outer about e's
+// centre): (page - grey) / (page - print), clamped to [0, 1]. nullopt when print and page
+// are less than a grey level apart.
+std::optional<Eigen::Vector2d> ShareCentroid(const ImageView8& image, const Ellipse& e,
+                                             const Window& w, double outer, const Levels& levels) {
+  const EllipseScale scale(e);
+  double sum_w = 0.0;
+  Eigen::Vector2d sum_wp = Eigen::Vector2d::Zero();
+  for (int y = w.y0; y <= w.y1; ++y) {
+    const std::uint8_t* row = image.Row(y);
+    for (int x = w.x0; x <= w.x1; ++x) {
+      const Eigen::Vector2d p(x, y);
+      if (scale.Squared(p) > outer * outer) continue;
+      const double page = levels.page.dot(Eigen::Vector3d(1.0, x - e.centre.x(), y - e.centre.y()));
+      const double step = levels.print - page;
+      if (!(std::abs(step) >= 1.0)) return std::nullopt;
+      const double share = std::clamp((row[x] - page) / step, 0.0, 1.0);
+      sum_w += share;
+      sum_wp += share * p;
+    }
+  }
+  if (!(sum_w > 0.0)) return std::nullopt;
+  return sum_wp / sum_w;
+}
+
 }  // namespace
+
+std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellipse& ellipse,
+                                            bool light, double max_scale) {
+  // The page ring: from kBlurReachPx past the edge (where a blurred edge has reached the
+  // page) a further max(kRingPx, a quarter of the radius), in the semi-minor axis's pixels
+  // (along the major axis the ring is wider).
+  const double b = ellipse.semi_minor;
+  const double inner = 1.0 + kCentroidBlurReachPx / b;
+  // The ring as wide as the room leaves, at most max(kCentroidRingPx, a quarter radius).
+  const double ring_px =
+      std::min(std::max(kCentroidRingPx, 0.25 * b), (max_scale - inner) * b - kNeighbourBlurPx);
+  if (!(ring_px >= kCentroidMinRingPx)) return std::nullopt;
+  const double outer = inner + ring_px / b;
+  Ellipse e = ellipse;
+  // Two rounds: the second centres the window on the first's centroid, which leaves the
+  // page ring symmetric about the centre even when the edge fit was off.
+  for (int round = 0; round < 2; ++round) {
+    const std::optional<Window> w = WindowIn(image, e, outer);
+    if (!w) return std::nullopt;
+    const std::optional<Levels> levels = MeasureLevels(image, e, *w, inner, outer, light);
+    if (!levels) return std::nullopt;
+    const std::optional<Eigen::Vector2d> c = ShareCentroid(image, e, *w, outer, *levels);
+    if (!c || (*c - ellipse.centre).norm() > 0.25 * b) return std::nullopt;
+    e.centre = *c;
+  }
+  return e.centre;
+}
 
 CircleEdgeFitter::CircleEdgeFitter(int rays) {
   // Evenly spaced: the seeding pass uses every other one (it only has to bring the edge

@@ -712,6 +712,41 @@ std::optional<Eigen::Vector2d> ImageOfCentre(const Eigen::Matrix3d& H, const Ell
   return uv;
 }
 
+// The distance from e's centre to its edge along the unit direction u.
+double RadiusAlong(const Ellipse& e, const Eigen::Vector2d& u) {
+  const double c = (u.x() * std::cos(e.angle_rad) + u.y() * std::sin(e.angle_rad)) / e.semi_major;
+  const double s = (u.y() * std::cos(e.angle_rad) - u.x() * std::sin(e.angle_rad)) / e.semi_minor;
+  return 1.0 / std::sqrt(c * c + s * s);
+}
+
+// The scale about circle id's ellipse at which it first reaches another circle of its block
+// (along the line of their centres): the room for its grey centroid's window.
+double RoomScale(const GridModel& m, const std::vector<Ellipse>& ellipses, int id) {
+  const Ellipse& e = ellipses[id];
+  double room = std::numeric_limits<double>::infinity();
+  for (const int other : m.block[id]) {
+    if (other == id) continue;
+    const Eigen::Vector2d d = ellipses[other].centre - e.centre;
+    const double distance = d.norm();
+    if (!(distance > 0.0)) return 0.0;
+    const Eigen::Vector2d u = d / distance;
+    room = std::min(room, (distance - RadiusAlong(ellipses[other], -u)) / RadiusAlong(e, u));
+  }
+  return room;
+}
+
+// Each ellipse's centre replaced by its grey centroid (circle_edge_fit.h, header step 5)
+// where the room around it allows; elsewhere the edge fit's centre stays.
+void UseGreyCentroids(const ImageView8& image, const GridModel& m, std::vector<Ellipse>* ellipses) {
+  const std::vector<Ellipse> edge = *ellipses;
+  for (std::size_t id = 0; id < edge.size(); ++id) {
+    const double room = RoomScale(m, edge, static_cast<int>(id));
+    if (const std::optional<Eigen::Vector2d> c = GreyCentroid(image, edge[id], m.light, room)) {
+      (*ellipses)[id].centre = *c;
+    }
+  }
+}
+
 // The ellipse centres corrected for perspective (header, step 5): three rounds, each fitting
 // every block's homography to the current centres. The offset changes by (change of H) x
 // (offset / pitch), far below a hundredth of a pixel after the first round. A block whose
@@ -924,6 +959,7 @@ class Search {
     }
     Hypothesis h;
     h.blob = pl.blob;
+    if (options_.grey_centroids) UseGreyCentroids(image_, m_, &ellipses);
     if (options_.correct_perspective) {
       h.uv = CorrectPerspective(m_, ellipses);
     } else {
