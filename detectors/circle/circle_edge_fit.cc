@@ -2,7 +2,9 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <numbers>
 #include <span>
 
@@ -145,21 +147,32 @@ constexpr double kCentroidRingPx = 2.0;
 constexpr double kCentroidMinRingPx = 1.0;
 constexpr double kNeighbourBlurPx = 1.5;
 
-// The scale s of p relative to an ellipse: s^2 = (p - c)^T M (p - c), 1 on the ellipse, 0 at
-// its centre, s on the ellipse scaled by s about its centre.
+// The scale s of a pixel relative to an ellipse: s^2 = a dx^2 + 2 b dx dy + c dy^2 (dx, dy
+// from its centre), 1 on the ellipse, 0 at its centre, s on the ellipse scaled by s.
 struct EllipseScale {
   Eigen::Vector2d centre;
-  Eigen::Matrix2d m;
+  double a, b, c;
 
   explicit EllipseScale(const Ellipse& e) : centre(e.centre) {
-    const Eigen::Vector2d major(std::cos(e.angle_rad), std::sin(e.angle_rad));
-    const Eigen::Vector2d minor(-major.y(), major.x());
-    m = major * major.transpose() / (e.semi_major * e.semi_major) +
-        minor * minor.transpose() / (e.semi_minor * e.semi_minor);
+    const double cs = std::cos(e.angle_rad), sn = std::sin(e.angle_rad);
+    const double p = 1.0 / (e.semi_major * e.semi_major);
+    const double q = 1.0 / (e.semi_minor * e.semi_minor);
+    a = p * cs * cs + q * sn * sn;
+    b = (p - q) * cs * sn;
+    c = p * sn * sn + q * cs * cs;
   }
-  double Squared(const Eigen::Vector2d& p) const {
-    const Eigen::Vector2d d = p - centre;
-    return d.dot(m * d);
+  // The pixels of row y within scale `s` of the centre, clipped to [lo, hi]: false when none.
+  bool Span(int y, double s, int lo, int hi, int* x0, int* x1) const {
+    const double dy = y - centre.y();
+    const double disc = b * b * dy * dy - a * (c * dy * dy - s * s);
+    if (!(disc >= 0.0)) return false;
+    const double root = std::sqrt(disc);
+    *x0 = std::max(lo, static_cast<int>(std::ceil(centre.x() + (-b * dy - root) / a)));
+    *x1 = std::min(hi, static_cast<int>(std::floor(centre.x() + (-b * dy + root) / a)));
+    return *x0 <= *x1;
+  }
+  double Squared(double dx, double dy) const {
+    return a * dx * dx + 2.0 * b * dx * dy + c * dy * dy;
   }
 };
 
@@ -196,29 +209,36 @@ std::optional<Levels> MeasureLevels(const ImageView8& image, const Ellipse& e, c
   const EllipseScale scale(e);
   Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
   Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
-  std::vector<float> core;
+  std::array<int, 256> core{};  // the core's grey histogram
+  int core_n = 0;
   for (int y = w.y0; y <= w.y1; ++y) {
+    int x0 = 0, x1 = 0;
+    if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
     const std::uint8_t* row = image.Row(y);
-    for (int x = w.x0; x <= w.x1; ++x) {
-      const double s2 = scale.Squared(Eigen::Vector2d(x, y));
+    const double dy = y - e.centre.y();
+    for (int x = x0; x <= x1; ++x) {
+      const double dx = x - e.centre.x();
+      const double s2 = scale.Squared(dx, dy);
       if (s2 <= 0.36) {
-        core.push_back(row[x]);
-      } else if (s2 >= inner * inner && s2 <= outer * outer) {
-        const Eigen::Vector3d a(1.0, x - e.centre.x(), y - e.centre.y());
+        ++core[row[x]];
+        ++core_n;
+      } else if (s2 >= inner * inner) {
+        const Eigen::Vector3d a(1.0, dx, dy);
         normal += a * a.transpose();
         rhs += a * row[x];
       }
     }
   }
   // A dozen ring pixels at least: three unknowns, and a ring of a circle 4 px across.
-  if (core.size() < 5 || normal(0, 0) < 12.0) return std::nullopt;
+  if (core_n < 5 || normal(0, 0) < 12.0) return std::nullopt;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(normal);
   if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return std::nullopt;
   Levels levels;
   levels.page = ldlt.solve(rhs);
-  const std::size_t k = light ? core.size() / 10 : core.size() - 1 - core.size() / 10;
-  std::nth_element(core.begin(), core.begin() + k, core.end());
-  levels.print = core[k];
+  // The grey nine tenths of the core reach: counted from the print's side.
+  int seen = 0, grey = light ? 255 : 0;
+  for (; seen + core[grey] < core_n - core_n / 10; grey += light ? -1 : 1) seen += core[grey];
+  levels.print = grey;
   return levels;
 }
 
@@ -231,17 +251,22 @@ std::optional<Eigen::Vector2d> ShareCentroid(const ImageView8& image, const Elli
   double sum_w = 0.0;
   Eigen::Vector2d sum_wp = Eigen::Vector2d::Zero();
   for (int y = w.y0; y <= w.y1; ++y) {
+    int x0 = 0, x1 = 0;
+    if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
     const std::uint8_t* row = image.Row(y);
-    for (int x = w.x0; x <= w.x1; ++x) {
-      const Eigen::Vector2d p(x, y);
-      if (scale.Squared(p) > outer * outer) continue;
-      const double page = levels.page.dot(Eigen::Vector3d(1.0, x - e.centre.x(), y - e.centre.y()));
+    const double dy = y - e.centre.y();
+    double row_w = 0.0, row_wx = 0.0;
+    for (int x = x0; x <= x1; ++x) {
+      const double page =
+          levels.page[0] + levels.page[1] * (x - e.centre.x()) + levels.page[2] * dy;
       const double step = levels.print - page;
       if (!(std::abs(step) >= 1.0)) return std::nullopt;
       const double share = std::clamp((row[x] - page) / step, 0.0, 1.0);
-      sum_w += share;
-      sum_wp += share * p;
+      row_w += share;
+      row_wx += share * x;
     }
+    sum_w += row_w;
+    sum_wp += Eigen::Vector2d(row_wx, row_w * y);
   }
   if (!(sum_w > 0.0)) return std::nullopt;
   return sum_wp / sum_w;
@@ -261,19 +286,13 @@ std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellip
       std::min(std::max(kCentroidRingPx, 0.25 * b), (max_scale - inner) * b - kNeighbourBlurPx);
   if (!(ring_px >= kCentroidMinRingPx)) return std::nullopt;
   const double outer = inner + ring_px / b;
-  Ellipse e = ellipse;
-  // Two rounds: the second centres the window on the first's centroid, which leaves the
-  // page ring symmetric about the centre even when the edge fit was off.
-  for (int round = 0; round < 2; ++round) {
-    const std::optional<Window> w = WindowIn(image, e, outer);
-    if (!w) return std::nullopt;
-    const std::optional<Levels> levels = MeasureLevels(image, e, *w, inner, outer, light);
-    if (!levels) return std::nullopt;
-    const std::optional<Eigen::Vector2d> c = ShareCentroid(image, e, *w, outer, *levels);
-    if (!c || (*c - ellipse.centre).norm() > 0.25 * b) return std::nullopt;
-    e.centre = *c;
-  }
-  return e.centre;
+  const std::optional<Window> w = WindowIn(image, ellipse, outer);
+  if (!w) return std::nullopt;
+  const std::optional<Levels> levels = MeasureLevels(image, ellipse, *w, inner, outer, light);
+  if (!levels) return std::nullopt;
+  const std::optional<Eigen::Vector2d> c = ShareCentroid(image, ellipse, *w, outer, *levels);
+  if (!c || (*c - ellipse.centre).norm() > 0.25 * b) return std::nullopt;
+  return c;
 }
 
 CircleEdgeFitter::CircleEdgeFitter(int rays) {

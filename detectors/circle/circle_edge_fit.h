@@ -59,7 +59,7 @@ class CircleEdgeFitter {
 // centroid of a symmetric window is then that centre, exactly, without locating an edge.
 // Its noise is the page's and the edge pixels' grey noise averaged over the whole window,
 // where an edge fit's is the noise of 64 derivative peaks: on the renders of
-// circle_grid_detector_test its centres are 0.002 px RMS clean and 0.03 px noisy against
+// circle_grid_detector_test its centres are 0.002 px RMS clean and 0.026 px noisy against
 // the edge fit's 0.045 and 0.09. Like the edge fit's ellipse centre, it is not the image of
 // the circle's centre under perspective (the caller corrects that).
 //
@@ -69,7 +69,9 @@ class CircleEdgeFitter {
 // which it would touch the nearest other print, a neighbouring circle), it leaves
 // the image, print and page are less than a grey level apart, or the centroid strays from
 // the edge fit's centre by more than a quarter of the semi-minor axis. Reads the window's
-// pixels twice per round, two rounds (the second window centred on the first centroid).
+// pixels twice (the levels, then the centroid): about 10 microseconds for a circle 18 px
+// across. The window is centred on the edge fit's centre; centring a second window on the
+// centroid changed the renders' RMS by under a thousandth of a pixel.
 std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellipse& ellipse,
                                             bool light, double max_scale);
 
