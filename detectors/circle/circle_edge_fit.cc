@@ -1,7 +1,10 @@
 #include "detectors/circle/circle_edge_fit.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <numbers>
 #include <span>
 
@@ -136,7 +139,161 @@ std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bo
   return fit;
 }
 
+// How far past a circle's edge its blur reaches the page (3 sigma of docs/acceptance.md's
+// hardest blur, 1.5 px, is 4.5 px; at 2.5 px the share left out beyond is symmetric about
+// the centre, so it only dims the edge), and the page ring's least width.
+constexpr double kCentroidBlurReachPx = 2.5;
+constexpr double kCentroidRingPx = 2.0;
+constexpr double kCentroidMinRingPx = 1.0;
+constexpr double kNeighbourBlurPx = 1.5;
+
+// The scale s of a pixel relative to an ellipse: s^2 = a dx^2 + 2 b dx dy + c dy^2 (dx, dy
+// from its centre), 1 on the ellipse, 0 at its centre, s on the ellipse scaled by s.
+struct EllipseScale {
+  Eigen::Vector2d centre;
+  double a, b, c;
+
+  explicit EllipseScale(const Ellipse& e) : centre(e.centre) {
+    const double cs = std::cos(e.angle_rad), sn = std::sin(e.angle_rad);
+    const double p = 1.0 / (e.semi_major * e.semi_major);
+    const double q = 1.0 / (e.semi_minor * e.semi_minor);
+    a = p * cs * cs + q * sn * sn;
+    b = (p - q) * cs * sn;
+    c = p * sn * sn + q * cs * cs;
+  }
+  // The pixels of row y within scale `s` of the centre, clipped to [lo, hi]: false when none.
+  bool Span(int y, double s, int lo, int hi, int* x0, int* x1) const {
+    const double dy = y - centre.y();
+    const double disc = b * b * dy * dy - a * (c * dy * dy - s * s);
+    if (!(disc >= 0.0)) return false;
+    const double root = std::sqrt(disc);
+    *x0 = std::max(lo, static_cast<int>(std::ceil(centre.x() + (-b * dy - root) / a)));
+    *x1 = std::min(hi, static_cast<int>(std::floor(centre.x() + (-b * dy + root) / a)));
+    return *x0 <= *x1;
+  }
+  double Squared(double dx, double dy) const {
+    return a * dx * dx + 2.0 * b * dx * dy + c * dy * dy;
+  }
+};
+
+// The pixels of a grey centroid's window: the ellipse scaled by `outer` about its centre.
+struct Window {
+  int x0, y0, x1, y1;  // inclusive
+};
+
+// The window's pixel box; nullopt when it leaves the image (a centroid of a cut window is
+// pulled away from the border).
+std::optional<Window> WindowIn(const ImageView8& image, const Ellipse& e, double outer) {
+  const double reach = outer * e.semi_major + 1.0;
+  const Window w{static_cast<int>(std::floor(e.centre.x() - reach)),
+                 static_cast<int>(std::floor(e.centre.y() - reach)),
+                 static_cast<int>(std::ceil(e.centre.x() + reach)),
+                 static_cast<int>(std::ceil(e.centre.y() + reach))};
+  if (!(w.x0 >= 0 && w.y0 >= 0 && w.x1 < image.width && w.y1 < image.height)) {
+    return std::nullopt;
+  }
+  return w;
+}
+
+// The print's and the page's grey around `e`: the page a plane a + b du + c dv (du, dv from
+// e's centre) fitted to the ring between scales `inner` and `outer` (the light varies across
+// a circle), the print the grey that nine tenths of the circle's core (scale 0.6) reach, so
+// that texture in the print weighs nothing. nullopt when the ring or the core is too small
+// to tell.
+struct Levels {
+  Eigen::Vector3d page;
+  double print = 0.0;
+};
+std::optional<Levels> MeasureLevels(const ImageView8& image, const Ellipse& e, const Window& w,
+                                    double inner, double outer, bool light) {
+  const EllipseScale scale(e);
+  Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  std::array<int, 256> core{};  // the core's grey histogram
+  int core_n = 0;
+  for (int y = w.y0; y <= w.y1; ++y) {
+    int x0 = 0, x1 = 0;
+    if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
+    const std::uint8_t* row = image.Row(y);
+    const double dy = y - e.centre.y();
+    for (int x = x0; x <= x1; ++x) {
+      const double dx = x - e.centre.x();
+      const double s2 = scale.Squared(dx, dy);
+      if (s2 <= 0.36) {
+        ++core[row[x]];
+        ++core_n;
+      } else if (s2 >= inner * inner) {
+        const Eigen::Vector3d a(1.0, dx, dy);
+        normal += a * a.transpose();
+        rhs += a * row[x];
+      }
+    }
+  }
+  // A dozen ring pixels at least: three unknowns, and a ring of a circle 4 px across.
+  if (core_n < 5 || normal(0, 0) < 12.0) return std::nullopt;
+  const Eigen::LDLT<Eigen::Matrix3d> ldlt(normal);
+  if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return std::nullopt;
+  Levels levels;
+  levels.page = ldlt.solve(rhs);
+  // The grey nine tenths of the core reach: counted from the print's side.
+  int seen = 0, grey = light ? 255 : 0;
+  for (; seen + core[grey] < core_n - core_n / 10; grey += light ? -1 : 1) seen += core[grey];
+  levels.print = grey;
+  return levels;
+}
+
+// The centroid of the print's share of each pixel of the window (scale <= outer about e's
+// centre): (page - grey) / (page - print), clamped to [0, 1]. nullopt when print and page
+// are less than a grey level apart.
+std::optional<Eigen::Vector2d> ShareCentroid(const ImageView8& image, const Ellipse& e,
+                                             const Window& w, double outer, const Levels& levels) {
+  const EllipseScale scale(e);
+  double sum_w = 0.0;
+  Eigen::Vector2d sum_wp = Eigen::Vector2d::Zero();
+  for (int y = w.y0; y <= w.y1; ++y) {
+    int x0 = 0, x1 = 0;
+    if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
+    const std::uint8_t* row = image.Row(y);
+    const double dy = y - e.centre.y();
+    double row_w = 0.0, row_wx = 0.0;
+    for (int x = x0; x <= x1; ++x) {
+      const double page =
+          levels.page[0] + levels.page[1] * (x - e.centre.x()) + levels.page[2] * dy;
+      const double step = levels.print - page;
+      if (!(std::abs(step) >= 1.0)) return std::nullopt;
+      const double share = std::clamp((row[x] - page) / step, 0.0, 1.0);
+      row_w += share;
+      row_wx += share * x;
+    }
+    sum_w += row_w;
+    sum_wp += Eigen::Vector2d(row_wx, row_w * y);
+  }
+  if (!(sum_w > 0.0)) return std::nullopt;
+  return sum_wp / sum_w;
+}
+
 }  // namespace
+
+std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellipse& ellipse,
+                                            bool light, double max_scale) {
+  // The page ring: from kBlurReachPx past the edge (where a blurred edge has reached the
+  // page) a further max(kRingPx, a quarter of the radius), in the semi-minor axis's pixels
+  // (along the major axis the ring is wider).
+  const double b = ellipse.semi_minor;
+  const double inner = 1.0 + kCentroidBlurReachPx / b;
+  // The ring as wide as the room leaves, at most max(kCentroidRingPx, a quarter radius).
+  const double ring_px =
+      std::min(std::max(kCentroidRingPx, 0.25 * b), (max_scale - inner) * b - kNeighbourBlurPx);
+  if (!(ring_px >= kCentroidMinRingPx)) return std::nullopt;
+  const double outer = inner + ring_px / b;
+  const std::optional<Window> w = WindowIn(image, ellipse, outer);
+  if (!w) return std::nullopt;
+  const std::optional<Levels> levels = MeasureLevels(image, ellipse, *w, inner, outer, light);
+  if (!levels) return std::nullopt;
+  const std::optional<Eigen::Vector2d> c = ShareCentroid(image, ellipse, *w, outer, *levels);
+  if (!c || (*c - ellipse.centre).norm() > 0.25 * b) return std::nullopt;
+  return c;
+}
 
 CircleEdgeFitter::CircleEdgeFitter(int rays) {
   // Evenly spaced: the seeding pass uses every other one (it only has to bring the edge

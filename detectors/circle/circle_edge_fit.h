@@ -48,4 +48,31 @@ class CircleEdgeFitter {
   std::vector<Eigen::Vector2d> fine_;
 };
 
+// The centre of a circle's image ellipse from its grey levels rather than its edge: the
+// centroid of each pixel's share of print, (page - grey) / (page - print) clamped to [0, 1],
+// over the ellipse scaled by `outer` about its centre, the page a plane fitted to a ring
+// just inside `outer` (past the blurred edge), the print the grey of the circle's core.
+// `ellipse` is the edge fit (Measure), which gives the shape and the window.
+//
+// Why: the image of a printed circle is centrally symmetric about its ellipse's centre, and
+// so is its blurred, gamma-curved, sampled image for any point-symmetric blur; the share
+// centroid of a symmetric window is then that centre, exactly, without locating an edge.
+// Its noise is the page's and the edge pixels' grey noise averaged over the whole window,
+// where an edge fit's is the noise of 64 derivative peaks: on the renders of
+// circle_grid_detector_test its centres are 0.002 px RMS clean and 0.026 px noisy against
+// the edge fit's 0.045 and 0.09. Like the edge fit's ellipse centre, it is not the image of
+// the circle's centre under perspective (the caller corrects that).
+//
+// nullopt, and the caller keeps the edge fit's centre, when the window does not fit: its
+// scale (1 + 2.5 px and then a ring of max(2 px, a quarter radius), in semi-minor pixels)
+// reaches within 2.5 px of `max_scale` (the caller's room: the scale of the ellipse at
+// which it would touch the nearest other print, a neighbouring circle), it leaves
+// the image, print and page are less than a grey level apart, or the centroid strays from
+// the edge fit's centre by more than a quarter of the semi-minor axis. Reads the window's
+// pixels twice (the levels, then the centroid): about 10 microseconds for a circle 18 px
+// across. The window is centred on the edge fit's centre; centring a second window on the
+// centroid changed the renders' RMS by under a thousandth of a pixel.
+std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellipse& ellipse,
+                                            bool light, double max_scale);
+
 }  // namespace linecal

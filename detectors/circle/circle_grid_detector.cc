@@ -795,6 +795,29 @@ std::optional<Eigen::Vector2d> ImageOfCentre(const Eigen::Matrix3d& H, const Ell
   return uv;
 }
 
+// The distance from e's centre to its edge along the unit direction u.
+double RadiusAlong(const Ellipse& e, const Eigen::Vector2d& u) {
+  const double c = (u.x() * std::cos(e.angle_rad) + u.y() * std::sin(e.angle_rad)) / e.semi_major;
+  const double s = (u.y() * std::cos(e.angle_rad) - u.x() * std::sin(e.angle_rad)) / e.semi_minor;
+  return 1.0 / std::sqrt(c * c + s * s);
+}
+
+// The scale about circle id's ellipse at which it first reaches another circle of its block
+// (along the line of their centres): the room for its grey centroid's window.
+double RoomScale(const GridModel& m, const std::vector<Ellipse>& ellipses, int id) {
+  const Ellipse& e = ellipses[id];
+  double room = std::numeric_limits<double>::infinity();
+  for (const int other : m.block[id]) {
+    if (other == id) continue;
+    const Eigen::Vector2d d = ellipses[other].centre - e.centre;
+    const double distance = d.norm();
+    if (!(distance > 0.0)) return 0.0;
+    const Eigen::Vector2d u = d / distance;
+    room = std::min(room, (distance - RadiusAlong(ellipses[other], -u)) / RadiusAlong(e, u));
+  }
+  return room;
+}
+
 // The ellipse centres corrected for perspective (header, step 5): three rounds, each fitting
 // every block's homography to the current centres. The offset changes by (change of H) x
 // (offset / pitch), far below a hundredth of a pixel after the first round. A block whose
@@ -822,6 +845,15 @@ std::vector<Eigen::Vector2d> CorrectPerspective(const GridModel& m,
     centres = std::move(next);
   }
   return centres;
+}
+
+// The ellipses' centres, corrected for perspective when `correct`.
+std::vector<Eigen::Vector2d> Centres(const GridModel& m, const std::vector<Ellipse>& ellipses,
+                                     bool correct) {
+  if (correct) return CorrectPerspective(m, ellipses);
+  std::vector<Eigen::Vector2d> uv;
+  for (const Ellipse& e : ellipses) uv.push_back(e.centre);
+  return uv;
 }
 
 // The edge of a printed circle fits its ellipse within the noise of single edge points: a
@@ -890,9 +922,26 @@ bool LatticeAsPrinted(const GridModel& m, const std::vector<Eigen::Vector2d>& uv
 // x axis at its middle (for the upright rule).
 struct Hypothesis {
   std::vector<int> blob;            // per id
-  std::vector<Eigen::Vector2d> uv;  // per id
+  std::vector<Eigen::Vector2d> uv;  // per id: the edge fits' centres, corrected
+  std::vector<Ellipse> ellipses;    // per id: the edge fits
   double x_axis_u = 0.0;
 };
+
+// Step 5's grey centroids (circle_edge_fit.h), for the grid chosen only (its verification
+// needs no more than the edge fits' centres; a centroid stays within a quarter radius of its
+// edge fit's centre): each circle's feature moved by its centroid's offset from its edge
+// fit's centre, where the room around it allows. The perspective correction's offset depends
+// on the centre only through the block's homography, which such a move changes by far below
+// a thousandth of a pixel, so it is kept rather than computed again.
+void UseGreyCentroids(const ImageView8& image, const GridModel& m, Hypothesis* h) {
+  for (std::size_t id = 0; id < h->ellipses.size(); ++id) {
+    const Ellipse& e = h->ellipses[id];
+    const double room = RoomScale(m, h->ellipses, static_cast<int>(id));
+    if (const std::optional<Eigen::Vector2d> c = GreyCentroid(image, e, m.light, room)) {
+      h->uv[id] += *c - e.centre;
+    }
+  }
+}
 
 // How far a search got, for the reason reported: later outcomes rank higher.
 int Rank(DetectReason r) {
@@ -1008,14 +1057,11 @@ class Search {
     }
     Hypothesis h;
     h.blob = pl.blob;
-    if (options_.correct_perspective) {
-      h.uv = CorrectPerspective(m_, ellipses);
-    } else {
-      for (const Ellipse& e : ellipses) h.uv.push_back(e.centre);
-    }
+    h.uv = Centres(m_, ellipses, options_.correct_perspective);
     if (!LocallyConsistent(m_, h.uv, options_.max_residual_pitch_fraction)) return std::nullopt;
     if (!LatticeAsPrinted(m_, h.uv, ellipses)) return std::nullopt;
     h.x_axis_u = XAxisU(m_, h.uv);
+    h.ellipses = std::move(ellipses);
     return h;
   }
 
@@ -1105,6 +1151,7 @@ Detection DetectCircleGrid(const ImageView8& image, const Board& board,
   for (int factor = CoarsestCircleBlobFactor(image); factor >= 2; factor /= 2) {
     FactorResult r = SearchAtFactor(image, m, options, factor);
     if (r.chosen) {
+      if (options.grey_centroids) UseGreyCentroids(image, m, &*r.chosen);
       Detection d;
       d.found = true;
       d.reason = DetectReason::kNone;

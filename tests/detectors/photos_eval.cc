@@ -7,11 +7,13 @@
 // false-positive sweep: every linecal board on every photo that does not show it, and every
 // found board checked against OpenCV's corners (same points within 2 px, in an order that is
 // a symmetry of the grid).
-//   photos_eval [--photos DIR] [--set NAME] [--json] [--check] [--misses DIR]
+//   photos_eval [--photos DIR] [--set NAME] [--json] [--check] [--misses DIR] [--bootstrap N]
 // --check exits 1 when a bar is missed: found >= 98% (mild) / 95% (wide, fisheye) of the
 // whole-view photos of each set with a linecal board, no false detection, RMS(linecal) <=
 // RMS(OpenCV) (mild) / 1.1x (wide, fisheye) on the common photos. A markdown table on stdout
 // (JSON with --json), progress on stderr. Without the corpus: the skip message, exit 0.
+// --bootstrap N adds, per set, the spread of RMS linecal / RMS OpenCV over N resamples of
+// the photos both found (PrintBootstrap), to tell a detector's difference from the photos'.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -23,6 +25,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <optional>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -50,6 +53,7 @@ struct Options {
   bool json = false;
   bool check = false;
   std::string misses_dir;
+  int bootstrap = 0;  // --bootstrap N: resamples of each set's common photos (0: none)
 };
 
 // One photo's outcome.
@@ -232,6 +236,16 @@ View OpenCvView(const PhotoResult& p, photo_corpus::Reference kind) {
 }
 
 bool LinecalFound(const PhotoResult& p) { return p.linecal && p.linecal->found; }
+
+// The views of the photos both detectors found, in the same order.
+void CommonViews(const SetResult& s, std::vector<View>* linecal, std::vector<View>* opencv) {
+  for (const PhotoResult& p : s.photos) {
+    if (LinecalFound(p) && p.reference.found) {
+      linecal->push_back(LinecalView(p));
+      opencv->push_back(OpenCvView(p, s.set->reference));
+    }
+  }
+}
 
 // The four calibrations of a set: each detector on the photos it found, and on the photos
 // both found.
@@ -543,6 +557,50 @@ void PrintJson(const std::string& corpus, const std::vector<SetResult>& results)
   std::printf("]}\n");
 }
 
+// The paired bootstrap of a set's comparison: `n` resamples (with replacement, seeded) of
+// the photos both detectors found, each calibrated from either detector's points of the same
+// photos; the ratio RMS linecal / RMS OpenCV of each. It tells how much the comparison owes
+// to the particular photos: a bar met or missed by less than the spread of the ratio is
+// not a difference between the detectors that another sample of photos would keep.
+void PrintBootstrap(const SetResult& s, int n) {
+  std::vector<View> linecal, opencv;
+  CommonViews(s, &linecal, &opencv);
+  std::erase_if(linecal, [&](const View& v) { return s.linecal_common.dropped.contains(v.photo); });
+  std::erase_if(opencv, [&](const View& v) { return s.linecal_common.dropped.contains(v.photo); });
+  if (linecal.size() < static_cast<std::size_t>(kMinViewsPerCamera) ||
+      !std::isfinite(s.linecal_common.rms_px) || !std::isfinite(s.opencv_common.rms_px)) {
+    return;
+  }
+  const cv::Size size = s.photos.front().size;
+  std::mt19937_64 random(1);
+  std::uniform_int_distribution<std::size_t> pick(0, linecal.size() - 1);
+  std::vector<double> ratios;
+  for (int r = 0; r < n; ++r) {
+    std::vector<View> l, o;
+    for (std::size_t k = 0; k < linecal.size(); ++k) {
+      const std::size_t i = pick(random);
+      l.push_back(linecal[i]);
+      o.push_back(opencv[i]);
+    }
+    const double rl = Calibrate(l, size, s.set->lens).rms_px;
+    const double ro = Calibrate(o, size, s.set->lens).rms_px;
+    if (std::isfinite(rl) && std::isfinite(ro)) ratios.push_back(rl / ro);
+  }
+  if (ratios.empty()) return;
+  std::sort(ratios.begin(), ratios.end());
+  auto quantile = [&](double q) {
+    return ratios[static_cast<std::size_t>(q * (ratios.size() - 1) + 0.5)];
+  };
+  const auto not_above =
+      std::count_if(ratios.begin(), ratios.end(), [](double v) { return v <= 1.0; });
+  std::printf(
+      "- %s: RMS linecal / OpenCV %.4f on the %zu common photos; over %zu resamples median "
+      "%.4f, 95%% of them %.4f-%.4f, linecal <= OpenCV in %.0f%%\n",
+      s.set->name.c_str(), s.linecal_common.rms_px / s.opencv_common.rms_px, linecal.size(),
+      ratios.size(), quantile(0.5), quantile(0.025), quantile(0.975),
+      100.0 * not_above / ratios.size());
+}
+
 int Run(const Options& options) {
   const std::string corpus =
       options.photos.empty() ? testing_support::ExternalPath("camera_real") : options.photos;
@@ -566,6 +624,11 @@ int Run(const Options& options) {
   } else {
     PrintMarkdown(corpus, results);
     PrintChecks(results);
+    if (options.bootstrap > 0) {
+      std::printf("\nBootstrap over the photos both found (%d resamples each):\n",
+                  options.bootstrap);
+      for (const SetResult& s : results) PrintBootstrap(s, options.bootstrap);
+    }
   }
   bool met = true;
   for (const SetResult& s : results) met = met && MissedBars(s, CountSet(s)).empty();
@@ -594,11 +657,13 @@ bool ParseArgs(int argc, char** argv, Options* o) {
       o->check = true;
     } else if (a == "--misses" && has_value) {
       o->misses_dir = argv[++i];
+    } else if (a == "--bootstrap" && has_value && std::atoi(argv[i + 1]) > 0) {
+      o->bootstrap = std::atoi(argv[++i]);
     } else {
       std::fprintf(stderr,
                    "photos_eval: unknown or incomplete argument '%s'\n"
                    "usage: photos_eval [--photos DIR] [--set NAME] [--json] [--check] "
-                   "[--misses DIR]\n",
+                   "[--misses DIR] [--bootstrap N]\n",
                    a.c_str());
       return false;
     }
