@@ -13,21 +13,18 @@
 #include <string>
 
 #include "station/io/image_io.h"
+#include "tests/tools/json_file.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_tools::ReadJson;
 using testing_tools::RunLinecal;
 
 const std::string kCar =
     std::string(" --car ") + LINECAL_SOURCE_DIR + "/deploy/cars/reference.json";
-
-nlohmann::json ReadJson(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
 
 std::string Pair(const nlohmann::json& uv) {
   return std::to_string(uv[0].get<double>()) + "," + std::to_string(uv[1].get<double>());

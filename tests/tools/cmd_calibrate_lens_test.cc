@@ -12,22 +12,19 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "tests/tools/json_file.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_tools::ReadJson;
 using testing_tools::RunLinecal;
 
 // docs/acceptance.md, camera bars.
 constexpr double kAngleBarDeg = 0.02;
 constexpr double kPositionBarM = 0.010;
-
-nlohmann::json ReadJson(const fs::path& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
 
 // The reference car with the front camera's k1, k2 replaced, written into `dir` with the
 // LiDAR angle file it names (the car file's relative paths are relative to the file).

@@ -12,18 +12,15 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "tests/tools/json_file.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_tools::ReadJson;
 using testing_tools::RunLinecal;
-
-nlohmann::json ReadJson(const fs::path& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
 
 void WriteJson(const fs::path& path, const nlohmann::json& j) { std::ofstream(path) << j.dump(2); }
 

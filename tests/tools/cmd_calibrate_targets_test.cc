@@ -17,18 +17,15 @@
 #include <string>
 #include <vector>
 
+#include "tests/tools/json_file.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_tools::ReadJson;
 using testing_tools::RunLinecal;
-
-nlohmann::json ReadJson(const fs::path& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
 
 TEST(CalibrateTargetsTest, EveryCameraFindsEveryPlannedBoardInEveryFrame) {
   constexpr int kFrames = 2;

@@ -15,6 +15,7 @@
 #include "station/camera/camera_model.h"
 #include "station/capture/capture.h"
 #include "tests/support/crafted_files.h"
+#include "tests/tools/json_file.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -22,6 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using testing_tools::LinecalRun;
+using testing_tools::ReadJson;
 using testing_tools::RunLinecal;
 
 const std::string kRef = std::string(" --station ") + LINECAL_SOURCE_DIR +
@@ -29,11 +31,6 @@ const std::string kRef = std::string(" --station ") + LINECAL_SOURCE_DIR +
                          "/deploy/cars/reference.json";
 // Estimates within 4 reported sigma of the truth (a false failure once in 16,000 per check).
 constexpr double kSigmaBound = 4.0;
-
-nlohmann::json ReadJson(const fs::path& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
 
 class CalibrateCliTest : public ::testing::Test {
  protected:

@@ -15,6 +15,7 @@
 #include <set>
 #include <string>
 
+#include "tests/tools/json_file.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -22,6 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using testing_tools::LinecalRun;
+using testing_tools::ReadJson;
 using testing_tools::RunLinecal;
 
 const std::string kCar = std::string(LINECAL_SOURCE_DIR) + "/deploy/cars/reference.json";
@@ -33,11 +35,6 @@ const std::string kFloor =
 // noisy: 0.012 px is the mean over their σ on seeds 6..10 (docs/planner.md).
 constexpr char kCornerNoise[] = " --corner-noise-px 0.04 --fisheye-corner-noise-px 0.012";
 constexpr char kFisheyes[] = "surround_front,surround_rear,surround_left,surround_right";
-
-nlohmann::json ReadJson(const fs::path& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
 
 void WriteJson(const fs::path& path, const nlohmann::json& j) {
   std::ofstream out(path);
