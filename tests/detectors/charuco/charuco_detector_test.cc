@@ -382,6 +382,19 @@ TEST(CharucoDetectorTest, EveryMarkerSizeIsFoundWithItsIds) {
   }
 }
 
+// The ChArUco board as detectors_eval renders it in the hard set at its nearest distance for
+// the view (yaw, pitch, roll in degrees) and the evaluation's seed.
+absl::StatusOr<CameraFrame> RenderNearestHard(const Board& board, const CameraModel& camera,
+                                              double yaw, double pitch, double roll,
+                                              std::uint64_t seed) {
+  const double distance =
+      circle_scene::EvaluationDistances(board, camera, false, yaw, pitch).front();
+  return circle_scene::RenderScene(
+      circle_scene::OneBoard(BoardType::kCharuco,
+                             circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed)),
+      circle_scene::HardEffects(seed), seed, camera);
+}
+
 // detectors_eval's hard set (noise 6, blur 1.5, a 4:1 light gradient, gamma, JPEG 80, clutter)
 // on the default 9 x 6 board at its nearest distance, turned 35-50 degrees: the far side's
 // markers are too foreshortened for the scan (cells of 1-2 px across) and some corners' saddle
@@ -397,12 +410,8 @@ TEST(CharucoDetectorTest, HardRendersWithForeshortenedMarkersAreFoundWhole) {
        {std::tuple{-50.0, 0.0, 0.0, std::uint64_t{60}},
         std::tuple{-35.0, -35.0, -30.0, std::uint64_t{165}}}) {
     SCOPED_TRACE(testing::Message() << "seed " << seed);
-    const double distance =
-        circle_scene::EvaluationDistances(board, camera, false, yaw, pitch).front();
-    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
-        circle_scene::OneBoard(BoardType::kCharuco,
-                               circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed)),
-        circle_scene::HardEffects(seed), seed, camera);
+    const absl::StatusOr<CameraFrame> frame =
+        RenderNearestHard(board, camera, yaw, pitch, roll, seed);
     ASSERT_TRUE(frame.ok()) << frame.status();
     const Detection d = DetectCharuco(frame->image8.view(), board);
     ExpectComplete(d, board);
@@ -434,12 +443,8 @@ TEST(CharucoDetectorTest, CornersBesideUnreadMarkersArePlacedByTheirNeighbours) 
         std::tuple{50.0, 0.0, 0.0, std::uint64_t{429}},
         std::tuple{-35.0, -35.0, 30.0, std::uint64_t{549}}}) {
     SCOPED_TRACE(testing::Message() << "seed " << seed);
-    const double distance =
-        circle_scene::EvaluationDistances(board, camera, false, yaw, pitch).front();
-    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
-        circle_scene::OneBoard(BoardType::kCharuco,
-                               circle_scene::EvaluationPose(distance, yaw, pitch, roll, seed)),
-        circle_scene::HardEffects(seed), seed, camera);
+    const absl::StatusOr<CameraFrame> frame =
+        RenderNearestHard(board, camera, yaw, pitch, roll, seed);
     ASSERT_TRUE(frame.ok()) << frame.status();
     const Detection d = DetectCharuco(frame->image8.view(), board);
     ExpectComplete(d, board);
