@@ -61,6 +61,7 @@ TEST(AravisCameraTest, FullHdFramesEqualTheServedImage) {
   ASSERT_TRUE(camera.ok()) << camera.status();
   const auto t_opened = steady_clock::now();
   std::vector<double> grab_s;
+  int first_attempts = 0;
   for (int k = 0; k < 5; ++k) {
     const auto t0 = steady_clock::now();
     absl::StatusOr<CameraFrame> frame = (*camera)->Grab(t0 + std::chrono::seconds(5), nullptr);
@@ -68,11 +69,21 @@ TEST(AravisCameraTest, FullHdFramesEqualTheServedImage) {
     ASSERT_TRUE(frame.ok()) << frame.status();
     EXPECT_EQ(frame->image.width, 1920);
     EXPECT_EQ(frame->image.height, 1080);
-    EXPECT_EQ(frame->attempts, 1);
+    // Aravis sizes the stream's socket buffer when a frame starts, so the fake camera's
+    // first 1920 x 1080 burst after the start of acquisition can overflow the kernel's
+    // default buffer on loopback and be retried once (docs/sensors.md, "Several cameras at
+    // once"); every later frame comes whole at the first attempt.
+    if (k == 0) {
+      first_attempts = frame->attempts;
+      EXPECT_GE(frame->attempts, 1);
+      EXPECT_LE(frame->attempts, 2);
+    } else {
+      EXPECT_EQ(frame->attempts, 1) << "frame " << k;
+    }
     EXPECT_TRUE(frame->image.pixels == served.pixels) << "frame " << k;
     EXPECT_GT(frame->t_ns, 0);
   }
-  EXPECT_EQ((*camera)->incomplete_frames(), 0);
+  EXPECT_EQ((*camera)->incomplete_frames(), first_attempts - 1);
   // Measured numbers for docs/daemon.md: open, first frame (acquisition start), later frames
   // (the fake camera's 25 frames/s period).
   std::printf("open %.3f s, grab 1920x1080: first %.3f s, then %.3f %.3f %.3f %.3f s\n",
