@@ -267,16 +267,16 @@ PlaneFit FitPlane(const std::vector<RoiPoint>& points, const Eigen::Vector3d& n0
   return fit;
 }
 
-// How many frames' worth of independent errors each frame's azimuth quantisation counts for,
-// per ring: an edge's error is a sawtooth of where its boundary falls on the ring's firing
-// grid, so the same boundary in two frames whose grids lie a phase difference d (in steps)
-// apart has errors correlated by rho(d) = 1 - 6 frac(d) (1 - frac(d)) (1 at d = 0, 0 on
-// average over a uniform d, -1/2 at half a step). The variance of the frames' mean is the
-// single frame's times (1 / N^2) sum over frame pairs of rho; the fit's covariance already
-// divides by N, so this returns (1 / N) sum rho, the median over the rings: N when all
-// frames fired at the same azimuths (a phase-locked sensor), about 1 for a free-running one.
-// Clustering the phases (0.05 of a step apart) instead counted a free-running motor's close
-// but distinct phases as repeats, and its sigma came out up to 1.6 times too large.
+// How many frames' worth of independent errors each frame's edge excess (beyond the half step,
+// and the floor) counts for, per ring: like the quantisation it is a function of where the
+// boundary falls on the ring's firing grid, so the same boundary in two frames whose grids lie
+// a phase difference d (in steps) apart is taken as correlated by the sawtooth's
+// rho(d) = 1 - 6 frac(d) (1 - frac(d)) (1 at d = 0, 0 on average over a uniform d, -1/2 at
+// half a step). The variance of the frames' mean is the single frame's times (1 / N^2) sum
+// over frame pairs of rho; the fit's covariance already divides by N, so this returns
+// (1 / N) sum rho, the median over the rings: N when all frames fired at the same azimuths (a
+// phase-locked sensor), about 1 for a free-running one. (The quantisation itself correlates
+// every edge pair across frames exactly, QuantisationB.)
 double FrameRepeats(const std::vector<int>& group_ring, const std::vector<int>& group_frame,
                     const std::vector<double>& group_phase) {
   std::map<int, std::map<int, double>> phases;  // ring -> frame -> phase
@@ -340,36 +340,84 @@ double SawtoothCovariance(double f, double sigma_f) {
   return sum;
 }
 
-// The edges' quantisation errors as the sandwich's middle: sum over edge pairs of one
-// rotation of SawtoothCovariance(their boundaries' separation) (w a J)_i (w a J)_j^T, with
-// `pose_covariance` (x, y, theta) giving each separation's uncertainty. Edges of different
-// rotations are left independent; FrameRepeats accounts for rotations that repeat. The edges
-// of one rotation are consecutive (the extraction goes frame by frame, ring by ring).
+// SawtoothCovariance(f, sigma_f) for sigma_f below kTabledSigmaMax, interpolated bilinearly in
+// a table of frac(f) x sigma_f built once (steps of 1/512 by 0.0025, 82 KiB): QuantisationB
+// evaluates it for every pair of edges of all frames (~10^6 for a Pandar64 board over 10
+// rotations), where seven evaluations of the sawtooth per pair cost more. The table's nodes
+// are SawtoothCovariance's own values, linear between them; the cusp at f = 0 lies on a node.
+constexpr double kTabledSigmaMax = 0.1;
+double TabledSawtoothCovariance(double f, double sigma_f) {
+  constexpr int kCols = 512;  // frac(f)
+  constexpr int kRows = 40;   // sigma_f
+  if (!(sigma_f < kTabledSigmaMax)) return SawtoothCovariance(f, sigma_f);
+  static const std::vector<float> table = [] {
+    std::vector<float> t((kRows + 1) * (kCols + 1));
+    for (int r = 0; r <= kRows; ++r) {
+      for (int c = 0; c <= kCols; ++c) {
+        t[r * (kCols + 1) + c] = static_cast<float>(SawtoothCovariance(
+            static_cast<double>(c) / kCols, kTabledSigmaMax * static_cast<double>(r) / kRows));
+      }
+    }
+    return t;
+  }();
+  const double x = (f - std::floor(f)) * kCols;
+  const double y = sigma_f * (kRows / kTabledSigmaMax);
+  const int c = std::min(static_cast<int>(x), kCols - 1);
+  const int r = std::min(static_cast<int>(y), kRows - 1);
+  const double u = x - c, v = y - r;
+  const float* row = &table[r * (kCols + 1) + c];
+  const float* next = row + (kCols + 1);
+  return (1.0 - v) * ((1.0 - u) * row[0] + u * row[1]) + v * ((1.0 - u) * next[0] + u * next[1]);
+}
+
+// The edges' quantisation errors as the sandwich's middle: sum over all edge pairs, of one
+// rotation or of two, of SawtoothCovariance(their boundaries' separation) (w a J)_i (w a J)_j^T,
+// with `pose_covariance` (x, y, theta) giving each separation's uncertainty. An edge's
+// steps_along counts from its ring's first point in its own rotation, a point of that
+// rotation's firing grid, so the separation of two edges of different rotations includes the
+// rotations' phase difference: the same boundary in two rotations d of a step apart correlates
+// as 1 - 6 d (1 - d), fully when they fired at the same azimuths (a phase-locked sensor). Only
+// same-rotation pairs, scaled by a per-rotation-pair factor (FrameRepeats), made the
+// cross-rotation covariance of two different boundaries f apart 12 B(f) B(d) instead of
+// B(f + d) (B the sawtooth's covariance), and the VLP-16's sigma on a free-running motor came
+// out 8% too small. With `same_frame_only`, the pairs of one rotation alone (a first estimate
+// of `pose_covariance` needs no more). Cost: O(edges^2).
 Eigen::Matrix3d QuantisationB(const std::vector<Edge>& edges, const std::vector<int>& group_frame,
-                              const std::vector<Eigen::Vector3d>& wJa,
+                              bool same_frame_only, const std::vector<Eigen::Vector3d>& wJa,
                               const std::vector<double>& true_steps,
                               const std::vector<Eigen::Vector3d>& steps_dpose,
                               const Eigen::Matrix3d& pose_covariance) {
+  // Per edge, its crossing's sensitivity s (steps per pose unit) and P s, P the pose
+  // covariance: a pair's sigma_f^2 = (s_i - s_j)^T P (s_i - s_j) = s_i P s_i + s_j P s_j -
+  // 2 s_i P s_j. Edges whose crossing does not move with the pose have an infinite sigma_f.
+  const std::size_t n = edges.size();
+  std::vector<Eigen::Vector3d> Ps(n);
+  std::vector<double> sPs(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    Ps[i] = pose_covariance * steps_dpose[i];
+    sPs[i] = steps_dpose[i].dot(Ps[i]);
+  }
+  // B = sum_i v_i v_i^T / 12 + sum_{i<j} c_ij (v_i v_j^T + v_j v_i^T): with w_i = sum_{j>i}
+  // c_ij v_j, the second sum is sum_i (v_i w_i^T + w_i v_i^T), one 3-vector update per pair
+  // (the pairs of all frames are many: ~10^6 for a Pandar64 board over 10 rotations).
   Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
-  for (std::size_t a = 0; a < edges.size();) {
-    std::size_t b = a;
-    while (b < edges.size() && group_frame[edges[b].group] == group_frame[edges[a].group]) ++b;
-    for (std::size_t i = a; i < b; ++i) {
-      if (wJa[i].isZero()) continue;
-      B += (1.0 / 12.0) * wJa[i] * wJa[i].transpose();
-      for (std::size_t j = i + 1; j < b; ++j) {
-        if (wJa[j].isZero()) continue;
-        const Eigen::Vector3d d = steps_dpose[i] - steps_dpose[j];
-        const double sigma_f = d.allFinite() ? std::sqrt(std::max(d.dot(pose_covariance * d), 0.0))
-                                             : std::numeric_limits<double>::infinity();
-        // The boundaries' separation along the rings, not the edges': those are whole steps
-        // apart by construction.
-        const double c = SawtoothCovariance(true_steps[i] - true_steps[j], sigma_f);
-        const Eigen::Matrix3d outer = wJa[i] * wJa[j].transpose();
-        B += c * (outer + outer.transpose());
-      }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (wJa[i].isZero()) continue;
+    Eigen::Vector3d w = Eigen::Vector3d::Zero();
+    const bool finite_i = std::isfinite(sPs[i]);
+    for (std::size_t j = i + 1; j < n; ++j) {
+      if (same_frame_only && group_frame[edges[j].group] != group_frame[edges[i].group]) break;
+      if (wJa[j].isZero()) continue;
+      const double var_f = sPs[i] + sPs[j] - 2.0 * steps_dpose[i].dot(Ps[j]);
+      const double sigma_f = finite_i && std::isfinite(sPs[j])
+                                 ? std::sqrt(std::max(var_f, 0.0))
+                                 : std::numeric_limits<double>::infinity();
+      // The boundaries' separation along the rings, not the edges': those are whole steps
+      // apart by construction.
+      w += TabledSawtoothCovariance(true_steps[i] - true_steps[j], sigma_f) * wJa[j];
     }
-    a = b;
+    const Eigen::Matrix3d outer = wJa[i] * w.transpose();
+    B += (1.0 / 12.0) * wJa[i] * wJa[i].transpose() + outer + outer.transpose();
   }
   return B;
 }
@@ -1003,7 +1051,8 @@ Rigid3d BoardPose(const PlaneFit& plane, const PlaneFrame& frame, const Eigen::V
 // (each edge uniform within half a step along its ring), through the fit's Jacobian — a ring
 // that crosses a hole near its centre hardly places the board's y, one near its top or
 // bottom does. Frames that fired at the same azimuths repeat those errors exactly, so their
-// edges count once, not once per frame.
+// edges count once, not once per frame; frames at other phases share them partly
+// (QuantisationB, over every pair of edges of all frames).
 // The plane's error moves the in-plane pose too: by -H^-1 K dw (the rays' meeting points
 // slide across the plane as it moves, by tan(incidence) of its shift).
 void PoseCovariance(const BoardFitState& state, const Rigid3d& T_lidar_board,
@@ -1013,13 +1062,15 @@ void PoseCovariance(const BoardFitState& state, const Rigid3d& T_lidar_board,
   const Eigen::Matrix3d H_inv = fit.H.inverse();
   const double repeats = FrameRepeats(rings.group_ring, rings.group_frame, rings.group_phase);
   // The quantisation's correlations need the boundaries' separations, which the pose places
-  // only to its own uncertainty: first without it, then with the covariance that gives.
-  Eigen::Matrix3d cov_quantisation = Eigen::Matrix3d::Zero();
-  for (int round = 0; round < 2; ++round) {
-    const Eigen::Matrix3d B_quantisation = QuantisationB(
-        rings.edges, rings.group_frame, fit.wJa, fit.true_steps, fit.steps_dpose, cov_quantisation);
-    cov_quantisation = H_inv * (fit.B + B_quantisation) * H_inv * repeats;
-  }
+  // only to its own uncertainty: first without it (and, as a first estimate, with the pairs
+  // of other rotations taken as FrameRepeats says), then with the covariance that gives.
+  const Eigen::Matrix3d B_first =
+      QuantisationB(rings.edges, rings.group_frame, true, fit.wJa, fit.true_steps, fit.steps_dpose,
+                    Eigen::Matrix3d::Zero());
+  const Eigen::Matrix3d cov_first = H_inv * (fit.B + B_first) * H_inv * repeats;
+  const Eigen::Matrix3d B_quantisation = QuantisationB(
+      rings.edges, rings.group_frame, false, fit.wJa, fit.true_steps, fit.steps_dpose, cov_first);
+  const Eigen::Matrix3d cov_quantisation = H_inv * (fit.B * repeats + B_quantisation) * H_inv;
   const Eigen::Matrix3d dpose_dw = -H_inv * fit.K;
   Eigen::Matrix3d A = Eigen::Matrix3d::Zero();  // (dx, dy, dtheta) -> (t_x, t_y, theta_z)
   A.topLeftCorner<2, 2>() = Rotation2(-fit.pose.z());

@@ -72,9 +72,12 @@ int SimulatedColumnStepCentideg(LidarModel model);
 
 // Casts `options.rotations` rotations, the first starting at azimuth 0 at time `start_time_ns`
 // (the lead-in fires before it). With options.free_running, rotation r's columns (the lead-in
-// with the first, the lead-out with the last) fire at their azimuths plus rotation r's phase;
-// where the phase changes, one column gap is shorter or longer than a step, which a decoder
-// that interpolates azimuths between columns places slightly differently for that column.
+// with the first, the lead-out with the last) fire at their azimuths plus rotation r's phase.
+// The phase changes only where a rotation starts, a packet boundary for every model (a
+// rotation is a whole number of packets), and the VLP-16 decoder interpolates a block's second
+// firing from the next block of its own packet only: every point decodes to the azimuth its
+// ray was cast at, per-laser firing delays included (tests/station/sim/lidar_radar_sim_test.cc,
+// FreeRunningPacketsDecodeToTheAzimuthsOfTheRaysCast).
 // Deterministic for a seed. Errors: InvalidArgument for invalid options or beam table.
 // Cost: rotations · columns · beams ray casts against every board, surface and stand
 // (about 40 ms for a Pandar64 rotation in the reference station).

@@ -266,10 +266,11 @@ TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
 
 // A free-running motor: every rotation fires at its own azimuth phase, so the frames'
 // quantisation errors are (nearly) independent and average down. The covariance must say so:
-// it compares the rings' phases across frames (FrameRepeats). Clustering phases within 0.05
-// of a step counted the simulator's 20 distinct phases (a centidegree apart) as repeats and
-// the in-plane sigma came out too large: RMS error / sigma of t_x, t_y, theta_z pooled was
-// 0.66 (VLP-16) and 0.83 (Pandar64) here; 0.98 and 1.12 with the phases' correlation.
+// it correlates every pair of edges across frames through the frames' phase difference
+// (QuantisationB). Clustering phases within 0.05 of a step counted the simulator's 20 distinct
+// phases (a centidegree apart) as repeats and the in-plane sigma came out too large: RMS
+// error / sigma of t_x, t_y, theta_z pooled was 0.66 (VLP-16) and 0.83 (Pandar64) here; 0.98
+// and 1.12 with same-frame pairs scaled by the phases' correlation; 0.98 and 1.08 now.
 TEST(RoundHoleCloudTest, CovarianceOfAFreeRunningMotor) {
   struct Run {
     const char* sensor;
