@@ -13,9 +13,9 @@ namespace {
 constexpr double kDegToRad = std::numbers::pi / 180.0;
 // 1.4826 x MAD estimates σ for Gaussian data (1 / Φ⁻¹(3/4)).
 constexpr double kMadToSigma = 1.4826;
-// The nearest a station reflector stands to a radar (docs/station-and-car.md: reflectors at
-// 4..15 m); converts a lateral position tolerance or step into an azimuth margin.
-constexpr double kNearestReflectorRangeM = 4.0;
+// The range at which ForSensor turns the gate's lateral margin into azimuth_gate_rad; nearer
+// reflectors widen their gate by the rest (AzimuthGate).
+constexpr double kLateralGateRangeM = 4.0;
 
 double Median(std::vector<double> v) {
   const size_t mid = v.size() / 2;
@@ -335,6 +335,7 @@ absl::Status ReflectorAssociationOptions::Validate() const {
         absl::StrCat("azimuth_gate_rad = ", azimuth_gate_rad, ": must be below pi/2"));
   }
   if (auto s = positive("range_gate_m", range_gate_m); !s.ok()) return s;
+  if (auto s = non_negative("azimuth_gate_lateral_m", azimuth_gate_lateral_m); !s.ok()) return s;
   if (!std::isfinite(min_rcs_dbsm)) {
     return absl::InvalidArgumentError(
         absl::StrCat("min_rcs_dbsm = ", min_rcs_dbsm, ": must be finite"));
@@ -376,10 +377,9 @@ absl::StatusOr<ReflectorAssociationOptions> ReflectorAssociationOptions::ForSens
   // Twice the yaw tolerance so that out-of-tolerance mountings are measured and judged
   // rather than lost; 3σ of the noise; the position tolerance and half a resolution step as
   // azimuth at the nearest reflector.
-  o.azimuth_gate_rad =
-      2 * sensor.tolerance.yaw_rad + 3 * o.detection_azimuth_sigma_rad +
-      (lateral_tolerance_m + 0.5 * resolution->position_step_m) / kNearestReflectorRangeM +
-      resolution->azimuth_step_rad;
+  o.azimuth_gate_lateral_m = lateral_tolerance_m + 0.5 * resolution->position_step_m;
+  o.azimuth_gate_rad = 2 * sensor.tolerance.yaw_rad + 3 * o.detection_azimuth_sigma_rad +
+                       o.azimuth_gate_lateral_m / kLateralGateRangeM + resolution->azimuth_step_rad;
   // The range does not depend on the mounting angles: the position tolerance, 3σ of the range
   // noise and one resolution step.
   o.range_gate_m = sensor.tolerance.xyz_m.norm() + 3 * o.detection_range_sigma_m +
@@ -405,6 +405,15 @@ const char* ReflectorStatusName(ReflectorStatus status) {
 
 namespace {
 
+// The half-width of reflector e's azimuth gate: options.azimuth_gate_rad, plus the part of the
+// lateral margin's angle that it leaves out for a reflector nearer than kLateralGateRangeM.
+double AzimuthGate(const ExpectedReflector& e, const ReflectorAssociationOptions& options) {
+  constexpr double kLeastRangeM = 0.1;  // a reflector at the radar itself: a finite gate
+  const double inverse_range = 1 / std::max(e.range_m, kLeastRangeM);
+  return options.azimuth_gate_rad +
+         options.azimuth_gate_lateral_m * std::max(0.0, inverse_range - 1 / kLateralGateRangeM);
+}
+
 // True if the gates of in-view reflector i and another in-view one overlap: detections in
 // both cannot tell them apart.
 bool GatesOverlap(std::span<const ExpectedReflector> expected, size_t i,
@@ -415,7 +424,7 @@ bool GatesOverlap(std::span<const ExpectedReflector> expected, size_t i,
     if (j == i || !expected[j].in_view) continue;
     overlaps |= std::abs(expected[j].range_m - e.range_m) <= 2 * options.range_gate_m &&
                 std::abs(WrapAngle(expected[j].azimuth_rad - e.azimuth_rad)) <=
-                    2 * options.azimuth_gate_rad;
+                    AzimuthGate(e, options) + AzimuthGate(expected[j], options);
   }
   return overlaps;
 }
@@ -424,7 +433,7 @@ bool GatesOverlap(std::span<const ExpectedReflector> expected, size_t i,
 bool InGate(const ExpectedReflector& e, double range_m, double azimuth_rad,
             const ReflectorAssociationOptions& options) {
   return std::abs(range_m - e.range_m) <= options.range_gate_m &&
-         std::abs(WrapAngle(azimuth_rad - e.azimuth_rad)) <= options.azimuth_gate_rad;
+         std::abs(WrapAngle(azimuth_rad - e.azimuth_rad)) <= AzimuthGate(e, options);
 }
 
 // Per cycle, the nearest candidate in reflector e's gate (passing the range-rate and RCS

@@ -60,6 +60,11 @@ struct ReflectorAssociationOptions {
   // cover the mounting yaw error to be measured (tolerance and beyond) plus 3σ of the noise.
   double azimuth_gate_rad = 0.05;  // ~2.9°: 2 x a 1° tolerance + 3σ + margins (see ForSensor)
   double range_gate_m = 0.6;       // ForSensor: position tolerance + noise + resolution
+  // The lateral margin of the azimuth gate (ForSensor: the position tolerance and half a
+  // position step), metres across the line of sight. azimuth_gate_rad holds it as the angle it
+  // spans at 4 m; a reflector nearer than that gets the rest of its angle on top (at 2 m a 7 cm
+  // margin spans 2°, not 1°), so that a radar off its place still finds its near reflectors.
+  double azimuth_gate_lateral_m = 0;
   // Station clutter (floor, stands, people) stays below ~5 dBm² while corner reflectors are
   // ≥ 10 dBm²; applied only to detections that carry RCS.
   double min_rcs_dbsm = 8.0;

@@ -62,7 +62,7 @@ TEST(RadarCalibrateCliTest, CalibratesSimulatedRadarsAgainstGroundTruth) {
     EXPECT_EQ(j["cycles"], 50);
     EXPECT_EQ(j["pitch_observable"], false);
     EXPECT_EQ(j["position"], "nominal");
-    EXPECT_EQ(j["reflectors_used"], sensor == "front_radar" ? 6 : 2);  // deploy/cars/reference.json
+    EXPECT_EQ(j["reflectors_used"], sensor == "front_radar" ? 6 : 3);  // deploy/cars/reference.json
     for (const nlohmann::json& r : j["reflectors"]) EXPECT_EQ(r["status"], "found") << r["id"];
     const double sigma = j["yaw_sigma_deg"].get<double>();
     EXPECT_GT(sigma, 0);

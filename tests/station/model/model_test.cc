@@ -22,7 +22,7 @@ TEST(StationLayoutTest, ReferenceStationLoads) {
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_EQ(s->name, "reference");
   EXPECT_EQ(s->boards.size(), 19u);
-  EXPECT_EQ(s->reflectors.size(), 10u);
+  EXPECT_EQ(s->reflectors.size(), 12u);
   const StationBoard* chess = s->FindBoard("front_chessboard");
   ASSERT_NE(chess, nullptr);
   EXPECT_EQ(chess->params.type, BoardType::kChessboard);

@@ -4,11 +4,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
 
 #include "absl/strings/str_cat.h"
+#include "station/model/car_model.h"
+#include "station/model/station_layout.h"
 #include "tests/station/solvers/radar_test_scene.h"
 
 namespace linecal {
@@ -290,6 +293,59 @@ TEST(RadarCalibrationTest, SigmaMatchesMonteCarloWithRangeNoiseAndPositionError)
   EXPECT_LE(m.error_over_sigma, 1.25);
   EXPECT_GE(m.coverage95, 0.93);
   EXPECT_LE(m.coverage95, 0.97);
+}
+
+// issue 20's radar bar on the reference station (deploy/): the ESR corner radars' yaw p95 within
+// 0.05° with the radar up to ±1 cm off its nominal place per axis, under the car model's ±5 cm
+// prior, and the σ still right (error / σ 0.8–1.25, coverage 93–97%). With the two reflectors
+// at 5.2 and 5.7 m that the station had before, a lateral offset could not be told from the yaw
+// (δ / range: 1 cm is 0.1°), and the p95 was 0.110° (docs/lidar-radar.md); the close reflector
+// at 2 m tells it (linecal eval radar --position-error-m 0.01: 0.038–0.040° over 2 x 2000).
+// 300 cars, two radars each: the p95 scatters by about ±0.003°, the coverage by ±0.9 points.
+TEST(RadarCalibrationTest, ReferenceCornerRadarsMeetTheYawBarOffTheirNominalPlace) {
+  const std::string deploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
+  const absl::StatusOr<StationLayout> layout =
+      ReadStationLayout(deploy + "/stations/reference.json");
+  ASSERT_TRUE(layout.ok()) << layout.status();
+  const absl::StatusOr<CarModel> car = ReadCarModel(deploy + "/cars/reference.json");
+  ASSERT_TRUE(car.ok()) << car.status();
+  std::mt19937_64 rng(20);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<double> abs_errors;
+  double sum_e2 = 0, sum_s2 = 0;
+  int covered = 0;
+  for (int i = 0; i < 300; ++i) {
+    const Rigid3d T_station_car(
+        Eigen::Matrix3d(Eigen::AngleAxisd(0.2 * kDeg * u(rng), Eigen::Vector3d::UnitZ())),
+        Eigen::Vector3d(0.02 * u(rng), 0.02 * u(rng), 0));
+    for (const SensorModel& s : car->sensors) {
+      if (s.model != "esr") continue;
+      const YawPitchRoll error{2.0 * kDeg * u(rng), 1.0 * kDeg * u(rng), 1.0 * kDeg * u(rng)};
+      const Eigen::Vector3d offset = 0.01 * Eigen::Vector3d(u(rng), u(rng), u(rng));
+      const std::vector<RadarCycle> cycles = radar_test::SimulatedCycles(
+          s, *layout, T_station_car, radar_test::TrueMounting(s, error, offset), AcceptanceSim(),
+          rng());
+      const RadarCalibrationResult r = Calibrate(s, *layout, T_station_car, cycles).result;
+      ASSERT_NE(r.verdict, Verdict::kError) << s.name << " car " << i << ": " << r.reason;
+      EXPECT_EQ(r.reflectors_used, 3) << s.name << " car " << i;
+      const double e = r.yaw_deviation_rad - error.yaw;
+      abs_errors.push_back(std::abs(e));
+      sum_e2 += e * e;
+      sum_s2 += r.yaw_sigma_rad * r.yaw_sigma_rad;
+      covered += std::abs(e) <= r.yaw_ci95_rad;
+    }
+  }
+  ASSERT_EQ(abs_errors.size(), 600u);
+  std::sort(abs_errors.begin(), abs_errors.end());
+  const double p95_deg = abs_errors[569] / kDeg;  // the 570th of 600
+  const double ratio = std::sqrt(sum_e2 / sum_s2);
+  const double coverage = covered / 600.0;
+  std::printf("p95 %.4f deg, error / sigma %.3f, coverage %.3f\n", p95_deg, ratio, coverage);
+  EXPECT_LE(p95_deg, 0.05);
+  EXPECT_GE(ratio, 0.8);
+  EXPECT_LE(ratio, 1.25);
+  EXPECT_GE(coverage, 0.93);
+  EXPECT_LE(coverage, 0.97);
 }
 
 // ARS408 traffic carries cluster and object lists of several sensor ids; only the clusters

@@ -85,6 +85,34 @@ TEST(ReflectorAssociationOptionsTest, GatesCoverTwiceTheToleranceAndTheNoise) {
   EXPECT_NE(bad.Validate().message().find("resolution.position_step_m"), std::string::npos);
 }
 
+// A radar 5 cm off its place moves a reflector 2.2 m away by up to 1.8° of azimuth, twice as
+// much as one at 4 m, which the fixed gate was sized for: near reflectors widen their gate by the
+// lateral margin's extra angle (3.41° at 4 m and beyond, 4.24° at 2.2 m for the ESR), far ones
+// keep theirs.
+TEST(AssociateReflectorsTest, NearReflectorsHaveAWiderAzimuthGate) {
+  const SensorModel s = radar_test::TestCornerRadar();  // near 5.2 m, far 5.7 m, close 2.2 m
+  const std::vector<ExpectedReflector> e = Expected(s, radar_test::CornerLayout());
+  const ReflectorAssociationOptions o = OptionsFor(s);
+  EXPECT_NEAR(o.azimuth_gate_rad, 3.413 * kDeg, 0.001 * kDeg);
+  EXPECT_NEAR(o.azimuth_gate_lateral_m, std::hypot(0.05, 0.05), 1e-12);
+  std::vector<RadarCycle> cycles(20);
+  for (RadarCycle& c : cycles) {
+    for (const ExpectedReflector& r : e) {
+      c.detections.push_back(Detection(r.range_m, r.azimuth_rad + 3.8 * kDeg, 0.0, std::nullopt));
+    }
+  }
+  const ReflectorAssociation out = AssociateReflectors(cycles, e, o);
+  ASSERT_EQ(out.reflectors.size(), 3u);
+  EXPECT_EQ(out.reflectors[0].status, ReflectorStatus::kNoDetections);  // near, 5.2 m
+  EXPECT_EQ(out.reflectors[1].status, ReflectorStatus::kNoDetections);  // far, 5.7 m
+  EXPECT_EQ(out.reflectors[2].status, ReflectorStatus::kFound);         // close, 2.2 m
+  EXPECT_EQ(out.reflectors[2].n_used, 20);
+
+  ReflectorAssociationOptions bad = o;
+  bad.azimuth_gate_lateral_m = -0.1;
+  EXPECT_NE(bad.Validate().message().find("azimuth_gate_lateral_m"), std::string::npos);
+}
+
 // Per cycle: the reflector, a weaker echo 0.35 m farther inside the range gate, a weak
 // clutter return and a strong mover both nearer in range inside the gate, and a ghost at 1.5x
 // the range. Only the reflector may be used, exactly as reported.
