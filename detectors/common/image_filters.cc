@@ -160,18 +160,4 @@ Eigen::Vector2d LevelToImage(const Eigen::Vector2d& uv_level, int level) {
   return scale * uv_level + Eigen::Vector2d::Constant(0.5 * (scale - 1.0));
 }
 
-float SampleBilinear(const ImageF& image, double u, double v) {
-  u = std::clamp(u, 0.0, static_cast<double>(image.width - 1));
-  v = std::clamp(v, 0.0, static_cast<double>(image.height - 1));
-  const int x0 = std::min(static_cast<int>(u), image.width - 2 < 0 ? 0 : image.width - 2);
-  const int y0 = std::min(static_cast<int>(v), image.height - 2 < 0 ? 0 : image.height - 2);
-  const int x1 = std::min(x0 + 1, image.width - 1);
-  const int y1 = std::min(y0 + 1, image.height - 1);
-  const float fx = static_cast<float>(u - x0);
-  const float fy = static_cast<float>(v - y0);
-  const float top = image.at(x0, y0) + fx * (image.at(x1, y0) - image.at(x0, y0));
-  const float bottom = image.at(x0, y1) + fx * (image.at(x1, y1) - image.at(x0, y1));
-  return top + fy * (bottom - top);
-}
-
 }  // namespace linecal
