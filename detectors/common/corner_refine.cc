@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace linecal {
@@ -14,6 +15,8 @@ std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::
   // one moment each, and a, c, g from a 3 x 3 system of the even moments S2 = sum x^2,
   // S4 = sum x^4, S22 = sum x^2 y^2 and N (sums over the whole window).
   const int side = 2 * w + 1;
+  constexpr int kMaxSide = 2 * 15 + 1;  // SaddleFitOptions::half_window <= 15
+  if (side > kMaxSide) return std::nullopt;
   double s2_1d = 0.0, s4_1d = 0.0;
   for (int i = -w; i <= w; ++i) {
     s2_1d += i * i;
@@ -43,11 +46,16 @@ std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::
     const double w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
     double m_x = 0, m_y = 0, m_xy = 0, m_xx = 0, m_yy = 0, m_1 = 0;
     for (int j = -w; j <= w; ++j) {
-      const float* r0 = blurred.Row(y0 + j);
-      const float* r1 = blurred.Row(y0 + j + 1);
+      const float* r0 = blurred.Row(y0 + j) + x0 - w;
+      const float* r1 = blurred.Row(y0 + j + 1) + x0 - w;
+      // The row's samples first, in a loop of their own that vectorises; the moments below
+      // add them in the same order as before (sums that depend on the previous one).
+      std::array<double, kMaxSide> row;
+      for (int k = 0; k < side; ++k) {
+        row[k] = w00 * r0[k] + w10 * r0[k + 1] + w01 * r1[k] + w11 * r1[k + 1];
+      }
       for (int i = -w; i <= w; ++i) {
-        const int x = x0 + i;
-        const double f = w00 * r0[x] + w10 * r0[x + 1] + w01 * r1[x] + w11 * r1[x + 1];
+        const double f = row[i + w];
         m_x += i * f;
         m_y += j * f;
         m_xy += i * j * f;

@@ -31,7 +31,8 @@ struct SaddleFitOptions {
 // The refined X-corner near `start_px` in `blurred` (an image already smoothed, e.g. by
 // GaussianBlur with sigma about half_window / 2, so that the vertex is a smooth saddle).
 // Returns nullopt when the fitted quadratic is not a saddle (no X-corner there), the
-// estimate leaves the window around start_px, or the window leaves the image.
+// estimate leaves the window around start_px, the window leaves the image, or half_window
+// is outside 1..15.
 // Cost: O(half_window^2) per iteration.
 std::optional<Eigen::Vector2d> RefineSaddle(const ImageF& blurred, const Eigen::Vector2d& start_px,
                                             const SaddleFitOptions& options = {});

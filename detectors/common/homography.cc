@@ -172,8 +172,11 @@ Eigen::Vector2d ApplyHomography(const Eigen::Matrix3d& H, const Eigen::Vector2d&
   const Eigen::Vector3d q = H * p.homogeneous();
   // w this small relative to the terms that make it is zero up to rounding: the point is on
   // the line at infinity of the destination plane.
+  // Compared squared: the same test without two square roots (the detectors map thousands
+  // of points per frame).
   constexpr double kRelativeZeroW = 1e-12;
-  if (!(std::abs(q.z()) > kRelativeZeroW * H.row(2).norm() * p.homogeneous().norm())) {
+  if (!(q.z() * q.z() >
+        kRelativeZeroW * kRelativeZeroW * H.row(2).squaredNorm() * p.homogeneous().squaredNorm())) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     return Eigen::Vector2d(nan, nan);
   }

@@ -5,7 +5,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <map>
 #include <optional>
 #include <span>
 #include <tuple>
@@ -414,26 +413,28 @@ std::vector<EdgePoint> SegmentPoints(const Frame& frame, const Eigen::Matrix3d& 
 // The edge points of the segments (SegmentPoints) measured under one homography and edge
 // bias, each measured once: the lines of neighbouring L-corners share up to three of their
 // four segments (the outer vertical lines carry an L-corner on almost every row), which
-// made a pass measure most edges several times.
+// made a pass measure most edges several times. One slot per segment starting on the page
+// (a flat table, not a map: no node to allocate or tree to walk per lookup).
 class SegmentCache {
  public:
   SegmentCache(const Frame& frame, const Eigen::Matrix3d& H, double edge_bias_px)
-      : frame_(frame), H_(H), edge_bias_px_(edge_bias_px) {}
+      : frame_(frame), H_(H), edge_bias_px_(edge_bias_px), slots_(2 * kPageCols * kPageRows) {}
 
   const std::vector<EdgePoint>& Points(int gx, int gy, bool vertical) {
-    const auto key = std::make_tuple(gx, gy, vertical);
-    auto it = segments_.find(key);
-    if (it == segments_.end()) {
-      it = segments_.emplace(key, SegmentPoints(frame_, H_, gx, gy, vertical, edge_bias_px_)).first;
-    }
-    return it->second;
+    // A segment from a vertex off the page's cells has no edge (SegmentPoints).
+    if (!Layout::OnPage(gx, gy)) return no_points_;
+    std::optional<std::vector<EdgePoint>>& slot =
+        slots_[(gy * kPageCols + gx) * 2 + (vertical ? 1 : 0)];
+    if (!slot.has_value()) slot = SegmentPoints(frame_, H_, gx, gy, vertical, edge_bias_px_);
+    return *slot;
   }
 
  private:
   const Frame& frame_;
   const Eigen::Matrix3d H_;
   const double edge_bias_px_;
-  std::map<std::tuple<int, int, bool>, std::vector<EdgePoint>> segments_;
+  std::vector<std::optional<std::vector<EdgePoint>>> slots_;
+  const std::vector<EdgePoint> no_points_;
 };
 
 // Edge points of the board line through vertex (gx, gy), vertical (x = gx) or horizontal
