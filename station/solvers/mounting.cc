@@ -67,6 +67,14 @@ MountingEstimate MountingFromSensorPose(const Rigid3d& T_sensor_car,
   return MountingFromCarPose(T_car_sensor, J * covariance * J.transpose(), sensor);
 }
 
+ToleranceDecision DecideTolerance(double deviation, double sigma, double tolerance,
+                                  double guard_sigmas) {
+  const double u = guard_sigmas * sigma;
+  if (std::abs(deviation) + u <= tolerance) return ToleranceDecision::kInside;
+  if (std::abs(deviation) - u > tolerance) return ToleranceDecision::kOutside;
+  return ToleranceDecision::kUndecided;
+}
+
 MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimate& m,
                                 double max_sigma_fraction_of_tolerance) {
   const MountingTolerance& tol = sensor.tolerance;
@@ -90,21 +98,29 @@ MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimat
       return j;
     }
   }
-  std::string out_of_tolerance;
+  std::string out_of_tolerance, undecided;
   for (int i = 0; i < 6; ++i) {
-    if (!m.observed[i] || !(tolerances[i] > 0) || std::abs(deviations[i]) <= tolerances[i])
-      continue;
-    if (j.reason.empty()) j.reason = absl::StrCat(names[i], "_out_of_tolerance");
-    absl::StrAppendFormat(&out_of_tolerance, "%s%s %+.3f %s (tolerance %.3f)",
-                          out_of_tolerance.empty() ? "" : ", ", names[i], shown(i, deviations[i]),
-                          units[i], shown(i, tolerances[i]));
+    if (!m.observed[i] || !(tolerances[i] > 0)) continue;
+    const ToleranceDecision d = DecideTolerance(deviations[i], m.sigma[i], tolerances[i]);
+    if (d == ToleranceDecision::kInside) continue;
+    std::string& list = d == ToleranceDecision::kOutside ? out_of_tolerance : undecided;
+    if (d == ToleranceDecision::kOutside && out_of_tolerance.empty())
+      j.reason = absl::StrCat(names[i], "_out_of_tolerance");
+    absl::StrAppendFormat(&list, "%s%s %+.3f %s (2 sigma %.3f, tolerance %.3f)",
+                          list.empty() ? "" : ", ", names[i], shown(i, deviations[i]), units[i],
+                          shown(i, kVerdictGuardSigmas * m.sigma[i]), shown(i, tolerances[i]));
   }
-  if (!j.reason.empty()) {
+  if (!out_of_tolerance.empty()) {
     j.verdict = Verdict::kFail;
     j.message = absl::StrCat(sensor.name, ": out of tolerance: ", out_of_tolerance);
-    return j;
+  } else if (!undecided.empty()) {
+    j.reason = "near_tolerance_edge";
+    j.message = absl::StrCat(sensor.name,
+                             ": too close to a tolerance edge to tell pass from fail: ", undecided,
+                             "; measure again or check the mounting by hand");
+  } else {
+    j.verdict = Verdict::kPass;
   }
-  j.verdict = Verdict::kPass;
   return j;
 }
 

@@ -65,16 +65,37 @@ MountingEstimate MountingFromCarPose(const Rigid3d& T_car_sensor,
 
 struct MountingJudgement {
   Verdict verdict = Verdict::kError;
-  std::string reason;   // "", "uncertainty_too_high", "<yaw|pitch|roll|x|y|z>_out_of_tolerance"
+  // "", "uncertainty_too_high", "<yaw|pitch|roll|x|y|z>_out_of_tolerance",
+  // "near_tolerance_edge"
+  std::string reason;
   std::string message;  // for a person; empty on pass
 };
+
+// The guard band of every verdict, in multiples of the component's 1-sigma: the decision rule
+// of ISO 14253-1 with the expanded uncertainty U = 2 sigma (coverage factor 2, as the GUM).
+// Conformity is shown when |deviation| + U <= tolerance, non-conformity when
+// |deviation| - U > tolerance; between the two the measurement cannot tell, and a verdict
+// from the estimate alone would be wrong for about one car in six of those whose truth lies
+// 1 sigma inside or outside the edge (issue 20's bar: no verdict wrong with the truth more
+// than 1 sigma from an edge; docs/solvers.md, "Verdicts near a tolerance edge").
+inline constexpr double kVerdictGuardSigmas = 2.0;
+
+// What one component's estimate shows against its tolerance (all > 0 but the deviation).
+enum class ToleranceDecision { kInside, kOutside, kUndecided };
+
+// The decision above for one component: kInside when |deviation| + guard·sigma <= tolerance,
+// kOutside when |deviation| - guard·sigma > tolerance, else kUndecided. Pure, O(1).
+ToleranceDecision DecideTolerance(double deviation, double sigma, double tolerance,
+                                  double guard_sigmas = kVerdictGuardSigmas);
 
 // The verdict of a trustworthy estimate against sensor.tolerance: error
 // "uncertainty_too_high" when an observed component's 1-sigma exceeds
 // max_sigma_fraction_of_tolerance of its tolerance (the verdict could not be trusted); else
-// fail with the first out-of-tolerance component in the order yaw, pitch, roll, x, y, z (the
-// message lists all, in degrees and millimetres); else pass. A zero tolerance and an
-// unobserved component are not judged. O(1).
+// fail with the first component shown out of tolerance (DecideTolerance) in the order yaw,
+// pitch, roll, x, y, z (the message lists all, in degrees and millimetres); else error
+// "near_tolerance_edge" when a component is undecided (the message names it: measure again or
+// check the mounting by hand); else pass. A zero tolerance and an unobserved component are not
+// judged. O(1).
 MountingJudgement JudgeMounting(const SensorModel& sensor, const MountingEstimate& mounting,
                                 double max_sigma_fraction_of_tolerance);
 

@@ -508,18 +508,28 @@ void AddResiduals(const YawFit& fit, RadarCalibrationResult* out) {
   }
 }
 
-// The verdict from the yaw's σ and its deviation from nominal.
+// The verdict from the yaw's σ and its deviation from nominal, with the guard band of
+// every verdict (mounting.h, DecideTolerance).
 void SetVerdict(const SensorModel& sensor, const RadarCalibrationOptions& options,
                 RadarCalibrationResult* out) {
   if (out->yaw_sigma_rad > options.max_sigma_fraction_of_tolerance * sensor.tolerance.yaw_rad) {
     out->verdict = Verdict::kError;
     out->reason = "uncertainty_too_high";
-  } else if (std::abs(out->yaw_deviation_rad) > sensor.tolerance.yaw_rad) {
-    out->verdict = Verdict::kFail;
-    out->reason = "yaw_out_of_tolerance";
-  } else {
-    out->verdict = Verdict::kPass;
-    out->reason = "";
+    return;
+  }
+  switch (DecideTolerance(out->yaw_deviation_rad, out->yaw_sigma_rad, sensor.tolerance.yaw_rad)) {
+    case ToleranceDecision::kOutside:
+      out->verdict = Verdict::kFail;
+      out->reason = "yaw_out_of_tolerance";
+      break;
+    case ToleranceDecision::kUndecided:
+      out->verdict = Verdict::kError;
+      out->reason = "near_tolerance_edge";
+      break;
+    case ToleranceDecision::kInside:
+      out->verdict = Verdict::kPass;
+      out->reason = "";
+      break;
   }
 }
 

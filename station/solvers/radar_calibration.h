@@ -35,6 +35,7 @@
 #include "detectors/core/pose.h"
 #include "station/model/car_model.h"
 #include "station/model/verdict.h"
+#include "station/solvers/mounting.h"
 #include "station/solvers/reflector_association.h"
 
 namespace linecal {
@@ -63,7 +64,7 @@ struct RadarReflectorResidual {
 struct RadarCalibrationResult {
   Verdict verdict = Verdict::kError;
   // "" for pass; "yaw_out_of_tolerance" for fail; "too_few_reflectors" or
-  // "uncertainty_too_high" for error.
+  // "uncertainty_too_high" or "near_tolerance_edge" (mounting.h, DecideTolerance) for error.
   std::string reason;
   int reflectors_used = 0;
   // Mounting angles (docs/conventions.md), radians. Pitch and roll are the nominal ones: not

@@ -116,6 +116,13 @@ struct MonteCarloSpread {
   double coverage95 = 0;        // share of |error| within the reported 95% interval
 };
 
+// A yaw was solved: pass or fail, or an error only because the estimate lies within the
+// verdict's guard band of the tolerance edge (mounting.h, DecideTolerance), as random yaws
+// within ±1.5–2x the tolerance sometimes do.
+bool YawMeasured(const RadarCalibrationResult& r) {
+  return r.verdict != Verdict::kError || r.reason == "near_tolerance_edge";
+}
+
 // The reported 1-σ against the spread of the errors over many cars (fixed seeds): random yaw
 // errors within ±1.5°, pitch and roll within their tolerance, the position within its
 // tolerance (what the σ assumes), random aligner poses.
@@ -135,8 +142,8 @@ MonteCarloSpread SpreadOverCars(const SensorModel& s, const StationLayout& layou
     const std::vector<RadarCycle> cycles = radar_test::SimulatedCycles(
         s, layout, T_station_car, radar_test::TrueMounting(s, error, offset), sim, rng());
     const RadarCalibrationResult r = Calibrate(s, layout, T_station_car, cycles).result;
-    EXPECT_NE(r.verdict, Verdict::kError) << i << ": " << r.reason;
-    if (r.verdict == Verdict::kError) return {};
+    EXPECT_TRUE(YawMeasured(r)) << i << ": " << r.reason;
+    if (!YawMeasured(r)) return {};
     const double e = r.yaw_deviation_rad - error.yaw;
     sum_e2 += e * e;
     sum_s2 += r.yaw_sigma_rad * r.yaw_sigma_rad;
@@ -326,7 +333,7 @@ TEST(RadarCalibrationTest, ReferenceCornerRadarsMeetTheYawBarOffTheirNominalPlac
           s, *layout, T_station_car, radar_test::TrueMounting(s, error, offset), AcceptanceSim(),
           rng());
       const RadarCalibrationResult r = Calibrate(s, *layout, T_station_car, cycles).result;
-      ASSERT_NE(r.verdict, Verdict::kError) << s.name << " car " << i << ": " << r.reason;
+      ASSERT_TRUE(YawMeasured(r)) << s.name << " car " << i << ": " << r.reason;
       EXPECT_EQ(r.reflectors_used, 3) << s.name << " car " << i;
       const double e = r.yaw_deviation_rad - error.yaw;
       abs_errors.push_back(std::abs(e));
