@@ -412,6 +412,61 @@ double InscribedRadiusPx(const Eigen::Matrix3d& H, const Eigen::Vector2d& p_boar
   return radius;
 }
 
+// The most a corner fitted in the smaller window may differ from its point reflection
+// (Asymmetry over 3 px), as a share of its grey range: noise 6 and JPEG leave a corner of the
+// hard set at 0.03-0.17, the foreshortening of a board turned 50 degrees at 0.20; an occluder's
+// edge 3 px from the corner (the smaller window's fit then lies 0.8 px off) at 0.30.
+constexpr double kMaxSmallWindowAsymmetry = 0.25;
+
+// How far the image about `corner` is from point-symmetric: the RMS difference of the grey at
+// corner + d and corner - d over the window of half side half_px (pixel steps), over the grey
+// range of those samples. nullopt when a sample leaves the image.
+std::optional<double> Asymmetry(const ImageView8& image, const Eigen::Vector2d& corner,
+                                int half_px) {
+  double sum = 0.0, lo = 255.0, hi = 0.0;
+  int n = 0;
+  for (int dy = 0; dy <= half_px; ++dy) {
+    for (int dx = -half_px; dx <= half_px; ++dx) {
+      if (dy == 0 && dx <= 0) continue;
+      const Eigen::Vector2d a = corner + Eigen::Vector2d(dx, dy),
+                            b = corner - Eigen::Vector2d(dx, dy);
+      if (!InsideForBilinearGrey(image, a) || !InsideForBilinearGrey(image, b)) return std::nullopt;
+      const double ga = BilinearGrey(image, a.x(), a.y()), gb = BilinearGrey(image, b.x(), b.y());
+      sum += (ga - gb) * (ga - gb);
+      lo = std::min({lo, ga, gb});
+      hi = std::max({hi, ga, gb});
+      ++n;
+    }
+  }
+  if (!(hi > lo)) return std::nullopt;
+  return std::sqrt(sum / n) / (hi - lo);
+}
+
+// The saddle fit of the corner predicted at `predicted` (RefineXCornerOnPatch), whose white
+// margins leave a disc of reach_px about it clear of the markers (InscribedRadiusPx): with a
+// window of half side reach_px, then, when that fails, one whose corners stay inside that disc
+// (half side reach_px / sqrt 2). On a board turned 50 degrees the margin narrows to 3 px, and
+// the larger window's corners take in the markers' black borders, which turn the fit away from
+// a saddle. Those borders are point-symmetric about the corner; an occluder's edge is not, and
+// a fit in the smaller window beside one lies off the corner: the smaller window's corner is
+// kept only when the image about it is nearly point-symmetric (kMaxSmallWindowAsymmetry).
+// nullopt when both fail.
+std::optional<Eigen::Vector2d> RefineInMargin(const ImageView8& image,
+                                              const Eigen::Vector2d& predicted, double reach_px,
+                                              double blur_sigma_px) {
+  // RefineXCornerOnPatch's window is a third of the side it is given.
+  if (std::optional<Eigen::Vector2d> refined =
+          RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, blur_sigma_px)) {
+    return refined;
+  }
+  const std::optional<Eigen::Vector2d> inside =
+      RefineXCornerOnPatch(image, predicted, 3.0 * reach_px / std::sqrt(2.0), blur_sigma_px);
+  if (!inside) return std::nullopt;
+  const std::optional<double> asymmetry = Asymmetry(image, *inside, 3);
+  if (!asymmetry || *asymmetry > kMaxSmallWindowAsymmetry) return std::nullopt;
+  return inside;
+}
+
 // True when both black squares at the corner look darker than both white ones: probes in the
 // middle of the black squares' quarter next to the corner, and in the white squares' margin
 // between the corner and the marker (half way along its diagonal). A probe off the image (a
@@ -528,7 +583,7 @@ void FindCornersFromNeighbours(const ImageView8& image, const Board& board,
                                        BorderRoomPx(image, predicted, options.blur_sigma_px));
       if (!std::isfinite(reach_px)) continue;
       const std::optional<Eigen::Vector2d> refined =
-          RefineXCornerOnPatch(image, predicted, 3.0 * reach_px, options.blur_sigma_px);
+          RefineInMargin(image, predicted, reach_px, options.blur_sigma_px);
       if (!refined) continue;
       const bool dark_first = !CharucoSquareHasMarker(p, r - 1, c - 1);
       if (!CornerPaintAgrees(image, *H, feature.p_board, g.square_m, margin_m, dark_first,

@@ -24,8 +24,9 @@
 // Markers the scan missed are read where the kept markers around them put them. Corners still
 // missing are then looked for as a chessboard's: predicted by the homography of the corners
 // found around them (at least four over two rows and two columns of the 5 x 5 about it),
-// refined and checked as above, repeated while corners are added; the ids stay those the
-// markers gave. A partial
+// refined and checked as above (where the fit fails, again in a window inside the white margin,
+// kept when the image about the corner is nearly point-symmetric), repeated while corners are
+// added; the ids stay those the markers gave. A partial
 // board whose marker cells are under 4 px (the scan's design size) is looked for again on its
 // part of the image at twice the resolution, and the result with more corners is returned.
 

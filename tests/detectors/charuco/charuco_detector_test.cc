@@ -460,6 +460,35 @@ TEST(CharucoDetectorTest, CornersBesideUnreadMarkersArePlacedByTheirNeighbours) 
   }
 }
 
+// The evaluation's last hard miss (seed 39: the middle distance, yaw 50, roll -30): the far
+// corner of the board, where the 50 degree turn narrows the white margin between the corner
+// and its markers to 3 px. The saddle fit's window of half side 3 px reached, at its corners,
+// into the markers' black borders and failed to find a saddle; a window whose corners stay in
+// the margin (half side 2 px) finds the corner, as it is: a sharp X-junction.
+TEST(CharucoDetectorTest, CornerWhoseMarginIsNarrowedByTheTurnIsFitInsideIt) {
+  BoardParams params;
+  params.type = BoardType::kCharuco;
+  const Board board = *Board::Create(params);
+  const CameraModel camera = circle_scene::Camera();
+  // The middle of the three distances at that turn: 0.39 m, far-side cells of 2 px.
+  const double distance = circle_scene::EvaluationDistances(board, camera, false, 50.0, 0.0)[1];
+  const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
+      circle_scene::OneBoard(BoardType::kCharuco,
+                             circle_scene::EvaluationPose(distance, 50.0, 0.0, -30.0, 39)),
+      circle_scene::HardEffects(39), 39, camera);
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  const Detection d = DetectCharuco(frame->image8.view(), board);
+  ExpectComplete(d, board);
+  int matched = 0;
+  int unknown = 0;
+  const double rms = FeatureRmsPx(d, *frame, &matched, &unknown);
+  std::printf("seed 39: RMS %.4f px, max %.3f px\n", rms, MaxErrorPx(d, *frame));
+  EXPECT_EQ(unknown, 0);
+  EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+  // A third of a marker cell on the far side, as above.
+  EXPECT_LT(MaxErrorPx(d, *frame), 5.0 / 3.0);
+}
+
 // A small board far off: the deepcharuco photos' 5 x 5 board (10 mm squares, 7.5 mm markers:
 // cells of 1.25 mm) at 0.45 m, cells of 2.8 px, under the 4 px the marker scan is made for:
 // clean renders are still found whole, every corner with its id. (The photos' heavier blur

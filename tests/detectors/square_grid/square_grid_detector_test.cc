@@ -175,8 +175,12 @@ TEST(SquareGridDetectorTest, EvaluationMissesUnderTheHardEffects) {
     double roll, yaw, pitch;
     int distance;  // index into circle_scene::EvaluationDistances: near, mean, far
   };
+  // Seeds 21, 24 and 27: face-on at the far distance (squares of 12 px), every corner rounded
+  // with a radius of a quarter side, so that the quad inscribed in the contour holds under
+  // 0.85 of it; the lines of the sides' straight middles give the quad (contours.cc).
   for (const Case& c : {Case{102, -30, 0, 50, 2}, Case{105, 0, 0, 50, 2}, Case{123, 0, 0, -50, 1},
-                        Case{168, 0, -35, -35, 0}}) {
+                        Case{168, 0, -35, -35, 0}, Case{21, -30, 0, 0, 2}, Case{24, 0, 0, 0, 2},
+                        Case{27, 30, 0, 0, 2}}) {
     SCOPED_TRACE(testing::Message() << "seed " << c.seed);
     const double distance =
         circle_scene::EvaluationDistances(board, camera, false, c.yaw, c.pitch)[c.distance];
