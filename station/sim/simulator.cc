@@ -279,6 +279,11 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
       sensors.push_back(s);
     }
   }
+  for (const auto& [name, pose] : options.true_mountings) {
+    if (car.FindSensor(name) == nullptr)
+      return absl::InvalidArgumentError(
+          absl::StrCat("true_mountings: car model '", car.id, "' has no sensor '", name, "'"));
+  }
   const fs::path dir(out_dir);
   std::error_code ec;
   fs::create_directories(dir, ec);
@@ -315,16 +320,22 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
     const YawPitchRoll nominal =
         MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
     const double a = options.perturb_angle_deg * kDegToRad;
-    const YawPitchRoll error{a * u(srng), a * u(srng), a * u(srng)};
+    YawPitchRoll error{a * u(srng), a * u(srng), a * u(srng)};
     // Braced lists evaluate in order (a constructor's parenthesised arguments do not), so the
     // same seed gives the same pose whatever the compiler.
-    const Eigen::Vector3d offset{options.perturb_offset_m * u(srng),
-                                 options.perturb_offset_m * u(srng),
-                                 options.perturb_offset_m * u(srng)};
+    Eigen::Vector3d offset{options.perturb_offset_m * u(srng), options.perturb_offset_m * u(srng),
+                           options.perturb_offset_m * u(srng)};
     const YawPitchRoll truth_angles{nominal.yaw + error.yaw, nominal.pitch + error.pitch,
                                     nominal.roll + error.roll};
-    const Rigid3d T_car_sensor(MountingRotation(truth_angles, r_base),
-                               sensor->T_car_sensor_nominal.translation() + offset);
+    Rigid3d T_car_sensor(MountingRotation(truth_angles, r_base),
+                         sensor->T_car_sensor_nominal.translation() + offset);
+    if (const auto given = options.true_mountings.find(sensor->name);
+        given != options.true_mountings.end()) {
+      T_car_sensor = given->second;
+      const YawPitchRoll angles = MountingAngles(T_car_sensor.RotationMatrix(), r_base);
+      error = {angles.yaw - nominal.yaw, angles.pitch - nominal.pitch, angles.roll - nominal.roll};
+      offset = T_car_sensor.translation() - sensor->T_car_sensor_nominal.translation();
+    }
     const Rigid3d T_station_sensor = T_station_car * T_car_sensor;
     const std::uint64_t stream = srng();
 
