@@ -17,12 +17,14 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <string>
 #include <thread>
@@ -120,6 +122,18 @@ absl::StatusOr<StationEvalFlags> ReadStationEvalFlags(const cli::CommandLine& cl
   return f;
 }
 
+// The flags: --cars and --seed, this evaluation's own, then --station and --car and their
+// targets' check (the cheap checks before the files are read); the error names the flag or file.
+absl::Status ReadInputs(const cli::CommandLine& cl, EvalInputs* in, StationEvalFlags* flags) {
+  absl::Status status = ReadCarsAndSeed(cl, in);
+  if (!status.ok()) return status;
+  absl::StatusOr<StationEvalFlags> read = ReadStationEvalFlags(cl);
+  if (!read.ok()) return read.status();
+  *flags = *read;
+  status = ReadStationAndCar(cl, in);
+  return status.ok() ? CheckTargetsExist(in->car, in->station) : status;
+}
+
 // A sensor's true mounting for this evaluation: angles within ±kErrorRangeOfTolerance x each
 // tolerance, positions within ±min(position_error_m, tolerance) per axis.
 TrueMounting DrawMounting(const SensorModel& s, double position_error_m, std::mt19937_64& rng) {
@@ -213,20 +227,27 @@ absl::StatusOr<CarOutcome> EvaluateCar(const EvalInputs& in, const StationEvalFl
   return car;
 }
 
+// Set by SIGINT or SIGTERM: no car starts after it, and the evaluation reports the cars done (a
+// long run stopped at a deadline still gives its table).
+std::atomic<bool> stop_requested{false};
+void RequestStop(int) { stop_requested = true; }
+
 // Runs every car, `threads` at a time, printing "eval station: car k of N" to stderr as each
-// ends; the outcomes in car order. Stops at the first error and returns it.
+// ends; the outcomes in car order. Once a stop is requested, the cars done before the first
+// one not done (the same cars as a run with that many --cars). Stops at the first error and
+// returns it.
 absl::StatusOr<std::vector<CarOutcome>> EvaluateCars(const EvalInputs& in,
                                                      const StationEvalFlags& f) {
-  std::vector<absl::StatusOr<CarOutcome>> outcomes(in.cars, absl::UnknownError("not run"));
+  std::vector<std::optional<absl::StatusOr<CarOutcome>>> outcomes(in.cars);
   std::atomic<int> next{0}, done{0};
   std::atomic<bool> failed{false};
   std::mutex progress;
   // One car at a time uses both cores for its renders and sensors; parallel cars one each.
   const int inner_threads = f.threads == 1 ? 2 : 1;
   auto work = [&] {
-    for (int i = next++; i < in.cars && !failed; i = next++) {
+    for (int i = next++; i < in.cars && !failed && !stop_requested; i = next++) {
       outcomes[i] = EvaluateCar(in, f, i, inner_threads);
-      failed = failed || !outcomes[i].ok();
+      failed = failed || !outcomes[i]->ok();
       const std::lock_guard<std::mutex> lock(progress);
       std::fprintf(stderr, "linecal %s: car %d of %d\n", kCommand, ++done, in.cars);
     }
@@ -236,16 +257,19 @@ absl::StatusOr<std::vector<CarOutcome>> EvaluateCars(const EvalInputs& in,
   work();
   for (std::thread& t : pool) t.join();
   std::vector<CarOutcome> cars;
-  for (absl::StatusOr<CarOutcome>& o : outcomes) {
-    if (!o.ok()) return o.status();
-    cars.push_back(*std::move(o));
+  for (std::optional<absl::StatusOr<CarOutcome>>& o : outcomes) {
+    if (!o) break;
+    if (!o->ok()) return o->status();
+    cars.push_back(**std::move(o));
   }
   return cars;
 }
 
-// The frames a planned target was looked for in, found whole in, and seen partly in.
+// The frames a planned target was looked for in, found whole in, and seen partly in; per car
+// that missed it in some frame, the detector's reason in the last of those frames.
 struct TargetCount {
   int looked = 0, found = 0, partial = 0;
+  std::map<std::string, int> miss_reasons;
 };
 
 // One sensor's results over the cars.
@@ -318,6 +342,9 @@ void AddSensor(const SensorModel& s, const TrueMounting& truth, const SensorCali
     out->targets[b].second.looked += c.boards[b].frames;
     out->targets[b].second.found += c.boards[b].frames_found;
     out->targets[b].second.partial += c.boards[b].frames_partial;
+    if (c.boards[b].frames_found < c.boards[b].frames) {
+      ++out->targets[b].second.miss_reasons[c.boards[b].last_reason];
+    }
   }
   if (!c.solved) {
     ++out->reasons[c.reason.empty() ? "not_solved" : c.reason];
@@ -383,8 +410,11 @@ bool ReportSensor(const std::string& name, const SensorSamples& c, EvalReport* r
   const double agreement = c.verdicts ? static_cast<double>(c.verdicts_agree) / c.verdicts : 1.0;
   nlohmann::json targets = nlohmann::json::array();
   for (const auto& [id, t] : c.targets) {
-    targets.push_back(
-        {{"target", id}, {"looked_for", t.looked}, {"found", t.found}, {"partial", t.partial}});
+    targets.push_back({{"target", id},
+                       {"looked_for", t.looked},
+                       {"found", t.found},
+                       {"partial", t.partial},
+                       {"miss_reasons", t.miss_reasons}});
   }
   row.update({{"solved", f.solved},
               {"angle_p95_abs_error_deg", f.angle_p95 * kRadToDeg},
@@ -417,8 +447,9 @@ bool ReportSensor(const std::string& name, const SensorSamples& c, EvalReport* r
                   row[ratio].get<double>(), row[absl::StrCat(k, "_coverage95")].get<double>());
   }
   for (const auto& [id, t] : c.targets) {
-    report->Table("%-18s   target %-24s found %d of %d (partial %d)\n", "", id, t.found, t.looked,
-                  t.partial);
+    report->Table("%-18s   target %-24s found %d of %d (partial %d)%s%s\n", "", id, t.found,
+                  t.looked, t.partial,
+                  t.miss_reasons.empty() ? "" : "; missed: ", ReasonsText(t.miss_reasons));
   }
   report->AddRow(std::move(row));
   return f.meets;
@@ -476,21 +507,20 @@ int RunEvalStation(const Args& args) {
        {"json", "", "print one JSON object"}});
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
   EvalInputs in;
-  if (absl::Status s = ReadCarsAndSeed(cl, &in); !s.ok()) {
+  StationEvalFlags flags;
+  if (absl::Status s = ReadInputs(cl, &in, &flags); !s.ok()) {
     return cli::BadInput(kCommand, std::string(s.message()));
   }
-  const absl::StatusOr<StationEvalFlags> flags = ReadStationEvalFlags(cl);
-  if (!flags.ok()) return cli::BadInput(kCommand, std::string(flags.status().message()));
-  if (absl::Status s = ReadStationAndCar(cl, &in); !s.ok()) {
-    return cli::BadInput(kCommand, std::string(s.message()));
-  }
-  if (absl::Status s = CheckTargetsExist(in.car, in.station); !s.ok()) {
-    return cli::BadInput(kCommand, std::string(s.message()));
-  }
-  const absl::StatusOr<std::vector<CarOutcome>> outcomes = EvaluateCars(in, *flags);
+  std::signal(SIGINT, RequestStop);
+  std::signal(SIGTERM, RequestStop);
+  const absl::StatusOr<std::vector<CarOutcome>> outcomes = EvaluateCars(in, flags);
   if (!outcomes.ok()) {
     std::fprintf(stderr, "linecal %s: %s\n", kCommand,
                  std::string(outcomes.status().message()).c_str());
+    return cli::kExitNegative;
+  }
+  if (outcomes->empty()) {
+    std::fprintf(stderr, "linecal %s: stopped before the first car ended\n", kCommand);
     return cli::kExitNegative;
   }
   const std::map<std::string, SensorSamples> samples = Collect(in.car, *outcomes);
@@ -509,15 +539,20 @@ int RunEvalStation(const Args& args) {
       "in every frame: %s\n",
       kSigmaRatioLow, kSigmaRatioHighFullPhysics, kCoverageLow, kCoverageHigh, kRadarYawP95BarDeg,
       kWrongVerdictEdgeSigmas, all_meet ? "all met" : "NOT all met");
-  return report.Finish({{"cars", in.cars},
+  if (outcomes->size() < static_cast<size_t>(in.cars)) {
+    std::fprintf(stderr, "linecal %s: stopped: %zu of %d cars reported\n", kCommand,
+                 outcomes->size(), in.cars);
+  }
+  return report.Finish({{"cars", outcomes->size()},
+                        {"cars_requested", in.cars},
                         {"seed", in.seed},
-                        {"frames_min", flags->frames_min},
-                        {"frames_max", flags->frames_max},
-                        {"range_noise_min_m", flags->range_noise_min_m},
-                        {"range_noise_max_m", flags->range_noise_max_m},
-                        {"position_error_m", flags->position_error_m},
-                        {"camera_noise", flags->noise},
-                        {"camera_blur_px", flags->blur_px},
+                        {"frames_min", flags.frames_min},
+                        {"frames_max", flags.frames_max},
+                        {"range_noise_min_m", flags.range_noise_min_m},
+                        {"range_noise_max_m", flags.range_noise_max_m},
+                        {"position_error_m", flags.position_error_m},
+                        {"camera_noise", flags.noise},
+                        {"camera_blur_px", flags.blur_px},
                         {"lidar_free_running", true},
                         {"radar_cycles", kRadarCycles}},
                        "sensors", all_meet);
