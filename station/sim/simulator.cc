@@ -254,6 +254,66 @@ absl::StatusOr<StationLayout> StandingStation(const StationLayout& surveyed,
   return standing;
 }
 
+// The sensors to simulate: options.sensors of `car`, or all of them when empty. Errors:
+// InvalidArgument naming a sensor of options.sensors or options.true_mountings the car lacks.
+absl::StatusOr<std::vector<const SensorModel*>> SelectedSensors(const CarModel& car,
+                                                                const SimulatorOptions& options) {
+  std::vector<const SensorModel*> sensors;
+  if (options.sensors.empty()) {
+    for (const SensorModel& s : car.sensors) sensors.push_back(&s);
+  } else {
+    for (const std::string& name : options.sensors) {
+      const SensorModel* s = car.FindSensor(name);
+      if (s == nullptr)
+        return absl::InvalidArgumentError(
+            absl::StrCat("car model '", car.id, "' has no sensor '", name, "'"));
+      sensors.push_back(s);
+    }
+  }
+  for (const auto& [name, pose] : options.true_mountings) {
+    if (car.FindSensor(name) == nullptr)
+      return absl::InvalidArgumentError(
+          absl::StrCat("true_mountings: car model '", car.id, "' has no sensor '", name, "'"));
+  }
+  return sensors;
+}
+
+// A sensor's true mounting and its error from the nominal one (for the ground truth).
+struct SensorTruth {
+  Rigid3d T_car_sensor;
+  YawPitchRoll error;
+  Eigen::Vector3d offset;
+};
+
+// The true mounting of `sensor`: the nominal mounting angles and position plus a random error
+// within options' perturb bounds drawn from `srng`, or options.true_mountings' pose when it
+// has one (the error is drawn all the same, so that `srng` goes on as it would).
+SensorTruth DrawSensorTruth(const SensorModel& sensor, const SimulatorOptions& options,
+                            std::mt19937_64& srng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Eigen::Matrix3d r_base = SensorBaseRotation(sensor.kind);
+  const YawPitchRoll nominal = MountingAngles(sensor.T_car_sensor_nominal.RotationMatrix(), r_base);
+  const double a = options.perturb_angle_deg * kDegToRad;
+  SensorTruth t;
+  t.error = {a * u(srng), a * u(srng), a * u(srng)};
+  // Braced lists evaluate in order (a constructor's parenthesised arguments do not), so the
+  // same seed gives the same pose whatever the compiler.
+  t.offset = Eigen::Vector3d{options.perturb_offset_m * u(srng), options.perturb_offset_m * u(srng),
+                             options.perturb_offset_m * u(srng)};
+  const YawPitchRoll truth_angles{nominal.yaw + t.error.yaw, nominal.pitch + t.error.pitch,
+                                  nominal.roll + t.error.roll};
+  t.T_car_sensor = Rigid3d(MountingRotation(truth_angles, r_base),
+                           sensor.T_car_sensor_nominal.translation() + t.offset);
+  if (const auto given = options.true_mountings.find(sensor.name);
+      given != options.true_mountings.end()) {
+    t.T_car_sensor = given->second;
+    const YawPitchRoll angles = MountingAngles(t.T_car_sensor.RotationMatrix(), r_base);
+    t.error = {angles.yaw - nominal.yaw, angles.pitch - nominal.pitch, angles.roll - nominal.roll};
+    t.offset = t.T_car_sensor.translation() - sensor.T_car_sensor_nominal.translation();
+  }
+  return t;
+}
+
 }  // namespace
 
 absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
@@ -267,18 +327,9 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
   absl::StatusOr<StationLayout> standing = StandingStation(surveyed, options);
   if (!standing.ok()) return standing.status();
   const StationLayout& station = *standing;
-  std::vector<const SensorModel*> sensors;
-  if (options.sensors.empty()) {
-    for (const SensorModel& s : car.sensors) sensors.push_back(&s);
-  } else {
-    for (const std::string& name : options.sensors) {
-      const SensorModel* s = car.FindSensor(name);
-      if (s == nullptr)
-        return absl::InvalidArgumentError(
-            absl::StrCat("car model '", car.id, "' has no sensor '", name, "'"));
-      sensors.push_back(s);
-    }
-  }
+  absl::StatusOr<std::vector<const SensorModel*>> selected = SelectedSensors(car, options);
+  if (!selected.ok()) return selected.status();
+  const std::vector<const SensorModel*>& sensors = *selected;
   const fs::path dir(out_dir);
   std::error_code ec;
   fs::create_directories(dir, ec);
@@ -310,21 +361,11 @@ absl::StatusOr<SimulationSummary> SimulateCapture(const StationLayout& surveyed,
     }
     const size_t index = static_cast<size_t>(sensor - car.sensors.data());
     std::mt19937_64 srng(StreamSeed(seed, index + 1));
-    // The true mounting: nominal mounting angles and position plus the random error.
+    const SensorTruth truth = DrawSensorTruth(*sensor, options, srng);
     const Eigen::Matrix3d r_base = SensorBaseRotation(sensor->kind);
-    const YawPitchRoll nominal =
-        MountingAngles(sensor->T_car_sensor_nominal.RotationMatrix(), r_base);
-    const double a = options.perturb_angle_deg * kDegToRad;
-    const YawPitchRoll error{a * u(srng), a * u(srng), a * u(srng)};
-    // Braced lists evaluate in order (a constructor's parenthesised arguments do not), so the
-    // same seed gives the same pose whatever the compiler.
-    const Eigen::Vector3d offset{options.perturb_offset_m * u(srng),
-                                 options.perturb_offset_m * u(srng),
-                                 options.perturb_offset_m * u(srng)};
-    const YawPitchRoll truth_angles{nominal.yaw + error.yaw, nominal.pitch + error.pitch,
-                                    nominal.roll + error.roll};
-    const Rigid3d T_car_sensor(MountingRotation(truth_angles, r_base),
-                               sensor->T_car_sensor_nominal.translation() + offset);
+    const YawPitchRoll& error = truth.error;
+    const Eigen::Vector3d& offset = truth.offset;
+    const Rigid3d& T_car_sensor = truth.T_car_sensor;
     const Rigid3d T_station_sensor = T_station_car * T_car_sensor;
     const std::uint64_t stream = srng();
 

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -65,6 +66,10 @@ struct SimulatorOptions {
   std::vector<MovedBoard> moved_boards;
   // Only these sensors (empty: all of the car model).
   std::vector<std::string> sensors;
+  // The true mounting T_car_sensor of these sensors (by name, each a sensor of the car)
+  // instead of the random one: an evaluation that draws its own truth. The random draws are
+  // still made, so every other sensor's stream stays as it was.
+  std::map<std::string, Rigid3d> true_mountings;
   // When set and true, the simulation stops before its next sensor with Cancelled (a daemon
   // cycle cancelled or draining: one sensor's frames at most are still made, not the car's).
   const std::atomic<bool>* cancel = nullptr;

@@ -41,4 +41,12 @@ inline LinecalRun RunLinecal(const std::string& args) {
   return run;
 }
 
+// " --station <source>/deploy/stations/reference.json --car <source>/deploy/cars/reference.json":
+// the reference station and car as the flags of a linecal command.
+inline std::string ReferenceStationAndCarFlags() {
+  const std::string deploy = std::string(LINECAL_SOURCE_DIR) + "/deploy";
+  return " --station " + deploy + "/stations/reference.json --car " + deploy +
+         "/cars/reference.json";
+}
+
 }  // namespace linecal::testing_tools

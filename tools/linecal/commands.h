@@ -22,6 +22,7 @@ int RunEvalLidar(const Args& args);       // cmd_eval_lidar.cc
 int RunDetect(const Args& args);          // cmd_detect.cc
 int RunCalibrate(const Args& args);       // cmd_calibrate.cc
 int RunEvalCalibrate(const Args& args);   // cmd_eval_calibrate.cc
+int RunEvalStation(const Args& args);     // cmd_eval_station.cc
 int RunCycleStart(const Args& args);      // cmd_cycle.cc
 int RunCycleShow(const Args& args);       // cmd_cycle.cc
 int RunCyclesList(const Args& args);      // cmd_cycle.cc

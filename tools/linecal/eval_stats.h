@@ -77,27 +77,37 @@ inline AlignerMeasurement RandomAligner(std::mt19937_64& rng) {
   return aligner;
 }
 
-// A sensor's true mounting: yaw, pitch, roll, x, y, z errors uniform within ±range_of_tolerance
-// times each tolerance (in `truth`, radians and metres), applied to the nominal mounting.
+// A sensor's true mounting: yaw, pitch, roll, x, y, z errors (in `truth`, radians and metres)
+// applied to the nominal mounting, and the sensor's tolerances in the same order.
 struct TrueMounting {
   std::array<double, 6> truth{};
   std::array<double, 6> tolerances{};
   Rigid3d T_car_sensor;
 };
-inline TrueMounting RandomMounting(const SensorModel& s, double range_of_tolerance,
-                                   std::mt19937_64& rng) {
-  std::uniform_real_distribution<double> unit(-1.0, 1.0);
-  TrueMounting m;
+// The tolerances of yaw, pitch, roll (radians), x, y, z (metres) of `s`.
+inline std::array<double, 6> MountingTolerances(const SensorModel& s) {
   const MountingTolerance& tol = s.tolerance;
-  m.tolerances = {tol.yaw_rad,   tol.pitch_rad, tol.roll_rad,
-                  tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
-  for (int i = 0; i < 6; ++i) m.truth[i] = range_of_tolerance * m.tolerances[i] * unit(rng);
+  return {tol.yaw_rad, tol.pitch_rad, tol.roll_rad, tol.xyz_m.x(), tol.xyz_m.y(), tol.xyz_m.z()};
+}
+// The mounting of `s` whose yaw, pitch, roll, x, y, z errors are `truth` (radians, metres).
+inline TrueMounting MountingWithErrors(const SensorModel& s, const std::array<double, 6>& truth) {
+  TrueMounting m;
+  m.tolerances = MountingTolerances(s);
+  m.truth = truth;
   const Eigen::Matrix3d r_base = SensorBaseRotation(s.kind);
   const YawPitchRoll n = MountingAngles(s.T_car_sensor_nominal.RotationMatrix(), r_base);
   m.T_car_sensor = Rigid3d(
       MountingRotation({n.yaw + m.truth[0], n.pitch + m.truth[1], n.roll + m.truth[2]}, r_base),
       s.T_car_sensor_nominal.translation() + Eigen::Vector3d(m.truth[3], m.truth[4], m.truth[5]));
   return m;
+}
+inline TrueMounting RandomMounting(const SensorModel& s, double range_of_tolerance,
+                                   std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const std::array<double, 6> tolerances = MountingTolerances(s);
+  std::array<double, 6> truth{};
+  for (int i = 0; i < 6; ++i) truth[i] = range_of_tolerance * tolerances[i] * unit(rng);
+  return MountingWithErrors(s, truth);
 }
 
 // The estimates of one sensor over the cars: per component (yaw, pitch, roll, x, y, z) the

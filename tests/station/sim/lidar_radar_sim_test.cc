@@ -400,6 +400,36 @@ TEST_F(SimTest, GivenAlignerIsUsed) {
   EXPECT_NE(bad.message().find("aligner.lateral_offset_m"), std::string::npos) << bad;
 }
 
+// A given true mounting is the one the truth records (its error from nominal), the other
+// sensors' draws stay as they were, and a sensor the car lacks is refused.
+TEST_F(SimTest, GivenTrueMountingIsUsed) {
+  SimulatorOptions o;
+  o.sensors = {"front_radar", "corner_radar_left"};
+  const fs::path dir = fs::path(testing::TempDir()) / "sim_true_mounting";
+  const absl::StatusOr<SimulationSummary> drawn =
+      SimulateCapture(*station_, *car_, o, 7, dir.string());
+  ASSERT_TRUE(drawn.ok()) << drawn.status();
+  const Rigid3d nominal = NominalPose("front_radar");
+  const Eigen::Vector3d offset(0.004, -0.007, 0.002);
+  o.true_mountings["front_radar"] = Rigid3d(
+      nominal.RotationMatrix() * Eigen::AngleAxisd(0.3 * kDegToRad, Eigen::Vector3d::UnitZ()),
+      nominal.translation() + offset);
+  const absl::StatusOr<SimulationSummary> given =
+      SimulateCapture(*station_, *car_, o, 7, dir.string());
+  ASSERT_TRUE(given.ok()) << given.status();
+  const nlohmann::json& truth = given->ground_truth["sensors"][0]["mounting_error"];
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(truth["xyz_m"][i].get<double>(), offset[i], 1e-12);
+  // The radar's z axis is the car's: a turn about it is a yaw error alone.
+  EXPECT_NEAR(std::abs(truth["ypr_deg"][0].get<double>()), 0.3, 1e-9);
+  EXPECT_NEAR(truth["ypr_deg"][1].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(truth["ypr_deg"][2].get<double>(), 0.0, 1e-9);
+  EXPECT_EQ(given->ground_truth["sensors"][1].dump(), drawn->ground_truth["sensors"][1].dump());
+  o.true_mountings["periscope"] = nominal;
+  const absl::Status bad = SimulateCapture(*station_, *car_, o, 7, dir.string()).status();
+  EXPECT_EQ(bad.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.message().find("true_mountings"), std::string::npos) << bad;
+}
+
 TEST_F(SimTest, UnknownSensorIsRefused) {
   SimulatorOptions o;
   o.sensors = {"periscope"};

@@ -1,0 +1,119 @@
+// linecal eval station through the built binary, reduced (2 cars, 1 or 2 frames per sensor) on
+// the reference station and car: every sensor of the reference car is solved in every car,
+// every planned target is found in every frame, the errors are within the accuracy bars of
+// docs/acceptance.md, and the JSON carries every field with sane values; where the evaluation
+// finds a bar missed, the test checks that it says so. Two cars cannot put a 95% coverage
+// within 0.93..0.97, so the exit code is 1 (the full run is in docs/solvers.md, "The
+// full-physics evaluation"). Bad flags are refused with exit 2, naming the flag.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "tests/tools/run_linecal.h"
+
+namespace linecal {
+namespace {
+
+using testing_tools::LinecalRun;
+using testing_tools::RunLinecal;
+
+const std::string kReference = testing_tools::ReferenceStationAndCarFlags();
+
+// The accuracy bars of docs/acceptance.md ("Solvers"), p95 angle (degrees) and position (mm).
+struct Bars {
+  double angle_deg, position_mm;
+};
+Bars BarsOf(const nlohmann::json& sensor) {
+  const std::string name = sensor["sensor"];
+  if (name == "roof_lidar") return {0.05, 5.0};    // the Pandar64
+  if (name == "bumper_lidar") return {0.1, 10.0};  // the VLP-16
+  return {0.02, 10.0};                             // cameras; radars' yaw 0.05 below
+}
+
+TEST(EvalStationCliTest, ReferenceCarOnTheReferenceStation) {
+  const LinecalRun run = RunLinecal(
+      "eval station --json --cars 2 --seed 1 --frames-min 1 --frames-max 2" + kReference);
+  ASSERT_EQ(run.exit_code, 1) << run.err;
+  EXPECT_NE(run.err.find("eval station: car 2 of 2"), std::string::npos) << run.err;
+  const nlohmann::json r = nlohmann::json::parse(run.out);
+  EXPECT_EQ(r["cars"], 2);
+  EXPECT_EQ(r["frames_min"], 1);
+  EXPECT_EQ(r["frames_max"], 2);
+  EXPECT_EQ(r["lidar_free_running"], true);
+  EXPECT_EQ(r["radar_cycles"], 50);
+  EXPECT_EQ(r["meets_bars"], false);
+  ASSERT_EQ(r["sensors"].size(), 10u);  // every sensor of the reference car
+  int radars = 0;
+  for (const nlohmann::json& s : r["sensors"]) {
+    const std::string name = s["sensor"];
+    SCOPED_TRACE(name);
+    EXPECT_EQ(s["cars"], 2);
+    EXPECT_EQ(s["solved"], 2);
+    EXPECT_EQ(s["verdicts"], 2);
+    EXPECT_EQ(s["wrong_verdicts_beyond_1sigma_of_edge"], 0);
+    EXPECT_GT(s["error_over_sigma_min"].get<double>(), 0.0);
+    EXPECT_LE(s["error_over_sigma_min"].get<double>(), s["error_over_sigma_max"].get<double>());
+    EXPECT_GE(s["coverage95_min"].get<double>(), 0.0);
+    EXPECT_LE(s["coverage95_max"].get<double>(), 1.0);
+    ASSERT_FALSE(s["targets"].empty());
+    for (const nlohmann::json& t : s["targets"]) {
+      SCOPED_TRACE(t["target"].get<std::string>());
+      EXPECT_GT(t["looked_for"].get<int>(), 0);
+      // The one target the evaluation finds missed with this seed (docs/solvers.md, "The
+      // full-physics evaluation"): surround_left loses rear_left_board in one frame of four.
+      if (name == "surround_left" && t["target"] == "rear_left_board") {
+        EXPECT_EQ(t["looked_for"], 4);
+        EXPECT_EQ(t["found"], 3);
+        EXPECT_EQ(t["miss_reasons"].size(), 1u);
+        EXPECT_FALSE(s["all_targets_found"].get<bool>());
+        EXPECT_FALSE(s["meets_bars"].get<bool>());
+        continue;
+      }
+      EXPECT_EQ(t["found"], t["looked_for"]);
+      EXPECT_TRUE(t["miss_reasons"].empty());
+    }
+    if (name != "surround_left") {
+      EXPECT_TRUE(s["all_targets_found"].get<bool>());
+    }
+    if (s["kind"] == "radar") {
+      ++radars;
+      const double yaw95 = s["yaw_p95_abs_error_deg"].get<double>();
+      EXPECT_EQ(s["meets_accuracy_bars"].get<bool>(), yaw95 <= 0.05);
+      // The ARS408 meets its 0.05 degree bar; the ESRs, with the radar up to 1 cm off its
+      // nominal position, are where docs/acceptance.md says that bar is not met yet.
+      if (name == "front_radar") {
+        EXPECT_LE(yaw95, 0.05);
+      }
+      EXPECT_FALSE(s.contains("pitch_error_over_sigma"));  // the yaw alone is measured
+      continue;
+    }
+    const Bars bars = BarsOf(s);
+    EXPECT_TRUE(s["meets_accuracy_bars"].get<bool>());
+    for (const char* k : {"yaw", "pitch", "roll"}) {
+      EXPECT_LE(s[std::string(k) + "_p95_abs_error_deg"].get<double>(), bars.angle_deg) << k;
+      EXPECT_GT(s[std::string(k) + "_error_over_sigma"].get<double>(), 0.0) << k;
+    }
+    for (const char* k : {"x", "y", "z"})
+      EXPECT_LE(s[std::string(k) + "_p95_abs_error_mm"].get<double>(), bars.position_mm) << k;
+  }
+  EXPECT_EQ(radars, 3);
+}
+
+TEST(EvalStationCliTest, BadFlagsExitTwoNamingTheFlag) {
+  for (const std::string flag : {"--frames-min 0", "--frames-max 101", "--range-noise-min-m -1",
+                                 "--position-error-m 1", "--threads 0", "--cars 0", "--noise -1"}) {
+    const LinecalRun run = RunLinecal("eval station " + flag + kReference);
+    EXPECT_EQ(run.exit_code, 2) << flag;
+    EXPECT_NE(run.err.find(flag.substr(0, flag.find(' '))), std::string::npos) << run.err;
+  }
+  const LinecalRun order = RunLinecal("eval station --frames-min 3 --frames-max 2" + kReference);
+  EXPECT_EQ(order.exit_code, 2);
+  EXPECT_NE(order.err.find("--frames-max"), std::string::npos) << order.err;
+  const LinecalRun missing = RunLinecal("eval station --station /no/such.json --car /no/car.json");
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_NE(missing.err.find("/no/such.json"), std::string::npos) << missing.err;
+}
+
+}  // namespace
+}  // namespace linecal
