@@ -164,11 +164,13 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
   out.features_used = r.reflectors_used;
   out.solved = r.reflectors_used > 0;
   if (out.solved) {
-    // Yaw measured; pitch, roll and position nominal (unobservable without elevation), so
-    // their deviations are 0 with no uncertainty to report beyond the yaw's.
-    out.mounting.T_car_sensor = r.T_car_radar;
+    // Yaw measured; pitch, roll and position reported nominal (docs/interfaces.md), so their
+    // deviations are 0 with no uncertainty to report beyond the yaw's. The solver's horizontal
+    // offset, estimated where the reflectors tell it (radar_calibration.h), serves the yaw
+    // alone: the car model judges a radar by its yaw.
     out.mounting.angles = {r.yaw_rad, r.pitch_rad, r.roll_rad};
-    out.mounting.position_m = r.T_car_radar.translation();
+    out.mounting.position_m = sensor.T_car_sensor_nominal.translation();
+    out.mounting.T_car_sensor = Rigid3d(r.T_car_radar.RotationMatrix(), out.mounting.position_m);
     out.mounting.angles_deviation = {r.yaw_deviation_rad, 0, 0};
     out.mounting.sigma[0] = r.yaw_sigma_rad;
     out.mounting.observed = {true, false, false, false, false, false};

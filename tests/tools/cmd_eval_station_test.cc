@@ -50,7 +50,8 @@ TEST(EvalStationCliTest, ReferenceCarOnTheReferenceStation) {
     SCOPED_TRACE(name);
     EXPECT_EQ(s["cars"], 2);
     EXPECT_EQ(s["solved"], 2);
-    EXPECT_EQ(s["verdicts"], 2);
+    // Every solved car gets pass or fail, or neither when within 2σ of a tolerance edge.
+    EXPECT_EQ(s["verdicts"].get<int>() + s["undecided_near_edge"].get<int>(), 2);
     EXPECT_EQ(s["wrong_verdicts_beyond_1sigma_of_edge"], 0);
     EXPECT_GT(s["error_over_sigma_min"].get<double>(), 0.0);
     EXPECT_LE(s["error_over_sigma_min"].get<double>(), s["error_over_sigma_max"].get<double>());

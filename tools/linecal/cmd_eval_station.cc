@@ -425,6 +425,10 @@ bool ReportSensor(const std::string& name, const SensorSamples& c, EvalReport* r
               {"coverage95_min", f.cover_lo},
               {"coverage95_max", f.cover_hi},
               {"verdicts", c.verdicts},
+              // Verdict error near_tolerance_edge: solved, but within the verdict's 2σ guard
+              // band of an edge (mounting.h, DecideTolerance), so neither pass nor fail.
+              {"undecided_near_edge",
+               c.reasons.contains("near_tolerance_edge") ? c.reasons.at("near_tolerance_edge") : 0},
               {"verdict_agreement", agreement},
               {"wrong_verdicts_beyond_1sigma_of_edge", c.wrong_off_edge},
               {"max_wrong_verdict_edge_distance_sigma", c.max_wrong_edge_sigmas},
