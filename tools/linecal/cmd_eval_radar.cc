@@ -32,8 +32,6 @@ namespace {
 
 constexpr char kCommand[] = "eval radar";
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
-// Acceptance bars (docs/acceptance.md, "Solvers").
-constexpr double kYawP95BarDeg = 0.05;
 // Yaw errors are drawn within ±this x the tolerance: half the cars in, half out.
 constexpr double kYawErrorRangeOfTolerance = 2.0;
 // docs/acceptance.md: σ 0.1° per detection, 50 cycles.
@@ -41,9 +39,6 @@ constexpr double kAzimuthSigmaDeg = 0.1;
 constexpr int kCycles = 50;
 // The simulator's default range noise (radar_sim.h); acceptance.md asks for 2–10 cm.
 constexpr double kDefaultRangeNoiseM = 0.05;
-// acceptance.md ("Uncertainty on the full-physics evaluation"): a wrong verdict is allowed
-// only with the truth within this many σ of a tolerance edge.
-constexpr double kWrongVerdictEdgeSigmas = 1.0;
 
 struct Sample {
   double error_deg = 0;  // estimated − true yaw
@@ -108,7 +103,7 @@ Summary Summarise(const Group& g) {
   s.sigma_ratio = s.rms_error_deg / s.rms_sigma_deg;
   s.coverage95 = covered / n;
   s.verdict_agreement = decided ? static_cast<double>(agree) / decided : 1.0;
-  s.meets_bars = s.p95_abs_error_deg <= kYawP95BarDeg && s.sigma_ratio >= kSigmaRatioLow &&
+  s.meets_bars = s.p95_abs_error_deg <= kRadarYawP95BarDeg && s.sigma_ratio >= kSigmaRatioLow &&
                  s.sigma_ratio <= kSigmaRatioHigh && s.coverage95 >= kCoverageLow &&
                  s.coverage95 <= kCoverageHigh && s.wrong_verdicts_off_edge == 0;
   return s;

@@ -51,11 +51,9 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 // a third of the cars out of tolerance, so the verdicts are tested.
 constexpr double kErrorRangeOfTolerance = 1.5;
 // The bars of docs/acceptance.md, "Uncertainty on the full-physics evaluation": RMS error / σ
-// within 0.8..1.25 (kSigmaRatioLow), coverage 93..97% (eval_harness.h), radar yaw p95, wrong
-// verdicts only with the truth within 1σ of a tolerance edge.
+// within 0.8..1.25 (kSigmaRatioLow); coverage, radar yaw p95 and wrong verdicts as
+// eval_harness.h has them.
 constexpr double kSigmaRatioHighFullPhysics = 1.25;
-constexpr double kRadarYawP95BarDeg = 0.05;
-constexpr double kWrongVerdictEdgeSigmas = 1.0;
 // The accuracy bars of docs/acceptance.md ("Solvers"), p95 of angles and positions.
 struct AccuracyBars {
   double angle_deg, position_m;

@@ -25,6 +25,11 @@ namespace linecal::tools {
 // error / RMS sigma within [0.8, 1.2], and the 95% intervals cover 93..97% of the errors.
 inline constexpr double kSigmaRatioLow = 0.8, kSigmaRatioHigh = 1.2;
 inline constexpr double kCoverageLow = 0.93, kCoverageHigh = 0.97;
+// Radar yaw p95 (docs/acceptance.md, "Solvers" and "Uncertainty on the full-physics
+// evaluation"), and a wrong verdict is allowed only with the truth within this many σ of a
+// tolerance edge (the latter section).
+inline constexpr double kRadarYawP95BarDeg = 0.05;
+inline constexpr double kWrongVerdictEdgeSigmas = 1.0;
 
 // The flags of an evaluation over random cars: --station, --car (their targets must exist in
 // the station), --cars (default 200, [1, 100000]: 200 put the 95th percentiles and the
