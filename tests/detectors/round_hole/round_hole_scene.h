@@ -106,6 +106,58 @@ inline Scene Simulate(const LidarBeamTable& beams, double distance_m, double bea
   return SimulateLayout(beams, layout, sigma_m, rotations);
 }
 
+// A surface `size_m` wide and high whose centre is at `centre_station`, facing along the
+// horizontal direction `facing_rad` (station frame).
+inline StationSurface Panel(const std::string& id, const Eigen::Vector3d& centre_station,
+                            double facing_rad, Eigen::Vector2d size_m) {
+  StationSurface s;
+  s.id = id;
+  // The surface's x-y plane is the rectangle: x horizontal, y up, z its normal.
+  const Eigen::Vector3d z(std::cos(facing_rad), std::sin(facing_rad), 0.0);
+  const Eigen::Vector3d y = Eigen::Vector3d::UnitZ();
+  Eigen::Matrix3d R;
+  R << y.cross(z), y, z;
+  s.T_station_surface = Rigid3d(R, centre_station);
+  s.size_m = size_m;
+  s.reflectivity = 0.5;
+  return s;
+}
+
+// A box of the board's size (1.1 m cube) standing on the floor, centred `distance_m` along
+// `bearing_deg` from the LiDAR: its four sides and its top.
+inline void AddBox(StationLayout& layout, double distance_m, double bearing_deg) {
+  const double b = bearing_deg * kDegToRad;
+  const Eigen::Vector3d c(distance_m * std::cos(b), distance_m * std::sin(b), 0.55);
+  const Eigen::Vector2d side(1.1, 1.1);
+  for (int k = 0; k < 4; ++k) {
+    const double facing = b + k * 0.5 * std::numbers::pi;
+    layout.surfaces.push_back(
+        Panel("box_side" + std::to_string(k),
+              c + 0.55 * Eigen::Vector3d(std::cos(facing), std::sin(facing), 0), facing, side));
+  }
+  StationSurface top;
+  top.id = "box_top";
+  top.T_station_surface = Rigid3d::Translation(c + Eigen::Vector3d(0, 0, 0.55));
+  top.size_m = side;
+  layout.surfaces.push_back(top);
+}
+
+// The search's scene of case `c`: the board on its stand, a wall 2 m behind it facing the
+// LiDAR, and a board-sized box 90 degrees around (round_hole_search_test.cc and
+// round_hole_bench.cc).
+inline StationLayout BoardWallAndBox(const Case& c) {
+  StationLayout layout;
+  layout.name = "search_test";
+  layout.boards.push_back(RoundHoleAt(FacingPose(c.distance_m, c.bearing_deg, c.heading_deg)));
+  const double b = c.bearing_deg * kDegToRad;
+  layout.surfaces.push_back(Panel(
+      "wall",
+      Eigen::Vector3d((c.distance_m + 2) * std::cos(b), (c.distance_m + 2) * std::sin(b), 1.5),
+      b + std::numbers::pi, Eigen::Vector2d(8.0, 3.0)));
+  AddBox(layout, c.distance_m, c.bearing_deg + 90.0);
+  return layout;
+}
+
 // The largest distance of the detected hole centres from their true positions, metres.
 inline double WorstHoleError(const Scene& scene, const RoundHoleCloudDetection& d) {
   double worst = 0.0;
