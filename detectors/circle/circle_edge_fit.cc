@@ -96,8 +96,8 @@ std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bo
         !patch.Inside(seed.centre + (rho + (n + 1) * step) * u)) {
       continue;
     }
-    // The sample points first, then their grey levels (loops of their own: the positions'
-    // arithmetic vectorises, and the samples do not wait on one another).
+    // The sample points first, then their grey levels, in loops of their own: the samples
+    // do not wait on one another.
     const int count = 2 * n + 3;
     profile.resize(count);
     xs.resize(count);
@@ -277,8 +277,8 @@ std::optional<Eigen::Vector2d> ShareCentroid(const ImageView8& image, const Elli
     if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
     const std::uint8_t* row = image.Row(y);
     const double dy = y - e.centre.y();
-    // The shares first, in a loop of their own (without a branch it vectorises: two
-    // divisions to an instruction), then summed in order.
+    // The shares first, in a loop of their own without a branch, where the divisions of
+    // successive pixels overlap, then summed in order.
     bool flat = false;
     for (int x = x0; x <= x1; ++x) {
       const double page =
