@@ -143,41 +143,49 @@ void Classify(const Reduced& half, int min_contrast, std::vector<std::uint8_t>* 
       sat_n[s] = half.tile_count[t] + sat_n[s - 1] + sat_n[s - sat_w] - sat_n[s - sat_w - 1];
     }
   }
-  // Range: separable sliding minimum and maximum over the same window.
-  std::vector<std::uint8_t> row_lo(half.tile_min.size());
-  std::vector<std::uint8_t> row_hi(half.tile_max.size());
+  // Range: separable sliding minimum and maximum over the same window. Each pass takes the
+  // window's offsets in turn over a whole row of tiles (straight loops, which vectorise).
+  std::vector<std::uint8_t> row_lo(half.tile_min.size(), 255);
+  std::vector<std::uint8_t> row_hi(half.tile_max.size(), 0);
   for (int ty = 0; ty < th; ++ty) {
     const std::size_t t_row = static_cast<std::size_t>(ty) * tw;
-    for (int tx = 0; tx < tw; ++tx) {
-      std::uint8_t a = 255;
-      std::uint8_t b = 0;
-      for (int x = std::max(0, tx - k); x <= std::min(tw - 1, tx + k); ++x) {
-        a = std::min(a, half.tile_min[t_row + x]);
-        b = std::max(b, half.tile_max[t_row + x]);
-      }
-      row_lo[t_row + tx] = a;
-      row_hi[t_row + tx] = b;
+    std::uint8_t* lo = row_lo.data() + t_row;
+    std::uint8_t* hi = row_hi.data() + t_row;
+    for (int d = -k; d <= k; ++d) {
+      // The tiles tx whose neighbour tx + d lies on the row.
+      const int tx0 = std::max(0, -d), tx1 = std::min(tw, tw - d);
+      const std::uint8_t* in_lo = half.tile_min.data() + t_row;
+      const std::uint8_t* in_hi = half.tile_max.data() + t_row;
+      for (int tx = tx0; tx < tx1; ++tx) lo[tx] = std::min(lo[tx], in_lo[tx + d]);
+      for (int tx = tx0; tx < tx1; ++tx) hi[tx] = std::max(hi[tx], in_hi[tx + d]);
     }
   }
   // Per tile, the grey levels below which a pixel is dark and above which it is light; a
   // tile without contrast gets bounds no pixel passes.
   std::vector<int> dark_below(half.tile_sum.size());
   std::vector<int> light_above(half.tile_sum.size());
+  std::vector<std::uint8_t> column_lo(tw);
+  std::vector<std::uint8_t> column_hi(tw);
   for (int ty = 0; ty < th; ++ty) {
     const int y0 = std::max(0, ty - k);
     const int y1 = std::min(th, ty + k + 1);
+    // The window's extremes down each column of tiles, a row of the window at a time.
+    std::fill(column_lo.begin(), column_lo.end(), std::uint8_t{255});
+    std::fill(column_hi.begin(), column_hi.end(), std::uint8_t{0});
+    for (int y = y0; y < y1; ++y) {
+      const std::uint8_t* in_lo = row_lo.data() + static_cast<std::size_t>(y) * tw;
+      const std::uint8_t* in_hi = row_hi.data() + static_cast<std::size_t>(y) * tw;
+      for (int tx = 0; tx < tw; ++tx) column_lo[tx] = std::min(column_lo[tx], in_lo[tx]);
+      for (int tx = 0; tx < tw; ++tx) column_hi[tx] = std::max(column_hi[tx], in_hi[tx]);
+    }
     for (int tx = 0; tx < tw; ++tx) {
       const int x0 = std::max(0, tx - k);
       const int x1 = std::min(tw, tx + k + 1);
       auto box = [&](const std::vector<double>& s) {
         return s[y1 * sat_w + x1] - s[y0 * sat_w + x1] - s[y1 * sat_w + x0] + s[y0 * sat_w + x0];
       };
-      int a = 255;
-      int b = 0;
-      for (int y = y0; y < y1; ++y) {
-        a = std::min<int>(a, row_lo[static_cast<std::size_t>(y) * tw + tx]);
-        b = std::max<int>(b, row_hi[static_cast<std::size_t>(y) * tw + tx]);
-      }
+      const int a = column_lo[tx];
+      const int b = column_hi[tx];
       const std::size_t t = static_cast<std::size_t>(ty) * tw + tx;
       if (b - a < min_contrast) {
         dark_below[t] = 0;
@@ -225,7 +233,8 @@ void Classify(const Reduced& half, int min_contrast, std::vector<std::uint8_t>* 
 void CollectBlobs(const std::vector<std::uint8_t>& mask, const Reduced& half, bool light,
                   std::vector<CircleBlob>* blobs) {
   const ImageView8 view{mask.data(), half.width, half.height, half.width};
-  const ComponentLabels labels = LabelComponents(view);
+  // The components' runs rather than a label image: the moments are sums over the runs.
+  const ComponentLabels labels = LabelComponents(view, /*label_image=*/false);
   const std::size_t n = labels.components.size();
   // Components worth the moments: 5 reduced pixels is, at factor 2, a circle 6 px across at
   // full resolution seen at 50 degrees; a sixteenth of the image is far more than the
@@ -242,20 +251,21 @@ void CollectBlobs(const std::vector<std::uint8_t>& mask, const Reduced& half, bo
     // degrees); sparser components are not worth their moments.
     const int box_area = (c.max_x - c.min_x + 1) * (c.max_y - c.min_y + 1);
     if (c.area_px < 0.3 * box_area) continue;
-    // Moments over the component's bounding box only: the few plausible components cost
-    // far less than a pass over the whole label image.
-    const std::int32_t label = static_cast<std::int32_t>(i) + 1;
+    // Moments over the component's runs (in raster order), row by row. Every sum is of
+    // integers far below 2^53, exact in doubles whatever the order.
     std::array<double, 5> m = {0, 0, 0, 0, 0};
-    for (int y = c.min_y; y <= c.max_y; ++y) {
-      const std::int32_t* row = labels.labels.data() + static_cast<std::size_t>(y) * half.width;
+    const int r_end = labels.run_begin[i + 1];
+    for (int r = labels.run_begin[i]; r < r_end;) {
+      const int y = labels.runs[r].y;
       double sx = 0.0;
       double sxx = 0.0;
       int count = 0;
-      for (int x = c.min_x; x <= c.max_x; ++x) {
-        if (row[x] != label) continue;
-        sx += x;
-        sxx += static_cast<double>(x) * x;
-        ++count;
+      for (; r < r_end && labels.runs[r].y == y; ++r) {
+        for (int x = labels.runs[r].x0; x < labels.runs[r].x1; ++x) {
+          sx += x;
+          sxx += static_cast<double>(x) * x;
+          ++count;
+        }
       }
       m[0] += sx;
       m[1] += static_cast<double>(y) * count;

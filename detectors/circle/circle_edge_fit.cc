@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <numbers>
 #include <span>
+#include <vector>
 
 #include "detectors/common/image_filters.h"
 
@@ -18,8 +19,8 @@ struct Patch {
   ImageF image;
   Eigen::Vector2d origin = Eigen::Vector2d::Zero();  // image coordinates of its pixel (0, 0)
 
-  float At(const Eigen::Vector2d& uv) const {
-    return SampleBilinear(image, uv.x() - origin.x(), uv.y() - origin.y());
+  float At(double u, double v) const {
+    return SampleBilinear(image, u - origin.x(), v - origin.y());
   }
   // True when uv lies on the patch's pixel centres' area. The patch covers every sample the
   // search can take, except where the image ends: a point off the patch is off the image,
@@ -71,6 +72,7 @@ std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bo
   std::vector<Eigen::Vector2d> points;
   points.reserve(rays);
   std::vector<float> profile;
+  std::vector<double> xs, ys;
   const double sign = light ? 1.0 : -1.0;  // light: grey falls outwards
   const double axis_cos = std::cos(seed.angle_rad);
   const double axis_sin = std::sin(seed.angle_rad);
@@ -94,9 +96,18 @@ std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bo
         !patch.Inside(seed.centre + (rho + (n + 1) * step) * u)) {
       continue;
     }
-    profile.resize(2 * n + 3);
-    for (int j = -n - 1; j <= n + 1; ++j)
-      profile[j + n + 1] = patch.At(seed.centre + (rho + j * step) * u);
+    // The sample points first, then their grey levels, in loops of their own: the samples
+    // do not wait on one another.
+    const int count = 2 * n + 3;
+    profile.resize(count);
+    xs.resize(count);
+    ys.resize(count);
+    for (int j = -n - 1; j <= n + 1; ++j) {
+      const double t = rho + j * step;
+      xs[j + n + 1] = seed.centre.x() + t * u.x();
+      ys[j + n + 1] = seed.centre.y() + t * u.y();
+    }
+    for (int i = 0; i < count; ++i) profile[i] = patch.At(xs[i], ys[i]);
     auto derivative = [&](int j) {
       return sign * (profile[j + n] - profile[j + n + 2]);  // P(j - 1) - P(j + 1)
     };
@@ -176,6 +187,10 @@ struct EllipseScale {
   }
 };
 
+// Two doubles, one SSE register: GCC's and clang's vector extension (as image_filters.cc's
+// Float4).
+using Double2 = double __attribute__((vector_size(16)));
+
 // The pixels of a grey centroid's window: the ellipse scaled by `outer` about its centre.
 struct Window {
   int x0, y0, x1, y1;  // inclusive
@@ -223,12 +238,22 @@ std::optional<Levels> MeasureLevels(const ImageView8& image, const Ellipse& e, c
         ++core[row[x]];
         ++core_n;
       } else if (s2 >= inner * inner) {
-        const Eigen::Vector3d a(1.0, dx, dy);
-        normal += a * a.transpose();
-        rhs += a * row[x];
+        // The normal equations of (1, dx, dy): the upper triangle only (the lower one is its
+        // mirror, the same products), and the products with 1 as the terms themselves.
+        const double grey = row[x];
+        normal(0, 0) += 1.0;
+        normal(0, 1) += dx;
+        normal(0, 2) += dy;
+        normal(1, 1) += dx * dx;
+        normal(1, 2) += dx * dy;
+        normal(2, 2) += dy * dy;
+        rhs += Eigen::Vector3d(grey, dx * grey, dy * grey);
       }
     }
   }
+  normal(1, 0) = normal(0, 1);
+  normal(2, 0) = normal(0, 2);
+  normal(2, 1) = normal(1, 2);
   // A dozen ring pixels at least: three unknowns, and a ring of a circle 4 px across.
   if (core_n < 5 || normal(0, 0) < 12.0) return std::nullopt;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(normal);
@@ -250,18 +275,41 @@ std::optional<Eigen::Vector2d> ShareCentroid(const ImageView8& image, const Elli
   const EllipseScale scale(e);
   double sum_w = 0.0;
   Eigen::Vector2d sum_wp = Eigen::Vector2d::Zero();
+  std::vector<double> shares(static_cast<std::size_t>(w.x1 - w.x0 + 1));
   for (int y = w.y0; y <= w.y1; ++y) {
     int x0 = 0, x1 = 0;
     if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
     const std::uint8_t* row = image.Row(y);
     const double dy = y - e.centre.y();
+    // The shares first, two pixels to a vector (two divisions to an instruction; each
+    // lane's arithmetic is the scalar's, in the same order), then summed in order.
+    const double cx = e.centre.x(), page_dy = levels.page[2] * dy;
+    const Double2 zero = {0.0, 0.0}, one = {1.0, 1.0};
+    bool steep = true;  // every |step| >= 1 so far
+    int x = x0;
+    for (; x + 1 <= x1; x += 2) {
+      const Double2 at = {static_cast<double>(x), static_cast<double>(x + 1)};
+      const Double2 page = (levels.page[0] + levels.page[1] * (at - cx)) + page_dy;
+      const Double2 step = levels.print - page;
+      const auto steep_pair = (step < zero ? -step : step) >= one;
+      steep &= (steep_pair[0] != 0) & (steep_pair[1] != 0);
+      const Double2 grey = {static_cast<double>(row[x]), static_cast<double>(row[x + 1])};
+      const Double2 v = (grey - page) / step;
+      const Double2 share = v < zero ? zero : (one < v ? one : v);  // std::clamp's order
+      shares[x - x0] = share[0];
+      shares[x + 1 - x0] = share[1];
+    }
+    bool flat = !steep;
+    for (; x <= x1; ++x) {
+      const double page = levels.page[0] + levels.page[1] * (x - cx) + page_dy;
+      const double step = levels.print - page;
+      flat |= !(std::abs(step) >= 1.0);
+      shares[x - x0] = std::clamp((row[x] - page) / step, 0.0, 1.0);
+    }
+    if (flat) return std::nullopt;
     double row_w = 0.0, row_wx = 0.0;
     for (int x = x0; x <= x1; ++x) {
-      const double page =
-          levels.page[0] + levels.page[1] * (x - e.centre.x()) + levels.page[2] * dy;
-      const double step = levels.print - page;
-      if (!(std::abs(step) >= 1.0)) return std::nullopt;
-      const double share = std::clamp((row[x] - page) / step, 0.0, 1.0);
+      const double share = shares[x - x0];
       row_w += share;
       row_wx += share * x;
     }

@@ -38,28 +38,45 @@ void Unite(std::vector<Run>& runs, int a, int b) {
   }
 }
 
-// The first x in [x, width) whose pixel of `row` is set (non-zero) when `set`, unset when
-// not; width when there is none. Eight pixels at a time: a binary image's runs are tens of
-// pixels long, and a loop over single pixels spends its time on mispredicted branches.
-int NextWithSetTo(const std::uint8_t* row, int x, int width, bool set) {
+// The set (non-zero) pixels of a row as bits: bit x % 64 of words[x / 64], and a zero word
+// past the row's end, so that every run of set bits ends before the words do. Eight pixels
+// at a time without a branch; the runs are then found a word at a time (NextBit): a binary
+// image's runs are tens of pixels long, and a loop that stops at each group of pixels to test
+// it spends its time on mispredicted branches.
+void RowBits(const std::uint8_t* row, int width, std::vector<std::uint64_t>* words) {
   constexpr std::uint64_t kLow7 = 0x7f7f7f7f7f7f7f7fULL;
   constexpr std::uint64_t kHigh = 0x8080808080808080ULL;
-  for (; x + 8 <= width; x += 8) {
-    std::uint64_t v;
-    std::memcpy(&v, row + x, 8);
-    // The high bit of each byte: set when the byte is non-zero (no carry crosses a byte:
-    // 0x7f + 0x7f < 0x100).
-    const std::uint64_t non_zero = (((v & kLow7) + kLow7) | v) & kHigh;
-    const std::uint64_t wanted = set ? non_zero : ~non_zero & kHigh;
-    if (wanted != 0) {
-      // The first pixel is the lowest byte on a little-endian machine, the highest on others.
-      const int bits = std::endian::native == std::endian::little ? std::countr_zero(wanted)
-                                                                  : std::countl_zero(wanted);
-      return x + bits / 8;
+  // Gathers the high bit of byte i (bit 8 i + 7) into bit 56 + i: no two products overlap.
+  constexpr std::uint64_t kGather = 0x0102040810204080ULL;
+  words->assign(static_cast<std::size_t>(width) / 64 + 1, 0);
+  std::uint64_t* out = words->data();
+  int x = 0;
+  if constexpr (std::endian::native == std::endian::little) {
+    for (; x + 8 <= width; x += 8) {
+      std::uint64_t v;
+      std::memcpy(&v, row + x, 8);
+      // The high bit of each byte: set when the byte is non-zero (no carry crosses a byte:
+      // 0x7f + 0x7f < 0x100).
+      const std::uint64_t non_zero = (((v & kLow7) + kLow7) | v) & kHigh;
+      out[x / 64] |= (((non_zero >> 7) * kGather) >> 56) << (x % 64);
     }
   }
-  while (x < width && (row[x] != 0) != set) ++x;
-  return x;
+  for (; x < width; ++x) out[x / 64] |= static_cast<std::uint64_t>(row[x] != 0) << (x % 64);
+}
+
+// The first bit at or after x that is set when `set`, unset when not; words.size() * 64 when
+// there is none.
+int NextBit(const std::vector<std::uint64_t>& words, int x, bool set) {
+  const int n = static_cast<int>(words.size());
+  int k = x / 64;
+  if (k >= n) return n * 64;
+  const std::uint64_t flip = set ? 0 : ~std::uint64_t{0};
+  std::uint64_t w = (words[k] ^ flip) & (~std::uint64_t{0} << (x % 64));
+  while (w == 0) {
+    if (++k == n) return n * 64;
+    w = words[k] ^ flip;
+  }
+  return k * 64 + std::countr_zero(w);
 }
 
 // Moore neighbourhood, clockwise in the image (y down), starting east.
@@ -117,7 +134,7 @@ double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
 
 }  // namespace
 
-ComponentLabels LabelComponents(const ImageView8& binary) {
+ComponentLabels LabelComponents(const ImageView8& binary, bool label_image) {
   ComponentLabels out;
   out.width = binary.width;
   out.height = binary.height;
@@ -125,14 +142,15 @@ ComponentLabels LabelComponents(const ImageView8& binary) {
   std::vector<int> row_start(static_cast<std::size_t>(binary.height) + 1, 0);
   int prev_begin = 0;
   int prev_end = 0;
+  std::vector<std::uint64_t> bits;
   for (int y = 0; y < binary.height; ++y) {
     const std::uint8_t* row = binary.Row(y);
     const int begin = static_cast<int>(runs.size());
-    int x = 0;
-    while (x < binary.width) {
-      const int x0 = NextWithSetTo(row, x, binary.width, true);
-      if (x0 == binary.width) break;
-      x = NextWithSetTo(row, x0, binary.width, false);
+    RowBits(row, binary.width, &bits);
+    // The zero word past the row's end ends the last run at binary.width at the latest.
+    for (int x = NextBit(bits, 0, true); x < binary.width; x = NextBit(bits, x, true)) {
+      const int x0 = x;
+      x = NextBit(bits, x0, false);
       const int index = static_cast<int>(runs.size());
       runs.push_back(Run{x0, x, y, index});
     }
@@ -154,8 +172,9 @@ ComponentLabels LabelComponents(const ImageView8& binary) {
   // zeroed image with the runs filled in would write the runs' pixels twice: the labels of
   // a large image are several megabytes, and writing them is most of the cost).
   const std::size_t pixels = static_cast<std::size_t>(binary.width) * binary.height;
-  out.labels.reserve(pixels);
+  if (label_image) out.labels.reserve(pixels);
   std::vector<int> component_of_root(runs.size(), -1);
+  std::vector<int> component_of_run(label_image ? 0 : runs.size());
   for (int i = 0; i < static_cast<int>(runs.size()); ++i) {
     const int root = FindRoot(runs, i);
     int c = component_of_root[root];
@@ -176,21 +195,37 @@ ComponentLabels LabelComponents(const ImageView8& binary) {
     comp.min_x = std::min(comp.min_x, run.x0);
     comp.max_x = std::max(comp.max_x, run.x1 - 1);
     comp.max_y = std::max(comp.max_y, run.y);
+    if (!label_image) {
+      component_of_run[i] = c;
+      continue;
+    }
     const std::size_t start = static_cast<std::size_t>(run.y) * binary.width + run.x0;
     out.labels.insert(out.labels.end(), start - out.labels.size(), 0);
     out.labels.insert(out.labels.end(), run.x1 - run.x0, c + 1);
   }
-  out.labels.insert(out.labels.end(), pixels - out.labels.size(), 0);
+  if (label_image) {
+    out.labels.insert(out.labels.end(), pixels - out.labels.size(), 0);
+    return out;
+  }
+  // The runs grouped by component (a counting sort, which keeps each one's raster order).
+  const int n = static_cast<int>(out.components.size());
+  out.run_begin.assign(n + 1, 0);
+  for (const int c : component_of_run) ++out.run_begin[c + 1];
+  for (int c = 0; c < n; ++c) out.run_begin[c + 1] += out.run_begin[c];
+  std::vector<int> next(out.run_begin.begin(), out.run_begin.end() - 1);
+  out.runs.resize(runs.size());
+  for (int i = 0; i < static_cast<int>(runs.size()); ++i) {
+    out.runs[next[component_of_run[i]]++] = PixelRun{runs[i].x0, runs[i].x1, runs[i].y};
+  }
   return out;
 }
 
-std::vector<Eigen::Vector2i> TraceOuterContour(const ComponentLabels& labels, int index) {
-  const Component& comp = labels.components[index];
-  const std::int32_t label = index + 1;
-  auto inside = [&](int x, int y) {
-    return x >= 0 && y >= 0 && x < labels.width && y < labels.height &&
-           labels.LabelAt(x, y) == label;
-  };
+namespace {
+
+// Moore-neighbour tracing of the component `comp`, whose pixels inside(x, y) tells (false
+// off the image), as TraceOuterContour.
+template <typename Inside>
+std::vector<Eigen::Vector2i> TraceContour(const Component& comp, Inside&& inside) {
   std::vector<Eigen::Vector2i> contour;
   const Eigen::Vector2i start(comp.first_x, comp.first_y);
   contour.push_back(start);
@@ -228,6 +263,32 @@ std::vector<Eigen::Vector2i> TraceOuterContour(const ComponentLabels& labels, in
     backtrack = (move + 6 - (move & 1)) % 8;
   }
   return contour;
+}
+
+}  // namespace
+
+std::vector<Eigen::Vector2i> TraceOuterContour(const ComponentLabels& labels, int index) {
+  const Component& comp = labels.components[index];
+  if (labels.labels.empty()) {
+    // The component's pixels in its bounding box with a border of one pixel, which holds
+    // every neighbour the trace looks at: no bounds to check.
+    const int x0 = comp.min_x - 1, y0 = comp.min_y - 1;
+    const int w = comp.max_x - comp.min_x + 3;
+    std::vector<std::uint8_t> mask(static_cast<std::size_t>(w) * (comp.max_y - comp.min_y + 3), 0);
+    for (int r = labels.run_begin[index]; r < labels.run_begin[index + 1]; ++r) {
+      const PixelRun& run = labels.runs[r];
+      std::fill_n(&mask[static_cast<std::size_t>(run.y - y0) * w + (run.x0 - x0)], run.x1 - run.x0,
+                  std::uint8_t{1});
+    }
+    return TraceContour(comp, [&](int x, int y) {
+      return mask[static_cast<std::size_t>(y - y0) * w + (x - x0)] != 0;
+    });
+  }
+  const std::int32_t label = index + 1;
+  return TraceContour(comp, [&](int x, int y) {
+    return x >= 0 && y >= 0 && x < labels.width && y < labels.height &&
+           labels.LabelAt(x, y) == label;
+  });
 }
 
 std::vector<int> ApproximateClosedPolygon(const std::vector<Eigen::Vector2i>& contour,

@@ -129,7 +129,10 @@ std::optional<HomographyFit> FitHomography(std::span<const Eigen::Vector2d> src,
     Eigen::Matrix<double, 2, 9> rows;
     rows << -x, -y, -1.0, 0.0, 0.0, 0.0, u * x, u * y, u,  //
         0.0, 0.0, 0.0, -x, -y, -1.0, v * x, v * y, v;
-    AtA.noalias() += rows.transpose() * rows;
+    // A lazy (coefficient-wise) product: 9 + 9 + 2 dimensions are past Eigen's threshold for
+    // the blocked matrix-product kernel, whose packing costs more than this small product.
+    // The same sums either way (each coefficient a product of the two rows' terms added).
+    AtA.noalias() += rows.transpose().lazyProduct(rows);
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> eig(AtA);
   if (eig.info() != Eigen::Success) return std::nullopt;

@@ -136,7 +136,9 @@ QuadOptions SquareQuadOptions(int min_side_px) {
 std::vector<Square> FindSquares(const ImageView8& image, const Image8& dark, double gap_ratio,
                                 int min_side_px) {
   std::vector<Square> squares;
-  for (const Quad& quad : FindQuads(LabelComponents(dark.view()), SquareQuadOptions(min_side_px))) {
+  // Without the label image: only the quads' contours need the components' pixels.
+  const ComponentLabels labels = LabelComponents(dark.view(), /*label_image=*/false);
+  for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
     for (int pass = 0; pass < 2 && corners; ++pass) {
       corners = RefineCorners(image, *corners, gap_ratio);
@@ -760,7 +762,7 @@ std::optional<Square> FindPredictedSquare(const ImageView8& image, const Predict
   const Eigen::Vector2d origin(x0, y0);
   std::optional<Square> best;
   double nearest = 0.5 * p.side_px;
-  const ComponentLabels labels = LabelComponents(window.view());
+  const ComponentLabels labels = LabelComponents(window.view(), /*label_image=*/false);
   for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
     for (Eigen::Vector2d& c : *corners) c += origin;

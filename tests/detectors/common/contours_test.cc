@@ -64,6 +64,50 @@ TEST(ContoursTest, UShapeMergesIntoOneComponent) {
   EXPECT_EQ(labels.LabelAt(8, 1), labels.LabelAt(1, 1));
 }
 
+// Without the label image, the components are the same, their runs cover exactly the pixels
+// the label image gives them, and every contour is traced the same: shapes touching at a
+// corner, a U whose arms merge late, a ring, a component on the image's border, and rows
+// wider than 64 pixels (the run search takes 64 pixels at a time).
+TEST(ContoursTest, RunsGiveTheSameComponentsAndContoursAsTheLabelImage) {
+  Image8 img = Blank(150, 40);
+  FillRect(&img, 2, 2, 5, 5);
+  FillRect(&img, 6, 6, 9, 9);
+  FillRect(&img, 20, 1, 21, 20);
+  FillRect(&img, 26, 1, 27, 20);
+  FillRect(&img, 20, 21, 27, 21);
+  FillRect(&img, 40, 5, 60, 25);
+  for (int y = 10; y <= 20; ++y) {
+    for (int x = 45; x <= 55; ++x) img.at(x, y) = 0;
+  }
+  FillRect(&img, 0, 30, 149, 39);  // the whole width, on the left, right and bottom borders
+  FillRect(&img, 63, 2, 128, 3);   // across the 64-pixel boundaries
+  img.at(100, 10) = 1;
+  const ComponentLabels labels = LabelComponents(img.view());
+  const ComponentLabels runs = LabelComponents(img.view(), /*label_image=*/false);
+  EXPECT_TRUE(runs.labels.empty());
+  ASSERT_EQ(runs.components.size(), 7u);
+  ASSERT_EQ(labels.components.size(), runs.components.size());
+  ASSERT_EQ(runs.run_begin.size(), runs.components.size() + 1);
+  std::vector<std::int32_t> drawn(labels.labels.size(), 0);
+  for (int c = 0; c < static_cast<int>(runs.components.size()); ++c) {
+    const Component& a = labels.components[c];
+    const Component& b = runs.components[c];
+    EXPECT_EQ(a.area_px, b.area_px);
+    EXPECT_EQ(a.min_x, b.min_x);
+    EXPECT_EQ(a.max_x, b.max_x);
+    EXPECT_EQ(a.min_y, b.min_y);
+    EXPECT_EQ(a.max_y, b.max_y);
+    EXPECT_EQ(a.first_x, b.first_x);
+    EXPECT_EQ(a.first_y, b.first_y);
+    for (int r = runs.run_begin[c]; r < runs.run_begin[c + 1]; ++r) {
+      const PixelRun& run = runs.runs[r];
+      for (int x = run.x0; x < run.x1; ++x) drawn[run.y * img.width + x] = c + 1;
+    }
+    EXPECT_EQ(TraceOuterContour(labels, c), TraceOuterContour(runs, c)) << "component " << c;
+  }
+  EXPECT_EQ(drawn, labels.labels);
+}
+
 TEST(ContoursTest, TracesASquareClockwiseFromItsFirstPixel) {
   Image8 img = Blank(10, 10);
   FillRect(&img, 3, 4, 5, 6);
