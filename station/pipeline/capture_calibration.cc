@@ -301,11 +301,14 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
     BoardDetectionSummary& summary = (*summaries)[i];
     ++summary.frames;
     std::optional<Detection> d = DetectBoard(image, board->board);
-    if (d && camera && (!d->found || ViewRefinesMarkerCorners(*camera, board->board))) {
-      // Not found in the raw image, or a marker board whose corners a fisheye shifts there:
-      // look again in a perspective view of where the board is expected
-      // (station/camera/board_view.h); where the view does not show the whole board, the raw
-      // detection stands.
+    if (d && camera && (!d->found || camera->type() == CameraModelType::kFisheye)) {
+      // Not found in the raw image, or any board of a fisheye, whose lens bends the board's
+      // lines there and shifts its features: marker corners (docs/solvers.md, "The rear ArUco
+      // board through the fisheye") and checker corners alike, 0.027-0.029 px towards the
+      // image centre on every capture ("Camera sigma on the full-physics evaluation"), which
+      // moved the surround cameras' positions by 3 sigma. Look again in a perspective view of
+      // where the board is expected (station/camera/board_view.h); where the view does not
+      // show the whole board, the raw detection stands.
       const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
       std::optional<Detection> v = DetectInBoardView(*camera, image, T_camera_board, board->board);
       if (v && v->found) {
