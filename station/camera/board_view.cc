@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -24,6 +25,41 @@ constexpr double kMinCornerDepth = 0.05;
 constexpr double kMinFacingCos = 0.1;
 // View pixels between exactly projected nodes of the view-to-raw map (Render says why 4).
 constexpr int kMapStep = 4;
+// The smallest cells the detectors are made for (docs/acceptance.md, "Detectors": boards sized
+// down to a 12 px square, marker boards down to a 4 px data cell).
+constexpr double kMinSquarePx = 12;
+constexpr double kMinMarkerCellPx = 4;
+
+// The focal length (view pixels per unit of the view's normalised coordinates) at which the
+// page's smallest cell, `cell_m`, spans `min_px` wherever on the page and in whichever
+// direction: at each page corner and the centre, the smallest singular value of the board
+// plane's map to the view's normalised coordinates. 0 when no bound is asked.
+double FocalForCells(const Eigen::Matrix3d& R_view_camera, const Rigid3d& T_camera_board,
+                     const Eigen::Vector2d& half_page_m, double cell_m, double min_px) {
+  if (!(cell_m > 0 && min_px > 0)) return 0;
+  const Eigen::Matrix3d R = R_view_camera * T_camera_board.rotation();
+  double smallest = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector2d& s :
+       {Eigen::Vector2d(0, 0), Eigen::Vector2d(-1, -1), Eigen::Vector2d(-1, 1),
+        Eigen::Vector2d(1, -1), Eigen::Vector2d(1, 1)}) {
+    const Eigen::Vector3d p =
+        R_view_camera *
+        (T_camera_board * Eigen::Vector3d(s.x() * half_page_m.x(), s.y() * half_page_m.y(), 0));
+    // d(p.xy / p.z) / d(board x, y): the projection's Jacobian times the board axes.
+    Eigen::Matrix<double, 2, 3> dq;
+    dq << 1 / p.z(), 0, -p.x() / (p.z() * p.z()), 0, 1 / p.z(), -p.y() / (p.z() * p.z());
+    const Eigen::Matrix2d J = dq * R.leftCols<2>();
+    smallest = std::min(smallest, Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues()(1));
+  }
+  return smallest > 0 ? min_px / (smallest * cell_m) : 0;
+}
+
+// Whether the board's image features are marker corners (ArUco, AprilTag, ChArUco, the
+// round-hole board's markers). O(features).
+bool IsMarkerBoard(const Board& board) {
+  return std::any_of(board.features().begin(), board.features().end(),
+                     [](const BoardFeature& f) { return f.kind == FeatureKind::kMarkerCorner; });
+}
 
 }  // namespace
 
@@ -32,6 +68,11 @@ absl::Status BoardViewOptions::Validate() const {
     return absl::InvalidArgumentError(absl::StrCat("margin = ", margin, ": must be in [0, 2]"));
   if (!(scale > 0.1 && scale <= 4))
     return absl::InvalidArgumentError(absl::StrCat("scale = ", scale, ": must be in (0.1, 4]"));
+  if (!(smallest_cell_m >= 0 && min_cell_px >= 0 && min_cell_px <= 100)) {
+    return absl::InvalidArgumentError(absl::StrCat("smallest_cell_m = ", smallest_cell_m,
+                                                   ", min_cell_px = ", min_cell_px,
+                                                   ": must be >= 0 and min_cell_px <= 100"));
+  }
   if (max_side_px < 64 || max_side_px > kMaxImageSide) {
     return absl::InvalidArgumentError(
         absl::StrCat("max_side_px = ", max_side_px, ": must be in [64, ", kMaxImageSide, "]"));
@@ -69,7 +110,9 @@ absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const Ima
   // Raw pixels per radian of view direction at the centre: the Jacobian times the distance,
   // on the view's x and y; its larger singular value is the finest scale.
   const Eigen::Matrix2d local = J * view.R_camera_view_.leftCols<2>() * p_centre.norm();
-  double f = options.scale * Eigen::JacobiSVD<Eigen::Matrix2d>(local).singularValues()(0);
+  double f = std::max(options.scale * Eigen::JacobiSVD<Eigen::Matrix2d>(local).singularValues()(0),
+                      FocalForCells(view.R_camera_view_.transpose(), T_camera_board,
+                                    page_size_m / 2, options.smallest_cell_m, options.min_cell_px));
 
   const double grow = options.margin * page_size_m.maxCoeff();
   const double hx = page_size_m.x() / 2 + grow, hy = page_size_m.y() / 2 + grow;
@@ -147,8 +190,11 @@ std::optional<Eigen::Vector2d> BoardView::ToRaw(const CameraModel& camera,
 std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
                                            const Rigid3d& T_camera_board, const Board& board,
                                            const BoardViewOptions& options) {
+  BoardViewOptions sized = options;
+  sized.smallest_cell_m = SmallestCellM(board);
+  sized.min_cell_px = IsMarkerBoard(board) ? kMinMarkerCellPx : kMinSquarePx;
   absl::StatusOr<BoardView> view =
-      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), options);
+      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), sized);
   if (!view.ok()) return std::nullopt;
   std::optional<Detection> d = DetectBoard(view->image().view(), board);
   if (!d) return std::nullopt;
@@ -161,9 +207,7 @@ std::optional<Detection> DetectInBoardView(const CameraModel& camera, const Imag
 }
 
 bool ViewRefinesMarkerCorners(const CameraModel& camera, const Board& board) {
-  return camera.type() == CameraModelType::kFisheye &&
-         std::any_of(board.features().begin(), board.features().end(),
-                     [](const BoardFeature& f) { return f.kind == FeatureKind::kMarkerCorner; });
+  return camera.type() == CameraModelType::kFisheye && IsMarkerBoard(board);
 }
 
 }  // namespace linecal

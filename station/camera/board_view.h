@@ -31,8 +31,18 @@ struct BoardViewOptions {
   // reference station's fisheye renders it halves the checker corners' error against 1.0
   // (tests/station/camera/board_view_test.cc prints them), and 2.0 gains nothing more.
   double scale = 1.5;
+  // The board's smallest printed square or marker data cell (SmallestCellM, metres) and the
+  // size in view pixels it is to have at least, foreshortened as the expected pose turns it
+  // (0: no such bound). The detectors' windows and blurs are sized in pixels for cells down
+  // to a size (docs/acceptance.md: 12 px squares, 4 px marker data cells); a board turned
+  // 70 degrees from the line of sight shows its squares a third as wide as they are tall, and
+  // the raw image's finest scale leaves them too narrow (surround_left's rear_left_board: 6 px
+  // in the view, too_few_features). Interpolating the raw pixels finer keeps what they hold.
+  // DetectInBoardView sets both from the board.
+  double smallest_cell_m = 0;
+  double min_cell_px = 0;
   // The view's larger side is at most this (pixels): a cap on time and memory when a board
-  // is expected very close.
+  // is expected very close or turned far.
   int max_side_px = 3000;
 
   absl::Status Validate() const;
@@ -64,7 +74,9 @@ class BoardView {
 };
 
 // `board` detected (DetectBoard) in its view expected at T_camera_board, with every feature
-// mapped back to raw pixels. nullopt when no view can be made (Render's errors), the board has
+// mapped back to raw pixels. options.smallest_cell_m and min_cell_px are set from the board:
+// its SmallestCellM at 12 px, or at 4 px for a board of markers (docs/acceptance.md's
+// smallest sizes). nullopt when no view can be made (Render's errors), the board has
 // no image detector, or a feature maps outside the camera's valid region; otherwise the
 // detector's result, whatever its reason. Cost: Render plus the detector on the view.
 std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
