@@ -68,10 +68,11 @@ absl::Status BoardViewOptions::Validate() const {
     return absl::InvalidArgumentError(absl::StrCat("margin = ", margin, ": must be in [0, 2]"));
   if (!(scale > 0.1 && scale <= 4))
     return absl::InvalidArgumentError(absl::StrCat("scale = ", scale, ": must be in (0.1, 4]"));
-  if (!(smallest_cell_m >= 0 && min_cell_px >= 0 && min_cell_px <= 100)) {
+  if (!(std::isfinite(smallest_cell_m) && smallest_cell_m >= 0 && std::isfinite(min_cell_px) &&
+        min_cell_px >= 0)) {
     return absl::InvalidArgumentError(absl::StrCat("smallest_cell_m = ", smallest_cell_m,
                                                    ", min_cell_px = ", min_cell_px,
-                                                   ": must be >= 0 and min_cell_px <= 100"));
+                                                   ": must be finite and >= 0"));
   }
   if (max_side_px < 64 || max_side_px > kMaxImageSide) {
     return absl::InvalidArgumentError(

@@ -217,6 +217,11 @@ TEST(BoardView, RefusesBoardsBehindTheCameraAndBadOptions) {
   absl::Status s = BoardView::Render(*camera, raw.view(), facing, page, bad).status();
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("scale"), std::string::npos) << s;
+  BoardViewOptions negative_cell;
+  negative_cell.min_cell_px = -1;
+  s = BoardView::Render(*camera, raw.view(), facing, page, negative_cell).status();
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("min_cell_px"), std::string::npos) << s;
 }
 
 }  // namespace
