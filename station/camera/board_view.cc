@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <limits>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -30,27 +29,21 @@ constexpr int kMapStep = 4;
 constexpr double kMinSquarePx = 12;
 constexpr double kMinMarkerCellPx = 4;
 
-// The focal length (view pixels per unit of the view's normalised coordinates) at which the
-// page's smallest cell, `cell_m`, spans `min_px` wherever on the page and in whichever
-// direction: at each page corner and the centre, the smallest singular value of the board
-// plane's map to the view's normalised coordinates. 0 when no bound is asked.
+// The focal length (view pixels per unit of the view's normalised coordinates) at which a
+// cell of `cell_m` at the board's centre spans `min_px` in whichever direction: the smallest
+// singular value of the board plane's map to the view's normalised coordinates there. At the
+// centre, as the raw image's scale is taken: a long board seen at a grazing angle (the floor
+// grids) has its far cells under any such bound, and sampling for them would only make the
+// view larger. 0 when no bound is asked.
 double FocalForCells(const Eigen::Matrix3d& R_view_camera, const Rigid3d& T_camera_board,
-                     const Eigen::Vector2d& half_page_m, double cell_m, double min_px) {
+                     double cell_m, double min_px) {
   if (!(cell_m > 0 && min_px > 0)) return 0;
-  const Eigen::Matrix3d R = R_view_camera * T_camera_board.rotation();
-  double smallest = std::numeric_limits<double>::infinity();
-  for (const Eigen::Vector2d& s :
-       {Eigen::Vector2d(0, 0), Eigen::Vector2d(-1, -1), Eigen::Vector2d(-1, 1),
-        Eigen::Vector2d(1, -1), Eigen::Vector2d(1, 1)}) {
-    const Eigen::Vector3d p =
-        R_view_camera *
-        (T_camera_board * Eigen::Vector3d(s.x() * half_page_m.x(), s.y() * half_page_m.y(), 0));
-    // d(p.xy / p.z) / d(board x, y): the projection's Jacobian times the board axes.
-    Eigen::Matrix<double, 2, 3> dq;
-    dq << 1 / p.z(), 0, -p.x() / (p.z() * p.z()), 0, 1 / p.z(), -p.y() / (p.z() * p.z());
-    const Eigen::Matrix2d J = dq * R.leftCols<2>();
-    smallest = std::min(smallest, Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues()(1));
-  }
+  const Eigen::Vector3d p = R_view_camera * T_camera_board.translation();
+  // d(p.xy / p.z) / d(board x, y): the projection's Jacobian times the board axes.
+  Eigen::Matrix<double, 2, 3> dq;
+  dq << 1 / p.z(), 0, -p.x() / (p.z() * p.z()), 0, 1 / p.z(), -p.y() / (p.z() * p.z());
+  const Eigen::Matrix2d J = dq * (R_view_camera * T_camera_board.rotation()).leftCols<2>();
+  const double smallest = Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues()(1);
   return smallest > 0 ? min_px / (smallest * cell_m) : 0;
 }
 
@@ -113,7 +106,7 @@ absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const Ima
   const Eigen::Matrix2d local = J * view.R_camera_view_.leftCols<2>() * p_centre.norm();
   double f = std::max(options.scale * Eigen::JacobiSVD<Eigen::Matrix2d>(local).singularValues()(0),
                       FocalForCells(view.R_camera_view_.transpose(), T_camera_board,
-                                    page_size_m / 2, options.smallest_cell_m, options.min_cell_px));
+                                    options.smallest_cell_m, options.min_cell_px));
 
   const double grow = options.margin * page_size_m.maxCoeff();
   const double hx = page_size_m.x() / 2 + grow, hy = page_size_m.y() / 2 + grow;

@@ -32,11 +32,11 @@ struct BoardViewOptions {
   // (tests/station/camera/board_view_test.cc prints them), and 2.0 gains nothing more.
   double scale = 1.5;
   // The board's smallest printed square or marker data cell (SmallestCellM, metres) and the
-  // size in view pixels it is to have at least, foreshortened as the expected pose turns it
-  // (0: no such bound). The detectors' windows and blurs are sized in pixels for cells down
-  // to a size (docs/acceptance.md: 12 px squares, 4 px marker data cells); a board turned
-  // 70 degrees from the line of sight shows its squares a third as wide as they are tall, and
-  // the raw image's finest scale leaves them too narrow (surround_left's rear_left_board: 6 px
+  // size in view pixels it is to have at least at the board's centre, foreshortened as the
+  // expected pose turns it (0: no such bound). The detectors' windows and blurs are sized in pixels
+  // for cells down to a size (docs/acceptance.md: 12 px squares, 4 px marker data cells); a board
+  // turned 70 degrees from the line of sight shows its squares a third as wide as they are tall,
+  // and the raw image's finest scale leaves them too narrow (surround_left's rear_left_board: 6 px
   // in the view, too_few_features). Interpolating the raw pixels finer keeps what they hold.
   // DetectInBoardView sets both from the board.
   double smallest_cell_m = 0;
