@@ -181,23 +181,44 @@ std::optional<Eigen::Vector2d> BoardView::ToRaw(const CameraModel& camera,
   return uv;
 }
 
-std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
-                                           const Rigid3d& T_camera_board, const Board& board,
-                                           const BoardViewOptions& options) {
-  BoardViewOptions sized = options;
-  sized.smallest_cell_m = SmallestCellM(board);
-  sized.min_cell_px = IsMarkerBoard(board) ? kMinMarkerCellPx : kMinSquarePx;
-  absl::StatusOr<BoardView> view =
-      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), sized);
-  if (!view.ok()) return std::nullopt;
-  std::optional<Detection> d = DetectBoard(view->image().view(), board);
+namespace {
+
+// `board` detected in `view`, its features mapped back to raw pixels; nullopt when the board
+// has no image detector or a feature maps outside the camera's valid region.
+std::optional<Detection> DetectInView(const CameraModel& camera, const BoardView& view,
+                                      const Board& board) {
+  std::optional<Detection> d = DetectBoard(view.image().view(), board);
   if (!d) return std::nullopt;
   for (DetectedFeature& f : d->features) {
-    const std::optional<Eigen::Vector2d> uv = view->ToRaw(camera, f.uv_px);
+    const std::optional<Eigen::Vector2d> uv = view.ToRaw(camera, f.uv_px);
     if (!uv) return std::nullopt;
     f.uv_px = *uv;
   }
   return d;
+}
+
+}  // namespace
+
+std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
+                                           const Rigid3d& T_camera_board, const Board& board,
+                                           const BoardViewOptions& options) {
+  absl::StatusOr<BoardView> view =
+      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), options);
+  if (!view.ok()) return std::nullopt;
+  std::optional<Detection> d = DetectInView(camera, *view, board);
+  if (!d || d->found) return d;
+  // Not found: again in a view whose smallest cell reaches the detectors' smallest size, when
+  // that view is finer. Only then: a board found at the raw scale keeps its corners, and with
+  // them its residuals, from which the solvers estimate the feature noise (finer views of the
+  // floor grids gave the same errors with a smaller sigma in `linecal eval station`).
+  BoardViewOptions sized = options;
+  sized.smallest_cell_m = SmallestCellM(board);
+  sized.min_cell_px = IsMarkerBoard(board) ? kMinMarkerCellPx : kMinSquarePx;
+  absl::StatusOr<BoardView> finer =
+      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), sized);
+  if (!finer.ok() || finer->image().width <= view->image().width) return d;
+  std::optional<Detection> again = DetectInView(camera, *finer, board);
+  return again && again->found ? again : d;
 }
 
 bool ViewRefinesMarkerCorners(const CameraModel& camera, const Board& board) {

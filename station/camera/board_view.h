@@ -38,7 +38,8 @@ struct BoardViewOptions {
   // turned 70 degrees from the line of sight shows its squares a third as wide as they are tall,
   // and the raw image's finest scale leaves them too narrow (surround_left's rear_left_board: 6 px
   // in the view, too_few_features). Interpolating the raw pixels finer keeps what they hold.
-  // DetectInBoardView sets both from the board.
+  // DetectInBoardView sets both from the board for a second look when the first view does
+  // not show the board whole.
   double smallest_cell_m = 0;
   double min_cell_px = 0;
   // The view's larger side is at most this (pixels): a cap on time and memory when a board
@@ -74,11 +75,13 @@ class BoardView {
 };
 
 // `board` detected (DetectBoard) in its view expected at T_camera_board, with every feature
-// mapped back to raw pixels. options.smallest_cell_m and min_cell_px are set from the board:
-// its SmallestCellM at 12 px, or at 4 px for a board of markers (docs/acceptance.md's
-// smallest sizes). nullopt when no view can be made (Render's errors), the board has
-// no image detector, or a feature maps outside the camera's valid region; otherwise the
-// detector's result, whatever its reason. Cost: Render plus the detector on the view.
+// mapped back to raw pixels. When the board is not found whole, it is looked for once more in
+// a view with options.smallest_cell_m and min_cell_px set from the board (its SmallestCellM at
+// 12 px, or at 4 px for a board of markers: docs/acceptance.md's smallest sizes) when that
+// view is finer, and that result is taken when it finds the board. nullopt when no view can be made
+// (Render's errors), the board has no image detector, or a feature maps outside the camera's valid
+// region; otherwise the detector's result, whatever its reason. Cost: Render plus the detector on
+// the view.
 std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
                                            const Rigid3d& T_camera_board, const Board& board,
                                            const BoardViewOptions& options = {});
