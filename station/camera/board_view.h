@@ -33,13 +33,13 @@ struct BoardViewOptions {
   double scale = 1.5;
   // The board's smallest printed square or marker data cell (SmallestCellM, metres) and the
   // size in view pixels it is to have at least at the board's centre, foreshortened as the
-  // expected pose turns it (0: no such bound). The detectors' windows and blurs are sized in pixels
-  // for cells down to a size (docs/acceptance.md: 12 px squares, 4 px marker data cells); a board
-  // turned 70 degrees from the line of sight shows its squares a third as wide as they are tall,
-  // and the raw image's finest scale leaves them too narrow (surround_left's rear_left_board: 6 px
-  // in the view, too_few_features). Interpolating the raw pixels finer keeps what they hold.
-  // DetectInBoardView sets both from the board for a second look when the first view does
-  // not show the board whole.
+  // expected pose turns it (0: no such bound). The detectors' windows and blurs are sized in
+  // pixels for cells down to a size (docs/acceptance.md: 12 px squares, 4 px marker data
+  // cells); a board facing the camera 67 degrees off the line of sight shows its squares
+  // under half as wide as tall, and the raw image's finest scale can leave them too narrow
+  // (surround_left's rear_left_board: 7.8 px at its centre, too_few_features). Interpolating
+  // the raw pixels finer keeps what they hold. DetectInBoardView sets both from the board
+  // for a second look when the first view does not show the board whole.
   double smallest_cell_m = 0;
   double min_cell_px = 0;
   // The view's larger side is at most this (pixels): a cap on time and memory when a board

@@ -125,10 +125,11 @@ TEST_F(BoardViewScene, SurroundBoardsFoundInTheirViewsAtTheTruePixels) {
 
 // The scene of issue 20 where surround_left lost rear_left_board (too_few_features in 7 of 62
 // frames): `linecal sim --seed 14 --sensors surround_left --perturb-angle-deg 1.5 --noise 2
-// --blur 0.5`. The 6 x 5 checker stands 70 degrees or more from the line of sight, so its squares
-// image a third as wide as tall: a view at 1.5 times the raw image's finest scale shows them
-// 6 px wide, under the checker detector's 12 px. DetectInBoardView samples the view so that
-// they reach 12 px, and finds the board at the true pixels.
+// --blur 0.5`. The 6 x 5 checker faces the camera about 67 degrees off the line of sight, so
+// its squares image under half as wide as tall: a view at 1.5 times the raw image's finest
+// scale shows them 7.8 px across at the board's centre, under the checker detector's 12 px.
+// DetectInBoardView looks again in a view where they reach 12 px, and finds the board at the
+// true pixels.
 TEST(BoardView, AFarTurnedCheckerIsSampledFinelyEnoughToBeFound) {
   const std::string dir =
       (fs::temp_directory_path() / ("board_view_turned_" + std::to_string(getpid()))).string();
