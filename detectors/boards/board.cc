@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <string_view>
 
@@ -913,6 +914,18 @@ std::optional<Paint> Board::UniformPaintIn(const Eigen::Vector2d& min_board,
     }
   }
   return paint;
+}
+
+double SmallestCellM(const Board& board) {
+  double smallest = std::numeric_limits<double>::infinity();
+  // shapes()[0] is the white page; every later shape is a printed square, bit run, disc
+  // or hole, whose shorter side is one cell.
+  for (size_t i = 1; i < board.shapes().size(); ++i) {
+    const Eigen::Vector2d size = board.shapes()[i].box_board.sizes();
+    if (board.shapes()[i].paint == Paint::kHole) continue;
+    smallest = std::min(smallest, size.minCoeff());
+  }
+  return smallest;
 }
 
 }  // namespace linecal

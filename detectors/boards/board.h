@@ -286,4 +286,8 @@ class Board {
   std::vector<std::uint32_t> index_shapes_;
 };
 
+// The smallest printed square or marker cell of a board, metres: a chessboard square, an
+// ArUco or AprilTag bit, the smallest circle. O(shapes).
+double SmallestCellM(const Board& board);
+
 }  // namespace linecal

@@ -1134,16 +1134,19 @@ struct ScanSplit {
   std::vector<const DecodedMarker*> others;
 };
 
-// Needs the scan and the board's markers; gives the scan's markers split by the board's ids
-// in *split, or the failure: no marker of the board (kWrongBoard with markers of other ids,
-// else the scan's reason or kNoCandidates), an id seen twice (kAmbiguous), a single marker
-// (kTooFewFeatures, or kWrongBoard with markers of other ids).
+// Needs the scan, the board's markers and, per scan marker, whether it is taken for another
+// board's print (an instance of a board id not chosen, VerifyMarkerBoard); gives the scan's
+// markers split by the board's ids in *split, or the failure: no marker of the board
+// (kWrongBoard with markers of other ids, else the scan's reason or kNoCandidates), an id seen
+// twice (kAmbiguous), a single marker (kTooFewFeatures, or kWrongBoard with markers of other
+// ids).
 std::optional<Detection> SplitScan(const MarkerScan& scan, const BoardMarkers& board_markers,
-                                   ScanSplit* split) {
+                                   const std::vector<bool>& another_board, ScanSplit* split) {
   std::vector<const DecodedMarker*>& on_board = split->on_board;
   std::vector<const DecodedMarker*>& others = split->others;
-  for (const DecodedMarker& m : scan.markers) {
-    (board_markers.count(m.id) != 0 ? on_board : others).push_back(&m);
+  for (std::size_t i = 0; i < scan.markers.size(); ++i) {
+    const DecodedMarker& m = scan.markers[i];
+    (board_markers.count(m.id) != 0 && !another_board[i] ? on_board : others).push_back(&m);
   }
   if (on_board.empty()) {
     if (!others.empty()) return Fail(DetectReason::kWrongBoard);
@@ -1295,14 +1298,16 @@ Detection ReportFittedBoard(const MarkerBoardContext& ctx, const BoardFit& fitte
   return CheckAndReport(model, on_board, ctx.board_markers, others, ctx.board, sibling, ctx.image,
                         ctx.options);
 }
-}  // namespace
 
-Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
-                            const MarkerDetectOptions& options, const ImageView8& image,
-                            const Board* sibling) {
-  const BoardMarkers board_markers = MarkersOfBoard(board);
+// Needs the board's markers and one choice of `scan`'s markers (another_board as SplitScan
+// takes it); gives VerifyMarkerBoard's result for that choice.
+Detection VerifyChosenMarkers(const MarkerScan& scan, const BoardMarkers& board_markers,
+                              const std::vector<bool>& another_board, const Board& board,
+                              const MarkerFamily& family, const MarkerDetectOptions& options,
+                              const ImageView8& image, const Board* sibling) {
   ScanSplit split;
-  if (std::optional<Detection> failure = SplitScan(scan, board_markers, &split)) return *failure;
+  if (std::optional<Detection> failure = SplitScan(scan, board_markers, another_board, &split))
+    return *failure;
   std::vector<const DecodedMarker*>& on_board = split.on_board;
   const MarkerBoardContext ctx{board, family, options, image, board_markers, scan.min_contrast};
   // Small markers' sides placed on the page before any board fit (FitSmallMarkerToPage).
@@ -1333,6 +1338,69 @@ Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const Ma
     return Fail(DetectReason::kVerificationFailed);
   for (const DecodedMarker& m : placed) on_board.push_back(&m);
   return ReportFittedBoard(ctx, *board_fit, side.px / side.m, on_board, split.others, sibling);
+}
+
+// Bounds the choices VerifyMarkerBoard tries when board ids are seen more than once: two
+// boards of the same ids whole in one image (2^4 choices for a four-marker board), each
+// choice one verification (about 0.2 ms, more on a bent board).
+constexpr int kMaxIdChoices = 16;
+
+// Needs the scan and the board's markers; gives every choice of one instance per board id the
+// scan saw, each as SplitScan's another_board (the instances not chosen set), or an empty list
+// when there are more than kMaxIdChoices. One choice, marking nothing, when no id is seen
+// twice.
+std::vector<std::vector<bool>> IdChoices(const MarkerScan& scan,
+                                         const BoardMarkers& board_markers) {
+  std::map<int, std::vector<std::size_t>> instances;  // board id -> its scan markers
+  for (std::size_t i = 0; i < scan.markers.size(); ++i) {
+    if (board_markers.count(scan.markers[i].id) != 0) instances[scan.markers[i].id].push_back(i);
+  }
+  std::vector<std::vector<bool>> choices = {std::vector<bool>(scan.markers.size(), false)};
+  for (const auto& [id, at] : instances) {
+    if (at.size() == 1) continue;
+    if (choices.size() * at.size() > static_cast<std::size_t>(kMaxIdChoices)) return {};
+    std::vector<std::vector<bool>> grown;
+    for (const std::vector<bool>& c : choices) {
+      for (std::size_t keep : at) {
+        std::vector<bool>& g = grown.emplace_back(c);
+        for (std::size_t i : at) g[i] = i != keep;
+      }
+    }
+    choices = std::move(grown);
+  }
+  return choices;
+}
+}  // namespace
+
+Detection VerifyMarkerBoard(const MarkerScan& scan, const Board& board, const MarkerFamily& family,
+                            const MarkerDetectOptions& options, const ImageView8& image,
+                            const Board* sibling) {
+  const BoardMarkers board_markers = MarkersOfBoard(board);
+  const std::vector<std::vector<bool>> choices = IdChoices(scan, board_markers);
+  if (choices.size() == 1) {
+    return VerifyChosenMarkers(scan, board_markers, choices[0], board, family, options, image,
+                               sibling);
+  }
+  // An id seen twice: another board printing the same markers shows some of them (the
+  // station's round-hole boards share ids 0..15; a board view's margin can hold a marker of
+  // the next one). The board is the one choice of instances that verifies: found whole, else
+  // partial; two such choices of the same kind cannot be told apart.
+  std::optional<Detection> found, partial;
+  int founds = 0, partials = 0;
+  for (const std::vector<bool>& c : choices) {
+    Detection d =
+        VerifyChosenMarkers(scan, board_markers, c, board, family, options, image, sibling);
+    if (d.found) {
+      ++founds;
+      found = std::move(d);
+    } else if (d.reason == DetectReason::kPartial) {
+      ++partials;
+      partial = std::move(d);
+    }
+  }
+  if (founds == 1) return *found;
+  if (founds == 0 && partials == 1) return *partial;
+  return Fail(DetectReason::kAmbiguous);
 }
 
 Detection DetectMarkerBoard(const ImageView8& image, const Board& board, const MarkerFamily& family,

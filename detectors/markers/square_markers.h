@@ -171,9 +171,9 @@ std::optional<DilatedHomographyFit> FitDilatedHomography(
     std::size_t markers);
 
 // Identifies `board` (ArUco, AprilTag or round-hole: its marker-corner features, markers of
-// `family`) from the markers of `scan`, and checks the whole board: every marker id at most
-// once, one board homography through all their corners within the residual bound, no marker
-// of another id on the board's page, and the board's printed paint where it is projected.
+// `family`) from the markers of `scan`, and checks the whole board: every marker id once (an id
+// seen twice: below), one board homography through all their corners within the residual bound, no
+// marker of another id on the board's page, and the board's printed paint where it is projected.
 // Markers whose black border is under 5 px across their shortest side have their sides
 // fitted to the board's blurred page (page_edge_fit.h) before they enter the homography:
 // their edge-point corners are biased by the edges next to the border. Markers the scan missed (too
@@ -183,10 +183,14 @@ std::optional<DilatedHomographyFit> FitDilatedHomography(
 // through all corners and checked. found = true when all of the board's markers pass; with 2 or
 // more markers but not all: found = false, kPartial, their corners. Otherwise no features and the
 // reason: kWrongBoard (markers of other ids only, another id on the page, or the paint disagrees),
-// kAmbiguous (an id seen twice), kVerificationFailed (residual), kTooFewFeatures (one
-// marker), scan.reason / kNoCandidates (no markers). Cost: O(markers) plus a fixed grid of
-// paint probes (about 0.2 ms), plus O(side) per missed marker, plus about 0.4 ms per small
-// marker fitted to the page.
+// kAmbiguous (see below), kVerificationFailed (residual), kTooFewFeatures (one
+// marker), scan.reason / kNoCandidates (no markers). An id seen more than once (another board
+// of the same ids in view): every choice of one instance per id is verified as above, the
+// instances not chosen taken for that board's print; the one choice found whole is the board
+// (else the one found partly); none, two alike, or over 16 choices (more than two such boards
+// whole in view): kAmbiguous. Cost per choice: O(markers) plus a fixed grid of paint probes
+// (about 0.2 ms), plus O(side) per missed marker, plus about 0.4 ms per small marker fitted to
+// the page.
 // `sibling`: a board that prints the same markers at the same places (the ArUco board for the
 // round-hole board and back), or nullptr; the board is then also told from it by the grey
 // levels where the two print differently (PaintContrastPrefers on `image`, the scanned

@@ -24,6 +24,35 @@ constexpr double kMinCornerDepth = 0.05;
 constexpr double kMinFacingCos = 0.1;
 // View pixels between exactly projected nodes of the view-to-raw map (Render says why 4).
 constexpr int kMapStep = 4;
+// The smallest cells the detectors are made for (docs/acceptance.md, "Detectors": boards sized
+// down to a 12 px square, marker boards down to a 4 px data cell).
+constexpr double kMinSquarePx = 12;
+constexpr double kMinMarkerCellPx = 4;
+
+// The focal length (view pixels per unit of the view's normalised coordinates) at which a
+// cell of `cell_m` at the board's centre spans `min_px` in whichever direction: the smallest
+// singular value of the board plane's map to the view's normalised coordinates there. At the
+// centre, as the raw image's scale is taken: a long board seen at a grazing angle (the floor
+// grids) has its far cells under any such bound, and sampling for them would only make the
+// view larger. 0 when no bound is asked.
+double FocalForCells(const Eigen::Matrix3d& R_view_camera, const Rigid3d& T_camera_board,
+                     double cell_m, double min_px) {
+  if (!(cell_m > 0 && min_px > 0)) return 0;
+  const Eigen::Vector3d p = R_view_camera * T_camera_board.translation();
+  // d(p.xy / p.z) / d(board x, y): the projection's Jacobian times the board axes.
+  Eigen::Matrix<double, 2, 3> dq;
+  dq << 1 / p.z(), 0, -p.x() / (p.z() * p.z()), 0, 1 / p.z(), -p.y() / (p.z() * p.z());
+  const Eigen::Matrix2d J = dq * (R_view_camera * T_camera_board.rotation()).leftCols<2>();
+  const double smallest = Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues()(1);
+  return smallest > 0 ? min_px / (smallest * cell_m) : 0;
+}
+
+// Whether the board's image features are marker corners (ArUco, AprilTag, ChArUco, the
+// round-hole board's markers). O(features).
+bool IsMarkerBoard(const Board& board) {
+  return std::any_of(board.features().begin(), board.features().end(),
+                     [](const BoardFeature& f) { return f.kind == FeatureKind::kMarkerCorner; });
+}
 
 }  // namespace
 
@@ -32,6 +61,12 @@ absl::Status BoardViewOptions::Validate() const {
     return absl::InvalidArgumentError(absl::StrCat("margin = ", margin, ": must be in [0, 2]"));
   if (!(scale > 0.1 && scale <= 4))
     return absl::InvalidArgumentError(absl::StrCat("scale = ", scale, ": must be in (0.1, 4]"));
+  if (!(std::isfinite(smallest_cell_m) && smallest_cell_m >= 0 && std::isfinite(min_cell_px) &&
+        min_cell_px >= 0)) {
+    return absl::InvalidArgumentError(absl::StrCat("smallest_cell_m = ", smallest_cell_m,
+                                                   ", min_cell_px = ", min_cell_px,
+                                                   ": must be finite and >= 0"));
+  }
   if (max_side_px < 64 || max_side_px > kMaxImageSide) {
     return absl::InvalidArgumentError(
         absl::StrCat("max_side_px = ", max_side_px, ": must be in [64, ", kMaxImageSide, "]"));
@@ -69,7 +104,9 @@ absl::StatusOr<BoardView> BoardView::Render(const CameraModel& camera, const Ima
   // Raw pixels per radian of view direction at the centre: the Jacobian times the distance,
   // on the view's x and y; its larger singular value is the finest scale.
   const Eigen::Matrix2d local = J * view.R_camera_view_.leftCols<2>() * p_centre.norm();
-  double f = options.scale * Eigen::JacobiSVD<Eigen::Matrix2d>(local).singularValues()(0);
+  double f = std::max(options.scale * Eigen::JacobiSVD<Eigen::Matrix2d>(local).singularValues()(0),
+                      FocalForCells(view.R_camera_view_.transpose(), T_camera_board,
+                                    options.smallest_cell_m, options.min_cell_px));
 
   const double grow = options.margin * page_size_m.maxCoeff();
   const double hx = page_size_m.x() / 2 + grow, hy = page_size_m.y() / 2 + grow;
@@ -144,26 +181,48 @@ std::optional<Eigen::Vector2d> BoardView::ToRaw(const CameraModel& camera,
   return uv;
 }
 
-std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
-                                           const Rigid3d& T_camera_board, const Board& board,
-                                           const BoardViewOptions& options) {
-  absl::StatusOr<BoardView> view =
-      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), options);
-  if (!view.ok()) return std::nullopt;
-  std::optional<Detection> d = DetectBoard(view->image().view(), board);
+namespace {
+
+// `board` detected in `view`, its features mapped back to raw pixels; nullopt when the board
+// has no image detector or a feature maps outside the camera's valid region.
+std::optional<Detection> DetectInView(const CameraModel& camera, const BoardView& view,
+                                      const Board& board) {
+  std::optional<Detection> d = DetectBoard(view.image().view(), board);
   if (!d) return std::nullopt;
   for (DetectedFeature& f : d->features) {
-    const std::optional<Eigen::Vector2d> uv = view->ToRaw(camera, f.uv_px);
+    const std::optional<Eigen::Vector2d> uv = view.ToRaw(camera, f.uv_px);
     if (!uv) return std::nullopt;
     f.uv_px = *uv;
   }
   return d;
 }
 
+}  // namespace
+
+std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
+                                           const Rigid3d& T_camera_board, const Board& board,
+                                           const BoardViewOptions& options) {
+  absl::StatusOr<BoardView> view =
+      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), options);
+  if (!view.ok()) return std::nullopt;
+  std::optional<Detection> d = DetectInView(camera, *view, board);
+  if (!d || d->found) return d;
+  // Not found: again in a view whose smallest cell reaches the detectors' smallest size, when
+  // that view is finer. Only then: a board found at the raw scale keeps its corners, and with
+  // them its residuals, from which the solvers estimate the feature noise (finer views of the
+  // floor grids gave the same errors with a smaller sigma in `linecal eval station`).
+  BoardViewOptions sized = options;
+  sized.smallest_cell_m = SmallestCellM(board);
+  sized.min_cell_px = IsMarkerBoard(board) ? kMinMarkerCellPx : kMinSquarePx;
+  absl::StatusOr<BoardView> finer =
+      BoardView::Render(camera, raw, T_camera_board, board.page_size_m(), sized);
+  if (!finer.ok() || finer->image().width <= view->image().width) return d;
+  std::optional<Detection> again = DetectInView(camera, *finer, board);
+  return again && again->found ? again : d;
+}
+
 bool ViewRefinesMarkerCorners(const CameraModel& camera, const Board& board) {
-  return camera.type() == CameraModelType::kFisheye &&
-         std::any_of(board.features().begin(), board.features().end(),
-                     [](const BoardFeature& f) { return f.kind == FeatureKind::kMarkerCorner; });
+  return camera.type() == CameraModelType::kFisheye && IsMarkerBoard(board);
 }
 
 }  // namespace linecal

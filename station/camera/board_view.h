@@ -31,8 +31,19 @@ struct BoardViewOptions {
   // reference station's fisheye renders it halves the checker corners' error against 1.0
   // (tests/station/camera/board_view_test.cc prints them), and 2.0 gains nothing more.
   double scale = 1.5;
+  // The board's smallest printed square or marker data cell (SmallestCellM, metres) and the
+  // size in view pixels it is to have at least at the board's centre, foreshortened as the
+  // expected pose turns it (0: no such bound). The detectors' windows and blurs are sized in
+  // pixels for cells down to a size (docs/acceptance.md: 12 px squares, 4 px marker data
+  // cells); a board facing the camera 67 degrees off the line of sight shows its squares
+  // under half as wide as tall, and the raw image's finest scale can leave them too narrow
+  // (surround_left's rear_left_board: 7.8 px at its centre, too_few_features). Interpolating
+  // the raw pixels finer keeps what they hold. DetectInBoardView sets both from the board
+  // for a second look when the first view does not show the board whole.
+  double smallest_cell_m = 0;
+  double min_cell_px = 0;
   // The view's larger side is at most this (pixels): a cap on time and memory when a board
-  // is expected very close.
+  // is expected very close or turned far.
   int max_side_px = 3000;
 
   absl::Status Validate() const;
@@ -64,9 +75,13 @@ class BoardView {
 };
 
 // `board` detected (DetectBoard) in its view expected at T_camera_board, with every feature
-// mapped back to raw pixels. nullopt when no view can be made (Render's errors), the board has
-// no image detector, or a feature maps outside the camera's valid region; otherwise the
-// detector's result, whatever its reason. Cost: Render plus the detector on the view.
+// mapped back to raw pixels. When the board is not found whole, it is looked for once more in
+// a view with options.smallest_cell_m and min_cell_px set from the board (its SmallestCellM at
+// 12 px, or at 4 px for a board of markers: docs/acceptance.md's smallest sizes) when that
+// view is finer, and that result is taken when it finds the board. nullopt when no view can be made
+// (Render's errors), the board has no image detector, or a feature maps outside the camera's valid
+// region; otherwise the detector's result, whatever its reason. Cost: Render plus the detector on
+// the view.
 std::optional<Detection> DetectInBoardView(const CameraModel& camera, const ImageView8& raw,
                                            const Rigid3d& T_camera_board, const Board& board,
                                            const BoardViewOptions& options = {});

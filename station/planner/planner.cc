@@ -1162,18 +1162,6 @@ absl::StatusOr<ValidRegion> ValidRegionOf(const SensorModel& sensor, const std::
   return r;
 }
 
-double SmallestCellM(const Board& board) {
-  double smallest = std::numeric_limits<double>::infinity();
-  // shapes()[0] is the white page; every later shape is a printed square, bit run, disc
-  // or hole, whose shorter side is one cell.
-  for (size_t i = 1; i < board.shapes().size(); ++i) {
-    const Eigen::Vector2d size = board.shapes()[i].box_board.sizes();
-    if (board.shapes()[i].paint == Paint::kHole) continue;
-    smallest = std::min(smallest, size.minCoeff());
-  }
-  return smallest;
-}
-
 double SmallestCellPx(const CameraModel& camera, const Rigid3d& T_camera_board,
                       const Board& board) {
   const double cell = SmallestCellM(board);

@@ -162,9 +162,6 @@ absl::StatusOr<StationPlan> PlanLayout(const CarModel& car, const FloorLimits& f
 
 // Geometry helpers, exposed for the tests.
 
-// The smallest printed square or marker cell of a board, metres: a chessboard square, an
-// ArUco or AprilTag bit, the smallest circle. O(shapes).
-double SmallestCellM(const Board& board);
 // The smallest imaged cell over the board's features, pixels: at each feature the image
 // length of one cell along the board's x and y, over the features the lens can image
 // (+infinity when none can). O(features).
