@@ -221,8 +221,4 @@ std::optional<Detection> DetectInBoardView(const CameraModel& camera, const Imag
   return again && again->found ? again : d;
 }
 
-bool ViewRefinesMarkerCorners(const CameraModel& camera, const Board& board) {
-  return camera.type() == CameraModelType::kFisheye && IsMarkerBoard(board);
-}
-
 }  // namespace linecal

@@ -86,16 +86,4 @@ std::optional<Detection> DetectInBoardView(const CameraModel& camera, const Imag
                                            const Rigid3d& T_camera_board, const Board& board,
                                            const BoardViewOptions& options = {});
 
-// Whether a board found in `camera`'s raw image is to be found again in its perspective view:
-// a fisheye camera and a board whose image features are marker corners (ArUco, AprilTag, the
-// round-hole board's markers), i.e. corners where straight edge lines meet, placed by a
-// board-wide homography with a dilation of the dark print. In a fisheye's raw image neither
-// holds: a marker's side bends by a tenth of a pixel or more, which the lines turn into a shift
-// of the corners, and the lens's bending across the board fits the dilation (surround_rear's
-// ArUco board: corners 0.135 px RMS off, all bent the same way, the pitch +0.0034 degrees off
-// over five seeds, docs/solvers.md). In the view both hold again. A pinhole camera's lens bends
-// a marker little: the front camera's results stay the same to 0.0001 degree there, at twice
-// the time. O(features).
-bool ViewRefinesMarkerCorners(const CameraModel& camera, const Board& board);
-
 }  // namespace linecal
