@@ -188,6 +188,36 @@ SensorCalibration CalibrateRadarSensor(const Capture& capture, const SensorModel
   return out;
 }
 
+// `station_board` detected in `image`. A fisheye camera's boards are looked for first in a
+// perspective view of where they are expected (station/camera/board_view.h): in the raw image
+// its lens bends the board's lines and shifts the features, marker corners (docs/solvers.md,
+// "The rear ArUco board through the fisheye") and checker corners alike, 0.027-0.029 px
+// towards the image centre on every capture ("Camera sigma on the full-physics evaluation"),
+// which moved the surround cameras' positions by 3 sigma. The raw image serves where the view
+// does not show the whole board, and for other cameras first, their view only when the raw
+// image does not show the whole board. nullopt: the board has no image detector.
+std::optional<Detection> DetectInExpectedView(const ImageView8& image,
+                                              const std::optional<CameraModel>& camera,
+                                              const Rigid3d& T_camera_station,
+                                              const StationBoard& station_board) {
+  const Board& board = station_board.board;
+  const auto in_view = [&]() -> std::optional<Detection> {
+    if (!camera) return std::nullopt;
+    std::optional<Detection> v =
+        DetectInBoardView(*camera, image, T_camera_station * station_board.T_station_board, board);
+    if (v && v->found) return v;
+    return std::nullopt;
+  };
+  if (camera && camera->type() == CameraModelType::kFisheye) {
+    std::optional<Detection> v = in_view();
+    return v ? v : DetectBoard(image, board);
+  }
+  std::optional<Detection> d = DetectBoard(image, board);
+  if (!d || d->found) return d;
+  std::optional<Detection> v = in_view();
+  return v ? v : d;
+}
+
 }  // namespace
 
 absl::StatusOr<CycleCalibration> CalibrateCapture(const Capture& capture,
@@ -300,21 +330,7 @@ std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const Se
     if (board == nullptr) continue;
     BoardDetectionSummary& summary = (*summaries)[i];
     ++summary.frames;
-    std::optional<Detection> d = DetectBoard(image, board->board);
-    if (d && camera && (!d->found || camera->type() == CameraModelType::kFisheye)) {
-      // Not found in the raw image, or any board of a fisheye, whose lens bends the board's
-      // lines there and shifts its features: marker corners (docs/solvers.md, "The rear ArUco
-      // board through the fisheye") and checker corners alike, 0.027-0.029 px towards the
-      // image centre on every capture ("Camera sigma on the full-physics evaluation"), which
-      // moved the surround cameras' positions by 3 sigma. Look again in a perspective view of
-      // where the board is expected (station/camera/board_view.h); where the view does not
-      // show the whole board, the raw detection stands.
-      const Rigid3d T_camera_board = T_camera_station * board->T_station_board;
-      std::optional<Detection> v = DetectInBoardView(*camera, image, T_camera_board, board->board);
-      if (v && v->found) {
-        d = std::move(v);
-      }
-    }
+    std::optional<Detection> d = DetectInExpectedView(image, camera, T_camera_station, *board);
     if (!d) {
       summary.last_reason = "no_detector";
       continue;
