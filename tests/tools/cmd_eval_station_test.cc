@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "tests/tools/run_linecal.h"
 
@@ -31,9 +32,22 @@ Bars BarsOf(const nlohmann::json& sensor) {
   return {0.02, 10.0};                             // cameras; radars' yaw 0.05 below
 }
 
-TEST(EvalStationCliTest, ReferenceCarOnTheReferenceStation) {
-  const LinecalRun run = RunLinecal(
-      "eval station --json --cars 2 --seed 1 --frames-min 1 --frames-max 2" + kReference);
+constexpr char kTwoCars[] = "eval station --json --cars 2 --seed 1 --frames-min 1 --frames-max 2";
+
+// The whole car's run, shared by the tests (a minute of rendering and solving).
+class EvalStationCliTest : public testing::Test {
+ protected:
+  static void SetUpTestSuite() { whole_car_ = new LinecalRun(RunLinecal(kTwoCars + kReference)); }
+  static void TearDownTestSuite() {
+    delete whole_car_;
+    whole_car_ = nullptr;
+  }
+  static const LinecalRun* whole_car_;
+};
+const LinecalRun* EvalStationCliTest::whole_car_ = nullptr;
+
+TEST_F(EvalStationCliTest, ReferenceCarOnTheReferenceStation) {
+  const LinecalRun& run = *whole_car_;
   ASSERT_EQ(run.exit_code, 1) << run.err;
   EXPECT_NE(run.err.find("eval station: car 2 of 2"), std::string::npos) << run.err;
   const nlohmann::json r = nlohmann::json::parse(run.out);
@@ -89,7 +103,32 @@ TEST(EvalStationCliTest, ReferenceCarOnTheReferenceStation) {
   EXPECT_EQ(radars, 3);
 }
 
-TEST(EvalStationCliTest, BadFlagsExitTwoNamingTheFlag) {
+// --sensors evaluates a subset whose rows are, field for field, those of the whole car's run:
+// every sensor draws from its own random streams.
+TEST_F(EvalStationCliTest, ASubsetOfSensorsGivesTheWholeCarsRows) {
+  const LinecalRun run = RunLinecal(
+      std::string(kTwoCars) + " --sensors bumper_lidar,front_radar,surround_rear" + kReference);
+  ASSERT_EQ(run.exit_code, 1) << run.err;
+  const nlohmann::json subset = nlohmann::json::parse(run.out);
+  EXPECT_EQ(subset["sensors_selected"],
+            nlohmann::json({"bumper_lidar", "front_radar", "surround_rear"}));
+  ASSERT_EQ(whole_car_->exit_code, 1) << whole_car_->err;
+  const nlohmann::json whole = nlohmann::json::parse(whole_car_->out);
+  EXPECT_TRUE(whole["sensors_selected"].empty());
+  std::vector<std::string> names;
+  for (const nlohmann::json& row : subset["sensors"]) {
+    names.push_back(row["sensor"]);
+    for (const nlohmann::json& full : whole["sensors"]) {
+      if (full["sensor"] == row["sensor"]) {
+        EXPECT_EQ(row, full) << row["sensor"];
+      }
+    }
+  }
+  // In the car model's order, whatever the flag's.
+  EXPECT_EQ(names, (std::vector<std::string>{"surround_rear", "bumper_lidar", "front_radar"}));
+}
+
+TEST(EvalStationCliFlagsTest, BadFlagsExitTwoNamingTheFlag) {
   for (const std::string flag : {"--frames-min 0", "--frames-max 101", "--range-noise-min-m -1",
                                  "--position-error-m 1", "--threads 0", "--cars 0", "--noise -1"}) {
     const LinecalRun run = RunLinecal("eval station " + flag + kReference);
@@ -99,6 +138,9 @@ TEST(EvalStationCliTest, BadFlagsExitTwoNamingTheFlag) {
   const LinecalRun order = RunLinecal("eval station --frames-min 3 --frames-max 2" + kReference);
   EXPECT_EQ(order.exit_code, 2);
   EXPECT_NE(order.err.find("--frames-max"), std::string::npos) << order.err;
+  const LinecalRun unknown = RunLinecal("eval station --sensors bumper_lidar,no_such" + kReference);
+  EXPECT_EQ(unknown.exit_code, 2);
+  EXPECT_NE(unknown.err.find("has no sensor 'no_such'"), std::string::npos) << unknown.err;
   const LinecalRun missing = RunLinecal("eval station --station /no/such.json --car /no/car.json");
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_NE(missing.err.find("/no/such.json"), std::string::npos) << missing.err;
