@@ -159,12 +159,19 @@ absl::Status ReadInputs(const cli::CommandLine& cl, EvalInputs* in, StationEvalF
 }
 
 // A sensor's true mounting for this evaluation: angles within ±kErrorRangeOfTolerance x each
-// tolerance, positions within ±min(position_error_m, tolerance) per axis.
+// tolerance (a radar's pitch and roll within their tolerance), positions within
+// ±min(position_error_m, tolerance) per axis.
 TrueMounting DrawMounting(const SensorModel& s, double position_error_m, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
   std::array<double, 6> truth = RandomMounting(s, kErrorRangeOfTolerance, rng).truth;
   const std::array<double, 6> tolerances = MountingTolerances(s);
   for (int i = 3; i < 6; ++i) truth[i] = std::min(position_error_m, tolerances[i]) * unit(rng);
+  // A radar measures its yaw alone. Its σ carries pitch and roll as uniform within their
+  // tolerances (radar_calibration.cc, PitchRollSigma): an assumption no radar measurement can
+  // check, so they are drawn within them, as `eval radar` draws them (the same draws, scaled).
+  if (s.kind == SensorKind::kRadar) {
+    for (int i : {1, 2}) truth[i] /= kErrorRangeOfTolerance;
+  }
   return MountingWithErrors(s, truth);
 }
 
