@@ -763,8 +763,8 @@ Detection DetectSmallMarkersUpsampled(const ImageView8& image, const Board& boar
 // each way the grid can lie on the board, the grey at every data cell of every marker is
 // compared with the bit the board prints there, over all markers at once.
 
-// A complete grid of as many inner corners as the board has, as the X-corner links give it:
-// w x h corners in the grid's own axes (i right, j down, right-handed in the image).
+// A window of as many inner corners as the board has, as the X-corner links give it: w x h
+// corners in the grid's own axes (i right, j down, right-handed in the image).
 struct CornerWindow {
   int w = 0;
   int h = 0;
@@ -1018,7 +1018,8 @@ GridVote VoteOnWindow(const CornerWindow& win, const WindowCells& cells, const C
     if (&other == &*best) continue;
     int differ = 0;
     for (std::size_t p = 0; p < other.t.size(); ++p) differ += other.t[p] != best->t[p];
-    if (differ == 0) continue;  // the same print: a symmetric board (no such ArUco layout)
+    // Two hypotheses that print alike cannot be told apart (no ArUco layout has two).
+    if (differ == 0) return GridVote{};
     vote.margin = std::min(vote.margin, (best->score - other.score) /
                                             (2.0 * std::max(sigma, 1e-9) * std::sqrt(differ)));
   }
@@ -1031,9 +1032,9 @@ GridVote VoteOnWindow(const CornerWindow& win, const WindowCells& cells, const C
 // probability under 3e-7 (one-sided normal). And it must show the board's print with this
 // significance: for a print unrelated to the image the score is about normal with that
 // spread, so a window of 16 hypotheses reaches 6 with a probability under 1e-8. Measured
-// (docs/detectors.md, photos_eval): the 531 windows of the board's size on the corpus's other
-// photos reach at most 1.6 and 3.5; IMG_7413.png's board 21.2 and 12.6 (of at most 13.9, the
-// square root of its 192 cells).
+// (docs/detectors.md, photos_eval, searching whole images): the 531 windows of a ChArUco
+// board's size on the corpus's photos other than IMG_7413.png's board reach at most 1.6 and 3.5;
+// IMG_7413.png's board 21.2 and 12.6 (of at most 13.9, the square root of its 192 cells).
 constexpr double kMinVoteMargin = 5.0;
 constexpr double kMinVoteSignificance = 6.0;
 
