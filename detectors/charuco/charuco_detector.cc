@@ -4,13 +4,17 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "detectors/common/corner_refine.h"
 #include "detectors/common/edge_lines.h"
 #include "detectors/common/homography.h"
+#include "detectors/common/image_filters.h"
+#include "detectors/common/x_corners.h"
 
 namespace linecal {
 namespace {
@@ -600,14 +604,17 @@ void FindCornersFromNeighbours(const ImageView8& image, const Board& board,
   }
 }
 
-// DetectCharuco on a view already checked.
-Detection DetectOnce(const ImageView8& image, const Board& board, const CharucoOptions& options) {
+// DetectCharuco's marker path on a view already checked; `scan_out`, when given, receives the
+// marker scan.
+Detection DetectOnce(const ImageView8& image, const Board& board, const CharucoOptions& options,
+                     MarkerScan* scan_out = nullptr) {
   Detection detection;
   const BoardParams& p = board.params();
   const CharucoGeometry g = GeometryOf(board);
   const int marker_count = static_cast<int>(g.markers.size());
   const MarkerFamily family = ArucoFamily(p.charuco_dictionary);
   const MarkerScan scan = ScanMarkers(image, family, options.markers, marker_count);
+  if (scan_out != nullptr) *scan_out = scan;
   if (scan.markers.empty()) {
     detection.reason =
         scan.reason == DetectReason::kNone ? DetectReason::kNoCandidates : scan.reason;
@@ -748,6 +755,497 @@ Detection DetectSmallMarkersUpsampled(const ImageView8& image, const Board& boar
   return again;
 }
 
+// ---- The board read from its chessboard corners ---------------------------------------------
+//
+// Where the markers' cells are too small for the marker scan (1-3 px), the board's inner
+// corners are still the vertices of a chessboard, found as the checker detector finds them.
+// What the single markers cannot tell (which corner is which), all of them together can: for
+// each way the grid can lie on the board, the grey at every data cell of every marker is
+// compared with the bit the board prints there, over all markers at once.
+
+// A window of as many inner corners as the board has, as the X-corner links give it: w x h
+// corners in the grid's own axes (i right, j down, right-handed in the image).
+struct CornerWindow {
+  int w = 0;
+  int h = 0;
+  std::vector<Eigen::Vector2d> uv;  // corner (i, j) at uv[j * w + i]
+  std::vector<Eigen::Vector2d> dark_axis;
+  std::vector<bool> present;  // false: no X-corner there, uv predicted
+  const Eigen::Vector2d& At(int i, int j) const { return uv[j * w + i]; }
+};
+
+// The step from corner (i, j) to its neighbour along i (along j when `along_j`), one-sided at
+// the window's edge. O(1).
+Eigen::Vector2d WindowStep(const CornerWindow& win, int i, int j, bool along_j) {
+  const int n = along_j ? win.h : win.w;
+  const int at = along_j ? j : i;
+  const int from = std::min(at, n - 2);
+  return along_j ? win.At(i, from + 1) - win.At(i, from) : win.At(from + 1, j) - win.At(from, j);
+}
+
+// The parity (si + sj) % 2 of the window's dark squares, square (si, sj) lying between corners
+// si - 1 and si along i and sj - 1 and sj along j: at each corner, the dark axis lies along
+// either the diagonal through squares (i, j) and (i + 1, j + 1) or the other one. nullopt
+// unless three quarters of the corners agree (a window that is no chessboard's). O(w h).
+std::optional<int> DarkParity(const CornerWindow& win) {
+  int votes[2] = {0, 0};
+  for (int j = 0; j < win.h; ++j) {
+    for (int i = 0; i < win.w; ++i) {
+      if (!win.present[j * win.w + i]) continue;
+      const Eigen::Vector2d si = WindowStep(win, i, j, false).normalized();
+      const Eigen::Vector2d sj = WindowStep(win, i, j, true).normalized();
+      const Eigen::Vector2d& axis = win.dark_axis[j * win.w + i];
+      const bool main =
+          std::abs(axis.dot((si + sj).normalized())) > std::abs(axis.dot((si - sj).normalized()));
+      ++votes[(i + j + (main ? 0 : 1)) % 2];
+    }
+  }
+  const int n = votes[0] + votes[1];
+  for (int parity : {0, 1}) {
+    if (4 * votes[parity] >= 3 * n) return parity;
+  }
+  return std::nullopt;
+}
+
+// The image position of window point (x, y) (corner units; square centres and the outer ring
+// of squares beyond the corners are any real numbers) through the homography of the 3 x 3 block
+// of corners nearest to it (2 along a side of two), as the checker detector maps its windows:
+// local, so that a lens bending the board moves it little. Blocks are fitted once, by origin.
+class WindowMap {
+ public:
+  explicit WindowMap(const CornerWindow& win) : win_(win) {
+    const int bw = std::max(1, win.w - 2), bh = std::max(1, win.h - 2);
+    blocks_.resize(bw * bh);
+    for (int r0 = 0; r0 < bh; ++r0) {
+      for (int c0 = 0; c0 < bw; ++c0) {
+        std::vector<Eigen::Vector2d> src, dst;
+        for (int r = r0; r < std::min(win.h, r0 + 3); ++r) {
+          for (int c = c0; c < std::min(win.w, c0 + 3); ++c) {
+            src.emplace_back(c, r);
+            dst.push_back(win.At(c, r));
+          }
+        }
+        if (const std::optional<HomographyFit> fit = FitHomography(src, dst, {.refine = false})) {
+          blocks_[r0 * bw + c0] = fit->H;
+        }
+      }
+    }
+  }
+  std::optional<Eigen::Vector2d> Map(double x, double y) const {
+    const int bw = std::max(1, win_.w - 2);
+    const int c0 = std::clamp(static_cast<int>(std::lround(x)) - 1, 0, bw - 1);
+    const int r0 = std::clamp(static_cast<int>(std::lround(y)) - 1, 0, std::max(1, win_.h - 2) - 1);
+    const std::optional<Eigen::Matrix3d>& H = blocks_[r0 * bw + c0];
+    if (!H) return std::nullopt;
+    const Eigen::Vector2d p = ApplyHomography(*H, Eigen::Vector2d(x, y));
+    if (!p.allFinite()) return std::nullopt;
+    return p;
+  }
+
+ private:
+  const CornerWindow& win_;
+  std::vector<std::optional<Eigen::Matrix3d>> blocks_;
+};
+
+// The grey of every data cell of every light square of a window (the squares that hold the
+// markers), in the window's axes: cell (a, b) of the n x n data cells of light square q is
+// grey[(q * n + b) * n + a], a along i. Each is the mean of four samples a quarter cell from
+// the cell's centre (an area, not a point, under noise), and each square's cells are centred
+// on their mean: the vote compares the pattern inside a marker, not the light on it.
+struct WindowCells {
+  int n = 0;                                // data cells per side
+  std::vector<std::array<int, 2>> squares;  // (si, sj) of each light square
+  std::vector<double> grey;
+};
+
+std::optional<WindowCells> SampleWindowCells(const ImageView8& image, const CornerWindow& win,
+                                             int dark_parity, const MarkerFamily& family,
+                                             double inset) {
+  const WindowMap map(win);
+  WindowCells cells;
+  cells.n = family.cells - 2 * family.border_cells;
+  const double cell = (1.0 - 2.0 * inset) / family.cells;  // in squares
+  for (int sj = 0; sj <= win.h; ++sj) {
+    for (int si = 0; si <= win.w; ++si) {
+      if ((si + sj) % 2 == dark_parity) continue;
+      cells.squares.push_back({si, sj});
+      const std::size_t first = cells.grey.size();
+      for (int b = 0; b < cells.n; ++b) {
+        for (int a = 0; a < cells.n; ++a) {
+          const double x = si - 1 + inset + (family.border_cells + a + 0.5) * cell;
+          const double y = sj - 1 + inset + (family.border_cells + b + 0.5) * cell;
+          double sum = 0.0;
+          for (const auto& [dx, dy] :
+               {std::pair{-0.25, -0.25}, {0.25, -0.25}, {-0.25, 0.25}, {0.25, 0.25}}) {
+            const std::optional<Eigen::Vector2d> uv = map.Map(x + dx * cell, y + dy * cell);
+            if (!uv || !InsideForBilinearGrey(image, *uv)) return std::nullopt;
+            sum += BilinearGrey(image, uv->x(), uv->y());
+          }
+          cells.grey.push_back(0.25 * sum);
+        }
+      }
+      double mean = 0.0;
+      for (std::size_t k = first; k < cells.grey.size(); ++k) mean += cells.grey[k];
+      mean /= static_cast<double>(cells.grey.size() - first);
+      for (std::size_t k = first; k < cells.grey.size(); ++k) cells.grey[k] -= mean;
+    }
+  }
+  return cells;
+}
+
+// One way the window lies on the board: rotation k takes window point (x, y) (corner units) to
+// the board's inner-corner coordinates (X, Y) — k = 0: (x, y); 1: (y, w-1-x); 2: (w-1-x,
+// h-1-y); 3: (h-1-y, x) — all keeping the axes right-handed in the image as the board's
+// columns right and rows down are for a camera facing the print.
+Eigen::Vector2d ToBoardInner(const CornerWindow& win, int k, double x, double y) {
+  switch (k) {
+    case 0:
+      return {x, y};
+    case 1:
+      return {y, win.w - 1 - x};
+    case 2:
+      return {win.w - 1 - x, win.h - 1 - y};
+    default:
+      return {win.h - 1 - y, x};
+  }
+}
+
+// The marker bit each sampled cell shows under rotation k when the board's markers carry ids
+// offset by `id_offset` (a board of the same layout whose ids start there): +1 white, -1
+// black, in the order of WindowCells::grey. Empty when rotation k puts a light square of the
+// window where the board prints no marker (the colours do not fit, or the window's shape).
+std::vector<signed char> Template(const CornerWindow& win, const WindowCells& cells, int k,
+                                  int id_offset, const CharucoGeometry& g,
+                                  const MarkerFamily& family, double inset) {
+  const int cols = static_cast<int>(g.marker_of_square.size()) / g.rows;
+  const bool swapped = k % 2 == 1;
+  if ((swapped ? win.h : win.w) != cols - 1 || (swapped ? win.w : win.h) != g.rows - 1) return {};
+  std::vector<int> bit_of_cell(family.cells * family.cells, -1);
+  const int bits = static_cast<int>(family.bit_cells.size());
+  for (int i = 0; i < bits; ++i) {
+    bit_of_cell[family.bit_cells[i][0] * family.cells + family.bit_cells[i][1]] = bits - 1 - i;
+  }
+  const double cell = (1.0 - 2.0 * inset) / family.cells;
+  std::vector<signed char> t;
+  t.reserve(cells.grey.size());
+  for (const auto& [si, sj] : cells.squares) {
+    const Eigen::Vector2d centre = ToBoardInner(win, k, si - 0.5, sj - 0.5);
+    const int col = static_cast<int>(std::lround(centre.x() + 0.5));
+    const int row = static_cast<int>(std::lround(centre.y() + 0.5));
+    const int id = g.marker_of_square[row * cols + col];
+    if (id < 0 || id + id_offset >= static_cast<int>(family.codes.size())) return {};
+    const std::uint64_t code = family.codes[id + id_offset];
+    for (int b = 0; b < cells.n; ++b) {
+      for (int a = 0; a < cells.n; ++a) {
+        const double x = si - 1 + inset + (family.border_cells + a + 0.5) * cell;
+        const double y = sj - 1 + inset + (family.border_cells + b + 0.5) * cell;
+        const Eigen::Vector2d p = ToBoardInner(win, k, x, y) + Eigen::Vector2d(1 - col, 1 - row);
+        const int mc = static_cast<int>(std::floor((p.x() - inset) / cell));
+        const int mr = static_cast<int>(std::floor((p.y() - inset) / cell));
+        const int bit = bit_of_cell[mr * family.cells + mc];
+        t.push_back(((code >> bit) & 1) != 0 ? 1 : -1);
+      }
+    }
+  }
+  return t;
+}
+
+// The outcome of the vote on one window.
+struct GridVote {
+  int rotation = -1;          // the winner's (ToBoardInner), -1 when there is none
+  double margin = 0.0;        // its least margin over every other hypothesis, in noise sigmas
+  double significance = 0.0;  // its score over the score's spread for a pattern it does not
+                              // predict, in sigmas
+};
+
+// The rotations of the window on the board and the id offsets of boards of the same layout
+// (ids from 0, from the marker count, twice that, ... while the dictionary has them; at most
+// kMaxIdOffsets) are the hypotheses; each scores S = sum of cell grey times its printed bit
+// (+1 white, -1 black). The winner must hold the board's own ids and beat every other
+// hypothesis by a clear margin: S_best - S_other = 2 c D + noise over the D cells where the two
+// print differently (c: the cells' contrast), whose noise has spread 2 sigma sqrt(D), sigma the
+// residual of the cells about the winner's print (the fit of each square's cells to its bits:
+// noise and the blur's mixing of neighbouring cells alike). And it must show the board at all:
+// for a print unrelated to the image, S has spread |grey| (the bits as coin flips), so the
+// winner's S / |grey| is its significance. O(hypotheses * cells).
+constexpr int kMaxIdOffsets = 8;
+
+GridVote VoteOnWindow(const CornerWindow& win, const WindowCells& cells, const CharucoGeometry& g,
+                      const MarkerFamily& family, double inset) {
+  struct Hypothesis {
+    int rotation;
+    int offset;
+    std::vector<signed char> t;
+    double score;
+  };
+  const int markers = static_cast<int>(g.markers.size());
+  std::vector<Hypothesis> hyps;
+  for (int o = 0; o < kMaxIdOffsets; ++o) {
+    for (int k = 0; k < 4; ++k) {
+      std::vector<signed char> t = Template(win, cells, k, o * markers, g, family, inset);
+      if (t.empty()) continue;
+      double s = 0.0;
+      for (std::size_t p = 0; p < t.size(); ++p) s += t[p] * cells.grey[p];
+      hyps.push_back({k, o, std::move(t), s});
+    }
+  }
+  GridVote vote;
+  if (hyps.size() < 2) return vote;
+  const auto best = std::max_element(
+      hyps.begin(), hyps.end(), [](const auto& a, const auto& b) { return a.score < b.score; });
+  // The residual about the winner's print: each square's cells fitted by a + c t.
+  const int per_square = cells.n * cells.n;
+  double rss = 0.0, norm2 = 0.0;
+  for (std::size_t q = 0; q < cells.squares.size(); ++q) {
+    double st = 0.0, stt = 0.0, sx = 0.0, sxt = 0.0, sxx = 0.0;
+    for (int m = 0; m < per_square; ++m) {
+      const double t = best->t[q * per_square + m], x = cells.grey[q * per_square + m];
+      st += t, stt += t * t, sx += x, sxt += x * t, sxx += x * x;
+    }
+    const double n = per_square;
+    const double var_t = stt - st * st / n;
+    const double cov = sxt - sx * st / n;
+    const double var_x = sxx - sx * sx / n;
+    rss += var_t > 0.0 ? var_x - cov * cov / var_t : var_x;
+    norm2 += sxx;
+  }
+  const double dof = static_cast<double>(cells.grey.size()) - 2.0 * cells.squares.size();
+  if (!(dof > 0.0) || !(norm2 > 0.0)) return vote;
+  const double sigma = std::sqrt(std::max(rss, 0.0) / dof);
+  vote.significance = best->score / std::sqrt(norm2);
+  vote.margin = std::numeric_limits<double>::infinity();
+  for (const Hypothesis& other : hyps) {
+    if (&other == &*best) continue;
+    int differ = 0;
+    for (std::size_t p = 0; p < other.t.size(); ++p) differ += other.t[p] != best->t[p];
+    // Two hypotheses that print alike cannot be told apart (no ArUco layout has two).
+    if (differ == 0) return GridVote{};
+    vote.margin = std::min(vote.margin, (best->score - other.score) /
+                                            (2.0 * std::max(sigma, 1e-9) * std::sqrt(differ)));
+  }
+  if (best->offset == 0) vote.rotation = best->rotation;
+  return vote;
+}
+
+// A vote is accepted when the winner beats every other hypothesis by this many sigmas of its
+// noise: were another hypothesis the truth, the winner's lead would exceed it with a
+// probability under 3e-7 (one-sided normal). And it must show the board's print with this
+// significance: for a print unrelated to the image the score is about normal with that
+// spread, so a window of 16 hypotheses reaches 6 with a probability under 1e-8. Measured
+// (docs/detectors.md, photos_eval, searching whole images): the 531 windows of a ChArUco
+// board's size on the corpus's photos other than IMG_7413.png's board reach at most 1.6 and 3.5;
+// IMG_7413.png's board 21.2 and 12.6 (of at most 13.9, the square root of its 192 cells).
+constexpr double kMinVoteMargin = 5.0;
+constexpr double kMinVoteSignificance = 6.0;
+
+// Where the board may lie whose markers the scan read with cells under kSmallCellPx (the
+// cells the grid path is for): the box about each such marker of the board's ids reaching the
+// board's longer side plus a square beyond it in every direction, their union clipped to the
+// image, as [x0, x1) x [y0, y1). Markers of larger cells are the marker path's; where no
+// marker of the board is read, nothing bounds the board and the grid is not looked for (an
+// image without the board pays nothing for it). nullopt when there is no such marker.
+std::optional<Eigen::AlignedBox2i> SmallMarkersRegion(const ImageView8& image, const BoardParams& p,
+                                                      const MarkerFamily& family,
+                                                      const MarkerScan& scan, int marker_count) {
+  Eigen::AlignedBox2d box;
+  for (const DecodedMarker& m : scan.markers) {
+    if (m.id >= marker_count) continue;
+    double side_px = 0.0;
+    for (int k = 0; k < 4; ++k)
+      side_px += 0.25 * (m.corners_px[(k + 1) % 4] - m.corners_px[k]).norm();
+    if (!(side_px / family.cells < kSmallCellPx)) continue;
+    const double reach_px = (std::max(p.cols, p.rows) + 1) * side_px * p.square_m / p.marker_m;
+    const Eigen::Vector2d centre = Centre(m.corners_px);
+    box.extend(centre - Eigen::Vector2d::Constant(reach_px));
+    box.extend(centre + Eigen::Vector2d::Constant(reach_px));
+  }
+  if (box.isEmpty() || !box.min().allFinite() || !box.max().allFinite()) return std::nullopt;
+  const Eigen::Vector2i lo(std::max(0, static_cast<int>(std::floor(box.min().x()))),
+                           std::max(0, static_cast<int>(std::floor(box.min().y()))));
+  const Eigen::Vector2i hi(std::min(image.width, static_cast<int>(std::ceil(box.max().x())) + 1),
+                           std::min(image.height, static_cast<int>(std::ceil(box.max().y())) + 1));
+  if (hi.x() - lo.x() < 2 || hi.y() - lo.y() < 2) return std::nullopt;
+  return Eigen::AlignedBox2i(lo, hi);
+}
+
+// The windows of the board's inner-corner size (either way round) among the linked X-corners
+// (GridComponents, as the checker detector finds a chessboard) of `region` of the image at
+// twice the resolution (the X-corner test's ring of 4 px fits the white margins of 10-20 px
+// squares there, 2-3 px wide at twice the resolution, not at the image's own), that hold at
+// least three quarters of their corners; a missing corner is put where the homography of the
+// window's corners puts it (for sampling the cells; the caller looks for it again once the
+// board is placed). Image pixels. Cost: the X-corner search on 4 times the region's pixels.
+std::vector<CornerWindow> InnerCornerWindows(const ImageView8& image, const BoardParams& p,
+                                             const Eigen::AlignedBox2i& region) {
+  const Eigen::Vector2i size = region.max() - region.min();
+  if (2 * size.x() > kMaxImageSide || 2 * size.y() > kMaxImageSide) return {};
+  const Image8 doubled = DoublePatch(image, region.min().x(), region.min().y(), size.x(), size.y());
+  // The checker detector's blur and X-corner test (x_corners.h: 1.5 px).
+  const ImageF blurred = GaussianBlur(doubled.view(), 1.5);
+  std::vector<XCorner> corners = FindXCorners(blurred);
+  const std::vector<XCornerComponent> components =
+      GridComponents(corners, LinkXCorners(corners, &blurred));
+  // Output pixel x of DoublePatch samples the input at x0 + x / 2 - 0.25.
+  for (XCorner& c : corners) {
+    c.uv_px = region.min().cast<double>() + 0.5 * c.uv_px - Eigen::Vector2d::Constant(0.25);
+  }
+  std::vector<CornerWindow> windows;
+  std::vector<std::pair<int, int>> sizes = {{p.cols - 1, p.rows - 1}};
+  if (p.cols != p.rows) sizes.emplace_back(p.rows - 1, p.cols - 1);
+  for (const XCornerComponent& comp : components) {
+    for (const auto& [w, h] : sizes) {
+      for (const std::vector<int>& indices : GridWindows(comp, w, h, (3 * w * h + 3) / 4)) {
+        CornerWindow win{w, h, {}, {}, {}};
+        std::vector<Eigen::Vector2d> src, dst;
+        for (int k = 0; k < w * h; ++k) {
+          const bool present = indices[k] >= 0;
+          win.present.push_back(present);
+          win.uv.push_back(present ? corners[indices[k]].uv_px : Eigen::Vector2d::Zero());
+          win.dark_axis.push_back(present ? corners[indices[k]].dark_axis
+                                          : Eigen::Vector2d::UnitX());
+          if (!present) continue;
+          src.emplace_back(k % w, k / w);
+          dst.push_back(win.uv.back());
+        }
+        const std::optional<HomographyFit> fit = FitHomography(src, dst);
+        if (!fit) continue;
+        for (int k = 0; k < w * h; ++k) {
+          if (!win.present[k]) win.uv[k] = ApplyHomography(fit->H, Eigen::Vector2d(k % w, k / w));
+        }
+        windows.push_back(std::move(win));
+      }
+    }
+  }
+  return windows;
+}
+
+// The board's inner corners from the window under rotation k: the X-corners, each refined by
+// the saddle fit in its white margin (RefineInMargin; where it fails, the X-corner search's own
+// saddle fit stays), then the missing ones looked for as a chessboard's from them
+// (FindCornersFromNeighbours). Ordered by id; found when all are there.
+Detection WindowFeatures(const ImageView8& image, const Board& board, const CharucoGeometry& g,
+                         const CornerWindow& win, int k, const CharucoOptions& options,
+                         int min_contrast) {
+  const BoardParams& p = board.params();
+  const double margin_m = 0.5 * (p.square_m - p.marker_m) * p.scale;
+  std::vector<std::optional<DetectedFeature>> found(board.features().size());
+  for (int j = 0; j < win.h; ++j) {
+    for (int i = 0; i < win.w; ++i) {
+      if (!win.present[j * win.w + i]) continue;
+      const Eigen::Vector2d inner = ToBoardInner(win, k, i, j);
+      const int id = (p.cols - 1) * static_cast<int>(std::lround(inner.y())) +
+                     static_cast<int>(std::lround(inner.x()));
+      const BoardFeature& f = board.features()[id];
+      found[id] = DetectedFeature{id, win.At(i, j), f.p_board, f.marker};
+    }
+  }
+  Detection detection;
+  for (std::optional<DetectedFeature>& f : found) {
+    if (!f) continue;
+    DetectedFeature refined = *f;
+    const std::optional<Eigen::Matrix3d> H =
+        FoundCornersHomography(found, p, f->id / (p.cols - 1) + 1, f->id % (p.cols - 1) + 1);
+    const double reach_px = H ? std::min(InscribedRadiusPx(*H, f->p_board, margin_m),
+                                         BorderRoomPx(image, f->uv_px, options.blur_sigma_px))
+                              : std::numeric_limits<double>::quiet_NaN();
+    if (std::isfinite(reach_px)) {
+      if (const std::optional<Eigen::Vector2d> uv =
+              RefineInMargin(image, f->uv_px, reach_px, options.blur_sigma_px)) {
+        refined.uv_px = *uv;
+      }
+    }
+    detection.features.push_back(refined);
+  }
+  FindCornersFromNeighbours(image, board, g, options, margin_m, min_contrast, &detection);
+  detection.found = detection.features.size() == board.features().size();
+  detection.reason = detection.found ? DetectReason::kNone : DetectReason::kPartial;
+  return detection;
+}
+
+// Whether what the marker path saw agrees with the board the vote placed (`features`): every
+// marker the scan read on the board's page is the marker printed there (AsPrintedMarker: its
+// id, or a misread whose cells still show that print), and every corner the markers gave lies
+// within a quarter of a square of the grid's corner of the same id. O(markers + corners).
+bool MarkersAgree(const ImageView8& image, const Board& board, const CharucoGeometry& g,
+                  const MarkerFamily& family, const MarkerScan& scan,
+                  const std::vector<DetectedFeature>& features, const Detection& from_markers,
+                  const CharucoOptions& options) {
+  std::vector<Eigen::Vector2d> src, dst;
+  for (const DetectedFeature& f : features) {
+    src.push_back(f.p_board);
+    dst.push_back(f.uv_px);
+  }
+  const std::optional<HomographyFit> fit = FitHomography(src, dst);
+  if (!fit) return false;
+  const Eigen::Matrix3d H_board_px = fit->H.inverse();
+  const Eigen::Vector2d half_page = 0.5 * board.page_size_m();
+  for (const DecodedMarker& m : scan.markers) {
+    const Eigen::Vector2d p_board = ApplyHomography(H_board_px, Centre(m.corners_px));
+    if (!p_board.allFinite() || (p_board.array().abs() > half_page.array()).any()) continue;
+    const std::optional<PrintedRead> read =
+        AsPrintedMarker(image, g, family, fit->H, m, p_board, options, scan.min_contrast);
+    if (!read) return false;
+  }
+  for (const DetectedFeature& f : from_markers.features) {
+    const double side_px = LocalSquareSide(fit->H, f.p_board, g.square_m);
+    const auto same = std::find_if(features.begin(), features.end(),
+                                   [&f](const DetectedFeature& e) { return e.id == f.id; });
+    if (same == features.end() || !((same->uv_px - f.uv_px).norm() <= 0.25 * side_px)) {
+      return false;
+    }
+  }
+  return true;
+}
+
+// The board read from its inner-corner grid (the section's method), for a detection the
+// markers left incomplete (`from_markers`, with the scan it came from): the one window whose
+// vote is accepted, with every corner, when the markers agree; `from_markers` otherwise (no
+// window, none or two accepted, or markers that disagree). Cost: the X-corner search over the
+// image (a few ms at 1280 x 720) and O(cells) per window.
+Detection DetectFromCornerGrid(const ImageView8& image, const Board& board,
+                               const CharucoOptions& options, const MarkerScan& scan,
+                               Detection from_markers) {
+  const BoardParams& p = board.params();
+  if (p.cols < 3 || p.rows < 3) return from_markers;  // a window of 2 x 2 corners holds nothing
+  const CharucoGeometry g = GeometryOf(board);
+  const MarkerFamily family = ArucoFamily(p.charuco_dictionary);
+  const double inset = 0.5 * (p.square_m - p.marker_m) / p.square_m;
+  std::optional<std::pair<CornerWindow, int>> accepted;
+  const std::optional<Eigen::AlignedBox2i> region =
+      SmallMarkersRegion(image, p, family, scan, static_cast<int>(g.markers.size()));
+  if (!region) return from_markers;
+  for (const CornerWindow& win : InnerCornerWindows(image, p, *region)) {
+    const std::optional<int> dark_parity = DarkParity(win);
+    if (!dark_parity) continue;
+    const std::optional<WindowCells> cells =
+        SampleWindowCells(image, win, *dark_parity, family, inset);
+    if (!cells) continue;
+    const GridVote vote = VoteOnWindow(win, *cells, g, family, inset);
+    if (vote.rotation < 0 || vote.margin < kMinVoteMargin ||
+        vote.significance < kMinVoteSignificance) {
+      continue;
+    }
+    if (accepted) return from_markers;  // two placements of the board
+    accepted.emplace(win, vote.rotation);
+  }
+  if (!accepted) return from_markers;
+  Detection detection = WindowFeatures(image, board, g, accepted->first, accepted->second, options,
+                                       scan.min_contrast);
+  if (!detection.found ||
+      !MarkersAgree(image, board, g, family, scan, detection.features, from_markers, options)) {
+    return from_markers;
+  }
+  return detection;
+}
+
+// Markers too small to read, or none read, leave the board to its corner grid
+// (DetectFromCornerGrid); markers that speak against the board (kWrongBoard, kAmbiguous) do
+// not.
+bool GridMayHoldTheBoard(DetectReason reason) {
+  return reason == DetectReason::kPartial || reason == DetectReason::kTooFewFeatures ||
+         reason == DetectReason::kNoCandidates;
+}
+
 }  // namespace
 
 Detection DetectCharuco(const ImageView8& image, const Board& board,
@@ -756,12 +1254,14 @@ Detection DetectCharuco(const ImageView8& image, const Board& board,
   detection.reason =
       CheckDetectorInput(image, board, BoardType::kCharuco, options.Validate().empty());
   if (detection.reason != DetectReason::kNone) return detection;
-  detection = DetectOnce(image, board, options);
+  MarkerScan scan;
+  detection = DetectOnce(image, board, options, &scan);
   // Four corners fix the homography that places the patch.
-  if (detection.reason != DetectReason::kPartial || detection.features.size() < 4) {
-    return detection;
+  if (detection.reason == DetectReason::kPartial && detection.features.size() >= 4) {
+    detection = DetectSmallMarkersUpsampled(image, board, options, std::move(detection));
   }
-  return DetectSmallMarkersUpsampled(image, board, options, std::move(detection));
+  if (!GridMayHoldTheBoard(detection.reason)) return detection;
+  return DetectFromCornerGrid(image, board, options, scan, std::move(detection));
 }
 
 }  // namespace linecal

@@ -29,6 +29,19 @@
 // added; the ids stay those the markers gave. A partial
 // board whose marker cells are under 4 px (the scan's design size) is looked for again on its
 // part of the image at twice the resolution, and the result with more corners is returned.
+// Where the markers still leave the board incomplete (too small to read: cells of 1.5-3 px),
+// and none spoke against the board, the board is read from its chessboard: about the markers
+// of the board read with cells under 4 px (nothing bounds a board none of whose markers is
+// read: it is not looked for), the X-corners at twice the resolution linked into grids
+// (x_corners.h, as the checker detector does), each window of the board's inner-corner size
+// holding three quarters of its corners a candidate; for each rotation of the window on the
+// board, and for boards of the same layout with other ids (offsets of the marker count), the
+// grey of every data cell of every marker (sampled through the homographies of 3 x 3 blocks
+// of corners) is correlated with the bit printed there, over all markers at once. The board's
+// own ids must win by 5 sigmas of the cells' noise over every other hypothesis and show their
+// print with a significance of 6 sigmas (against a print unrelated to the image); the markers
+// the scan read must be the ones printed where they lie and the corners they gave must agree.
+// Such a board is returned only whole (its missing corners looked for from their neighbours).
 
 #include <string_view>
 
@@ -69,7 +82,8 @@ struct CharucoOptions {
 // board's markers agree, or no corner passes). Pure function. Cost: the marker scan (about
 // 3 ms at 1280 x 720) plus a small blur and fit per corner: about 5 ms for a 7 x 5 board at
 // 1280 x 720 (tests/detectors/charuco); a partial board of small markers adds the detection on
-// its doubled patch (4 times the patch's pixels).
+// its doubled patch (4 times the patch's pixels); one still not whole adds the X-corner search
+// on its doubled region.
 Detection DetectCharuco(const ImageView8& image, const Board& board,
                         const CharucoOptions& options = {});
 

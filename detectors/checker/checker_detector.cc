@@ -5,7 +5,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <deque>
 #include <limits>
 #include <map>
 #include <optional>
@@ -17,72 +16,6 @@
 
 namespace linecal {
 namespace {
-
-struct GridCorner {
-  int index = 0;  // into the corner list
-  int gi = 0;     // grid coordinates, axes right-handed in the image
-  int gj = 0;
-};
-
-struct Component {
-  std::vector<GridCorner> corners;  // at most one on each grid point
-};
-
-// Connected components of the link graph with grid coordinates: global direction g
-// (0 = +i, 1 = +j, 2 = -i, 3 = -j) is local direction (rotation[c] + g) % 4 of corner c.
-// Coordinates spread breadth-first from each component's strongest corner (corners come
-// by decreasing contrast). A link that contradicts the coordinates already given is not
-// followed, and of two corners on one grid point the stronger stays: a stray saddle linked
-// into a board (texture in a square, clutter at its edge) then costs the grid nothing, and
-// whatever it moved is refused by the windows' verification.
-std::vector<Component> GridComponents(const std::vector<XCorner>& corners,
-                                      const std::vector<std::array<int, 4>>& links) {
-  const int n = static_cast<int>(corners.size());
-  constexpr std::array<int, 4> kDi = {1, 0, -1, 0};
-  constexpr std::array<int, 4> kDj = {0, 1, 0, -1};
-  std::vector<int> rotation(n, -1);
-  std::vector<std::pair<int, int>> coords(n);
-  std::vector<Component> components;
-  for (int seed = 0; seed < n; ++seed) {
-    if (rotation[seed] >= 0) continue;
-    bool linked = false;
-    for (int j : links[seed]) linked = linked || j >= 0;
-    if (!linked) continue;
-    rotation[seed] = 0;
-    coords[seed] = {0, 0};
-    std::deque<int> queue = {seed};
-    std::map<std::pair<int, int>, int> at;  // grid point -> the strongest corner there
-    while (!queue.empty()) {
-      const int c = queue.front();
-      queue.pop_front();
-      if (const auto [it, fresh] = at.emplace(coords[c], c); !fresh) {
-        it->second = std::min(it->second, c);
-        continue;  // the weaker of two corners on one point spreads nothing
-      }
-      for (int g = 0; g < 4; ++g) {
-        const int j = links[c][(rotation[c] + g) % 4];
-        if (j < 0 || rotation[j] >= 0) continue;
-        const Eigen::Vector2d v = XCornerDirection(corners[c], rotation[c] + g);
-        int m_best = 0;
-        for (int m = 1; m < 4; ++m) {
-          if (XCornerDirection(corners[j], m).dot(v) >
-              XCornerDirection(corners[j], m_best).dot(v)) {
-            m_best = m;
-          }
-        }
-        rotation[j] = (m_best - g + 4) % 4;
-        coords[j] = {coords[c].first + kDi[g], coords[c].second + kDj[g]};
-        queue.push_back(j);
-      }
-    }
-    Component comp;
-    for (const auto& [point, index] : at) {
-      comp.corners.push_back({index, point.first, point.second});
-    }
-    components.push_back(std::move(comp));
-  }
-  return components;
-}
 
 // A complete w x h block of one component's corners, in window coordinates: corner (i, j),
 // i right and j down as the component's grid axes (right-handed in the image), at
@@ -402,47 +335,30 @@ void AddRotations(Window& window, const Paint& paint, int cols, int rows,
 // geometry and paint, and refused when the pattern continues beyond it; the verified
 // windows' rotations go to *out. Returns the reason of the last refusal (kNone if none).
 DetectReason SearchComponent(const ImageF& blurred, const std::vector<XCorner>& corners,
-                             const Component& comp, int cols, int rows,
+                             const XCornerComponent& comp, int cols, int rows,
                              const CheckerOptions& options, std::vector<GridHypothesis>* out) {
-  int i0 = 1 << 30, i1 = -(1 << 30), j0 = 1 << 30, j1 = -(1 << 30);
-  for (const GridCorner& gc : comp.corners) {
-    i0 = std::min(i0, gc.gi);
-    i1 = std::max(i1, gc.gi);
-    j0 = std::min(j0, gc.gj);
-    j1 = std::max(j1, gc.gj);
-  }
-  const int bw = i1 - i0 + 1, bh = j1 - j0 + 1;
-  std::vector<int> at(static_cast<std::size_t>(bw) * bh, -1);  // corner index by grid point
-  for (const GridCorner& gc : comp.corners) at[(gc.gj - j0) * bw + gc.gi - i0] = gc.index;
   DetectReason refusal = DetectReason::kNone;
   std::vector<std::pair<int, int>> sizes = {{cols, rows}};
   if (cols != rows) sizes.emplace_back(rows, cols);
   for (const auto& [w, h] : sizes) {
-    for (int wj = 0; wj + h <= bh; ++wj) {
-      for (int wi = 0; wi + w <= bw; ++wi) {
-        std::vector<Eigen::Vector2d> uv;
-        for (int j = wj; j < wj + h; ++j) {
-          for (int i = wi; i < wi + w; ++i) {
-            if (at[j * bw + i] >= 0) uv.push_back(corners[at[j * bw + i]].uv_px);
-          }
-        }
-        if (static_cast<int>(uv.size()) != w * h) continue;
-        Window window(w, h, std::move(uv));
-        if (!window.LocallyConsistent(options.max_residual_square_fraction)) {
-          refusal = DetectReason::kVerificationFailed;
-          continue;
-        }
-        const Paint paint = CheckPaint(blurred, window);
-        if (!paint.ok) {
-          refusal = DetectReason::kVerificationFailed;
-          continue;
-        }
-        if (PatternContinues(blurred, window, paint)) {
-          refusal = DetectReason::kWrongBoard;
-          continue;
-        }
-        AddRotations(window, paint, cols, rows, out);
+    for (const std::vector<int>& indices : GridWindows(comp, w, h, w * h)) {
+      std::vector<Eigen::Vector2d> uv;
+      for (int index : indices) uv.push_back(corners[index].uv_px);
+      Window window(w, h, std::move(uv));
+      if (!window.LocallyConsistent(options.max_residual_square_fraction)) {
+        refusal = DetectReason::kVerificationFailed;
+        continue;
       }
+      const Paint paint = CheckPaint(blurred, window);
+      if (!paint.ok) {
+        refusal = DetectReason::kVerificationFailed;
+        continue;
+      }
+      if (PatternContinues(blurred, window, paint)) {
+        refusal = DetectReason::kWrongBoard;
+        continue;
+      }
+      AddRotations(window, paint, cols, rows, out);
     }
   }
   return refusal;
@@ -480,7 +396,7 @@ GridSearch SearchGrid(const ImageView8& view, int cols, int rows, const CheckerO
   }
   std::vector<GridHypothesis> found_grids;
   DetectReason best_failure = DetectReason::kTooFewFeatures;
-  for (const Component& comp : GridComponents(corners, LinkXCorners(corners, &blurred))) {
+  for (const XCornerComponent& comp : GridComponents(corners, LinkXCorners(corners, &blurred))) {
     if (static_cast<int>(comp.corners.size()) < cols * rows) continue;
     const DetectReason refusal =
         SearchComponent(blurred, corners, comp, cols, rows, options, &found_grids);

@@ -5,7 +5,10 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <deque>
+#include <map>
 #include <numbers>
+#include <utility>
 
 namespace linecal {
 namespace {
@@ -439,6 +442,86 @@ std::string_view XCornerOptions::Validate() const {
   if (max_candidates < 1 || max_candidates > 1000000) return "corners.max_candidates";
   if (saddle.half_window < 1 || saddle.half_window > 15) return "corners.saddle.half_window";
   return {};
+}
+
+std::vector<XCornerComponent> GridComponents(const std::vector<XCorner>& corners,
+                                             const std::vector<std::array<int, 4>>& links) {
+  const int n = static_cast<int>(corners.size());
+  constexpr std::array<int, 4> kDi = {1, 0, -1, 0};
+  constexpr std::array<int, 4> kDj = {0, 1, 0, -1};
+  std::vector<int> rotation(n, -1);
+  std::vector<std::pair<int, int>> coords(n);
+  std::vector<XCornerComponent> components;
+  for (int seed = 0; seed < n; ++seed) {
+    if (rotation[seed] >= 0) continue;
+    bool linked = false;
+    for (int j : links[seed]) linked = linked || j >= 0;
+    if (!linked) continue;
+    rotation[seed] = 0;
+    coords[seed] = {0, 0};
+    std::deque<int> queue = {seed};
+    std::map<std::pair<int, int>, int> at;  // grid point -> the strongest corner there
+    while (!queue.empty()) {
+      const int c = queue.front();
+      queue.pop_front();
+      if (const auto [it, fresh] = at.emplace(coords[c], c); !fresh) {
+        it->second = std::min(it->second, c);
+        continue;  // the weaker of two corners on one point spreads nothing
+      }
+      for (int g = 0; g < 4; ++g) {
+        const int j = links[c][(rotation[c] + g) % 4];
+        if (j < 0 || rotation[j] >= 0) continue;
+        const Eigen::Vector2d v = XCornerDirection(corners[c], rotation[c] + g);
+        int m_best = 0;
+        for (int m = 1; m < 4; ++m) {
+          if (XCornerDirection(corners[j], m).dot(v) >
+              XCornerDirection(corners[j], m_best).dot(v)) {
+            m_best = m;
+          }
+        }
+        rotation[j] = (m_best - g + 4) % 4;
+        coords[j] = {coords[c].first + kDi[g], coords[c].second + kDj[g]};
+        queue.push_back(j);
+      }
+    }
+    XCornerComponent comp;
+    for (const auto& [point, index] : at) {
+      comp.corners.push_back({index, point.first, point.second});
+    }
+    components.push_back(std::move(comp));
+  }
+  return components;
+}
+
+std::vector<std::vector<int>> GridWindows(const XCornerComponent& component, int w, int h,
+                                          int min_corners) {
+  int i0 = 1 << 30, i1 = -(1 << 30), j0 = 1 << 30, j1 = -(1 << 30);
+  for (const XCornerGridCorner& gc : component.corners) {
+    i0 = std::min(i0, gc.gi);
+    i1 = std::max(i1, gc.gi);
+    j0 = std::min(j0, gc.gj);
+    j1 = std::max(j1, gc.gj);
+  }
+  const int bw = i1 - i0 + 1, bh = j1 - j0 + 1;
+  std::vector<int> at(static_cast<std::size_t>(std::max(bw, 0)) * std::max(bh, 0), -1);
+  for (const XCornerGridCorner& gc : component.corners) {
+    at[(gc.gj - j0) * bw + gc.gi - i0] = gc.index;
+  }
+  std::vector<std::vector<int>> windows;
+  for (int wj = 0; wj + h <= bh; ++wj) {
+    for (int wi = 0; wi + w <= bw; ++wi) {
+      std::vector<int> indices;
+      int present = 0;
+      for (int j = wj; j < wj + h; ++j) {
+        for (int i = wi; i < wi + w; ++i) {
+          indices.push_back(at[j * bw + i]);
+          present += at[j * bw + i] >= 0 ? 1 : 0;
+        }
+      }
+      if (present >= min_corners) windows.push_back(std::move(indices));
+    }
+  }
+  return windows;
 }
 
 }  // namespace linecal

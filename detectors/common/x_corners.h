@@ -94,4 +94,33 @@ Eigen::Vector2d XCornerDirection(const XCorner& corner, int k);
 std::vector<std::array<int, 4>> LinkXCorners(const std::vector<XCorner>& corners,
                                              const ImageF* blurred = nullptr);
 
+// A connected part of the link graph with integer grid coordinates.
+struct XCornerGridCorner {
+  int index = 0;  // into the corner list
+  int gi = 0;     // grid coordinates, axes right-handed in the image
+  int gj = 0;
+};
+struct XCornerComponent {
+  std::vector<XCornerGridCorner> corners;  // at most one on each grid point
+};
+
+// Connected components of the link graph `links` (LinkXCorners) of `corners` with grid
+// coordinates: global direction g (0 = +i, 1 = +j, 2 = -i, 3 = -j) is local direction
+// (rotation[c] + g) % 4 of corner c. Coordinates spread breadth-first from each component's
+// strongest corner (corners come by decreasing contrast). A link that contradicts the
+// coordinates already given is not followed, and of two corners on one grid point the
+// stronger stays: a stray saddle linked into a board (texture in a square, clutter at its
+// edge) then costs the grid nothing, and whatever it moved is for the caller's verification
+// of its windows to refuse. Unlinked corners belong to no component. O(n log n).
+std::vector<XCornerComponent> GridComponents(const std::vector<XCorner>& corners,
+                                             const std::vector<std::array<int, 4>>& links);
+
+// Every w x h window of `component` that holds at least min_corners of its corners: each
+// placement inside the component's extent (the component itself when it is that size; a grid
+// grown into clutter, or a larger board, holds several), as the corners' indices, row-major
+// (i fastest), -1 where a grid point holds none. min_corners = w * h gives the complete
+// windows. O(extent * w * h).
+std::vector<std::vector<int>> GridWindows(const XCornerComponent& component, int w, int h,
+                                          int min_corners);
+
 }  // namespace linecal
