@@ -338,14 +338,13 @@ bool ForEachGapLine(const Window& win, Fn&& fn) {
 // along its line is held: a corner's shift across a row is a shift along the column through
 // it, which that column's gaps hold (every corner lies on one of each; a square moved,
 // turned, scaled or sheared moves its corners along one or the other). The component across
-// carries the side fits' angle errors twice over (a side's two corners move across the line
-// in opposite senses, and the line's direction is taken from them), and a bias of
-// sheared squares that cancels along it: the fits of a small blurred square make it more
+// carries what the side fits get wrong: a side's angle error moves its two corners across
+// the line by the lever of half a side, and the fits make a small blurred square more
 // sheared than it is (its acute corners out along their bisectors, its obtuse corners in,
-// 0.2-0.4 px on 13 px squares turned 50 degrees, hard renders), which turns every side of a
-// row alike and leaves 0.8-1 px across each line against 0.1-0.3 px along it
-// (docs/detectors.md, "The square grid"). A pair of squares (PairConsistent) has lines one
-// way only and keeps the whole residual.
+// 0.2-0.4 px on 13 px squares turned 50 degrees under the hard effects), which turns every
+// side of a row alike: on average up to 0.8-1 px across the lines against 0.1-0.3 px along
+// them (docs/detectors.md, "The four sheared misses"). A pair of squares (PairConsistent)
+// has lines one way only and keeps the whole residual.
 bool LocallyConsistent(const Window& win, double gap_ratio, double fraction) {
   const bool lines_both_ways = win.w >= 2 && win.h >= 2;
   return ForEachGapLine(win, [&](const Eigen::Vector2d& p0, const Eigen::Vector2d& p1,
