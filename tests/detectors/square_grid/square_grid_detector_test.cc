@@ -198,16 +198,16 @@ TEST(SquareGridDetectorTest, EvaluationMissesUnderTheHardEffects) {
   }
 }
 
-// The last four misses of detectors_eval's full grid (docs/detectors.md, "The square grid"),
-// at its far distance for the turn: 13-15 px squares sheared by yaw -50 degrees and roll -30
-// or 30 (seeds 75, 81), pitch -50 and roll 30 (135), yaw and pitch 35 (159), under the hard
-// effects. The side fits make such squares more sheared than they are and their angles are
-// noisy, which moved corners across a line of the lattice by 0.8-1 px on average and up to
-// 4.4 px in the gap geometry, against tolerances of 2.7-3.0 px; the gap geometry now holds
-// each line along it only (LocallyConsistent). Found whole with exact ids; the corners carry
-// that noise: RMS 0.39-0.47 px, the worst 1.2-2.0 px (the hard set has no accuracy bar), so
-// the bounds are 0.55 px RMS and 2.5 px, a fifth of the smallest side seen; a wrong id is off
-// by a side.
+// The last four misses of detectors_eval's full grid (docs/detectors.md, "The four sheared
+// misses"), at its far distance for the turn: 13-15 px squares sheared by yaw -50 degrees and
+// roll -30 or 30 (seeds 75, 81), pitch -50 and roll 30 (135), yaw and pitch 35 (159), under
+// the hard effects. The side fits make such squares more sheared than they are and their
+// angles are noisy, which moves the gap geometry's residuals across their lines (0.8-1 px on
+// average): 1-3 lines per render were over their tolerances of 2.6-3.0 px by that component
+// (2.7-3.6 px), none by the component along the line, which the geometry now holds alone
+// (LocallyConsistent). Found whole with exact ids; the corners carry that noise: RMS
+// 0.39-0.47 px, the worst 1.2-2.0 px (the hard set has no accuracy bar), so the bounds are
+// 0.55 px RMS and 2.5 px, a fifth of the smallest side seen; a wrong id is off by a side.
 TEST(SquareGridDetectorTest, ShearedSmallSquaresUnderTheHardEffects) {
   constexpr double kShearedRmsPx = 0.55;
   constexpr double kShearedMaxPx = 2.5;
