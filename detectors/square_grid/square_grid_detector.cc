@@ -333,11 +333,25 @@ bool ForEachGapLine(const Window& win, Fn&& fn) {
 // fraction x the two squares' mean side). The window's corners must have the squares'
 // dilation taken out (below): it changes r by the same amount along every line, 3-4 px of a
 // 15 px square's gap under blur 1.5 and a gamma, as much as the tolerance.
+//
+// In a window with lines both ways (at least 2 x 2 squares) only the residual's component
+// along its line is held: a corner's shift across a row is a shift along the column through
+// it, which that column's gaps hold (every corner lies on one of each; a square moved,
+// turned, scaled or sheared moves its corners along one or the other). The component across
+// carries what the side fits get wrong: a side's angle error moves its two corners across
+// the line by the lever of half a side, and the fits make a small blurred square more
+// sheared than it is (its acute corners out along their bisectors, its obtuse corners in,
+// 0.2-0.4 px on 13 px squares turned 50 degrees under the hard effects), which turns every
+// side of a row alike: on average up to 0.8-1 px across the lines against 0.1-0.3 px along
+// them (docs/detectors.md, "The four sheared misses"). A pair of squares (PairConsistent)
+// has lines one way only and keeps the whole residual.
 bool LocallyConsistent(const Window& win, double gap_ratio, double fraction) {
+  const bool lines_both_ways = win.w >= 2 && win.h >= 2;
   return ForEachGapLine(win, [&](const Eigen::Vector2d& p0, const Eigen::Vector2d& p1,
                                  const Eigen::Vector2d& p2, const Eigen::Vector2d& p3) {
     const double side = 0.5 * ((p1 - p0).norm() + (p3 - p2).norm());
-    const double residual = ((p2 - p1) - 0.5 * gap_ratio * ((p1 - p0) + (p3 - p2))).norm();
+    const Eigen::Vector2d r = (p2 - p1) - 0.5 * gap_ratio * ((p1 - p0) + (p3 - p2));
+    const double residual = lines_both_ways ? std::abs(r.dot((p3 - p0).normalized())) : r.norm();
     return residual <= std::max(1.0, fraction * side);
   });
 }

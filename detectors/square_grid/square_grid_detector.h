@@ -16,7 +16,8 @@
 //      verified locally, never by one homography of the whole board, which a real lens bends
 //      by tens of pixels:
 //        - along every row and column of corners, each gap agrees with the two squares beside
-//          it (exact for any quadratic image of the line: the lens's bending drops out);
+//          it (exact for any quadratic image of the line: the lens's bending drops out), in
+//          its component along the line (a corner's shift across a row is one along a column);
 //        - the paint: each gap between neighbouring squares and each crossing of gaps lighter
 //          than the squares around it by half the board's contrast (a chessboard prints a
 //          black square at every crossing, an AprilGrid a corner square);
@@ -58,10 +59,10 @@ struct SquareGridOptions {
   // the homographies; a lens bends half a gap by a few percent of a side; a square of another
   // grid or of clutter is off by a good part of a side. (0, 0.5].
   double max_link_side_fraction = 0.25;
-  // Each corner must agree with its prediction from the neighbouring squares' corners within
-  // this fraction of the local square side (or 1 px, whichever is larger), half as large again
-  // per axis along which the square lies at the window's edge (predicted by extrapolation). A
-  // square that is not the grid's is off by a good part of a side. (0, 0.5].
+  // Along every row and column of corners, each gap must agree with the two squares beside it
+  // (its component along the line in a window of 2 x 2 squares or more, the whole residual
+  // between two squares alone) within this fraction of their mean side (or 1 px, whichever is
+  // larger). A square that is not the grid's is off by a good part of a side. (0, 0.5].
   double max_residual_side_fraction = 0.2;
 
   // Empty when valid, else the name of the first field out of range ("min_contrast").

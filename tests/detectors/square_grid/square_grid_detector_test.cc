@@ -198,6 +198,52 @@ TEST(SquareGridDetectorTest, EvaluationMissesUnderTheHardEffects) {
   }
 }
 
+// The last four misses of detectors_eval's full grid (docs/detectors.md, "The four sheared
+// misses"), at its far distance for the turn: 13-15 px squares sheared by yaw -50 degrees and
+// roll -30 or 30 (seeds 75, 81), pitch -50 and roll 30 (135), yaw and pitch 35 (159), under
+// the hard effects. The side fits make such squares more sheared than they are and their
+// angles are noisy, which moves the gap geometry's residuals across their lines (0.8-1 px on
+// average): 1-3 lines per render were over their tolerances of 2.6-3.0 px by that component
+// (2.7-3.6 px), none by the component along the line, which the geometry now holds alone
+// (LocallyConsistent). Found whole with exact ids; the corners carry that noise: RMS
+// 0.39-0.47 px, the worst 1.2-2.0 px (the hard set has no accuracy bar), so the bounds are
+// 0.55 px RMS and 2.5 px, a fifth of the smallest side seen; a wrong id is off by a side.
+TEST(SquareGridDetectorTest, ShearedSmallSquaresUnderTheHardEffects) {
+  constexpr double kShearedRmsPx = 0.55;
+  constexpr double kShearedMaxPx = 2.5;
+  BoardParams params;
+  params.type = BoardType::kSquareGrid;
+  const Board board = *Board::Create(params);
+  const CameraModel camera = circle_scene::Camera();
+  struct Case {
+    std::uint64_t seed;
+    double roll, yaw, pitch;
+  };
+  for (const Case& c :
+       {Case{75, -30, -50, 0}, Case{81, 30, -50, 0}, Case{135, 30, 0, -50}, Case{159, 0, 35, 35}}) {
+    SCOPED_TRACE(testing::Message() << "seed " << c.seed);
+    const double far_m =
+        circle_scene::EvaluationDistances(board, camera, false, c.yaw, c.pitch).back();
+    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
+        circle_scene::OneBoard(BoardType::kSquareGrid,
+                               circle_scene::EvaluationPose(far_m, c.yaw, c.pitch, c.roll, c.seed)),
+        circle_scene::HardEffects(c.seed), c.seed, camera);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    ASSERT_EQ(frame->features.size(), board.features().size()) << "the whole grid in view";
+    const Detection d = DetectSquareGrid(frame->image8.view(), board);
+    ExpectComplete(d, board);
+    int matched = 0, unknown = 0;
+    const double rms = FeatureRmsPx(d, *frame, &matched, &unknown);
+    EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+    EXPECT_EQ(unknown, 0);
+    const double worst = test_scene::MaxErrorPx(d, *frame);
+    std::printf("seed %llu: RMS %.4f px, worst %.3f px\n", static_cast<unsigned long long>(c.seed),
+                rms, worst);
+    EXPECT_LT(rms, kShearedRmsPx);
+    EXPECT_LT(worst, kShearedMaxPx);
+  }
+}
+
 // Through the strong wide-angle pinhole (k1 -0.30) near the image corner and the 190-degree
 // fisheye 40 degrees off its axis, BoofCV's 3 x 4 board with equal squares and gaps.
 TEST(SquareGridDetectorTest, StrongDistortionAndFisheye) {
