@@ -289,10 +289,12 @@ void RefinePose(const CameraModel& camera, std::span<const PnpCorrespondence> po
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 
-// A noise class's σ from fewer explainable degrees of freedom than this is too unsteady to
-// trust (a χ² of 1 or 2 degrees of freedom is near 0 a fifth of the time): it takes the σ of
-// every residual instead.
-constexpr double kMinClassDof = 3.0;
+// A noise class's σ² from k explainable degrees of freedom has a relative standard error of
+// about sqrt(2/k), its σ about 1/sqrt(2k); the σ bar (error/σ 0.8 to 1.25) allows ±25%, so
+// one standard error stays inside it from k = 8. A class below that (the front camera's
+// one-board classes, 4.5 to 5.7) may come out far too small, the unsafe side for verdicts: it
+// takes the larger of its own σ and the σ of every residual (docs/solvers.md).
+constexpr double kSteadyClassDof = 8.0;
 
 // One board's share of the normal equations at the solution: J_bᵀJ_b, J_bᵀr_b, its points.
 struct BoardTerms {
@@ -321,7 +323,7 @@ std::pair<double, double> ExplainedResidual(const BoardTerms& b, const Matrix6d&
 }
 
 // Each noise class's σ² (pnp.h): its boards' explained residuals over their degrees of
-// freedom; `pooled_sigma`² for a class below kMinClassDof.
+// freedom; at least `pooled_sigma`² for a class below kSteadyClassDof.
 std::map<int, double> ClassSigmaSquared(const std::map<std::pair<int, int>, BoardTerms>& boards,
                                         const Matrix6d& JtJ_inverse, double pooled_sigma) {
   std::map<int, std::pair<double, double>> sums;  // per class: Σ explained, Σ degrees of freedom
@@ -332,7 +334,8 @@ std::map<int, double> ClassSigmaSquared(const std::map<std::pair<int, int>, Boar
   }
   std::map<int, double> out;
   for (const auto& [c, sum] : sums) {
-    out[c] = sum.second >= kMinClassDof ? sum.first / sum.second : pooled_sigma * pooled_sigma;
+    const double own = sum.second > 0 ? sum.first / sum.second : 0.0;
+    out[c] = sum.second >= kSteadyClassDof ? own : std::max(own, pooled_sigma * pooled_sigma);
   }
   return out;
 }

@@ -28,8 +28,8 @@
 // expectation of a numerator term under one σ is σ² times its denominator term); pooling a
 // class's boards steadies it (one board alone has at most 6 degrees of freedom, fewer the more
 // it fixes the pose). The covariance is the sandwich A (Σ_b σ_c(b)² J_bᵀJ_b) A. A class with
-// under 3 degrees of freedom (one board that nearly fixes the pose alone) takes the σ from
-// every residual, as a single board does.
+// under 8 degrees of freedom (one board; σ_c² then about ±50% or worse) takes the larger of
+// σ_c and the σ from every residual, so an unsteady class never reports less than one σ would.
 //
 // Outcomes (not errors): too few points, collinear points, no closed-form start, not
 // converged — each a reason code for verdicts. Errors: InvalidArgument for non-finite input
