@@ -140,18 +140,23 @@ absl::StatusOr<CameraInputs> CollectCorrespondences(
     while (board_index < in.boards_seen.size() && in.boards_seen[board_index].first != o.board_id)
       ++board_index;
     if (board_index == in.boards_seen.size()) in.boards_seen.emplace_back(o.board_id, T_car_board);
+    // Each board its own rigid body and each board type (detector) its noise class: the
+    // covariance gives every detector its own feature sigma (pnp.h).
+    const int noise_class = static_cast<int>(board->board.type());
     for (const DetectedFeature& f : o.features) {
-      in.points.push_back(
-          {T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0), f.uv_px});
+      in.points.push_back({T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0),
+                           f.uv_px, static_cast<int>(board_index), noise_class});
       in.point_board.push_back(board_index);
       auto& [sum, n] = sums[{o.board_id, f.id}];
-      sum.p_object = in.points.back().p_object;
-      sum.uv_px += f.uv_px;
+      sum = {in.points.back().p_object, sum.uv_px + f.uv_px, static_cast<int>(board_index),
+             noise_class};
       ++n;
     }
   }
   for (const auto& [key, sum_n] : sums) {
-    in.means.push_back({sum_n.first.p_object, sum_n.first.uv_px / sum_n.second});
+    PnpCorrespondence mean = sum_n.first;
+    mean.uv_px /= sum_n.second;
+    in.means.push_back(mean);
   }
   return in;
 }

@@ -3,7 +3,8 @@
 // car frame through the station layout and the aligner (p_car = T_car_station *
 // T_station_board * p_board) and solved jointly as one PnP problem (not per board and
 // averaged; a feature seen in several frames of the still scene enters as its mean over them,
-// so that the 1-sigma does not shrink with frames below what the data's scatter supports);
+// so that the 1-sigma does not shrink with frames below what the data's scatter supports; each
+// board type, i.e. detector, gets its own feature noise, pnp.h);
 // then the mounting angles and position with their 1-sigma, the deviation from
 // nominal, the verdict against the car model's tolerances, and what the car's own software
 // derives from the extrinsic: the vanishing point of the car's forward direction, the

@@ -3,10 +3,12 @@
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <optional>
 #include <vector>
 
@@ -284,13 +286,84 @@ void RefinePose(const CameraModel& camera, std::span<const PnpCorrespondence> po
       summary.termination_type == ceres::CONVERGENCE ? PnpOutcome::kOk : PnpOutcome::kNotConverged;
 }
 
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+// A noise class's σ² from k explainable degrees of freedom has a relative standard error of
+// about sqrt(2/k), its σ about 1/sqrt(2k); the σ bar (error/σ 0.8 to 1.25) allows ±25%, so
+// one standard error stays inside it from k = 8. A class below that (the front camera's
+// one-board classes, 4.5 to 5.7) may come out far too small, the unsafe side for verdicts: it
+// takes the larger of its own σ and the σ of every residual (docs/solvers.md).
+constexpr double kSteadyClassDof = 8.0;
+
+// One board's share of the normal equations at the solution: J_bᵀJ_b, J_bᵀr_b, its points.
+struct BoardTerms {
+  int noise_class = 0;
+  Matrix6d JtJ = Matrix6d::Zero();
+  Vector6d Jtr = Vector6d::Zero();
+  int points = 0;
+};
+
+// Board b's terms of σ_c² (pnp.h): g_bᵀ(J_bᵀJ_b)⁺g_b, the part of its residuals a pose change
+// of the board explains, and rank(J_bᵀJ_b) − tr(A J_bᵀJ_b), that part's expectation over σ²
+// when every feature has noise σ (the pseudo-inverse and rank serve a board too small to fix a
+// pose on its own).
+std::pair<double, double> ExplainedResidual(const BoardTerms& b, const Matrix6d& JtJ_inverse) {
+  const Eigen::SelfAdjointEigenSolver<Matrix6d> eigen(b.JtJ);
+  const Vector6d projected = eigen.eigenvectors().transpose() * b.Jtr;
+  const double floor = 1e-12 * eigen.eigenvalues().maxCoeff();
+  double explained = 0;
+  int rank = 0;
+  for (int k = 0; k < 6; ++k) {
+    if (!(eigen.eigenvalues()[k] > floor)) continue;
+    explained += projected[k] * projected[k] / eigen.eigenvalues()[k];
+    ++rank;
+  }
+  return {explained, rank - (JtJ_inverse * b.JtJ).trace()};
+}
+
+// Each noise class's σ² (pnp.h): its boards' explained residuals over their degrees of
+// freedom; at least `pooled_sigma`² for a class below kSteadyClassDof.
+std::map<int, double> ClassSigmaSquared(const std::map<std::pair<int, int>, BoardTerms>& boards,
+                                        const Matrix6d& JtJ_inverse, double pooled_sigma) {
+  std::map<int, std::pair<double, double>> sums;  // per class: Σ explained, Σ degrees of freedom
+  for (const auto& [key, b] : boards) {
+    const auto [explained, dof] = ExplainedResidual(b, JtJ_inverse);
+    sums[b.noise_class].first += explained;
+    sums[b.noise_class].second += dof;
+  }
+  std::map<int, double> out;
+  for (const auto& [c, sum] : sums) {
+    const double own = sum.second > 0 ? sum.first / sum.second : 0.0;
+    out[c] = sum.second >= kSteadyClassDof ? own : std::max(own, pooled_sigma * pooled_sigma);
+  }
+  return out;
+}
+
+// The sandwich covariance A (Σ_b σ_c(b)² J_bᵀJ_b) A of pnp.h; sets result->sigma_px to the
+// RMS of the points' σ.
+void SetClassCovariance(const std::map<std::pair<int, int>, BoardTerms>& boards,
+                        const Matrix6d& JtJ_inverse, double pooled_sigma, PnpResult* result) {
+  const std::map<int, double> sigma_sq = ClassSigmaSquared(boards, JtJ_inverse, pooled_sigma);
+  Matrix6d information = Matrix6d::Zero();
+  double sum_sigma_sq = 0;
+  int points = 0;
+  for (const auto& [key, b] : boards) {
+    information += sigma_sq.at(b.noise_class) * b.JtJ;
+    sum_sigma_sq += sigma_sq.at(b.noise_class) * b.points;
+    points += b.points;
+  }
+  result->sigma_px = std::sqrt(sum_sigma_sq / points);
+  result->covariance = JtJ_inverse * information * JtJ_inverse;
+}
+
 // Residuals and the Jacobian of every reprojection at result->T_camera_object, for the
 // covariance: d uv / d(δθ, δt) = d uv / d p_camera * [-[R p]x, I]. Sets the residuals, sigma
-// and covariance; kNotConverged (and infinite residuals) when the pose puts a point outside
-// the lens or the covariance is not finite.
+// and covariance (pnp.h: one σ, or per noise class); kNotConverged (and infinite residuals)
+// when the pose puts a point outside the lens or the covariance is not finite.
 void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCorrespondence> points,
                                const PnpOptions& options, PnpResult* result) {
-  Eigen::Matrix<double, 6, 6> JtJ = Eigen::Matrix<double, 6, 6>::Zero();
+  std::map<std::pair<int, int>, BoardTerms> boards;  // by (noise class, board)
   double sum_sq = 0;
   bool all_projected = true;
   const Eigen::Matrix3d R = result->T_camera_object.RotationMatrix();
@@ -302,13 +375,17 @@ void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCor
       all_projected = false;  // the pose puts a point outside the lens: no fit
       continue;
     }
-    const double e = (uv - c.uv_px).norm();
-    sum_sq += e * e;
-    result->max_residual_px = std::max(result->max_residual_px, e);
+    const Eigen::Vector2d r = uv - c.uv_px;
+    sum_sq += r.squaredNorm();
+    result->max_residual_px = std::max(result->max_residual_px, r.norm());
     Eigen::Matrix<double, 3, 6> d_p;
     d_p << -Skew(rp), Eigen::Matrix3d::Identity();
     const Eigen::Matrix<double, 2, 6> J = d_uv_d_p * d_p;
-    JtJ += J.transpose() * J;
+    BoardTerms& b = boards[{c.noise_class, c.board}];
+    b.noise_class = c.noise_class;
+    b.JtJ += J.transpose() * J;
+    b.Jtr += J.transpose() * r;
+    ++b.points;
   }
   const double n = static_cast<double>(points.size());
   if (!all_projected) {
@@ -317,9 +394,16 @@ void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCor
     return;
   }
   result->residual_rms_px = std::sqrt(sum_sq / n);
-  result->sigma_px =
-      options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
-  result->covariance = result->sigma_px * result->sigma_px * JtJ.inverse();
+  Matrix6d JtJ = Matrix6d::Zero();
+  for (const auto& [key, b] : boards) JtJ += b.JtJ;
+  const Matrix6d JtJ_inverse = JtJ.inverse();
+  if (options.feature_sigma_px > 0 || boards.size() == 1) {
+    result->sigma_px =
+        options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
+    result->covariance = result->sigma_px * result->sigma_px * JtJ_inverse;
+  } else {
+    SetClassCovariance(boards, JtJ_inverse, std::sqrt(sum_sq / (2 * n - 6)), result);
+  }
   if (!result->covariance.allFinite()) result->outcome = PnpOutcome::kNotConverged;
 }
 

@@ -17,6 +17,20 @@
 // reprojection Jacobian at the solution and σ the feature noise: options.feature_sigma_px
 // when given, else estimated from the residuals (Σ r² / (2n - 6)).
 //
+// Several boards of different detectors (feature_sigma_px = 0 and the points' `board` or
+// `noise_class` not all equal): one σ from every residual would charge a checker's corners
+// (0.007 px) with a marker's error (0.07 px), and a board's error that no pose change of the
+// board could cause (a marker corner's pattern) does not move the pose. So each noise class c
+// gets its own σ_c from the part of its boards' residuals a pose change of the board explains:
+// with J_b, r_b a board's Jacobian and residuals, g_b = J_bᵀ r_b and A = (JᵀJ)⁻¹,
+//   σ_c² = Σ_{b in c} g_bᵀ (J_bᵀJ_b)⁺ g_b / Σ_{b in c} (rank(J_bᵀJ_b) − tr(A J_bᵀJ_b)),
+// unbiased when every board's error moves its pose as independent noise of σ_c would (the
+// expectation of a numerator term under one σ is σ² times its denominator term); pooling a
+// class's boards steadies it (one board alone has at most 6 degrees of freedom, fewer the more
+// it fixes the pose). The covariance is the sandwich A (Σ_b σ_c(b)² J_bᵀJ_b) A. A class with
+// under 8 degrees of freedom (one board; σ_c² then about ±50% or worse) takes the larger of
+// σ_c and the σ from every residual, so an unsteady class never reports less than one σ would.
+//
 // Outcomes (not errors): too few points, collinear points, no closed-form start, not
 // converged — each a reason code for verdicts. Errors: InvalidArgument for non-finite input
 // or invalid options.
@@ -35,6 +49,10 @@ namespace linecal {
 struct PnpCorrespondence {
   Eigen::Vector3d p_object = Eigen::Vector3d::Zero();  // metres, in the object's frame
   Eigen::Vector2d uv_px = Eigen::Vector2d::Zero();     // observed, pixel-centre convention
+  // For the covariance from the residuals (see the top of this file): the board the point is
+  // on, and its noise class (points of one detector share a σ); any integers.
+  int board = 0;
+  int noise_class = 0;
 };
 
 enum class PnpOutcome {
@@ -71,7 +89,9 @@ struct PnpResult {
   // kNotConverged) when the pose leaves a point outside the lens.
   double residual_rms_px = 0.0;
   double max_residual_px = 0.0;
-  double sigma_px = 0.0;  // the feature noise the covariance uses
+  // The feature noise the covariance uses; with several noise classes, the RMS over the
+  // points of their class's σ.
+  double sigma_px = 0.0;
   // (δθ [rad], δt [m]), camera frame; see the top of this file.
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
 };

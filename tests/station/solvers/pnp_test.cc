@@ -14,6 +14,7 @@ namespace linecal {
 namespace {
 
 constexpr double kDeg = M_PI / 180.0;
+using Vector6 = Eigen::Matrix<double, 6, 1>;
 
 CameraModel Pinhole() {
   CameraIntrinsics k;
@@ -209,6 +210,143 @@ TEST(PnpTest, ReportedUncertaintyMatchesTheMonteCarloSpread) {
   const double coverage = static_cast<double>(inside_95) / components;
   EXPECT_GT(coverage, 0.93);
   EXPECT_LT(coverage, 0.97);
+}
+
+// Issue 20, item 1: six boards of two detectors, as a camera at the station sees them. Three
+// checkers (noise class 0): 6 x 5 corners with independent noise of 0.01 px per axis. Three
+// marker boards (class 1): 3 x 3 square tags, each tag's four corners off by one shift common to
+// them (0.02 px per axis) and one change of the tag's size (0.1 px along each corner's direction
+// from the tag's centre, which moves the pose little: the corners' shifts cancel), drawn per tag
+// and capture, plus 0.01 px independent noise. The noise is estimated from the residuals.
+// Returns, over `trials` captures, the RMS of error/σ per pose component and the fraction of
+// components within their 95% interval.
+struct TwoDetectorSigma {
+  Vector6 rms_error_over_sigma = Vector6::Zero();
+  double coverage = 0;
+  int below_one_sigma = 0;  // captures with a component's σ under that of one σ (kByBoard)
+};
+
+// Whether a component's σ of `labelled` (the solve of `points`) is under that of one σ from
+// every residual, the points unlabelled.
+bool BelowOneSigma(const CameraModel& camera, std::vector<PnpCorrespondence> points,
+                   const PnpResult& labelled) {
+  for (PnpCorrespondence& c : points) c.board = c.noise_class = 0;
+  const absl::StatusOr<PnpResult> one = SolvePnp(camera, points);
+  if (!one.ok()) return true;
+  return (labelled.covariance.diagonal().array() < (1 - 1e-9) * one->covariance.diagonal().array())
+      .any();
+}
+
+// Board b's points in its own frame: checker corners, or the marker tags' corners (four a tag).
+std::vector<Eigen::Vector3d> TwoDetectorBoard(bool marker) {
+  if (!marker) return Grid(6, 5, 0.08);
+  std::vector<Eigen::Vector3d> p;
+  for (int tag = 0; tag < 9; ++tag) {
+    const Eigen::Vector3d centre(0.15 * (tag % 3 - 1), 0.15 * (tag / 3 - 1), 0.0);
+    for (int corner = 0; corner < 4; ++corner)
+      p.push_back(centre +
+                  Eigen::Vector3d(corner % 2 ? 0.05 : -0.05, corner / 2 ? 0.05 : -0.05, 0));
+  }
+  return p;
+}
+
+// How the points are labelled: not at all (one σ), each board by its detector, or each board a
+// class of its own (as the front camera's four boards of four types).
+enum class Labels { kNone, kByDetector, kByBoard };
+
+TwoDetectorSigma RunTwoDetectors(Labels labels, int trials, bool tag_errors = true) {
+  const CameraModel camera = Pinhole();
+  const Rigid3d truth = CameraViewing(4.0, 15 * kDeg, 8 * kDeg, 3 * kDeg);
+  std::vector<std::vector<Eigen::Vector3d>> boards;
+  for (int b = 0; b < 6; ++b) {
+    const Rigid3d T_object_board(
+        Eigen::AngleAxisd((b % 2 == 0 ? 20 : -25) * kDeg,
+                          b < 3 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitX())
+            .toRotationMatrix(),
+        Eigen::Vector3d(0.8 * (b % 3 - 1), b < 3 ? 0.45 : -0.45, 0.1 * (b % 3)));
+    boards.emplace_back();
+    for (const Eigen::Vector3d& p : TwoDetectorBoard(b >= 3))
+      boards.back().push_back(T_object_board * p);
+  }
+  std::mt19937_64 rng(20);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  TwoDetectorSigma out;
+  int inside_95 = 0;
+  for (int t = 0; t < trials; ++t) {
+    std::vector<PnpCorrespondence> points;
+    for (int b = 0; b < 6; ++b) {
+      std::vector<PnpCorrespondence> board = Observe(camera, truth, boards[b], 0.01, rng);
+      for (size_t tag = 0; tag_errors && b >= 3 && tag < board.size() / 4; ++tag) {
+        const Eigen::Vector2d shift(0.02 * unit(rng), 0.02 * unit(rng));
+        const double size = 0.1 * unit(rng);
+        Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+        for (size_t i = 4 * tag; i < 4 * tag + 4; ++i) centre += board[i].uv_px / 4;
+        for (size_t i = 4 * tag; i < 4 * tag + 4; ++i)
+          board[i].uv_px += shift + size * (board[i].uv_px - centre).normalized();
+      }
+      for (PnpCorrespondence& c : board) {
+        if (labels != Labels::kNone) {
+          c.board = b;
+          c.noise_class = labels == Labels::kByBoard ? b : (b >= 3 ? 1 : 0);
+        }
+        points.push_back(c);
+      }
+    }
+    absl::StatusOr<PnpResult> r = SolvePnp(camera, points);
+    EXPECT_TRUE(r.ok() && r->outcome == PnpOutcome::kOk);
+    if (!r.ok() || r->outcome != PnpOutcome::kOk) return out;
+    if (labels == Labels::kByBoard && BelowOneSigma(camera, points, *r)) ++out.below_one_sigma;
+    const Eigen::AngleAxisd d_rotation(r->T_camera_object.RotationMatrix() *
+                                       truth.RotationMatrix().transpose());
+    Vector6 e;
+    e << d_rotation.angle() * d_rotation.axis(),
+        r->T_camera_object.translation() - truth.translation();
+    for (int k = 0; k < 6; ++k) {
+      const double sigma = std::sqrt(r->covariance(k, k));
+      out.rms_error_over_sigma[k] += e[k] * e[k] / (sigma * sigma) / trials;
+      if (std::abs(e[k]) <= 1.96 * sigma) ++inside_95;
+    }
+  }
+  out.rms_error_over_sigma = out.rms_error_over_sigma.cwiseSqrt();
+  out.coverage = static_cast<double>(inside_95) / (6.0 * trials);
+  return out;
+}
+
+// Each detector its own σ, from what a pose change of its boards explains: error/σ within the
+// issue's bar of 0.8-1.25 per component (400 captures measure an RMS ratio to about +-4%), and
+// the 95% intervals cover 93-98.5% (measured: 0.84-0.94 and 0.970; the tags' size error does not
+// move a board's pose quite as independent noise would, and the σ comes out about 10% large, on
+// the safe side). One σ from every residual (the points unlabelled) fails both: the size error
+// inflates it, error/σ 0.52-0.63 and coverage 0.998.
+TEST(PnpTest, EachDetectorsSigmaFromItsBoardsMatchesTheMonteCarloSpread) {
+  const TwoDetectorSigma labelled = RunTwoDetectors(Labels::kByDetector, 400);
+  const TwoDetectorSigma pooled = RunTwoDetectors(Labels::kNone, 400);
+  for (int k = 0; k < 6; ++k) {
+    EXPECT_GT(labelled.rms_error_over_sigma[k], 0.8) << "component " << k;
+    EXPECT_LT(labelled.rms_error_over_sigma[k], 1.25) << "component " << k;
+    EXPECT_LT(pooled.rms_error_over_sigma[k], 0.7) << "component " << k;
+  }
+  EXPECT_GT(labelled.coverage, 0.93);
+  EXPECT_LT(labelled.coverage, 0.985);
+  EXPECT_GT(pooled.coverage, 0.99);
+}
+
+// Each board a class of its own, the six boards with independent noise of 0.01 px alike (tags
+// without their shift and size error), as the front camera's boards of four types: one board's
+// σ has at most 6 degrees of freedom, under kSteadyClassDof (its σ² about ±60% at 5). Such a
+// class takes the larger of its σ and that of every residual, so no component's σ is ever under
+// the single-σ covariance's; measured error/σ 0.84-0.95 and coverage 0.970 over 400 captures.
+// With each board's own σ (the rule before: 3 degrees of freedom enough) 298 of the 400
+// captures had a component's σ under the single σ's, and the coverage was 0.942.
+TEST(PnpTest, AClassOfOneBoardIsNotTrustedBelowEveryResidualsSigma) {
+  const TwoDetectorSigma by_board = RunTwoDetectors(Labels::kByBoard, 400, false);
+  EXPECT_EQ(by_board.below_one_sigma, 0);
+  for (int k = 0; k < 6; ++k) {
+    EXPECT_GT(by_board.rms_error_over_sigma[k], 0.8) << "component " << k;
+    EXPECT_LT(by_board.rms_error_over_sigma[k], 1.25) << "component " << k;
+  }
+  EXPECT_GT(by_board.coverage, 0.95);
+  EXPECT_LT(by_board.coverage, 0.985);
 }
 
 // The covariance's hand-written Jacobian, d uv / d p_camera * [-[R p]x, I] for the left
