@@ -169,17 +169,24 @@ struct Link {
 // side, is nearest, within max_fraction of the two squares' mean side, both ways. Half a gap
 // from each side keeps the bending of a lens out: a fisheye near the rim shrinks the pitch
 // by a third from one square to the next, which a whole pitch carried by one square's
-// homography misses by more than a quarter of it.
+// homography misses by more than a quarter of it. The two half gaps, each seen through its
+// own square's homography, must also agree within kMaxSideRatio (the gap is one for both):
+// a dark clutter shape whose quad is far from any square's image carries its homography
+// wildly, and its half gap of 42 px against a neighbour's 11 px once landed on a grid
+// square's gap centre and took its grid point (docs/detectors.md, "A clutter square's link").
 std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares, double gap_ratio,
                                              double max_fraction) {
   const int n = static_cast<int>(squares.size());
   std::vector<std::array<Eigen::Vector2d, 4>> gap_centre(n);
+  std::vector<std::array<double, 4>> half_gap(n);  // from the side's middle to gap_centre, px
   for (int a = 0; a < n; ++a) {
     for (int k = 0; k < 4; ++k) {
       const double reach = 0.5 + 0.5 * gap_ratio;  // from the square's centre, in sides
-      gap_centre[a][k] = ApplyHomography(
-          squares[a].H,
-          Eigen::Vector2d(0.5 + reach * kSideDirection[k][0], 0.5 + reach * kSideDirection[k][1]));
+      const Eigen::Vector2d dir(kSideDirection[k][0], kSideDirection[k][1]);
+      gap_centre[a][k] = ApplyHomography(squares[a].H, Eigen::Vector2d(0.5, 0.5) + reach * dir);
+      half_gap[a][k] =
+          (gap_centre[a][k] - ApplyHomography(squares[a].H, Eigen::Vector2d(0.5, 0.5) + 0.5 * dir))
+              .norm();
     }
   }
   // Per square, the farthest of its gap centres from its centre (infinite when one is not
@@ -208,7 +215,9 @@ std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares,
         }
         for (int m = 0; m < 4; ++m) {
           const double dist = (gap_centre[b][m] - gap_centre[a][k]).norm();
-          if (dist <= tol && dist < nearest) {
+          const double gap_ratio_ab = half_gap[b][m] / half_gap[a][k];
+          if (dist <= tol && dist < nearest && gap_ratio_ab <= kMaxSideRatio &&
+              gap_ratio_ab >= 1.0 / kMaxSideRatio) {
             nearest = dist;
             best[a][k] = Link{b, m};
           }

@@ -244,6 +244,41 @@ TEST(SquareGridDetectorTest, ShearedSmallSquaresUnderTheHardEffects) {
   }
 }
 
+// A miss of the run of every board (docs/detectors.md, "A clutter square's link"): seed 1482,
+// pitch -50 degrees at the far distance (1.28 m, 18-20 px squares) under the hard effects. A
+// dark clutter diamond above the board, its quad far from any square's image, carried its
+// homography half a gap out to the gap centre of a square of the top row and took the link
+// (and the grid point) of the square there; the window with it was 81 px off along a line.
+// The link now needs both squares to see the gap between them alike (within kMaxSideRatio).
+// Found whole with exact ids, RMS 0.25 px and the worst corner 0.58 px (measured); bounds
+// 0.35 px and 1 px, a wrong id being off by a side (18 px).
+TEST(SquareGridDetectorTest, ClutterSquareDoesNotTakeAGridPoint) {
+  constexpr double kRmsPx = 0.35;
+  constexpr double kMaxPx = 1.0;
+  BoardParams params;
+  params.type = BoardType::kSquareGrid;
+  const Board board = *Board::Create(params);
+  const CameraModel camera = circle_scene::Camera();
+  constexpr std::uint64_t kSeed = 1482;
+  const double far_m = circle_scene::EvaluationDistances(board, camera, false, 0, -50).back();
+  const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
+      circle_scene::OneBoard(BoardType::kSquareGrid,
+                             circle_scene::EvaluationPose(far_m, 0, -50, 0, kSeed)),
+      circle_scene::HardEffects(kSeed), kSeed, camera);
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  ASSERT_EQ(frame->features.size(), board.features().size()) << "the whole grid in view";
+  const Detection d = DetectSquareGrid(frame->image8.view(), board);
+  ExpectComplete(d, board);
+  int matched = 0, unknown = 0;
+  const double rms = FeatureRmsPx(d, *frame, &matched, &unknown);
+  EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+  EXPECT_EQ(unknown, 0);
+  const double worst = test_scene::MaxErrorPx(d, *frame);
+  std::printf("seed 1482: RMS %.4f px, worst %.3f px\n", rms, worst);
+  EXPECT_LT(rms, kRmsPx);
+  EXPECT_LT(worst, kMaxPx);
+}
+
 // Through the strong wide-angle pinhole (k1 -0.30) near the image corner and the 190-degree
 // fisheye 40 degrees off its axis, BoofCV's 3 x 4 board with equal squares and gaps.
 TEST(SquareGridDetectorTest, StrongDistortionAndFisheye) {
