@@ -35,6 +35,7 @@ struct Square {
   Eigen::Matrix3d H = Eigen::Matrix3d::Identity();
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();
   double side_px = 0.0;
+  double edge_rms_px = 0.0;  // its edge points' RMS distance from their side's line, worst side
 };
 
 // The quad's corners where lines fitted to its four edges meet (edge points from dark inside
@@ -42,10 +43,13 @@ struct Square {
 // and of the next square beyond the gap (gap_ratio sides away). nullopt when a side has too
 // few edge points, two sides are near parallel, or a corner moves by more than a third of a
 // side (not a square's corner: the contour's vertices of a blurred, noisy square of 12-16 px
-// lie up to a quarter of a side off its corners).
+// lie up to a quarter of a side off its corners). *edge_rms_px: the edge points' RMS distance
+// from their side's line, the largest over the four sides (how straight the sides are).
 std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
-    const ImageView8& image, const std::array<Eigen::Vector2d, 4>& corners, double gap_ratio) {
+    const ImageView8& image, const std::array<Eigen::Vector2d, 4>& corners, double gap_ratio,
+    double* edge_rms_px) {
   std::array<Line2d, 4> lines;
+  *edge_rms_px = 0.0;
   for (int k = 0; k < 4; ++k) {
     const Eigen::Vector2d a = corners[k], b = corners[(k + 1) % 4];
     const double len = (b - a).norm();
@@ -66,6 +70,10 @@ std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
     const std::optional<Line2d> line = FitWeightedLine(points, d);
     if (!line) return std::nullopt;
     lines[k] = *line;
+    const Eigen::Vector2d normal(line->dir.y(), -line->dir.x());
+    double sum_sq = 0.0;
+    for (const EdgePoint& e : points) sum_sq += std::pow((e.uv_px - line->point).dot(normal), 2);
+    *edge_rms_px = std::max(*edge_rms_px, std::sqrt(sum_sq / static_cast<double>(points.size())));
   }
   std::array<Eigen::Vector2d, 4> out;
   for (int k = 0; k < 4; ++k) {
@@ -140,11 +148,15 @@ std::vector<Square> FindSquares(const ImageView8& image, const Image8& dark, dou
   const ComponentLabels labels = LabelComponents(dark.view(), /*label_image=*/false);
   for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
+    double edge_rms_px = 0.0;
     for (int pass = 0; pass < 2 && corners; ++pass) {
-      corners = RefineCorners(image, *corners, gap_ratio);
+      corners = RefineCorners(image, *corners, gap_ratio, &edge_rms_px);
     }
     if (!corners) continue;
-    if (std::optional<Square> s = MakeSquare(*corners)) squares.push_back(*s);
+    if (std::optional<Square> s = MakeSquare(*corners)) {
+      s->edge_rms_px = edge_rms_px;
+      squares.push_back(*s);
+    }
   }
   return squares;
 }
@@ -158,6 +170,15 @@ constexpr std::array<std::array<double, 2>, 4> kSideDirection = {
 // Two squares of one grid differ in size by perspective only: under 2:1 for any view the
 // link test accepts, while dark shapes of the room come in every size.
 constexpr double kMaxSideRatio = 2.0;
+
+// A square beyond a window continues the grid only with sides as straight as the window's:
+// its edge points' RMS distance from their sides' lines (Square::edge_rms_px) at most this
+// times the window's least straight square's. A printed square is as straight as its
+// neighbours (a factor of 2 leaves room for one further into a lens's bend); a dark disc
+// just off the page, its tangent quad of 34 px, is at 1.32 px RMS and once passed the gap
+// geometry (docs/detectors.md, "A disc beyond the window"), while the least straight square
+// of every found window of detectors_eval is within 0.30 px.
+constexpr double kMaxEdgeRmsRatio = 2.0;
 
 struct Link {
   int square = -1;  // the neighbour, -1 for none
@@ -671,8 +692,16 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
         }
         // The grid goes on: a square linked next to the window along one of its sides, in
         // the gap geometry of the window's square beside it (a dark shadow or edge that
-        // touches a square links as a neighbour of another size, no gap away).
+        // touches a square links as a neighbour of another size, no gap away), with sides
+        // as straight as a printed square's (kMaxEdgeRmsRatio).
+        double window_edge_rms_px = 0.0;
+        for (const Square* s : win.geometry) {
+          window_edge_rms_px = std::max(window_edge_rms_px, s->edge_rms_px);
+        }
         const bool continues = std::any_of(group.begin(), group.end(), [&](const auto& entry) {
+          if (squares[entry.second.square].edge_rms_px > kMaxEdgeRmsRatio * window_edge_rms_px) {
+            return false;
+          }
           const auto [i, j] = entry.first;
           const bool in_i = i >= wi && i < wi + w, in_j = j >= wj && j < wj + h;
           std::pair<int, int> inside = {i, j};
@@ -789,12 +818,14 @@ std::optional<Square> FindPredictedSquare(const ImageView8& image, const Predict
   for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
     for (Eigen::Vector2d& c : *corners) c += origin;
+    double edge_rms_px = 0.0;
     for (int pass = 0; pass < 2 && corners; ++pass) {
-      corners = RefineCorners(image, *corners, gap_ratio);
+      corners = RefineCorners(image, *corners, gap_ratio, &edge_rms_px);
     }
     if (!corners) continue;
-    const std::optional<Square> s = MakeSquare(*corners);
+    std::optional<Square> s = MakeSquare(*corners);
     if (!s) continue;
+    s->edge_rms_px = edge_rms_px;
     const double ratio = s->side_px / p.side_px;
     const double dist = (s->centre - p.centre).norm();
     if (ratio > kMaxSideRatio || ratio < 1.0 / kMaxSideRatio || dist > nearest) continue;
