@@ -176,8 +176,8 @@ constexpr double kMaxSideRatio = 2.0;
 // times the window's least straight square's. A printed square is as straight as its
 // neighbours (a factor of 2 leaves room for one further into a lens's bend); a dark disc
 // just off the page, its tangent quad of 34 px, is at 1.32 px RMS and once passed the gap
-// geometry (docs/detectors.md, "A disc beyond the window"), while the least straight square
-// of every found window of detectors_eval is within 0.30 px.
+// geometry (docs/detectors.md, "The two misses of the run of every board"), while the least
+// straight square of every found window of detectors_eval is within 0.30 px.
 constexpr double kMaxEdgeRmsRatio = 2.0;
 
 struct Link {
@@ -191,10 +191,11 @@ struct Link {
 // from each side keeps the bending of a lens out: a fisheye near the rim shrinks the pitch
 // by a third from one square to the next, which a whole pitch carried by one square's
 // homography misses by more than a quarter of it. The two half gaps, each seen through its
-// own square's homography, must also agree within kMaxSideRatio (the gap is one for both):
-// a dark clutter shape whose quad is far from any square's image carries its homography
-// wildly, and its half gap of 42 px against a neighbour's 11 px once landed on a grid
-// square's gap centre and took its grid point (docs/detectors.md, "A clutter square's link").
+// own square's homography, must also agree within kMaxSideRatio (the gap is one for both): a
+// dark clutter shape whose quad is far from any square's image carries its homography
+// wildly, and its gap centre, 42 px from its side where half a gap of its 20 px is 10 px,
+// once landed on a grid square's and took that square's grid point (docs/detectors.md, "The
+// two misses of the run of every board").
 std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares, double gap_ratio,
                                              double max_fraction) {
   const int n = static_cast<int>(squares.size());
