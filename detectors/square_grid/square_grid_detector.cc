@@ -237,9 +237,9 @@ std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares,
         }
         for (int m = 0; m < 4; ++m) {
           const double dist = (gap_centre[b][m] - gap_centre[a][k]).norm();
-          const double gap_ratio_ab = half_gap[b][m] / half_gap[a][k];
-          if (dist <= tol && dist < nearest && gap_ratio_ab <= kMaxSideRatio &&
-              gap_ratio_ab >= 1.0 / kMaxSideRatio) {
+          const double half_gap_ratio = half_gap[b][m] / half_gap[a][k];
+          if (dist <= tol && dist < nearest && half_gap_ratio <= kMaxSideRatio &&
+              half_gap_ratio >= 1.0 / kMaxSideRatio) {
             nearest = dist;
             best[a][k] = Link{b, m};
           }
