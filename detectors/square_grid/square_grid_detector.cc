@@ -35,6 +35,7 @@ struct Square {
   Eigen::Matrix3d H = Eigen::Matrix3d::Identity();
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();
   double side_px = 0.0;
+  double edge_rms_px = 0.0;  // its edge points' RMS distance from their side's line, worst side
 };
 
 // The quad's corners where lines fitted to its four edges meet (edge points from dark inside
@@ -42,10 +43,13 @@ struct Square {
 // and of the next square beyond the gap (gap_ratio sides away). nullopt when a side has too
 // few edge points, two sides are near parallel, or a corner moves by more than a third of a
 // side (not a square's corner: the contour's vertices of a blurred, noisy square of 12-16 px
-// lie up to a quarter of a side off its corners).
+// lie up to a quarter of a side off its corners). *edge_rms_px: the edge points' RMS distance
+// from their side's line, the largest over the four sides (how straight the sides are).
 std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
-    const ImageView8& image, const std::array<Eigen::Vector2d, 4>& corners, double gap_ratio) {
+    const ImageView8& image, const std::array<Eigen::Vector2d, 4>& corners, double gap_ratio,
+    double* edge_rms_px) {
   std::array<Line2d, 4> lines;
+  *edge_rms_px = 0.0;
   for (int k = 0; k < 4; ++k) {
     const Eigen::Vector2d a = corners[k], b = corners[(k + 1) % 4];
     const double len = (b - a).norm();
@@ -66,6 +70,10 @@ std::optional<std::array<Eigen::Vector2d, 4>> RefineCorners(
     const std::optional<Line2d> line = FitWeightedLine(points, d);
     if (!line) return std::nullopt;
     lines[k] = *line;
+    const Eigen::Vector2d normal(line->dir.y(), -line->dir.x());
+    double sum_sq = 0.0;
+    for (const EdgePoint& e : points) sum_sq += std::pow((e.uv_px - line->point).dot(normal), 2);
+    *edge_rms_px = std::max(*edge_rms_px, std::sqrt(sum_sq / static_cast<double>(points.size())));
   }
   std::array<Eigen::Vector2d, 4> out;
   for (int k = 0; k < 4; ++k) {
@@ -140,11 +148,15 @@ std::vector<Square> FindSquares(const ImageView8& image, const Image8& dark, dou
   const ComponentLabels labels = LabelComponents(dark.view(), /*label_image=*/false);
   for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
+    double edge_rms_px = 0.0;
     for (int pass = 0; pass < 2 && corners; ++pass) {
-      corners = RefineCorners(image, *corners, gap_ratio);
+      corners = RefineCorners(image, *corners, gap_ratio, &edge_rms_px);
     }
     if (!corners) continue;
-    if (std::optional<Square> s = MakeSquare(*corners)) squares.push_back(*s);
+    if (std::optional<Square> s = MakeSquare(*corners)) {
+      s->edge_rms_px = edge_rms_px;
+      squares.push_back(*s);
+    }
   }
   return squares;
 }
@@ -159,6 +171,15 @@ constexpr std::array<std::array<double, 2>, 4> kSideDirection = {
 // link test accepts, while dark shapes of the room come in every size.
 constexpr double kMaxSideRatio = 2.0;
 
+// A square beyond a window continues the grid only with sides as straight as the window's:
+// its edge points' RMS distance from their sides' lines (Square::edge_rms_px) at most this
+// times the window's least straight square's. A printed square is as straight as its
+// neighbours (a factor of 2 leaves room for one further into a lens's bend); a dark disc
+// just off the page, its tangent quad of 34 px, is at 1.32 px RMS and once passed the gap
+// geometry (docs/detectors.md, "The two misses of the run of every board"), while the least
+// straight square of every found window of detectors_eval is within 0.30 px.
+constexpr double kMaxEdgeRmsRatio = 2.0;
+
 struct Link {
   int square = -1;  // the neighbour, -1 for none
   int side = 0;     // its side that faces back
@@ -169,17 +190,25 @@ struct Link {
 // side, is nearest, within max_fraction of the two squares' mean side, both ways. Half a gap
 // from each side keeps the bending of a lens out: a fisheye near the rim shrinks the pitch
 // by a third from one square to the next, which a whole pitch carried by one square's
-// homography misses by more than a quarter of it.
+// homography misses by more than a quarter of it. The two half gaps, each seen through its
+// own square's homography, must also agree within kMaxSideRatio (the gap is one for both): a
+// dark clutter shape whose quad is far from any square's image carries its homography
+// wildly, and its gap centre, 42 px from its side where half a gap of its 20 px is 10 px,
+// once landed on a grid square's and took that square's grid point (docs/detectors.md, "The
+// two misses of the run of every board").
 std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares, double gap_ratio,
                                              double max_fraction) {
   const int n = static_cast<int>(squares.size());
   std::vector<std::array<Eigen::Vector2d, 4>> gap_centre(n);
+  std::vector<std::array<double, 4>> half_gap(n);  // from the side's middle to gap_centre, px
   for (int a = 0; a < n; ++a) {
     for (int k = 0; k < 4; ++k) {
       const double reach = 0.5 + 0.5 * gap_ratio;  // from the square's centre, in sides
-      gap_centre[a][k] = ApplyHomography(
-          squares[a].H,
-          Eigen::Vector2d(0.5 + reach * kSideDirection[k][0], 0.5 + reach * kSideDirection[k][1]));
+      const Eigen::Vector2d dir(kSideDirection[k][0], kSideDirection[k][1]);
+      gap_centre[a][k] = ApplyHomography(squares[a].H, Eigen::Vector2d(0.5, 0.5) + reach * dir);
+      half_gap[a][k] =
+          (gap_centre[a][k] - ApplyHomography(squares[a].H, Eigen::Vector2d(0.5, 0.5) + 0.5 * dir))
+              .norm();
     }
   }
   // Per square, the farthest of its gap centres from its centre (infinite when one is not
@@ -208,7 +237,9 @@ std::vector<std::array<Link, 4>> LinkSquares(const std::vector<Square>& squares,
         }
         for (int m = 0; m < 4; ++m) {
           const double dist = (gap_centre[b][m] - gap_centre[a][k]).norm();
-          if (dist <= tol && dist < nearest) {
+          const double half_gap_ratio = half_gap[b][m] / half_gap[a][k];
+          if (dist <= tol && dist < nearest && half_gap_ratio <= kMaxSideRatio &&
+              half_gap_ratio >= 1.0 / kMaxSideRatio) {
             nearest = dist;
             best[a][k] = Link{b, m};
           }
@@ -662,8 +693,16 @@ void SearchGroup(const ImageView8& image, const std::vector<Square>& squares,
         }
         // The grid goes on: a square linked next to the window along one of its sides, in
         // the gap geometry of the window's square beside it (a dark shadow or edge that
-        // touches a square links as a neighbour of another size, no gap away).
+        // touches a square links as a neighbour of another size, no gap away), with sides
+        // as straight as a printed square's (kMaxEdgeRmsRatio).
+        double window_edge_rms_px = 0.0;
+        for (const Square* s : win.geometry) {
+          window_edge_rms_px = std::max(window_edge_rms_px, s->edge_rms_px);
+        }
         const bool continues = std::any_of(group.begin(), group.end(), [&](const auto& entry) {
+          if (squares[entry.second.square].edge_rms_px > kMaxEdgeRmsRatio * window_edge_rms_px) {
+            return false;
+          }
           const auto [i, j] = entry.first;
           const bool in_i = i >= wi && i < wi + w, in_j = j >= wj && j < wj + h;
           std::pair<int, int> inside = {i, j};
@@ -780,12 +819,14 @@ std::optional<Square> FindPredictedSquare(const ImageView8& image, const Predict
   for (const Quad& quad : FindQuads(labels, SquareQuadOptions(min_side_px))) {
     std::optional<std::array<Eigen::Vector2d, 4>> corners = quad.corners_px;
     for (Eigen::Vector2d& c : *corners) c += origin;
+    double edge_rms_px = 0.0;
     for (int pass = 0; pass < 2 && corners; ++pass) {
-      corners = RefineCorners(image, *corners, gap_ratio);
+      corners = RefineCorners(image, *corners, gap_ratio, &edge_rms_px);
     }
     if (!corners) continue;
-    const std::optional<Square> s = MakeSquare(*corners);
+    std::optional<Square> s = MakeSquare(*corners);
     if (!s) continue;
+    s->edge_rms_px = edge_rms_px;
     const double ratio = s->side_px / p.side_px;
     const double dist = (s->centre - p.centre).norm();
     if (ratio > kMaxSideRatio || ratio < 1.0 / kMaxSideRatio || dist > nearest) continue;
