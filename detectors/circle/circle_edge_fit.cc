@@ -1,7 +1,6 @@
 #include "detectors/circle/circle_edge_fit.h"
 
 #include <Eigen/Cholesky>
-#include <Eigen/QR>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -67,23 +66,34 @@ constexpr double kProfileStepPx = 0.5;
 EdgeShape FourfoldDeparture(const Ellipse& e, const std::vector<Eigen::Vector2d>& points) {
   const double c = std::cos(e.angle_rad);
   const double s = std::sin(e.angle_rad);
-  const int n = static_cast<int>(points.size());
-  Eigen::MatrixX3d basis(n, 3);
-  Eigen::VectorXd departure(n);
-  for (int i = 0; i < n; ++i) {
-    const Eigen::Vector2d d = points[i] - e.centre;
+  // Normal equations of the three terms; cos 4 phi and sin 4 phi as the fourth power of the
+  // unit vector (x, y) / |q|, without trigonometry.
+  Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  double sum = 0.0;
+  double sum_sq = 0.0;
+  for (const Eigen::Vector2d& p : points) {
+    const Eigen::Vector2d d = p - e.centre;
     const double x = (c * d.x() + s * d.y()) / e.semi_major;
     const double y = (c * d.y() - s * d.x()) / e.semi_minor;
-    const double phi = std::atan2(y, x);
-    basis.row(i) << 1.0, std::cos(4.0 * phi), std::sin(4.0 * phi);
-    departure[i] = std::hypot(x, y) - 1.0;
+    const double rho = std::hypot(x, y);
+    const double c2 = (x * x - y * y) / (rho * rho);
+    const double s2 = 2.0 * x * y / (rho * rho);
+    const Eigen::Vector3d term(1.0, c2 * c2 - s2 * s2, 2.0 * c2 * s2);
+    const double departure = rho - 1.0;
+    normal += term * term.transpose();
+    rhs += departure * term;
+    sum += departure;
+    sum_sq += departure * departure;
   }
-  const Eigen::Vector3d coef = basis.colPivHouseholderQr().solve(departure);
-  const Eigen::VectorXd harmonic = basis.rightCols<2>() * coef.tail<2>();
-  const double variance = (departure.array() - departure.mean()).square().sum();
+  const Eigen::Vector3d coef = normal.ldlt().solve(rhs);
+  // The harmonic's share: the sum of squares the two terms explain beyond the mean.
+  const double n = static_cast<double>(points.size());
+  const double variance = sum_sq - sum * sum / n;
+  const double explained = coef.dot(rhs) - sum * sum / n;
   EdgeShape shape;
   shape.fourfold_px = coef.tail<2>().norm() * std::sqrt(e.semi_major * e.semi_minor);
-  shape.fourfold_share = variance > 0.0 ? harmonic.squaredNorm() / variance : 0.0;
+  shape.fourfold_share = variance > 0.0 ? explained / variance : 0.0;
   return shape;
 }
 

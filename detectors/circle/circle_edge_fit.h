@@ -29,7 +29,7 @@ namespace linecal {
 // ellipse's frame (the fit's affine map undone) turns back into a square: its edge departs
 // from the ellipse by the fourfold harmonic above all (cos 4 phi: corners out, the sides'
 // middles in), 0.14 of the radius for sharp corners, 0.86 of the departure's variance
-// (63 rays around a square, computed).
+// (64 rays around a square, computed).
 struct EdgeShape {
   double median_residual_px = 0.0;  // the median distance of the edge points from the ellipse
   // The fourfold harmonic of the points' radial departure (least squares in the ellipse's
