@@ -60,14 +60,51 @@ struct EdgeSearch {
 // blurred by 0.5 px with a parabola.
 constexpr double kProfileStepPx = 0.5;
 
+// The fourfold harmonic of the points' radial departure from `e` (EdgeShape), in e's frame,
+// where e is the unit circle: least squares of |q| - 1 on 1, cos 4 phi and sin 4 phi, which
+// stays exact when the rays are spread unevenly in phi (an elongated ellipse).
+EdgeShape FourfoldDeparture(const Ellipse& e, const std::vector<Eigen::Vector2d>& points) {
+  const double c = std::cos(e.angle_rad);
+  const double s = std::sin(e.angle_rad);
+  // Normal equations of the three terms; cos 4 phi and sin 4 phi as the fourth power of the
+  // unit vector (x, y) / |q|, without trigonometry.
+  Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  double sum = 0.0;
+  double sum_sq = 0.0;
+  for (const Eigen::Vector2d& p : points) {
+    const Eigen::Vector2d d = p - e.centre;
+    const double x = (c * d.x() + s * d.y()) / e.semi_major;
+    const double y = (c * d.y() - s * d.x()) / e.semi_minor;
+    const double rho = std::hypot(x, y);
+    const double c2 = (x * x - y * y) / (rho * rho);
+    const double s2 = 2.0 * x * y / (rho * rho);
+    const Eigen::Vector3d term(1.0, c2 * c2 - s2 * s2, 2.0 * c2 * s2);
+    const double departure = rho - 1.0;
+    normal += term * term.transpose();
+    rhs += departure * term;
+    sum += departure;
+    sum_sq += departure * departure;
+  }
+  const Eigen::Vector3d coef = normal.ldlt().solve(rhs);
+  // The harmonic's share: the sum of squares the two terms explain beyond the mean.
+  const double n = static_cast<double>(points.size());
+  const double variance = sum_sq - sum * sum / n;
+  const double explained = coef.dot(rhs) - sum * sum / n;
+  EdgeShape shape;
+  shape.fourfold_px = coef.tail<2>().norm() * std::sqrt(e.semi_major * e.semi_minor);
+  shape.fourfold_share = variance > 0.0 ? explained / variance : 0.0;
+  return shape;
+}
+
 // One pass of edge points along rays from seed's centre and an ellipse fit to them, with
 // the outliers (neighbouring edges, occlusion) removed.
-// *median_residual_px (when not null): the median distance of the edge points from the first
-// fit, before the outliers are removed.
+// *shape (when not null): how the edge points depart from the first fit, before the outliers
+// are removed.
 std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bool light,
                                      std::span<const Eigen::Vector2d> directions,
                                      const EdgeSearch& search, int min_contrast,
-                                     double* median_residual_px = nullptr) {
+                                     EdgeShape* shape = nullptr) {
   const int rays = static_cast<int>(directions.size());
   std::vector<Eigen::Vector2d> points;
   points.reserve(rays);
@@ -137,7 +174,10 @@ std::optional<Ellipse> FitCircleEdge(const Patch& patch, const Ellipse& seed, bo
   std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
   // 3 robust sigmas (1.4826 median absolute residual), and never below 0.2 px, the noise
   // of a single edge point at sigma 4.
-  if (median_residual_px != nullptr) *median_residual_px = sorted[sorted.size() / 2];
+  if (shape != nullptr) {
+    *shape = FourfoldDeparture(*fit, points);
+    shape->median_residual_px = sorted[sorted.size() / 2];
+  }
   const double limit = std::max(0.2, 3.0 * 1.4826 * sorted[sorted.size() / 2]);
   std::vector<double> weights(points.size());
   int kept = 0;
@@ -355,7 +395,7 @@ CircleEdgeFitter::CircleEdgeFitter(int rays) {
 
 std::optional<Ellipse> CircleEdgeFitter::Measure(const ImageView8& image, const Ellipse& seed,
                                                  bool light, int min_contrast,
-                                                 double* median_residual_px) const {
+                                                 EdgeShape* shape) const {
   const Patch patch = MakePatch(image, seed);
   // First pass: 0.35 of the radius covers the seed's error (a blob's threshold edge, or a
   // prediction within half a radius) while it stays short of the nearest other edge of the
@@ -367,7 +407,7 @@ std::optional<Ellipse> CircleEdgeFitter::Measure(const ImageView8& image, const 
   // Second pass: centred on the first fit, every 0.5 px over +-3 px, which holds an edge
   // blurred by sigma 1.5 and the first pass's error.
   std::optional<Ellipse> second =
-      FitCircleEdge(patch, *first, light, fine_, {0.35, 3.0, 0}, min_contrast, median_residual_px);
+      FitCircleEdge(patch, *first, light, fine_, {0.35, 3.0, 0}, min_contrast, shape);
   if (!second) return std::nullopt;
   const double r_seed = std::sqrt(seed.semi_major * seed.semi_minor);
   const double r_meas = std::sqrt(second->semi_major * second->semi_minor);

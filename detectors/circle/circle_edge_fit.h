@@ -22,6 +22,23 @@
 
 namespace linecal {
 
+// How a measured edge departs from the ellipse fitted to it, a test of the printed shape. The
+// image of a circle is an ellipse under any homography, and blur and noise keep it one up to
+// the edge noise (a tenth to a few tenths of a pixel, spread over every harmonic of the angle
+// around the ellipse). A square's image is an affine square up to perspective, which the
+// ellipse's frame (the fit's affine map undone) turns back into a square: its edge departs
+// from the ellipse by the fourfold harmonic above all (cos 4 phi: corners out, the sides'
+// middles in), 0.14 of the radius for sharp corners, 0.86 of the departure's variance
+// (64 rays around a square, computed).
+struct EdgeShape {
+  double median_residual_px = 0.0;  // the median distance of the edge points from the ellipse
+  // The fourfold harmonic of the points' radial departure (least squares in the ellipse's
+  // frame, scaled to pixels by the mean radius): amplitude, and its share of the departure's
+  // variance about its mean.
+  double fourfold_px = 0.0;
+  double fourfold_share = 0.0;
+};
+
 class CircleEdgeFitter {
  public:
   // `rays` edge points per circle, [16, 256] (the caller's options validate it): 64 average
@@ -35,13 +52,11 @@ class CircleEdgeFitter {
   // when fewer than half the rays find the edge (a circle half hidden, cut by the image
   // border, or merged with a neighbour), or when the result strays from the seed (centre
   // more than half a radius away, or radius off by more than a third plus 1 px: another
-  // edge was measured). *median_residual_px, when not null, receives the median distance of
-  // the last pass's edge points from its first ellipse fit (before outliers are removed), a
-  // test of the shape: the edge noise (a tenth to a few tenths of a pixel) for a circle,
-  // several percent of the size for a square. Reads only the pixels around the seed. Cost:
-  // about 10 microseconds per circle at 64 rays.
+  // edge was measured). *shape, when not null, receives how the last pass's edge points depart
+  // from its first ellipse fit (before outliers are removed), a test of the shape (EdgeShape).
+  // Reads only the pixels around the seed. Cost: about 10 microseconds per circle at 64 rays.
   std::optional<Ellipse> Measure(const ImageView8& image, const Ellipse& seed, bool light,
-                                 int min_contrast, double* median_residual_px = nullptr) const;
+                                 int min_contrast, EdgeShape* shape = nullptr) const;
 
  private:
   std::vector<Eigen::Vector2d> coarse_;  // every other ray, for the first pass

@@ -14,7 +14,7 @@
 // and largest feature error (clean, noisy), the circle centre bias (the mean error vector of
 // the clean circle-board renders). With --check, exits 1 when a bar is missed (see Options);
 // detection rates are printed, not checked.
-//   detectors_eval [--board NAME] [--width W --height H] [--reduced] [--board-free N]
+//   detectors_eval [--board NAME]... [--width W --height H] [--reduced] [--board-free N]
 //                  [--check] [--fronto-size] [--seed S] [--repeat N] [--misses DIR]
 #include <algorithm>
 #include <array>
@@ -302,6 +302,7 @@ int Run(const Options& options) {
 }
 
 bool ParseArgs(int argc, char** argv, Options* o) {
+  bool boards_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const bool has_value = i + 1 < argc;
@@ -313,7 +314,11 @@ bool ParseArgs(int argc, char** argv, Options* o) {
         std::fprintf(stderr, "detectors_eval: --board: unknown board '%s'\n", name.c_str());
         return false;
       }
-      o->boards = {*t};
+      // Repeated, the boards add up (in the order given, which sets their renders' seeds):
+      // each board's detector runs on the others' renders.
+      if (!boards_given) o->boards.clear();
+      boards_given = true;
+      o->boards.push_back(*t);
     } else if (a == "--width" && has_value) {
       o->width = std::atoi(argv[++i]);
     } else if (a == "--height" && has_value) {
