@@ -6,6 +6,7 @@
 
 #include <array>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -114,20 +115,24 @@ TEST(PhotosTest, FoundRateBarsOfTheSetsHeldToTheBar) {
   }
 }
 
-// The ChArUco photo IMG_7412.png (deepcharuco, 320 x 240, marker cells of 2.2-3.4 px, under
-// the 4 px the marker scan is made for): the markers read at full resolution give a partial
-// board, whose part of the image is read again at twice the resolution; all 16 corners are
-// found, and they lie on one grid: a homography through them leaves at most a third of a
-// pixel (a corner given another corner's id would be a square, 7-10 px, off). OpenCV 4.6
-// reads no corner of this photo to compare with (docs/detectors.md).
-TEST(PhotosTest, CharucoPhotoWithSmallMarkersIsFoundWhole) {
-  LINECAL_EXTERNAL_OR_SKIP(files_json, "camera_real/files.json");
+// The deepcharuco set's board (ChArUco 5 x 5) detected on one photo of its set.
+struct CharucoPhoto {
+  std::optional<Board> board;
+  std::string path;
+  std::optional<HomographyFit> fit;  // board plane to image, through the corners found
+};
+
+// Detects the board on `photo` and expects it whole: 16 corners with ids 0..15 in order, on
+// one grid (a homography through them leaves at most a third of a pixel). Fills *out as far
+// as it gets.
+void ExpectCharucoPhotoWhole(const std::string& files_json, const std::string& photo,
+                             CharucoPhoto* out) {
   const PhotoSet* set = photo_corpus::FindSet("deepcharuco/charuco_5x5_4x4_50");
   ASSERT_NE(set, nullptr);
   ASSERT_TRUE(set->board.has_value());
-  const Board board = *Board::Create(*set->board);
-  const absl::StatusOr<Detection> d = photo_corpus::DetectInPhoto(
-      CorpusDir(files_json) + "/deepcharuco/charuco_5x5_4x4_50/IMG_7412.png", board);
+  out->board.emplace(*Board::Create(*set->board));
+  out->path = CorpusDir(files_json) + "/deepcharuco/charuco_5x5_4x4_50/" + photo;
+  const absl::StatusOr<Detection> d = photo_corpus::DetectInPhoto(out->path, *out->board);
   ASSERT_TRUE(d.ok()) << d.status();
   EXPECT_TRUE(d->found) << DetectReasonName(d->reason);
   ASSERT_EQ(d->features.size(), 16u);
@@ -138,9 +143,21 @@ TEST(PhotosTest, CharucoPhotoWithSmallMarkersIsFoundWhole) {
     p_board.push_back(d->features[i].p_board);
     uv_px.push_back(d->features[i].uv_px);
   }
-  const std::optional<HomographyFit> fit = FitHomography(p_board, uv_px);
-  ASSERT_TRUE(fit.has_value());
-  EXPECT_LT(fit->max_residual, 1.0 / 3.0);
+  out->fit = FitHomography(p_board, uv_px);
+  ASSERT_TRUE(out->fit.has_value());
+  EXPECT_LT(out->fit->max_residual, 1.0 / 3.0);
+}
+
+// The ChArUco photo IMG_7412.png (deepcharuco, 320 x 240, marker cells of 2.2-3.4 px, under
+// the 4 px the marker scan is made for): the markers read at full resolution give a partial
+// board, whose part of the image is read again at twice the resolution; all 16 corners are
+// found, and they lie on one grid: a homography through them leaves at most a third of a
+// pixel (a corner given another corner's id would be a square, 7-10 px, off). OpenCV 4.6
+// reads no corner of this photo to compare with (docs/detectors.md).
+TEST(PhotosTest, CharucoPhotoWithSmallMarkersIsFoundWhole) {
+  LINECAL_EXTERNAL_OR_SKIP(files_json, "camera_real/files.json");
+  CharucoPhoto photo;
+  ExpectCharucoPhotoWhole(files_json, "IMG_7412.png", &photo);
 }
 
 // IMG_7413.png of the same set: the board, about 100 px across on a tablet, has marker cells
@@ -153,25 +170,12 @@ TEST(PhotosTest, CharucoPhotoWithSmallMarkersIsFoundWhole) {
 // a square or more away).
 TEST(PhotosTest, CharucoPhotoWithUnreadableMarkersIsFoundWholeFromItsCorners) {
   LINECAL_EXTERNAL_OR_SKIP(files_json, "camera_real/files.json");
-  const PhotoSet* set = photo_corpus::FindSet("deepcharuco/charuco_5x5_4x4_50");
-  ASSERT_NE(set, nullptr);
-  ASSERT_TRUE(set->board.has_value());
-  const Board board = *Board::Create(*set->board);
-  const std::string path = CorpusDir(files_json) + "/deepcharuco/charuco_5x5_4x4_50/IMG_7413.png";
-  const absl::StatusOr<Detection> d = photo_corpus::DetectInPhoto(path, board);
-  ASSERT_TRUE(d.ok()) << d.status();
-  EXPECT_TRUE(d->found) << DetectReasonName(d->reason);
-  ASSERT_EQ(d->features.size(), 16u);
-  std::vector<Eigen::Vector2d> p_board;
-  std::vector<Eigen::Vector2d> uv_px;
-  for (std::size_t i = 0; i < d->features.size(); ++i) {
-    EXPECT_EQ(d->features[i].id, static_cast<int>(i));
-    p_board.push_back(d->features[i].p_board);
-    uv_px.push_back(d->features[i].uv_px);
-  }
-  const std::optional<HomographyFit> fit = FitHomography(p_board, uv_px);
-  ASSERT_TRUE(fit.has_value());
-  EXPECT_LT(fit->max_residual, 1.0 / 3.0);
+  CharucoPhoto photo;
+  ExpectCharucoPhotoWhole(files_json, "IMG_7413.png", &photo);
+  ASSERT_TRUE(photo.fit.has_value()) << "not found whole";
+  const Board& board = *photo.board;
+  const std::optional<HomographyFit>& fit = photo.fit;
+  const std::string& path = photo.path;
 
   const absl::StatusOr<Image8> image = ReadImage8(path);
   ASSERT_TRUE(image.ok()) << image.status();

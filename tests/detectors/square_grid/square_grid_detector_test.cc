@@ -156,6 +156,46 @@ TEST(SquareGridDetectorTest, PitchedGridWithRoundedCorners) {
   }
 }
 
+// One of detectors_eval's full-grid renders of the default 9 x 6 square grid under its hard
+// effects (noise 6, blur 1.5, a 4:1 gradient, gamma 0.6 or 1.6, JPEG 80, clutter): its seed,
+// turn in degrees and distance (an index into circle_scene::EvaluationDistances: near,
+// middle, far).
+struct HardCase {
+  std::uint64_t seed;
+  double roll, yaw, pitch;
+  int distance;
+};
+
+// Renders `c` as detectors_eval does and expects the grid found whole with exact ids, the
+// corners' RMS error under rms_bound_px and every corner under max_bound_px from the truth.
+void ExpectFoundUnderHardEffects(const HardCase& c, double rms_bound_px, double max_bound_px) {
+  SCOPED_TRACE(testing::Message() << "seed " << c.seed);
+  BoardParams params;
+  params.type = BoardType::kSquareGrid;
+  const Board board = *Board::Create(params);
+  const CameraModel camera = circle_scene::Camera();
+  const double distance_m =
+      circle_scene::EvaluationDistances(board, camera, false, c.yaw, c.pitch).at(c.distance);
+  const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
+      circle_scene::OneBoard(
+          BoardType::kSquareGrid,
+          circle_scene::EvaluationPose(distance_m, c.yaw, c.pitch, c.roll, c.seed)),
+      circle_scene::HardEffects(c.seed), c.seed, camera);
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  ASSERT_EQ(frame->features.size(), board.features().size()) << "the whole grid in view";
+  const Detection d = DetectSquareGrid(frame->image8.view(), board);
+  ExpectComplete(d, board);
+  int matched = 0, unknown = 0;
+  const double rms = FeatureRmsPx(d, *frame, &matched, &unknown);
+  EXPECT_EQ(matched, static_cast<int>(board.features().size()));
+  EXPECT_EQ(unknown, 0);
+  const double worst = test_scene::MaxErrorPx(d, *frame);
+  std::printf("seed %llu at %.2f m: RMS %.4f px, worst %.3f px\n",
+              static_cast<unsigned long long>(c.seed), distance_m, rms, worst);
+  EXPECT_LT(rms, rms_bound_px);
+  EXPECT_LT(worst, max_bound_px);
+}
+
 // Renders of detectors_eval's full grid (1280 x 720, the default 9 x 6 board, docs/
 // detectors.md) under its hard effects (noise 6, blur 1.5, a 4:1 gradient, gamma 0.6 or 1.6,
 // JPEG 80, clutter) that the detector missed: a gamma after the blur dilated every square by
@@ -164,37 +204,15 @@ TEST(SquareGridDetectorTest, PitchedGridWithRoundedCorners) {
 // 123); the dim end of the gradient left gaps under half the median contrast (seed 168).
 TEST(SquareGridDetectorTest, EvaluationMissesUnderTheHardEffects) {
   // docs/acceptance.md sets no RMS bar under the hard effects; these views measure 0.21-0.30
-  // px (corners of 12-20 px squares), every corner within a pixel (ExpectFound).
-  constexpr double kHardRmsPx = 0.35;
-  BoardParams params;
-  params.type = BoardType::kSquareGrid;
-  const Board board = *Board::Create(params);
-  const CameraModel camera = circle_scene::Camera();
-  struct Case {
-    std::uint64_t seed;
-    double roll, yaw, pitch;
-    int distance;  // index into circle_scene::EvaluationDistances: near, mean, far
-  };
+  // px (corners of 12-20 px squares), every corner within a pixel.
   // Seeds 21, 24 and 27: face-on at the far distance (squares of 12 px), every corner rounded
   // with a radius of a quarter side, so that the quad inscribed in the contour holds under
   // 0.85 of it; the lines of the sides' straight middles give the quad (contours.cc).
-  for (const Case& c : {Case{102, -30, 0, 50, 2}, Case{105, 0, 0, 50, 2}, Case{123, 0, 0, -50, 1},
-                        Case{168, 0, -35, -35, 0}, Case{21, -30, 0, 0, 2}, Case{24, 0, 0, 0, 2},
-                        Case{27, 30, 0, 0, 2}}) {
-    SCOPED_TRACE(testing::Message() << "seed " << c.seed);
-    const double distance =
-        circle_scene::EvaluationDistances(board, camera, false, c.yaw, c.pitch)[c.distance];
-    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
-        circle_scene::OneBoard(
-            BoardType::kSquareGrid,
-            circle_scene::EvaluationPose(distance, c.yaw, c.pitch, c.roll, c.seed)),
-        circle_scene::HardEffects(c.seed), c.seed, camera);
-    ASSERT_TRUE(frame.ok()) << frame.status();
-    ASSERT_EQ(frame->features.size(), board.features().size()) << "the whole grid in view";
-    double rms = 0.0;
-    ExpectFound(*frame, params, &rms);
-    std::printf("seed %llu: RMS %.4f px\n", static_cast<unsigned long long>(c.seed), rms);
-    EXPECT_LT(rms, kHardRmsPx);
+  for (const HardCase& c :
+       {HardCase{102, -30, 0, 50, 2}, HardCase{105, 0, 0, 50, 2}, HardCase{123, 0, 0, -50, 1},
+        HardCase{168, 0, -35, -35, 0}, HardCase{21, -30, 0, 0, 2}, HardCase{24, 0, 0, 0, 2},
+        HardCase{27, 30, 0, 0, 2}}) {
+    ExpectFoundUnderHardEffects(c, 0.35, 1.0);
   }
 }
 
@@ -209,38 +227,9 @@ TEST(SquareGridDetectorTest, EvaluationMissesUnderTheHardEffects) {
 // 0.39-0.47 px, the worst 1.2-2.0 px (the hard set has no accuracy bar), so the bounds are
 // 0.55 px RMS and 2.5 px, a fifth of the smallest side seen; a wrong id is off by a side.
 TEST(SquareGridDetectorTest, ShearedSmallSquaresUnderTheHardEffects) {
-  constexpr double kShearedRmsPx = 0.55;
-  constexpr double kShearedMaxPx = 2.5;
-  BoardParams params;
-  params.type = BoardType::kSquareGrid;
-  const Board board = *Board::Create(params);
-  const CameraModel camera = circle_scene::Camera();
-  struct Case {
-    std::uint64_t seed;
-    double roll, yaw, pitch;
-  };
-  for (const Case& c :
-       {Case{75, -30, -50, 0}, Case{81, 30, -50, 0}, Case{135, 30, 0, -50}, Case{159, 0, 35, 35}}) {
-    SCOPED_TRACE(testing::Message() << "seed " << c.seed);
-    const double far_m =
-        circle_scene::EvaluationDistances(board, camera, false, c.yaw, c.pitch).back();
-    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
-        circle_scene::OneBoard(BoardType::kSquareGrid,
-                               circle_scene::EvaluationPose(far_m, c.yaw, c.pitch, c.roll, c.seed)),
-        circle_scene::HardEffects(c.seed), c.seed, camera);
-    ASSERT_TRUE(frame.ok()) << frame.status();
-    ASSERT_EQ(frame->features.size(), board.features().size()) << "the whole grid in view";
-    const Detection d = DetectSquareGrid(frame->image8.view(), board);
-    ExpectComplete(d, board);
-    int matched = 0, unknown = 0;
-    const double rms = FeatureRmsPx(d, *frame, &matched, &unknown);
-    EXPECT_EQ(matched, static_cast<int>(board.features().size()));
-    EXPECT_EQ(unknown, 0);
-    const double worst = test_scene::MaxErrorPx(d, *frame);
-    std::printf("seed %llu: RMS %.4f px, worst %.3f px\n", static_cast<unsigned long long>(c.seed),
-                rms, worst);
-    EXPECT_LT(rms, kShearedRmsPx);
-    EXPECT_LT(worst, kShearedMaxPx);
+  for (const HardCase& c : {HardCase{75, -30, -50, 0, 2}, HardCase{81, 30, -50, 0, 2},
+                            HardCase{135, 30, 0, -50, 2}, HardCase{159, 0, 35, 35, 2}}) {
+    ExpectFoundUnderHardEffects(c, 0.55, 2.5);
   }
 }
 
@@ -256,39 +245,8 @@ TEST(SquareGridDetectorTest, ShearedSmallSquaresUnderTheHardEffects) {
 // as the window's. Found whole with exact ids, RMS 0.25 and 0.18 px, the worst corners 0.58
 // and 0.42 px (measured); bounds 0.35 px and 1 px, a wrong id being off by a side (18 px).
 TEST(SquareGridDetectorTest, EveryBoardRunMisses) {
-  constexpr double kRmsPx = 0.35;
-  constexpr double kMaxPx = 1.0;
-  BoardParams params;
-  params.type = BoardType::kSquareGrid;
-  const Board board = *Board::Create(params);
-  const CameraModel camera = circle_scene::Camera();
-  struct Case {
-    std::uint64_t seed;
-    double roll, yaw, pitch;
-    int distance;  // index into EvaluationDistances: near, middle, far
-  };
-  for (const Case& c : {Case{1482, 0, 0, -50, 2}, Case{1395, 30, 50, 0, 1}}) {
-    SCOPED_TRACE(testing::Message() << "seed " << c.seed);
-    const double distance_m =
-        circle_scene::EvaluationDistances(board, camera, false, c.yaw, c.pitch).at(c.distance);
-    const absl::StatusOr<CameraFrame> frame = circle_scene::RenderScene(
-        circle_scene::OneBoard(
-            BoardType::kSquareGrid,
-            circle_scene::EvaluationPose(distance_m, c.yaw, c.pitch, c.roll, c.seed)),
-        circle_scene::HardEffects(c.seed), c.seed, camera);
-    ASSERT_TRUE(frame.ok()) << frame.status();
-    ASSERT_EQ(frame->features.size(), board.features().size()) << "the whole grid in view";
-    const Detection d = DetectSquareGrid(frame->image8.view(), board);
-    ExpectComplete(d, board);
-    int matched = 0, unknown = 0;
-    const double rms = FeatureRmsPx(d, *frame, &matched, &unknown);
-    EXPECT_EQ(matched, static_cast<int>(board.features().size()));
-    EXPECT_EQ(unknown, 0);
-    const double worst = test_scene::MaxErrorPx(d, *frame);
-    std::printf("seed %llu at %.2f m: RMS %.4f px, worst %.3f px\n",
-                static_cast<unsigned long long>(c.seed), distance_m, rms, worst);
-    EXPECT_LT(rms, kRmsPx);
-    EXPECT_LT(worst, kMaxPx);
+  for (const HardCase& c : {HardCase{1482, 0, 0, -50, 2}, HardCase{1395, 30, 50, 0, 1}}) {
+    ExpectFoundUnderHardEffects(c, 0.35, 1.0);
   }
 }
 
