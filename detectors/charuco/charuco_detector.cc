@@ -807,46 +807,6 @@ std::optional<int> DarkParity(const CornerWindow& win) {
   return std::nullopt;
 }
 
-// The image position of window point (x, y) (corner units; square centres and the outer ring
-// of squares beyond the corners are any real numbers) through the homography of the 3 x 3 block
-// of corners nearest to it (2 along a side of two), as the checker detector maps its windows:
-// local, so that a lens bending the board moves it little. Blocks are fitted once, by origin.
-class WindowMap {
- public:
-  explicit WindowMap(const CornerWindow& win) : win_(win) {
-    const int bw = std::max(1, win.w - 2), bh = std::max(1, win.h - 2);
-    blocks_.resize(bw * bh);
-    for (int r0 = 0; r0 < bh; ++r0) {
-      for (int c0 = 0; c0 < bw; ++c0) {
-        std::vector<Eigen::Vector2d> src, dst;
-        for (int r = r0; r < std::min(win.h, r0 + 3); ++r) {
-          for (int c = c0; c < std::min(win.w, c0 + 3); ++c) {
-            src.emplace_back(c, r);
-            dst.push_back(win.At(c, r));
-          }
-        }
-        if (const std::optional<HomographyFit> fit = FitHomography(src, dst, {.refine = false})) {
-          blocks_[r0 * bw + c0] = fit->H;
-        }
-      }
-    }
-  }
-  std::optional<Eigen::Vector2d> Map(double x, double y) const {
-    const int bw = std::max(1, win_.w - 2);
-    const int c0 = std::clamp(static_cast<int>(std::lround(x)) - 1, 0, bw - 1);
-    const int r0 = std::clamp(static_cast<int>(std::lround(y)) - 1, 0, std::max(1, win_.h - 2) - 1);
-    const std::optional<Eigen::Matrix3d>& H = blocks_[r0 * bw + c0];
-    if (!H) return std::nullopt;
-    const Eigen::Vector2d p = ApplyHomography(*H, Eigen::Vector2d(x, y));
-    if (!p.allFinite()) return std::nullopt;
-    return p;
-  }
-
- private:
-  const CornerWindow& win_;
-  std::vector<std::optional<Eigen::Matrix3d>> blocks_;
-};
-
 // The grey of every data cell of every light square of a window (the squares that hold the
 // markers), in the window's axes: cell (a, b) of the n x n data cells of light square q is
 // grey[(q * n + b) * n + a], a along i. Each is the mean of four samples a quarter cell from
@@ -861,7 +821,7 @@ struct WindowCells {
 std::optional<WindowCells> SampleWindowCells(const ImageView8& image, const CornerWindow& win,
                                              int dark_parity, const MarkerFamily& family,
                                              double inset) {
-  const WindowMap map(win);
+  GridBlockMap map(win.w, win.h, win.uv);
   WindowCells cells;
   cells.n = family.cells - 2 * family.border_cells;
   const double cell = (1.0 - 2.0 * inset) / family.cells;  // in squares

@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <map>
 #include <optional>
 #include <utility>
 #include <vector>
@@ -24,24 +23,16 @@ namespace {
 // pixels under a fisheye) never enters a check.
 class Window {
  public:
-  Window(int w, int h, std::vector<Eigen::Vector2d> uv) : w_(w), h_(h), uv_(std::move(uv)) {}
+  Window(int w, int h, std::vector<Eigen::Vector2d> uv)
+      : w_(w), h_(h), uv_(std::move(uv)), map_(w, h, uv_) {}
+  Window(const Window&) = delete;  // map_ reads uv_ in place
+  Window& operator=(const Window&) = delete;
   int w() const { return w_; }
   int h() const { return h_; }
   const Eigen::Vector2d& uv(int i, int j) const { return uv_[j * w_ + i]; }
 
-  // The image position of window point (x, y) (corner units, any real numbers: square
-  // centres, points beyond the outer corners) through the homography of the 3 x 3 block of
-  // corners nearest to it (2 along a side of two corners). nullopt when that block is
-  // degenerate. Blocks are fitted once and cached.
-  std::optional<Eigen::Vector2d> Map(double x, double y) {
-    const int c0 = BlockOrigin(x, w_);
-    const int r0 = BlockOrigin(y, h_);
-    const std::optional<Eigen::Matrix3d>& H = Block(c0, r0);
-    if (!H) return std::nullopt;
-    const Eigen::Vector2d p = ApplyHomography(*H, Eigen::Vector2d(x, y));
-    if (!p.allFinite()) return std::nullopt;
-    return p;
-  }
+  // The image position of window point (x, y) (GridBlockMap::Map).
+  std::optional<Eigen::Vector2d> Map(double x, double y) { return map_.Map(x, y); }
 
   // The local square side (pixels) at corner (i, j): the shortest link to a neighbour.
   double SideAt(int i, int j) const {
@@ -81,8 +72,6 @@ class Window {
   }
 
  private:
-  static constexpr HomographyFitOptions kDltOnly{.refine = false};
-
   // Corner (i, j) predicted by least squares from the others of its block: each image
   // coordinate as a + b i + c j + d ij (+ e i^2 and f j^2 along a side of three). nullopt
   // when the block's points do not determine it.
@@ -117,29 +106,9 @@ class Window {
     return Eigen::Vector2d(coef(0, 0), coef(0, 1));
   }
 
-  // The first corner of the block of three that is centred nearest to x, inside 0..n-1.
-  static int BlockOrigin(double x, int n) {
-    return std::clamp(static_cast<int>(std::lround(x)) - 1, 0, std::max(0, n - 3));
-  }
-
-  const std::optional<Eigen::Matrix3d>& Block(int c0, int r0) {
-    const auto key = std::make_pair(c0, r0);
-    if (auto it = blocks_.find(key); it != blocks_.end()) return it->second;
-    std::vector<Eigen::Vector2d> src, dst;
-    for (int r = r0; r < std::min(h_, r0 + 3); ++r) {
-      for (int c = c0; c < std::min(w_, c0 + 3); ++c) {
-        src.emplace_back(c, r);
-        dst.push_back(uv(c, r));
-      }
-    }
-    std::optional<Eigen::Matrix3d> H;
-    if (const std::optional<HomographyFit> fit = FitHomography(src, dst, kDltOnly)) H = fit->H;
-    return blocks_.emplace(key, H).first->second;
-  }
-
   int w_, h_;
   std::vector<Eigen::Vector2d> uv_;
-  std::map<std::pair<int, int>, std::optional<Eigen::Matrix3d>> blocks_;
+  GridBlockMap map_;
 };
 
 // Mean of the blurred image at window point (x, y) and at the points a quarter square away

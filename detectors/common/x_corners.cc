@@ -10,6 +10,8 @@
 #include <numbers>
 #include <utility>
 
+#include "detectors/common/homography.h"
+
 namespace linecal {
 namespace {
 
@@ -522,6 +524,38 @@ std::vector<std::vector<int>> GridWindows(const XCornerComponent& component, int
     }
   }
   return windows;
+}
+
+namespace {
+// The first corner of the block of three that is centred nearest to x, inside 0..n-1.
+int BlockOrigin(double x, int n) {
+  return std::clamp(static_cast<int>(std::lround(x)) - 1, 0, std::max(0, n - 3));
+}
+}  // namespace
+
+std::optional<Eigen::Vector2d> GridBlockMap::Map(double x, double y) {
+  const std::optional<Eigen::Matrix3d>& H = Block(BlockOrigin(x, w_), BlockOrigin(y, h_));
+  if (!H) return std::nullopt;
+  const Eigen::Vector2d p = ApplyHomography(*H, Eigen::Vector2d(x, y));
+  if (!p.allFinite()) return std::nullopt;
+  return p;
+}
+
+const std::optional<Eigen::Matrix3d>& GridBlockMap::Block(int c0, int r0) {
+  const auto key = std::make_pair(c0, r0);
+  if (auto it = blocks_.find(key); it != blocks_.end()) return it->second;
+  std::vector<Eigen::Vector2d> src, dst;
+  for (int r = r0; r < std::min(h_, r0 + 3); ++r) {
+    for (int c = c0; c < std::min(w_, c0 + 3); ++c) {
+      src.emplace_back(c, r);
+      dst.push_back(uv_[r * w_ + c]);
+    }
+  }
+  std::optional<Eigen::Matrix3d> H;
+  if (const std::optional<HomographyFit> fit = FitHomography(src, dst, {.refine = false})) {
+    H = fit->H;
+  }
+  return blocks_.emplace(key, H).first->second;
 }
 
 }  // namespace linecal

@@ -13,7 +13,11 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <map>
+#include <optional>
+#include <span>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "detectors/common/corner_refine.h"
@@ -122,5 +126,27 @@ std::vector<XCornerComponent> GridComponents(const std::vector<XCorner>& corners
 // windows. O(extent * w * h).
 std::vector<std::vector<int>> GridWindows(const XCornerComponent& component, int w, int h,
                                           int min_corners);
+
+// The image position of a point of a w x h window of corners (corner (i, j) at uv[j * w + i],
+// i right and j down) through the homography of the 3 x 3 block of corners nearest to it (2
+// along a side of two corners): local, so that the bending of a real lens over the whole
+// board (tens of pixels under a fisheye) moves it little. Blocks are fitted on first use and
+// kept. `uv` is only read and must outlive the map; w, h >= 2.
+class GridBlockMap {
+ public:
+  GridBlockMap(int w, int h, std::span<const Eigen::Vector2d> uv) : w_(w), h_(h), uv_(uv) {}
+
+  // Window point (x, y) in corner units (square centres and points beyond the outer corners
+  // are any real numbers); nullopt when its block is degenerate or the point maps to
+  // infinity. O(1) after the block's first use.
+  std::optional<Eigen::Vector2d> Map(double x, double y);
+
+ private:
+  const std::optional<Eigen::Matrix3d>& Block(int c0, int r0);
+
+  int w_, h_;
+  std::span<const Eigen::Vector2d> uv_;
+  std::map<std::pair<int, int>, std::optional<Eigen::Matrix3d>> blocks_;
+};
 
 }  // namespace linecal
