@@ -15,6 +15,7 @@
 #include "station/camera/camera_model.h"
 #include "station/capture/capture.h"
 #include "tests/support/crafted_files.h"
+#include "tests/support/scoped_path.h"
 #include "tests/tools/json_file.h"
 #include "tests/tools/run_linecal.h"
 
@@ -22,6 +23,7 @@ namespace linecal {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_support::ScopedPath;
 using testing_tools::LinecalRun;
 using testing_tools::ReadJson;
 using testing_tools::RunLinecal;
@@ -43,6 +45,7 @@ class CalibrateCliTest : public ::testing::Test {
         " --out " + dir_.string());
     ASSERT_EQ(sim.exit_code, 0) << sim.err;
   }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
   static fs::path dir_;
 };
 fs::path CalibrateCliTest::dir_;
@@ -127,9 +130,8 @@ TEST_F(CalibrateCliTest, JsonResultsAgreeWithTheGroundTruth) {
 // clouds, the mounting within 4 reported sigma of the truth. (The 16-ring bumper LiDAR is
 // not asserted: its hole centres' in-plane sigma is underestimated, docs/lidar-radar.md.)
 TEST(CalibrateLidarCliTest, RoofLidarAgreesWithTheGroundTruth) {
-  const fs::path dir =
-      fs::path(testing::TempDir()) / ("calibrate_cli_lidar_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
+  const ScopedPath scratch("calibrate_cli_lidar");
+  const fs::path& dir = scratch.path();
   const LinecalRun sim = RunLinecal(
       "sim" + kRef + " --seed 5 --sensors roof_lidar --lidar-rotations 10 --out " + dir.string());
   ASSERT_EQ(sim.exit_code, 0) << sim.err;
@@ -166,8 +168,8 @@ TEST(CalibrateLidarCliTest, RoofLidarAgreesWithTheGroundTruth) {
 // every seed (docs/solvers.md, "Camera sigma on the full-physics evaluation"); from their
 // views, x -0.016..+0.008 mm and z -0.002..+0.008 mm.
 TEST(CalibrateFisheyeCliTest, SurroundRearHasNoRawFisheyeBias) {
-  const fs::path base =
-      fs::path(testing::TempDir()) / ("calibrate_cli_rear_" + std::to_string(::getpid()));
+  const ScopedPath scratch("calibrate_cli_rear");
+  const fs::path& base = scratch.path();
   double sum_deg = 0;
   constexpr int kSeeds = 5;
   for (int seed = 1; seed <= kSeeds; ++seed) {
@@ -194,7 +196,6 @@ TEST(CalibrateFisheyeCliTest, SurroundRearHasNoRawFisheyeBias) {
               0.016e-3);
     sum_deg += error_deg;
   }
-  fs::remove_all(base);
   // The pitch bias itself: the mean of the five was +0.0034 degrees, it is +0.0003 now.
   EXPECT_LT(std::abs(sum_deg / kSeeds), 0.0012);
 }
@@ -220,9 +221,8 @@ TEST_F(CalibrateCliTest, BadInputExitsTwoNamingTheProblem) {
 // a ring around a reprojected chessboard corner (magenta) and around the vanishing point on
 // the horizon (cyan), both computed here from the JSON pose, the layout and the aligner.
 TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
-  const fs::path report =
-      fs::path(testing::TempDir()) / ("calibrate_cli_report_" + std::to_string(::getpid()));
-  fs::remove_all(report);
+  const ScopedPath scratch("calibrate_cli_report");
+  const fs::path& report = scratch.path();
   const LinecalRun run =
       RunLinecal("calibrate --json --capture " + dir_.string() + " --report " + report.string());
   ASSERT_EQ(run.exit_code, 0) << run.err;
@@ -283,9 +283,8 @@ TEST_F(CalibrateCliTest, ReportDrawsTheModelAndTheHorizonWhereThePosePutsThem) {
 // A camera whose frames were lost gives that sensor an error with the file named, and the
 // radar is still calibrated.
 TEST_F(CalibrateCliTest, UnreadableFrameIsThatSensorsError) {
-  const fs::path copy =
-      fs::path(testing::TempDir()) / ("calibrate_cli_corrupt_" + std::to_string(::getpid()));
-  fs::remove_all(copy);
+  const ScopedPath scratch("calibrate_cli_corrupt");
+  const fs::path& copy = scratch.path();
   fs::copy(dir_, copy, fs::copy_options::recursive);
   const fs::path frame = copy / "front_camera" / "frame-000000.png";
   ASSERT_TRUE(fs::exists(frame));
@@ -310,9 +309,8 @@ TEST_F(CalibrateCliTest, UnreadableFrameIsThatSensorsError) {
 // the same budget, so a 74-byte PNG claiming 16384 x 16384 is refused by both, with the same
 // message, and neither decodes it.
 TEST_F(CalibrateCliTest, FrameOverTheBudgetIsRefusedByCheckAndCalibrateAlike) {
-  const fs::path copy =
-      fs::path(testing::TempDir()) / ("calibrate_cli_huge_" + std::to_string(::getpid()));
-  fs::remove_all(copy);
+  const ScopedPath scratch("calibrate_cli_huge");
+  const fs::path& copy = scratch.path();
   fs::copy(dir_, copy, fs::copy_options::recursive);
   const fs::path frame = copy / "front_camera" / "frame-000000.png";
   ASSERT_TRUE(fs::exists(frame));
@@ -332,7 +330,6 @@ TEST_F(CalibrateCliTest, FrameOverTheBudgetIsRefusedByCheckAndCalibrateAlike) {
     EXPECT_EQ(s["reason"], "data_unreadable");
     EXPECT_EQ(s["message"], refusal);
   }
-  fs::remove_all(copy);
 }
 
 // The budget from the command line: both commands take the same --max-* options.
@@ -362,9 +359,8 @@ TEST_F(CalibrateCliTest, BudgetFlagsApplyToCheckAndCalibrate) {
 // A garbage CAN log passed capture check before (it only looked at frames); now the log is
 // parsed as calibrate parses it, and the message names file and line without quoting it.
 TEST_F(CalibrateCliTest, CaptureCheckParsesTheCanLog) {
-  const fs::path copy =
-      fs::path(testing::TempDir()) / ("calibrate_cli_can_" + std::to_string(::getpid()));
-  fs::remove_all(copy);
+  const ScopedPath scratch("calibrate_cli_can");
+  const fs::path& copy = scratch.path();
   fs::copy(dir_, copy, fs::copy_options::recursive);
   const fs::path log = copy / "front_radar" / "can.log";
   ASSERT_TRUE(fs::exists(log));
@@ -374,7 +370,6 @@ TEST_F(CalibrateCliTest, CaptureCheckParsesTheCanLog) {
   EXPECT_EQ(check.err, "linecal capture check: " + (copy / "manifest.json").string() +
                            ": sensors[1].can_log: " + log.string() +
                            ":1: expected '(seconds.micros) interface ID#DATA', got 1 field(s)\n");
-  fs::remove_all(copy);
 }
 
 }  // namespace

@@ -1,6 +1,5 @@
 // `linecal radar decode` run as a program: output, summary and exit codes (docs/interfaces.md).
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -10,6 +9,7 @@
 
 #include "station/io/candump.h"
 #include "station/sensors/radar/radar_format.h"
+#include "tests/support/scoped_path.h"
 #include "tests/tools/run_linecal.h"
 
 namespace linecal {
@@ -85,9 +85,8 @@ TEST(CmdRadarTest, EsrTracksHaveNoRcs) {
   d.azimuth_rad = -5.0 * std::numbers::pi / 180.0;  // 5° to the right
   d.range_rate_mps = -1.5;
   scan.detections.push_back(d);
-  const std::string path = (std::filesystem::path(testing::TempDir()) /
-                            ("cmd_esr_" + std::to_string(::getpid()) + ".log"))
-                               .string();
+  const testing_support::ScopedPath scratch("cmd_esr", ".log");
+  const std::string path = scratch.string();
   ASSERT_TRUE(WriteCandumpLog(path, *EncodeEsrScan(scan, "can0", {})).ok());
   const LinecalRun run = RunLinecal("radar decode --model esr --json --log " + path);
   ASSERT_EQ(run.exit_code, 0) << run.err;

@@ -39,7 +39,10 @@ class SimCliTest : public ::testing::Test {
     // Progress goes to stderr, one line per sensor.
     EXPECT_NE(run.err.find("sim: [3/3] front_radar"), std::string::npos) << run.err;
   }
-  static void TearDownTestSuite() { delete dir_; }
+  static void TearDownTestSuite() {
+    fs::remove_all(*dir_);
+    delete dir_;
+  }
 
   // A copy of the capture to break.
   fs::path Copy(const std::string& name) {

@@ -23,6 +23,7 @@ class DaemonConfigTest : public ::testing::Test {
             testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::create_directories(dir_);
   }
+  void TearDown() override { fs::remove_all(dir_); }
   absl::StatusOr<DaemonConfig> Read(const std::string& text) {
     const fs::path path = dir_ / "linecald.json";
     std::ofstream(path) << text;

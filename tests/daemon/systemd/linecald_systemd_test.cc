@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "daemon/systemd/sd_notify.h"
+#include "tests/support/scoped_path.h"
 
 namespace linecal {
 namespace {
@@ -59,10 +60,12 @@ class NotifySocket {
   bool bound_ = false;
 };
 
+// A file or folder in this process's scratch directory, which goes at exit (the forked
+// daemon leaves by exec or _exit, so only the test process removes it).
 std::string Scratch(const std::string& what) {
-  return (fs::path(testing::TempDir()) /
-          ("linecald_systemd_" + std::to_string(::getpid()) + "_" + what))
-      .string();
+  static const testing_support::ScopedPath root("linecald_systemd");
+  fs::create_directories(root.path());
+  return (root.path() / what).string();
 }
 
 TEST(SystemdNotifier, SendsToPathAndAbstractSockets) {

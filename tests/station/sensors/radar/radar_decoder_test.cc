@@ -1,13 +1,14 @@
 #include "station/sensors/radar/radar_decoder.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <numbers>
 #include <random>
+
+#include "tests/support/scoped_path.h"
 
 namespace linecal {
 namespace {
@@ -177,8 +178,8 @@ TEST(RadarDecoderTest, Ars408EncodeWriteReadDecodeRoundTrip) {
   }
   std::stable_sort(frames.begin(), frames.end(),
                    [](const CanFrame& a, const CanFrame& b) { return a.time < b.time; });
-  const std::filesystem::path path =
-      std::filesystem::path(testing::TempDir()) / ("ars408_" + std::to_string(::getpid()) + ".log");
+  const testing_support::ScopedPath scratch("ars408", ".log");
+  const std::filesystem::path& path = scratch.path();
   ASSERT_TRUE(WriteCandumpLog(path, frames).ok());
   const absl::StatusOr<std::vector<CanFrame>> read = ReadCandumpLog(path);
   ASSERT_TRUE(read.ok()) << read.status();
@@ -252,8 +253,8 @@ TEST(RadarDecoderTest, EsrEncodeWriteReadDecodeRoundTrip) {
     frames.insert(frames.end(), encoded->begin(), encoded->end());
     sent.push_back(c);
   }
-  const std::filesystem::path path =
-      std::filesystem::path(testing::TempDir()) / ("esr_" + std::to_string(::getpid()) + ".log");
+  const testing_support::ScopedPath scratch("esr", ".log");
+  const std::filesystem::path& path = scratch.path();
   ASSERT_TRUE(WriteCandumpLog(path, frames).ok());
   const absl::StatusOr<std::vector<CanFrame>> read = ReadCandumpLog(path);
   ASSERT_TRUE(read.ok()) << read.status();
