@@ -1,9 +1,9 @@
 #pragma once
-// LiDAR packets over loopback for daemon tests: a free port on 127.0.0.1, a recording's UDP
-// payloads, and a thread that sends them to the port, looped, at a LiDAR's pace.
+// LiDAR packets over loopback for daemon tests and the soak: a free port on 127.0.0.1, a
+// recording's UDP payloads, and a thread that sends them to the port, looped, at a LiDAR's
+// pace, optionally losing, cutting or ceasing to send packets as a faulty link or sensor does.
 
 #include <arpa/inet.h>
-#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -13,27 +13,32 @@
 #include <cstdint>
 #include <cstdio>
 #include <fstream>
+#include <optional>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "absl/status/statusor.h"
 #include "station/io/pcap.h"
 
 namespace linecal::testing_daemon {
 
 using Payload = std::vector<std::uint8_t>;
 
-// The UDP payloads of a pcap file, in order.
-inline std::vector<Payload> PcapPayloads(const std::string& pcap) {
+// The UDP payloads of a pcap file, in order. Errors: PcapReader's (the file named).
+inline absl::StatusOr<std::vector<Payload>> PcapPayloads(const std::string& pcap) {
   std::vector<Payload> out;
   absl::StatusOr<PcapReader> r = PcapReader::Open(pcap);
-  EXPECT_TRUE(r.ok()) << r.status();
+  if (!r.ok()) return r.status();
   PcapRecord rec;
-  while (r.ok() && *r->Next(&rec)) {
+  for (;;) {
+    absl::StatusOr<bool> more = r->Next(&rec);
+    if (!more.ok()) return more.status();
+    if (!*more) return out;
     const UdpFrame f = ParseUdpFrame(r->info().link_type, rec.data);
     out.emplace_back(f.payload.begin(), f.payload.end());
   }
-  return out;
 }
 
 // A port on 127.0.0.1 that was free a moment ago.
@@ -64,14 +69,27 @@ inline bool UdpPortBound(std::uint16_t port) {
 
 enum class SendStart { kNow, kWhenBound };
 
+// What goes wrong on the way, for the soak's live faults: each packet lost with probability
+// `lose`, else cut to a random shorter length with probability `cut`; after `stop_after`
+// packets the sender falls silent (a sensor unplugged mid-scan). Drawn from `seed`, so a
+// fault is reproduced by its seed.
+struct SendFaults {
+  double lose = 0.0;
+  double cut = 0.0;
+  std::optional<std::size_t> stop_after;
+  std::uint64_t seed = 0;
+};
+
 // Sends the payloads to 127.0.0.1:port over and over until destroyed, about 7,000 a second
 // (a Pandar64 sends 6,000): slow enough for any receive buffer. kWhenBound: only from when
 // a socket is bound to the port, so the receiver gets the recording from its first packet.
 class LoopingSender {
  public:
   LoopingSender(std::uint16_t port, std::vector<Payload> payloads,
-                SendStart start = SendStart::kNow)
-      : payloads_(std::move(payloads)), thread_([this, port, start] { Run(port, start); }) {}
+                SendStart start = SendStart::kNow, SendFaults faults = {})
+      : payloads_(std::move(payloads)),
+        faults_(faults),
+        thread_([this, port, start] { Run(port, start); }) {}
   ~LoopingSender() {
     stop_ = true;
     thread_.join();
@@ -89,15 +107,25 @@ class LoopingSender {
     to.sin_family = AF_INET;
     to.sin_port = htons(port);
     to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    std::mt19937_64 rng(faults_.seed);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::size_t sent = 0;
     for (size_t i = 0; !stop_ && !payloads_.empty(); i = (i + 1) % payloads_.size()) {
-      sendto(fd, payloads_[i].data(), payloads_[i].size(), 0,
-             reinterpret_cast<const sockaddr*>(&to), sizeof(to));
+      if (faults_.stop_after && sent >= *faults_.stop_after) break;
+      ++sent;
+      const Payload& p = payloads_[i];
+      if (unit(rng) >= faults_.lose) {
+        const std::size_t size =
+            unit(rng) < faults_.cut ? static_cast<std::size_t>(unit(rng) * p.size()) : p.size();
+        sendto(fd, p.data(), size, 0, reinterpret_cast<const sockaddr*>(&to), sizeof(to));
+      }
       std::this_thread::sleep_for(std::chrono::microseconds(100));
     }
     close(fd);
   }
 
   const std::vector<Payload> payloads_;
+  const SendFaults faults_;
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };

@@ -205,9 +205,10 @@ TEST_F(StationCoreLiveTest, LiveCycleEqualsTheOfflineCalibrationOfItsRecording) 
 
   // Sending starts once the cycle has bound its socket, so the first rotation it completes is
   // the recording's first, not one spliced across the loop.
-  LoopingSender sender(
-      port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
-      testing_daemon::SendStart::kWhenBound);
+  absl::StatusOr<std::vector<testing_daemon::Payload>> packets =
+      testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string());
+  ASSERT_TRUE(packets.ok()) << packets.status();
+  LoopingSender sender(port_, *std::move(packets), testing_daemon::SendStart::kWhenBound);
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok()) << id.status();
   const std::vector<std::string> events = Events(*core, *id);
@@ -317,9 +318,10 @@ TEST_F(StationCoreLiveTest, CalibrationPastItsDeadlineEndsTheCycleInError) {
   config_.calibrate_deadline = std::chrono::milliseconds(1);
   std::unique_ptr<StationCore> core = Core();
   ASSERT_NE(core, nullptr);
-  LoopingSender sender(
-      port_, testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string()),
-      testing_daemon::SendStart::kWhenBound);
+  absl::StatusOr<std::vector<testing_daemon::Payload>> packets =
+      testing_daemon::PcapPayloads((dir_ / "sim/roof_lidar/packets.pcap").string());
+  ASSERT_TRUE(packets.ok()) << packets.status();
+  LoopingSender sender(port_, *std::move(packets), testing_daemon::SendStart::kWhenBound);
   absl::StatusOr<int64_t> id = core->StartCycle(Request());
   ASSERT_TRUE(id.ok());
   core->WaitIdle();

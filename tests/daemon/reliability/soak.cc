@@ -49,6 +49,7 @@
 #include "daemon/core/station_core.h"
 #include "station/capture/capture.h"
 #include "tests/daemon/reliability/reliability_support.h"
+#include "tests/daemon/reliability/soak_live.h"
 
 namespace linecal::reliability {
 namespace {
@@ -77,6 +78,8 @@ struct Soak {
   std::vector<std::int64_t> started;  // every id StartCycle returned
   std::vector<std::string> changed;   // capture files a fault changed (relative)
   std::vector<Clock::duration> cycle_times;
+  LiveRig live;                         // the car's LiDARs and radars on live sources
+  std::optional<LiveCycle> live_clean;  // the first clean live cycle: the live faults' reference
 };
 
 absl::Status Violation(const std::string& what) { return absl::InternalError(what); }
@@ -736,6 +739,151 @@ absl::StatusOr<std::string> DescriptorsExhausted(Soak& s) {
   return absl::StrCat(outcome, "; the next cycle as cycle 0");
 }
 
+// ---- Live sources (soak_live.h) ----
+
+// The live core's request: the soak's, for the car of its LiDARs and radars.
+CycleRequest LiveRequest(const Soak& s) {
+  CycleRequest r = s.request;
+  r.car_model_id = LiveRig::kCarId;
+  return r;
+}
+
+// The reference of every undisturbed live sensor: the first clean live cycle, made on first use
+// and required to end with every sensor acquired (its verdict may be an error of the
+// calibration, as cycle 0's may: the soak's car is a random one).
+absl::StatusOr<const LiveCycle*> LiveReference(Soak& s) {
+  if (s.live_clean) return &*s.live_clean;
+  absl::StatusOr<LiveCycle> c = s.live.Run(LiveRequest(s), {});
+  if (!c.ok()) return c.status();
+  if (absl::Status st = ExpectEnded(c->stored); !st.ok()) return st;
+  for (const StoredSensorResult& r : c->stored.sensors) {
+    if (r.reason.rfind("acquisition_failed", 0) == 0) {
+      return Violation(absl::StrCat("clean live cycle: ", r.sensor, " '", r.reason, "'"));
+    }
+  }
+  s.live_clean = *std::move(c);
+  return &*s.live_clean;
+}
+
+double ToSeconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+// The live cycle ended done within the acquisition deadline and twice the clean live cycle,
+// every sensor but `faulted` as in the clean live cycle, `faulted` with a verdict, or an error
+// with a reason that the cycle's reason carries. Returns `faulted`'s outcome for the summary:
+// its verdict, " as clean" when its result is the clean one's, and the reason's code
+// ("error acquisition_failed"); with `faulted` empty, every sensor as in the clean live cycle.
+absl::StatusOr<std::string> ExpectLiveFaulted(const LiveCycle& clean, const LiveCycle& c,
+                                              const std::string& faulted) {
+  const StoredCycle& got = c.stored;
+  if (absl::Status st = ExpectEnded(got); !st.ok()) return st;
+  if (got.state != CycleState::kDone || got.sensors.size() != clean.stored.sensors.size()) {
+    return Violation(absl::StrCat("live cycle: ", CycleStateName(got.state), " with ",
+                                  got.sensors.size(), " sensors (", got.reason, ")"));
+  }
+  const Clock::duration bound = 2 * clean.wall + LiveRig::kAcquireDeadline;
+  if (c.wall > bound) {
+    return Violation(absl::StrFormat("live cycle took %.1f s, over %.1f s", ToSeconds(c.wall),
+                                     ToSeconds(bound)));
+  }
+  std::string outcome;
+  for (size_t i = 0; i < got.sensors.size(); ++i) {
+    const StoredSensorResult& r = got.sensors[i];
+    if (r.sensor != faulted) {
+      if (!(r == clean.stored.sensors[i]))
+        return Violation(absl::StrCat("live cycle: ", r.sensor, " differs from the clean one"));
+      continue;
+    }
+    outcome = VerdictName(r.verdict);
+    if (r == clean.stored.sensors[i]) outcome += " as clean";
+    if (r.verdict != Verdict::kError) continue;
+    if (r.reason.empty() || got.reason.find(faulted + ":") == std::string::npos) {
+      return Violation(absl::StrCat("live cycle: ", faulted, " error '", r.reason,
+                                    "', cycle reason '", got.reason, "'"));
+    }
+    outcome += " " + r.reason.substr(0, r.reason.find(':'));
+  }
+  if (faulted.empty()) return std::string("done as the clean live cycle");
+  if (outcome.empty()) return Violation(absl::StrCat("live cycle: no result for ", faulted));
+  return outcome;
+}
+
+// One of the car's LiDARs, its packets sent with `send`; the cycle must end as
+// ExpectLiveFaulted says.
+absl::StatusOr<std::string> LiveLidarFault(Soak& s, const testing_daemon::SendFaults& send,
+                                           std::string* lidar) {
+  absl::StatusOr<const LiveCycle*> clean = LiveReference(s);
+  if (!clean.ok()) return clean.status();
+  *lidar = s.live.lidars()[Pick(s, s.live.lidars().size())];
+  absl::StatusOr<LiveCycle> c = s.live.Run(LiveRequest(s), {*lidar, send, ""});
+  if (!c.ok()) return c.status();
+  return ExpectLiveFaulted(**clean, *c, *lidar);
+}
+
+absl::StatusOr<std::string> LiveClean(Soak& s) {
+  if (s.live.empty()) return std::string("skipped: the car has no LiDAR or radar");
+  absl::StatusOr<const LiveCycle*> clean = LiveReference(s);
+  if (!clean.ok()) return clean.status();
+  absl::StatusOr<LiveCycle> c = s.live.Run(LiveRequest(s), {});
+  if (!c.ok()) return c.status();
+  if (c->stored.verdict != (*clean)->stored.verdict || c->stored.reason != (*clean)->stored.reason)
+    return Violation(absl::StrCat("live cycle: '", c->stored.reason, "', the clean one had '",
+                                  (*clean)->stored.reason, "'"));
+  return ExpectLiveFaulted(**clean, *c, "");
+}
+
+absl::StatusOr<std::string> LidarPacketLoss(Soak& s) {
+  if (s.live.lidars().empty()) return std::string("skipped: the car has no LiDAR");
+  testing_daemon::SendFaults send;
+  send.lose = Uniform(s, 0.02, 0.5);
+  send.seed = s.rng();
+  std::string lidar;
+  return LiveLidarFault(s, send, &lidar);
+}
+
+absl::StatusOr<std::string> LidarPacketsCut(Soak& s) {
+  if (s.live.lidars().empty()) return std::string("skipped: the car has no LiDAR");
+  testing_daemon::SendFaults send;
+  send.cut = Uniform(s, 0.01, 0.3);
+  send.seed = s.rng();
+  std::string lidar;
+  return LiveLidarFault(s, send, &lidar);
+}
+
+// The LiDAR sends nothing (a third of the draws) or falls silent after up to 1.5 recordings'
+// worth of packets; silent from the start, it must be given up at the deadline by name.
+absl::StatusOr<std::string> LidarVanishes(Soak& s) {
+  if (s.live.lidars().empty()) return std::string("skipped: the car has no LiDAR");
+  const std::string& first = s.live.lidars().front();
+  testing_daemon::SendFaults send;
+  send.stop_after = Pick(s, 3) == 0 ? 0 : 1 + Pick(s, s.live.PacketCount(first) * 3 / 2);
+  std::string lidar;
+  absl::StatusOr<std::string> outcome = LiveLidarFault(s, send, &lidar);
+  if (!outcome.ok() || *send.stop_after != 0) return outcome;
+  if (*outcome != "error acquisition_failed")
+    return Violation(absl::StrCat("a LiDAR that never sent: ", lidar, " ", *outcome));
+  return absl::StrCat(*outcome, " (never sent)");
+}
+
+// A radar's bus silent: its candump log empty. It must be that radar's acquisition_failed,
+// saying the radar was silent, the other sensors as in the clean live cycle.
+absl::StatusOr<std::string> RadarSilent(Soak& s) {
+  if (s.live.radars().empty()) return std::string("skipped: the car has no radar");
+  absl::StatusOr<const LiveCycle*> clean = LiveReference(s);
+  if (!clean.ok()) return clean.status();
+  const std::string radar = s.live.radars()[Pick(s, s.live.radars().size())];
+  absl::StatusOr<LiveCycle> c = s.live.Run(LiveRequest(s), {"", {}, radar});
+  if (!c.ok()) return c.status();
+  absl::StatusOr<std::string> outcome = ExpectLiveFaulted(**clean, *c, radar);
+  if (!outcome.ok()) return outcome;
+  for (const StoredSensorResult& r : c->stored.sensors) {
+    if (r.sensor == radar && r.message.find("the radar was silent") == std::string::npos)
+      return Violation(absl::StrCat("silent radar ", radar, ": '", r.message, "'"));
+  }
+  if (*outcome != "error acquisition_failed")
+    return Violation(absl::StrCat("silent radar ", radar, ": ", *outcome));
+  return *outcome;
+}
+
 std::vector<Fault> Faults() {
   return {
       {"clean", 30, "no fault: the result must equal cycle 0's", Clean},
@@ -770,6 +918,13 @@ std::vector<Fault> Faults() {
       {"descriptors_exhausted", 2,
        "RLIMIT_NOFILE lowered to the descriptors open during a cycle, restored; then a cycle",
        DescriptorsExhausted},
+      {"live_clean", 3, "live sources (LiDARs over loopback UDP, radars from CAN logs), no fault",
+       LiveClean},
+      {"lidar_packet_loss", 4, "live: 2-50% of one LiDAR's UDP packets lost", LidarPacketLoss},
+      {"lidar_packets_cut", 3, "live: 1-30% of one LiDAR's UDP packets cut short", LidarPacketsCut},
+      {"lidar_vanishes", 3, "live: one LiDAR silent from the start or after some packets",
+       LidarVanishes},
+      {"radar_silent", 3, "live: one radar's CAN bus silent", RadarSilent},
   };
 }
 
@@ -836,6 +991,10 @@ absl::StatusOr<std::unique_ptr<StationCore>> SetUpSoak(const Workspace& workspac
   s->core = core->get();
   s->request.vin = kVin;
   s->request.car_model_id = kCarId;
+  absl::StatusOr<LiveRig> live =
+      LiveRig::Create(dir, s->pristine, s->layout, workspace.car_path, config);
+  if (!live.ok()) return live.status();
+  s->live = *std::move(live);
   return core;
 }
 
