@@ -934,7 +934,7 @@ double Mb(std::int64_t kb) { return kb / 1024.0; }
 // each a read of /proc/self/status and mallinfo2.
 constexpr int kMemorySampleEvery = 10;
 // A line through fewer samples says nothing: a run shorter than the warm-up plus 100 cycles
-// is not judged (the smoke's 14 cycles).
+// is not judged (the smoke's 20 cycles).
 constexpr size_t kMinMemorySamples = 10;
 
 // Bytes malloc has handed out and not got back, every arena (glibc's mallinfo2).
