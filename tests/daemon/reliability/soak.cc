@@ -831,22 +831,21 @@ absl::StatusOr<std::string> LiveClean(Soak& s) {
   return ExpectLiveFaulted(**clean, *c, "");
 }
 
-absl::StatusOr<std::string> LidarPacketLoss(Soak& s) {
+// One LiDAR's packets each lost (or cut short) with a probability drawn in [lo, hi].
+absl::StatusOr<std::string> LidarPacketsDamaged(Soak& s, double testing_daemon::SendFaults::*rate,
+                                                double lo, double hi) {
   if (s.live.lidars().empty()) return std::string("skipped: the car has no LiDAR");
   testing_daemon::SendFaults send;
-  send.lose = Uniform(s, 0.02, 0.5);
+  send.*rate = Uniform(s, lo, hi);
   send.seed = s.rng();
   std::string lidar;
   return LiveLidarFault(s, send, &lidar);
 }
-
+absl::StatusOr<std::string> LidarPacketLoss(Soak& s) {
+  return LidarPacketsDamaged(s, &testing_daemon::SendFaults::lose, 0.02, 0.5);
+}
 absl::StatusOr<std::string> LidarPacketsCut(Soak& s) {
-  if (s.live.lidars().empty()) return std::string("skipped: the car has no LiDAR");
-  testing_daemon::SendFaults send;
-  send.cut = Uniform(s, 0.01, 0.3);
-  send.seed = s.rng();
-  std::string lidar;
-  return LiveLidarFault(s, send, &lidar);
+  return LidarPacketsDamaged(s, &testing_daemon::SendFaults::cut, 0.01, 0.3);
 }
 
 // The LiDAR sends nothing (a third of the draws) or falls silent after up to 1.5 recordings'
