@@ -155,7 +155,7 @@ Eigen::Matrix2d Rotation2(double theta) { return Eigen::Rotation2Dd(theta).toRot
 
 // The signed distance of m_board to the nearest boundary of the model (a hole circle or a
 // side of the page, each taken as a whole line), its outward unit gradient, and which it is
-// (a hole index, or -1 for the page).
+// (a hole index, or -1 - s for the page's side s: +x, -x, +y, -y).
 double NearestBoundary(const std::vector<Circle>& holes, const Eigen::Vector2d& half_page,
                        const Eigen::Vector2d& m_board, Eigen::Vector2d* gradient, int* which) {
   const std::array<double, 4> sides = {m_board.x() - half_page.x(), -half_page.x() - m_board.x(),
@@ -167,7 +167,7 @@ double NearestBoundary(const std::vector<Circle>& holes, const Eigen::Vector2d& 
     if (std::abs(sides[s]) < std::abs(best)) {
       best = sides[s];
       *gradient = normals[s];
-      *which = -1;
+      *which = -1 - s;
     }
   }
   for (std::size_t i = 0; i < holes.size(); ++i) {
@@ -267,8 +267,8 @@ PlaneFit FitPlane(const std::vector<RoiPoint>& points, const Eigen::Vector3d& n0
   return fit;
 }
 
-// How many frames' worth of independent errors each frame's edge excess (beyond the half step,
-// and the floor) counts for, per ring: like the quantisation it is a function of where the
+// How many frames' worth of independent errors each frame's edge floor and the profiles
+// (WidenByProfiles) count for, per ring: like the quantisation they are a function of where the
 // boundary falls on the ring's firing grid, so the same boundary in two frames whose grids lie
 // a phase difference d (in steps) apart is taken as correlated by the sawtooth's
 // rho(d) = 1 - 6 frac(d) (1 - frac(d)) (1 at d = 0, 0 on average over a uniform d, -1/2 at
@@ -429,12 +429,15 @@ Eigen::Matrix3d QuantisationB(const std::vector<Edge>& edges, const std::vector<
 // the holes left and right of the centre sets. The profile of the edges' whitened cost
 // (each edge's quantisation variance, truncated at `gate_m`) along `direction` in
 // (x, y, theta) — a unit of the component profiled, the others moving with it — gives the
-// honest spread: the farthest move within `reach` whose cost is within 1 of the least.
+// honest spread: the farthest move within `reach` whose cost is within `repeats` of the
+// least (the cost takes every edge as an independent error; `repeats` is FrameRepeats, the
+// frames' worth each frame's edges count for: 1 for one rotation or a free-running motor's,
+// N for N rotations that fired at the same azimuths and so repeat one rotation's errors).
 // Returns its square (of `direction`'s unit).
 double ProfileVariance(const std::vector<Edge>& edges, const std::vector<double>& weights,
                        const std::vector<Circle>& holes, const Eigen::Vector2d& half_page,
                        const Eigen::Vector3d& pose, double gate_m, const Eigen::Vector3d& direction,
-                       double step, double reach) {
+                       double step, double reach, double repeats) {
   const int n = static_cast<int>(reach / step);
   std::vector<double> cost(2 * n + 1, 0.0);
   for (int i = -n; i <= n; ++i) {
@@ -455,7 +458,7 @@ double ProfileVariance(const std::vector<Edge>& edges, const std::vector<double>
   const double least = *std::min_element(cost.begin(), cost.end());
   double farthest = 0.0;
   for (int i = -n; i <= n; ++i)
-    if (cost[i + n] <= least + 1.0) farthest = std::max(farthest, std::abs(i * step));
+    if (cost[i + n] <= least + repeats) farthest = std::max(farthest, std::abs(i * step));
   return farthest * farthest;
 }
 
@@ -793,8 +796,13 @@ struct EdgeFit {
   std::vector<int> which;      // per edge: the boundary it fits (NearestBoundary's `which`)
   std::vector<double> weight;  // per edge: its Tukey weight, 0 for an outlier
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-  // Sum of w^2 J J^T v over the edges, v the edge's quantisation variance along its normal.
-  Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
+  // Sum of w^2 J J^T kEdgeFloorVarM2 over the edges: the points' rounding.
+  Eigen::Matrix3d B_floor = Eigen::Matrix3d::Zero();
+  // Per edge: w J times its residual beyond the half step (signed as the residual), and which
+  // crossing of its ring it is (2 * `which`, + 1 when the ring's step runs along the boundary's
+  // gradient): see ExcessB.
+  std::vector<Eigen::Vector3d> excess_wJ;
+  std::vector<int> crossing;
   // Sum of w J (d r / d w): how the plane's error (w = n / d) moves the edges, which the
   // rays put where they meet the fitted plane, and with them the in-plane pose.
   Eigen::Matrix3d K = Eigen::Matrix3d::Zero();
@@ -825,11 +833,13 @@ void AccumulateEdges(const std::vector<Edge>& edges, const HoleModel& model,
   Eigen::Matrix2d dRt;
   dRt << -std::sin(pose.z()), std::cos(pose.z()), -std::cos(pose.z()), -std::sin(pose.z());
   fit->H.setZero();
-  fit->B.setZero();
+  fit->B_floor.setZero();
   fit->K.setZero();
   fit->wJa.assign(edges.size(), Eigen::Vector3d::Zero());
   fit->true_steps.assign(edges.size(), 0.0);
   fit->steps_dpose.assign(edges.size(), Eigen::Vector3d::Zero());
+  fit->excess_wJ.assign(edges.size(), Eigen::Vector3d::Zero());
+  fit->crossing.assign(edges.size(), 0);
   sums->g = Eigen::Vector3d::Zero();
   sums->abs_r.clear();
   sums->sum_r2 = 0.0;
@@ -858,10 +868,12 @@ void AccumulateEdges(const std::vector<Edge>& edges, const HoleModel& model,
     fit->H += weight * J * J.transpose();
     sums->g += weight * J * r;
     // Beyond the quantisation (below), what the edge's residual shows past the half step
-    // (a chord grazing a hole, where the model is far from linear), and a floor. Not
-    // r^2 - step^2 / 12: a quantisation error exceeds its RMS 42% of the time, and that
-    // would count it twice.
-    fit->B += weight * weight * (excess * excess + kEdgeFloorVarM2) * J * J.transpose();
+    // (a chord grazing a hole, where the model is far from linear; the stand's post), and a
+    // floor. Not r^2 - step^2 / 12: a quantisation error exceeds its RMS 42% of the time, and
+    // that would count it twice.
+    fit->B_floor += weight * weight * kEdgeFloorVarM2 * J * J.transpose();
+    fit->excess_wJ[k] = weight * std::copysign(excess, r) * J;
+    fit->crossing[k] = 2 * fit->which[k] + (along > 0.0 ? 1 : 0);
     fit->wJa[k] = weight * along * J;
     // How the boundary's crossing of the ring (in steps) moves with the pose.
     fit->steps_dpose[k] = std::abs(along) > kMinAlongM
@@ -1044,6 +1056,30 @@ Rigid3d BoardPose(const PlaneFit& plane, const PlaneFrame& frame, const Eigen::V
   return T_lidar_plane * T_plane_board;
 }
 
+// The edges' residuals beyond their half step as the sandwich's middle: what the quantisation
+// does not explain is a misfit of the model (the stand's post seen behind the page's lower edge
+// continues a ring's run of points; a ring grazing a hole or running along the page's top or
+// bottom leaves it through a curve), and the same ring meets it again in every rotation. So the
+// excess of one crossing (ring, boundary, direction: `crossing`) is summed over the rotations
+// before it is squared: N^2 times one rotation's for N rotations showing one excess, whatever
+// their phases, as the pose error it causes does not average down. Summed per edge and
+// scaled by FrameRepeats (about 1 for a free-running motor), it had left the VLP-16 boards' y
+// 1.3 times its sigma over 10 free-running rotations at 2.5-4 m, one board's post alone
+// 2.9 sigma; phase-locked rotations and single ones get what they had. Cost: O(edges log
+// edges).
+Eigen::Matrix3d ExcessB(const std::vector<Edge>& edges, const std::vector<int>& group_ring,
+                        const EdgeFit& fit) {
+  std::map<std::pair<int, int>, Eigen::Vector3d> by_crossing;
+  for (std::size_t k = 0; k < edges.size(); ++k) {
+    if (fit.excess_wJ[k].isZero()) continue;
+    const std::pair<int, int> key(group_ring[edges[k].group], fit.crossing[k]);
+    by_crossing.try_emplace(key, Eigen::Vector3d::Zero()).first->second += fit.excess_wJ[k];
+  }
+  Eigen::Matrix3d B = Eigen::Matrix3d::Zero();
+  for (const auto& [key, sum] : by_crossing) B += sum * sum.transpose();
+  return B;
+}
+
 // Covariance of the pose, board frame, (theta_x, theta_y, theta_z, t_x, t_y, t_z). Needs the
 // last pass's state and the pose it gives (T_lidar_board). Assigned in place, not returned:
 // Eigen evaluates a returned sum of products in another order, which moved the last bits.
@@ -1052,25 +1088,27 @@ Rigid3d BoardPose(const PlaneFit& plane, const PlaneFrame& frame, const Eigen::V
 // that crosses a hole near its centre hardly places the board's y, one near its top or
 // bottom does. Frames that fired at the same azimuths repeat those errors exactly, so their
 // edges count once, not once per frame; frames at other phases share them partly
-// (QuantisationB, over every pair of edges of all frames).
+// (QuantisationB, over every pair of edges of all frames). The edges' misfit beyond the
+// quantisation repeats in every frame (ExcessB); `repeats` is FrameRepeats.
 // The plane's error moves the in-plane pose too: by -H^-1 K dw (the rays' meeting points
 // slide across the plane as it moves, by tan(incidence) of its shift).
-void PoseCovariance(const BoardFitState& state, const Rigid3d& T_lidar_board,
+void PoseCovariance(const BoardFitState& state, const Rigid3d& T_lidar_board, double repeats,
                     Eigen::Matrix<double, 6, 6>* pose_covariance) {
   const EdgeFit& fit = state.fit;
   const RingEdges& rings = state.rings;
   const Eigen::Matrix3d H_inv = fit.H.inverse();
-  const double repeats = FrameRepeats(rings.group_ring, rings.group_frame, rings.group_phase);
+  const Eigen::Matrix3d B_misfit =
+      ExcessB(rings.edges, rings.group_ring, fit) + fit.B_floor * repeats;
   // The quantisation's correlations need the boundaries' separations, which the pose places
   // only to its own uncertainty: first without it (and, as a first estimate, with the pairs
   // of other rotations taken as FrameRepeats says), then with the covariance that gives.
   const Eigen::Matrix3d B_first =
       QuantisationB(rings.edges, rings.group_frame, true, fit.wJa, fit.true_steps, fit.steps_dpose,
                     Eigen::Matrix3d::Zero());
-  const Eigen::Matrix3d cov_first = H_inv * (fit.B + B_first) * H_inv * repeats;
+  const Eigen::Matrix3d cov_first = H_inv * (B_misfit + B_first * repeats) * H_inv;
   const Eigen::Matrix3d B_quantisation = QuantisationB(
       rings.edges, rings.group_frame, false, fit.wJa, fit.true_steps, fit.steps_dpose, cov_first);
-  const Eigen::Matrix3d cov_quantisation = H_inv * (fit.B * repeats + B_quantisation) * H_inv;
+  const Eigen::Matrix3d cov_quantisation = H_inv * (B_misfit + B_quantisation) * H_inv;
   const Eigen::Matrix3d dpose_dw = -H_inv * fit.K;
   Eigen::Matrix3d A = Eigen::Matrix3d::Zero();  // (dx, dy, dtheta) -> (t_x, t_y, theta_z)
   A.topLeftCorner<2, 2>() = Rotation2(-fit.pose.z());
@@ -1097,17 +1135,23 @@ void PoseCovariance(const BoardFitState& state, const Rigid3d& T_lidar_board,
 }
 
 // With kFewRingsThroughHoles or fewer rings through the holes: widens the board's y and
-// rotation variances in *pose_covariance to their profiles' (ProfileVariance). Needs the edges
-// and their fit.
+// rotation variances in *pose_covariance to their profiles' (ProfileVariance). Needs the edges,
+// their fit and FrameRepeats. The profile's cost takes every edge as an independent error, so
+// N rotations that fired at the same azimuths (their edges the same N times over) made it N
+// times as steep and the profile's variance N times too small (less where it reached the
+// hole's radius), though they say no more than one: the VLP-16's theta_z came out 15% too
+// small on phase-locked pairs of rotations (error / sigma 1.15 over 1,000 boards, 1.02 with
+// one rotation). The profile's threshold is therefore FrameRepeats instead of 1: N for those,
+// about 1 for a free-running motor, whose rotations' errors do average down.
 void WidenByProfiles(const std::vector<Edge>& edges, const EdgeFit& fit, const HoleModel& model,
-                     Eigen::Matrix<double, 6, 6>* pose_covariance) {
+                     double repeats, Eigen::Matrix<double, 6, 6>* pose_covariance) {
   const Eigen::Vector3d& pose = fit.pose;
   double reach = 0.0;
   for (const Circle& c : model.holes) reach = std::max(reach, c.radius_m);
   // y along the board's own y, x and rotation held: nothing else moves with it by symmetry.
   const Eigen::Vector3d along_y(-std::sin(pose.z()), std::cos(pose.z()), 0.0);
   const double y_profile = ProfileVariance(edges, fit.weight, model.holes, model.half_page, pose,
-                                           fit.last_gate, along_y, 1e-3, reach);
+                                           fit.last_gate, along_y, 1e-3, reach, repeats);
   (*pose_covariance)(4, 4) = std::max((*pose_covariance)(4, 4), y_profile);
   // The rotation with x and y as the fit moves them with it (H^-1's column), reaching as far
   // as turns the outer holes by a radius.
@@ -1117,7 +1161,7 @@ void WidenByProfiles(const std::vector<Edge>& edges, const EdgeFit& fit, const H
   for (const Circle& c : model.holes) outer = std::max(outer, c.centre_board.norm());
   const double theta_profile =
       ProfileVariance(edges, fit.weight, model.holes, model.half_page, pose, fit.last_gate,
-                      with_theta, 5e-4, reach / outer);
+                      with_theta, 5e-4, reach / outer, repeats);
   (*pose_covariance)(2, 2) = std::max((*pose_covariance)(2, 2), theta_profile);
 }
 }  // namespace
@@ -1192,9 +1236,11 @@ RoundHoleCloudDetection DetectRoundHoleBoardInCloud(
     return out;
   }
   out.T_lidar_board = BoardPose(state.plane, state.frame, fit.pose);
-  PoseCovariance(state, out.T_lidar_board, &out.pose_covariance);
+  const double repeats =
+      FrameRepeats(state.rings.group_ring, state.rings.group_frame, state.rings.group_phase);
+  PoseCovariance(state, out.T_lidar_board, repeats, &out.pose_covariance);
   if (out.rings_through_holes <= kFewRingsThroughHoles)
-    WidenByProfiles(state.rings.edges, fit, model, &out.pose_covariance);
+    WidenByProfiles(state.rings.edges, fit, model, repeats, &out.pose_covariance);
   const Eigen::Matrix2d cov_in = out.pose_covariance.block<2, 2>(3, 3);
   out.in_plane_sigma_m = Eigen::Vector2d(std::sqrt(cov_in(0, 0)), std::sqrt(cov_in(1, 1)));
   for (std::size_t i = 0; i < model.holes.size(); ++i) {

@@ -107,8 +107,9 @@ struct RoundHoleCloudDetection {
   // Covariance of the pose error, in the board frame: T_true = T_lidar_board * (R(theta), t)
   // for small (theta_x, theta_y, theta_z [rad], t_x, t_y, t_z [m]), in that order. In-plane
   // (t_x, t_y, theta_z) from the edge fit's Jacobian with each edge uniformly within half an
-  // azimuth step along its ring (frames that fired at the same azimuths share those errors);
-  // out of the plane (theta_x, theta_y, t_z) from the plane fit's range residuals. When found.
+  // azimuth step along its ring (frames that fired at the same azimuths share those errors),
+  // and what an edge shows beyond that repeated in every frame; out of the plane (theta_x,
+  // theta_y, t_z) from the plane fit's range residuals. When found.
   Eigen::Matrix<double, 6, 6> pose_covariance = Eigen::Matrix<double, 6, 6>::Zero();
   // 1-sigma of the in-plane position (x, y of the board frame), metres: of pose_covariance.
   Eigen::Vector2d in_plane_sigma_m = Eigen::Vector2d::Zero();

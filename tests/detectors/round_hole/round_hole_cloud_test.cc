@@ -8,8 +8,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -215,11 +217,14 @@ namespace {
 // the RMS of error / reported 1-sigma should be 1 (docs/acceptance.md: within +-20%). With 40
 // runs one component's RMS scatters by about 11% (1-sigma), so position and tilt components
 // are held to 0.75..1.25 and the six pooled (240 values, 4.6%) to 0.8..1.2. The in-plane
-// rotation theta_z does not meet the bar: over 150 runs its ratio is 1.31 for the VLP-16
-// (under-reported) and 0.73 for the Pandar64 (over-reported), see docs/lidar-radar.md; it is
-// held to 0.6..1.5 here so that a regression shows.
+// rotation theta_z was held to 0.6..1.5 while it missed the bar (over 150 runs 1.31, then 1.18,
+// for the VLP-16, 0.73, then 0.86, for the Pandar64); since the profile variance counts
+// phase-locked rotations once, the VLP-16's is 1.06 over 150 runs (1.03 over 1,000), and it is
+// held to the same bar as the others (docs/lidar-radar.md "The detector's covariance").
 TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
-  constexpr int kRuns = 40;
+  // LINECAL_ROUND_HOLE_MC_RUNS=150 gives docs/lidar-radar.md's figures (the same boards first).
+  const char* runs_env = std::getenv("LINECAL_ROUND_HOLE_MC_RUNS");
+  const int kRuns = runs_env != nullptr ? std::max(1, std::atoi(runs_env)) : 40;
   for (const char* sensor : {"bumper_lidar", "roof_lidar"}) {
     const LidarBeamTable beams = Beams(sensor);
     std::mt19937_64 rng(17);
@@ -251,13 +256,72 @@ TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
         "t_x %.2f t_y %.2f t_z %.2f, pooled %.2f\n",
         sensor, runs, ratio(0), ratio(1), ratio(2), ratio(3), ratio(4), ratio(5), pooled);
     for (int k = 0; k < 6; ++k) {
-      const bool theta_z = k == 2;
-      EXPECT_GT(ratio(k), theta_z ? 0.6 : 0.75) << sensor << " component " << k;
-      EXPECT_LT(ratio(k), theta_z ? 1.5 : 1.25) << sensor << " component " << k;
+      EXPECT_GT(ratio(k), 0.75) << sensor << " component " << k;
+      EXPECT_LT(ratio(k), 1.25) << sensor << " component " << k;
     }
     EXPECT_GT(pooled, 0.8) << sensor;
     EXPECT_LT(pooled, 1.2) << sensor;
   }
+}
+
+// Rotations that fired at the same azimuths repeat one rotation's quantisation errors: the same
+// rotation twice says no more about the board's in-plane pose than once. The profile variance
+// of a board resting on four rings or fewer took every edge as an independent error and halved
+// (VLP-16 theta_z error / sigma 1.15 over 1,000 boards of two phase-locked rotations, 1.02 of
+// one; docs/lidar-radar.md "The detector's covariance"). The plane's fit does take the doubled
+// points at their word (its covariance halves, and with it its share of the in-plane one).
+TEST(RoundHoleCloudTest, ARepeatedRotationAddsNoInPlaneInformation) {
+  const LidarBeamTable beams = Beams("bumper_lidar");
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int profiled = 0;
+  for (int run = 0; run < 12; ++run) {
+    const double distance = 5.5 + u(rng), lift = 0.15 * u(rng), heading = 25.0 * u(rng);
+    StationLayout layout;
+    layout.name = "repeated";
+    layout.boards.push_back(RoundHoleAt(FacingPose(distance, 30.0 * u(rng), heading, lift)));
+    Scene scene = SimulateLayout(beams, layout, 0.02, 1, 100 + run);
+    const RoundHoleCloudDetection once = Detect(scene, Prior(scene.T_lidar_board, run));
+    scene.frames.push_back(scene.frames.front());
+    const RoundHoleCloudDetection twice = Detect(scene, Prior(scene.T_lidar_board, run));
+    ASSERT_TRUE(once.found && twice.found) << run;
+    profiled += once.rings_through_holes <= 4 ? 1 : 0;
+    for (int k : {2, 4}) {  // theta_z, t_y: the components the profiles widen
+      const double ratio = twice.pose_covariance(k, k) / once.pose_covariance(k, k);
+      std::printf("run %2d, %d rings through holes: component %d variance twice / once %.3f\n", run,
+                  once.rings_through_holes, k, ratio);
+      EXPECT_GT(ratio, 0.8) << "run " << run << " component " << k;
+      EXPECT_LT(ratio, 1.05) << "run " << run << " component " << k;
+    }
+  }
+  EXPECT_GE(profiled, 6);  // the case at stake: boards the profiles widen
+}
+
+// The stand's post, seen behind the page's lower edge by a ring that also clips the page's
+// lower corner, continues that ring's run of points with edges the model does not explain,
+// the same in every rotation: their pull on the board's y does not average down over a
+// free-running motor's rotations as the quantisation does. Their excess summed per rotation
+// (and scaled by the rotations' correlation, about 1 / N here) gave RMS t_y error / sigma 2.9
+// over these six scans of 10 rotations; summed per crossing across rotations, 1.5.
+TEST(RoundHoleCloudTest, TheStandsPullRepeatsInEveryRotation) {
+  const LidarBeamTable beams = Beams("bumper_lidar");
+  StationLayout layout;
+  layout.name = "post";
+  layout.boards.push_back(RoundHoleAt(FacingPose(2.887, 18.77, -24.38, 0.099)));
+  double sum_z2 = 0.0;
+  constexpr int kScans = 6;
+  for (int scan = 0; scan < kScans; ++scan) {
+    const Scene scene = SimulateLayout(beams, layout, 0.02, 10, 125 + 100000 * scan, true);
+    const RoundHoleCloudDetection d = Detect(scene, Prior(scene.T_lidar_board, 25));
+    ASSERT_TRUE(d.found) << scan;
+    const double ty = (d.T_lidar_board.Inverse() * scene.T_lidar_board).translation().y();
+    const double sigma = std::sqrt(d.pose_covariance(4, 4));
+    std::printf("scan %d: t_y error %.2f mm, 1-sigma %.2f mm\n", scan, 1e3 * ty, 1e3 * sigma);
+    sum_z2 += ty * ty / (sigma * sigma);
+  }
+  const double rms = std::sqrt(sum_z2 / kScans);
+  std::printf("t_y RMS error / sigma %.2f\n", rms);
+  EXPECT_LT(rms, 2.0);
 }
 
 // A free-running motor: every rotation fires at its own azimuth phase, so the frames'
@@ -266,7 +330,8 @@ TEST(RoundHoleCloudTest, ReportedCovarianceMatchesTheMonteCarloSpread) {
 // (QuantisationB). Clustering phases within 0.05 of a step counted the simulator's 20 distinct
 // phases (a centidegree apart) as repeats and the in-plane sigma came out too large: RMS
 // error / sigma of t_x, t_y, theta_z pooled was 0.66 (VLP-16) and 0.83 (Pandar64) here; 0.98
-// and 1.12 with same-frame pairs scaled by the phases' correlation; 0.98 and 1.08 now.
+// and 1.12 with same-frame pairs scaled by the phases' correlation; 0.98 and 1.08 with all
+// pairs; 0.93 and 1.06 now that the edges' excess repeats across rotations (ExcessB).
 TEST(RoundHoleCloudTest, CovarianceOfAFreeRunningMotor) {
   struct Run {
     const char* sensor;
