@@ -38,11 +38,12 @@
 //     grid's squares are not); and the lattice square in each circle's own metric (not a
 //     hexagonal or rectangular grid; hexagonal: its steps 60 degrees apart, not a square grid).
 //  5. Sub-pixel: each circle's ellipse from its edge (circle_edge_fit.h), seeded by its blob;
-//     its centre then from the grey levels (GreyCentroid: the centroid of each pixel's share
-//     of print over the ellipse and a ring of page around it, which a point-symmetric blur
-//     leaves at the ellipse's centre), where the gap to its neighbours leaves room for the
-//     ring (OpenCV's layouts; not BoofCV's hexagonal print, 0.2 diameter apart, which keeps
-//     the edge fit's centre); the image of the circle's centre is not the ellipse's centre
+//     its centre then from the grey levels over the ellipse and a ring of page around it
+//     (ModelCentre: a blurred ellipse on a page lit by a plane, fitted by least squares; where
+//     that fails, GreyCentroid: the centroid of each pixel's share of print, which a
+//     point-symmetric blur leaves at the ellipse's centre), where the gap to its neighbours leaves
+//     room for the ring (OpenCV's layouts; not BoofCV's hexagonal print, 0.2 diameter apart, which
+//     keeps the edge fit's centre); the image of the circle's centre is not the ellipse's centre
 //     under perspective, so the ellipse is taken back to the board through the homography
 //     of its block, and the centre of that circle mapped forward (three rounds, each block's
 //     homography refitted to the corrected centres). This needs no printed diameter.
@@ -86,11 +87,19 @@ struct CircleGridOptions {
   // and the centre of its image ellipse (Method, step 5). Off: the features are the ellipse
   // centres (for comparison; biased by up to a pixel at strong perspective).
   bool correct_perspective = true;
-  // Take each centre from the grey levels inside and around its ellipse rather than from its
-  // edge points (Method, step 5; circle_edge_fit.h, GreyCentroid), where the gap to the
-  // neighbouring circles leaves room for the window. Off: the edge fit's centres (for
-  // comparison; about 3 times the noise and 20 times the error on clean renders).
-  bool grey_centroids = true;
+  // How each centre is measured (Method, step 5; circle_edge_fit.h), where the gap to the
+  // neighbouring circles leaves room for the window of page around it (else the edge fit's):
+  //  - kModelFit: a model of the window's grey levels fitted by least squares (ModelCentre:
+  //    a blurred ellipse on a page lit by a plane), falling back on the grey centroid where
+  //    the fit fails; on renders with noise 4 it is about a third closer than the grey
+  //    centroid, on clean ones a few thousandths of a pixel further (docs/circle-detector.md);
+  //    about 80 microseconds a circle of 18 px;
+  //  - kGreyCentroid: the centroid of each pixel's share of print (GreyCentroid), about 10
+  //    microseconds a circle;
+  //  - kEdgeFit: the ellipse fitted to the edge points (for comparison; about 3 times the
+  //    noise and 20 times the error on clean renders of the grey centroid).
+  enum class Centre { kEdgeFit, kGreyCentroid, kModelFit };
+  Centre centre = Centre::kModelFit;
 
   // Empty when valid, else the name of the first field out of range ("edge_rays").
   std::string_view Validate() const;
