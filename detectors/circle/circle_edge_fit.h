@@ -105,10 +105,13 @@ std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellip
 // 0.026 px; under JPEG 80 0.007 against 0.014. The model is point-symmetric about the
 // centre, as the image is, so a wrong profile (gamma, the pixels' area) does not move the
 // centre either, except through the pixel grid's sampling of the edge: on clean renders
-// (blur 0.5) 0.005 px RMS against the centroid's 0.002 px.
+// (blur 0.5) 0.005 px RMS against the centroid's 0.002 px, so the fit is left to images
+// with noise.
 //
-// nullopt (the caller keeps another centre) where GreyCentroid's window does not fit, or the
-// fit does not converge, finds no contrast of the expected polarity, a blur over half the
+// nullopt (the caller keeps another centre) where GreyCentroid's window does not fit; where
+// the page ring's grey levels scatter about their plane by under a grey level RMS (there the
+// centroid's error is the smaller: the caller takes GreyCentroid); or where the fit does not
+// converge, finds no contrast of the expected polarity, a blur over half the
 // semi-minor axis, or a centre more than a quarter of the semi-minor axis from the edge
 // fit's. Cost: 3-4 passes over the window: about 80 microseconds for a circle 18 px across,
 // 8 times GreyCentroid.

@@ -90,10 +90,10 @@ struct CircleGridOptions {
   // How each centre is measured (Method, step 5; circle_edge_fit.h), where the gap to the
   // neighbouring circles leaves room for the window of page around it (else the edge fit's):
   //  - kModelFit: a model of the window's grey levels fitted by least squares (ModelCentre:
-  //    a blurred ellipse on a page lit by a plane), falling back on the grey centroid where
-  //    the fit fails; on renders with noise 4 it is about a third closer than the grey
-  //    centroid, on clean ones a few thousandths of a pixel further (docs/circle-detector.md);
-  //    about 80 microseconds a circle of 18 px;
+  //    a blurred ellipse on a page lit by a plane) where the page shows noise (a grey level
+  //    RMS or more about its plane), else (or where the fit fails) the grey centroid; on
+  //    renders with noise 4 about a third closer than the grey centroid, the same on clean
+  //    ones (docs/circle-detector.md); about 80 microseconds a circle of 18 px;
   //  - kGreyCentroid: the centroid of each pixel's share of print (GreyCentroid), about 10
   //    microseconds a circle;
   //  - kEdgeFit: the ellipse fitted to the edge points (for comparison; about 3 times the

@@ -338,11 +338,11 @@ TEST(CircleGridDetectorTest, GreyLevelCentresUnderStrongPerspective) {
 // The model fit (circle_edge_fit.h, ModelCentre; the default) against the grey centroid, on
 // the same renders of the pose grid. Under noise the least-squares fit weighs each pixel by
 // what its grey tells of the centre (the blurred edge), where the centroid weighs the page
-// ring's noise by its distance from the centre; and its page is lit by a plane that dims the
-// print with it, where the centroid's print is one grey. The former default, the grey
-// centroid, gave 0.0260 and 0.0261 px noisy; the model fit 0.017 px. On clean renders the
-// centroid, linear in the grey levels, is immune to the pixel grid's sampling of the edge,
-// which leaves the model fit a few thousandths of a pixel off: both far below the bar.
+// ring's noise by its distance from the centre. The former default, the grey centroid, gave
+// 0.0260 and 0.0261 px noisy; the model fit 0.017 px. On clean renders the centroid, linear
+// in the grey levels, is immune to the pixel grid's sampling of the edge, which leaves the
+// model fit 0.005 px off: there (the page ring's scatter under a grey level) the detector
+// keeps the centroid, so the clean figures are the same.
 TEST(CircleGridDetectorTest, ModelFitIsCloserThanTheGreyCentroidUnderNoise) {
   CircleGridOptions centroid;
   centroid.centre = CircleGridOptions::Centre::kGreyCentroid;
@@ -356,7 +356,7 @@ TEST(CircleGridDetectorTest, ModelFitIsCloserThanTheGreyCentroidUnderNoise) {
         params.asymmetric ? "asymmetric" : "symmetric", rms[0][0], rms[0][1], rms[1][0], rms[1][1]);
     EXPECT_LT(rms[0][1], 0.021);
     EXPECT_LT(rms[0][1], 0.75 * rms[1][1]);
-    EXPECT_LT(rms[0][0], 0.01);
+    EXPECT_LE(rms[0][0], rms[1][0] + 1e-4);
   }
 }
 
