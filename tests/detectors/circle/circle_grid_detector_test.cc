@@ -93,56 +93,73 @@ void ExpectFound(const CameraFrame& frame, const BoardParams& params, double* rm
   EXPECT_LT(test_scene::MaxErrorPx(d, frame), 1.0);
 }
 
-// The RMS error of each of `options` over a grid of views (roll, yaw and pitch at the extremes
-// of docs/acceptance.md, two sizes), each rendered clean and noisy (sigma 4, blur 1.0, a 3:1
-// lighting gradient, gamma 1.4), as the checker detector's test, every one found: rms[k][0]
-// clean, rms[k][1] noisy for options[k]. Each render is detected with every option, so their
-// errors are paired.
-std::vector<std::array<double, 2>> PoseGridRms(const BoardParams& params, double near_m,
-                                               double far_m, std::uint64_t seed,
-                                               const std::vector<CircleGridOptions>& options) {
-  std::vector<std::array<double, 2>> sum_sq(options.size(), {0.0, 0.0});
-  int n[2] = {0, 0};
-  int index = 0;
+// Image effects of a render (CameraRenderOptions), the lighting gradient's direction following
+// the view's roll.
+struct Effects {
+  double blur_px = 0.5;
+  double noise = 0.0;
+  double gradient = 1.0;
+  double gamma = 1.0;
+  int jpeg_quality = 0;
+};
+constexpr Effects kCleanEffects{};
+constexpr Effects kNoisyEffects{1.0, 4.0, 3.0, 1.4};
+
+CameraRenderOptions RenderOptions(const Effects& e, double roll_deg) {
+  CameraRenderOptions o = CleanRender();
+  o.blur_sigma_px = e.blur_px;
+  o.noise_sigma = e.noise;
+  if (e.gradient > 1.0) {
+    o.illumination_gradient_ratio = e.gradient;
+    o.illumination_gradient_direction_deg = roll_deg * 3.0;
+  }
+  o.gamma = e.gamma;
+  o.jpeg_quality = e.jpeg_quality;
+  return o;
+}
+
+// The RMS error of each of `options` (rms[k][...]) under each of `effects` (rms[...][j]) over
+// a grid of views (roll, yaw and pitch at the extremes of docs/acceptance.md, two sizes), as
+// the checker detector's test, every one found. Each render is detected with every option,
+// so their errors are paired.
+std::vector<std::vector<double>> PoseGridRms(const BoardParams& params, double near_m, double far_m,
+                                             std::uint64_t seed,
+                                             const std::vector<CircleGridOptions>& options,
+                                             const std::vector<Effects>& effects = {
+                                                 kCleanEffects, kNoisyEffects}) {
+  std::vector<std::vector<double>> sum_sq(options.size(), std::vector<double>(effects.size()));
+  int views = 0;
   for (double roll : {-30.0, 30.0}) {
     for (double yaw : {-50.0, 0.0, 50.0}) {
       for (double pitch : {-40.0, 40.0}) {
-        const double distance = index++ % 2 == 0 ? near_m : far_m;
-        for (const int noisy : {0, 1}) {
-          BoardView view;
-          view.params = params;
-          view.distance_m = distance;
-          view.roll_deg = roll;
-          view.yaw_deg = yaw;
-          view.pitch_deg = pitch;
-          CameraRenderOptions render = noisy ? NoisyRender() : CleanRender();
-          if (noisy) {
-            render.illumination_gradient_ratio = 3.0;
-            render.illumination_gradient_direction_deg = roll * 3.0;
-            render.gamma = 1.4;
-          }
+        BoardView view;
+        view.params = params;
+        view.distance_m = views++ % 2 == 0 ? near_m : far_m;
+        view.roll_deg = roll;
+        view.yaw_deg = yaw;
+        view.pitch_deg = pitch;
+        for (std::size_t j = 0; j < effects.size(); ++j) {
           SCOPED_TRACE(testing::Message() << "roll " << roll << " yaw " << yaw << " pitch " << pitch
-                                          << " distance " << distance << " noisy " << noisy);
-          const CameraFrame frame = RenderView(view, render, ++seed);
+                                          << " distance " << view.distance_m << " effects " << j);
+          const CameraFrame frame = RenderView(view, RenderOptions(effects[j], roll), ++seed);
           for (std::size_t k = 0; k < options.size(); ++k) {
             double rms = 0.0;
             ExpectFound(frame, params, &rms, options[k]);
-            sum_sq[k][noisy] += rms * rms;
+            sum_sq[k][j] += rms * rms;
           }
-          ++n[noisy];
         }
       }
     }
   }
-  for (std::array<double, 2>& rms : sum_sq) {
-    rms = {std::sqrt(rms[0] / n[0]), std::sqrt(rms[1] / n[1])};
+  for (std::vector<double>& row : sum_sq) {
+    for (double& v : row) v = std::sqrt(v / views);
   }
   return sum_sq;
 }
 
 // The pose grid with the default options: every view found, RMS within the bars.
 void PoseGrid(const BoardParams& params, double near_m, double far_m, std::uint64_t seed) {
-  const std::array<double, 2> rms = PoseGridRms(params, near_m, far_m, seed, {{}})[0];
+  const std::vector<double> rms = PoseGridRms(params, near_m, far_m, seed, {{}})[0];
   std::printf("%s %d x %d pose grid: RMS clean %.4f px, noisy %.4f px\n",
               params.hexagonal    ? "hexagonal"
               : params.asymmetric ? "asymmetric"
@@ -347,7 +364,7 @@ TEST(CircleGridDetectorTest, ModelFitIsCloserThanTheGreyCentroidUnderNoise) {
   CircleGridOptions centroid;
   centroid.centre = CircleGridOptions::Centre::kGreyCentroid;
   for (const BoardParams& params : {Symmetric(), Asymmetric()}) {
-    const std::vector<std::array<double, 2>> rms =
+    const std::vector<std::vector<double>> rms =
         PoseGridRms(params, params.asymmetric ? 0.6 : 0.55, params.asymmetric ? 1.05 : 0.95,
                     params.asymmetric ? 200 : 100, {{}, centroid});
     std::printf(
@@ -357,6 +374,36 @@ TEST(CircleGridDetectorTest, ModelFitIsCloserThanTheGreyCentroidUnderNoise) {
     EXPECT_LT(rms[0][1], 0.021);
     EXPECT_LT(rms[0][1], 0.75 * rms[1][1]);
     EXPECT_LE(rms[0][0], rms[1][0] + 1e-4);
+  }
+}
+
+// A measurement, not a test (run with --gtest_also_run_disabled_tests): the model fit and the
+// grey centroid under each image effect alone and together, over the symmetric pose grid
+// (docs/circle-detector.md's table). Noise 6 and blur 1.5 without the other hard effects is
+// not among them: one of its 24 renders fails the grid's verification with either estimator.
+TEST(CircleGridDetectorTest, DISABLED_CentreEstimatorsByEffect) {
+  CircleGridOptions centroid, model;
+  centroid.centre = CircleGridOptions::Centre::kGreyCentroid;
+  struct Named {
+    const char* name;
+    Effects effects;
+  };
+  const Named named[] = {{"clean, blur 0.5", kCleanEffects},
+                         {"clean, blur 1.0", {1.0}},
+                         {"clean, blur 1.5", {1.5}},
+                         {"noise 4, blur 1.0", {1.0, 4.0}},
+                         {"gradient 3:1, blur 1.0", {1.0, 0.0, 3.0}},
+                         {"gamma 1.4, blur 1.0", {1.0, 0.0, 1.0, 1.4}},
+                         {"JPEG 80, blur 1.0", {1.0, 0.0, 1.0, 1.0, 80}},
+                         {"noise 4, 3:1, gamma 1.4 (the noisy set)", kNoisyEffects},
+                         {"noise 6, blur 1.5, 4:1, gamma 1.6, JPEG 80", {1.5, 6.0, 4.0, 1.6, 80}},
+                         {"noise 6, blur 1.5, 4:1, gamma 0.6, JPEG 80", {1.5, 6.0, 4.0, 0.6, 80}}};
+  std::vector<Effects> effects;
+  for (const Named& n : named) effects.push_back(n.effects);
+  const std::vector<std::vector<double>> rms =
+      PoseGridRms(Symmetric(), 0.55, 0.95, 100, {model, centroid}, effects);
+  for (std::size_t j = 0; j < effects.size(); ++j) {
+    std::printf("| %s | %.4f | %.4f |\n", named[j].name, rms[1][j], rms[0][j]);
   }
 }
 
