@@ -93,7 +93,7 @@ struct CircleGridOptions {
   //    a blurred ellipse on a page lit by a plane) where the page shows noise (a grey level
   //    RMS or more about its plane), else (or where the fit fails) the grey centroid; on
   //    renders with noise 4 about a third closer than the grey centroid, the same on clean
-  //    ones (docs/circle-detector.md); about 80 microseconds a circle of 18 px;
+  //    ones (docs/circle-detector.md); about 55 microseconds a circle of 18 px;
   //  - kGreyCentroid: the centroid of each pixel's share of print (GreyCentroid), about 10
   //    microseconds a circle;
   //  - kEdgeFit: the ellipse fitted to the edge points (for comparison; about 3 times the
