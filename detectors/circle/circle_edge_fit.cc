@@ -224,6 +224,9 @@ constexpr double kModelMinNoise = 1.0;
 // the costly ones, are a quarter fewer than at 4 sigmas (the renders' RMS the same to 0.0001
 // px).
 constexpr double kModelEdgeReachSigmas = 3.0;
+// The core left out of the fit's window: 3 sigmas of the hardest blur (1.5 px, acceptance.md)
+// and the edge fit's error beyond.
+constexpr double kModelCoreMarginPx = 6.0;
 
 // The scale s of a pixel relative to an ellipse: s^2 = a dx^2 + 2 b dx dy + c dy^2 (dx, dy
 // from its centre), 1 on the ellipse, 0 at its centre, s on the ellipse scaled by s.
@@ -448,17 +451,24 @@ struct ModelPixel {
   double du, dv, grey;
 };
 
-// The pixels within scale `outer` of e (its window w).
+// The pixels of e's window w (within scale `outer` of it) but its core: those more than
+// kModelCoreMarginPx inside the edge are all print at any blur the fit can meet, so they tell
+// nothing of the geometry, only of the print's grey, which the edge's inner side tells too.
+// A large circle's core is most of its window (a circle 55 px across: 40%).
 std::vector<ModelPixel> WindowPixels(const ImageView8& image, const Ellipse& e, const Window& w,
                                      double outer) {
   const EllipseScale scale(e);
+  const double core = std::max(0.0, 1.0 - kModelCoreMarginPx / e.semi_minor);
   std::vector<ModelPixel> pixels;
   for (int y = w.y0; y <= w.y1; ++y) {
     int x0 = 0, x1 = 0;
     if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
     const std::uint8_t* row = image.Row(y);
+    const double dy = y - e.centre.y();
     for (int x = x0; x <= x1; ++x) {
-      pixels.push_back({x - e.centre.x(), y - e.centre.y(), static_cast<double>(row[x])});
+      const double dx = x - e.centre.x();
+      if (scale.Squared(dx, dy) < core * core) continue;
+      pixels.push_back({dx, dy, static_cast<double>(row[x])});
     }
   }
   return pixels;
