@@ -377,11 +377,12 @@ TEST(CircleGridDetectorTest, ModelFitIsCloserThanTheGreyCentroidUnderNoise) {
   }
 }
 
-// A measurement, not a test (run with --gtest_also_run_disabled_tests): the model fit and the
-// grey centroid under each image effect alone and together, over the symmetric pose grid
-// (docs/circle-detector.md's table). Noise 6 and blur 1.5 without the other hard effects is
-// not among them: one of its 24 renders fails the grid's verification with either estimator.
-TEST(CircleGridDetectorTest, DISABLED_CentreEstimatorsByEffect) {
+// The model fit and the grey centroid under each image effect alone and together, over the
+// symmetric pose grid (docs/circle-detector.md's table, printed): the fit is never the
+// farther (within 0.0001 px, the clean renders' tie where the detector keeps the centroid).
+// Noise 6 and blur 1.5 without the other hard effects is not among them: one of its 24 renders
+// fails the grid's verification with either estimator.
+TEST(CircleGridDetectorTest, ModelFitIsNeverFartherThanTheGreyCentroidUnderAnyEffect) {
   CircleGridOptions centroid, model;
   centroid.centre = CircleGridOptions::Centre::kGreyCentroid;
   struct Named {
@@ -404,6 +405,7 @@ TEST(CircleGridDetectorTest, DISABLED_CentreEstimatorsByEffect) {
       PoseGridRms(Symmetric(), 0.55, 0.95, 100, {model, centroid}, effects);
   for (std::size_t j = 0; j < effects.size(); ++j) {
     std::printf("| %s | %.4f | %.4f |\n", named[j].name, rms[1][j], rms[0][j]);
+    EXPECT_LE(rms[0][j], rms[1][j] + 1e-4) << named[j].name;
   }
 }
 
