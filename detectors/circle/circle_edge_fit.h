@@ -90,4 +90,32 @@ class CircleEdgeFitter {
 std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellipse& ellipse,
                                             bool light, double max_scale);
 
+// The centre of a circle's image ellipse from a model of its window's grey levels (the
+// window of GreyCentroid), fitted by least squares (Levenberg-Marquardt from the edge fit and
+// GreyCentroid's levels): grey = page (1 - k F), the page a plane a + b du + c dv (the
+// illumination, which dims the print with the page), k the print's contrast, F the share of
+// print, the Gaussian integral of the pixel's distance from the ellipse over the blur sigma;
+// the ellipse's centre and conic, sigma, the plane and k are fitted (10 parameters).
+//
+// Why: under Gaussian noise the least-squares fit weighs each pixel by what its grey tells
+// of the centre, the blurred edge's slope, where the share centroid weighs the page ring's
+// noise by its distance from the centre; and its print follows the light, where the
+// centroid's print is one grey. On the renders of circle_grid_detector_test (noise 4, blur
+// 1.0, a 3:1 gradient, gamma 1.4) its centres are 0.017 px RMS off against the centroid's
+// 0.026 px; under JPEG 80 0.007 against 0.014. The model is point-symmetric about the
+// centre, as the image is, so a wrong profile (gamma, the pixels' area) does not move the
+// centre either, except through the pixel grid's sampling of the edge: on clean renders
+// (blur 0.5) 0.005 px RMS against the centroid's 0.002 px, so the fit is left to images
+// with noise.
+//
+// nullopt (the caller keeps another centre) where GreyCentroid's window does not fit; where
+// the page ring's grey levels scatter about their plane by under a grey level RMS (there the
+// centroid's error is the smaller: the caller takes GreyCentroid); or where the fit does not
+// converge, finds no contrast of the expected polarity, a blur over half the
+// semi-minor axis, or a centre more than a quarter of the semi-minor axis from the edge
+// fit's. Cost: 3-5 passes over the window: about 55 microseconds for a circle 18 px across,
+// 5 times GreyCentroid.
+std::optional<Eigen::Vector2d> ModelCentre(const ImageView8& image, const Ellipse& ellipse,
+                                           bool light, double max_scale);
+
 }  // namespace linecal

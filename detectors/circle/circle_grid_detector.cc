@@ -946,19 +946,22 @@ struct Hypothesis {
   double x_axis_u = 0.0;
 };
 
-// Step 5's grey centroids (circle_edge_fit.h), for the grid chosen only (its verification
-// needs no more than the edge fits' centres; a centroid stays within a quarter radius of its
-// edge fit's centre): each circle's feature moved by its centroid's offset from its edge
-// fit's centre, where the room around it allows. The perspective correction's offset depends
-// on the centre only through the block's homography, which such a move changes by far below
-// a thousandth of a pixel, so it is kept rather than computed again.
-void UseGreyCentroids(const ImageView8& image, const GridModel& m, Hypothesis* h) {
+// Step 5's centres from the grey levels (circle_edge_fit.h), for the grid chosen only (its
+// verification needs no more than the edge fits' centres; both estimates stay within a quarter
+// radius of the edge fit's centre): each circle's feature moved by the estimate's offset from
+// its edge fit's centre, where the room around it allows; the model fit where it converges,
+// else the grey centroid. The perspective correction's offset depends on the centre only
+// through the block's homography, which such a move changes by far below a thousandth of a
+// pixel, so it is kept rather than computed again.
+void UseGreyLevelCentres(const ImageView8& image, const GridModel& m,
+                         CircleGridOptions::Centre centre, Hypothesis* h) {
   for (std::size_t id = 0; id < h->ellipses.size(); ++id) {
     const Ellipse& e = h->ellipses[id];
     const double room = RoomScale(m, h->ellipses, static_cast<int>(id));
-    if (const std::optional<Eigen::Vector2d> c = GreyCentroid(image, e, m.light, room)) {
-      h->uv[id] += *c - e.centre;
-    }
+    std::optional<Eigen::Vector2d> c;
+    if (centre == CircleGridOptions::Centre::kModelFit) c = ModelCentre(image, e, m.light, room);
+    if (!c) c = GreyCentroid(image, e, m.light, room);
+    if (c) h->uv[id] += *c - e.centre;
   }
 }
 
@@ -1170,7 +1173,9 @@ Detection DetectCircleGrid(const ImageView8& image, const Board& board,
   for (int factor = CoarsestCircleBlobFactor(image); factor >= 2; factor /= 2) {
     FactorResult r = SearchAtFactor(image, m, options, factor);
     if (r.chosen) {
-      if (options.grey_centroids) UseGreyCentroids(image, m, &*r.chosen);
+      if (options.centre != CircleGridOptions::Centre::kEdgeFit) {
+        UseGreyLevelCentres(image, m, options.centre, &*r.chosen);
+      }
       Detection d;
       d.found = true;
       d.reason = DetectReason::kNone;

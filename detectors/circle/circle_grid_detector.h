@@ -38,11 +38,12 @@
 //     grid's squares are not); and the lattice square in each circle's own metric (not a
 //     hexagonal or rectangular grid; hexagonal: its steps 60 degrees apart, not a square grid).
 //  5. Sub-pixel: each circle's ellipse from its edge (circle_edge_fit.h), seeded by its blob;
-//     its centre then from the grey levels (GreyCentroid: the centroid of each pixel's share
-//     of print over the ellipse and a ring of page around it, which a point-symmetric blur
-//     leaves at the ellipse's centre), where the gap to its neighbours leaves room for the
-//     ring (OpenCV's layouts; not BoofCV's hexagonal print, 0.2 diameter apart, which keeps
-//     the edge fit's centre); the image of the circle's centre is not the ellipse's centre
+//     its centre then from the grey levels over the ellipse and a ring of page around it
+//     (ModelCentre: a blurred ellipse on a page lit by a plane, fitted by least squares; where
+//     that fails, GreyCentroid: the centroid of each pixel's share of print, which a
+//     point-symmetric blur leaves at the ellipse's centre), where the gap to its neighbours leaves
+//     room for the ring (OpenCV's layouts; not BoofCV's hexagonal print, 0.2 diameter apart, which
+//     keeps the edge fit's centre); the image of the circle's centre is not the ellipse's centre
 //     under perspective, so the ellipse is taken back to the board through the homography
 //     of its block, and the centre of that circle mapped forward (three rounds, each block's
 //     homography refitted to the corrected centres). This needs no printed diameter.
@@ -86,11 +87,19 @@ struct CircleGridOptions {
   // and the centre of its image ellipse (Method, step 5). Off: the features are the ellipse
   // centres (for comparison; biased by up to a pixel at strong perspective).
   bool correct_perspective = true;
-  // Take each centre from the grey levels inside and around its ellipse rather than from its
-  // edge points (Method, step 5; circle_edge_fit.h, GreyCentroid), where the gap to the
-  // neighbouring circles leaves room for the window. Off: the edge fit's centres (for
-  // comparison; about 3 times the noise and 20 times the error on clean renders).
-  bool grey_centroids = true;
+  // How each centre is measured (Method, step 5; circle_edge_fit.h), where the gap to the
+  // neighbouring circles leaves room for the window of page around it (else the edge fit's):
+  //  - kModelFit: a model of the window's grey levels fitted by least squares (ModelCentre:
+  //    a blurred ellipse on a page lit by a plane) where the page shows noise (a grey level
+  //    RMS or more about its plane), else (or where the fit fails) the grey centroid; on
+  //    renders with noise 4 about a third closer than the grey centroid, the same on clean
+  //    ones (docs/circle-detector.md); about 55 microseconds a circle of 18 px;
+  //  - kGreyCentroid: the centroid of each pixel's share of print (GreyCentroid), about 10
+  //    microseconds a circle;
+  //  - kEdgeFit: the ellipse fitted to the edge points (for comparison; about 3 times the
+  //    noise and 20 times the error on clean renders of the grey centroid).
+  enum class Centre { kEdgeFit, kGreyCentroid, kModelFit };
+  Centre centre = Centre::kModelFit;
 
   // Empty when valid, else the name of the first field out of range ("edge_rays").
   std::string_view Validate() const;
@@ -104,10 +113,12 @@ struct CircleGridOptions {
 // complete cols x rows grid of blobs), kVerificationFailed (grids that failed the local
 // checks or the sub-pixel fit), kWrongBoard (every grid found is part of a larger one),
 // kAmbiguous (two grids). When several reduction factors are searched, the reason is the one
-// that got furthest. Pure function. Cost on one core: about 3 ms for a 9 x 6 board at
-// 1280 x 720 with clutter, 4-6 ms for real 640 x 480 photos of 30-80 circles, 9 ms for a
-// 1280 x 720 photo of large circles; up to 30 ms for megapixel images with hundreds of small
-// blobs (the lattice search grows from each).
+// that got furthest. Pure function. Cost on one core, with the grey centroids: about 3 ms for
+// a 9 x 6 board at 1280 x 720 with clutter, 4-6 ms for real 640 x 480 photos of 30-80
+// circles, 9 ms for a 1280 x 720 photo of large circles; up to 30 ms for megapixel images
+// with hundreds of small blobs (the lattice search grows from each). The model fit (the
+// default) adds 50-170 microseconds a circle on noisy images, with the size of the circle:
+// 7 ms for that 9 x 6 board.
 Detection DetectCircleGrid(const ImageView8& image, const Board& board,
                            const CircleGridOptions& options = {});
 

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -92,49 +93,80 @@ void ExpectFound(const CameraFrame& frame, const BoardParams& params, double* rm
   EXPECT_LT(test_scene::MaxErrorPx(d, frame), 1.0);
 }
 
-// A grid of views (roll, yaw and pitch at the extremes of docs/acceptance.md, two sizes), each
-// rendered clean and noisy (sigma 4, blur 1.0, a 3:1 lighting gradient, gamma 1.4), as the
-// checker detector's test: every one found, RMS within the bars.
-void PoseGrid(const BoardParams& params, double near_m, double far_m, std::uint64_t seed) {
-  double sum_sq[2] = {0.0, 0.0};
-  int n[2] = {0, 0};
-  int index = 0;
+// Image effects of a render (CameraRenderOptions), the lighting gradient's direction following
+// the view's roll.
+struct Effects {
+  double blur_px = 0.5;
+  double noise = 0.0;
+  double gradient = 1.0;
+  double gamma = 1.0;
+  int jpeg_quality = 0;
+};
+constexpr Effects kCleanEffects{};
+constexpr Effects kNoisyEffects{1.0, 4.0, 3.0, 1.4};
+
+CameraRenderOptions RenderOptions(const Effects& e, double roll_deg) {
+  CameraRenderOptions o = CleanRender();
+  o.blur_sigma_px = e.blur_px;
+  o.noise_sigma = e.noise;
+  if (e.gradient > 1.0) {
+    o.illumination_gradient_ratio = e.gradient;
+    o.illumination_gradient_direction_deg = roll_deg * 3.0;
+  }
+  o.gamma = e.gamma;
+  o.jpeg_quality = e.jpeg_quality;
+  return o;
+}
+
+// The RMS error of each of `options` (rms[k][...]) under each of `effects` (rms[...][j]) over
+// a grid of views (roll, yaw and pitch at the extremes of docs/acceptance.md, two sizes), as
+// the checker detector's test, every one found. Each render is detected with every option,
+// so their errors are paired.
+std::vector<std::vector<double>> PoseGridRms(const BoardParams& params, double near_m, double far_m,
+                                             std::uint64_t seed,
+                                             const std::vector<CircleGridOptions>& options,
+                                             const std::vector<Effects>& effects = {
+                                                 kCleanEffects, kNoisyEffects}) {
+  std::vector<std::vector<double>> sum_sq(options.size(), std::vector<double>(effects.size()));
+  int views = 0;
   for (double roll : {-30.0, 30.0}) {
     for (double yaw : {-50.0, 0.0, 50.0}) {
       for (double pitch : {-40.0, 40.0}) {
-        const double distance = index++ % 2 == 0 ? near_m : far_m;
-        for (const int noisy : {0, 1}) {
-          BoardView view;
-          view.params = params;
-          view.distance_m = distance;
-          view.roll_deg = roll;
-          view.yaw_deg = yaw;
-          view.pitch_deg = pitch;
-          CameraRenderOptions options = noisy ? NoisyRender() : CleanRender();
-          if (noisy) {
-            options.illumination_gradient_ratio = 3.0;
-            options.illumination_gradient_direction_deg = roll * 3.0;
-            options.gamma = 1.4;
-          }
+        BoardView view;
+        view.params = params;
+        view.distance_m = views++ % 2 == 0 ? near_m : far_m;
+        view.roll_deg = roll;
+        view.yaw_deg = yaw;
+        view.pitch_deg = pitch;
+        for (std::size_t j = 0; j < effects.size(); ++j) {
           SCOPED_TRACE(testing::Message() << "roll " << roll << " yaw " << yaw << " pitch " << pitch
-                                          << " distance " << distance << " noisy " << noisy);
-          double rms = 0.0;
-          ExpectFound(RenderView(view, options, ++seed), params, &rms);
-          sum_sq[noisy] += rms * rms;
-          ++n[noisy];
+                                          << " distance " << view.distance_m << " effects " << j);
+          const CameraFrame frame = RenderView(view, RenderOptions(effects[j], roll), ++seed);
+          for (std::size_t k = 0; k < options.size(); ++k) {
+            double rms = 0.0;
+            ExpectFound(frame, params, &rms, options[k]);
+            sum_sq[k][j] += rms * rms;
+          }
         }
       }
     }
   }
-  const double rms_clean = std::sqrt(sum_sq[0] / n[0]);
-  const double rms_noisy = std::sqrt(sum_sq[1] / n[1]);
+  for (std::vector<double>& row : sum_sq) {
+    for (double& v : row) v = std::sqrt(v / views);
+  }
+  return sum_sq;
+}
+
+// The pose grid with the default options: every view found, RMS within the bars.
+void PoseGrid(const BoardParams& params, double near_m, double far_m, std::uint64_t seed) {
+  const std::vector<double> rms = PoseGridRms(params, near_m, far_m, seed, {{}})[0];
   std::printf("%s %d x %d pose grid: RMS clean %.4f px, noisy %.4f px\n",
               params.hexagonal    ? "hexagonal"
               : params.asymmetric ? "asymmetric"
                                   : "symmetric",
-              params.cols, params.rows, rms_clean, rms_noisy);
-  EXPECT_LT(rms_clean, kCleanRmsBarPx);
-  EXPECT_LT(rms_noisy, kNoisyRmsBarPx);
+              params.cols, params.rows, rms[0], rms[1]);
+  EXPECT_LT(rms[0], kCleanRmsBarPx);
+  EXPECT_LT(rms[1], kNoisyRmsBarPx);
 }
 
 // ---- Found, with sub-pixel centres ------------------------------------------------------
@@ -266,18 +298,21 @@ TEST(CircleGridDetectorTest, PerspectiveCorrectionRemovesTheCentreBias) {
   EXPECT_LT(rms_corrected, kCleanRmsBarPx);
 }
 
-// Grey centroids (circle_grid_detector.h, step 5) under strong perspective: boards turned by
-// 50 and 40 degrees and rolled, near, clean and with noise, blur, a 3:1 lighting gradient and
-// gamma 1.4. Their centres (corrected for perspective) are several times closer to the truth
-// than the edge fit's: the centroid averages the grey noise of the whole window where the
-// edge fit takes 64 derivative peaks.
-TEST(CircleGridDetectorTest, GreyCentroidsUnderStrongPerspective) {
-  CircleGridOptions edge;
-  edge.grey_centroids = false;
+// Centres from the grey levels (circle_grid_detector.h, step 5: the model fit, the default,
+// and the grey centroid) under strong perspective: boards turned by 50 and 40 degrees and
+// rolled, near, clean and with noise, blur, a 3:1 lighting gradient and gamma 1.4. Their
+// centres (corrected for perspective) are several times closer to the truth than the edge
+// fit's: both weigh the grey noise of the whole window where the edge fit takes 64
+// derivative peaks.
+TEST(CircleGridDetectorTest, GreyLevelCentresUnderStrongPerspective) {
+  CircleGridOptions edge, centroid;
+  edge.centre = CircleGridOptions::Centre::kEdgeFit;
+  centroid.centre = CircleGridOptions::Centre::kGreyCentroid;
+  const std::vector<CircleGridOptions> options = {{}, centroid, edge};
   std::uint64_t seed = 300;
   for (const BoardParams& params : {Symmetric(), Asymmetric()}) {
     for (const int noisy : {0, 1}) {
-      double sum_sq_grey = 0.0, sum_sq_edge = 0.0;
+      std::array<double, 3> sum_sq = {0.0, 0.0, 0.0};
       int views = 0;
       for (const double roll : {-30.0, 30.0}) {
         BoardView view;
@@ -286,29 +321,91 @@ TEST(CircleGridDetectorTest, GreyCentroidsUnderStrongPerspective) {
         view.roll_deg = roll;
         view.yaw_deg = 50.0;
         view.pitch_deg = -40.0;
-        CameraRenderOptions options = noisy ? NoisyRender() : CleanRender();
+        CameraRenderOptions render = noisy ? NoisyRender() : CleanRender();
         if (noisy) {
-          options.illumination_gradient_ratio = 3.0;
-          options.illumination_gradient_direction_deg = roll * 3.0;
-          options.gamma = 1.4;
+          render.illumination_gradient_ratio = 3.0;
+          render.illumination_gradient_direction_deg = roll * 3.0;
+          render.gamma = 1.4;
         }
         SCOPED_TRACE(testing::Message() << "asymmetric " << params.asymmetric << " roll " << roll
                                         << " noisy " << noisy);
-        const CameraFrame frame = RenderView(view, options, ++seed);
-        double rms_grey = 0.0, rms_edge = 0.0;
-        ExpectFound(frame, params, &rms_grey);
-        ExpectFound(frame, params, &rms_edge, edge);
-        sum_sq_grey += rms_grey * rms_grey;
-        sum_sq_edge += rms_edge * rms_edge;
+        const CameraFrame frame = RenderView(view, render, ++seed);
+        for (std::size_t k = 0; k < options.size(); ++k) {
+          double rms = 0.0;
+          ExpectFound(frame, params, &rms, options[k]);
+          sum_sq[k] += rms * rms;
+        }
         ++views;
       }
-      const double grey = std::sqrt(sum_sq_grey / views), edge_rms = std::sqrt(sum_sq_edge / views);
-      std::printf("%s, %s, yaw 50 pitch -40: RMS grey centroids %.4f px, edge fit %.4f px\n",
-                  params.asymmetric ? "asymmetric" : "symmetric", noisy ? "noisy" : "clean", grey,
-                  edge_rms);
-      EXPECT_LT(grey, noisy ? 0.04 : 0.01);
-      EXPECT_LT(grey, 0.6 * edge_rms);
+      std::array<double, 3> rms;
+      for (std::size_t k = 0; k < rms.size(); ++k) rms[k] = std::sqrt(sum_sq[k] / views);
+      std::printf(
+          "%s, %s, yaw 50 pitch -40: RMS model fit %.4f px, grey centroids %.4f px, "
+          "edge fit %.4f px\n",
+          params.asymmetric ? "asymmetric" : "symmetric", noisy ? "noisy" : "clean", rms[0], rms[1],
+          rms[2]);
+      for (const double grey : {rms[0], rms[1]}) {
+        EXPECT_LT(grey, noisy ? 0.04 : 0.01);
+        EXPECT_LT(grey, 0.6 * rms[2]);
+      }
     }
+  }
+}
+
+// The model fit (circle_edge_fit.h, ModelCentre; the default) against the grey centroid, on
+// the same renders of the pose grid. Under noise the least-squares fit weighs each pixel by
+// what its grey tells of the centre (the blurred edge), where the centroid weighs the page
+// ring's noise by its distance from the centre. The former default, the grey centroid, gave
+// 0.0260 and 0.0261 px noisy; the model fit 0.017 px. On clean renders the centroid, linear
+// in the grey levels, is immune to the pixel grid's sampling of the edge, which leaves the
+// model fit 0.005 px off: there (the page ring's scatter under a grey level) the detector
+// keeps the centroid, so the clean figures are the same.
+TEST(CircleGridDetectorTest, ModelFitIsCloserThanTheGreyCentroidUnderNoise) {
+  CircleGridOptions centroid;
+  centroid.centre = CircleGridOptions::Centre::kGreyCentroid;
+  for (const BoardParams& params : {Symmetric(), Asymmetric()}) {
+    const std::vector<std::vector<double>> rms =
+        PoseGridRms(params, params.asymmetric ? 0.6 : 0.55, params.asymmetric ? 1.05 : 0.95,
+                    params.asymmetric ? 200 : 100, {{}, centroid});
+    std::printf(
+        "%s pose grid: model fit RMS clean %.4f px, noisy %.4f px; grey centroid %.4f, "
+        "%.4f px\n",
+        params.asymmetric ? "asymmetric" : "symmetric", rms[0][0], rms[0][1], rms[1][0], rms[1][1]);
+    EXPECT_LT(rms[0][1], 0.021);
+    EXPECT_LT(rms[0][1], 0.75 * rms[1][1]);
+    EXPECT_LE(rms[0][0], rms[1][0] + 1e-4);
+  }
+}
+
+// The model fit and the grey centroid under each image effect alone and together, over the
+// symmetric pose grid (docs/circle-detector.md's table, printed): the fit is never the
+// farther (within 0.0001 px, the clean renders' tie where the detector keeps the centroid).
+// Noise 6 and blur 1.5 without the other hard effects is not among them: one of its 24 renders
+// fails the grid's verification with either estimator.
+TEST(CircleGridDetectorTest, ModelFitIsNeverFartherThanTheGreyCentroidUnderAnyEffect) {
+  CircleGridOptions centroid, model;
+  centroid.centre = CircleGridOptions::Centre::kGreyCentroid;
+  struct Named {
+    const char* name;
+    Effects effects;
+  };
+  const Named named[] = {{"clean, blur 0.5", kCleanEffects},
+                         {"clean, blur 1.0", {1.0}},
+                         {"clean, blur 1.5", {1.5}},
+                         {"noise 4, blur 1.0", {1.0, 4.0}},
+                         {"gradient 3:1, blur 1.0", {1.0, 0.0, 3.0}},
+                         {"gamma 1.4, blur 1.0", {1.0, 0.0, 1.0, 1.4}},
+                         {"JPEG 80, blur 1.0", {1.0, 0.0, 1.0, 1.0, 80}},
+                         {"noise 4, 3:1, gamma 1.4 (the noisy set)", kNoisyEffects},
+                         {"noise 6, blur 1.5, 4:1, gamma 1.6, JPEG 80", {1.5, 6.0, 4.0, 1.6, 80}},
+                         {"noise 6, blur 1.5, 4:1, gamma 0.6, JPEG 80", {1.5, 6.0, 4.0, 0.6, 80}}};
+  std::vector<Effects> effects;
+  for (const Named& n : named) effects.push_back(n.effects);
+  const std::vector<std::vector<double>> rms =
+      PoseGridRms(Symmetric(), 0.55, 0.95, 100, {model, centroid}, effects);
+  for (std::size_t j = 0; j < effects.size(); ++j) {
+    std::printf("| %s | %.4f | %.4f |\n", named[j].name, rms[1][j], rms[0][j]);
+    EXPECT_LE(rms[0][j], rms[1][j] + 1e-4) << named[j].name;
   }
 }
 
