@@ -280,6 +280,23 @@ std::optional<Window> WindowIn(const ImageView8& image, const Ellipse& e, double
   return w;
 }
 
+// Calls visit(dx, dy, s2, grey) for every pixel of window w within scale `outer` of the
+// ellipse, row by row: dx, dy from its centre, s2 the pixel's squared scale.
+template <typename Visit>
+void ForEachPixelWithin(const ImageView8& image, const EllipseScale& scale, const Window& w,
+                        double outer, Visit&& visit) {
+  for (int y = w.y0; y <= w.y1; ++y) {
+    int x0 = 0, x1 = 0;
+    if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
+    const std::uint8_t* row = image.Row(y);
+    const double dy = y - scale.centre.y();
+    for (int x = x0; x <= x1; ++x) {
+      const double dx = x - scale.centre.x();
+      visit(dx, dy, scale.Squared(dx, dy), row[x]);
+    }
+  }
+}
+
 // The print's and the page's grey around `e`: the page a plane a + b du + c dv (du, dv from
 // e's centre) fitted to the ring between scales `inner` and `outer` (the light varies across
 // a circle), the print the grey that nine tenths of the circle's core (scale 0.6) reach, so
@@ -298,32 +315,26 @@ std::optional<Levels> MeasureLevels(const ImageView8& image, const Ellipse& e, c
   std::array<int, 256> core{};  // the core's grey histogram
   double sum_sq = 0.0;          // the ring's squared grey levels
   int core_n = 0;
-  for (int y = w.y0; y <= w.y1; ++y) {
-    int x0 = 0, x1 = 0;
-    if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
-    const std::uint8_t* row = image.Row(y);
-    const double dy = y - e.centre.y();
-    for (int x = x0; x <= x1; ++x) {
-      const double dx = x - e.centre.x();
-      const double s2 = scale.Squared(dx, dy);
-      if (s2 <= 0.36) {
-        ++core[row[x]];
-        ++core_n;
-      } else if (s2 >= inner * inner) {
-        // The normal equations of (1, dx, dy): the upper triangle only (the lower one is its
-        // mirror, the same products), and the products with 1 as the terms themselves.
-        const double grey = row[x];
-        normal(0, 0) += 1.0;
-        normal(0, 1) += dx;
-        normal(0, 2) += dy;
-        normal(1, 1) += dx * dx;
-        normal(1, 2) += dx * dy;
-        normal(2, 2) += dy * dy;
-        rhs += Eigen::Vector3d(grey, dx * grey, dy * grey);
-        sum_sq += grey * grey;
-      }
-    }
-  }
+  ForEachPixelWithin(image, scale, w, outer,
+                     [&](double dx, double dy, double s2, std::uint8_t level) {
+                       if (s2 <= 0.36) {
+                         ++core[level];
+                         ++core_n;
+                       } else if (s2 >= inner * inner) {
+                         // The normal equations of (1, dx, dy): the upper triangle only (the
+                         // lower one is its mirror, the same products), and the products with 1
+                         // as the terms themselves.
+                         const double grey = level;
+                         normal(0, 0) += 1.0;
+                         normal(0, 1) += dx;
+                         normal(0, 2) += dy;
+                         normal(1, 1) += dx * dx;
+                         normal(1, 2) += dx * dy;
+                         normal(2, 2) += dy * dy;
+                         rhs += Eigen::Vector3d(grey, dx * grey, dy * grey);
+                         sum_sq += grey * grey;
+                       }
+                     });
   normal(1, 0) = normal(0, 1);
   normal(2, 0) = normal(0, 2);
   normal(2, 1) = normal(1, 2);
@@ -460,17 +471,10 @@ std::vector<ModelPixel> WindowPixels(const ImageView8& image, const Ellipse& e, 
   const EllipseScale scale(e);
   const double core = std::max(0.0, 1.0 - kModelCoreMarginPx / e.semi_minor);
   std::vector<ModelPixel> pixels;
-  for (int y = w.y0; y <= w.y1; ++y) {
-    int x0 = 0, x1 = 0;
-    if (!scale.Span(y, outer, w.x0, w.x1, &x0, &x1)) continue;
-    const std::uint8_t* row = image.Row(y);
-    const double dy = y - e.centre.y();
-    for (int x = x0; x <= x1; ++x) {
-      const double dx = x - e.centre.x();
-      if (scale.Squared(dx, dy) < core * core) continue;
-      pixels.push_back({dx, dy, static_cast<double>(row[x])});
-    }
-  }
+  ForEachPixelWithin(image, scale, w, outer,
+                     [&](double dx, double dy, double s2, std::uint8_t grey) {
+                       if (s2 >= core * core) pixels.push_back({dx, dy, static_cast<double>(grey)});
+                     });
   return pixels;
 }
 
