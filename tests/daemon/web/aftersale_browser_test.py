@@ -199,6 +199,7 @@ def test(args, work):
         driver.find_element(By.ID, "login").click()
         wait(driver, "the live page", lambda d: d.current_url == url)
         driver.find_element(By.LINK_TEXT, "after-sale").click()
+        wait(driver, "the after-sale page's address", lambda d: d.current_url.endswith("/aftersale.html"))
         wait(driver, "the after-sale page", lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "true")
         select = Select(driver.find_element(By.ID, "camera"))
         select.select_by_visible_text(f"reference · {CAMERA} (1920×1080)")

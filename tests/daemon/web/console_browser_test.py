@@ -123,11 +123,22 @@ def errors(driver):
     return [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
 
 
+def page_state(driver):
+    """Where a failed wait left the browser: the page's address, its message line (where the
+    pages show an error) and the browser's console errors, so a failure says why."""
+    try:
+        message = driver.find_elements(By.ID, "message")
+        text = message[0].text if message else ""
+        return f"at {driver.current_url}, message {text!r}, browser errors {errors(driver)}"
+    except Exception as e:  # the browser itself gone: say so rather than hide the first error
+        return f"browser state unreadable: {e}"
+
+
 def wait(driver, what, condition):
     try:
         return WebDriverWait(driver, WAIT_S, poll_frequency=0.02).until(lambda d: condition(d))
     except Exception as e:
-        raise Failure(f"timed out waiting for {what}: {e}")
+        raise Failure(f"timed out waiting for {what}: {e}; {page_state(driver)}")
 
 
 def verdict_word(proto_verdict):
