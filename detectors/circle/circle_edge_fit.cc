@@ -601,18 +601,24 @@ bool FitModel(const std::vector<ModelPixel>& pixels, ModelVector* x) {
   return converged;
 }
 
-}  // namespace
+// The grey centroid of window g (GreyCentroid's contract).
+std::optional<Eigen::Vector2d> CentroidIn(const ImageView8& image, const Ellipse& ellipse,
+                                          const GreyWindow& g) {
+  const std::optional<Eigen::Vector2d> c = ShareCentroid(image, ellipse, g.box, g.outer, g.levels);
+  if (!c || (*c - ellipse.centre).norm() > 0.25 * ellipse.semi_minor) return std::nullopt;
+  return c;
+}
 
-std::optional<Eigen::Vector2d> ModelCentre(const ImageView8& image, const Ellipse& ellipse,
-                                           bool light, double max_scale) {
-  const std::optional<GreyWindow> g = GreyWindowOf(image, ellipse, light, max_scale);
-  if (!g || !(std::abs(g->levels.page[0]) >= 1.0)) return std::nullopt;
-  if (g->levels.noise < kModelMinNoise) return std::nullopt;
-  const std::vector<ModelPixel> pixels = WindowPixels(image, ellipse, g->box, g->outer);
+// The model fit in window g (ModelCentre's contract): nullopt where the page is too quiet for
+// it or the fit fails.
+std::optional<Eigen::Vector2d> ModelFitIn(const ImageView8& image, const Ellipse& ellipse,
+                                          bool light, const GreyWindow& g) {
+  if (!(std::abs(g.levels.page[0]) >= 1.0) || g.levels.noise < kModelMinNoise) return std::nullopt;
+  const std::vector<ModelPixel> pixels = WindowPixels(image, ellipse, g.box, g.outer);
   const EllipseScale scale(ellipse);
   ModelVector x;
-  x << 0.0, 0.0, scale.a, scale.b, scale.c, kModelStartSigmaPx, g->levels.page[0],
-      g->levels.page[1], g->levels.page[2], 1.0 - g->levels.print / g->levels.page[0];
+  x << 0.0, 0.0, scale.a, scale.b, scale.c, kModelStartSigmaPx, g.levels.page[0], g.levels.page[1],
+      g.levels.page[2], 1.0 - g.levels.print / g.levels.page[0];
   const bool converged = FitModel(pixels, &x);
   const double b = ellipse.semi_minor;
   const double contrast = x[kContrast] * x[kPage0];
@@ -623,14 +629,21 @@ std::optional<Eigen::Vector2d> ModelCentre(const ImageView8& image, const Ellips
   return ellipse.centre + x.head<2>();
 }
 
+}  // namespace
+
+std::optional<Eigen::Vector2d> ModelCentre(const ImageView8& image, const Ellipse& ellipse,
+                                           bool light, double max_scale) {
+  const std::optional<GreyWindow> g = GreyWindowOf(image, ellipse, light, max_scale);
+  if (!g) return std::nullopt;
+  if (const std::optional<Eigen::Vector2d> c = ModelFitIn(image, ellipse, light, *g)) return c;
+  return CentroidIn(image, ellipse, *g);
+}
+
 std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellipse& ellipse,
                                             bool light, double max_scale) {
   const std::optional<GreyWindow> g = GreyWindowOf(image, ellipse, light, max_scale);
   if (!g) return std::nullopt;
-  const std::optional<Eigen::Vector2d> c =
-      ShareCentroid(image, ellipse, g->box, g->outer, g->levels);
-  if (!c || (*c - ellipse.centre).norm() > 0.25 * ellipse.semi_minor) return std::nullopt;
-  return c;
+  return CentroidIn(image, ellipse, *g);
 }
 
 CircleEdgeFitter::CircleEdgeFitter(int rays) {

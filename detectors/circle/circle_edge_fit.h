@@ -108,13 +108,13 @@ std::optional<Eigen::Vector2d> GreyCentroid(const ImageView8& image, const Ellip
 // (blur 0.5) 0.005 px RMS against the centroid's 0.002 px, so the fit is left to images
 // with noise.
 //
-// nullopt (the caller keeps another centre) where GreyCentroid's window does not fit; where
-// the page ring's grey levels scatter about their plane by under a grey level RMS (there the
-// centroid's error is the smaller: the caller takes GreyCentroid); or where the fit does not
-// converge, finds no contrast of the expected polarity, a blur over half the
-// semi-minor axis, or a centre more than a quarter of the semi-minor axis from the edge
-// fit's. Cost: 3-5 passes over the window: about 55 microseconds for a circle 18 px across,
-// 5 times GreyCentroid.
+// GreyCentroid's centre of the same window (its levels measured once) where the page ring's
+// grey levels scatter about their plane by under a grey level RMS (there the centroid's error
+// is the smaller), or where the fit does not converge, finds no contrast of the expected
+// polarity, a blur over half the semi-minor axis, or a centre more than a quarter of the
+// semi-minor axis from the edge fit's. nullopt (the caller keeps the edge fit's centre) where
+// GreyCentroid gives none. Cost: 3-5 passes over the window: about 55 microseconds for a
+// circle 18 px across, 5 times GreyCentroid.
 std::optional<Eigen::Vector2d> ModelCentre(const ImageView8& image, const Ellipse& ellipse,
                                            bool light, double max_scale);
 

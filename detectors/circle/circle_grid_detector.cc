@@ -958,9 +958,9 @@ void UseGreyLevelCentres(const ImageView8& image, const GridModel& m,
   for (std::size_t id = 0; id < h->ellipses.size(); ++id) {
     const Ellipse& e = h->ellipses[id];
     const double room = RoomScale(m, h->ellipses, static_cast<int>(id));
-    std::optional<Eigen::Vector2d> c;
-    if (centre == CircleGridOptions::Centre::kModelFit) c = ModelCentre(image, e, m.light, room);
-    if (!c) c = GreyCentroid(image, e, m.light, room);
+    const std::optional<Eigen::Vector2d> c = centre == CircleGridOptions::Centre::kModelFit
+                                                 ? ModelCentre(image, e, m.light, room)
+                                                 : GreyCentroid(image, e, m.light, room);
     if (c) h->uv[id] += *c - e.centre;
   }
 }
