@@ -145,11 +145,11 @@ absl::StatusOr<CameraInputs> CollectCorrespondences(
     const int noise_class = static_cast<int>(board->board.type());
     for (const DetectedFeature& f : o.features) {
       in.points.push_back({T_car_board * Eigen::Vector3d(f.p_board.x(), f.p_board.y(), 0.0),
-                           f.uv_px, static_cast<int>(board_index), noise_class});
+                           f.uv_px, static_cast<int>(board_index), noise_class, f.marker});
       in.point_board.push_back(board_index);
       auto& [sum, n] = sums[{o.board_id, f.id}];
       sum = {in.points.back().p_object, sum.uv_px + f.uv_px, static_cast<int>(board_index),
-             noise_class};
+             noise_class, f.marker};
       ++n;
     }
   }

@@ -10,6 +10,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -293,7 +294,8 @@ using Vector6d = Eigen::Matrix<double, 6, 1>;
 // about sqrt(2/k), its σ about 1/sqrt(2k); the σ bar (error/σ 0.8 to 1.25) allows ±25%, so
 // one standard error stays inside it from k = 8. A class below that (the front camera's
 // one-board classes, 4.5 to 5.7) may come out far too small, the unsafe side for verdicts: it
-// takes the larger of its own σ and the σ of every residual (docs/solvers.md).
+// takes the larger of its own σ and a floor from a steady estimate (UnsteadyFloor,
+// docs/solvers.md), which must itself have this many degrees of freedom.
 constexpr double kSteadyClassDof = 8.0;
 
 // One board's share of the normal equations at the solution: J_bᵀJ_b, J_bᵀr_b, its points.
@@ -302,6 +304,22 @@ struct BoardTerms {
   Matrix6d JtJ = Matrix6d::Zero();
   Vector6d Jtr = Vector6d::Zero();
   int points = 0;
+};
+
+// One marker's corners on a board (PnpCorrespondence::marker): the sums of their Jacobians and
+// residuals, for the shift they share.
+struct MarkerTerms {
+  int noise_class = 0;
+  Eigen::Matrix<double, 2, 6> J_sum = Eigen::Matrix<double, 2, 6>::Zero();
+  Eigen::Vector2d r_sum = Eigen::Vector2d::Zero();
+  int corners = 0;
+};
+
+// The per-board and per-marker terms of every point, keyed by (noise class, board) and
+// (noise class, board, marker).
+struct CovarianceTerms {
+  std::map<std::pair<int, int>, BoardTerms> boards;
+  std::map<std::tuple<int, int, int>, MarkerTerms> markers;
 };
 
 // Board b's terms of σ_c² (pnp.h): g_bᵀ(J_bᵀJ_b)⁺g_b, the part of its residuals a pose change
@@ -322,33 +340,64 @@ std::pair<double, double> ExplainedResidual(const BoardTerms& b, const Matrix6d&
   return {explained, rank - (JtJ_inverse * b.JtJ).trace()};
 }
 
+// Per noise class: Σ_m n_m |r̄_m|² over its markers, the residuals' part shared by each
+// marker's n_m corners (what moves the pose of a marker's error), and that sum's expectation
+// over σ² under independent noise σ, Σ_m (2 − n_m tr(A J̄_mᵀJ̄_m)) (pnp.h); {0, 0} for a class
+// with a point that is not a marker corner.
+std::map<int, std::pair<double, double>> MarkerShiftSums(const CovarianceTerms& terms,
+                                                         const Matrix6d& JtJ_inverse) {
+  std::map<int, std::pair<double, double>> sums;
+  std::map<int, int> other_points;  // per class: points not counted in a marker
+  for (const auto& [key, b] : terms.boards) other_points[b.noise_class] += b.points;
+  for (const auto& [key, m] : terms.markers) {
+    other_points[m.noise_class] -= m.corners;
+    auto& [shift, dof] = sums[m.noise_class];
+    shift += m.r_sum.squaredNorm() / m.corners;
+    dof += 2 - (JtJ_inverse * m.J_sum.transpose() * m.J_sum).trace() / m.corners;
+  }
+  for (const auto& [c, others] : other_points) {
+    if (others != 0) sums[c] = {0.0, 0.0};
+  }
+  return sums;
+}
+
+// The σ² below which a class under kSteadyClassDof may not go (pnp.h): its markers' shift σ²
+// when its points are marker corners with that many degrees of freedom, else every residual's.
+double UnsteadyFloor(int noise_class, const std::map<int, std::pair<double, double>>& shifts,
+                     double pooled_sigma) {
+  const auto& [shift, dof] = shifts.at(noise_class);  // every class has an entry
+  return dof >= kSteadyClassDof ? shift / dof : pooled_sigma * pooled_sigma;
+}
+
 // Each noise class's σ² (pnp.h): its boards' explained residuals over their degrees of
-// freedom; at least `pooled_sigma`² for a class below kSteadyClassDof.
-std::map<int, double> ClassSigmaSquared(const std::map<std::pair<int, int>, BoardTerms>& boards,
-                                        const Matrix6d& JtJ_inverse, double pooled_sigma) {
+// freedom; at least UnsteadyFloor for a class below kSteadyClassDof.
+std::map<int, double> ClassSigmaSquared(const CovarianceTerms& terms, const Matrix6d& JtJ_inverse,
+                                        double pooled_sigma) {
   std::map<int, std::pair<double, double>> sums;  // per class: Σ explained, Σ degrees of freedom
-  for (const auto& [key, b] : boards) {
+  for (const auto& [key, b] : terms.boards) {
     const auto [explained, dof] = ExplainedResidual(b, JtJ_inverse);
     sums[b.noise_class].first += explained;
     sums[b.noise_class].second += dof;
   }
+  const std::map<int, std::pair<double, double>> shifts = MarkerShiftSums(terms, JtJ_inverse);
   std::map<int, double> out;
   for (const auto& [c, sum] : sums) {
     const double own = sum.second > 0 ? sum.first / sum.second : 0.0;
-    out[c] = sum.second >= kSteadyClassDof ? own : std::max(own, pooled_sigma * pooled_sigma);
+    out[c] =
+        sum.second >= kSteadyClassDof ? own : std::max(own, UnsteadyFloor(c, shifts, pooled_sigma));
   }
   return out;
 }
 
 // The sandwich covariance A (Σ_b σ_c(b)² J_bᵀJ_b) A of pnp.h; sets result->sigma_px to the
 // RMS of the points' σ.
-void SetClassCovariance(const std::map<std::pair<int, int>, BoardTerms>& boards,
-                        const Matrix6d& JtJ_inverse, double pooled_sigma, PnpResult* result) {
-  const std::map<int, double> sigma_sq = ClassSigmaSquared(boards, JtJ_inverse, pooled_sigma);
+void SetClassCovariance(const CovarianceTerms& terms, const Matrix6d& JtJ_inverse,
+                        double pooled_sigma, PnpResult* result) {
+  const std::map<int, double> sigma_sq = ClassSigmaSquared(terms, JtJ_inverse, pooled_sigma);
   Matrix6d information = Matrix6d::Zero();
   double sum_sigma_sq = 0;
   int points = 0;
-  for (const auto& [key, b] : boards) {
+  for (const auto& [key, b] : terms.boards) {
     information += sigma_sq.at(b.noise_class) * b.JtJ;
     sum_sigma_sq += sigma_sq.at(b.noise_class) * b.points;
     points += b.points;
@@ -357,13 +406,29 @@ void SetClassCovariance(const std::map<std::pair<int, int>, BoardTerms>& boards,
   result->covariance = JtJ_inverse * information * JtJ_inverse;
 }
 
+// Adds one point's Jacobian J and residual r to its board's and its marker's terms.
+void AddPointTerms(const PnpCorrespondence& c, const Eigen::Matrix<double, 2, 6>& J,
+                   const Eigen::Vector2d& r, CovarianceTerms* terms) {
+  BoardTerms& b = terms->boards[{c.noise_class, c.board}];
+  b.noise_class = c.noise_class;
+  b.JtJ += J.transpose() * J;
+  b.Jtr += J.transpose() * r;
+  ++b.points;
+  if (c.marker < 0) return;
+  MarkerTerms& m = terms->markers[{c.noise_class, c.board, c.marker}];
+  m.noise_class = c.noise_class;
+  m.J_sum += J;
+  m.r_sum += r;
+  ++m.corners;
+}
+
 // Residuals and the Jacobian of every reprojection at result->T_camera_object, for the
 // covariance: d uv / d(δθ, δt) = d uv / d p_camera * [-[R p]x, I]. Sets the residuals, sigma
 // and covariance (pnp.h: one σ, or per noise class); kNotConverged (and infinite residuals)
 // when the pose puts a point outside the lens or the covariance is not finite.
 void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCorrespondence> points,
                                const PnpOptions& options, PnpResult* result) {
-  std::map<std::pair<int, int>, BoardTerms> boards;  // by (noise class, board)
+  CovarianceTerms terms;
   double sum_sq = 0;
   bool all_projected = true;
   const Eigen::Matrix3d R = result->T_camera_object.RotationMatrix();
@@ -380,12 +445,7 @@ void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCor
     result->max_residual_px = std::max(result->max_residual_px, r.norm());
     Eigen::Matrix<double, 3, 6> d_p;
     d_p << -Skew(rp), Eigen::Matrix3d::Identity();
-    const Eigen::Matrix<double, 2, 6> J = d_uv_d_p * d_p;
-    BoardTerms& b = boards[{c.noise_class, c.board}];
-    b.noise_class = c.noise_class;
-    b.JtJ += J.transpose() * J;
-    b.Jtr += J.transpose() * r;
-    ++b.points;
+    AddPointTerms(c, d_uv_d_p * d_p, r, &terms);
   }
   const double n = static_cast<double>(points.size());
   if (!all_projected) {
@@ -395,14 +455,14 @@ void SetResidualsAndCovariance(const CameraModel& camera, std::span<const PnpCor
   }
   result->residual_rms_px = std::sqrt(sum_sq / n);
   Matrix6d JtJ = Matrix6d::Zero();
-  for (const auto& [key, b] : boards) JtJ += b.JtJ;
+  for (const auto& [key, b] : terms.boards) JtJ += b.JtJ;
   const Matrix6d JtJ_inverse = JtJ.inverse();
-  if (options.feature_sigma_px > 0 || boards.size() == 1) {
+  if (options.feature_sigma_px > 0 || terms.boards.size() == 1) {
     result->sigma_px =
         options.feature_sigma_px > 0 ? options.feature_sigma_px : std::sqrt(sum_sq / (2 * n - 6));
     result->covariance = result->sigma_px * result->sigma_px * JtJ_inverse;
   } else {
-    SetClassCovariance(boards, JtJ_inverse, std::sqrt(sum_sq / (2 * n - 6)), result);
+    SetClassCovariance(terms, JtJ_inverse, std::sqrt(sum_sq / (2 * n - 6)), result);
   }
   if (!result->covariance.allFinite()) result->outcome = PnpOutcome::kNotConverged;
 }
