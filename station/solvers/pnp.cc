@@ -294,8 +294,8 @@ using Vector6d = Eigen::Matrix<double, 6, 1>;
 // about sqrt(2/k), its σ about 1/sqrt(2k); the σ bar (error/σ 0.8 to 1.25) allows ±25%, so
 // one standard error stays inside it from k = 8. A class below that (the front camera's
 // one-board classes, 4.5 to 5.7) may come out far too small, the unsafe side for verdicts: it
-// takes the larger of its own σ and a floor from a steady estimate (UnsteadyFloor,
-// docs/solvers.md), which must itself have this many degrees of freedom.
+// takes the larger of its own σ and every residual's, or, a class of marker corners, its
+// markers' errors when they have this many degrees of freedom (ClassNoises, docs/solvers.md).
 constexpr double kSteadyClassDof = 8.0;
 
 // One board's share of the normal equations at the solution: J_bᵀJ_b, J_bᵀr_b, its points.
@@ -307,11 +307,12 @@ struct BoardTerms {
 };
 
 // One marker's corners on a board (PnpCorrespondence::marker): the sums of their Jacobians and
-// residuals, for the shift they share.
+// residuals (the shift they share), and Σ J_iᵀr_i (what moves the pose of the marker's error).
 struct MarkerTerms {
   int noise_class = 0;
   Eigen::Matrix<double, 2, 6> J_sum = Eigen::Matrix<double, 2, 6>::Zero();
   Eigen::Vector2d r_sum = Eigen::Vector2d::Zero();
+  Vector6d Jtr = Vector6d::Zero();
   int corners = 0;
 };
 
@@ -340,67 +341,84 @@ std::pair<double, double> ExplainedResidual(const BoardTerms& b, const Matrix6d&
   return {explained, rank - (JtJ_inverse * b.JtJ).trace()};
 }
 
-// Per noise class: Σ_m n_m |r̄_m|² over its markers, the residuals' part shared by each
-// marker's n_m corners (what moves the pose of a marker's error), and that sum's expectation
-// over σ² under independent noise σ, Σ_m (2 − n_m tr(A J̄_mᵀJ̄_m)) (pnp.h); {0, 0} for a class
-// with a point that is not a marker corner.
-std::map<int, std::pair<double, double>> MarkerShiftSums(const CovarianceTerms& terms,
-                                                         const Matrix6d& JtJ_inverse) {
-  std::map<int, std::pair<double, double>> sums;
-  std::map<int, int> other_points;  // per class: points not counted in a marker
-  for (const auto& [key, b] : terms.boards) other_points[b.noise_class] += b.points;
+// A class's markers (pnp.h): Σ_m n_m |r̄_m|², the residuals' part shared by each marker's n_m
+// corners; its expectation over σ² under independent noise σ, Σ_m (2 − n_m tr(A J̄_mᵀJ̄_m));
+// the markers; and the class's points that are not marker corners.
+struct MarkerShift {
+  double shift = 0;
+  double dof = 0;
+  int markers = 0;
+  int other_points = 0;
+};
+
+// Per noise class (every class has an entry), its MarkerShift.
+std::map<int, MarkerShift> MarkerShifts(const CovarianceTerms& terms, const Matrix6d& JtJ_inverse) {
+  std::map<int, MarkerShift> out;
+  for (const auto& [key, b] : terms.boards) out[b.noise_class].other_points += b.points;
   for (const auto& [key, m] : terms.markers) {
-    other_points[m.noise_class] -= m.corners;
-    auto& [shift, dof] = sums[m.noise_class];
-    shift += m.r_sum.squaredNorm() / m.corners;
-    dof += 2 - (JtJ_inverse * m.J_sum.transpose() * m.J_sum).trace() / m.corners;
+    MarkerShift& s = out[m.noise_class];
+    s.other_points -= m.corners;
+    s.shift += m.r_sum.squaredNorm() / m.corners;
+    s.dof += 2 - (JtJ_inverse * m.J_sum.transpose() * m.J_sum).trace() / m.corners;
+    ++s.markers;
   }
-  for (const auto& [c, others] : other_points) {
-    if (others != 0) sums[c] = {0.0, 0.0};
-  }
-  return sums;
+  return out;
 }
 
-// The σ² below which a class under kSteadyClassDof may not go (pnp.h): its markers' shift σ²
-// when its points are marker corners with that many degrees of freedom, else every residual's.
-double UnsteadyFloor(int noise_class, const std::map<int, std::pair<double, double>>& shifts,
-                     double pooled_sigma) {
-  const auto& [shift, dof] = shifts.at(noise_class);  // every class has an entry
-  return dof >= kSteadyClassDof ? shift / dof : pooled_sigma * pooled_sigma;
-}
+// A noise class's share of the covariance (pnp.h): a feature σ² times its boards' J_bᵀJ_b, or,
+// by_markers, its markers' own pose-relevant errors, scale Σ_m g_m g_mᵀ (sigma_sq then the
+// markers' shift σ², for PnpResult::sigma_px).
+struct ClassNoise {
+  double sigma_sq = 0;
+  bool by_markers = false;
+  double scale = 1;  // 2 × markers / their degrees of freedom: undoes the fit's share
+};
 
-// Each noise class's σ² (pnp.h): its boards' explained residuals over their degrees of
-// freedom; at least UnsteadyFloor for a class below kSteadyClassDof.
-std::map<int, double> ClassSigmaSquared(const CovarianceTerms& terms, const Matrix6d& JtJ_inverse,
-                                        double pooled_sigma) {
+// Each noise class's noise (pnp.h): its own σ² from its boards' explained residuals from
+// kSteadyClassDof degrees of freedom up; below, its markers' errors when its points are marker
+// corners with that many marker degrees of freedom, else the larger of its own σ² and every
+// residual's.
+std::map<int, ClassNoise> ClassNoises(const CovarianceTerms& terms, const Matrix6d& JtJ_inverse,
+                                      double pooled_sigma) {
   std::map<int, std::pair<double, double>> sums;  // per class: Σ explained, Σ degrees of freedom
   for (const auto& [key, b] : terms.boards) {
     const auto [explained, dof] = ExplainedResidual(b, JtJ_inverse);
     sums[b.noise_class].first += explained;
     sums[b.noise_class].second += dof;
   }
-  const std::map<int, std::pair<double, double>> shifts = MarkerShiftSums(terms, JtJ_inverse);
-  std::map<int, double> out;
+  const std::map<int, MarkerShift> shifts = MarkerShifts(terms, JtJ_inverse);
+  std::map<int, ClassNoise> out;
   for (const auto& [c, sum] : sums) {
     const double own = sum.second > 0 ? sum.first / sum.second : 0.0;
-    out[c] =
-        sum.second >= kSteadyClassDof ? own : std::max(own, UnsteadyFloor(c, shifts, pooled_sigma));
+    const MarkerShift& m = shifts.at(c);
+    if (sum.second >= kSteadyClassDof) {
+      out[c] = {own};
+    } else if (m.other_points == 0 && m.dof >= kSteadyClassDof) {
+      out[c] = {m.shift / m.dof, true, 2.0 * m.markers / m.dof};
+    } else {
+      out[c] = {std::max(own, pooled_sigma * pooled_sigma)};
+    }
   }
   return out;
 }
 
-// The sandwich covariance A (Σ_b σ_c(b)² J_bᵀJ_b) A of pnp.h; sets result->sigma_px to the
-// RMS of the points' σ.
+// The sandwich covariance A (Σ_b σ_c(b)² J_bᵀJ_b + Σ_m s_c(m) g_m g_mᵀ) A of pnp.h; sets
+// result->sigma_px to the RMS of the points' σ.
 void SetClassCovariance(const CovarianceTerms& terms, const Matrix6d& JtJ_inverse,
                         double pooled_sigma, PnpResult* result) {
-  const std::map<int, double> sigma_sq = ClassSigmaSquared(terms, JtJ_inverse, pooled_sigma);
+  const std::map<int, ClassNoise> noise = ClassNoises(terms, JtJ_inverse, pooled_sigma);
   Matrix6d information = Matrix6d::Zero();
   double sum_sigma_sq = 0;
   int points = 0;
   for (const auto& [key, b] : terms.boards) {
-    information += sigma_sq.at(b.noise_class) * b.JtJ;
-    sum_sigma_sq += sigma_sq.at(b.noise_class) * b.points;
+    const ClassNoise& n = noise.at(b.noise_class);
+    if (!n.by_markers) information += n.sigma_sq * b.JtJ;
+    sum_sigma_sq += n.sigma_sq * b.points;
     points += b.points;
+  }
+  for (const auto& [key, m] : terms.markers) {
+    const ClassNoise& n = noise.at(m.noise_class);
+    if (n.by_markers) information += n.scale * m.Jtr * m.Jtr.transpose();
   }
   result->sigma_px = std::sqrt(sum_sigma_sq / points);
   result->covariance = JtJ_inverse * information * JtJ_inverse;
@@ -419,6 +437,7 @@ void AddPointTerms(const PnpCorrespondence& c, const Eigen::Matrix<double, 2, 6>
   m.noise_class = c.noise_class;
   m.J_sum += J;
   m.r_sum += r;
+  m.Jtr += J.transpose() * r;
   ++m.corners;
 }
 

@@ -29,18 +29,22 @@
 // class's boards steadies it (one board alone has at most 6 degrees of freedom, fewer the more
 // it fixes the pose). The covariance is the sandwich A (Σ_b σ_c(b)² J_bᵀJ_b) A. A class with
 // under 8 degrees of freedom (one board; σ_c² then about ±50% or worse) takes the larger of
-// σ_c and a floor, so an unsteady class never reports less than a steady estimate would: the
-// σ from every residual, or, for a class of marker corners (the points' `marker`), the σ of its
-// markers' shifts. A marker's corners share its detector error: a shift, which moves the pose
-// as noise at the marker would, and a size and shape error (most of a corner's error), which
-// barely does (the corners' moves cancel). With n_m corners of marker m, r̄_m and J̄_m their mean
-// residual and Jacobian, that floor is
-//   σ_shift² = Σ_m n_m |r̄_m|² / Σ_m (2 − n_m tr(A J̄_mᵀJ̄_m)),
-// unbiased under independent noise σ (n_m |r̄_m|² then has expectation σ² times its term) and
-// under a shift of variance σ²/n_m per axis, which moves the pose as noise σ on each corner
-// would; two degrees of freedom a marker, so a floor grid of 36 tags has about 70 where its
-// own σ_c has 3 (docs/solvers.md, "Marker classes"). It is used from 8 degrees of freedom up;
-// below (a board of four markers), the σ from every residual.
+// σ_c and the σ from every residual, so an unsteady class never reports less than one σ would;
+// except a class of marker corners (the points' `marker`) with enough markers, below.
+//
+// Markers. A marker's corners share its detector error: a shift, which moves the pose as noise
+// at the marker would, and a size and shape error (most of a corner's error), which barely does
+// (the corners' moves cancel), while it inflates every residual's σ. So a class under 8 degrees
+// of freedom whose points are all marker corners, with n_m corners of marker m, r̄_m and J̄_m
+// their mean residual and Jacobian, counts its markers' shifts' degrees of freedom,
+//   d = Σ_m (2 − n_m tr(A J̄_mᵀJ̄_m))   (two a marker: about 70 for a floor grid of 36 tags),
+// and from d = 8 up its markers give its share of the sandwich's middle directly, each marker
+// its own error (a cluster-robust sandwich, one cluster a marker): with g_m = Σ_{i∈m} J_iᵀ r_i,
+//   (2 M / d) Σ_m g_m g_mᵀ   in place of σ_c² Σ_b J_bᵀJ_b   (M markers),
+// the factor undoing the part of the residuals the fit took. It holds what a scalar σ cannot:
+// far tags noisier than near ones, shifts larger along one image axis (docs/solvers.md,
+// "Marker classes"). Such a class's σ in `sigma_px` is its markers' shift σ,
+// (Σ_m n_m |r̄_m|² / d)^½. A steady class keeps σ_c.
 //
 // Outcomes (not errors): too few points, collinear points, no closed-form start, not
 // converged — each a reason code for verdicts. Errors: InvalidArgument for non-finite input
