@@ -294,9 +294,15 @@ using Vector6d = Eigen::Matrix<double, 6, 1>;
 // about sqrt(2/k), its σ about 1/sqrt(2k); the σ bar (error/σ 0.8 to 1.25) allows ±25%, so
 // one standard error stays inside it from k = 8. A class below that (the front camera's
 // one-board classes, 4.5 to 5.7) may come out far too small, the unsafe side for verdicts: it
-// takes the larger of its own σ and every residual's, or, a class of marker corners, its
-// markers' errors when they have this many degrees of freedom (ClassNoises, docs/solvers.md).
+// takes the larger of its own σ and every residual's, or, a class of enough marker corners,
+// its markers' errors (kMarkerMiddleDof; ClassNoises, docs/solvers.md).
 constexpr double kSteadyClassDof = 8.0;
+
+// The markers' middle Σ_m g_m g_mᵀ is a 6 x 6 matrix estimated from one term a marker; each of
+// its six directions needs what one σ needs, so a class takes it from 6 kSteadyClassDof marker
+// degrees of freedom up (about 25 markers). With 9 tags (d about 17) the pose's σ came out up to
+// 26% small, coverage 0.886; with 16, 0.916 (docs/solvers.md, "Marker classes on new cars").
+constexpr double kMarkerMiddleDof = 6 * kSteadyClassDof;
 
 // One board's share of the normal equations at the solution: J_bᵀJ_b, J_bᵀr_b, its points.
 struct BoardTerms {
@@ -376,8 +382,8 @@ struct ClassNoise {
 
 // Each noise class's noise (pnp.h): its own σ² from its boards' explained residuals from
 // kSteadyClassDof degrees of freedom up; below, its markers' errors when its points are marker
-// corners with that many marker degrees of freedom, else the larger of its own σ² and every
-// residual's.
+// corners with kMarkerMiddleDof marker degrees of freedom, else the larger of its own σ² and
+// every residual's.
 std::map<int, ClassNoise> ClassNoises(const CovarianceTerms& terms, const Matrix6d& JtJ_inverse,
                                       double pooled_sigma) {
   std::map<int, std::pair<double, double>> sums;  // per class: Σ explained, Σ degrees of freedom
@@ -393,7 +399,7 @@ std::map<int, ClassNoise> ClassNoises(const CovarianceTerms& terms, const Matrix
     const MarkerShift& m = shifts.at(c);
     if (sum.second >= kSteadyClassDof) {
       out[c] = {own};
-    } else if (m.other_points == 0 && m.dof >= kSteadyClassDof) {
+    } else if (m.other_points == 0 && m.dof >= kMarkerMiddleDof) {
       out[c] = {m.shift / m.dof, true, 2.0 * m.markers / m.dof};
     } else {
       out[c] = {std::max(own, pooled_sigma * pooled_sigma)};

@@ -38,7 +38,8 @@
 // of freedom whose points are all marker corners, with n_m corners of marker m, r̄_m and J̄_m
 // their mean residual and Jacobian, counts its markers' shifts' degrees of freedom,
 //   d = Σ_m (2 − n_m tr(A J̄_mᵀJ̄_m))   (two a marker: about 70 for a floor grid of 36 tags),
-// and from d = 8 up its markers give its share of the sandwich's middle directly, each marker
+// and from d = 48 up (about 25 markers; a 6 x 6 middle needs 8 for each of its directions) its
+// markers give its share of the sandwich's middle directly, each marker
 // its own error (a cluster-robust sandwich, one cluster a marker): with g_m = Σ_{i∈m} J_iᵀ r_i,
 //   (2 M / d) Σ_m g_m g_mᵀ   in place of σ_c² Σ_b J_bᵀJ_b   (M markers),
 // the factor undoing the part of the residuals the fit took. It holds what a scalar σ cannot:
