@@ -109,12 +109,11 @@ SensorCalibration CalibrateLidarFrames(const StationLayout& station, const Rigid
                                        std::vector<RoundHoleCloudDetection>* detections = nullptr);
 
 // The target boards of camera `sensor` in one frame, as a cycle detects them (the cycle page
-// draws the same): DetectBoard on the image, else (and for a fisheye always, the raw detection
-// standing where the view does not show the whole board) DetectInBoardView where the nominal
-// mounting and the capture's aligner put the board; whole boards and the certain features of
-// partial views, in sensor.targets order. `summaries` (one per target, same order) count the
-// frames found and keep the last reason. Returns what was found before a stop was requested.
-// Cost: the detectors' (tens to hundreds of ms a board on the reference frames).
+// draws the same): DetectInBoardView where the nominal mounting and the capture's aligner put
+// the board, the raw image's DetectBoard where the view does not show the whole board; whole boards
+// and the certain features of partial views, in sensor.targets order. `summaries` (one per target,
+// same order) count the frames found and keep the last reason. Returns what was found before a stop
+// was requested. Cost: the detectors' (tens to hundreds of ms a board on the reference frames).
 std::vector<BoardObservation> DetectCameraFrame(const Capture& capture, const SensorModel& sensor,
                                                 const ImageView8& image,
                                                 std::vector<BoardDetectionSummary>* summaries,
