@@ -7,6 +7,9 @@
 // full-physics evaluation"). Bad flags are refused with exit 2, naming the flag.
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cmath>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -148,6 +151,62 @@ TEST(EvalStationCliRadarTest, CornerRadarSigmaHoldsOverAThousandCars) {
     EXPECT_LE(s["yaw_p95_abs_error_deg"].get<double>(), 0.05);
     EXPECT_EQ(s["wrong_verdicts_beyond_1sigma_of_edge"], 0);
   }
+}
+
+// --per-car writes one line per car and sensor whose numbers give the table's: each line's
+// error/σ is (estimate − truth) / σ, and over the cars the RMS error over the RMS σ and the
+// share within 1.96σ are the summary's error/σ and coverage. A radar's unmeasured components
+// are null.
+TEST(EvalStationCliPerCarTest, LinesGiveTheSummarysFigures) {
+  const std::string path = ::testing::TempDir() + "/eval_station_per_car.jsonl";
+  const LinecalRun run =
+      RunLinecal("eval station --json --cars 20 --sensors bumper_lidar,front_radar --per-car " +
+                 path + kReference);
+  ASSERT_NE(run.exit_code, 2) << run.err;
+  const nlohmann::json summary = nlohmann::json::parse(run.out);
+  std::ifstream in(path);
+  std::vector<nlohmann::json> lines;
+  for (std::string text; std::getline(in, text);) lines.push_back(nlohmann::json::parse(text));
+  ASSERT_EQ(lines.size(), 40u);
+  const char* names[6] = {"yaw", "pitch", "roll", "x", "y", "z"};
+  std::array<double, 6> sum_e2{}, sum_s2{}, covered{};
+  for (size_t k = 0; k < lines.size(); ++k) {
+    const nlohmann::json& l = lines[k];
+    EXPECT_EQ(l["car"], static_cast<int>(k / 2));
+    ASSERT_EQ(l["sensor"], k % 2 == 0 ? "bumper_lidar" : "front_radar");
+    ASSERT_TRUE(l["solved"].get<bool>()) << l.dump();
+    EXPECT_GE(l["frames"].get<int>(), 1);
+    EXPECT_LE(l["frames"].get<int>(), 10);
+    for (int i = 0; i < 6; ++i) {
+      ASSERT_TRUE(l["truth"][i].is_number()) << l.dump();
+      if (k % 2 == 1 && i > 0) {  // a radar measures its yaw alone
+        EXPECT_TRUE(l["estimate"][i].is_null() && l["sigma"][i].is_null()) << l.dump();
+        continue;
+      }
+      const double e = l["estimate"][i].get<double>() - l["truth"][i].get<double>();
+      const double sigma = l["sigma"][i].get<double>();
+      EXPECT_NEAR(l["error_over_sigma"][i].get<double>(), e / sigma,
+                  1e-9 * (1 + std::abs(e / sigma)));
+      if (k % 2 == 1) continue;
+      sum_e2[i] += e * e;
+      sum_s2[i] += sigma * sigma;
+      covered[i] += std::abs(e) <= 1.96 * sigma;
+    }
+  }
+  const nlohmann::json& lidar = summary["sensors"][0];
+  ASSERT_EQ(lidar["sensor"], "bumper_lidar");
+  for (int i = 0; i < 6; ++i) {
+    SCOPED_TRACE(names[i]);
+    const std::string k = names[i];
+    EXPECT_NEAR(lidar[k + "_error_over_sigma"].get<double>(), std::sqrt(sum_e2[i] / sum_s2[i]),
+                1e-6);
+    EXPECT_NEAR(lidar[k + "_coverage95"].get<double>(), covered[i] / 20.0, 1e-12);
+  }
+  const LinecalRun bad =
+      RunLinecal("eval station --cars 1 --per-car /no/such/dir/cars.jsonl" + kReference);
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("--per-car: cannot write /no/such/dir/cars.jsonl"), std::string::npos)
+      << bad.err;
 }
 
 TEST(EvalStationCliFlagsTest, BadFlagsExitTwoNamingTheFlag) {

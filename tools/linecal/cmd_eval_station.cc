@@ -24,6 +24,7 @@
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -79,6 +80,8 @@ struct StationEvalFlags {
   // Only these sensors of the car model (empty: all). Each sensor draws from its own random
   // streams, so a sensor's rows are those of a run over the whole car.
   std::vector<std::string> sensors;
+  // --per-car FILE: one JSON line per car and sensor (WritePerCar); empty: none.
+  std::string per_car;
 };
 
 // Whether `f` evaluates sensor `name`.
@@ -128,6 +131,10 @@ absl::StatusOr<StationEvalFlags> ReadStationEvalFlags(const cli::CommandLine& cl
         absl::StrCat("--frames-max: ", f.frames_max, ": must be >= --frames-min ", f.frames_min));
   }
   if (cl.Has("sensors")) f.sensors = absl::StrSplit(cl.Get("sensors"), ',', absl::SkipEmpty());
+  if (cl.Has("per-car")) f.per_car = cl.Get("per-car");
+  if (cl.Has("per-car") && f.per_car.empty()) {
+    return absl::InvalidArgumentError("--per-car: names no file");
+  }
   if (cl.Has("sensors") && f.sensors.empty()) {
     return absl::InvalidArgumentError("--sensors: names no sensor");
   }
@@ -147,6 +154,10 @@ absl::Status ReadInputs(const cli::CommandLine& cl, EvalInputs* in, StationEvalF
   absl::StatusOr<StationEvalFlags> read = ReadStationEvalFlags(cl);
   if (!read.ok()) return read.status();
   *flags = *read;
+  // A path that cannot be written is found now, not after hours of cars.
+  if (!flags->per_car.empty() && !std::ofstream(flags->per_car, std::ios::app)) {
+    return absl::InvalidArgumentError(absl::StrCat("--per-car: cannot write ", flags->per_car));
+  }
   status = ReadStationAndCar(cl, in);
   if (!status.ok()) return status;
   for (const std::string& name : flags->sensors) {
@@ -491,6 +502,59 @@ bool ReportSensor(const std::string& name, const SensorSamples& c, EvalReport* r
   return f.meets;
 }
 
+// One line of --per-car: car `index`'s sensor `s`, what was drawn and what the pipeline gave.
+// truth, estimate (the deviation from nominal), sigma and error_over_sigma in the order yaw,
+// pitch, roll (degrees), x, y, z (millimetres); a component the sensor did not measure (a
+// radar's all but yaw) or an unsolved sensor's is null.
+nlohmann::json PerCarLine(int index, const CarOutcome& o, const SensorModel& s,
+                          const TrueMounting& truth, const SensorCalibration& c) {
+  nlohmann::json truths = nlohmann::json::array(), estimates = nlohmann::json::array(),
+                 sigmas = nlohmann::json::array(), ratios = nlohmann::json::array();
+  const Eigen::Matrix<double, 6, 1> estimate = c.mounting.Deviation();
+  for (int i = 0; i < 6; ++i) {
+    const double unit = i < 3 ? kRadToDeg : 1e3;
+    truths.push_back(truth.truth[i] * unit);
+    const bool measured = c.solved && c.mounting.observed[i] && c.mounting.sigma[i] > 0;
+    estimates.push_back(measured ? nlohmann::json(estimate[i] * unit) : nlohmann::json());
+    sigmas.push_back(measured ? nlohmann::json(c.mounting.sigma[i] * unit) : nlohmann::json());
+    ratios.push_back(measured ? nlohmann::json((estimate[i] - truth.truth[i]) / c.mounting.sigma[i])
+                              : nlohmann::json());
+  }
+  return {{"car", index},
+          {"sensor", s.name},
+          {"frames", o.frames},
+          {"range_noise_m", o.range_noise_m},
+          {"solved", c.solved},
+          {"verdict", VerdictName(c.verdict)},
+          {"reason", c.reason},
+          {"truth", std::move(truths)},
+          {"estimate", std::move(estimates)},
+          {"sigma", std::move(sigmas)},
+          {"error_over_sigma", std::move(ratios)}};
+}
+
+// Writes --per-car: one JSON object a line per car (in car order) and selected sensor (in car
+// model order), for looking into the cars behind a table's figures. Errors: the file's.
+absl::Status WritePerCar(const CarModel& car, const StationEvalFlags& f,
+                         const std::vector<CarOutcome>& outcomes) {
+  std::ofstream out(f.per_car, std::ios::trunc);
+  for (size_t k = 0; k < outcomes.size() && out; ++k) {
+    for (size_t i = 0; i < car.sensors.size(); ++i) {
+      if (!Selected(f, car.sensors[i].name)) continue;
+      for (const SensorCalibration& c : outcomes[k].calibrations) {
+        if (c.name != car.sensors[i].name) continue;
+        out << PerCarLine(static_cast<int>(k), outcomes[k], car.sensors[i], outcomes[k].truths[i],
+                          c)
+                   .dump()
+            << "\n";
+      }
+    }
+  }
+  out.close();
+  if (!out) return absl::InternalError(absl::StrCat("--per-car: cannot write ", f.per_car));
+  return absl::OkStatus();
+}
+
 // The per-sensor samples of all cars, in car order (so they do not depend on --threads).
 std::map<std::string, SensorSamples> Collect(const CarModel& car, const StationEvalFlags& f,
                                              const std::vector<CarOutcome>& outcomes) {
@@ -516,7 +580,7 @@ int RunEvalStation(const Args& args) {
   cli::CommandLine cl(
       "linecal eval station --station FILE --car FILE [--cars N] [--seed S] [--frames-min F] "
       "[--frames-max F] [--range-noise-min-m M] [--range-noise-max-m M] [--position-error-m M] "
-      "[--noise G] [--blur P] [--sensors A,B] [--threads T] [--json]",
+      "[--noise G] [--blur P] [--sensors A,B] [--threads T] [--per-car FILE] [--json]",
       "Full-physics Monte Carlo evaluation of the whole car: per car, mounting angles within "
       "1.5x each tolerance, positions within --position-error-m per axis (and the tolerance), a "
       "random aligner pose, F frames per sensor (uniform in --frames-min..--frames-max; camera "
@@ -544,6 +608,9 @@ int RunEvalStation(const Args& args) {
         "evaluate only these sensors (default: all); each sensor's figures are those of a run "
         "over the whole car"},
        {"threads", "T", "cars evaluated at once (default 1)"},
+       {"per-car", "FILE",
+        "also write one JSON line per car and sensor: frames, range noise, verdict, and truth, "
+        "estimate, sigma and error/sigma of yaw, pitch, roll (deg), x, y, z (mm)"},
        {"json", "", "print one JSON object"}});
   if (const std::optional<int> exit = cli::ParseOrExit(cl, kCommand, args)) return *exit;
   EvalInputs in;
@@ -564,6 +631,12 @@ int RunEvalStation(const Args& args) {
     return cli::kExitNegative;
   }
   const std::map<std::string, SensorSamples> samples = Collect(in.car, flags, *outcomes);
+  if (!flags.per_car.empty()) {
+    if (absl::Status s = WritePerCar(in.car, flags, *outcomes); !s.ok()) {
+      std::fprintf(stderr, "linecal %s: %s\n", kCommand, std::string(s.message()).c_str());
+      return cli::kExitNegative;
+    }
+  }
 
   EvalReport report(cl);
   report.Table("%-18s %-6s %4s %6s | %8s %7s | %10s %10s | %7s %3s | %s\n", "sensor", "kind",
