@@ -533,23 +533,31 @@ nlohmann::json PerCarLine(int index, const CarOutcome& o, const SensorModel& s,
           {"error_over_sigma", std::move(ratios)}};
 }
 
+// Calls visit(k, i, c) for car k's calibration c of each selected sensor i, in car order and
+// then car model order: the one walk of the outcomes that the table and --per-car share.
+template <typename Visit>
+void ForEachSelectedCalibration(const CarModel& car, const StationEvalFlags& f,
+                                const std::vector<CarOutcome>& outcomes, Visit visit) {
+  for (size_t k = 0; k < outcomes.size(); ++k) {
+    for (size_t i = 0; i < car.sensors.size(); ++i) {
+      if (!Selected(f, car.sensors[i].name)) continue;
+      for (const SensorCalibration& c : outcomes[k].calibrations) {
+        if (c.name == car.sensors[i].name) visit(k, i, c);
+      }
+    }
+  }
+}
+
 // Writes --per-car: one JSON object a line per car (in car order) and selected sensor (in car
 // model order), for looking into the cars behind a table's figures. Errors: the file's.
 absl::Status WritePerCar(const CarModel& car, const StationEvalFlags& f,
                          const std::vector<CarOutcome>& outcomes) {
   std::ofstream out(f.per_car, std::ios::trunc);
-  for (size_t k = 0; k < outcomes.size() && out; ++k) {
-    for (size_t i = 0; i < car.sensors.size(); ++i) {
-      if (!Selected(f, car.sensors[i].name)) continue;
-      for (const SensorCalibration& c : outcomes[k].calibrations) {
-        if (c.name != car.sensors[i].name) continue;
-        out << PerCarLine(static_cast<int>(k), outcomes[k], car.sensors[i], outcomes[k].truths[i],
-                          c)
-                   .dump()
-            << "\n";
-      }
-    }
-  }
+  ForEachSelectedCalibration(car, f, outcomes, [&](size_t k, size_t i, const SensorCalibration& c) {
+    out << PerCarLine(static_cast<int>(k), outcomes[k], car.sensors[i], outcomes[k].truths[i], c)
+               .dump()
+        << "\n";
+  });
   out.close();
   if (!out) return absl::InternalError(absl::StrCat("--per-car: cannot write ", f.per_car));
   return absl::OkStatus();
@@ -559,18 +567,15 @@ absl::Status WritePerCar(const CarModel& car, const StationEvalFlags& f,
 std::map<std::string, SensorSamples> Collect(const CarModel& car, const StationEvalFlags& f,
                                              const std::vector<CarOutcome>& outcomes) {
   std::map<std::string, SensorSamples> samples;
-  for (const CarOutcome& o : outcomes) {
-    for (size_t i = 0; i < car.sensors.size(); ++i) {
-      const SensorModel& s = car.sensors[i];
-      if (!Selected(f, s.name)) continue;
-      SensorSamples& out = samples[s.name];
-      out.kind = s.kind;
-      out.bars = BarsOf(s);
-      for (const SensorCalibration& c : o.calibrations) {
-        if (c.name == s.name) AddSensor(s, o.truths[i], c, &out);
-      }
-    }
+  for (const SensorModel& s : car.sensors) {
+    if (!Selected(f, s.name)) continue;
+    samples[s.name].kind = s.kind;
+    samples[s.name].bars = BarsOf(s);
   }
+  ForEachSelectedCalibration(car, f, outcomes, [&](size_t k, size_t i, const SensorCalibration& c) {
+    const SensorModel& s = car.sensors[i];
+    AddSensor(s, outcomes[k].truths[i], c, &samples[s.name]);
+  });
   return samples;
 }
 
