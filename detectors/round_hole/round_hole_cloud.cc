@@ -740,20 +740,29 @@ BoardRing MakeBoardRing(const std::vector<InPlane>& in_plane, std::size_t begin,
 // phases: any of them with an occluder there drops it. With one frame there is no other.
 std::vector<HiddenEnds> EdgeHiding(const std::vector<InPlane>& in_plane,
                                    const std::vector<BoardRing>& rings) {
-  std::map<int, std::array<int, 3>> per_ring;  // frames, hidden starts, hidden ends
+  struct Counts {
+    int frames = 0;
+    int hidden_starts = 0;
+    int hidden_ends = 0;
+  };
+  std::map<int, Counts> per_ring;
   for (const BoardRing& r : rings) {
-    std::array<int, 3>& n = per_ring[in_plane[r.begin].group % 65536];
-    n = {n[0] + 1, n[1] + (r.own.start ? 1 : 0), n[2] + (r.own.end ? 1 : 0)};
+    Counts& n = per_ring[in_plane[r.begin].group % 65536];
+    ++n.frames;
+    n.hidden_starts += r.own.start ? 1 : 0;
+    n.hidden_ends += r.own.end ? 1 : 0;
   }
   std::vector<HiddenEnds> hiding;
   hiding.reserve(rings.size());
   for (const BoardRing& r : rings) {
-    const std::array<int, 3>& n = per_ring.at(in_plane[r.begin].group % 65536);
-    if (n[0] == 1) {
+    const Counts& n = per_ring.at(in_plane[r.begin].group % 65536);
+    if (n.frames == 1) {
       hiding.push_back(r.own);
       continue;
     }
-    hiding.push_back({n[1] - (r.own.start ? 1 : 0) > 0, n[2] - (r.own.end ? 1 : 0) > 0});
+    // The other frames' counts: this frame's own hidden end leaves it out.
+    hiding.push_back(
+        {n.hidden_starts - (r.own.start ? 1 : 0) > 0, n.hidden_ends - (r.own.end ? 1 : 0) > 0});
   }
   return hiding;
 }
