@@ -88,10 +88,8 @@
   async function init() {
     const session = await (await fetch("/api/session", { credentials: "same-origin" })).json();
     if (session.role !== "operator") {
-      if (session.operator_login) {
-        const link = element("a", { id: "operator-login", href: "/login.html?next=%2F" }, "operator log in");
-        document.querySelector("header").appendChild(link);
-      }
+      // The link's place is kept in the header (index.html) so that the others do not move.
+      if (session.operator_login) document.getElementById("operator-login").hidden = false;
       return;
     }
     const status = await (await fetch("/api/status", { credentials: "same-origin" })).json();

@@ -178,6 +178,26 @@ def compare_birdseye(driver, url, work, tag):
     return len(expected)
 
 
+def check_links_stay_put(driver):
+    """The header's links do not move while the live page fills in its station name, connection,
+    cycle link, log-out and operator log-in links: a click aimed at one must not land on its
+    neighbour (a CI run clicked "trends" for "after-sale" when the header changed between the
+    aim and the click)."""
+    moved = driver.execute_script(
+        "const link = [...document.querySelectorAll('header a')].find((a) => a.textContent === 'after-sale');"
+        " const before = link.getBoundingClientRect();"
+        " const grown = ['station', 'connection', 'cycle-link'].map((id) => document.getElementById(id));"
+        " const saved = grown.map((e) => [e.textContent, e.hidden]);"
+        " for (const e of grown) { e.textContent += ' · a longer text than any the page shows'; e.hidden = false; }"
+        " const toggled = ['logout', 'operator-login'].map((id) => document.getElementById(id));"
+        " for (const e of toggled) e.hidden = !e.hidden;"
+        " const after = link.getBoundingClientRect();"
+        " grown.forEach((e, i) => { e.textContent = saved[i][0]; e.hidden = saved[i][1]; });"
+        " for (const e of toggled) e.hidden = !e.hidden;"
+        " return [before.x - after.x, before.y - after.y];")
+    check(moved == [0, 0], f"the after-sale link moved by {moved} px as the header filled in")
+
+
 def test(args, work):
     scene = os.path.join(work, "scene")
     run([args.linecal, "sim", "lanes", "--car", os.path.join(args.source_dir, "deploy/cars/reference.json"),
@@ -198,6 +218,7 @@ def test(args, work):
         driver.find_element(By.ID, "token").send_keys(console.TOKEN)
         driver.find_element(By.ID, "login").click()
         wait(driver, "the live page", lambda d: d.current_url == url)
+        check_links_stay_put(driver)
         driver.find_element(By.LINK_TEXT, "after-sale").click()
         wait(driver, "the after-sale page's address", lambda d: d.current_url.endswith("/aftersale.html"))
         wait(driver, "the after-sale page", lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "true")

@@ -273,7 +273,7 @@ def operator_cycle(driver, args, address, url, shots):
     """An operator logs in from the live page, starts a cycle that keeps its capture, and the
     page shows it to its end; GetCycle has it done with the VIN typed. Returns its id."""
     driver.get(url)
-    wait(driver, "the operator log-in link", lambda d: d.find_elements(By.ID, "operator-login"))
+    wait(driver, "the operator log-in link", lambda d: d.find_element(By.ID, "operator-login").is_displayed())
     check(not driver.find_elements(By.ID, "operator"), "a read-only session shows the operator's controls")
     driver.find_element(By.ID, "operator-login").click()
     wait(driver, "the login page", lambda d: "/login.html" in d.current_url)
